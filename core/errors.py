@@ -1,0 +1,21 @@
+"""Exceptions whose messages are written for the person using SceneFit."""
+
+
+class SceneFitError(Exception):
+    """Base class: the message says what went wrong and how to fix it."""
+
+
+class InputError(SceneFitError):
+    """The asset, photo, placement or an option given by the user cannot be used."""
+
+
+class ModelMissingError(SceneFitError):
+    """Model weights were not found where they were looked for."""
+
+
+class RendererUnavailableError(SceneFitError):
+    """Mitsuba (or the LLVM/CUDA backend it needs) cannot be started."""
+
+
+class Cancelled(SceneFitError):
+    """The user cancelled a running job; work done so far is kept."""

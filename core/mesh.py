@@ -1,0 +1,97 @@
+"""A triangle mesh as plain arrays, split at UV seams so every vertex has one UV."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+
+# The paper normalises every asset into a sphere of this radius, centred at the origin (appendix).
+NORMALIZED_RADIUS = 0.5
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """Vertices are already split where UVs or normals differ, as renderers need.
+
+    positions: (V, 3) float32, object space.
+    faces:     (F, 3) int32 indices into positions.
+    uvs:       (V, 2) float32, OpenGL convention (v = 0 at the bottom of the image).
+    normals:   (V, 3) float32 unit vertex normals, or None for flat shading.
+    """
+
+    positions: np.ndarray
+    faces: np.ndarray
+    uvs: np.ndarray
+    normals: np.ndarray | None = None
+    name: str = "asset"
+
+    def __post_init__(self) -> None:
+        p, f, uv = self.positions, self.faces, self.uvs
+        if p.ndim != 2 or p.shape[1] != 3 or len(p) == 0:
+            raise InputError(f"Mesh '{self.name}' has no vertices; select an object with geometry.")
+        if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
+            raise InputError(f"Mesh '{self.name}' has no faces; SceneFit needs a surface to texture.")
+        if uv is None or uv.shape != (len(p), 2):
+            raise InputError(
+                f"Mesh '{self.name}' has no UV map; unwrap it in Blender (UV > Smart UV Project) first."
+            )
+        if f.min() < 0 or f.max() >= len(p):
+            raise InputError(f"Mesh '{self.name}' has face indices outside its vertex list.")
+        if not (np.isfinite(p).all() and np.isfinite(uv).all()):
+            raise InputError(f"Mesh '{self.name}' has NaN or infinite coordinates.")
+        if self.normals is not None and self.normals.shape != p.shape:
+            raise InputError(f"Mesh '{self.name}' has {len(self.normals)} normals for {len(p)} vertices.")
+        # Freeze the arrays too, so nothing downstream edits the user's data in place.
+        for a in (p, f, uv, self.normals):
+            if a is not None:
+                a.setflags(write=False)
+
+    @staticmethod
+    def from_arrays(positions, faces, uvs, normals=None, name: str = "asset") -> "Mesh":
+        return Mesh(
+            positions=np.ascontiguousarray(positions, dtype=np.float32),
+            faces=np.ascontiguousarray(faces, dtype=np.int32),
+            uvs=np.ascontiguousarray(uvs, dtype=np.float32),
+            normals=None if normals is None else np.ascontiguousarray(normals, dtype=np.float32),
+            name=name,
+        )
+
+
+@dataclass(frozen=True)
+class NormalizeTransform:
+    """object_space = normalized * scale + center; kept so results map back onto the asset."""
+
+    center: np.ndarray
+    scale: float
+
+    def to_normalized(self, points: np.ndarray) -> np.ndarray:
+        return (points - self.center) / self.scale
+
+    def to_object(self, points: np.ndarray) -> np.ndarray:
+        return points * self.scale + self.center
+
+
+def normalize_to_unit_sphere(mesh: Mesh, radius: float = NORMALIZED_RADIUS) -> tuple[Mesh, NormalizeTransform]:
+    """Centre the bounding box at the origin and scale so the farthest vertex sits at `radius`."""
+    p = mesh.positions.astype(np.float64)
+    center = 0.5 * (p.min(axis=0) + p.max(axis=0))
+    extent = np.linalg.norm(p - center, axis=1).max()
+    if not np.isfinite(extent) or extent <= 0.0:
+        raise InputError(f"Mesh '{mesh.name}' is degenerate: all its vertices are at one point.")
+    scale = float(extent / radius)
+    normalized = Mesh.from_arrays(((p - center) / scale), mesh.faces, mesh.uvs, mesh.normals, mesh.name)
+    return normalized, NormalizeTransform(center=center.astype(np.float32), scale=scale)
+
+
+def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals (for meshes that come without them)."""
+    p = positions.astype(np.float64)
+    fn = np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]])
+    n = np.zeros_like(p)
+    for k in range(3):
+        np.add.at(n, faces[:, k], fn)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.where(length > 0, n / np.maximum(length, 1e-30), np.array([0.0, 0.0, 1.0]))
+    return n.astype(np.float32)
