@@ -1,0 +1,102 @@
+"""Write an asset, its maps, a camera and the lighting as a Mitsuba 3 scene that `mitsuba` renders alone.
+
+Layout written into `out_dir`:
+    scene.xml, mesh.ply, base_color.png (sRGB), roughness.png / metallic.png (linear), envmap.exr
+"""
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from .atomic import write_text_atomic
+from .backend import init_mitsuba
+from .camera import Camera
+from .imageio import linear_to_srgb, write_image
+from .maps import PBRMaps
+from .mesh import Mesh
+from .render import ENVMAP_TO_WORLD, _mitsuba_mesh
+
+
+def _add(parent: ET.Element, tag: str, **attrs) -> ET.Element:
+    return ET.SubElement(parent, tag, {k: str(v) for k, v in attrs.items()})
+
+
+def _matrix(parent: ET.Element, name: str, m: np.ndarray) -> None:
+    t = _add(parent, "transform", name=name)
+    _add(t, "matrix", value=" ".join(f"{x:.9g}" for x in np.asarray(m, dtype=np.float64).ravel()))
+
+
+def _texture_or_value(parent: ET.Element, name: str, value, filename: str | None) -> None:
+    if filename is None:
+        _add(parent, "float", name=name, value=f"{float(value):.6g}")
+        return
+    tex = _add(parent, "texture", type="bitmap", name=name)
+    _add(tex, "string", name="filename", value=filename)
+    _add(tex, "boolean", name="raw", value="true")
+
+
+def export_mitsuba_scene(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, camera: Camera | None = None,
+                         envmap: np.ndarray | None = None, spp: int = 256, max_depth: int = 8) -> Path:
+    """Write the scene; returns the path of scene.xml. Nothing outside `out_dir` is touched.
+
+    envmap: linear (H, 2H, 3) radiance in Blender's equirectangular convention; None writes a
+    constant white environment.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    init_mitsuba()
+    import mitsuba as mi
+
+    camera = camera or Camera(width=512, height=512)
+    # The PLY holds Mitsuba's own texture convention (v = 0 at the top row), so it is read unflipped.
+    tmp_ply = out_dir / ".mesh.ply.tmp"
+    _mitsuba_mesh(mi, mesh).write_ply(str(tmp_ply))
+    tmp_ply.replace(out_dir / "mesh.ply")
+    write_image(out_dir / "base_color.png", linear_to_srgb(maps.base_color))
+    files: dict[str, str | None] = {}
+    for name in ("roughness", "metallic"):
+        value = getattr(maps, name)
+        if isinstance(value, np.ndarray):
+            write_image(out_dir / f"{name}.png", value, dtype="uint16")
+            files[name] = f"{name}.png"
+        else:
+            files[name] = None
+
+    scene = ET.Element("scene", version="3.0.0")
+    integrator = _add(scene, "integrator", type="path")
+    _add(integrator, "integer", name="max_depth", value=max_depth)
+
+    sensor = _add(scene, "sensor", type="perspective")
+    _add(sensor, "string", name="fov_axis", value="smaller")
+    _add(sensor, "float", name="fov", value=f"{camera.fov_deg:.9g}")
+    look = _add(_add(sensor, "transform", name="to_world"), "lookat",
+                origin=",".join(f"{x:.9g}" for x in camera.origin), target=",".join(map(str, camera.target)),
+                up="0,0,1")
+    del look
+    _add(_add(sensor, "sampler", type="independent"), "integer", name="sample_count", value=spp)
+    film = _add(sensor, "film", type="hdrfilm")
+    _add(film, "integer", name="width", value=camera.width)
+    _add(film, "integer", name="height", value=camera.height)
+    _add(film, "rfilter", type="box")
+
+    emitter = _add(scene, "emitter", type="envmap")
+    env = np.ones((16, 32, 3), np.float32) if envmap is None else np.asarray(envmap, np.float32)
+    write_image(out_dir / "envmap.exr", env)
+    _add(emitter, "string", name="filename", value="envmap.exr")
+    _matrix(emitter, "to_world", ENVMAP_TO_WORLD)
+
+    shape = _add(scene, "shape", type="ply")
+    _add(shape, "string", name="filename", value="mesh.ply")
+    _add(shape, "boolean", name="flip_tex_coords", value="false")
+    bsdf = _add(shape, "bsdf", type="principled")
+    base = _add(bsdf, "texture", type="bitmap", name="base_color")
+    _add(base, "string", name="filename", value="base_color.png")  # sRGB, decoded by Mitsuba
+    _texture_or_value(bsdf, "roughness", maps.roughness, files["roughness"])
+    _texture_or_value(bsdf, "metallic", maps.metallic, files["metallic"])
+
+    ET.indent(scene)
+    xml_path = out_dir / "scene.xml"
+    write_text_atomic(xml_path, ET.tostring(scene, encoding="unicode") + "\n")
+    return xml_path

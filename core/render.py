@@ -1,0 +1,267 @@
+"""Mitsuba 3 scenes built from plain arrays, rendered differentiably and bridged to torch.
+
+One `AssetRenderer` owns one scene, built once. Each call updates what changed (texture maps,
+environment map, camera) through `mi.traverse` and renders; gradients with respect to the maps and
+the environment map flow back to torch through `dr.wrap`.
+
+Conventions:
+- World space is Blender's (Z up). Mitsuba's envmap is Y up, so the emitter gets `ENVMAP_TO_WORLD`,
+  which makes a latitude-longitude map light the asset from the same directions as Blender's
+  Environment Texture does (top row = +Z; the map's centre column looks along +X... see
+  `blender_direction_to_equirect_uv`).
+- Mesh UVs arrive in OpenGL convention (v = 0 at the bottom); Mitsuba looks textures up with v = 0 at
+  the top row, so v is flipped when the mesh is built.
+- Maps are torch tensors (H, W, C), linear, rows top to bottom as in image files.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .backend import Backend, init_mitsuba
+from .camera import Camera
+from .errors import InputError
+from .mesh import Mesh, vertex_normals
+
+# Rotation taking Mitsuba's envmap frame (Y up) to Blender's world (Z up), chosen so that
+# Mitsuba's direction->(u, v) lookup equals Blender's equirectangular Environment Texture:
+# local (x, y, z) -> world (-z, -x, y).
+ENVMAP_TO_WORLD = np.array(
+    [[0.0, 0.0, -1.0, 0.0],
+     [-1.0, 0.0, 0.0, 0.0],
+     [0.0, 1.0, 0.0, 0.0],
+     [0.0, 0.0, 0.0, 1.0]]
+)
+
+BASE_COLOR_KEY = "asset.bsdf.base_color.data"
+ROUGHNESS_KEY = "asset.bsdf.roughness.data"
+METALLIC_KEY = "asset.bsdf.metallic.data"
+ENVMAP_KEY = "environment.data"
+
+
+def blender_direction_to_equirect_uv(direction: np.ndarray) -> np.ndarray:
+    """(u, v) in [0, 1] of Blender's equirectangular mapping; v measured from the TOP row.
+
+    Blender: u = atan2(d.y, -d.x) / 2pi + 0.5, v_bottom = atan2(d.z, hypot(d.x, d.y)) / pi + 0.5.
+    """
+    d = np.asarray(direction, dtype=np.float64)
+    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    u = np.arctan2(d[..., 1], -d[..., 0]) / (2 * np.pi) + 0.5
+    v_top = 0.5 - np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])) / np.pi
+    return np.stack([u % 1.0, v_top], axis=-1)
+
+
+def equirect_directions(height: int, width: int) -> np.ndarray:
+    """World direction (Blender convention) through the centre of each texel of an (H, W) map."""
+    u = (np.arange(width) + 0.5) / width
+    v_top = (np.arange(height) + 0.5) / height
+    phi = (u - 0.5) * 2.0 * np.pi                 # atan2(d.y, -d.x)
+    elevation = (0.5 - v_top) * np.pi
+    el, ph = np.meshgrid(elevation, phi, indexing="ij")
+    return np.stack([-np.cos(ph) * np.cos(el), np.sin(ph) * np.cos(el), np.sin(el)], axis=-1)
+
+
+@dataclass(frozen=True)
+class SphereSpec:
+    """The light-capturing apparatus: a white, smooth, diffuse sphere."""
+
+    center: tuple[float, float, float] = (0.9, 0.0, -0.25)
+    radius: float = 0.25
+    albedo: float = 1.0
+
+
+@dataclass(frozen=True)
+class SceneOptions:
+    floor: bool = False             # infinite diffuse floor under the asset, for shadows
+    floor_albedo: float = 0.8
+    sphere: SphereSpec | None = None
+    max_depth: int = 6              # path length; 2 is direct light only
+    integrator_type: str = "prb"    # "prb" (path replay, cheap gradients) or "path"
+    floor_extent: float = 1000.0
+
+    def __post_init__(self) -> None:
+        if self.integrator_type not in ("prb", "path"):
+            raise InputError(f"integrator_type must be 'prb' or 'path', got {self.integrator_type!r}.")
+        if self.max_depth < 2 and self.max_depth != -1:
+            raise InputError(f"max_depth must be at least 2 (camera -> surface -> light), got {self.max_depth}.")
+
+
+@dataclass
+class RenderOutput:
+    """Torch tensors (h, w, C): radiance is linear HDR; alpha is 1 where the asset (or floor/sphere) is."""
+
+    rgb: "object"
+    alpha: "object"
+    seconds: float = 0.0
+    extras: dict = field(default_factory=dict)
+
+
+def _mitsuba_mesh(mi, mesh: Mesh):
+    """A mi.Mesh from our arrays (v flipped to Mitsuba's top-row-first texture lookup)."""
+    normals = mesh.normals if mesh.normals is not None else vertex_normals(mesh.positions, mesh.faces)
+    m = mi.Mesh(mesh.name, vertex_count=len(mesh.positions), face_count=len(mesh.faces),
+                has_vertex_normals=True, has_vertex_texcoords=True)
+    params = mi.traverse(m)
+    uv = mesh.uvs.astype(np.float32).copy()
+    uv[:, 1] = 1.0 - uv[:, 1]
+    params["vertex_positions"] = mi.Float(mesh.positions.astype(np.float32).ravel())
+    params["faces"] = mi.UInt32(mesh.faces.astype(np.uint32).ravel())
+    params["vertex_normals"] = mi.Float(normals.astype(np.float32).ravel())
+    params["vertex_texcoords"] = mi.Float(uv.ravel())
+    params.update()
+    return m
+
+
+def _bitmap_texture(mi, data: np.ndarray) -> dict:
+    data = np.ascontiguousarray(data, dtype=np.float32)
+    if data.ndim == 2:
+        data = data[..., None]
+    return {"type": "bitmap", "bitmap": mi.Bitmap(data), "raw": True, "filter_type": "bilinear"}
+
+
+def pad_envmap(envmap):
+    """Mitsuba stores the map with one wrapped column on each side (so bilinear lookups wrap)."""
+    import torch
+
+    return torch.cat([envmap[:, -1:], envmap, envmap[:, :1]], dim=1)
+
+
+class AssetRenderer:
+    """A Mitsuba scene of one asset under an environment map, built once and updated per render."""
+
+    def __init__(self, mesh: Mesh, maps_shape: tuple[int, int], envmap: np.ndarray,
+                 options: SceneOptions = SceneOptions(), variant: str | None = None) -> None:
+        self.backend: Backend = init_mitsuba(variant)
+        import mitsuba as mi
+
+        envmap = np.asarray(envmap, dtype=np.float32)
+        if envmap.ndim != 3 or envmap.shape[2] != 3 or envmap.shape[1] != 2 * envmap.shape[0]:
+            raise InputError(f"The environment map must be RGB with width = 2 x height, got {envmap.shape}.")
+        if not np.isfinite(envmap).all() or envmap.min() < 0:
+            raise InputError("The environment map holds negative, NaN or infinite radiance.")
+        h, w = maps_shape
+        self.mesh, self.options, self.maps_shape = mesh, options, (h, w)
+        self.envmap_shape = envmap.shape
+        grey = np.full((h, w), 0.5, np.float32)
+        scene: dict = {
+            "type": "scene",
+            "integrator": {"type": options.integrator_type, "max_depth": options.max_depth},
+            "environment": {"type": "envmap", "bitmap": mi.Bitmap(envmap),
+                            "to_world": mi.ScalarTransform4f(ENVMAP_TO_WORLD)},
+            "asset": _mitsuba_mesh(mi, mesh),
+        }
+        scene["asset"].set_bsdf(mi.load_dict({
+            "type": "principled",
+            "base_color": _bitmap_texture(mi, np.full((h, w, 3), 0.5, np.float32)),
+            "roughness": _bitmap_texture(mi, grey),
+            "metallic": _bitmap_texture(mi, np.zeros((h, w), np.float32)),
+        }))
+        if options.floor:
+            z = float(mesh.positions[:, 2].min())
+            scene["floor"] = {
+                "type": "rectangle",
+                "to_world": mi.ScalarTransform4f().translate([0.0, 0.0, z]).scale(options.floor_extent),
+                "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": options.floor_albedo}},
+            }
+        if options.sphere is not None:
+            s = options.sphere
+            scene["apparatus"] = {
+                "type": "sphere", "center": list(s.center), "radius": s.radius,
+                "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": s.albedo}},
+            }
+        self.scene = mi.load_dict(scene)
+        self.params = mi.traverse(self.scene)
+        for key in (BASE_COLOR_KEY, ROUGHNESS_KEY, METALLIC_KEY, ENVMAP_KEY):
+            if key not in self.params:
+                raise RuntimeError(f"Mitsuba scene lacks parameter {key}; got {list(self.params.keys())[:20]}")
+        self.params.keep([BASE_COLOR_KEY, ROUGHNESS_KEY, METALLIC_KEY, ENVMAP_KEY])
+        self._sensors: dict[tuple[int, int], object] = {}
+        self._aov_integrator = None
+        self._wrapped = None
+
+    # -- cameras -------------------------------------------------------------------------------
+    def _sensor(self, camera: Camera):
+        import mitsuba as mi
+
+        key = (camera.width, camera.height)
+        if key not in self._sensors:
+            self._sensors[key] = mi.load_dict({
+                "type": "perspective", "fov": 40.0, "fov_axis": "x",
+                "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
+                         "pixel_format": "rgba", "rfilter": {"type": "box"}},
+                "sampler": {"type": "independent"},
+            })
+        sensor = self._sensors[key]
+        p = mi.traverse(sensor)
+        # The paper's FOV applies to the smaller image side; Mitsuba takes it along x.
+        fov_small = np.radians(camera.fov_deg)
+        aspect = camera.width / camera.height
+        fov_x = fov_small if aspect <= 1 else 2 * np.arctan(np.tan(fov_small / 2) * aspect)
+        p["x_fov"] = float(np.degrees(fov_x))
+        p["to_world"] = mi.Transform4f().look_at(origin=camera.origin.tolist(), target=list(camera.target),
+                                                 up=[0.0, 0.0, 1.0])
+        p.update()
+        return sensor
+
+    # -- rendering -----------------------------------------------------------------------------
+    def _render_fn(self):
+        if self._wrapped is None:
+            import drjit as dr
+            import mitsuba as mi
+
+            @dr.wrap(source="torch", target="drjit")
+            def render(base_color, roughness, metallic, envmap, sensor_index: int, spp: int, seed: int):
+                self.params[BASE_COLOR_KEY] = base_color
+                self.params[ROUGHNESS_KEY] = roughness
+                self.params[METALLIC_KEY] = metallic
+                self.params[ENVMAP_KEY] = envmap
+                self.params.update()
+                sensor = self._sensor_by_index[sensor_index]
+                # Seeds are opaque so a new seed does not recompile the kernel.
+                return mi.render(self.scene, self.params, sensor=sensor, spp=spp,
+                                 seed=dr.opaque(mi.UInt32, seed), seed_grad=dr.opaque(mi.UInt32, seed + 0x9E37))
+
+            self._wrapped = render
+        return self._wrapped
+
+    def render(self, camera: Camera, base_color, roughness, metallic, envmap, spp: int = 16,
+               seed: int = 0) -> RenderOutput:
+        """Render RGBA. Arguments are torch tensors: maps (H, W, 3|1), envmap (He, We, 3), linear.
+
+        Tensors that require grad receive gradients through `dr.wrap` on backward().
+        """
+        import time
+
+        import torch
+
+        t0 = time.perf_counter()
+        maps = [self._check_map(base_color, 3, "base colour"), self._check_map(roughness, 1, "roughness"),
+                self._check_map(metallic, 1, "metallic")]
+        if tuple(envmap.shape) != tuple(self.envmap_shape):
+            raise InputError(f"Environment map shape {tuple(envmap.shape)} differs from the scene's {self.envmap_shape}.")
+        sensor = self._sensor(camera)
+        self._sensor_by_index = {0: sensor}
+        image = self._render_fn()(*maps, pad_envmap(envmap.float()), 0, int(spp), int(seed))
+        image = image.to(torch.float32)
+        return RenderOutput(rgb=image[..., :3], alpha=image[..., 3:4], seconds=time.perf_counter() - t0)
+
+    def _check_map(self, tensor, channels: int, name: str):
+        if tensor.ndim == 2:
+            tensor = tensor[..., None]
+        if tuple(tensor.shape) != (*self.maps_shape, channels):
+            raise InputError(f"The {name} map has shape {tuple(tensor.shape)}, expected {(*self.maps_shape, channels)}.")
+        return tensor.float().contiguous()
+
+    def render_aovs(self, camera: Camera) -> dict[str, np.ndarray]:
+        """Shading normals (world space), depth and coverage, one sample at pixel centres, no gradients."""
+        import mitsuba as mi
+
+        if self._aov_integrator is None:
+            self._aov_integrator = mi.load_dict({"type": "aov", "aovs": "nn:sh_normal,dd:depth"})
+        sensor = self._sensor(camera)
+        # Without a nested integrator the aov integrator returns exactly its channels: nn.xyz, dd.
+        image = np.array(mi.render(self.scene, sensor=sensor, integrator=self._aov_integrator, spp=1))
+        normals = image[..., 0:3]
+        depth = image[..., 3]
+        return {"normal": normals, "depth": depth, "coverage": (depth > 0).astype(np.float32)}
