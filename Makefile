@@ -1,0 +1,50 @@
+# SceneFit developer commands. A newcomer needs two: `make demo` and `make test`.
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+
+VENV     := .venv
+PY       := $(VENV)/bin/python
+STAMP    := $(VENV)/.scenefit-setup
+PLATFORM ?= linux-x64
+
+# Mitsuba's llvm variant loads this library (found lazily, after `setup` may have installed it).
+export DRJIT_LIBLLVM_PATH ?= $(shell tools/find_llvm.sh 2>/dev/null)
+
+.PHONY: help setup test demo bench extension extension-nowheels validate clean
+
+help:
+	@echo "make demo       set up on first use, run SceneFit on the bundled example -> out/demo/"
+	@echo "make test       set up on first use, run the tests"
+	@echo "make bench      speed and accuracy table (benchmarks/run.py)"
+	@echo "make extension PLATFORM=linux-x64|linux-arm64|windows-x64|macos-arm64|macos-x64"
+	@echo "                download runtime wheels, list them in the manifest, build dist/*.zip"
+	@echo "make extension-nowheels   pure-Python zip without wheels (what the install test uses)"
+
+setup: $(STAMP)
+
+# Re-run only when the pins or the packaging change; tools/setup.sh is itself idempotent.
+$(STAMP): requirements.txt pyproject.toml tools/setup.sh tools/find_llvm.sh
+	tools/setup.sh
+	@touch $@
+
+test: setup
+	$(PY) -m pytest -q tests
+
+demo: setup
+	$(VENV)/bin/scenefit demo --out out/demo
+
+bench: setup
+	$(PY) benchmarks/run.py
+
+validate: setup
+	$(PY) tools/build_extension.py validate
+
+extension: setup
+	$(PY) tools/build_extension.py wheels --platform $(PLATFORM)
+	$(PY) tools/build_extension.py build --platform $(PLATFORM)
+
+extension-nowheels: setup
+	$(PY) tools/build_extension.py nowheels
+
+clean:
+	rm -rf dist build out .pytest_cache
