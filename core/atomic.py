@@ -8,6 +8,16 @@ from pathlib import Path
 from typing import Any
 
 
+# mkstemp creates files readable by their owner only; results are ordinary files for others to read.
+FILE_MODE = 0o644
+
+
+def replace_atomic(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
+    """Give a finished temp file normal permissions and move it over `path` in one step."""
+    os.chmod(tmp, FILE_MODE)
+    os.replace(tmp, path)
+
+
 def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -15,7 +25,7 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
-        os.replace(tmp, path)
+        replace_atomic(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .atomic import replace_atomic
 from .errors import InputError
 
 
@@ -86,7 +87,7 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, dtype: str | None =
         out.close()
         if not ok:
             raise InputError(f"Cannot write '{path}': {out.geterror()}")
-        os.replace(tmp, path)
+        replace_atomic(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

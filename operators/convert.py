@@ -17,33 +17,17 @@ from ..core.errors import Cancelled, SceneFitError
 from ..core.progress import check_cancel
 from .common import gather_asset, output_dir, poll_mesh
 
-MAP_FILES = {"base_color": "base_color.png", "roughness": "roughness.png", "metallic": "metallic.png"}
+def run_conversion(mesh, maps, preset: str, out_dir: Path, progress, cancel=None) -> dict:
+    """The one place that calls core's conversion (worker thread: no bpy here).
 
-
-def run_conversion(mesh, maps, preset: str, out_dir: Path, progress) -> dict:
-    """The one place that calls core's conversion; adapt here when its signature changes.
-
-    Returns {"base_color": path, "roughness": path or float, "metallic": path or float}.
+    Returns {"base_color": path, "roughness": path, "metallic": path} of the baked maps.
     """
-    from ..core.texture import convert as conversion
+    from ..core.convert import convert_preset
+    from ..core.pipeline import convert_and_bake, write_report
 
-    make_config = getattr(conversion, "config_for_preset", None)
-    config = make_config(preset, out_dir=out_dir) if make_config else preset
-    result = conversion.convert_asset(mesh, maps, config, progress)
-    return result_maps(result, out_dir, maps)
-
-
-def result_maps(result, out_dir: Path, maps) -> dict:
-    """Map paths from whatever convert_asset returned: a dict, an object with .maps_paths, or files."""
-    if isinstance(result, dict):
-        return result
-    for attr in ("maps_paths", "paths"):
-        if isinstance(getattr(result, attr, None), dict):
-            return getattr(result, attr)
-    found = {key: out_dir / name for key, name in MAP_FILES.items() if (out_dir / name).is_file()}
-    for key in ("roughness", "metallic"):
-        found.setdefault(key, getattr(maps, key) if not hasattr(getattr(maps, key), "shape") else None)
-    return found
+    _, report = convert_and_bake(mesh, maps, out_dir, convert_preset(preset), progress=progress, cancel=cancel)
+    write_report(Path(out_dir) / "report.json", report)
+    return {key: Path(report["outputs"][key]) for key in ("base_color", "roughness", "metallic")}
 
 
 class SCENEFIT_OT_convert(bpy.types.Operator):
@@ -79,7 +63,7 @@ class SCENEFIT_OT_convert(bpy.types.Operator):
 
         def work() -> None:
             try:
-                self._events.put(("done", run_conversion(mesh, maps, preset, out, progress)))
+                self._events.put(("done", run_conversion(mesh, maps, preset, out, progress, self._cancel)))
             except Cancelled as error:
                 self._events.put(("cancelled", str(error)))
             except SceneFitError as error:

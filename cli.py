@@ -1,0 +1,204 @@
+"""`scenefit` on the command line: the same pipeline the Blender operators run, headless.
+
+It lives beside core/ rather than in it because reading .blend/glTF assets and making the bundled
+example need Blender (bpy), which core/ never imports.
+"""
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import threading
+import time
+from pathlib import Path
+
+from .core.errors import Cancelled, SceneFitError
+
+PRESETS = ("draft", "balanced", "final")
+
+
+def load_asset(path: str, object_name: str | None = None):
+    """(Mesh, PBRMaps) from an asset folder, or from a file Blender reads (needs bpy)."""
+    from .core.asset_io import is_asset_folder, load_asset_folder
+
+    if is_asset_folder(path):
+        return load_asset_folder(path)
+    from .blender_io.asset_file import load_asset_file
+
+    return load_asset_file(path, object_name)
+
+
+def _progress(args):
+    from .core.progress import TerminalProgress
+
+    return None if getattr(args, "quiet", False) else TerminalProgress()
+
+
+def _environment(args, photo_mean=None):
+    from .core.pipeline import constant_environment, load_environment
+    from .core.photo import studiolight_path
+
+    if getattr(args, "envmap", None):
+        return load_environment(args.envmap), f"environment map {args.envmap}"
+    if getattr(args, "studiolight", None):
+        return load_environment(studiolight_path(args.studiolight)), f"Blender studio light '{args.studiolight}'"
+    value = float(getattr(args, "ambient", 1.0))
+    return constant_environment([value] * 3), f"constant environment of radiance {value}"
+
+
+def cmd_convert(args) -> int:
+    from .core.convert import convert_preset
+    from .core.pipeline import convert_and_bake, environment_info, write_report
+    from .core.asset_io import save_asset_folder
+
+    mesh, maps = load_asset(args.asset, args.object)
+    overrides = {k: v for k, v in (("method_type", args.method), ("iterations", args.iterations),
+                                   ("resolution", args.resolution), ("seed", args.seed)) if v is not None}
+    config = convert_preset(args.preset, **overrides)
+    out = Path(args.out)
+    result, report = convert_and_bake(mesh, maps, out / "maps", config, progress=_progress(args))
+    save_asset_folder(mesh, maps, out / "asset")
+    report["environment"] = environment_info()
+    write_report(out / "report.json", report)
+    print(f"converted '{mesh.name}': {result.psnr:.2f} dB on covered texels in {result.seconds:.1f} s "
+          f"({config.method_type}) -> {out}")
+    return 0
+
+
+def cmd_render(args) -> int:
+    import numpy as np
+    import torch
+
+    from .core.camera import orbit_cameras
+    from .core.imageio import write_image
+    from .core.mesh import normalize_to_unit_sphere
+    from .core.pipeline import render_views, tonemap_srgb, write_report, environment_info
+    from .core.texture.bake import load_neural_texture
+    from .core.texture.uv_raster import rasterize_uv
+    from .core.convert import target_stack
+
+    mesh, maps = load_asset(args.asset, args.object)
+    normalized, _ = normalize_to_unit_sphere(mesh)
+    if args.texture:
+        texture = load_neural_texture(Path(args.texture))
+        resolution = texture.config.resolution
+        raster = rasterize_uv(normalized, resolution)
+        with torch.no_grad():
+            stack = texture.texture(raster.position, raster.border, raster.fill_index)
+        label = "neural texture"
+    else:
+        stack, label = torch.from_numpy(target_stack(maps, max(maps.resolution))), "asset maps"
+    env, env_label = _environment(args)
+    cameras = orbit_cameras(args.views, args.elevation, fov_multiplier=1.1, size=args.size)
+    images = render_views(normalized, {label: stack}, env, cameras, args.spp, progress=_progress(args))[label]
+    out = Path(args.out)
+    files = []
+    for camera, image in zip(cameras, images):
+        path = out / f"view_az{int(round(camera.azimuth_deg)):03d}.png"
+        write_image(path, tonemap_srgb(image, args.exposure))
+        files.append(str(path))
+    write_report(out / "report.json", {"stage": "render", "source": label, "lighting": env_label,
+                                       "views": files, "spp": args.spp, "environment": environment_info()})
+    print(f"rendered {len(files)} views of '{mesh.name}' ({label}, {env_label}) -> {out}")
+    return 0
+
+
+def cmd_export(args) -> int:
+    from .core.camera import Camera
+    from .core.export import export_mitsuba_scene
+    from .core.mesh import normalize_to_unit_sphere
+
+    mesh, maps = load_asset(args.asset, args.object)
+    normalized, _ = normalize_to_unit_sphere(mesh)
+    env = None
+    if args.envmap or args.studiolight:
+        env, _ = _environment(args)
+    camera = Camera(azimuth_deg=args.azimuth, elevation_deg=args.elevation, width=args.size, height=args.size)
+    xml = export_mitsuba_scene(normalized, maps, args.out, camera=camera, envmap=env, spp=args.spp)
+    print(f"wrote {xml}; render it with: mitsuba {xml}")
+    return 0
+
+
+def cmd_demo(args) -> int:
+    from .demo import run_demo
+
+    report = run_demo(Path(args.out), preset=args.preset, progress=_progress(args), refresh=args.refresh)
+    print(f"demo done in {report['seconds_total']:.1f} s: conversion {report['convert']['psnr_covered_texels_db']:.2f} dB "
+          f"-> {args.out}/report.json")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="scenefit", description=(
+        "Restyle a textured 3D asset to fit a photo: neural PBR textures rendered by Mitsuba 3."))
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def asset_args(p):
+        p.add_argument("asset", help="a SceneFit asset folder (mesh.npz + maps) or a .blend/.glb/.gltf/.obj/.fbx file")
+        p.add_argument("--object", help="mesh object to use from a Blender file (default: the largest)")
+        p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    def light_args(p):
+        p.add_argument("--envmap", help="equirectangular HDR map (EXR/HDR) to light the asset")
+        p.add_argument("--studiolight", help="one of Blender's bundled HDR maps (studio, interior, city, forest, ...)")
+        p.add_argument("--ambient", type=float, default=1.0, help="constant environment radiance when no map is given")
+
+    p = sub.add_parser("convert", help="fit a neural texture to the asset's own maps and bake it")
+    asset_args(p)
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--preset", choices=PRESETS, default="balanced", help="speed/accuracy trade (default: balanced)")
+    p.add_argument("--method", choices=("direct", "inverse"), help="direct texture-space fit (default) or inverse rendering")
+    p.add_argument("--iterations", type=int)
+    p.add_argument("--resolution", type=int, help="texture size (default: the asset's, capped by the preset)")
+    p.add_argument("--seed", type=int)
+    p.set_defaults(func=cmd_convert)
+
+    p = sub.add_parser("render", help="render the asset (or its converted neural texture) from orbit views")
+    asset_args(p)
+    light_args(p)
+    p.add_argument("--out", required=True)
+    p.add_argument("--texture", help="a texture.pt written by `scenefit convert` (default: the asset's maps)")
+    p.add_argument("--views", type=int, default=4)
+    p.add_argument("--elevation", type=float, default=15.0)
+    p.add_argument("--size", type=int, default=256)
+    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--exposure", type=float, default=1.0)
+    p.set_defaults(func=cmd_render)
+
+    p = sub.add_parser("export", help="write the asset, maps, camera and light as a Mitsuba scene (XML + PLY + images)")
+    asset_args(p)
+    light_args(p)
+    p.add_argument("--out", required=True)
+    p.add_argument("--azimuth", type=float, default=30.0)
+    p.add_argument("--elevation", type=float, default=15.0)
+    p.add_argument("--size", type=int, default=512)
+    p.add_argument("--spp", type=int, default=256)
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("demo", help="run SceneFit on the bundled example (what `make demo` runs)")
+    p.add_argument("--out", default="out/demo")
+    p.add_argument("--preset", choices=PRESETS, default="balanced")
+    p.add_argument("--refresh", action="store_true", help="re-make the example asset and photo")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_demo)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except Cancelled as error:
+        print(f"\nscenefit: {error}", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:
+        print("\nscenefit: interrupted; outputs already written are complete, nothing half-written remains.",
+              file=sys.stderr)
+        return 130
+    except SceneFitError as error:
+        print(f"scenefit: error: {error}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

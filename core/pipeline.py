@@ -1,0 +1,133 @@
+"""Stages strung together for the command line and the Blender operators: convert, bake, render, report."""
+from __future__ import annotations
+
+import platform
+import threading
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .atomic import write_json_atomic
+from .backend import init_mitsuba
+from .camera import Camera, orbit_cameras
+from .convert import ConvertConfig, ConvertResult, convert_asset
+from .errors import InputError
+from .imageio import linear_to_srgb, read_color_image, write_image
+from .maps import PBRMaps
+from .mesh import Mesh, normalize_to_unit_sphere
+from .progress import ProgressCallback, check_cancel, emit
+from .render import AssetRenderer, SceneOptions
+from .texture.bake import bake_maps
+from .texture.fit_direct import masked_psnr
+
+
+def constant_environment(color, height: int = 32) -> np.ndarray:
+    """A uniform environment of linear RGB `color` (the stand-in until light estimation runs)."""
+    color = np.broadcast_to(np.asarray(color, np.float32), (3,))
+    return np.broadcast_to(color, (height, 2 * height, 3)).copy()
+
+
+def load_environment(path: str | Path, max_height: int = 256) -> np.ndarray:
+    """An equirectangular HDR map (EXR/HDR linear, or an 8-bit image decoded from sRGB), downsized for rendering."""
+    import cv2
+
+    env = read_color_image(path)
+    h, w = env.shape[:2]
+    if w != 2 * h:
+        raise InputError(f"Environment map '{path}' is {w}x{h}; a latitude-longitude map is twice as wide as high.")
+    if h > max_height:
+        env = cv2.resize(env, (2 * max_height, max_height), interpolation=cv2.INTER_AREA)
+    return np.maximum(env, 0.0).astype(np.float32)
+
+
+def tonemap_srgb(rgb: np.ndarray, exposure: float = 1.0) -> np.ndarray:
+    """Linear radiance -> display sRGB in [0, 1] (exposure, clip, sRGB curve)."""
+    return linear_to_srgb(np.clip(np.asarray(rgb) * exposure, 0.0, 1.0))
+
+
+def maps_tensors(stack: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    return stack[..., 0:3], stack[..., 3:4], stack[..., 4:5]
+
+
+def render_views(normalized_mesh: Mesh, stacks: dict[str, torch.Tensor], envmap: np.ndarray,
+                 cameras: list[Camera], spp: int, progress: ProgressCallback | None = None,
+                 cancel: threading.Event | None = None) -> dict[str, list[np.ndarray]]:
+    """Render every (H, W, 5) map stack from every camera with one scene; linear RGB images."""
+    shapes = {tuple(s.shape[:2]) for s in stacks.values()}
+    images: dict[str, list[np.ndarray]] = {name: [] for name in stacks}
+    env_t = torch.from_numpy(envmap)
+    renderers = {shape: AssetRenderer(normalized_mesh, shape, envmap, SceneOptions(integrator_type="path"))
+                 for shape in shapes}
+    total, done = len(stacks) * len(cameras), 0
+    with torch.no_grad():
+        for name, stack in stacks.items():
+            renderer = renderers[tuple(stack.shape[:2])]
+            for i, camera in enumerate(cameras):
+                check_cancel(cancel)
+                out = renderer.render(camera, *maps_tensors(stack), env_t, spp=spp, seed=i)
+                images[name].append(out.rgb.numpy())
+                done += 1
+                emit(progress, "render", done, total, f"{name} view {i + 1}")
+    return images
+
+
+def image_psnr(a: np.ndarray, b: np.ndarray) -> float:
+    """PSNR in dB between two display images in [0, 1]."""
+    mse = float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
+    return float("inf") if mse == 0 else 10.0 * np.log10(1.0 / mse)
+
+
+def contact_sheet(rows: dict[str, list[np.ndarray]], label_height: int = 22) -> np.ndarray:
+    """A grid image (one labelled row per entry) of sRGB [0, 1] images."""
+    import cv2
+
+    strips = []
+    for label, images in rows.items():
+        strip = np.concatenate(images, axis=1)
+        band = np.full((label_height, strip.shape[1], 3), 0.12, np.float32)
+        cv2.putText(band, label, (6, label_height - 7), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0.95, 0.95, 0.95), 1,
+                    cv2.LINE_AA)
+        strips.append(np.concatenate([band, strip], axis=0))
+    return np.concatenate(strips, axis=0)
+
+
+def environment_info() -> dict:
+    backend = init_mitsuba()
+    return {
+        "mitsuba_variant": backend.variant, "variant_reason": backend.reason,
+        "llvm_library": backend.llvm_library, "torch": torch.__version__,
+        "machine": f"{platform.machine()}, {torch.get_num_threads()} torch threads, {platform.platform()}",
+    }
+
+
+def convert_and_bake(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, config: ConvertConfig = ConvertConfig(),
+                     progress: ProgressCallback | None = None,
+                     cancel: threading.Event | None = None) -> tuple[ConvertResult, dict]:
+    """Convert the asset's maps to a neural texture and bake it into `out_dir`; returns the result and report."""
+    out_dir = Path(out_dir)
+    result = convert_asset(mesh, maps, config, progress=progress, cancel=cancel)
+    check_cancel(cancel)
+    paths = bake_maps(result.texture, result.raster.position, result.raster.border, result.raster.fill_index, out_dir)
+    report = {
+        "stage": "convert",
+        "config": asdict(config),
+        "decisions": result.decisions,
+        "psnr_covered_texels_db": round(result.psnr, 3),
+        "seconds": round(result.seconds, 3),
+        "iterations": result.iterations,
+        "outputs": {k: str(v) for k, v in paths.items()},
+    }
+    return result, report
+
+
+def write_report(path: str | Path, report: dict) -> Path:
+    report = dict(report)
+    report.setdefault("written_at", time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+    return write_json_atomic(path, report)
+
+
+def baked_psnr(result: ConvertResult, baked: torch.Tensor) -> float:
+    return masked_psnr(baked, result.target, result.raster.mask)
