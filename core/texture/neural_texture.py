@@ -1,0 +1,263 @@
+"""The paper's appearance model (§3.2): hash-grid encoding + 2-layer bias-free MLP, 3D point -> PBR.
+
+A texel's 3D position (from the UV-space position map C) goes through a multi-resolution hash
+encoding and a 2-layer MLP without bias; a sigmoid and a per-channel remap to [min, max] give the
+five channels base colour RGB (linear), roughness and metallic.
+"""
+from __future__ import annotations
+
+import weakref
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import torch
+
+from ..errors import InputError
+from ..mesh import NORMALIZED_RADIUS
+from .hashgrid import EncodingPlan, HashGrid3D
+
+CHANNELS = ("base_r", "base_g", "base_b", "roughness", "metallic")
+
+
+@dataclass(frozen=True)
+class NeuralTextureConfig:
+    """Shape of the neural texture. Defaults follow the paper / Instant-NGP; see PRESETS for faster ones.
+
+    resolution: texture map size (H = W) the position map is rasterised and the maps are baked at.
+    n_levels, n_features, log2_table, base_resolution, finest_resolution: the hash grid (Instant-NGP
+        names: L, F, log2 T, N_min, N_max).
+    hidden: width of the MLP's hidden layer.
+    *_range: (min, max) each output channel is remapped to after the sigmoid. The paper gives no
+        numbers; base colour and metallic span [0, 1], roughness keeps a small floor (0.03) so
+        the GGX lobe never degenerates to a perfect mirror.
+    bound: positions are expected in [-bound, bound]^3 (meshes normalised into the radius-0.5 sphere).
+    """
+
+    resolution: int = 512
+    n_levels: int = 16
+    n_features: int = 2
+    log2_table: int = 19
+    base_resolution: int = 16
+    finest_resolution: int = 2048
+    hidden: int = 64
+    base_color_range: tuple[float, float] = (0.0, 1.0)
+    roughness_range: tuple[float, float] = (0.03, 1.0)
+    metallic_range: tuple[float, float] = (0.0, 1.0)
+    bound: float = NORMALIZED_RADIUS
+
+    def __post_init__(self) -> None:
+        def need(ok: bool, message: str) -> None:
+            if not ok:
+                raise InputError(f"Neural texture config: {message}")
+
+        for name in ("resolution", "n_levels", "n_features", "log2_table", "base_resolution",
+                     "finest_resolution", "hidden"):
+            value = getattr(self, name)
+            need(isinstance(value, (int, np.integer)) and not isinstance(value, bool),
+                 f"{name} must be an integer, got {value!r}.")
+        need(1 <= self.resolution <= 16384, f"resolution {self.resolution} must be between 1 and 16384 texels.")
+        need(1 <= self.n_levels <= 32, f"n_levels {self.n_levels} must be between 1 and 32.")
+        need(self.n_features in (1, 2, 4, 8), f"n_features {self.n_features} must be 1, 2, 4 or 8.")
+        need(8 <= self.log2_table <= 24, f"log2_table {self.log2_table} must be between 8 and 24.")
+        need(self.base_resolution >= 2, f"base_resolution {self.base_resolution} must be at least 2.")
+        need(self.finest_resolution >= self.base_resolution,
+             f"finest_resolution {self.finest_resolution} must be at least base_resolution {self.base_resolution}.")
+        need(self.hidden >= 1, f"hidden {self.hidden} must be at least 1.")
+        for name in ("base_color_range", "roughness_range", "metallic_range"):
+            value = getattr(self, name)
+            need(isinstance(value, (tuple, list)) and len(value) == 2, f"{name} must be a (min, max) pair, got {value!r}.")
+            lo, hi = float(value[0]), float(value[1])
+            need(0.0 <= lo < hi <= 1.0, f"{name} {tuple(value)} must satisfy 0 <= min < max <= 1.")
+            object.__setattr__(self, name, (lo, hi))  # lists from JSON become tuples
+        need(float(self.bound) > 0.0, f"bound {self.bound} must be positive.")
+
+    @property
+    def channel_min(self) -> tuple[float, ...]:
+        return (self.base_color_range[0],) * 3 + (self.roughness_range[0], self.metallic_range[0])
+
+    @property
+    def channel_max(self) -> tuple[float, ...]:
+        return (self.base_color_range[1],) * 3 + (self.roughness_range[1], self.metallic_range[1])
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @staticmethod
+    def from_dict(values: dict) -> "NeuralTextureConfig":
+        known = NeuralTextureConfig.__dataclass_fields__
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            raise InputError(f"Neural texture config has unknown fields {unknown}; was it saved by a newer SceneFit?")
+        return NeuralTextureConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+
+
+# Speed/accuracy trade-offs. "final" is the paper's Instant-NGP-sized grid; the others shrink the
+# grid so a CPU converts a 512^2 texture quickly (timings in the module's tests/bench notes).
+PRESETS: dict[str, NeuralTextureConfig] = {
+    "final": NeuralTextureConfig(),
+    "balanced": NeuralTextureConfig(n_levels=12, log2_table=18, finest_resolution=1024),
+    "draft": NeuralTextureConfig(n_levels=8, log2_table=17, finest_resolution=512),
+}
+
+
+def preset(name: str, **overrides) -> NeuralTextureConfig:
+    """A named config ("draft", "balanced", "final"), optionally with fields replaced."""
+    if name not in PRESETS:
+        raise InputError(f"Unknown neural texture preset '{name}'; choose one of {', '.join(PRESETS)}.")
+    return NeuralTextureConfig(**{**PRESETS[name].to_dict(), **overrides})
+
+
+@dataclass(eq=False)
+class TexelPlan:
+    """Everything about a set of texels that does not change while a texture trains.
+
+    texels: (K,) int64 flat indices (row-major in H*W) of the evaluated texels.
+    points: (K, 3) float32 their positions in the grid's unit cube.
+    gather: (H*W,) int64 row of the K evaluated values each texel copies (itself, or its nearest
+        evaluated texel past a seam).
+    encoding: the hash grid's sparse encoding of the K points.
+    """
+
+    shape: tuple[int, int]
+    texels: torch.Tensor
+    points: torch.Tensor
+    gather: torch.Tensor
+    encoding: EncodingPlan
+    config: NeuralTextureConfig
+
+
+class NeuralTexture(torch.nn.Module):
+    """3D point -> (base colour RGB linear, roughness, metallic), each in its configured range."""
+
+    def __init__(self, config: NeuralTextureConfig | None = None, seed: int | None = 0) -> None:
+        super().__init__()
+        self.config = config = config or NeuralTextureConfig()
+        generator = None if seed is None else torch.Generator().manual_seed(int(seed))
+        self.encoding = HashGrid3D(config.n_levels, config.n_features, config.log2_table,
+                                   config.base_resolution, config.finest_resolution)
+        self.mlp = torch.nn.Sequential(
+            torch.nn.Linear(self.encoding.output_dim, config.hidden, bias=False),
+            torch.nn.ReLU(),
+            torch.nn.Linear(config.hidden, len(CHANNELS), bias=False),
+        )
+        # Deterministic initialisation for a given seed (the hash table: uniform(-1e-4, 1e-4)).
+        with torch.no_grad():
+            torch.nn.init.uniform_(self.encoding.table, -1e-4, 1e-4, generator=generator)
+            for layer in (self.mlp[0], self.mlp[2]):
+                torch.nn.init.kaiming_uniform_(layer.weight, a=5**0.5, generator=generator)
+        self.register_buffer("_lo", torch.tensor(config.channel_min, dtype=torch.float32), persistent=False)
+        self.register_buffer("_hi", torch.tensor(config.channel_max, dtype=torch.float32), persistent=False)
+        self._plan_cache: tuple | None = None
+
+    # -- evaluation -------------------------------------------------------------------------------
+
+    def forward(self, points: torch.Tensor) -> torch.Tensor:
+        """points (N, 3) in normalised object space ([-bound, bound]^3) -> (N, 5)."""
+        return self._head(self.encoding(self._unit(points)))
+
+    def plan(self, position_map, mask, fill_index) -> TexelPlan:
+        """Precompute the fixed part of evaluating a texture on `mask` texels of `position_map`.
+
+        position_map (H, W, 3), mask (H, W) bool (texels to evaluate, e.g. UVRaster.border),
+        fill_index (H*W,) nearest evaluated texel of every texel (UVRaster.fill_index).
+        numpy arrays or tensors; a plan is tied to this texture's config and device.
+        """
+        device = self._lo.device
+        pos, msk, fill = _tensor(position_map), _tensor(mask), _tensor(fill_index)
+        if pos.ndim != 3 or pos.shape[2] != 3:
+            raise InputError(f"The position map must be (H, W, 3), got {tuple(pos.shape)}.")
+        h, w = pos.shape[:2]
+        if tuple(msk.shape) != (h, w):
+            raise InputError(f"The mask is {tuple(msk.shape)} but the position map is {h}x{w}.")
+        if fill.numel() != h * w:
+            raise InputError(f"The seam fill index has {fill.numel()} entries for a {h}x{w} texture.")
+        msk = msk.to(device=device, dtype=torch.bool).reshape(-1)
+        fill = fill.to(device=device, dtype=torch.int64).reshape(-1)
+        texels = torch.nonzero(msk).squeeze(1)
+        if texels.numel() == 0:
+            raise InputError("No texel is covered by the mesh's UV map; nothing to texture.")
+        if fill.min() < 0 or fill.max() >= h * w or not bool(msk[fill].all()):
+            raise InputError("The seam fill index points at texels outside the mask; build both from one UVRaster.")
+        rank = torch.full((h * w,), -1, dtype=torch.int64, device=device)
+        rank[texels] = torch.arange(texels.numel(), device=device)
+        points = self._unit(pos.to(device=device, dtype=torch.float32).reshape(-1, 3)[texels])
+        return TexelPlan(shape=(h, w), texels=texels, points=points, gather=rank[fill],
+                         encoding=self.encoding.plan(points), config=self.config)
+
+    def subset_plan(self, plan: TexelPlan, rows: torch.Tensor) -> TexelPlan:
+        """A plan for some of a plan's texels (`rows` index plan.texels); its texture is (1, len(rows))."""
+        rows = rows.to(plan.texels.device)
+        points = plan.points[rows]
+        return TexelPlan(shape=(1, rows.numel()), texels=plan.texels[rows], points=points,
+                         gather=torch.arange(rows.numel(), device=rows.device),
+                         encoding=self.encoding.plan(points), config=self.config)
+
+    def texture_from_plan(self, plan: TexelPlan) -> torch.Tensor:
+        """(H, W, 5) texture on the plan's texels, dilated past seams. Differentiable."""
+        if plan.config != self.config:
+            raise InputError("This texel plan was made for a neural texture with another config.")
+        values = self.values_from_plan(plan)
+        return values[plan.gather].view(*plan.shape, len(CHANNELS))
+
+    def values_from_plan(self, plan: TexelPlan) -> torch.Tensor:
+        """(K, 5) values at the plan's texels only (in plan.texels order)."""
+        return self._head(self.encoding.forward_planned(plan.encoding))
+
+    def texture(self, position_map, mask, fill_index) -> torch.Tensor:
+        """(H, W, 5) texture: the network on `mask` texels, copied outward past seams via fill_index.
+
+        The plan is cached while the same read-only numpy arrays (e.g. a UVRaster's) or unchanged
+        tensors are passed again, so calling this every iteration costs one forward pass.
+        """
+        key = _cache_key((position_map, mask, fill_index))
+        if key is not None and self._plan_cache is not None and self._plan_cache[0] == key[0] \
+                and all(ref() is obj for ref, obj in zip(self._plan_cache[1], (position_map, mask, fill_index))):
+            plan = self._plan_cache[2]
+        else:
+            plan = self.plan(position_map, mask, fill_index)
+            if key is not None:
+                self._plan_cache = (key[0], key[1], plan)
+        return self.texture_from_plan(plan)
+
+    # -- helpers ----------------------------------------------------------------------------------
+
+    def _unit(self, points: torch.Tensor) -> torch.Tensor:
+        """Normalised object space [-bound, bound]^3 -> the grid's [0, 1]^3."""
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise InputError(f"Points must be (N, 3), got {tuple(points.shape)}.")
+        return points.to(self._lo.device, torch.float32) / (2.0 * self.config.bound) + 0.5
+
+    def _head(self, features: torch.Tensor) -> torch.Tensor:
+        return self._lo + (self._hi - self._lo) * torch.sigmoid(self.mlp(features))
+
+    def _apply(self, fn, recurse=True):  # .to(device) invalidates cached plans
+        self._plan_cache = None
+        return super()._apply(fn, recurse)
+
+
+def split_channels(texture: torch.Tensor | np.ndarray):
+    """(..., 5) -> base colour (..., 3), roughness (...), metallic (...)."""
+    return texture[..., 0:3], texture[..., 3], texture[..., 4]
+
+
+def _tensor(x) -> torch.Tensor:
+    """A tensor view of x; read-only numpy arrays are copied (torch wants writable memory)."""
+    if torch.is_tensor(x):
+        return x
+    x = np.asarray(x)
+    return torch.from_numpy(x if x.flags.writeable else x.copy())
+
+
+def _cache_key(arrays) -> tuple | None:
+    """A key that identifies unchanged inputs, or None when they might change in place."""
+    versions = []
+    refs = []
+    for a in arrays:
+        if torch.is_tensor(a):
+            versions.append((id(a), a._version))
+        elif isinstance(a, np.ndarray) and not a.flags.writeable:
+            versions.append((id(a), 0))
+        else:
+            return None
+        refs.append(weakref.ref(a))
+    return tuple(versions), tuple(refs)
