@@ -1,0 +1,207 @@
+"""Score-distillation critics (paper §3.1, eq. vsd): one interface for SDS, VSD and their interpolation.
+
+For latents z = E(g(θ)), a timestep t and noise ε:
+
+    z_t      = sqrt(ᾱ_t) z + sqrt(1 - ᾱ_t) ε
+    ε_φ      = ε_φ(z_t, ∅) + s_cf (ε_φ(z_t, text) - ε_φ(z_t, ∅))            classifier-free guidance
+    ε̂        = λ ε_ψ(z_t, text, camera) + (1 - λ) ε                         λ = 0: SDS; λ = 1: VSD
+    ∇_z L    = w_t · w_n · (ε_φ - ε̂)                                        w_n: ⟨camera, normal⟩ map
+
+The gradient is handed to autograd as is (no Jacobian of the UNet), after the guard rails
+(float32, NaN/inf -> 0, optional clip). With reference latents, ε_φ and ε_ψ see the noised
+reference through ReferenceInjector; with `inpaint` the UNet gets the 9-channel input.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import torch
+
+from ..errors import InputError
+from .injection import Layout, ReferenceInjector
+from .lora import LoraCritic
+from .weighting import WEIGHTING_TYPES, add_noise, alphas_cumprod, guard_gradient, timestep_weight
+from .views import inpainting_input
+
+CRITIC_TYPES = ("sds", "vsd")
+REFERENCE_TYPES = ("inject", "none")
+
+
+@dataclass(frozen=True)
+class CriticConfig:
+    """critic_type "vsd" uses ε̂ = λ ε_ψ + (1 - λ) ε with λ annealed from 1 to lambda_end; "sds" is λ = 0.
+
+    control_scale is s_c, injection_fraction is p (reference_type "inject"); the paper's defaults
+    are s_c = 0, p = 1, s_cf = 7.5, λ = 1.
+    """
+
+    critic_type: str = "vsd"
+    guidance_scale: float = 7.5
+    lora_guidance_scale: float = 1.0
+    lambda_end: float = 1.0
+    weighting_type: str = "sds"
+    reference_type: str = "inject"
+    control_scale: float = 0.0
+    injection_fraction: float = 1.0
+    grad_clip: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.critic_type not in CRITIC_TYPES:
+            raise InputError(f"critic_type must be one of {CRITIC_TYPES}, got {self.critic_type!r}.")
+        if self.reference_type not in REFERENCE_TYPES:
+            raise InputError(f"reference_type must be one of {REFERENCE_TYPES}, got {self.reference_type!r}.")
+        if self.weighting_type not in WEIGHTING_TYPES:
+            raise InputError(f"weighting_type must be one of {WEIGHTING_TYPES}, got {self.weighting_type!r}.")
+        if not 0.0 <= self.lambda_end <= 1.0:
+            raise InputError(f"lambda_end must be in [0, 1], got {self.lambda_end}.")
+        if not 0.0 <= self.control_scale <= 1.0:
+            raise InputError(f"control_scale s_c must be in [0, 1], got {self.control_scale}.")
+        if not 0.0 <= self.injection_fraction <= 1.0:
+            raise InputError(f"injection_fraction p must be in [0, 1], got {self.injection_fraction}.")
+        if self.guidance_scale < 0 or self.lora_guidance_scale < 0:
+            raise InputError("Guidance scales must not be negative.")
+        if self.grad_clip is not None and not self.grad_clip > 0:
+            raise InputError(f"grad_clip must be positive or None, got {self.grad_clip}.")
+
+
+@dataclass
+class CriticOutput:
+    loss: torch.Tensor          # scalar whose gradient with respect to the latents is `grad`
+    grad: torch.Tensor          # float32, guarded
+    eps_phi: torch.Tensor
+    eps_hat: torch.Tensor
+    metrics: dict = field(default_factory=dict)
+
+
+class _InjectGradient(torch.autograd.Function):
+    """Forward: a scalar (Σ z·g, for logging only); backward: exactly g (times the incoming scale)."""
+
+    @staticmethod
+    def forward(ctx, latents, grad):
+        ctx.save_for_backward(grad)
+        return (latents.detach().float() * grad).sum()
+
+    @staticmethod
+    def backward(ctx, grad_output):
+        (grad,) = ctx.saved_tensors
+        return (grad_output * grad).to(grad.dtype), None
+
+
+def gradient_loss(latents: torch.Tensor, grad: torch.Tensor) -> torch.Tensor:
+    """A scalar whose backward puts `grad` into the latents' gradient."""
+    g = grad.to(latents.dtype) if latents.dtype == grad.dtype else grad
+    out = _InjectGradient.apply(latents, g)
+    return out
+
+
+def to_epsilon(prediction: torch.Tensor, x_t: torch.Tensor, alpha_bar_t: float, prediction_type: str) -> torch.Tensor:
+    """The UNet's output as a noise prediction (SD2-base predicts ε; SD2-768 predicts v)."""
+    prediction = prediction.float()
+    if prediction_type == "epsilon":
+        return prediction
+    if prediction_type == "v_prediction":
+        return (alpha_bar_t ** 0.5) * prediction + ((1.0 - alpha_bar_t) ** 0.5) * x_t.float()
+    raise InputError(f"Unsupported scheduler prediction type {prediction_type!r}.")
+
+
+class ScoreCritic:
+    """ε_φ (and ε_ψ when given a LoraCritic) scoring latents; see the module docstring."""
+
+    def __init__(self, unet, scheduler, config: CriticConfig, lora: LoraCritic | None = None,
+                 injector: ReferenceInjector | None = None) -> None:
+        if config.critic_type == "vsd" and lora is None:
+            raise InputError("critic_type 'vsd' needs the LoRA model ε_ψ.")
+        self.unet, self.config, self.lora, self.injector = unet, config, lora, injector
+        self.alpha_bar = alphas_cumprod(scheduler)
+        self.prediction_type = scheduler.config.prediction_type
+        self.num_train_timesteps = len(self.alpha_bar)
+
+    # -- UNet passes ---------------------------------------------------------------------------------
+    def _unet(self, x_t: torch.Tensor, t: int, text: torch.Tensor, ref_t: torch.Tensor | None,
+              uncond_rows: tuple[int, ...], class_labels: torch.Tensor | None, extra: tuple | None) -> torch.Tensor:
+        """One batched UNet call on rows x_t (B) [+ ref_t (B)]; returns the B x rows' outputs."""
+        n = x_t.shape[0]
+        sample = x_t
+        if extra is not None:
+            mask, masked_latents = extra
+            sample = inpainting_input(x_t, mask.expand(n, -1, -1, -1), masked_latents.expand(n, -1, -1, -1))
+        layout = None
+        if ref_t is not None:
+            if self.injector is None:
+                raise InputError("Reference latents were given but no ReferenceInjector is installed.")
+            sample = torch.cat([sample, ref_t], dim=0)
+            text = torch.cat([text, text], dim=0)
+            if class_labels is not None:
+                class_labels = torch.cat([class_labels, class_labels], dim=0)
+            layout = Layout(n_x=n, ref_index=tuple(range(n)), uncond=uncond_rows,
+                            control_scale=self.config.control_scale)
+        timesteps = torch.full((sample.shape[0],), t, device=sample.device, dtype=torch.long)
+        dtype = self.unet.dtype
+        with torch.no_grad():
+            if self.injector is not None:
+                with self.injector.layout(layout):
+                    out = self.unet(sample.to(dtype), timesteps, encoder_hidden_states=text.to(dtype),
+                                    class_labels=class_labels).sample
+            else:
+                out = self.unet(sample.to(dtype), timesteps, encoder_hidden_states=text.to(dtype),
+                                class_labels=class_labels).sample
+        return out[:n]
+
+    def predict_phi(self, x_t, t, text_cond, text_uncond, ref_t=None, extra=None) -> torch.Tensor:
+        """ε_φ with classifier-free guidance (rows [∅, text])."""
+        b = x_t.shape[0]
+        rows = torch.cat([x_t, x_t], dim=0)
+        text = torch.cat([text_uncond.expand(b, -1, -1), text_cond.expand(b, -1, -1)], dim=0)
+        refs = None if ref_t is None else torch.cat([ref_t, ref_t], dim=0)
+        out = to_epsilon(self._unet(rows, t, text, refs, tuple(range(b)), None, extra), rows,
+                         float(self.alpha_bar[t]), self.prediction_type)
+        uncond, cond = out[:b], out[b:]
+        return uncond + self.config.guidance_scale * (cond - uncond)
+
+    def predict_psi(self, x_t, t, text_cond, text_uncond, condition, ref_t=None) -> torch.Tensor:
+        """ε_ψ: LoRA on, camera/light condition; its own CFG over (text + condition) vs (∅ + no condition)."""
+        b = x_t.shape[0]
+        cond_labels = condition.to(x_t.device)[None].expand(b, -1)
+        with self.lora.active():
+            if self.config.lora_guidance_scale == 1.0:  # the unconditional branch has weight 0
+                out = self._unet(x_t, t, text_cond.expand(b, -1, -1), ref_t, (), cond_labels, None)
+                return to_epsilon(out, x_t, float(self.alpha_bar[t]), self.prediction_type)
+            rows = torch.cat([x_t, x_t], dim=0)
+            text = torch.cat([text_uncond.expand(b, -1, -1), text_cond.expand(b, -1, -1)], dim=0)
+            labels = torch.cat([torch.zeros_like(cond_labels), cond_labels], dim=0)
+            refs = None if ref_t is None else torch.cat([ref_t, ref_t], dim=0)
+            out = to_epsilon(self._unet(rows, t, text, refs, tuple(range(b)), labels, None), rows,
+                             float(self.alpha_bar[t]), self.prediction_type)
+        uncond, cond = out[:b], out[b:]
+        return uncond + self.config.lora_guidance_scale * (cond - uncond)
+
+    # -- the critic ----------------------------------------------------------------------------------
+    def __call__(self, latents: torch.Tensor, t: int, noise: torch.Tensor, text_cond: torch.Tensor,
+                 text_uncond: torch.Tensor, lam: float = 0.0, condition: torch.Tensor | None = None,
+                 reference_latents: torch.Tensor | None = None, weight_map: torch.Tensor | None = None,
+                 extra: tuple | None = None) -> CriticOutput:
+        """Score `latents` at timestep t with noise ε; `lam` is λ (0 for SDS)."""
+        if not 0 <= t < self.num_train_timesteps:
+            raise InputError(f"Timestep {t} outside [0, {self.num_train_timesteps}).")
+        alpha_bar_t = float(self.alpha_bar[t])
+        x_t = add_noise(latents.detach(), noise, alpha_bar_t)
+        ref_t = None
+        if reference_latents is not None and self.config.reference_type == "inject":
+            ref_t = add_noise(reference_latents.detach(), noise, alpha_bar_t)
+        eps_phi = self.predict_phi(x_t, t, text_cond, text_uncond, ref_t, extra)
+        eps = noise.float()
+        if lam > 0.0:
+            if self.lora is None:
+                raise InputError("λ > 0 needs the LoRA model ε_ψ (critic_type 'vsd').")
+            eps_psi = self.predict_psi(x_t, t, text_cond, text_uncond, condition, ref_t)
+            eps_hat = lam * eps_psi + (1.0 - lam) * eps
+        else:
+            eps_hat = eps
+        w = timestep_weight(alpha_bar_t, self.config.weighting_type)
+        grad = w * (eps_phi - eps_hat)
+        if weight_map is not None:
+            grad = grad * weight_map.to(grad.device, grad.dtype)
+        grad, bad = guard_gradient(grad, self.config.grad_clip)
+        loss = gradient_loss(latents, grad)
+        metrics = {"t": t, "w_t": w, "lambda": lam, "grad_norm": float(grad.norm()), "nonfinite": bad}
+        return CriticOutput(loss=loss, grad=grad, eps_phi=eps_phi, eps_hat=eps_hat, metrics=metrics)

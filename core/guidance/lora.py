@@ -1,0 +1,145 @@
+"""ε_ψ: a LoRA-tuned copy of the base UNet, trained online on the rendered latents (VSD).
+
+The LoRA weights live as a peft adapter on the base UNet itself; ε_φ runs with the adapter
+disabled, ε_ψ with it enabled, so the base weights are held once. ε_ψ is also conditioned on the
+camera extrinsics (4x4, flattened) concatenated with the light vector (5 numbers, the appendix's
+c_x, c_y, c_r, c_v, b_v) through a class embedding added to the timestep embedding; its last layer
+starts at zero, so ε_ψ starts equal to ε_φ. The condition is dropped (zeroed) with probability
+`condition_dropout` while training, which gives ε_ψ its own classifier-free guidance.
+"""
+from __future__ import annotations
+
+from contextlib import contextmanager
+
+import numpy as np
+import torch
+
+ADAPTER = "scenefit_vsd"
+LIGHT_DIM = 5
+CONDITION_DIM = 16 + LIGHT_DIM
+TARGET_MODULES = ["to_q", "to_k", "to_v", "to_out.0"]
+# The appendix's default ambient light as a light vector: c_x = 0.25, c_y = 0, c_r = 0, c_v = 1, b_v = 1.
+AMBIENT_LIGHT = (0.25, 0.0, 0.0, 1.0, 1.0)
+
+
+def camera_condition(origin, forward, light=AMBIENT_LIGHT) -> torch.Tensor:
+    """(CONDITION_DIM,) float32: the camera-to-world matrix (Z up) flattened, then the light vector."""
+    f = np.asarray(forward, np.float64)
+    right = np.cross(f, [0.0, 0.0, 1.0])
+    right /= max(np.linalg.norm(right), 1e-12)
+    up = np.cross(right, f)
+    c2w = np.eye(4)
+    c2w[:3, 0], c2w[:3, 1], c2w[:3, 2], c2w[:3, 3] = right, up, -f, np.asarray(origin, np.float64)
+    return torch.tensor(np.concatenate([c2w.ravel(), np.asarray(light, np.float64)]), dtype=torch.float32)
+
+
+class LoraCritic:
+    """Owns the adapter, the camera embedding and their optimiser."""
+
+    def __init__(self, unet, rank: int = 4, lr: float = 1e-4, condition_dropout: float = 0.1, seed: int = 0) -> None:
+        from diffusers.models.embeddings import TimestepEmbedding
+        from peft import LoraConfig
+
+        self.unet = unet
+        self.condition_dropout = condition_dropout
+        generator = torch.Generator().manual_seed(seed)
+        if ADAPTER not in (getattr(unet, "peft_config", None) or {}):
+            # Seeded initialisation: peft draws lora_A from torch's global generator.
+            state = torch.random.get_rng_state()
+            torch.manual_seed(seed)
+            unet.add_adapter(LoraConfig(r=rank, lora_alpha=rank, target_modules=TARGET_MODULES,
+                                        init_lora_weights=True), adapter_name=ADAPTER)
+            torch.random.set_rng_state(state)
+        device = next(unet.parameters()).device
+        time_dim = unet.time_embedding.linear_2.out_features
+        self.embedding = TimestepEmbedding(CONDITION_DIM, time_dim)
+        with torch.no_grad():
+            torch.nn.init.normal_(self.embedding.linear_1.weight, std=CONDITION_DIM ** -0.5, generator=generator)
+            self.embedding.linear_1.bias.zero_()
+            self.embedding.linear_2.weight.zero_()   # ε_ψ = ε_φ at the start
+            self.embedding.linear_2.bias.zero_()
+        # LoRA and the embedding train in float32 even when the UNet runs in fp16.
+        self.embedding.to(device=device, dtype=torch.float32)
+        for p in self.lora_parameters():
+            p.data = p.data.float()
+            p.requires_grad_(True)
+        unet.disable_adapters()
+        self.optimizer = torch.optim.AdamW(self.parameters(), lr=lr, weight_decay=0.0)
+
+    def lora_parameters(self) -> list[torch.nn.Parameter]:
+        return [p for n, p in self.unet.named_parameters() if "lora_" in n and ADAPTER in n]
+
+    def parameters(self) -> list[torch.nn.Parameter]:
+        return self.lora_parameters() + list(self.embedding.parameters())
+
+    @contextmanager
+    def active(self):
+        """ε_ψ inside, ε_φ outside."""
+        unet = self.unet
+        dtype = unet.dtype
+
+        class _Embed(torch.nn.Module):  # the class embedding in the UNet's dtype
+            def __init__(self, inner):
+                super().__init__()
+                self.inner = inner
+
+            def forward(self, x):
+                return self.inner(x.float()).to(dtype)
+
+        unet.enable_adapters()
+        for p in self.lora_parameters():  # peft's enable/disable also toggles requires_grad
+            p.requires_grad_(True)
+        previous = unet.class_embedding
+        unet.class_embedding = _Embed(self.embedding)
+        try:
+            yield
+        finally:
+            unet.class_embedding = previous
+            unet.disable_adapters()
+
+    def state_dict(self) -> dict:
+        return {"lora": {n: p.detach().cpu().clone() for n, p in self.unet.named_parameters()
+                         if "lora_" in n and ADAPTER in n},
+                "embedding": {k: v.detach().cpu().clone() for k, v in self.embedding.state_dict().items()},
+                "optimizer": self.optimizer.state_dict()}
+
+    def load_state_dict(self, state: dict) -> None:
+        params = dict(self.unet.named_parameters())
+        with torch.no_grad():
+            for n, v in state["lora"].items():
+                params[n].copy_(v)
+        self.embedding.load_state_dict(state["embedding"])
+        self.optimizer.load_state_dict(state["optimizer"])
+
+    def train_step(self, latents: torch.Tensor, text_embedding: torch.Tensor, condition: torch.Tensor,
+                   t: int, noise: torch.Tensor, alpha_bar_t: float, drop_condition: bool,
+                   prediction_type: str = "epsilon") -> float:
+        """One step of the diffusion loss on detached rendered latents; returns the loss.
+
+        ε_ψ learns the distribution of the current renderings (ProlificDreamer's LoRA update).
+        """
+        from .weighting import add_noise
+
+        latents = latents.detach()
+        cond = torch.zeros_like(condition) if drop_condition else condition
+        x_t = add_noise(latents, noise, alpha_bar_t)
+        timesteps = torch.full((latents.shape[0],), t, device=latents.device, dtype=torch.long)
+        with self.active(), torch.enable_grad():
+            pred = self.unet(x_t, timesteps, encoder_hidden_states=text_embedding.expand(latents.shape[0], -1, -1),
+                             class_labels=cond.to(latents.device)[None].expand(latents.shape[0], -1)).sample
+            if prediction_type == "v_prediction":
+                target = (alpha_bar_t ** 0.5) * noise.float() - ((1 - alpha_bar_t) ** 0.5) * latents.float()
+            else:
+                target = noise.float()
+            loss = torch.nn.functional.mse_loss(pred.float(), target)
+            self.optimizer.zero_grad(set_to_none=True)
+            # Inside `active()`: leaving it turns requires_grad off, and autograd skips such leaves.
+            loss.backward()
+        return float(loss.detach())
+
+    def step(self) -> None:
+        """Apply the gradients of the last train_step (after an all-reduce across ranks, if any)."""
+        for p in self.parameters():
+            if p.grad is not None:
+                p.grad.nan_to_num_(0.0, 0.0, 0.0)
+        self.optimizer.step()

@@ -1,0 +1,271 @@
+"""The one place diffusion models are found and loaded (Stable Diffusion 2 base and inpainting).
+
+A model is a hub id (looked up in the Hugging Face cache, downloaded only when online and allowed)
+or a local folder laid out like the hub repository (unet/, vae/, text_encoder/, tokenizer/,
+scheduler/). `locate_models` runs before any work starts and raises ModelMissingError with the
+model, where it looked and how to provide it. `load_guidance_models` then loads them with the
+memory switches applied. The inpainting model shares the base model's VAE and text encoder (SD2
+inpainting was fine-tuned from SD2 with both frozen), so only its UNet is loaded.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import InputError, ModelMissingError
+
+DEFAULT_BASE_MODEL = "stabilityai/stable-diffusion-2-base"
+DEFAULT_INPAINT_MODEL = "stabilityai/stable-diffusion-2-inpainting"
+DEVICE_TYPES = ("auto", "cpu", "cuda")
+DTYPE_TYPES = ("auto", "fp32", "fp16", "bf16")
+
+# What each role needs from its folder (a file that must exist in each subfolder).
+BASE_PARTS = {"unet": "config.json", "vae": "config.json", "text_encoder": "config.json",
+              "tokenizer": None, "scheduler": "scheduler_config.json"}
+INPAINT_PARTS = {"unet": "config.json"}
+_WEIGHT_PATTERNS = ["*.json", "*.txt", "*.safetensors", "*.model"]
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Which diffusion models and how to hold them in memory.
+
+    base_model / inpaint_model: hub id or local folder. cache_dir: the Hugging Face cache to look in
+    (None: HF_HUB_CACHE / HF_HOME / ~/.cache/huggingface/hub). local_files_only: never download
+    (also forced by HF_HUB_OFFLINE=1). dtype_type "auto" is fp16 on CUDA and fp32 on CPU.
+    """
+
+    base_model: str = DEFAULT_BASE_MODEL
+    inpaint_model: str = DEFAULT_INPAINT_MODEL
+    cache_dir: str | None = None
+    local_files_only: bool = False
+    device_type: str = "auto"
+    dtype_type: str = "auto"
+    attention_slicing: bool = False
+    vae_slicing: bool = False
+    vae_tiling: bool = False
+    channels_last: bool = False
+    cpu_offload: bool = False
+
+    def __post_init__(self) -> None:
+        if self.device_type not in DEVICE_TYPES:
+            raise InputError(f"device_type must be one of {DEVICE_TYPES}, got {self.device_type!r}.")
+        if self.dtype_type not in DTYPE_TYPES:
+            raise InputError(f"dtype_type must be one of {DTYPE_TYPES}, got {self.dtype_type!r}.")
+        if not self.base_model or not self.inpaint_model:
+            raise InputError("base_model and inpaint_model must name a hub id or a folder.")
+
+    @property
+    def offline(self) -> bool:
+        return self.local_files_only or os.environ.get("HF_HUB_OFFLINE", "").strip().lower() in ("1", "true", "yes", "on")
+
+    def device(self):
+        import torch
+
+        if self.device_type == "auto":
+            return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+        if self.device_type == "cuda" and not torch.cuda.is_available():
+            raise InputError("device_type 'cuda' was asked for but torch sees no CUDA GPU; use 'auto' or 'cpu'.")
+        return torch.device(self.device_type)
+
+    def dtype(self):
+        import torch
+
+        if self.dtype_type == "auto":
+            return torch.float16 if self.device().type == "cuda" else torch.float32
+        return {"fp32": torch.float32, "fp16": torch.float16, "bf16": torch.bfloat16}[self.dtype_type]
+
+
+def _cache_dir(config: ModelConfig) -> Path:
+    if config.cache_dir:
+        return Path(config.cache_dir).expanduser()
+    from huggingface_hub import constants
+
+    return Path(os.environ.get("HF_HUB_CACHE") or constants.HF_HUB_CACHE)
+
+
+def _missing_parts(folder: Path, parts: dict) -> list[str]:
+    missing = []
+    for sub, marker in parts.items():
+        path = folder / sub
+        if not path.is_dir() or (marker is not None and not (path / marker).is_file()) or not any(path.iterdir()):
+            missing.append(f"{sub}/")
+    return missing
+
+
+def locate_model(model: str, role: str, parts: dict, config: ModelConfig) -> Path:
+    """The folder holding `model` (a local folder, or the cached/downloaded hub snapshot).
+
+    Raises ModelMissingError naming the model, where it looked and how to provide it.
+    """
+    layout = ", ".join(p + "/" for p in parts)
+    local = Path(model).expanduser()
+    is_folder = local.is_dir() or model.startswith((".", "/", "~")) or model.count("/") > 1
+    if is_folder:
+        how = (f"Give a folder laid out like the hub repository ({layout}), a hub id such as "
+               f"'{DEFAULT_BASE_MODEL}', or run without diffusion guidance (`--guidance none`).")
+    else:
+        how = (f"Provide it by (a) running `huggingface-cli download {model}` on a machine with internet and "
+               f"copying its cache here (or pointing the cache folder setting / HF_HUB_CACHE at it), or (b) giving "
+               f"a local folder with {layout} as the {role} model; or run without diffusion guidance "
+               f"(`--guidance none`).")
+    if is_folder:
+        if not local.is_dir():
+            raise ModelMissingError(f"The {role} model folder '{local}' does not exist. {how}")
+        missing = _missing_parts(local, parts)
+        if missing:
+            raise ModelMissingError(f"The {role} model folder '{local}' lacks {', '.join(missing)}. {how}")
+        return local
+
+    from huggingface_hub import snapshot_download
+
+    cache = _cache_dir(config)
+    patterns = [f"{sub}/{p}" for sub in parts for p in _WEIGHT_PATTERNS] + ["model_index.json"]
+    try:
+        folder = Path(snapshot_download(model, cache_dir=cache, local_files_only=True, allow_patterns=patterns))
+    except Exception:
+        folder = None
+    if folder is not None and not _missing_parts(folder, parts):
+        return folder
+    if config.offline:
+        why = "HF_HUB_OFFLINE is set" if not config.local_files_only else "local files only was asked for"
+        raise ModelMissingError(f"The {role} model '{model}' is not in the Hugging Face cache at '{cache}' "
+                                f"and downloading is off ({why}). {how}")
+    try:
+        folder = Path(snapshot_download(model, cache_dir=cache, allow_patterns=patterns))
+    except Exception as error:
+        raise ModelMissingError(f"The {role} model '{model}' is not in the Hugging Face cache at '{cache}' and "
+                                f"could not be downloaded ({type(error).__name__}: {str(error)[:200]}). {how}") from None
+    missing = _missing_parts(folder, parts)
+    if missing:
+        raise ModelMissingError(f"The {role} model '{model}' in '{folder}' lacks {', '.join(missing)}. {how}")
+    return folder
+
+
+def locate_models(config: ModelConfig, need_inpaint: bool) -> dict[str, Path]:
+    """Find every model a run needs, before any work starts: {"base": folder, "inpaint": folder}."""
+    found = {"base": locate_model(config.base_model, "Stable Diffusion 2 base (local view)", BASE_PARTS, config)}
+    if need_inpaint:
+        found["inpaint"] = locate_model(config.inpaint_model, "Stable Diffusion 2 inpainting (global view)",
+                                        INPAINT_PARTS, config)
+    return found
+
+
+def models_available(config: ModelConfig, need_inpaint: bool = True) -> tuple[bool, str]:
+    """(True, where) when the models are already on this machine (never downloads), else (False, why)."""
+    from dataclasses import replace
+
+    try:
+        found = locate_models(replace(config, local_files_only=True), need_inpaint)
+    except ModelMissingError as error:
+        return False, str(error)
+    return True, ", ".join(f"{k}: {v}" for k, v in found.items())
+
+
+@dataclass
+class GuidanceModels:
+    """Loaded models. Text embeddings are computed once per prompt (`embed`), after which the text
+    encoder can be released (`release_text_encoder`)."""
+
+    tokenizer: object
+    text_encoder: object | None
+    vae: object
+    unet: object
+    scheduler: object
+    inpaint_unet: object | None
+    device: object
+    dtype: object
+    paths: dict[str, Path]
+    config: ModelConfig
+    _embeddings: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def vae_scale_factor(self) -> int:
+        return 2 ** (len(self.vae.config.block_out_channels) - 1)
+
+    @property
+    def latent_scale(self) -> float:
+        return float(self.vae.config.scaling_factor)
+
+    def embed(self, prompt: str):
+        """(1, 77, D) text embedding of `prompt`, cached."""
+        import torch
+
+        if prompt not in self._embeddings:
+            if self.text_encoder is None:
+                raise RuntimeError(f"The text encoder was released before prompt {prompt!r} was embedded.")
+            ids = self.tokenizer(prompt, padding="max_length", max_length=self.tokenizer.model_max_length,
+                                 truncation=True, return_tensors="pt").input_ids
+            encoder_device = next(self.text_encoder.parameters()).device
+            with torch.no_grad():
+                hidden = self.text_encoder(ids.to(encoder_device))[0]
+            self._embeddings[prompt] = hidden.to(self.device, self.dtype)
+        return self._embeddings[prompt]
+
+    def release_text_encoder(self) -> None:
+        self.text_encoder = None
+        _empty_cache(self.device)
+
+
+def _empty_cache(device) -> None:
+    import gc
+
+    import torch
+
+    gc.collect()
+    if getattr(device, "type", "") == "cuda":
+        torch.cuda.empty_cache()
+
+
+def load_guidance_models(config: ModelConfig, need_inpaint: bool, paths: dict[str, Path] | None = None) -> GuidanceModels:
+    """Locate (unless `paths` is given) and load the models onto the configured device and dtype."""
+    import torch
+    from diffusers import AutoencoderKL, DDPMScheduler, UNet2DConditionModel
+    from transformers import CLIPTextModel, CLIPTokenizer
+
+    paths = paths or locate_models(config, need_inpaint)
+    device, dtype = config.device(), config.dtype()
+    base = paths["base"]
+    tokenizer = CLIPTokenizer.from_pretrained(base, subfolder="tokenizer")
+    text_encoder = CLIPTextModel.from_pretrained(base, subfolder="text_encoder", torch_dtype=dtype)
+    vae = AutoencoderKL.from_pretrained(base, subfolder="vae", torch_dtype=dtype)
+    unet = UNet2DConditionModel.from_pretrained(base, subfolder="unet", torch_dtype=dtype)
+    # Only ᾱ_t and the prediction type are used; DDPM reads SD2's PNDM/DDIM configs too.
+    scheduler = DDPMScheduler.from_pretrained(base, subfolder="scheduler")
+    inpaint_unet = None
+    if need_inpaint:
+        inpaint_unet = UNet2DConditionModel.from_pretrained(paths["inpaint"], subfolder="unet", torch_dtype=dtype)
+        if inpaint_unet.config.in_channels != 9:
+            raise ModelMissingError(f"The inpainting model at '{paths['inpaint']}' has a UNet with "
+                                    f"{inpaint_unet.config.in_channels} input channels; an inpainting UNet has 9.")
+    if unet.config.in_channels != 4:
+        raise ModelMissingError(f"The base model at '{base}' has a UNet with {unet.config.in_channels} input "
+                                f"channels; a text-to-image UNet has 4.")
+    for module in (text_encoder, vae, unet, inpaint_unet):
+        if module is not None:
+            module.requires_grad_(False)
+            module.eval()
+    unets = [u for u in (unet, inpaint_unet) if u is not None]
+    if config.attention_slicing:
+        for u in unets:
+            u.set_attention_slice("auto")
+    if config.vae_slicing:
+        vae.enable_slicing()
+    if config.vae_tiling:
+        vae.enable_tiling()
+    if config.channels_last:
+        for u in unets:
+            u.to(memory_format=torch.channels_last)
+    if config.cpu_offload and device.type == "cuda":
+        # Each model moves to the GPU when called and the previous one goes back (accelerate hooks).
+        from accelerate import cpu_offload_with_hook
+
+        hook = None
+        for module in (text_encoder, vae, *unets):
+            _, hook = cpu_offload_with_hook(module, device, prev_module_hook=hook)
+    else:
+        for module in (text_encoder, vae, *unets):
+            module.to(device)
+    return GuidanceModels(tokenizer=tokenizer, text_encoder=text_encoder, vae=vae, unet=unet, scheduler=scheduler,
+                          inpaint_unet=inpaint_unet, device=device, dtype=dtype, paths=paths, config=config)

@@ -1,0 +1,84 @@
+"""Tiny random-weight stand-ins for Stable Diffusion 2, laid out like the hub repositories.
+
+Tests and `make bench` build them with the same diffusers/transformers classes as the real models
+and load them through `models.load_guidance_models`, so the loading code under test is the real one.
+Nothing here is used by a real run.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+# The byte-level alphabet of CLIP's BPE (the GPT-2 table): every byte gets a printable character.
+def _bytes_to_unicode() -> dict[int, str]:
+    bs = list(range(ord("!"), ord("~") + 1)) + list(range(ord("¡"), ord("¬") + 1)) + list(range(ord("®"), ord("ÿ") + 1))
+    cs = bs[:]
+    n = 0
+    for b in range(256):
+        if b not in bs:
+            bs.append(b)
+            cs.append(256 + n)
+            n += 1
+    return dict(zip(bs, (chr(c) for c in cs)))
+
+
+def tiny_tokenizer():
+    """A CLIPTokenizer with a 514-token vocabulary: every byte alone and word-final, plus the specials."""
+    from transformers import CLIPTokenizer
+
+    chars = list(_bytes_to_unicode().values())
+    vocab: dict[str, int] = {}
+    for token in chars + [c + "</w>" for c in chars] + ["<|startoftext|>", "<|endoftext|>"]:
+        vocab[token] = len(vocab)
+    return CLIPTokenizer(vocab=vocab, merges=[], model_max_length=77)
+
+
+def build_tiny_sd(folder: str | Path, in_channels: int = 4, seed: int = 0, sample_size: int = 16,
+                  block_out_channels: tuple[int, ...] = (32, 64), cross_attention_dim: int = 32) -> Path:
+    """Write unet/, vae/, text_encoder/, tokenizer/, scheduler/ and model_index.json into `folder`.
+
+    in_channels 4 is the text-to-image model, 9 the inpainting one (latents, mask, masked image).
+    The VAE halves the resolution once (a 32-pixel render gives 16x16 latents).
+    """
+    import torch
+    from diffusers import AutoencoderKL, DDPMScheduler, UNet2DConditionModel
+    from transformers import CLIPTextConfig, CLIPTextModel
+
+    folder = Path(folder)
+    torch.manual_seed(seed)
+    tokenizer = tiny_tokenizer()
+    n = len(block_out_channels)
+    unet = UNet2DConditionModel(
+        sample_size=sample_size, in_channels=in_channels, out_channels=4, layers_per_block=1,
+        block_out_channels=block_out_channels, norm_num_groups=min(32, block_out_channels[0]),
+        down_block_types=("CrossAttnDownBlock2D",) * (n - 1) + ("DownBlock2D",),
+        up_block_types=("UpBlock2D",) + ("CrossAttnUpBlock2D",) * (n - 1),
+        cross_attention_dim=cross_attention_dim, attention_head_dim=tuple(max(1, c // 16) for c in block_out_channels),
+        use_linear_projection=True,  # as SD2
+    )
+    vae = AutoencoderKL(in_channels=3, out_channels=3, latent_channels=4, block_out_channels=(8, 16),
+                        down_block_types=("DownEncoderBlock2D",) * 2, up_block_types=("UpDecoderBlock2D",) * 2,
+                        layers_per_block=1, norm_num_groups=8, sample_size=2 * sample_size)
+    text_encoder = CLIPTextModel(CLIPTextConfig(
+        vocab_size=len(tokenizer), hidden_size=cross_attention_dim, intermediate_size=2 * cross_attention_dim,
+        num_hidden_layers=2, num_attention_heads=4, max_position_embeddings=77, projection_dim=cross_attention_dim,
+        bos_token_id=tokenizer.bos_token_id, eos_token_id=tokenizer.eos_token_id, pad_token_id=tokenizer.pad_token_id))
+    scheduler = DDPMScheduler(num_train_timesteps=1000, beta_start=0.00085, beta_end=0.012,
+                              beta_schedule="scaled_linear", prediction_type="epsilon", clip_sample=False)
+    unet.save_pretrained(folder / "unet")
+    vae.save_pretrained(folder / "vae")
+    text_encoder.save_pretrained(folder / "text_encoder")
+    tokenizer.save_pretrained(folder / "tokenizer")
+    scheduler.save_pretrained(folder / "scheduler")
+    (folder / "model_index.json").write_text(json.dumps({
+        "_class_name": "StableDiffusionInpaintPipeline" if in_channels == 9 else "StableDiffusionPipeline",
+        "unet": ["diffusers", "UNet2DConditionModel"], "vae": ["diffusers", "AutoencoderKL"],
+        "text_encoder": ["transformers", "CLIPTextModel"], "tokenizer": ["transformers", "CLIPTokenizer"],
+        "scheduler": ["diffusers", "DDPMScheduler"]}, indent=1))
+    return folder
+
+
+def build_tiny_pair(folder: str | Path) -> tuple[Path, Path]:
+    """A tiny text-to-image model and a tiny inpainting model: (base, inpaint) folders."""
+    folder = Path(folder)
+    return build_tiny_sd(folder / "sd2-base", 4, seed=0), build_tiny_sd(folder / "sd2-inpaint", 9, seed=1)
