@@ -61,7 +61,8 @@ class ConvertConfig:
 CONVERT_PRESETS: dict[str, ConvertConfig] = {
     "draft": ConvertConfig(texture_preset="draft", iterations=150, max_resolution=512),
     "balanced": ConvertConfig(texture_preset="balanced", iterations=400, max_resolution=1024),
-    "final": ConvertConfig(texture_preset="final", iterations=1000, max_resolution=2048),
+    # final: the sparse encoding plan costs ~2 GB at 1024² with the full hash grid (8 GB at 2048²).
+    "final": ConvertConfig(texture_preset="final", iterations=1000, max_resolution=1024),
 }
 
 

@@ -114,7 +114,9 @@ def preferred(req: Requirement) -> str:
     except importlib.metadata.PackageNotFoundError:
         installed = None
     if installed and req.specifier.contains(Version(installed), prereleases=True):
-        return f"{req.name}=={installed}"
+        # The public version: a local build label (torch's "+cpu") names a build of this machine's
+        # index, not one the registry has for every platform.
+        return f"{req.name}=={Version(installed).public}"
     return f"{req.name}{req.specifier}"
 
 
