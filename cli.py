@@ -106,15 +106,13 @@ def cmd_render(args) -> int:
 def cmd_export(args) -> int:
     from .core.camera import Camera
     from .core.export import export_mitsuba_scene
-    from .core.mesh import normalize_to_unit_sphere
 
     mesh, maps = load_asset(args.asset, args.object)
-    normalized, _ = normalize_to_unit_sphere(mesh)
     env = None
     if args.envmap or args.studiolight:
         env, _ = _environment(args)
     camera = Camera(azimuth_deg=args.azimuth, elevation_deg=args.elevation, width=args.size, height=args.size)
-    xml = export_mitsuba_scene(normalized, maps, args.out, camera=camera, envmap=env, spp=args.spp)
+    xml = export_mitsuba_scene(mesh, maps, args.out, camera=camera, envmap=env, spp=args.spp)
     print(f"wrote {xml}; render it with: mitsuba {xml}")
     return 0
 

@@ -15,7 +15,7 @@ from .backend import init_mitsuba
 from .camera import Camera
 from .imageio import linear_to_srgb, write_image
 from .maps import PBRMaps
-from .mesh import Mesh
+from .mesh import Mesh, normalize_to_unit_sphere
 from .render import ENVMAP_TO_WORLD, _mitsuba_mesh
 
 
@@ -41,6 +41,10 @@ def export_mitsuba_scene(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, camera:
                          envmap: np.ndarray | None = None, spp: int = 256, max_depth: int = 8) -> Path:
     """Write the scene; returns the path of scene.xml. Nothing outside `out_dir` is touched.
 
+    The mesh keeps its own size and place; `camera` is given in SceneFit's normalised frame (asset in
+    the radius-0.5 sphere at the origin) and is carried into the asset's frame, so it frames the
+    asset as SceneFit's renders do.
+
     envmap: linear (H, 2H, 3) radiance in Blender's equirectangular convention; None writes a
     constant white environment.
     """
@@ -50,6 +54,9 @@ def export_mitsuba_scene(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, camera:
     import mitsuba as mi
 
     camera = camera or Camera(width=512, height=512)
+    _, transform = normalize_to_unit_sphere(mesh)
+    origin = transform.to_object(camera.origin)
+    target = transform.to_object(np.asarray(camera.target, dtype=np.float64))
     # The PLY holds Mitsuba's own texture convention (v = 0 at the top row), so it is read unflipped.
     tmp_ply = out_dir / ".mesh.ply.tmp"
     _mitsuba_mesh(mi, mesh).write_ply(str(tmp_ply))
@@ -71,10 +78,8 @@ def export_mitsuba_scene(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, camera:
     sensor = _add(scene, "sensor", type="perspective")
     _add(sensor, "string", name="fov_axis", value="smaller")
     _add(sensor, "float", name="fov", value=f"{camera.fov_deg:.9g}")
-    look = _add(_add(sensor, "transform", name="to_world"), "lookat",
-                origin=",".join(f"{x:.9g}" for x in camera.origin), target=",".join(map(str, camera.target)),
-                up="0,0,1")
-    del look
+    _add(_add(sensor, "transform", name="to_world"), "lookat", origin=",".join(f"{x:.9g}" for x in origin),
+         target=",".join(f"{x:.9g}" for x in target), up="0,0,1")
     _add(_add(sensor, "sampler", type="independent"), "integer", name="sample_count", value=spp)
     film = _add(sensor, "film", type="hdrfilm")
     _add(film, "integer", name="width", value=camera.width)

@@ -20,12 +20,17 @@ class SCENEFIT_OT_export_mitsuba(bpy.types.Operator):
         return poll_mesh(context)
 
     def execute(self, context):
+        import math
+
+        from ..core.camera import Camera
         from ..core.export import export_mitsuba_scene  # Mitsuba starts only when asked for
 
         try:
             _, mesh, maps = gather_asset(context)
             out = bpy.path.abspath(self.directory) if self.directory else output_dir(context, "mitsuba")
-            xml = export_mitsuba_scene(mesh, maps, out)
+            camera = Camera(azimuth_deg=30.0, elevation_deg=math.degrees(context.scene.scenefit.elevation),
+                            width=512, height=512)
+            xml = export_mitsuba_scene(mesh, maps, out, camera=camera)
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}

@@ -60,6 +60,22 @@ def test_exported_scene_renders_alone_like_the_live_scene(tmp_path):
     assert np.abs(blur(alone) - blur(live)).mean() < 0.02 * live.mean()
 
 
+def test_export_keeps_the_assets_size_and_frames_it_like_the_normalised_render(tmp_path):
+    from scenefit.core.mesh import Mesh
+    import mitsuba as mi
+
+    small = uv_sphere(radius=0.5)
+    big = Mesh.from_arrays(small.positions * 40.0 + np.array([100.0, -20.0, 5.0]), small.faces, small.uvs, small.normals)
+    cam = Camera(azimuth_deg=10, elevation_deg=20, width=32, height=32)
+    images = []
+    for name, mesh in (("small", small), ("big", big)):
+        xml = export_mitsuba_scene(mesh, striped_maps(), tmp_path / name, camera=cam, spp=16)
+        scene = mi.load_file(str(xml))
+        assert np.allclose(np.array(scene.shapes()[0].bbox().max), mesh.positions.max(0), rtol=1e-4, atol=1e-3)
+        images.append(np.array(mi.render(scene, spp=16)))
+    assert np.abs(images[0] - images[1]).mean() < 0.01
+
+
 def test_asset_folder_round_trip(tmp_path):
     mesh, maps = uv_sphere(segments=12, rings=6), striped_maps()
     folder = save_asset_folder(mesh, maps, tmp_path / "asset")
