@@ -80,7 +80,17 @@ class SCENEFIT_OT_convert(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def execute(self, context):
-        return self.invoke(context, None)
+        """Synchronous run for scripts and `blender -b` (no window, so no modal timer)."""
+        try:
+            obj, mesh, maps = gather_asset(context)
+            out = output_dir(context, "convert")
+            maps_paths = run_conversion(mesh, maps, context.scene.scenefit.preset, out, progress=None)
+        except SceneFitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        mat = write_result_material(obj, maps_paths)
+        self.report({"INFO"}, f"Done: material '{mat.name}'")
+        return {"FINISHED"}
 
     def modal(self, context, event):
         settings = context.scene.scenefit
