@@ -7,8 +7,9 @@ the environment map flow back to torch through `dr.wrap`.
 Conventions:
 - World space is Blender's (Z up). Mitsuba's envmap is Y up, so the emitter gets `ENVMAP_TO_WORLD`,
   which makes a latitude-longitude map light the asset from the same directions as Blender's
-  Environment Texture does (top row = +Z; the map's centre column looks along +X... see
-  `blender_direction_to_equirect_uv`).
+  Environment Texture does (top row = +Z, bottom row = -Z; the centre column (u = 0.5) looks along
+  +X, u = 0.25 along +Y, u = 0 / 1 along -X, u = 0.75 along -Y; see `blender_direction_to_equirect_uv`,
+  checked against Cycles in tests/test_lighting_blender.py).
 - Mesh UVs arrive in OpenGL convention (v = 0 at the bottom); Mitsuba looks textures up with v = 0 at
   the top row, so v is flipped when the mesh is built.
 - Maps are torch tensors (H, W, C), linear, rows top to bottom as in image files.
@@ -26,10 +27,10 @@ from .mesh import Mesh, vertex_normals
 
 # Rotation taking Mitsuba's envmap frame (Y up) to Blender's world (Z up), chosen so that
 # Mitsuba's direction->(u, v) lookup equals Blender's equirectangular Environment Texture:
-# local (x, y, z) -> world (-z, -x, y).
+# local (x, y, z) -> world (z, x, y).
 ENVMAP_TO_WORLD = np.array(
-    [[0.0, 0.0, -1.0, 0.0],
-     [-1.0, 0.0, 0.0, 0.0],
+    [[0.0, 0.0, 1.0, 0.0],
+     [1.0, 0.0, 0.0, 0.0],
      [0.0, 1.0, 0.0, 0.0],
      [0.0, 0.0, 0.0, 1.0]]
 )
@@ -43,11 +44,12 @@ ENVMAP_KEY = "environment.data"
 def blender_direction_to_equirect_uv(direction: np.ndarray) -> np.ndarray:
     """(u, v) in [0, 1] of Blender's equirectangular mapping; v measured from the TOP row.
 
-    Blender: u = atan2(d.y, -d.x) / 2pi + 0.5, v_bottom = atan2(d.z, hypot(d.x, d.y)) / pi + 0.5.
+    Blender (intern/cycles/kernel/geom, direction_to_equirectangular with its default range):
+    u = 0.5 - atan2(d.y, d.x) / 2pi, v_bottom = atan2(d.z, hypot(d.x, d.y)) / pi + 0.5.
     """
     d = np.asarray(direction, dtype=np.float64)
     d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-    u = np.arctan2(d[..., 1], -d[..., 0]) / (2 * np.pi) + 0.5
+    u = 0.5 - np.arctan2(d[..., 1], d[..., 0]) / (2 * np.pi)
     v_top = 0.5 - np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])) / np.pi
     return np.stack([u % 1.0, v_top], axis=-1)
 
@@ -56,10 +58,10 @@ def equirect_directions(height: int, width: int) -> np.ndarray:
     """World direction (Blender convention) through the centre of each texel of an (H, W) map."""
     u = (np.arange(width) + 0.5) / width
     v_top = (np.arange(height) + 0.5) / height
-    phi = (u - 0.5) * 2.0 * np.pi                 # atan2(d.y, -d.x)
+    phi = (0.5 - u) * 2.0 * np.pi                 # atan2(d.y, d.x)
     elevation = (0.5 - v_top) * np.pi
     el, ph = np.meshgrid(elevation, phi, indexing="ij")
-    return np.stack([-np.cos(ph) * np.cos(el), np.sin(ph) * np.cos(el), np.sin(el)], axis=-1)
+    return np.stack([np.cos(ph) * np.cos(el), np.sin(ph) * np.cos(el), np.sin(el)], axis=-1)
 
 
 @dataclass(frozen=True)

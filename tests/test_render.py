@@ -103,8 +103,10 @@ def test_equirect_directions_invert_blenders_mapping():
     rows, cols = np.meshgrid(np.arange(16), np.arange(32), indexing="ij")
     assert np.allclose(uv[..., 0] * 32 - 0.5, cols, atol=1e-6)
     assert np.allclose(uv[..., 1] * 16 - 0.5, rows, atol=1e-6)
-    # Blender: the centre column looks along -X... its u = 0.5 column is atan2(y, -x) = 0, i.e. -X.
-    assert np.allclose(directions[8, 16] + directions[7, 16], [-2 * np.cos(np.pi / 32), 0, 0], atol=0.2)
+    # Blender (checked against Cycles in test_lighting_blender.py): the u = 0.5 column looks along +X,
+    # u = 0.25 along +Y.
+    assert np.allclose(directions[8, 16] + directions[7, 16], [2 * np.cos(np.pi / 32), 0, 0], atol=0.2)
+    assert np.allclose(blender_direction_to_equirect_uv(np.array([0.0, 1.0, 0.0])), [0.25, 0.5])
 
 
 def test_object_fits_in_view_at_fov_multiplier_one_and_is_cut_below():
