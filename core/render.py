@@ -81,6 +81,7 @@ class SceneOptions:
     max_depth: int = 6              # path length; 2 is direct light only
     integrator_type: str = "prb"    # "prb" (path replay, cheap gradients) or "path"
     floor_extent: float = 1000.0
+    hide_emitters: bool = False     # True: the environment is not seen directly (rgb is 0 where alpha is 0)
 
     def __post_init__(self) -> None:
         if self.integrator_type not in ("prb", "path"):
@@ -148,7 +149,8 @@ class AssetRenderer:
         grey = np.full((h, w), 0.5, np.float32)
         scene: dict = {
             "type": "scene",
-            "integrator": {"type": options.integrator_type, "max_depth": options.max_depth},
+            "integrator": {"type": options.integrator_type, "max_depth": options.max_depth,
+                           "hide_emitters": options.hide_emitters},
             "environment": {"type": "envmap", "bitmap": mi.Bitmap(envmap),
                             "to_world": mi.ScalarTransform4f(ENVMAP_TO_WORLD)},
             "asset": _mitsuba_mesh(mi, mesh),

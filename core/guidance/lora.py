@@ -43,13 +43,14 @@ class LoraCritic:
         self.unet = unet
         self.condition_dropout = condition_dropout
         generator = torch.Generator().manual_seed(seed)
-        if ADAPTER not in (getattr(unet, "peft_config", None) or {}):
-            # Seeded initialisation: peft draws lora_A from torch's global generator.
-            state = torch.random.get_rng_state()
-            torch.manual_seed(seed)
-            unet.add_adapter(LoraConfig(r=rank, lora_alpha=rank, target_modules=TARGET_MODULES,
-                                        init_lora_weights=True), adapter_name=ADAPTER)
-            torch.random.set_rng_state(state)
+        if ADAPTER in (getattr(unet, "peft_config", None) or {}):
+            unet.delete_adapters(ADAPTER)  # a fresh ε_ψ for every run
+        # Seeded initialisation: peft draws lora_A from torch's global generator.
+        state = torch.random.get_rng_state()
+        torch.manual_seed(seed)
+        unet.add_adapter(LoraConfig(r=rank, lora_alpha=rank, target_modules=TARGET_MODULES,
+                                    init_lora_weights=True), adapter_name=ADAPTER)
+        torch.random.set_rng_state(state)
         device = next(unet.parameters()).device
         time_dim = unet.time_embedding.linear_2.out_features
         self.embedding = TimestepEmbedding(CONDITION_DIM, time_dim)

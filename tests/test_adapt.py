@@ -1,0 +1,180 @@
+"""The adapt stage end to end with tiny random-weight models, 16-32 px renders and 2 spp."""
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+import torch
+
+from scenefit.core.adapt import (AdaptConfig, AdaptInputs, StageSpec, adapt_preset, adapt_texture, edit_prompt,
+                                 sample_camera, spherical_gaussian_environment, stage_at, view_suffix)
+from scenefit.core.errors import Cancelled, InputError, ModelMissingError
+from scenefit.core.guidance import CriticConfig, ModelConfig, Placement
+from scenefit.core.guidance.testing import build_tiny_pair
+from scenefit.core.primitives import uv_sphere
+from scenefit.core.texture import NeuralTexture, preset, rasterize_uv
+
+TINY_STAGES = (StageSpec(0.5, 16, 2, (30, 990)), StageSpec(0.5, 32, 2, (500, 990)))
+
+
+@pytest.fixture(scope="module")
+def tiny_models(tmp_path_factory):
+    return build_tiny_pair(tmp_path_factory.mktemp("tiny_sd_adapt"))
+
+
+@pytest.fixture(scope="module")
+def asset():
+    mesh = uv_sphere(segments=16, rings=8)
+    raster = rasterize_uv(mesh, 32)
+    texture = NeuralTexture(preset("draft", resolution=32, log2_table=12), seed=0)
+    photo = np.random.default_rng(0).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32)
+    return mesh, raster, texture, photo
+
+
+def _config(tiny_models, **overrides) -> AdaptConfig:
+    base, inpaint = tiny_models
+    values = dict(prompt="a mossy sphere in a swamp", iterations=4, stages=TINY_STAGES, model_resolution=32,
+                  views=4, checkpoint_every=2, preview_every=2, lr_texture=1e-2,
+                  models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint)))
+    values.update(overrides)
+    return AdaptConfig(**values)
+
+
+def _inputs(asset, **overrides) -> AdaptInputs:
+    mesh, raster, texture, photo = asset
+    values = dict(mesh=mesh, raster=raster, texture=texture, photo=photo, placement=Placement((0.5, 0.6), 0.5))
+    values.update(overrides)
+    return AdaptInputs(**values)
+
+
+def _maps(texture, raster):
+    with torch.no_grad():
+        return texture.texture(raster.position, raster.border, raster.fill_index)
+
+
+def test_short_scene_run_changes_the_texture_and_resumes_exactly(tiny_models, asset, tmp_path):
+    mesh, raster, texture, photo = asset
+    before = _maps(texture, raster).clone()
+    config = _config(tiny_models)
+    events = []
+    full = adapt_texture(_inputs(asset), config, progress=events.append)
+    after = _maps(full.texture, raster)
+    assert torch.isfinite(after).all()
+    assert (after - before).abs().max() > 1e-4, "the texture did not change"
+    assert torch.equal(_maps(texture, raster), before), "the input texture was modified"
+    assert full.iterations == 4 and len(full.history) == 4
+    assert all(np.isfinite(h["local_grad_norm"]) and np.isfinite(h["global_grad_norm"]) for h in full.history)
+    assert all("lora_loss" in h for h in full.history)
+    assert [e.step for e in events] == [1, 2, 3, 4]
+    assert events[1].preview is not None and events[1].preview.shape == (32, 32, 3) and events[0].preview is None
+    assert full.decisions["reference_injection"] and full.decisions["injected_layers"] == 4
+    for phase in ("render", "vae", "unet", "vae_backward", "render_backward_and_step", "lora"):
+        assert full.timings[phase] > 0
+    # The coarse stage renders 16 px, the fine one 32 px.
+    assert [h["stage_size"] for h in full.history] == [16, 16, 32, 32]
+
+    # Interrupted after iteration 2 (cancel between iterations), then resumed from the checkpoint.
+    cancel = threading.Event()
+    seen = []
+
+    def stop_after_two(event):
+        seen.append(event.step)
+        if event.step == 2:
+            cancel.set()
+
+    with pytest.raises(Cancelled):
+        adapt_texture(_inputs(asset), config, progress=stop_after_two, cancel=cancel, checkpoint_dir=tmp_path)
+    assert seen == [1, 2], "iterations ran after cancel"
+    assert (tmp_path / "adapt_checkpoint.pt").is_file()
+    resumed = adapt_texture(_inputs(asset), config, checkpoint_dir=tmp_path)
+    assert resumed.resumed_from == 2 and len(resumed.history) == 4
+    torch.testing.assert_close(_maps(resumed.texture, raster), after, rtol=0, atol=1e-6)
+    # Other settings refuse to resume from that checkpoint.
+    with pytest.raises(InputError, match="other settings"):
+        adapt_texture(_inputs(asset), _config(tiny_models, seed=1), checkpoint_dir=tmp_path)
+
+
+def test_cancel_stops_promptly(tiny_models, asset):
+    cancel = threading.Event()
+    cancel.set()
+    start = time.perf_counter()
+    with pytest.raises(Cancelled):
+        adapt_texture(_inputs(asset), _config(tiny_models, iterations=50), cancel=cancel)
+    # Only model loading happened: no iteration ran.
+    assert time.perf_counter() - start < 20
+
+
+def test_generate_and_edit_modes(tiny_models, asset):
+    mesh, raster, texture, _ = asset
+    generate = adapt_preset("draft", "generate", prompt="a red umbrella", iterations=2, stages=TINY_STAGES,
+                            model_resolution=32, light_type="random", light_random_p=1.0, critic=CriticConfig(
+                                critic_type="sds", reference_type="none"),
+                            models=_config(tiny_models).models)
+    assert generate.views == 72 and generate.fov_range == (0.6, 1.21) and generate.views_type == "local"
+    result = adapt_texture(AdaptInputs(mesh=mesh, raster=raster), generate)
+    assert torch.isfinite(_maps(result.texture, raster)).all() and "lora_loss" not in result.history[0]
+    edit = adapt_preset("draft", "edit", object_prompt="a leather sofa", instruction="add dust to the sofa",
+                        iterations=2, stages=(StageSpec(1.0, 16, 2, (500, 990)),), model_resolution=32,
+                        models=_config(tiny_models).models)
+    assert edit.effective_prompt == "a leather sofa, with dust to the sofa"
+    result = adapt_texture(AdaptInputs(mesh=mesh, raster=raster, texture=texture), edit)
+    assert result.decisions["reference_injection"] and torch.isfinite(_maps(result.texture, raster)).all()
+
+
+def test_distributed_single_process_gloo(tiny_models, asset, tmp_path):
+    """torch.distributed with world size 1: the same code path, the same result."""
+    import torch.distributed as dist
+
+    config = _config(tiny_models, iterations=2, views_type="local", checkpoint_every=0)
+    alone = adapt_texture(_inputs(asset), config)
+    dist.init_process_group("gloo", init_method=f"file://{tmp_path / 'pg'}", rank=0, world_size=1)
+    try:
+        spread = adapt_texture(_inputs(asset), config)
+    finally:
+        dist.destroy_process_group()
+    assert spread.decisions["world_size"] == 1
+    torch.testing.assert_close(_maps(spread.texture, asset[1]), _maps(alone.texture, asset[1]), rtol=0, atol=1e-6)
+
+
+def test_missing_weights_stop_before_any_work(tmp_path, asset, monkeypatch):
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    config = AdaptConfig(prompt="a sofa", models=ModelConfig(cache_dir=str(tmp_path)))
+    events = []
+    with pytest.raises(ModelMissingError, match="stable-diffusion-2-base"):
+        adapt_texture(_inputs(asset), config, progress=events.append)
+    assert events == []
+
+
+def test_config_validation_and_helpers():
+    with pytest.raises(InputError, match="prompt"):
+        AdaptConfig(prompt="")
+    with pytest.raises(InputError, match="mode_type"):
+        AdaptConfig(prompt="x", mode_type="stylise")
+    with pytest.raises(InputError, match="add up to 1"):
+        AdaptConfig(prompt="x", stages=(StageSpec(0.5, 64, 4, (30, 990)),))
+    with pytest.raises(InputError, match="views_type 'local'"):
+        AdaptConfig(prompt="x", mode_type="generate")
+    with pytest.raises(InputError):
+        StageSpec(1.0, 64, 4, (30, 1200))
+    with pytest.raises(InputError, match="prompt"):
+        adapt_preset("final")  # no prompt
+    draft = adapt_preset("draft", prompt="x")
+    assert draft.iterations < adapt_preset("balanced", prompt="x").iterations < adapt_preset("final", prompt="x").iterations
+    paper = adapt_preset("final", prompt="x")
+    assert paper.stages == (StageSpec(0.2, 256, 64, (30, 990)), StageSpec(0.8, 512, 128, (500, 990)))
+    assert paper.lr_texture == 1e-3 and paper.lr_lora == 1e-4 and paper.views == 24 and paper.fov_range == (1.0, 1.21)
+    assert [stage_at(paper, i).render_size for i in (0, 799, 800, 3999)] == [256, 256, 512, 512]
+    rng = np.random.default_rng(0)
+    cams = [sample_camera(paper, rng, 64) for _ in range(50)]
+    assert {c.azimuth_deg % 15 for c in cams} == {0.0} and all(1.0 <= c.fov_multiplier <= 1.21 for c in cams)
+    assert view_suffix(10) == "front view" and view_suffix(180) == "back view" and view_suffix(-90) == "side view"
+    assert edit_prompt("a cottage", "make it snowy") == "a cottage, snowy"
+    env = spherical_gaussian_environment((0.25, 0.3, 0.08, 12.0, 0.8), 16)
+    assert env.shape == (16, 32, 3) and env.min() >= 0.8 - 1e-6 and env.max() > 10
+    with pytest.raises(InputError, match="photo"):
+        _inputs((uv_sphere(), rasterize_uv(uv_sphere(), 16), NeuralTexture(preset("draft", resolution=16)), None),
+                placement=None).validate(AdaptConfig(prompt="x"))
+    with pytest.raises(InputError, match="convert the asset first"):
+        _inputs((uv_sphere(), rasterize_uv(uv_sphere(), 16), None, None)).validate(AdaptConfig(prompt="x"))
