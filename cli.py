@@ -126,6 +126,31 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def cmd_light(args) -> int:
+    from .core.lighting import estimate_light, light_preset, light_report, load_photo, parse_placement, write_light_outputs
+    from .core.lighting.depth import DEFAULT_DEPTH_MODEL, DepthConfig
+    from .core.pipeline import environment_info, write_report
+
+    photo, info = load_photo(args.photo)
+    placement = parse_placement(args.at, photo.shape[1], photo.shape[0])
+    depth = DepthConfig(depth_type=args.depth, model=args.depth_model or DEFAULT_DEPTH_MODEL)
+    overrides = {k: v for k, v in (("scene_type", args.scene), ("fov_deg", args.fov), ("tint", args.tint),
+                                   ("camera_pitch_deg", -args.elevation if args.elevation is not None else None))
+                 if v is not None}
+    config = light_preset(args.preset, depth=depth, **overrides)
+    result = estimate_light(photo, placement, config, photo_info=info, progress=_progress(args))
+    out = Path(args.out)
+    outputs = write_light_outputs(result, out)
+    report = light_report(result, config, outputs)
+    report["photo"] = info
+    report["environment"] = environment_info()
+    write_report(out / "report.json", report)
+    depth_used = result.decisions.get("depth", {}).get("method", "none (outdoor)")
+    print(f"light: {result.decisions['scene_type']['chosen']} scene, depth {depth_used}, scales "
+          f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {out}/light.exr")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="scenefit", description=(
         "Restyle a textured 3D asset to fit a photo: neural PBR textures rendered by Mitsuba 3."))
@@ -179,6 +204,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--refresh", action="store_true", help="re-make the example asset and photo")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_demo)
+    p = sub.add_parser("light", help="estimate an HDR environment map from a photo and the object's placement")
+    p.add_argument("--photo", required=True, help="the scene photo (JPEG/PNG/EXR, any size)")
+    p.add_argument("--at", required=True, help="X,Y where the object stands: fractions of width,height (or pixels)")
+    p.add_argument("--out", required=True, help="output folder: light.exr, light_preview.png, report.json")
+    p.add_argument("--preset", choices=PRESETS, default="balanced")
+    p.add_argument("--scene", choices=("auto", "indoor", "outdoor"), help="scene type (default: auto)")
+    p.add_argument("--fov", type=float, help="horizontal field of view in degrees (default: metadata, else 60)")
+    p.add_argument("--elevation", type=float, help="how far the camera looks down, degrees (default 10)")
+    p.add_argument("--depth", choices=("auto", "model", "geometric"), default="auto",
+                   help="auto: the depth model if it is on this machine, else the geometric room")
+    p.add_argument("--depth-model", help="hub id or local folder of a transformers depth model")
+    p.add_argument("--tint", help='colour phrase for the critic prompt, e.g. "in blue tint"')
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_light)
     return parser
 
 

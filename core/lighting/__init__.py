@@ -1,0 +1,11 @@
+"""Light estimation: LDR panorama from the photo, HDR light scales with the white-sphere apparatus.
+
+Public entry points: `estimate_light`, `LightConfig`, `light_preset`, `load_photo`,
+`write_light_outputs`, `light_report` (estimate.py); `ReferenceCritic` (reference_critic.py);
+measures in measure.py.
+"""
+from .estimate import (LIGHT_PRESETS, LightConfig, LightResult, estimate_light, light_preset, light_report,
+                       load_photo, parse_placement, write_light_outputs)
+
+__all__ = ["LIGHT_PRESETS", "LightConfig", "LightResult", "estimate_light", "light_preset", "light_report",
+           "load_photo", "parse_placement", "write_light_outputs"]

@@ -1,0 +1,314 @@
+"""The light stage: photo + placement -> LDR panorama -> bright regions -> HDR scales -> HDR map.
+
+    estimate_light(photo_srgb, placement_px, config) -> LightResult
+
+Every run ends with an HDR map: the inverse-tone-mapping prior sets the scales, and a critic (the
+reference critic against a known map, or a diffusion critic from core/guidance) refines them when
+one is given. `write_light_outputs` writes light.exr (float32 EXR, linear), light_ldr.png,
+light_preview.png (tone-mapped) and returns the report's fields.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..errors import InputError
+from ..imageio import linear_to_srgb, read_image, write_image
+from ..mesh import Mesh, normalize_to_unit_sphere
+from ..photo import PhotoCamera, camera_exposure
+from ..primitives import uv_sphere
+from ..progress import ProgressCallback, check_cancel, emit
+from .depth import DepthConfig, estimate_ray_distance
+from .hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, Critic, OptimiseConfig, OptimiseResult,
+                  hdr_from_scales, is_dark_environment, light_prompt, optimise_scales, prior_scales, tonemap_preview,
+                  DEFAULT_L_WHITE)
+from .panorama import Panorama, indoor_panorama, outdoor_panorama, place_on_floor, sky_score
+from .regions import RegionThresholds, bright_regions
+
+DEFAULT_FOV_DEG = 60.0   # horizontal; a typical phone/kit-lens view (~28 mm full-frame equivalent)
+SCENE_TYPES = ("auto", "indoor", "outdoor")
+CRITIC_TYPES = ("none", "reference", "diffusion")
+PRIOR_TYPES = ("inverse_tonemap",)
+
+
+@dataclass(frozen=True)
+class LightConfig:
+    scene_type: str = "auto"
+    fov_deg: float | None = None              # horizontal; None: the photo's metadata, else DEFAULT_FOV_DEG
+    camera_pitch_deg: float = -10.0           # the photo camera looks this far up (negative: down)
+    map_height: int = 128                     # the map is map_height x 2 map_height
+    depth: DepthConfig = DepthConfig()
+    thresholds: RegionThresholds = RegionThresholds()
+    prior_type: str = "inverse_tonemap"
+    l_white: float = DEFAULT_L_WHITE
+    critic_type: str = "none"
+    apparatus: ApparatusConfig = ApparatusConfig()
+    optimise: OptimiseConfig = OptimiseConfig()
+    object_prompt: str = "a 3D object"
+    tint: str | None = None                   # e.g. "in blue tint", appended to both prompts
+
+    def __post_init__(self) -> None:
+        if self.scene_type not in SCENE_TYPES:
+            raise InputError(f"scene_type must be one of {', '.join(SCENE_TYPES)}, got {self.scene_type!r}.")
+        if self.critic_type not in CRITIC_TYPES:
+            raise InputError(f"critic_type must be one of {', '.join(CRITIC_TYPES)}, got {self.critic_type!r}.")
+        if self.prior_type not in PRIOR_TYPES:
+            raise InputError(f"prior_type must be one of {', '.join(PRIOR_TYPES)}, got {self.prior_type!r}.")
+        if self.fov_deg is not None and not 1.0 <= self.fov_deg <= 170.0:
+            raise InputError(f"The photo's field of view must be between 1 and 170 degrees, got {self.fov_deg}.")
+        if not -89.0 <= self.camera_pitch_deg <= 89.0:
+            raise InputError(f"camera_pitch_deg must be within +-89 degrees, got {self.camera_pitch_deg}.")
+        if not 8 <= self.map_height <= 4096:
+            raise InputError(f"map_height must be between 8 and 4096, got {self.map_height}.")
+        if not self.l_white > 1.0:
+            raise InputError(f"l_white must be above 1, got {self.l_white}.")
+
+
+# Paper setting in "final" (2000 iterations, lr 0.01; the paper renders at 512 with 128 spp on GPUs);
+# fewer iterations take a larger lr so the scales can travel as far.
+LIGHT_PRESETS: dict[str, LightConfig] = {
+    "draft": LightConfig(map_height=64, apparatus=ApparatusConfig(render_size=48, spp=4),
+                         optimise=OptimiseConfig(iterations=60, lr=0.1)),
+    "balanced": LightConfig(map_height=128, apparatus=ApparatusConfig(render_size=64, spp=8),
+                            optimise=OptimiseConfig(iterations=200, lr=0.05)),
+    "final": LightConfig(map_height=256, apparatus=ApparatusConfig(render_size=256, spp=32),
+                         optimise=OptimiseConfig(iterations=2000, lr=0.01)),
+}
+
+
+def light_preset(name: str, **overrides) -> LightConfig:
+    if name not in LIGHT_PRESETS:
+        raise InputError(f"Unknown light preset {name!r}; choose one of {', '.join(LIGHT_PRESETS)}.")
+    return replace(LIGHT_PRESETS[name], **overrides)
+
+
+@dataclass
+class LightResult:
+    ldr: np.ndarray                       # (H, 2H, 3) sRGB-encoded LDR panorama
+    hdr: np.ndarray                       # (H, 2H, 3) linear HDR map, photo exposure units
+    regions: dict[str, np.ndarray]
+    scales: dict[str, float]
+    prior_scales: dict[str, float]
+    panorama: Panorama
+    photo_camera: PhotoCamera
+    decisions: dict = field(default_factory=dict)
+    optimisation: OptimiseResult | None = None
+    seconds: float = 0.0
+
+
+# -- photos ----------------------------------------------------------------------------------------
+def load_photo(path: str | Path) -> tuple[np.ndarray, dict]:
+    """A photo as sRGB-encoded float32 RGB in [0, 1], and what was decided reading it.
+
+    8/16-bit files are taken as stored (sRGB). Float files (EXR/HDR) hold linear radiance: they are
+    exposed as a camera meters (log-average luminance -> 0.18), clipped and sRGB-encoded, so every
+    photo reaches the panorama as the LDR image a camera would have stored.
+    """
+    import OpenImageIO as oiio
+
+    path = Path(path)
+    pixels = read_image(path)
+    if pixels.shape[2] == 1:
+        pixels = np.repeat(pixels, 3, axis=2)
+    elif pixels.shape[2] == 2:
+        pixels = np.repeat(pixels[..., :1], 3, axis=2)
+    rgb = np.ascontiguousarray(pixels[..., :3], np.float32)
+    h, w = rgb.shape[:2]
+    if min(h, w) < 2:
+        raise InputError(f"The photo '{path}' is {w}x{h}; it needs at least 2x2 pixels.")
+    info: dict = {"path": str(path), "size": [w, h]}
+    if path.suffix.lower() in (".exr", ".hdr"):
+        rgb = np.nan_to_num(np.maximum(rgb, 0.0), nan=0.0, posinf=0.0)
+        exposure = camera_exposure(rgb)
+        info["decoded"] = f"linear HDR exposed by x{exposure:.4g} (log-average luminance -> 0.18), clipped, sRGB-encoded"
+        rgb = linear_to_srgb(np.clip(rgb * exposure, 0.0, 1.0))
+    else:
+        info["decoded"] = "sRGB as stored"
+        rgb = np.clip(rgb, 0.0, 1.0)
+    inp = oiio.ImageInput.open(str(path))
+    if inp is not None:
+        try:
+            focal35 = inp.spec().getattribute("Exif:FocalLengthIn35mmFilm")
+        finally:
+            inp.close()
+        if focal35:
+            info["fov_from_metadata_deg"] = round(float(np.degrees(2 * np.arctan(36.0 / (2 * float(focal35))))), 3)
+    return rgb, info
+
+
+def parse_placement(text_or_xy, width: int, height: int) -> tuple[float, float]:
+    """`X,Y` as fractions of the photo's width and height when both are <= 1, else as pixels."""
+    if isinstance(text_or_xy, str):
+        try:
+            x, y = (float(v) for v in text_or_xy.split(","))
+        except ValueError:
+            raise InputError(f"--at takes X,Y (fractions of width and height, or pixels), got {text_or_xy!r}.") from None
+    else:
+        x, y = (float(v) for v in text_or_xy)
+    if 0.0 <= x <= 1.0 and 0.0 <= y <= 1.0:
+        x, y = x * width, y * height
+    if not (0.0 <= x <= width and 0.0 <= y <= height):
+        raise InputError(f"The placement ({x:g}, {y:g}) lies outside the {width}x{height} photo.")
+    return x, y
+
+
+def default_object() -> tuple[Mesh, torch.Tensor]:
+    """When no asset is given: a mid-grey, medium-rough sphere of the normalised radius."""
+    maps = torch.cat([torch.full((8, 8, 3), 0.5), torch.full((8, 8, 1), 0.5), torch.zeros(8, 8, 1)], dim=-1)
+    return uv_sphere(radius=0.5, segments=32, rings=16), maps
+
+
+# -- the stage -------------------------------------------------------------------------------------
+def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], config: LightConfig = LightConfig(),
+                   photo_camera: PhotoCamera | None = None, mesh: Mesh | None = None, maps: torch.Tensor | None = None,
+                   critic: Critic | None = None, reference_envmap: np.ndarray | None = None,
+                   photo_info: dict | None = None, progress: ProgressCallback | None = None,
+                   cancel: threading.Event | None = None, on_iteration=None) -> LightResult:
+    """Estimate an HDR environment map from a photo (sRGB-encoded float RGB) and the object's placement.
+
+    photo_camera: the photo's orientation and FOV in the world (default: looking along +Y, the
+    composition's azimuth 0, pitched by config.camera_pitch_deg). mesh/maps: the object with its fixed
+    appearance ((H, W, 5) base colour, roughness, metallic); default a grey sphere. critic: used when
+    config.critic_type == "diffusion"; reference_envmap: the true map (photo exposure units) for "reference".
+    """
+    t0 = time.perf_counter()
+    photo = np.clip(np.asarray(photo_srgb, np.float32)[..., :3], 0.0, 1.0)
+    h, w = photo.shape[:2]
+    info = dict(photo_info or {})
+    decisions: dict = {}
+    if photo_camera is None:
+        fov = config.fov_deg or info.get("fov_from_metadata_deg") or DEFAULT_FOV_DEG
+        decisions["fov"] = {"deg": fov, "from": "config" if config.fov_deg else
+                            ("photo metadata" if info.get("fov_from_metadata_deg") else "default (horizontal 60 deg)")}
+        photo_camera = PhotoCamera(yaw_deg=90.0, pitch_deg=config.camera_pitch_deg, fov_deg=fov, width=w, height=h)
+    elif (photo_camera.width, photo_camera.height) != (w, h):
+        photo_camera = replace(photo_camera, width=w, height=h)
+    decisions["photo_camera"] = asdict(photo_camera)
+
+    # Indoor or outdoor.
+    cue = sky_score(photo)
+    scene_type = cue["scene_type"] if config.scene_type == "auto" else config.scene_type
+    decisions["scene_type"] = {"chosen": scene_type, "by": "auto" if config.scene_type == "auto" else "user", **cue}
+    emit(progress, "light", 0, max(config.optimise.iterations, 1), f"{scene_type} panorama")
+
+    # The LDR panorama.
+    placement = place_on_floor(photo_camera, placement_px)
+    decisions["placement"] = {"pixel": list(placement.pixel), "object_position": np.round(placement.object_position, 4).tolist(),
+                              "lifted_below_horizon": placement.clamped}
+    if scene_type == "indoor":
+        depth = estimate_ray_distance(photo, photo_camera, placement, config.depth)
+        decisions["depth"] = {"method": depth.method, **depth.detail}
+        pano = indoor_panorama(photo, depth.ray_distance, photo_camera, placement, config.map_height)
+    else:
+        pano = outdoor_panorama(photo, photo_camera, config.map_height)
+    decisions["panorama"] = pano.decisions
+    check_cancel(cancel)
+
+    # Bright regions and the prior.
+    regions = bright_regions(pano.ldr, pano.distance, scene_type, config.thresholds)
+    prior = prior_scales(pano.ldr, regions, config.l_white)
+    decisions["regions"] = {name: round(float(mask.mean()), 5) for name, mask in regions.items()}
+    decisions["prior"] = {"type": config.prior_type, "l_white": config.l_white,
+                          "scales": {k: round(v, 5) for k, v in prior.items()}}
+    prior_hdr = hdr_from_scales(pano.ldr, regions, prior)
+    dark, dark_info = is_dark_environment(prior_hdr, regions)
+    prompts = tuple(light_prompt(config.object_prompt, dark, config.tint) for _ in config.apparatus.object_azimuths) \
+        + (light_prompt(SPHERE_PROMPT, dark, config.tint),)
+    decisions["prompt"] = {"dark_environment": dark_info, "sphere": prompts[-1], "object": prompts[0],
+                           "evaluated_on": "the prior's HDR map"}
+
+    # Optimise the scales with a critic, when there is one.
+    scales, optimisation = dict(prior), None
+    use_critic, why = _pick_critic(config, critic, reference_envmap, regions)
+    decisions["critic"] = {"type": config.critic_type, "used": use_critic is not None, "why": why}
+    if config.critic_type in ("reference", "diffusion") and why.startswith("ok"):
+        if mesh is None or maps is None:
+            mesh, maps = default_object()
+            decisions["object"] = "default grey sphere (no asset given)"
+        else:
+            mesh, _ = normalize_to_unit_sphere(mesh)
+            decisions["object"] = f"the asset '{mesh.name}' with its own maps"
+        scene = ApparatusScene(mesh, maps, pano.ldr.shape[:2], config.apparatus,
+                               photo_azimuth_deg=photo_camera.yaw_deg - 90.0)
+        if config.critic_type == "reference":
+            from .reference_critic import ReferenceCritic
+
+            use_critic = ReferenceCritic.from_true_map(scene, _fit_map(reference_envmap, pano.ldr.shape[:2]))
+        optimisation = optimise_scales(scene, pano.ldr, regions, prior, use_critic, prompts, config.optimise,
+                                       progress=progress, cancel=cancel, on_iteration=on_iteration)
+        scales = {k: math.exp(v) for k, v in optimisation.log_scales.items()}
+        decisions["optimisation"] = {"iterations": config.optimise.iterations, "lr": config.optimise.lr,
+                                     "final_loss": optimisation.loss_history[-1] if optimisation.loss_history else None,
+                                     "seconds": round(optimisation.seconds, 3)}
+    hdr = hdr_from_scales(pano.ldr, regions, scales)
+    emit(progress, "light", max(config.optimise.iterations, 1), max(config.optimise.iterations, 1), "HDR map ready")
+    return LightResult(pano.ldr, hdr, regions, scales, prior, pano, photo_camera, decisions, optimisation,
+                       time.perf_counter() - t0)
+
+
+def _fit_map(envmap: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    import cv2
+
+    envmap = np.ascontiguousarray(envmap[..., :3], np.float32)
+    if envmap.shape[:2] != tuple(shape):
+        envmap = cv2.resize(envmap, (shape[1], shape[0]), interpolation=cv2.INTER_AREA)
+    return envmap
+
+
+def _pick_critic(config: LightConfig, critic, reference_envmap, regions) -> tuple[Critic | None, str]:
+    if not regions:
+        return None, "no bright region, so no scale to optimise"
+    if config.critic_type == "none":
+        return None, "critic_type 'none': the inverse-tone-mapping prior sets the scales"
+    if config.critic_type == "reference":
+        if reference_envmap is None:
+            raise InputError("critic_type 'reference' needs the true map (reference_envmap).")
+        return None, "ok: pixel loss against renders under the true map"
+    if critic is None:
+        return None, ("no diffusion critic was given (core/guidance has none wired in, or its weights are "
+                      "missing): the inverse-tone-mapping prior sets the scales")
+    return critic, "ok: diffusion critic"
+
+
+def write_light_outputs(result: LightResult, out_dir: str | Path) -> dict[str, str]:
+    """light.exr (float32 linear HDR), light_ldr.png (the LDR panorama), light_preview.png (tone-mapped)."""
+    out = Path(out_dir)
+    paths = {
+        "hdr_exr": write_image(out / "light.exr", result.hdr, dtype="float"),
+        "ldr_png": write_image(out / "light_ldr.png", result.ldr),
+        "preview_png": write_image(out / "light_preview.png", tonemap_preview(result.hdr)),
+    }
+    return {k: str(v) for k, v in paths.items()}
+
+
+def _json_safe(value):
+    """inf/nan as strings, so report.json stays strict JSON."""
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    return value
+
+
+def light_report(result: LightResult, config: LightConfig, outputs: dict[str, str]) -> dict:
+    return _json_safe({
+        "stage": "light",
+        "config": asdict(config),
+        "decisions": result.decisions,
+        "scales": {k: round(v, 6) for k, v in result.scales.items()},
+        "prior_scales": {k: round(v, 6) for k, v in result.prior_scales.items()},
+        "map_size": [int(result.hdr.shape[1]), int(result.hdr.shape[0])],
+        "hdr_max": float(result.hdr.max()),
+        "seconds": round(result.seconds, 3),
+        "outputs": outputs,
+        "convention": "latitude-longitude, Blender's equirectangular Environment Texture (top row = +Z, "
+                      "u = atan2(y, -x) / 2pi + 0.5); load with blender_io.world.world_from_hdr",
+    })
