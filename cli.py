@@ -120,7 +120,8 @@ def cmd_export(args) -> int:
 def cmd_demo(args) -> int:
     from .demo import run_demo
 
-    report = run_demo(Path(args.out), preset=args.preset, progress=_progress(args), refresh=args.refresh)
+    report = run_demo(Path(args.out), preset=args.preset, progress=_progress(args), refresh=args.refresh,
+                      guidance=args.guidance)
     print(f"demo done in {report['seconds_total']:.1f} s: conversion {report['convert']['psnr_covered_texels_db']:.2f} dB "
           f"-> {args.out}/report.json")
     return 0
@@ -148,6 +149,48 @@ def cmd_light(args) -> int:
     depth_used = result.decisions.get("depth", {}).get("method", "none (outdoor)")
     print(f"light: {result.decisions['scene_type']['chosen']} scene, depth {depth_used}, scales "
           f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {out}/light.exr")
+    return 0
+
+
+def cmd_adapt(args) -> int:
+    import numpy as np
+
+    from .core.adapt import adapt_and_bake, adapt_preset
+    from .core.guidance import ModelConfig, Placement
+    from .core.imageio import linear_to_srgb, read_color_image
+    from .core.pipeline import environment_info, write_report
+    from .core.texture.bake import load_neural_texture
+
+    mesh, _ = load_asset(args.asset, args.object)
+    models = ModelConfig(**{k: v for k, v in (("base_model", args.base_model), ("inpaint_model", args.inpaint_model),
+                                              ("cache_dir", args.cache_dir)) if v}, local_files_only=args.offline)
+    overrides = {k: v for k, v in (("iterations", args.iterations), ("seed", args.seed),
+                                   ("elevation", args.elevation)) if v is not None}
+    mode = args.mode
+    config = adapt_preset(args.preset, mode, prompt=args.prompt or "", object_prompt=args.object_prompt or "",
+                          instruction=args.instruction or "", models=models,
+                          **({"views_type": "local"} if mode == "scene" and not args.photo else {}),
+                          **({"light_type": "envmap"} if args.envmap else {}), **overrides)
+    if args.model_resolution or args.render_size:
+        from dataclasses import replace
+
+        from .core.adapt import StageSpec
+
+        stages = tuple(StageSpec(st.fraction, min(st.render_size, args.render_size or st.render_size), st.spp, st.t_range)
+                       for st in config.stages)
+        config = replace(config, stages=stages, model_resolution=args.model_resolution or config.model_resolution)
+    texture = load_neural_texture(args.texture) if args.texture else None
+    photo = placement = None
+    if args.photo:
+        photo = linear_to_srgb(np.clip(read_color_image(args.photo), 0.0, 1.0))
+        x, y = (float(v) for v in args.at.split(","))
+        placement = Placement((x, y), args.size)
+    env = _environment(args)[0] if args.envmap else None
+    result, report = adapt_and_bake(mesh, texture, config, Path(args.out), photo=photo, placement=placement,
+                                    envmap=env, progress=_progress(args))
+    report["environment"] = environment_info()
+    write_report(Path(args.out) / "report.json", report)
+    print(f"adapted '{mesh.name}' ({mode}, {result.iterations} iterations, {result.seconds:.1f} s) -> {args.out}/maps")
     return 0
 
 
@@ -202,8 +245,35 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out/demo")
     p.add_argument("--preset", choices=PRESETS, default="balanced")
     p.add_argument("--refresh", action="store_true", help="re-make the example asset and photo")
+    p.add_argument("--guidance", choices=("auto", "sd2", "none"), default="auto",
+                   help="texture adaptation: sd2 (needs the Stable Diffusion 2 weights), none, or auto (sd2 when "
+                        "its weights are on this machine)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("adapt", help="restyle a converted texture with diffusion guidance (or texture/edit from a prompt)")
+    asset_args(p)
+    p.add_argument("--out", required=True, help="output folder: maps/, checkpoint/ (rerun to resume), report.json")
+    p.add_argument("--mode", choices=("scene", "generate", "edit"), default="scene")
+    p.add_argument("--texture", help="texture.pt from `scenefit convert` (required unless --mode generate)")
+    p.add_argument("--prompt", help="appearance description, e.g. 'a leather sofa, soggy and stained with mud'")
+    p.add_argument("--object-prompt", help="edit mode: the object, e.g. 'a leather sofa'")
+    p.add_argument("--instruction", help="edit mode: e.g. 'add dust to the sofa'")
+    p.add_argument("--photo", help="scene mode: the photo the object goes into")
+    p.add_argument("--at", default="0.5,0.6", help="X,Y centre of the object in the photo, fractions (default 0.5,0.6)")
+    p.add_argument("--size", type=float, default=0.4, help="object size as a fraction of the photo height")
+    p.add_argument("--envmap", help="light the object with this HDR map while adapting (e.g. the estimated one)")
+    p.add_argument("--preset", choices=PRESETS, default="balanced")
+    p.add_argument("--iterations", type=int)
+    p.add_argument("--elevation", type=float)
+    p.add_argument("--seed", type=int)
+    p.add_argument("--model-resolution", type=int, help="image size the diffusion models see (default 512)")
+    p.add_argument("--render-size", type=int, help="largest render size of the coarse-to-fine stages")
+    p.add_argument("--base-model", help="hub id or folder (default stabilityai/stable-diffusion-2-base)")
+    p.add_argument("--inpaint-model", help="hub id or folder (default stabilityai/stable-diffusion-2-inpainting)")
+    p.add_argument("--cache-dir", help="Hugging Face cache folder to look in")
+    p.add_argument("--offline", action="store_true", help="never download (also HF_HUB_OFFLINE=1)")
+    p.set_defaults(func=cmd_adapt)
     p = sub.add_parser("light", help="estimate an HDR environment map from a photo and the object's placement")
     p.add_argument("--photo", required=True, help="the scene photo (JPEG/PNG/EXR, any size)")
     p.add_argument("--at", required=True, help="X,Y where the object stands: fractions of width,height (or pixels)")

@@ -50,9 +50,24 @@ def make_photo(path: Path) -> dict:
 
 
 def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | None = None,
-             refresh: bool = False) -> dict:
+             refresh: bool = False, guidance: str = "auto") -> dict:
     started = time.perf_counter()
     out = Path(out)
+    # Texture adaptation needs Stable Diffusion 2: "sd2" insists (a missing model stops the demo here,
+    # before any work), "auto" uses it when its weights are on this machine, "none" skips it.
+    from .core.errors import InputError
+    from .core.guidance import ModelConfig, locate_models, models_available
+
+    if guidance not in ("auto", "sd2", "none"):
+        raise InputError(f"guidance must be 'auto', 'sd2' or 'none', got {guidance!r}.")
+    if guidance == "sd2":
+        locate_models(ModelConfig(), need_inpaint=True)
+    found, where = models_available(ModelConfig()) if guidance == "auto" else (guidance == "sd2", "")
+    adapt_info: dict = {"guidance": guidance, "used": bool(found)}
+    if not found:
+        adapt_info["why"] = ("--guidance none: the weight-free path (the converted texture is not adapted)"
+                             if guidance == "none" else "Stable Diffusion 2 weights were not found, so the demo "
+                             "ran the weight-free path (the converted texture is not adapted): " + where)
     inputs = out / "input"
     if refresh and inputs.exists():
         shutil.rmtree(inputs)
@@ -106,6 +121,18 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     render_psnr = float(np.mean([image_psnr(a, b) for a, b in zip(display["original"], display["converted"])]))
     timings["render"] = time.perf_counter() - t
 
+    if found:  # scene-conditional adaptation of the converted texture (draft-sized for the demo)
+        from .core.adapt import adapt_and_bake, adapt_preset
+        from .core.guidance import Placement
+        from .core.imageio import linear_to_srgb
+
+        adapt_config = adapt_preset(preset, "scene", prompt="a monkey head sculpture standing in a living room, "
+                                    "its painted surface dusty and worn, photo")
+        _, adapt_info["report"] = adapt_and_bake(mesh, result.texture, adapt_config, out / "adapted",
+                                                 photo=linear_to_srgb(np.clip(photo, 0.0, 1.0)),
+                                                 placement=Placement(DEMO_PLACEMENT, 0.4), progress=progress)
+        timings["adapt"] = adapt_info["report"]["seconds"]
+
     report = {
         "stage": "demo",
         "preset": preset,
@@ -118,6 +145,9 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
         "environment": environment_info(),
         "not_yet": ["texture adaptation (diffusion critics)", "light estimation", "composition"],
     }
+    report["adapt"] = adapt_info
+    if found:
+        report["not_yet"] = [item for item in report["not_yet"] if not item.startswith("texture adaptation")]
     report["seconds_total"] = round(time.perf_counter() - started, 3)
     write_report(out / "report.json", report)
     return report

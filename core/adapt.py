@@ -641,3 +641,41 @@ def adapt_texture(inputs: AdaptInputs, config: AdaptConfig, progress: ProgressCa
     return AdaptResult(texture=texture, iterations=config.iterations, seconds=time.perf_counter() - started,
                        history=history, timings=timer.totals, resumed_from=start, decisions=decisions,
                        peak_memory_mb=peak)
+
+
+def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfig, out_dir: str | Path,
+                   photo: np.ndarray | None = None, placement: Placement | None = None,
+                   envmap: np.ndarray | None = None, resolution: int | None = None,
+                   progress: ProgressCallback | None = None, cancel: threading.Event | None = None,
+                   models: GuidanceModels | None = None) -> tuple[AdaptResult, dict]:
+    """Adapt (or, for "generate", make) the asset's texture and bake it into out_dir/maps.
+
+    mesh is the asset as given (normalised here); checkpoints go to out_dir/checkpoint so that
+    running the same command again resumes. Returns the result and a report dict.
+    """
+    from .mesh import normalize_to_unit_sphere
+    from .texture.bake import bake_maps
+    from .texture.uv_raster import rasterize_uv
+
+    out_dir = Path(out_dir)
+    if models is None:  # missing weights stop the run here, before any work
+        models = load_guidance_models(config.models, config.views_type == "local+global")
+    normalized, _ = normalize_to_unit_sphere(mesh)
+    res = texture.config.resolution if texture is not None else int(resolution or preset(config.texture_preset).resolution)
+    raster = rasterize_uv(normalized, res)
+    inputs = AdaptInputs(mesh=normalized, raster=raster, texture=texture, photo=photo, placement=placement,
+                         envmap=envmap)
+    result = adapt_texture(inputs, config, progress=progress, cancel=cancel, checkpoint_dir=out_dir / "checkpoint",
+                           models=models)
+    check_cancel(cancel)
+    paths = bake_maps(result.texture, raster.position, raster.border, raster.fill_index, out_dir / "maps")
+    per_it = result.seconds_per_iteration()
+    report = {
+        "stage": "adapt", "config": config.to_dict(), "decisions": result.decisions,
+        "iterations": result.iterations, "resumed_from": result.resumed_from, "seconds": round(result.seconds, 3),
+        "seconds_per_iteration": {k: round(v, 4) for k, v in per_it.items()},
+        "peak_memory_mb": None if result.peak_memory_mb is None else round(result.peak_memory_mb, 1),
+        "last_metrics": result.history[-1] if result.history else {},
+        "outputs": {k: str(v) for k, v in paths.items()},
+    }
+    return result, report

@@ -178,3 +178,34 @@ def test_config_validation_and_helpers():
                 placement=None).validate(AdaptConfig(prompt="x"))
     with pytest.raises(InputError, match="convert the asset first"):
         _inputs((uv_sphere(), rasterize_uv(uv_sphere(), 16), None, None)).validate(AdaptConfig(prompt="x"))
+
+
+def test_cli_adapt_and_demo_guidance(tiny_models, asset, tmp_path, monkeypatch, capsys):
+    from scenefit.cli import main
+    from scenefit.core.asset_io import save_asset_folder
+    from scenefit.core.imageio import write_image
+    from scenefit.core.maps import PBRMaps
+    from scenefit.core.texture import save_neural_texture
+
+    mesh, raster, texture, photo = asset
+    folder = tmp_path / "asset"
+    grey = np.full((32, 32, 3), 0.5, np.float32)
+    save_asset_folder(mesh, PBRMaps(base_color=grey, roughness=0.5, metallic=0.0), folder)
+    save_neural_texture(texture, tmp_path / "texture.pt")
+    write_image(tmp_path / "photo.png", photo)
+    base, inpaint = tiny_models
+    args = ["adapt", str(folder), "--texture", str(tmp_path / "texture.pt"), "--prompt", "a mossy ball",
+            "--photo", str(tmp_path / "photo.png"), "--at", "0.5,0.6", "--preset", "draft", "--iterations", "2",
+            "--model-resolution", "32", "--render-size", "16", "--base-model", str(base), "--inpaint-model",
+            str(inpaint), "--out", str(tmp_path / "out"), "--quiet"]
+    assert main(args) == 0
+    assert (tmp_path / "out" / "maps" / "base_color.png").is_file() and (tmp_path / "out" / "report.json").is_file()
+    assert (tmp_path / "out" / "checkpoint" / "adapt_checkpoint.pt").is_file()
+    # `demo --guidance sd2` with no weights stops before any work with the clear message.
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    monkeypatch.setenv("HF_HUB_CACHE", str(tmp_path / "empty"))
+    capsys.readouterr()
+    assert main(["demo", "--guidance", "sd2", "--out", str(tmp_path / "demo"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "stabilityai/stable-diffusion-2-base" in err and "Traceback" not in err
+    assert not (tmp_path / "demo").exists()
