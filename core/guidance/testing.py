@@ -33,8 +33,14 @@ def tiny_tokenizer():
     return CLIPTokenizer(vocab=vocab, merges=[], model_max_length=77)
 
 
+# Stable Diffusion 2's UNet shape (865M parameters), for timing with random weights on a GPU.
+SD2_UNET = {"sample_size": 64, "block_out_channels": (320, 640, 1280, 1280), "cross_attention_dim": 1024,
+            "layers_per_block": 2, "attention_head_dim": (5, 10, 20, 20)}
+
+
 def build_tiny_sd(folder: str | Path, in_channels: int = 4, seed: int = 0, sample_size: int = 16,
-                  block_out_channels: tuple[int, ...] = (32, 64), cross_attention_dim: int = 32) -> Path:
+                  block_out_channels: tuple[int, ...] = (32, 64), cross_attention_dim: int = 32,
+                  layers_per_block: int = 1, attention_head_dim: tuple[int, ...] | None = None) -> Path:
     """Write unet/, vae/, text_encoder/, tokenizer/, scheduler/ and model_index.json into `folder`.
 
     in_channels 4 is the text-to-image model, 9 the inpainting one (latents, mask, masked image).
@@ -49,11 +55,12 @@ def build_tiny_sd(folder: str | Path, in_channels: int = 4, seed: int = 0, sampl
     tokenizer = tiny_tokenizer()
     n = len(block_out_channels)
     unet = UNet2DConditionModel(
-        sample_size=sample_size, in_channels=in_channels, out_channels=4, layers_per_block=1,
+        sample_size=sample_size, in_channels=in_channels, out_channels=4, layers_per_block=layers_per_block,
         block_out_channels=block_out_channels, norm_num_groups=min(32, block_out_channels[0]),
         down_block_types=("CrossAttnDownBlock2D",) * (n - 1) + ("DownBlock2D",),
         up_block_types=("UpBlock2D",) + ("CrossAttnUpBlock2D",) * (n - 1),
-        cross_attention_dim=cross_attention_dim, attention_head_dim=tuple(max(1, c // 16) for c in block_out_channels),
+        cross_attention_dim=cross_attention_dim,
+        attention_head_dim=attention_head_dim or tuple(max(1, c // 16) for c in block_out_channels),
         use_linear_projection=True,  # as SD2
     )
     vae = AutoencoderKL(in_channels=3, out_channels=3, latent_channels=4, block_out_channels=(8, 16),
