@@ -12,7 +12,7 @@ from scenefit.core.errors import InputError, ModelMissingError
 from scenefit.core.imageio import read_image, write_image
 from scenefit.core.lighting import estimate_light, light_preset, load_photo
 from scenefit.core.lighting.depth import DepthConfig, estimate_ray_distance
-from scenefit.core.lighting.hdr import (ApparatusConfig, ApparatusScene, OptimiseConfig, compose_hdr,
+from scenefit.core.lighting.hdr import (ApparatusConfig, ApparatusScene, CriticRequest, OptimiseConfig, compose_hdr,
                                         is_dark_environment, light_prompt, optimise_scales, prior_scales)
 from scenefit.core.lighting.panorama import ORIGIN_LIFT, fill_panorama, indoor_panorama, place_on_floor
 from scenefit.core.lighting.reference_critic import ReferenceCritic
@@ -160,11 +160,14 @@ def test_scales_stay_finite_and_gradients_point_home_at_extremes(scale):
     log_scale = torch.tensor(math.log(scale), requires_grad=True)
     hdr = compose_hdr(ldr_lin, masks, {"near": log_scale})
     assert torch.isfinite(hdr).all()
-    renders, _ = scene.render(hdr, seed=1)
-    loss = (scene.weights * critic(renders)).sum()
-    loss.backward()
+    loss = 0.0
+    for v in range(len(scene.cameras)):
+        render, _ = scene.render_view(hdr, v, seed=1)
+        view_loss = scene.weights[v] * critic(render[None], CriticRequest(("p",), ("v",), 0, 1, view_indices=(v,))).sum()
+        view_loss.backward(retain_graph=True)
+        loss += float(view_loss)
     grad = log_scale.grad
-    assert torch.isfinite(loss) and torch.isfinite(grad) and abs(float(grad)) > 1e-6
+    assert math.isfinite(loss) and torch.isfinite(grad) and abs(float(grad)) > 1e-6
     # Too dark: the loss falls as the scale grows; too bright: it falls as the scale shrinks.
     assert (float(grad) < 0) if scale < 30 else (float(grad) > 0)
 

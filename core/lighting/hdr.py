@@ -8,8 +8,8 @@ disjoint. Scales live in log space (Adam steps are relative, s is clamped to [LO
 LOG_SCALE_MAX] so the map stays finite).
 
 Critics. Anything callable as `critic(renders, request) -> Tensor` scores the renders:
-renders is (V, h, w, 3) linear radiance (one per view, object views first, the sphere last), and the
-return value is either per-view losses (V,) or image-space gradients (V, h, w, 3), which are turned
+renders is (V, h, w, 3) linear radiance (during optimisation V = 1: one view at a time, named by
+request.view_indices / view_names; object views first, the sphere last), and the return value is either per-view losses (V,) or image-space gradients (V, h, w, 3), which are turned
 into the surrogate loss sum(grad.detach() * render) (the SDS/VSD convention). `ReferenceCritic`
 (reference_critic.py) compares with renders under the true map; a diffusion critic from
 core/guidance plugs in through the same call and reads the prompt and t range from the request.
@@ -127,6 +127,7 @@ class CriticRequest:
     iterations: int
     t_range: tuple[int, int] = (750, 990)
     alphas: torch.Tensor | None = None   # (V, h, w, 1) coverage, for critics that composite
+    view_indices: tuple[int, ...] = ()   # which of the scene's views these renders are
 
 
 class Critic(Protocol):
@@ -196,11 +197,18 @@ class ApparatusScene:
         self.weights = torch.tensor(config.view_weights, dtype=torch.float32)
 
     def render(self, envmap: torch.Tensor, spp: int | None = None, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
-        """(V, h, w, 3) radiance and (V, h, w, 1) alpha, one per view."""
-        spp = spp or self.config.spp
-        outs = [self.renderer.render(cam, *self.maps, envmap, spp=spp, seed=seed * 16 + i)
-                for i, cam in enumerate(self.cameras)]
-        return torch.stack([o.rgb for o in outs]), torch.stack([o.alpha for o in outs])
+        """(V, h, w, 3) radiance and (V, h, w, 1) alpha, one per view. For evaluation (no gradients): the
+        renderer's one sensor is moved for every view, so a backward pass after several views would
+        replay them all from the last camera; `render_view` + immediate backward is the training path."""
+        with torch.no_grad():
+            outs = [self.render_view(envmap, i, spp, seed) for i in range(len(self.cameras))]
+        return torch.stack([o[0] for o in outs]), torch.stack([o[1] for o in outs])
+
+    def render_view(self, envmap: torch.Tensor, index: int, spp: int | None = None,
+                    seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
+        out = self.renderer.render(self.cameras[index], *self.maps, envmap, spp=spp or self.config.spp,
+                                   seed=seed * 16 + index)
+        return out.rgb, out.alpha
 
 
 # -- optimisation ----------------------------------------------------------------------------------
@@ -249,27 +257,30 @@ def optimise_scales(scene: ApparatusScene, ldr_srgb: np.ndarray, regions: dict[s
         optimizer, lambda it: 1.0 - (1.0 - config.lr_final_factor) * min(it, n - 1) / max(n - 1, 1))
     for it in range(n):
         check_cancel(cancel)
-        # Compose the HDR map from the current scales and render every view.
-        envmap = compose_hdr(ldr, masks, log_scales)
-        renders, alphas = scene.render(envmap, seed=config.seed * 100003 + it)
-        # Score the renders and weight the views ({1/6, 1/6, 1/6, 1/2}).
-        request = CriticRequest(prompts, scene.view_names, it, n, config.t_range, alphas)
-        losses = per_view_losses(critic(renders, request), renders)
-        loss = (scene.weights * losses).sum()
-        # Step in log space, then keep the scales finite.
         optimizer.zero_grad()
-        loss.backward()
+        loss = 0.0
+        for v in range(len(scene.cameras)):
+            # Compose the HDR map from the current scales and render one view.
+            envmap = compose_hdr(ldr, masks, log_scales)
+            render, alpha = scene.render_view(envmap, v, seed=config.seed * 100003 + it)
+            # Score it and weight it ({1/6, 1/6, 1/6, 1/2}); backward now, while the sensor is this view's
+            # (Mitsuba replays the path from the renderer's current camera on backward).
+            request = CriticRequest((prompts[v],), (scene.view_names[v],), it, n, config.t_range, alpha[None], (v,))
+            view_loss = scene.weights[v] * per_view_losses(critic(render[None], request), render[None]).sum()
+            view_loss.backward()
+            loss += float(view_loss.detach())
+        # Step in log space, then keep the scales finite.
         optimizer.step()
         schedule.step()
         with torch.no_grad():
             for s in log_scales.values():
                 s.clamp_(LOG_SCALE_MIN, LOG_SCALE_MAX)
         current = {k: float(v.detach()) for k, v in log_scales.items()}
-        result.loss_history.append(float(loss.detach()))
+        result.loss_history.append(loss)
         result.scale_history.append({k: math.exp(v) for k, v in current.items()})
         if on_iteration is not None:
             on_iteration(it, current)
-        emit(progress, "light", it + 1, n, metrics={"loss": float(loss.detach()),
+        emit(progress, "light", it + 1, n, metrics={"loss": loss,
                                                     **{f"scale_{k}": math.exp(v) for k, v in current.items()}})
     result.log_scales = {k: float(v.detach()) for k, v in log_scales.items()}
     result.seconds = time.perf_counter() - t0

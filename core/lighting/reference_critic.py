@@ -29,5 +29,8 @@ class ReferenceCritic:
         return cls(targets)
 
     def __call__(self, renders: torch.Tensor, request: CriticRequest | None = None) -> torch.Tensor:
-        mse = ((renders - self.targets) ** 2).flatten(1).mean(dim=1)
-        return mse / (self.targets ** 2).flatten(1).mean(dim=1).clamp_min(1e-12)
+        targets = self.targets
+        if request is not None and request.view_indices:
+            targets = targets[list(request.view_indices)]
+        mse = ((renders - targets) ** 2).flatten(1).mean(dim=1)
+        return mse / (targets ** 2).flatten(1).mean(dim=1).clamp_min(1e-12)
