@@ -183,6 +183,7 @@ class AssetRenderer:
         self._sensors: dict[tuple[int, int], object] = {}
         self._aov_integrator = None
         self._wrapped = None
+        self._pending = None  # weak reference to a differentiable render whose backward has not run
 
     # -- cameras -------------------------------------------------------------------------------
     def _sensor(self, camera: Camera):
@@ -240,6 +241,7 @@ class AssetRenderer:
         import torch
 
         t0 = time.perf_counter()
+        self._refuse_while_backward_pending()
         maps = [self._check_map(base_color, 3, "base colour"), self._check_map(roughness, 1, "roughness"),
                 self._check_map(metallic, 1, "metallic")]
         if tuple(envmap.shape) != tuple(self.envmap_shape):
@@ -247,8 +249,32 @@ class AssetRenderer:
         sensor = self._sensor(camera)
         self._sensor_by_index = {0: sensor}
         image = self._render_fn()(*maps, pad_envmap(envmap.float()), 0, int(spp), int(seed))
+        if image.requires_grad:
+            self._track_pending(image)
         image = image.to(torch.float32)
         return RenderOutput(rgb=image[..., :3], alpha=image[..., 3:4], seconds=time.perf_counter() - t0)
+
+    # Mitsuba's backward replays the render from the scene's *current* state (camera, maps, light), so a
+    # second render through this scene before the first one's backward would silently give the first
+    # one wrong gradients. Refuse instead; a render dropped without backward stops counting.
+    def _track_pending(self, image) -> None:
+        import weakref
+
+        self._pending = weakref.ref(image)
+
+        def done(grad):
+            self._pending = None
+            return grad
+
+        image.register_hook(done)
+
+    def _refuse_while_backward_pending(self) -> None:
+        if self._pending is not None and self._pending() is not None:
+            raise RuntimeError(
+                "A differentiable render of this scene is still waiting for backward(); call backward() (or drop "
+                "the result) before rendering again, since Mitsuba replays a render from the scene's current state."
+            )
+        self._pending = None
 
     def _check_map(self, tensor, channels: int, name: str):
         if tensor.ndim == 2:
@@ -261,6 +287,7 @@ class AssetRenderer:
         """Shading normals (world space), depth and coverage, one sample at pixel centres, no gradients."""
         import mitsuba as mi
 
+        self._refuse_while_backward_pending()
         if self._aov_integrator is None:
             self._aov_integrator = mi.load_dict({"type": "aov", "aovs": "nn:sh_normal,dd:depth"})
         sensor = self._sensor(camera)

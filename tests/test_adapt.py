@@ -90,7 +90,9 @@ def test_short_scene_run_changes_the_texture_and_resumes_exactly(tiny_models, as
     assert (tmp_path / "adapt_checkpoint.pt").is_file()
     resumed = adapt_texture(_inputs(asset), config, checkpoint_dir=tmp_path)
     assert resumed.resumed_from == 2 and len(resumed.history) == 4
-    torch.testing.assert_close(_maps(resumed.texture, raster), after, rtol=0, atol=1e-6)
+    # Equal up to float rounding: Mitsuba's backward scatters texture gradients with atomic adds across
+    # threads, whose order varies run to run (seen: 1.4e-6 on one texel); a broken resume differs by ~1e-2.
+    torch.testing.assert_close(_maps(resumed.texture, raster), after, rtol=0, atol=1e-5)
     # Other settings refuse to resume from that checkpoint.
     with pytest.raises(InputError, match="other settings"):
         adapt_texture(_inputs(asset), _config(tiny_models, seed=1), checkpoint_dir=tmp_path)

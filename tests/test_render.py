@@ -68,6 +68,22 @@ def test_gradients_reach_maps_and_environment():
     assert base.grad.sum() > 0 and env.grad.sum() > 0
 
 
+def test_a_second_render_before_backward_is_refused_not_silently_wrong():
+    renderer = AssetRenderer(uv_sphere(), TEX, constant_env(1.0))
+    base = constant_maps()[0].clone().requires_grad_(True)
+    env = torch.tensor(constant_env(1.0))
+    first = renderer.render(Camera(width=16, height=16), base, *constant_maps()[1:], env, spp=2, seed=0)
+    with pytest.raises(RuntimeError, match="waiting for backward"):
+        renderer.render(Camera(azimuth_deg=90, width=16, height=16), base, *constant_maps()[1:], env, spp=2, seed=1)
+    first.rgb.sum().backward()
+    assert base.grad is not None and base.grad.abs().sum() > 0
+    # After backward, and after dropping a result without backward, rendering goes on.
+    second = renderer.render(Camera(azimuth_deg=90, width=16, height=16), base, *constant_maps()[1:], env, spp=2, seed=1)
+    del second
+    with torch.no_grad():
+        renderer.render(Camera(width=16, height=16), base, *constant_maps()[1:], env, spp=2, seed=2)
+
+
 def test_uv_convention_top_of_texture_lands_on_top_of_plane():
     # OpenGL UVs (v = 0 at the bottom) with an image whose top rows are red: the plane's top is red.
     renderer = AssetRenderer(grid_plane(size=0.9), TEX, constant_env(1.0))
