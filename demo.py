@@ -19,7 +19,8 @@ import torch
 from .core.asset_io import is_asset_folder, load_asset_folder
 from .core.camera import orbit_cameras
 from .core.convert import convert_preset, target_stack
-from .core.imageio import read_color_image, read_image, srgb_to_linear, write_image
+from .core.imageio import read_image, write_image
+from .core.lighting import estimate_light, light_preset, light_report, load_photo, parse_placement, write_light_outputs
 from .core.mesh import normalize_to_unit_sphere
 from .core.photo import PhotoCamera, develop_photo, perspective_view, studiolight_path
 from .core.pipeline import (constant_environment, contact_sheet, convert_and_bake, environment_info, image_psnr,
@@ -81,13 +82,18 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     timings["inputs"] = time.perf_counter() - t
 
     mesh, maps = load_asset_folder(inputs / "asset")
-    photo = read_color_image(inputs / "photo.png")
-    # Until light estimation lands, the asset is lit by a constant environment of the photo's mean colour.
-    mean_color = photo.reshape(-1, 3).mean(axis=0)
-    env = constant_environment(mean_color / max(float(mean_color.max()), 1e-6))
-    lighting = {"type": "constant", "radiance": np.round(env[0, 0], 4).tolist(),
-                "why": "light estimation is not implemented yet; a constant environment tinted by the photo's "
-                       "mean colour (normalised so its brightest channel is 1) lights the asset"}
+    # Light: the photo's HDR environment, estimated from the photo alone (no diffusion critic
+    # without weights, so the inverse-tone-mapping prior sets the light scales; the report says so).
+    t = time.perf_counter()
+    photo_srgb, photo_read = load_photo(inputs / "photo.png")
+    placement_px = parse_placement(DEMO_PLACEMENT, photo_srgb.shape[1], photo_srgb.shape[0])
+    light_config = light_preset(preset)
+    light = estimate_light(photo_srgb, placement_px, light_config, photo_camera=DEMO_PHOTO_CAMERA,
+                           photo_info=photo_read, progress=progress)
+    light_outputs = write_light_outputs(light, out / "light")
+    env = light.hdr.astype(np.float32)
+    lighting = light_report(light, light_config, light_outputs)
+    timings["light"] = time.perf_counter() - t
 
     # Convert the asset's own maps into the neural texture and bake it.
     config = convert_preset(preset)
@@ -124,12 +130,11 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     if found:  # scene-conditional adaptation of the converted texture (draft-sized for the demo)
         from .core.adapt import adapt_and_bake, adapt_preset
         from .core.guidance import Placement
-        from .core.imageio import linear_to_srgb
 
         adapt_config = adapt_preset(preset, "scene", prompt="a monkey head sculpture standing in a living room, "
                                     "its painted surface dusty and worn, photo")
         _, adapt_info["report"] = adapt_and_bake(mesh, result.texture, adapt_config, out / "adapted",
-                                                 photo=linear_to_srgb(np.clip(photo, 0.0, 1.0)),
+                                                 photo=photo_srgb,
                                                  placement=Placement(DEMO_PLACEMENT, 0.4), progress=progress)
         timings["adapt"] = adapt_info["report"]["seconds"]
 
@@ -143,7 +148,7 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
                     "psnr_original_vs_converted_db": round(render_psnr, 3), "spp": 64, "views": DEMO_VIEWS},
         "timings_seconds": {k: round(v, 3) for k, v in timings.items()},
         "environment": environment_info(),
-        "not_yet": ["texture adaptation (diffusion critics)", "light estimation", "composition"],
+        "not_yet": ["texture adaptation (diffusion critics)", "composition"],
     }
     report["adapt"] = adapt_info
     if found:

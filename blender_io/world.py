@@ -3,7 +3,7 @@
 Node setup: Environment Texture (the EXR, linear, equirectangular, default vector) -> Background
 (strength 1) -> World Output. With no Mapping node Blender looks the map up with
 
-    u = atan2(d.y, -d.x) / 2pi + 0.5,    v = atan2(d.z, hypot(d.x, d.y)) / pi + 0.5  (v from the bottom)
+    u = 0.5 - atan2(d.y, d.x) / 2pi,    v = atan2(d.z, hypot(d.x, d.y)) / pi + 0.5  (v from the bottom)
 
 which is the convention core/render.py gives Mitsuba through ENVMAP_TO_WORLD, so the map lights the
 asset from the same directions in both renderers (tests/test_lighting_blender.py checks it).

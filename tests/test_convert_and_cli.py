@@ -50,9 +50,10 @@ def test_demo_converts_the_bundled_example_above_30_db(demo_run):
     assert report["convert"]["psnr_covered_texels_db"] >= 30.0
     assert report["renders"]["psnr_original_vs_converted_db"] > 25.0
     assert report["environment"]["mitsuba_variant"] in ("llvm_ad_rgb", "cuda_ad_rgb")
-    assert report["lighting"]["type"] == "constant"  # said plainly until light estimation lands
-    for name in ("photo.png",):
-        assert (out / "input" / name).is_file()
+    # Lit by the HDR map estimated from the photo; without a critic the prior sets the scales, and says so.
+    assert report["lighting"]["stage"] == "light" and report["lighting"]["decisions"]["critic"]["used"] is False
+    assert (out / "light" / "light.exr").is_file() and (out / "input" / "photo.png").is_file()
+    assert report["adapt"]["used"] is False and "not found" in report["adapt"]["why"]
     for name in ("base_color.png", "roughness.png"):
         assert (out / "original" / name).is_file() and (out / "converted" / name).is_file()
     assert (out / "renders" / "comparison.png").is_file()

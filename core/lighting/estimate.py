@@ -310,5 +310,5 @@ def light_report(result: LightResult, config: LightConfig, outputs: dict[str, st
         "seconds": round(result.seconds, 3),
         "outputs": outputs,
         "convention": "latitude-longitude, Blender's equirectangular Environment Texture (top row = +Z, "
-                      "u = atan2(y, -x) / 2pi + 0.5); load with blender_io.world.world_from_hdr",
+                      "u = 0.5 - atan2(y, x) / 2pi, centre column +X); load with blender_io.world.world_from_hdr",
     })

@@ -2,9 +2,10 @@
 
 Map convention (the one the renderer and Blender share, see `core/render.py`): latitude-longitude,
 twice as wide as high, rows top (+Z, zenith) to bottom (-Z, nadir); the column at u = 0.5 looks
-along world -X and u grows towards +Y... exactly Blender's equirectangular Environment Texture:
+along world +X and u = 0.25 along +Y, exactly Blender's equirectangular Environment Texture
+(checked against Cycles in tests/test_lighting_blender.py):
 
-    u = atan2(d.y, -d.x) / 2pi + 0.5,        v_top = 0.5 - atan2(d.z, hypot(d.x, d.y)) / pi
+    u = 0.5 - atan2(d.y, d.x) / 2pi,        v_top = 0.5 - atan2(d.z, hypot(d.x, d.y)) / pi
 
 so `blender_direction_to_equirect_uv` maps a world direction to the texel that lights the asset
 from that direction in Mitsuba (through `ENVMAP_TO_WORLD`) and in Blender (World > Environment
