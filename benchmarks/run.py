@@ -197,10 +197,23 @@ def main() -> int:
                               ("iterations", "iterations", ""), ("seconds", "seconds", ".1f"),
                               ("PSNR dB", "final_psnr", ".2f")]), "",
           "PSNR against iterations and seconds: `conversion_psnr.png`."]
-    (RESULTS / "bench.md").write_text("\n".join(md) + "\n")
-    (RESULTS / "bench.json").write_text(json.dumps({"machine": machine(), "environment": env, "render": renders,
-                                                     "texture": textures, "conversion": conversions}, indent=1))
     plot(conversions, RESULTS / "conversion_psnr.png")
+
+    # The adapt stage (tiny random-weight models on the CPU; an SD2-sized UNet where CUDA exists).
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_adapt import bench_adapt
+
+    adapt = bench_adapt(quick=args.quick)
+    md += ["", "## Adapt", "", adapt["markdown"]]
+    (RESULTS / "bench.json").write_text(json.dumps({"machine": machine(), "environment": env, "render": renders,
+                                                     "texture": textures, "conversion": conversions,
+                                                     "adapt": adapt["rows"]}, indent=1, default=float))
+
+    # Light estimation against ground-truth HDR maps (its own script: writes light.md/json and the curve).
+    subprocess.run([sys.executable, str(Path(__file__).with_name("bench_light.py"))] + (["--quick"] if args.quick else []),
+                   check=True)
+    md += ["", "## Light estimation", "", (RESULTS / "light.md").read_text()]
+    (RESULTS / "bench.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))
     return 0
 
