@@ -138,8 +138,27 @@ def cmd_light(args) -> int:
     overrides = {k: v for k, v in (("scene_type", args.scene), ("fov_deg", args.fov), ("tint", args.tint),
                                    ("camera_pitch_deg", -args.elevation if args.elevation is not None else None))
                  if v is not None}
-    config = light_preset(args.preset, depth=depth, **overrides)
+    from dataclasses import replace
+
+    from .core.guidance import ModelConfig, models_available
+
+    models = ModelConfig(**{k: v for k, v in (("base_model", args.base_model), ("cache_dir", args.cache_dir)) if v},
+                         local_files_only=args.offline)
+    # --critic auto (as the demo's --guidance and --depth): the diffusion critic when SD2 is on this machine.
+    if args.critic == "auto":
+        found, where = models_available(models, need_inpaint=False)
+        critic_choice = {"asked": "auto", "chosen": "diffusion" if found else "none",
+                         "why": f"Stable Diffusion 2 found ({where})" if found else
+                                "Stable Diffusion 2 weights are not on this machine, so the prior sets the scales"}
+    else:
+        critic_choice = {"asked": args.critic, "chosen": args.critic, "why": "the user's choice"}
+    config = light_preset(args.preset, depth=depth, critic_type=critic_choice["chosen"], models=models, **overrides)
+    if args.iterations is not None:
+        config = replace(config, optimise=replace(config.optimise, iterations=args.iterations))
+    if args.model_resolution is not None:
+        config = replace(config, diffusion=replace(config.diffusion, model_resolution=args.model_resolution))
     result = estimate_light(photo, placement, config, photo_info=info, progress=_progress(args))
+    result.decisions["critic"]["choice"] = critic_choice
     out = Path(args.out)
     outputs = write_light_outputs(result, out)
     report = light_report(result, config, outputs)
@@ -286,6 +305,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="auto: the depth model if it is on this machine, else the geometric room")
     p.add_argument("--depth-model", help="hub id or local folder of a transformers depth model")
     p.add_argument("--tint", help='colour phrase for the critic prompt, e.g. "in blue tint"')
+    p.add_argument("--critic", choices=("auto", "diffusion", "none"), default="auto",
+                   help="what refines the light scales: diffusion (VSD with Stable Diffusion 2 base), none (the "
+                        "inverse-tone-mapping prior alone), or auto (diffusion when its weights are on this machine)")
+    p.add_argument("--iterations", type=int, help="light-scale optimisation steps (default: the preset's)")
+    p.add_argument("--model-resolution", type=int, help="image size the diffusion critic sees (default 512)")
+    p.add_argument("--base-model", help="hub id or folder (default stabilityai/stable-diffusion-2-base)")
+    p.add_argument("--cache-dir", help="Hugging Face cache folder to look in")
+    p.add_argument("--offline", action="store_true", help="never download (also HF_HUB_OFFLINE=1)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_light)
     return parser

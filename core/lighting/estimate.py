@@ -18,13 +18,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..errors import InputError
+from ..errors import InputError, ModelMissingError
+from ..guidance.models import ModelConfig
 from ..imageio import linear_to_srgb, read_image, write_image
 from ..mesh import Mesh, normalize_to_unit_sphere
 from ..photo import PhotoCamera, camera_exposure
 from ..primitives import uv_sphere
 from ..progress import ProgressCallback, check_cancel, emit
 from .depth import DepthConfig, estimate_ray_distance
+from .diffusion_critic import DiffusionCriticConfig
 from .hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, Critic, OptimiseConfig, OptimiseResult,
                   hdr_from_scales, is_dark_environment, light_prompt, optimise_scales, prior_scales, tonemap_preview,
                   DEFAULT_L_WHITE)
@@ -52,6 +54,8 @@ class LightConfig:
     optimise: OptimiseConfig = OptimiseConfig()
     object_prompt: str = "a 3D object"
     tint: str | None = None                   # e.g. "in blue tint", appended to both prompts
+    models: ModelConfig = ModelConfig()       # SD2 for critic_type "diffusion" (core/guidance/models.py)
+    diffusion: DiffusionCriticConfig = DiffusionCriticConfig()
 
     def __post_init__(self) -> None:
         if self.scene_type not in SCENE_TYPES:
@@ -178,6 +182,10 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     config.critic_type == "diffusion"; reference_envmap: the true map (photo exposure units) for "reference".
     """
     t0 = time.perf_counter()
+    # The diffusion critic's models are found before any work (a missing one is a clear error).
+    model_paths = None
+    if config.critic_type == "diffusion" and critic is None:
+        model_paths = _locate_light_models(config.models)
     photo = np.clip(np.asarray(photo_srgb, np.float32)[..., :3], 0.0, 1.0)
     h, w = photo.shape[:2]
     info = dict(photo_info or {})
@@ -226,7 +234,7 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     # Optimise the scales with a critic, when there is one.
     scales, optimisation = dict(prior), None
     use_critic, why = _pick_critic(config, critic, reference_envmap, regions)
-    decisions["critic"] = {"type": config.critic_type, "used": use_critic is not None, "why": why}
+    decisions["critic"] = {"type": config.critic_type, "used": why.startswith("ok"), "why": why}
     if config.critic_type in ("reference", "diffusion") and why.startswith("ok"):
         if mesh is None or maps is None:
             mesh, maps = default_object()
@@ -240,6 +248,16 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
             from .reference_critic import ReferenceCritic
 
             use_critic = ReferenceCritic.from_true_map(scene, _fit_map(reference_envmap, pano.ldr.shape[:2]))
+        elif use_critic is None:   # diffusion, with the models located above
+            from ..guidance.models import load_guidance_models
+            from .diffusion_critic import DiffusionLightCritic
+
+            models = load_guidance_models(config.models, need_inpaint=False, paths=model_paths)
+            use_critic = DiffusionLightCritic(models, scene.cameras, prompts, config.diffusion)
+            models.release_text_encoder()
+            decisions["critic"].update({"models": {k: str(v) for k, v in models.paths.items()},
+                                        "device": str(models.device), "dtype": str(models.dtype).replace("torch.", ""),
+                                        **{k: v for k, v in asdict(config.diffusion).items()}})
         optimisation = optimise_scales(scene, pano.ldr, regions, prior, use_critic, prompts, config.optimise,
                                        progress=progress, cancel=cancel, on_iteration=on_iteration)
         scales = {k: math.exp(v) for k, v in optimisation.log_scales.items()}
@@ -271,9 +289,18 @@ def _pick_critic(config: LightConfig, critic, reference_envmap, regions) -> tupl
             raise InputError("critic_type 'reference' needs the true map (reference_envmap).")
         return None, "ok: pixel loss against renders under the true map"
     if critic is None:
-        return None, ("no diffusion critic was given (core/guidance has none wired in, or its weights are "
-                      "missing): the inverse-tone-mapping prior sets the scales")
-    return critic, "ok: diffusion critic"
+        return None, "ok: diffusion critic (VSD with Stable Diffusion 2 base, core/guidance)"
+    return critic, "ok: diffusion critic (given by the caller)"
+
+
+def _locate_light_models(models: ModelConfig) -> dict:
+    from ..guidance.models import locate_models
+
+    try:
+        return locate_models(models, need_inpaint=False)
+    except ModelMissingError as error:
+        raise ModelMissingError(f"{error} For light estimation, `scenefit light --critic none` (critic_type "
+                                f"'none') sets the scales by the inverse-tone-mapping prior instead.") from None
 
 
 def write_light_outputs(result: LightResult, out_dir: str | Path) -> dict[str, str]:

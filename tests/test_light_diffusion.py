@@ -1,0 +1,136 @@
+"""The diffusion light critic (VSD through core/guidance) with a tiny random-weight SD model."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from scenefit.core.errors import ModelMissingError
+from scenefit.core.guidance import ModelConfig, load_guidance_models
+from scenefit.core.guidance.lora import ADAPTER
+from scenefit.core.guidance.testing import build_tiny_sd
+from scenefit.core.imageio import write_image
+from scenefit.core.lighting import estimate as estimate_module
+from scenefit.core.lighting.diffusion_critic import DiffusionCriticConfig, DiffusionLightCritic
+from scenefit.core.lighting.estimate import LightConfig, estimate_light
+from scenefit.core.lighting.hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, CriticRequest, OptimiseConfig,
+                                        optimise_scales)
+from scenefit.core.primitives import uv_sphere
+from scenefit.core.render import equirect_directions
+
+
+@pytest.fixture(scope="module")
+def tiny_base(tmp_path_factory):
+    return build_tiny_sd(tmp_path_factory.mktemp("tiny_light_sd") / "sd2-base", 4, seed=0)
+
+
+def _scene():
+    maps = torch.cat([torch.full((4, 4, 3), 0.6), torch.full((4, 4, 1), 0.4), torch.zeros(4, 4, 1)], -1)
+    config = ApparatusConfig(render_size=32, spp=2, object_azimuths=(0.0,), view_weights=(0.5, 0.5))
+    return ApparatusScene(uv_sphere(radius=0.5, segments=16, rings=8), maps, (16, 32), config)
+
+
+def _bright_spot(shape=(16, 32)):
+    h, w = shape
+    ldr = np.full((h, w, 3), 0.35, np.float32)
+    d = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    mask = equirect_directions(h, w) @ d > np.cos(np.radians(30))
+    ldr[mask] = 1.0
+    return ldr, {"near": mask}
+
+
+def _critic(tiny_base, scene):
+    models = load_guidance_models(ModelConfig(base_model=str(tiny_base)), need_inpaint=False)
+    prompts = ("a 3D object", SPHERE_PROMPT)
+    return DiffusionLightCritic(models, scene.cameras, prompts, DiffusionCriticConfig(model_resolution=32)), prompts
+
+
+def test_critic_gives_finite_image_gradients_for_every_view_and_trains_its_lora(tiny_base):
+    scene = _scene()
+    critic, prompts = _critic(tiny_base, scene)
+    lora_before = {n: p.detach().clone() for n, p in critic.models.unet.named_parameters() if ADAPTER in n}
+    envmap = torch.full((16, 32, 3), 0.8)
+    for v in range(len(scene.cameras)):
+        render, alpha = scene.render_view(envmap, v, seed=3)
+        request = CriticRequest((prompts[v],), (scene.view_names[v],), 0, 4, (750, 990), alpha[None], (v,))
+        grad = critic(render[None], request)
+        assert grad.shape == (1, 32, 32, 3) and grad.dtype == render.dtype
+        assert torch.isfinite(grad).all() and float(grad.abs().sum()) > 0
+    assert [h["view"] for h in critic.history] == [0, 1]
+    assert all(750 <= h["t"] <= 990 for h in critic.history)
+    # One LoRA step per view: ε_ψ moved.
+    changed = [not torch.equal(p, lora_before[n]) for n, p in critic.models.unet.named_parameters() if ADAPTER in n]
+    assert changed and any(changed)
+    # The LoRA learning rate is annealed with the scales': 1e-4 at the start, 1e-5 at the last iteration.
+    assert critic.lora.optimizer.param_groups[0]["lr"] == pytest.approx(1e-4)
+    render, alpha = scene.render_view(envmap, 1, seed=4)
+    critic(render[None], CriticRequest((prompts[1],), ("sphere",), 3, 4, (750, 990), alpha[None], (1,)))
+    assert critic.lora.optimizer.param_groups[0]["lr"] == pytest.approx(1e-5)
+
+
+def test_a_few_diffusion_steps_move_the_log_scales_and_keep_them_finite(tiny_base):
+    scene = _scene()
+    critic, prompts = _critic(tiny_base, scene)
+    ldr, regions = _bright_spot()
+    result = optimise_scales(scene, ldr, regions, {"near": 5.0}, critic, prompts, OptimiseConfig(iterations=3, lr=0.1))
+    assert math.isfinite(result.log_scales["near"]) and all(math.isfinite(x) for x in result.loss_history)
+    assert abs(result.log_scales["near"] - math.log(5.0)) > 1e-3
+    assert len(critic.history) == 3 * len(scene.cameras)
+
+
+def test_missing_weights_fail_before_any_work_with_a_clear_message(tmp_path, monkeypatch):
+    empty = tmp_path / "empty-cache"
+    empty.mkdir()
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the panorama was started before the models were located")
+
+    monkeypatch.setattr(estimate_module, "sky_score", no_work)
+    config = LightConfig(critic_type="diffusion", models=ModelConfig(cache_dir=str(empty), local_files_only=True))
+    with pytest.raises(ModelMissingError) as info:
+        estimate_light(np.full((8, 12, 3), 0.5, np.float32), (6, 6), config)
+    message = str(info.value)
+    assert "stabilityai/stable-diffusion-2-base" in message and str(empty) in message
+    assert "--critic none" in message
+
+
+def _photo(tmp_path):
+    pixels = np.random.default_rng(1).uniform(0.0, 1.0, size=(24, 32, 3)).astype(np.float32)
+    pixels[:8] = [0.95, 0.97, 1.0]
+    write_image(tmp_path / "photo.png", pixels)
+    return tmp_path / "photo.png"
+
+
+def test_scenefit_light_with_the_diffusion_critic_says_so(tmp_path, tiny_base):
+    from scenefit.cli import main
+
+    out = tmp_path / "out"
+    code = main(["light", "--photo", str(_photo(tmp_path)), "--at", "0.5,0.8", "--out", str(out), "--preset", "draft",
+                 "--scene", "outdoor", "--critic", "diffusion", "--base-model", str(tiny_base), "--iterations", "2",
+                 "--model-resolution", "32", "--quiet"])
+    assert code == 0
+    report = json.loads((out / "report.json").read_text())
+    critic = report["decisions"]["critic"]
+    assert critic["type"] == "diffusion" and critic["used"] and "diffusion critic" in critic["why"]
+    assert critic["models"]["base"] == str(tiny_base) and critic["choice"]["chosen"] == "diffusion"
+    assert report["decisions"]["optimisation"]["iterations"] == 2
+    assert report["scales"] != report["prior_scales"]
+
+
+def test_scenefit_light_critic_auto_and_missing_weights(tmp_path):
+    from scenefit.cli import main
+
+    empty = tmp_path / "empty-cache"
+    empty.mkdir()
+    photo = _photo(tmp_path)
+    common = ["light", "--photo", str(photo), "--at", "0.5,0.8", "--preset", "draft", "--scene", "outdoor",
+              "--cache-dir", str(empty), "--offline", "--quiet"]
+    assert main(common + ["--out", str(tmp_path / "a"), "--critic", "diffusion"]) == 2
+    assert not (tmp_path / "a" / "light.exr").exists()
+    assert main(common + ["--out", str(tmp_path / "b")]) == 0      # auto: no weights -> the prior
+    critic = json.loads((tmp_path / "b" / "report.json").read_text())["decisions"]["critic"]
+    assert critic["choice"]["asked"] == "auto" and critic["choice"]["chosen"] == "none"
+    assert critic["type"] == "none" and not critic["used"]
