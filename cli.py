@@ -142,8 +142,8 @@ def cmd_light(args) -> int:
 
     from .core.guidance import ModelConfig, models_available
 
-    models = ModelConfig(**{k: v for k, v in (("base_model", args.base_model), ("cache_dir", args.cache_dir)) if v},
-                         local_files_only=args.offline)
+    models = ModelConfig(**{k: v for k, v in (("base_model", args.base_model), ("inpaint_model", args.inpaint_model),
+                                              ("cache_dir", args.cache_dir)) if v}, local_files_only=args.offline)
     # --critic auto (as the demo's --guidance and --depth): the diffusion critic when SD2 is on this machine.
     if args.critic == "auto":
         found, where = models_available(models, need_inpaint=False)
@@ -155,8 +155,10 @@ def cmd_light(args) -> int:
     config = light_preset(args.preset, depth=depth, critic_type=critic_choice["chosen"], models=models, **overrides)
     if args.iterations is not None:
         config = replace(config, optimise=replace(config.optimise, iterations=args.iterations))
+    config = replace(config, outpaint=replace(config.outpaint, completion_type=args.outpaint))
     if args.model_resolution is not None:
-        config = replace(config, diffusion=replace(config.diffusion, model_resolution=args.model_resolution))
+        config = replace(config, diffusion=replace(config.diffusion, model_resolution=args.model_resolution),
+                         outpaint=replace(config.outpaint, resolution=args.model_resolution))
     result = estimate_light(photo, placement, config, photo_info=info, progress=_progress(args))
     result.decisions["critic"]["choice"] = critic_choice
     out = Path(args.out)
@@ -309,7 +311,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="what refines the light scales: diffusion (VSD with Stable Diffusion 2 base), none (the "
                         "inverse-tone-mapping prior alone), or auto (diffusion when its weights are on this machine)")
     p.add_argument("--iterations", type=int, help="light-scale optimisation steps (default: the preset's)")
-    p.add_argument("--model-resolution", type=int, help="image size the diffusion critic sees (default 512)")
+    p.add_argument("--outpaint", choices=("auto", "sd2", "prior"), default="auto",
+                   help="outdoor: complete the unseen map by SD2 inpainting (sd2), the sky/ground prior (prior), or "
+                        "auto (sd2 when its weights are on this machine)")
+    p.add_argument("--model-resolution", type=int,
+                   help="image size the diffusion critic sees and the outpainting height (default 512)")
+    p.add_argument("--inpaint-model", help="hub id or folder (default stabilityai/stable-diffusion-2-inpainting)")
     p.add_argument("--base-model", help="hub id or folder (default stabilityai/stable-diffusion-2-base)")
     p.add_argument("--cache-dir", help="Hugging Face cache folder to look in")
     p.add_argument("--offline", action="store_true", help="never download (also HF_HUB_OFFLINE=1)")

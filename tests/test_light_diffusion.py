@@ -134,3 +134,116 @@ def test_scenefit_light_critic_auto_and_missing_weights(tmp_path):
     critic = json.loads((tmp_path / "b" / "report.json").read_text())["decisions"]["critic"]
     assert critic["choice"]["asked"] == "auto" and critic["choice"]["chosen"] == "none"
     assert critic["type"] == "none" and not critic["used"]
+
+
+# -- outdoor outpainting ----------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def tiny_inpaint(tmp_path_factory):
+    return build_tiny_sd(tmp_path_factory.mktemp("tiny_light_inpaint") / "sd2-inpaint", 9, seed=1)
+
+
+def _outdoor_photo():
+    rng = np.random.default_rng(2)
+    photo = np.empty((24, 32, 3), np.float32)
+    photo[:12] = [0.55, 0.7, 0.95]
+    photo[12:] = [0.35, 0.4, 0.2]
+    return np.clip(photo + rng.normal(0, 0.03, photo.shape), 0, 1).astype(np.float32)
+
+
+def _seam_jump(ldr, rows):
+    """Mean |difference| across the wrap seam, and across every other pair of neighbouring columns."""
+    x = ldr[rows]
+    inner = np.abs(np.diff(x, axis=1)).mean(axis=(0, 2))
+    return float(np.abs(x[:, 0] - x[:, -1]).mean()), inner
+
+
+def test_outpainting_keeps_the_photo_and_paints_the_rest(tiny_base, tiny_inpaint):
+    from scenefit.core.lighting.outpaint import OutpaintConfig, outpaint_panorama
+    from scenefit.core.lighting.panorama import outdoor_panorama
+    from scenefit.core.photo import PhotoCamera
+
+    models = load_guidance_models(ModelConfig(base_model=str(tiny_base), inpaint_model=str(tiny_inpaint)),
+                                  need_inpaint=True)
+    camera = PhotoCamera(yaw_deg=90.0, pitch_deg=-10.0, fov_deg=60.0, width=32, height=24)
+    photo = _outdoor_photo()
+    config = OutpaintConfig(steps=3, resolution=32)
+    prior = outdoor_panorama(photo, camera, 32)
+    pano = outdoor_panorama(photo, camera, 32, outpaint=lambda ldr, seen: outpaint_panorama(ldr, seen, models, config))
+    assert pano.ldr.shape == (32, 64, 3) and np.isfinite(pano.ldr).all()
+    assert pano.ldr.min() >= 0 and pano.ldr.max() <= 1
+    assert "outpainted" in pano.decisions["completion"] and "prior" in prior.decisions["completion"]
+    # The photo's region is the photo: equal to the prior path wherever its feather does not reach.
+    import cv2
+
+    core = cv2.erode(pano.seen.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    assert core.any() and np.array_equal(pano.ldr[core], prior.ldr[core])
+    # The rest was painted (it is no longer the prior).
+    assert np.abs(pano.ldr[pano.unseen] - prior.ldr[pano.unseen]).mean() > 1e-3
+    # Known texels come back bit-exactly from outpaint_panorama itself.
+    ldr = np.random.default_rng(0).uniform(0, 1, (32, 64, 3)).astype(np.float32)
+    known = np.zeros((32, 64), bool)
+    known[8:20, 20:40] = True
+    out = outpaint_panorama(ldr, known, models, config)
+    assert np.array_equal(out[known], ldr[known]) and not np.array_equal(out[~known], ldr[~known])
+
+
+def _row_interpolating_painter(models, image, paint, config, generator):
+    """A seam-unaware stand-in for the model: each row's painted run is the straight line between the
+    known texels left and right of it (constant past the image's edges; no wrap-around)."""
+    x = image[0].permute(1, 2, 0).numpy().copy()
+    todo = paint[0, 0].numpy() > 0.5
+    cols = np.arange(x.shape[1])
+    for r in range(x.shape[0]):
+        if todo[r].any() and (~todo[r]).any():
+            for c in range(3):
+                x[r, todo[r], c] = np.interp(cols[todo[r]], cols[~todo[r]], x[r, ~todo[r], c])
+    return torch.from_numpy(x).permute(2, 0, 1)[None]
+
+
+@pytest.mark.parametrize("band", [0.125, 0.0])
+def test_the_wrap_seam_is_painted_again_across_u_0(monkeypatch, band):
+    from scenefit.core.lighting import outpaint as outpaint_module
+
+    monkeypatch.setattr(outpaint_module, "inpaint", _row_interpolating_painter)
+    ldr = np.zeros((32, 64, 3), np.float32)
+    known = np.zeros((32, 64), bool)
+    known[:, 10:20], known[:, 44:54] = True, True
+    ldr[:, 10:20], ldr[:, 44:54] = [0.9, 0.2, 0.1], [0.1, 0.3, 0.9]
+    out = outpaint_module.outpaint_panorama(ldr, known, None,
+                                            outpaint_module.OutpaintConfig(resolution=32, seam_band_fraction=band))
+    assert np.array_equal(out[known], ldr[known])
+    jump, inner = _seam_jump(out, slice(None))
+    if band > 0:   # across u = 0 = 1 the map jumps no more than between any other two neighbouring columns
+        assert jump <= inner.max() + 1e-5, (jump, inner.max())
+    else:          # the control: one pass that cannot see across the seam leaves a jump there
+        assert jump > 3 * inner.max()
+
+
+def test_outdoor_completion_falls_back_to_the_prior_without_weights(tmp_path, monkeypatch):
+    empty = tmp_path / "empty-cache"
+    empty.mkdir()
+    from scenefit.core.lighting.outpaint import OutpaintConfig
+
+    models = ModelConfig(cache_dir=str(empty), local_files_only=True)
+    config = LightConfig(scene_type="outdoor", map_height=16, models=models)
+    result = estimate_light(_outdoor_photo(), (16, 20), config)
+    info = result.decisions["outpainting"]
+    assert info["asked"] == "auto" and not info["used"] and "not on this machine" in info["why"]
+    assert "prior" in info["completion"]
+    # Asked for explicitly, the model must be there: a clear error before any work.
+    monkeypatch.setattr(estimate_module, "sky_score", lambda *a: (_ for _ in ()).throw(AssertionError("work began")))
+    with pytest.raises(ModelMissingError, match="--outpaint prior"):
+        estimate_light(_outdoor_photo(), (16, 20), LightConfig(scene_type="outdoor", models=models,
+                                                               outpaint=OutpaintConfig(completion_type="sd2")))
+
+
+def test_estimate_light_outpaints_an_outdoor_map_with_the_model(tiny_base, tiny_inpaint):
+    from scenefit.core.lighting.outpaint import OutpaintConfig
+
+    config = LightConfig(scene_type="outdoor", map_height=32,
+                         models=ModelConfig(base_model=str(tiny_base), inpaint_model=str(tiny_inpaint)),
+                         outpaint=OutpaintConfig(completion_type="sd2", steps=2, resolution=32))
+    result = estimate_light(_outdoor_photo(), (16, 20), config)
+    info = result.decisions["outpainting"]
+    assert info["used"] and "outpainted" in info["completion"]
+    assert result.hdr.shape == (32, 64, 3) and np.isfinite(result.hdr).all()

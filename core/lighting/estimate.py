@@ -27,6 +27,7 @@ from ..primitives import uv_sphere
 from ..progress import ProgressCallback, check_cancel, emit
 from .depth import DepthConfig, estimate_ray_distance
 from .diffusion_critic import DiffusionCriticConfig
+from .outpaint import OutpaintConfig
 from .hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, Critic, OptimiseConfig, OptimiseResult,
                   hdr_from_scales, is_dark_environment, light_prompt, optimise_scales, prior_scales, tonemap_preview,
                   DEFAULT_L_WHITE)
@@ -56,6 +57,7 @@ class LightConfig:
     tint: str | None = None                   # e.g. "in blue tint", appended to both prompts
     models: ModelConfig = ModelConfig()       # SD2 for critic_type "diffusion" (core/guidance/models.py)
     diffusion: DiffusionCriticConfig = DiffusionCriticConfig()
+    outpaint: OutpaintConfig = OutpaintConfig()   # outdoor completion: SD2 inpainting or the sky/ground prior
 
     def __post_init__(self) -> None:
         if self.scene_type not in SCENE_TYPES:
@@ -182,10 +184,20 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     config.critic_type == "diffusion"; reference_envmap: the true map (photo exposure units) for "reference".
     """
     t0 = time.perf_counter()
-    # The diffusion critic's models are found before any work (a missing one is a clear error).
+    # The diffusion models are found before any work (a missing one is a clear error).
+    want_outpaint, outpaint_why = _want_outpaint(config)
     model_paths = None
-    if config.critic_type == "diffusion" and critic is None:
-        model_paths = _locate_light_models(config.models)
+    if (config.critic_type == "diffusion" and critic is None) or want_outpaint:
+        model_paths = _locate_light_models(config.models, want_outpaint)
+    loaded: dict = {}
+
+    def guidance_models():
+        if "models" not in loaded:
+            from ..guidance.models import load_guidance_models
+
+            loaded["models"] = load_guidance_models(config.models, need_inpaint=want_outpaint, paths=model_paths)
+        return loaded["models"]
+
     photo = np.clip(np.asarray(photo_srgb, np.float32)[..., :3], 0.0, 1.0)
     h, w = photo.shape[:2]
     info = dict(photo_info or {})
@@ -214,7 +226,15 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
         decisions["depth"] = {"method": depth.method, **depth.detail}
         pano = indoor_panorama(photo, depth.ray_distance, photo_camera, placement, config.map_height)
     else:
-        pano = outdoor_panorama(photo, photo_camera, config.map_height)
+        outpaint = None
+        if want_outpaint:
+            from .outpaint import outpaint_panorama
+
+            def outpaint(ldr, seen):
+                return outpaint_panorama(ldr, seen, guidance_models(), config.outpaint)
+        pano = outdoor_panorama(photo, photo_camera, config.map_height, outpaint=outpaint)
+        decisions["outpainting"] = {"asked": config.outpaint.completion_type, "used": want_outpaint,
+                                    "why": outpaint_why, "completion": pano.decisions["completion"]}
     decisions["panorama"] = pano.decisions
     check_cancel(cancel)
 
@@ -249,10 +269,9 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
 
             use_critic = ReferenceCritic.from_true_map(scene, _fit_map(reference_envmap, pano.ldr.shape[:2]))
         elif use_critic is None:   # diffusion, with the models located above
-            from ..guidance.models import load_guidance_models
             from .diffusion_critic import DiffusionLightCritic
 
-            models = load_guidance_models(config.models, need_inpaint=False, paths=model_paths)
+            models = guidance_models()
             use_critic = DiffusionLightCritic(models, scene.cameras, prompts, config.diffusion)
             models.release_text_encoder()
             decisions["critic"].update({"models": {k: str(v) for k, v in models.paths.items()},
@@ -293,14 +312,32 @@ def _pick_critic(config: LightConfig, critic, reference_envmap, regions) -> tupl
     return critic, "ok: diffusion critic (given by the caller)"
 
 
-def _locate_light_models(models: ModelConfig) -> dict:
+def _locate_light_models(models: ModelConfig, need_inpaint: bool) -> dict:
     from ..guidance.models import locate_models
 
     try:
-        return locate_models(models, need_inpaint=False)
+        return locate_models(models, need_inpaint=need_inpaint)
     except ModelMissingError as error:
         raise ModelMissingError(f"{error} For light estimation, `scenefit light --critic none` (critic_type "
-                                f"'none') sets the scales by the inverse-tone-mapping prior instead.") from None
+                                f"'none') sets the scales by the inverse-tone-mapping prior instead, and "
+                                f"`--outpaint prior` completes an outdoor map without the model.") from None
+
+
+def _want_outpaint(config: LightConfig) -> tuple[bool, str]:
+    """Whether an outdoor map is outpainted by SD2 inpainting, decided before any work."""
+    kind = config.outpaint.completion_type
+    if config.scene_type == "indoor":
+        return False, "indoor scene: no outpainting"
+    if kind == "prior":
+        return False, "completion_type 'prior': the sky/ground prior completes the map"
+    if kind == "sd2":
+        return True, "completion_type 'sd2'"
+    from ..guidance.models import models_available
+
+    found, where = models_available(config.models, need_inpaint=True)
+    if found:
+        return True, f"auto: Stable Diffusion 2 inpainting found ({where})"
+    return False, "auto: Stable Diffusion 2 inpainting is not on this machine, so the sky/ground prior completes the map"
 
 
 def write_light_outputs(result: LightResult, out_dir: str | Path) -> dict[str, str]:

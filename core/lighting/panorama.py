@@ -224,9 +224,13 @@ def indoor_panorama(photo: np.ndarray, ray_distance: np.ndarray, camera: PhotoCa
 
 
 def outdoor_panorama(photo: np.ndarray, camera: PhotoCamera, height: int = 128,
-                     feather_fraction: float = 1 / 32) -> Panorama:
+                     feather_fraction: float = 1 / 32, outpaint=None) -> Panorama:
     """Warp the photo into its place on the map (the sun is far: the object's offset is ignored) and
     complete the rest with a sky/ground prior fitted to the photo, feathered across the seam.
+
+    outpaint: optional `outpaint(map, seen) -> map` (outpaint.py's SD2 outpainting) that repaints the
+    unseen part of the map (the warped photo over the prior) and keeps the seen texels; the photo's
+    region then stays exactly the photo.
 
     The prior, per map row: above the horizon, the photo's mean colour in the nearest rows that hold
     sky, blended towards the brightest tenth of the photo's upper part at the zenith; below it, the mean
@@ -254,6 +258,10 @@ def outdoor_panorama(photo: np.ndarray, camera: PhotoCamera, height: int = 128,
     warped = cv2.remap(photo.astype(np.float32), map_x, map_y, interpolation=cv2.INTER_LINEAR,
                        borderMode=cv2.BORDER_REPLICATE)
     prior = sky_ground_prior(warped, inside)
+    completion = "sky/ground prior fitted to the photo (no outpainting model)"
+    if outpaint is not None:
+        prior = outpaint(np.where(inside[..., None], warped, prior).astype(np.float32), inside)
+        completion = "outpainted by the Stable Diffusion 2 inpainting model (over the sky/ground prior)"
     # Feather the photo's border into the prior over a few texels (seam-aware: wrap in u).
     pad = max(4, width // 8)
     feather = max(1.0, width * feather_fraction)
@@ -263,7 +271,7 @@ def outdoor_panorama(photo: np.ndarray, camera: PhotoCamera, height: int = 128,
     return Panorama(ldr, np.full((height, width), np.inf, np.float32), inside, np.zeros_like(inside), ~inside, {
         "scene_type": "outdoor",
         "seen_fraction": round(float(inside.mean()), 4),
-        "completion": "sky/ground prior fitted to the photo (no outpainting model)",
+        "completion": completion,
     })
 
 
