@@ -22,6 +22,16 @@ from scenefit.core.primitives import uv_sphere
 from scenefit.core.render import equirect_directions
 
 
+@pytest.fixture(scope="module", autouse=True)
+def one_torch_thread():
+    """The tiny UNet's ops are microseconds long: with a busy machine, OpenMP's waiting between them
+    cost 10-30x (145 s against 8 s for this file under a concurrent benchmark). One thread is as fast."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 @pytest.fixture(scope="module")
 def tiny_base(tmp_path_factory):
     return build_tiny_sd(tmp_path_factory.mktemp("tiny_light_sd") / "sd2-base", 4, seed=0)
