@@ -257,3 +257,19 @@ def test_estimate_light_outpaints_an_outdoor_map_with_the_model(tiny_base, tiny_
     info = result.decisions["outpainting"]
     assert info["used"] and "outpainted" in info["completion"]
     assert result.hdr.shape == (32, 64, 3) and np.isfinite(result.hdr).all()
+
+
+def test_fp16_models_give_finite_float32_gradients_and_outpaint(tiny_base, tiny_inpaint):
+    from scenefit.core.lighting.outpaint import OutpaintConfig, outpaint_panorama
+
+    models = load_guidance_models(ModelConfig(base_model=str(tiny_base), inpaint_model=str(tiny_inpaint),
+                                              dtype_type="fp16"), need_inpaint=True)
+    scene = _scene()
+    critic = DiffusionLightCritic(models, scene.cameras, ("a", "b"), DiffusionCriticConfig(model_resolution=32))
+    render, alpha = scene.render_view(torch.full((16, 32, 3), 2.0), 0)
+    grad = critic(render[None], CriticRequest(("a",), ("v",), 0, 2, (750, 990), alpha[None], (0,)))
+    assert grad.dtype == torch.float32 and torch.isfinite(grad).all() and float(grad.abs().sum()) > 0
+    known = np.zeros((32, 64), bool)
+    known[10:20, 10:30] = True
+    out = outpaint_panorama(np.full((32, 64, 3), 0.5, np.float32), known, models, OutpaintConfig(steps=2, resolution=32))
+    assert out.dtype == np.float32 and np.isfinite(out).all()

@@ -118,11 +118,13 @@ class DiffusionLightCritic:
                 out = self.score(latents, t, noise, text, uncond, lam=self.config.lambda_vsd, condition=condition)
                 out.loss.backward()
             grads.append(torch.nan_to_num(leaf.grad, nan=0.0, posinf=0.0, neginf=0.0))
-            # ε_ψ learns the current renderings (one LoRA step on the detached latents).
+            # ε_ψ learns the current renderings (one LoRA step on the detached latents, handed over in the
+            # UNet's dtype: LoraCritic.train_step feeds them to the UNet as they come).
             t_lora = int(self.rng.integers(0, self.score.num_train_timesteps))
-            lora_noise = torch.randn(latents.shape, generator=self.generator).to(latents.device)
+            unet_dtype = self.models.unet.dtype
+            lora_noise = torch.randn(latents.shape, generator=self.generator).to(latents.device, unet_dtype)
             drop = bool(self.rng.uniform() < self.config.condition_dropout)
-            lora_loss = self.lora.train_step(latents, text, condition, t_lora, lora_noise,
+            lora_loss = self.lora.train_step(latents.detach().to(unet_dtype), text, condition, t_lora, lora_noise,
                                              float(self.score.alpha_bar[t_lora]), drop, self.score.prediction_type)
             self.lora.step()
             self.history.append({"iteration": request.iteration, "view": int(view), "t": t,
