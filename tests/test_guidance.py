@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import numpy as np
+import math
+
 import pytest
 import torch
 
@@ -266,6 +268,14 @@ def test_fp16_models_on_cpu_give_finite_float32_gradients(tiny_folders):
     out.loss.backward()
     assert torch.isfinite(latents.grad).all()
     assert all(p.dtype == torch.float32 for p in lora.parameters())
+    # The LoRA's own step takes float32 rendered latents against the fp16 UNet.
+    before = [p.detach().clone() for p in lora.parameters()]
+    loss = lora.train_step(torch.randn(1, 4, 16, 16), models.embed("a sofa"), camera_condition([0, -2, 0], [0, 1, 0]),
+                           500, torch.randn(1, 4, 16, 16), float(models.scheduler.alphas_cumprod[500]),
+                           drop_condition=False)
+    lora.step()
+    assert math.isfinite(loss)
+    assert any(not torch.equal(a, b) for a, b in zip(before, lora.parameters()))
 
 
 def test_configs_are_validated_when_built():

@@ -125,9 +125,12 @@ class LoraCritic:
         cond = torch.zeros_like(condition) if drop_condition else condition
         x_t = add_noise(latents, noise, alpha_bar_t)
         timesteps = torch.full((latents.shape[0],), t, device=latents.device, dtype=torch.long)
+        # The UNet may run in fp16 (the CUDA default) while renders and latents stay float32.
+        dtype = self.unet.dtype
         with self.active(), torch.enable_grad():
-            pred = self.unet(x_t, timesteps, encoder_hidden_states=text_embedding.expand(latents.shape[0], -1, -1),
-                             class_labels=cond.to(latents.device)[None].expand(latents.shape[0], -1)).sample
+            pred = self.unet(x_t.to(dtype), timesteps,
+                             encoder_hidden_states=text_embedding.to(dtype).expand(latents.shape[0], -1, -1),
+                             class_labels=cond.to(latents.device, dtype)[None].expand(latents.shape[0], -1)).sample
             if prediction_type == "v_prediction":
                 target = (alpha_bar_t ** 0.5) * noise.float() - ((1 - alpha_bar_t) ** 0.5) * latents.float()
             else:
