@@ -87,13 +87,17 @@ def bench_texture(raster, preset_name: str, repeats: int = 5) -> dict:
             "forward_backward_s": float(np.median(times[1:]))}
 
 
-def bench_direct(mesh, maps, preset_name: str, iterations: int) -> dict:
+def fit_setup(mesh, maps, preset_name: str):
+    """What both conversion methods start from: normalised mesh, UV raster, target maps, fresh texture."""
     normalized, _ = normalize_to_unit_sphere(mesh)
     config = convert_preset(preset_name)
     res = min(max(maps.resolution), config.max_resolution)
-    raster = rasterize_uv(normalized, res)
-    target = torch.from_numpy(target_stack(maps, res))
-    texture = NeuralTexture(config.texture_config(res), seed=0)
+    return normalized, res, rasterize_uv(normalized, res), torch.from_numpy(target_stack(maps, res)), \
+        NeuralTexture(config.texture_config(res), seed=0)
+
+
+def bench_direct(mesh, maps, preset_name: str, iterations: int) -> dict:
+    _, res, raster, target, texture = fit_setup(mesh, maps, preset_name)
     stamps = []
     t0 = time.perf_counter()
     fit = fit_direct(texture, raster.position, raster.mask, target, iterations=iterations,
@@ -105,12 +109,7 @@ def bench_direct(mesh, maps, preset_name: str, iterations: int) -> dict:
 
 
 def bench_inverse(mesh, maps, preset_name: str, iterations: int, every: int) -> dict:
-    normalized, _ = normalize_to_unit_sphere(mesh)
-    config = convert_preset(preset_name)
-    res = min(max(maps.resolution), config.max_resolution)
-    raster = rasterize_uv(normalized, res)
-    target = torch.from_numpy(target_stack(maps, res))
-    texture = NeuralTexture(config.texture_config(res), seed=0)
+    normalized, res, raster, target, texture = fit_setup(mesh, maps, preset_name)
     plan = texture.plan(raster.position, raster.border, raster.fill_index)
     curve_it, curve_psnr, curve_s = [], [], []
     t0 = time.perf_counter()

@@ -47,14 +47,18 @@ class PhotoCamera:
     width: int = 640
     height: int = 480
 
-    def ray_directions(self) -> np.ndarray:
+    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+        """forward, right, up unit vectors and the half extents of the image plane at distance 1."""
         yaw, pitch = np.radians(self.yaw_deg), np.radians(self.pitch_deg)
         forward = np.array([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)])
         right = np.cross(forward, [0.0, 0.0, 1.0])
         right /= np.linalg.norm(right)
         up = np.cross(right, forward)
-        half_w = np.tan(np.radians(self.fov_deg) / 2)
-        half_h = half_w * self.height / self.width
+        half_w = float(np.tan(np.radians(self.fov_deg) / 2))
+        return forward, right, up, half_w, half_w * self.height / self.width
+
+    def ray_directions(self) -> np.ndarray:
+        forward, right, up, half_w, half_h = self.basis()
         xs = ((np.arange(self.width) + 0.5) / self.width * 2 - 1) * half_w
         ys = (1 - (np.arange(self.height) + 0.5) / self.height * 2) * half_h
         x, y = np.meshgrid(xs, ys)

@@ -56,13 +56,7 @@ class Placement:
 
 def pixel_ray(camera: PhotoCamera, x: float, y: float) -> np.ndarray:
     """World direction through photo pixel coordinates (x right, y down, pixel centres at +0.5)."""
-    yaw, pitch = np.radians(camera.yaw_deg), np.radians(camera.pitch_deg)
-    forward = np.array([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)])
-    right = np.cross(forward, [0.0, 0.0, 1.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
-    half_w = np.tan(np.radians(camera.fov_deg) / 2)
-    half_h = half_w * camera.height / camera.width
+    forward, right, up, half_w, half_h = camera.basis()
     d = forward + (x / camera.width * 2 - 1) * half_w * right + (1 - y / camera.height * 2) * half_h * up
     return d / np.linalg.norm(d)
 
