@@ -6,10 +6,7 @@ example need Blender (bpy), which core/ never imports.
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
-import threading
-import time
 from pathlib import Path
 
 from .core.errors import Cancelled, SceneFitError
@@ -34,7 +31,7 @@ def _progress(args):
     return None if getattr(args, "quiet", False) else TerminalProgress()
 
 
-def _environment(args, photo_mean=None):
+def _environment(args):
     from .core.pipeline import constant_environment, load_environment
     from .core.photo import studiolight_path
 
@@ -66,7 +63,6 @@ def cmd_convert(args) -> int:
 
 
 def cmd_render(args) -> int:
-    import numpy as np
     import torch
 
     from .core.camera import orbit_cameras

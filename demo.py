@@ -23,7 +23,7 @@ from .core.imageio import read_image, write_image
 from .core.lighting import estimate_light, light_preset, light_report, load_photo, parse_placement, write_light_outputs
 from .core.mesh import normalize_to_unit_sphere
 from .core.photo import PhotoCamera, develop_photo, perspective_view, studiolight_path
-from .core.pipeline import (constant_environment, contact_sheet, convert_and_bake, environment_info, image_psnr,
+from .core.pipeline import (contact_sheet, convert_and_bake, environment_info, image_psnr,
                             render_views, tonemap_srgb, write_report)
 from .core.progress import ProgressCallback, emit
 

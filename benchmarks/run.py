@@ -25,7 +25,7 @@ from scenefit.core.convert import CONVERT_PRESETS, convert_preset, target_stack
 from scenefit.core.mesh import normalize_to_unit_sphere
 from scenefit.core.pipeline import environment_info
 from scenefit.core.primitives import uv_sphere
-from scenefit.core.render import AssetRenderer, SceneOptions
+from scenefit.core.render import AssetRenderer
 from scenefit.core.texture.fit_direct import fit_direct, masked_psnr
 from scenefit.core.texture.fit_inverse import fit_inverse_rendering, studio_environment
 from scenefit.core.texture.neural_texture import NeuralTexture, preset

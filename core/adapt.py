@@ -22,10 +22,9 @@ resumed from a checkpoint repeats the uninterrupted one.
 from __future__ import annotations
 
 import io
-import math
 import threading
 import time
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +37,7 @@ from .guidance.critics import CriticConfig, ScoreCritic
 from .guidance.injection import ReferenceInjector
 from .guidance.lora import AMBIENT_LIGHT, LoraCritic, camera_condition
 from .guidance.models import GuidanceModels, ModelConfig, load_guidance_models, locate_models
-from .guidance.views import (Placement, background_color, global_view, latent_mask, linear_to_srgb_torch,
+from .guidance.views import (Placement, background_color, global_view, latent_mask,
                              local_view, masked_image, sample_crops)
 from .guidance.weighting import (ANNEAL_TYPES, NORMAL_WEIGHT_TYPES, interpolation_lambda, normal_weight_map,
                                  sample_timestep)
@@ -573,7 +572,6 @@ def adapt_texture(inputs: AdaptInputs, config: AdaptConfig, progress: ProgressCa
         # Critics: ∇z = w_t w_n (ε_φ - ε̂), local and global weighed equally.
         local = local_critic(latents, t, noise, text, uncond, lam=lam, condition=condition,
                              reference_latents=reference_latents, weight_map=weight_map)
-        losses = [local.loss]
         metrics.update({"local_grad_norm": local.metrics["grad_norm"], "nonfinite": local.metrics["nonfinite"]})
         global_losses = []
         for g_latents, mask, masked_latents in global_inputs:

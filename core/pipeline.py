@@ -12,12 +12,12 @@ import torch
 
 from .atomic import write_json_atomic
 from .backend import init_mitsuba
-from .camera import Camera, orbit_cameras
+from .camera import Camera
 from .convert import ConvertConfig, ConvertResult, convert_asset
 from .errors import InputError
-from .imageio import linear_to_srgb, read_color_image, write_image
+from .imageio import linear_to_srgb, read_color_image
 from .maps import PBRMaps
-from .mesh import Mesh, normalize_to_unit_sphere
+from .mesh import Mesh
 from .progress import ProgressCallback, check_cancel, emit
 from .render import AssetRenderer, SceneOptions
 from .texture.bake import bake_maps
