@@ -1,0 +1,57 @@
+"""scenefit render: the asset (or its converted neural texture) from orbit views."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .options import add_asset_args, add_lighting_args, environment, load_asset, progress
+
+
+def run(args) -> int:
+    import torch
+
+    from ..core.camera import orbit_cameras
+    from ..core.convert import target_stack
+    from ..core.imageio import write_image
+    from ..core.mesh import normalize_to_unit_sphere
+    from ..core.pipeline import environment_info, render_views, tonemap_srgb, write_report
+    from ..core.texture.bake import load_neural_texture
+    from ..core.texture.uv_raster import rasterize_uv
+
+    mesh, maps = load_asset(args.asset, args.object)
+    normalized, _ = normalize_to_unit_sphere(mesh)
+    if args.texture:
+        texture = load_neural_texture(Path(args.texture))
+        resolution = texture.config.resolution
+        raster = rasterize_uv(normalized, resolution)
+        with torch.no_grad():
+            stack = texture.texture(raster.position, raster.border, raster.fill_index)
+        label = "neural texture"
+    else:
+        stack, label = torch.from_numpy(target_stack(maps, max(maps.resolution))), "asset maps"
+    env, env_label = environment(args)
+    cameras = orbit_cameras(args.views, args.elevation, fov_multiplier=1.1, size=args.size)
+    images = render_views(normalized, {label: stack}, env, cameras, args.spp, progress=progress(args))[label]
+    out = Path(args.out)
+    files = []
+    for camera, image in zip(cameras, images):
+        path = out / f"view_az{int(round(camera.azimuth_deg)):03d}.png"
+        write_image(path, tonemap_srgb(image, args.exposure))
+        files.append(str(path))
+    write_report(out / "report.json", {"stage": "render", "source": label, "lighting": env_label,
+                                       "views": files, "spp": args.spp, "environment": environment_info()})
+    print(f"rendered {len(files)} views of '{mesh.name}' ({label}, {env_label}) -> {out}")
+    return 0
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("render", help="render the asset (or its converted neural texture) from orbit views")
+    add_asset_args(p)
+    add_lighting_args(p)
+    p.add_argument("--out", required=True)
+    p.add_argument("--texture", help="a texture.pt written by `scenefit convert` (default: the asset's maps)")
+    p.add_argument("--views", type=int, default=4)
+    p.add_argument("--elevation", type=float, default=15.0)
+    p.add_argument("--size", type=int, default=256)
+    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--exposure", type=float, default=1.0)
+    p.set_defaults(func=run)
