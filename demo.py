@@ -18,18 +18,20 @@ import torch
 
 from .core.asset_io import is_asset_folder, load_asset_folder
 from .core.camera import orbit_cameras
-from .core.convert import convert_preset, target_stack
+from .core.convert import target_stack
 from .core.imageio import read_image, write_image
-from .core.lighting import estimate_light, light_preset, light_report, load_photo, parse_placement, write_light_outputs
+from .core.lighting import estimate_light, light_report, load_photo, write_light_outputs
 from .core.mesh import normalize_to_unit_sphere
 from .core.photo import PhotoCamera, develop_photo, perspective_view, studiolight_path
 from .core.pipeline import (contact_sheet, convert_and_bake, environment_info, image_psnr,
                             render_views, tonemap_srgb, write_report)
+from .core.placement import Placement
+from .core.presets import stage_config
 from .core.progress import ProgressCallback, emit
 
 DEMO_STUDIOLIGHT = "interior"
 DEMO_PHOTO_CAMERA = PhotoCamera(yaw_deg=60.0, pitch_deg=-12.0, fov_deg=60.0, width=768, height=512)
-DEMO_PLACEMENT = (0.5, 0.75)  # where the asset goes, as a fraction of the photo's width and height
+DEMO_PLACEMENT = Placement((0.5, 0.75), 0.4)  # the asset's centre (fractions of the photo) and size
 DEMO_VIEWS = 4
 
 
@@ -37,7 +39,7 @@ def make_example(folder: Path) -> str:
     """Make the example asset with Blender in a child process (it resets Blender's file); reuse it if present."""
     if is_asset_folder(folder):
         return "reused"
-    code = f"from scenefit.blender_io import make_example_asset; make_example_asset({str(folder)!r})"
+    code = f"from scenefit.devtools.example_asset import make_example_asset; make_example_asset({str(folder)!r})"
     subprocess.run([sys.executable, "-c", code], check=True)
     return "made by Blender (Suzanne, Smart UV Project, procedural material baked by Cycles)"
 
@@ -86,8 +88,8 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     # without weights, so the inverse-tone-mapping prior sets the light scales; the report says so).
     t = time.perf_counter()
     photo_srgb, photo_read = load_photo(inputs / "photo.png")
-    placement_px = parse_placement(DEMO_PLACEMENT, photo_srgb.shape[1], photo_srgb.shape[0])
-    light_config = light_preset(preset)
+    placement_px = DEMO_PLACEMENT.pixel(photo_srgb.shape[:2])
+    light_config = stage_config("light", preset)
     light = estimate_light(photo_srgb, placement_px, light_config, photo_camera=DEMO_PHOTO_CAMERA,
                            photo_info=photo_read, progress=progress)
     light_outputs = write_light_outputs(light, out / "light")
@@ -96,7 +98,7 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     timings["light"] = time.perf_counter() - t
 
     # Convert the asset's own maps into the neural texture and bake it.
-    config = convert_preset(preset)
+    config = stage_config("convert", preset)
     result, convert_report = convert_and_bake(mesh, maps, out / "converted", config, progress=progress)
     timings["convert"] = result.seconds
 
@@ -128,20 +130,20 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     timings["render"] = time.perf_counter() - t
 
     if found:  # scene-conditional adaptation of the converted texture (draft-sized for the demo)
-        from .core.adapt import adapt_and_bake, adapt_preset
-        from .core.guidance import Placement
+        from .core.adapt import adapt_and_bake
 
-        adapt_config = adapt_preset(preset, "scene", prompt="a monkey head sculpture standing in a living room, "
+        adapt_config = stage_config("adapt", preset, mode_type="scene",
+                                    prompt="a monkey head sculpture standing in a living room, "
                                     "its painted surface dusty and worn, photo")
         _, adapt_info["report"] = adapt_and_bake(mesh, result.texture, adapt_config, out / "adapted",
                                                  photo=photo_srgb,
-                                                 placement=Placement(DEMO_PLACEMENT, 0.4), progress=progress)
+                                                 placement=DEMO_PLACEMENT, progress=progress)
         timings["adapt"] = adapt_info["report"]["seconds"]
 
     report = {
         "stage": "demo",
         "preset": preset,
-        "inputs": {"asset": example_origin, "photo": photo_info, "placement": DEMO_PLACEMENT},
+        "inputs": {"asset": example_origin, "photo": photo_info, "placement": asdict(DEMO_PLACEMENT)},
         "lighting": lighting,
         "convert": convert_report,
         "renders": {"files": render_files, "comparison": str(out / "renders" / "comparison.png"),

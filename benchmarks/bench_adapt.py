@@ -1,8 +1,8 @@
 """Adapt-stage speed: seconds per iteration split into render, VAE, UNet and LoRA, and peak memory.
 
-CPU: tiny random-weight models (core/guidance/testing.py), 32-64 px renders, so the numbers measure
+CPU: tiny random-weight models (devtools/tiny_models.py), 32-64 px renders, so the numbers measure
 the stage's own overhead, not Stable Diffusion. Where CUDA is available, also an SD2-sized
-random-weight UNet in fp16 at 512 px (render sizes as the balanced preset).
+random-weight UNet in fp16 at setup (m)'s 512 px, 128 spp and 4 views per step.
 
 `bench_adapt(quick)` returns {"rows": [...], "markdown": str}; `python benchmarks/bench_adapt.py`
 prints the table. benchmarks/run.py can import and call it.
@@ -18,23 +18,26 @@ import numpy as np
 import torch
 
 from scenefit.core.adapt import AdaptConfig, AdaptInputs, StageSpec, adapt_texture
-from scenefit.core.guidance import ModelConfig, Placement
-from scenefit.core.guidance.testing import SD2_UNET, build_tiny_pair, build_tiny_sd
+from scenefit.core.guidance import ModelConfig
+from scenefit.core.placement import Placement
+from scenefit.devtools.tiny_models import SD2_UNET, build_tiny_pair, build_tiny_sd
 from scenefit.core.primitives import uv_sphere
-from scenefit.core.texture import NeuralTexture, preset, rasterize_uv
+from scenefit.core.presets import stage_config
+from scenefit.core.texture import NeuralTexture, rasterize_uv
 
 PHASES = (("render", "render"), ("VAE encode", "vae"), ("UNet passes", "unet"), ("VAE backward", "vae_backward"),
-          ("render backward + step", "render_backward_and_step"), ("LoRA step", "lora"))
+          ("render backward", "render_backward"), ("LoRA loss + backward", "lora"), ("Adam steps", "step"))
 
 
 def _run(base: Path, inpaint: Path, model_resolution: int, stages, iterations: int, views_type: str,
-         dtype_type: str = "auto") -> dict:
+         dtype_type: str = "auto", views_per_step: int = 1) -> dict:
     mesh = uv_sphere(segments=32, rings=16)
     raster = rasterize_uv(mesh, 128)
-    texture = NeuralTexture(preset("draft", resolution=128), seed=0)
+    texture = NeuralTexture(stage_config("texture", "draft", resolution=128), seed=0)
     photo = np.random.default_rng(0).uniform(0.2, 0.8, (96, 128, 3)).astype(np.float32)
     config = AdaptConfig(prompt="a mossy sphere in a swamp", iterations=iterations, stages=stages,
                          model_resolution=model_resolution, views_type=views_type, checkpoint_every=0, preview_every=0,
+                         views_per_step=views_per_step,
                          models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint), dtype_type=dtype_type))
     inputs = AdaptInputs(mesh=mesh, raster=raster, texture=texture, photo=photo, placement=Placement((0.5, 0.6), 0.5))
     adapt_texture(inputs, AdaptConfig(**{**config.__dict__, "iterations": 2}))  # warm-up: kernels compiled
@@ -45,8 +48,8 @@ def _run(base: Path, inpaint: Path, model_resolution: int, stages, iterations: i
     wall = (time.perf_counter() - t) / iterations
     per = result.seconds_per_iteration()
     return {"phases": {k: per.get(k, 0.0) for _, k in PHASES}, "iteration_s": sum(per.values()), "wall_s": wall,
-            "peak_memory_mb": result.peak_memory_mb, "device": result.decisions["device"],
-            "dtype": result.decisions["dtype"]}
+            "peak_memory_mb": result.peak_memory_mb, "device": result.decisions["device"].choice,
+            "views_per_step": result.decisions["views_per_step"].choice}
 
 
 def bench_adapt(quick: bool = False) -> dict:
@@ -54,17 +57,18 @@ def bench_adapt(quick: bool = False) -> dict:
     iterations = 3 if quick else 10
     with tempfile.TemporaryDirectory() as tmp:
         base, inpaint = build_tiny_pair(tmp)
-        for size, views in ((32, "local"), (64, "local+global")):
-            stages = (StageSpec(0.2, size // 2, 4, (30, 990)), StageSpec(0.8, size, 8, (500, 990)))
-            row = _run(base, inpaint, size, stages, iterations, views)
-            row["setup"] = f"tiny models, CPU, {size} px, {views}"
+        for size, views, per_step in ((32, "local", 1), (64, "local+global", 1), (64, "local+global", 4)):
+            stages = (StageSpec(1.0, size, 8, (500, 990)),)
+            row = _run(base, inpaint, size, stages, iterations, views, views_per_step=per_step)
+            row["setup"] = f"tiny models, CPU, {size} px, {views}, {per_step} view(s)/step, 2 crops"
             rows.append(row)
         if torch.cuda.is_available():
             sd2 = build_tiny_sd(Path(tmp) / "sd2-sized", 4, **SD2_UNET)
             sd2_inpaint = build_tiny_sd(Path(tmp) / "sd2-sized-inpaint", 9, seed=1, **SD2_UNET)
-            stages = (StageSpec(0.2, 192, 32, (30, 990)), StageSpec(0.8, 384, 64, (500, 990)))
-            row = _run(sd2, sd2_inpaint, 512, stages, 3 if quick else 6, "local+global", "fp16")
-            row["setup"] = f"SD2-sized UNet (random weights), {torch.cuda.get_device_name()}, fp16, 512 px, local+global"
+            stages = (StageSpec(1.0, 512, 128, (500, 990)),)   # setup (m)'s render size and spp
+            row = _run(sd2, sd2_inpaint, 512, stages, 3 if quick else 6, "local+global", "fp16", views_per_step=4)
+            row["setup"] = (f"SD2-sized UNet (random weights), {torch.cuda.get_device_name()}, fp16, 512 px, 128 spp, "
+                            "local+global, 4 views/step, 2 crops")
             rows.append(row)
     head = "| setup | " + " | ".join(title for title, _ in PHASES) + " | s / iteration | peak memory MB |"
     rule = "|" + "---|" * (len(PHASES) + 3)

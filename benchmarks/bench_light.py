@@ -24,7 +24,8 @@ import numpy as np
 import torch
 
 from scenefit.core.imageio import read_image, srgb_to_linear
-from scenefit.core.lighting import estimate_light, light_preset
+from scenefit.core.lighting import estimate_light
+from scenefit.core.presets import stage_config
 from scenefit.core.lighting.estimate import default_object
 from scenefit.core.lighting.hdr import ApparatusScene, hdr_from_scales
 from scenefit.core.lighting.measure import SphereProbe, compare_maps, object_mse
@@ -135,7 +136,7 @@ def main() -> int:
     args = parser.parse_args()
     RESULTS.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
-    config = light_preset("draft", map_height=64)
+    config = stage_config("light", "draft", map_height=64)
     if args.quick:
         config = replace(config, optimise=replace(config.optimise, iterations=20))
     yaws = YAWS[:1] if args.quick else YAWS

@@ -21,7 +21,8 @@ import torch
 
 from scenefit.core.asset_io import load_asset_folder
 from scenefit.core.camera import Camera
-from scenefit.core.convert import CONVERT_PRESETS, convert_preset, target_stack
+from scenefit.core.convert import target_stack
+from scenefit.core.presets import PRESET_NAMES, stage_config
 from scenefit.core.mesh import normalize_to_unit_sphere
 from scenefit.core.pipeline import environment_info
 from scenefit.core.primitives import uv_sphere
@@ -50,7 +51,7 @@ def machine() -> str:
 def example_asset() -> Path:
     folder = Path(tempfile.gettempdir()) / "scenefit-bench-example"
     if not (folder / "mesh.npz").is_file():
-        code = f"from scenefit.blender_io import make_example_asset; make_example_asset({str(folder)!r})"
+        code = f"from scenefit.devtools.example_asset import make_example_asset; make_example_asset({str(folder)!r})"
         subprocess.run([sys.executable, "-c", code], check=True)
     return folder
 
@@ -76,7 +77,7 @@ def bench_render(mesh, maps_hw, label: str, repeats: int = 10) -> dict:
 
 
 def bench_texture(raster, preset_name: str, repeats: int = 5) -> dict:
-    texture = NeuralTexture(preset(preset_name, resolution=raster.resolution[0]))
+    texture = NeuralTexture(stage_config("texture", preset_name, resolution=raster.resolution[0]))
     plan = texture.plan(raster.position, raster.border, raster.fill_index)
     times = []
     for _ in range(repeats + 1):
@@ -90,7 +91,7 @@ def bench_texture(raster, preset_name: str, repeats: int = 5) -> dict:
 def fit_setup(mesh, maps, preset_name: str):
     """What both conversion methods start from: normalised mesh, UV raster, target maps, fresh texture."""
     normalized, _ = normalize_to_unit_sphere(mesh)
-    config = convert_preset(preset_name)
+    config = stage_config("convert", preset_name)
     res = min(max(maps.resolution), config.max_resolution)
     return normalized, res, rasterize_uv(normalized, res), torch.from_numpy(target_stack(maps, res)), \
         NeuralTexture(config.texture_config(res), seed=0)
@@ -177,8 +178,8 @@ def main() -> int:
                bench_render(normalized, maps.resolution, "example (Suzanne)")]
     raster_256 = rasterize_uv(normalized, 256)
     raster_512 = rasterize_uv(normalized, 512)
-    textures = [bench_texture(r, p) for p in CONVERT_PRESETS for r in (raster_256, raster_512)]
-    conversions = [bench_direct(mesh, maps, p, max(10, int(CONVERT_PRESETS[p].iterations * scale)))
+    textures = [bench_texture(r, p) for p in PRESET_NAMES for r in (raster_256, raster_512)]
+    conversions = [bench_direct(mesh, maps, p, max(10, int(stage_config("convert", p).iterations * scale)))
                    for p in ("draft", "balanced")]
     conversions.append(bench_inverse(mesh, maps, "balanced", max(10, int(300 * scale)), every=max(5, int(25 * scale))))
 

@@ -4,63 +4,83 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-from .options import PRESETS, add_asset_args, add_model_args, environment, load_asset, model_config, progress
+from .options import (add_asset_args, add_dry_run_arg, add_elevation_arg, add_model_args, add_placement_args,
+                      add_preset_args, environment, load_asset, model_config, placement, print_config, progress,
+                      require)
+
+
+def resolve_config(args):
+    """The AdaptConfig the arguments ask for: the preset for the mode, then the options given."""
+    from ..core.adapt import StageSpec
+    from ..core.presets import stage_config
+
+    overrides = {k: v for k, v in (("iterations", args.iterations), ("seed", args.seed), ("elevation", args.elevation),
+                                   ("views_per_step", args.views_per_step), ("global_crops", args.global_crops),
+                                   ("model_resolution", args.model_resolution)) if v is not None}
+    if args.mode == "scene" and not args.photo and not args.dry_run:
+        overrides["views_type"] = "local"   # no photo: no global views (a dry run shows the scene setup)
+    if args.envmap:
+        overrides["light_type"] = "envmap"
+    config = stage_config("adapt", args.preset, mode_type=args.mode, prompt=args.prompt or "",
+                          object_prompt=args.object_prompt or "", instruction=args.instruction or "",
+                          models=model_config(args), **overrides)
+    if args.render_size:
+        config = replace(config, stages=tuple(StageSpec(s.fraction, min(s.render_size, args.render_size), s.spp,
+                                                        s.t_range) for s in config.stages))
+    return config
 
 
 def run(args) -> int:
     import numpy as np
 
-    from ..core.adapt import StageSpec, adapt_and_bake, adapt_preset
-    from ..core.guidance import Placement
+    from ..core.adapt import adapt_and_bake
     from ..core.imageio import linear_to_srgb, read_color_image
     from ..core.pipeline import environment_info, write_report
     from ..core.texture.bake import load_neural_texture
 
+    config = resolve_config(args)
+    if args.dry_run:
+        return print_config({"stage": "adapt", "preset": args.preset, "schedule": config.schedule(),
+                             "config": config.to_dict()})
+    require(args, "asset", "--out")
     mesh, _ = load_asset(args.asset, args.object)
-    overrides = {k: v for k, v in (("iterations", args.iterations), ("seed", args.seed),
-                                   ("elevation", args.elevation)) if v is not None}
-    mode = args.mode
-    config = adapt_preset(args.preset, mode, prompt=args.prompt or "", object_prompt=args.object_prompt or "",
-                          instruction=args.instruction or "", models=model_config(args),
-                          **({"views_type": "local"} if mode == "scene" and not args.photo else {}),
-                          **({"light_type": "envmap"} if args.envmap else {}), **overrides)
-    if args.model_resolution or args.render_size:
-        stages = tuple(StageSpec(st.fraction, min(st.render_size, args.render_size or st.render_size), st.spp, st.t_range)
-                       for st in config.stages)
-        config = replace(config, stages=stages, model_resolution=args.model_resolution or config.model_resolution)
     texture = load_neural_texture(args.texture) if args.texture else None
-    photo = placement = None
+    photo = where = None
     if args.photo:
         photo = linear_to_srgb(np.clip(read_color_image(args.photo), 0.0, 1.0))
-        x, y = (float(v) for v in args.at.split(","))
-        placement = Placement((x, y), args.size)
+        where = placement(args, photo.shape[:2])
     env = environment(args)[0] if args.envmap else None
-    result, report = adapt_and_bake(mesh, texture, config, Path(args.out), photo=photo, placement=placement,
+    result, report = adapt_and_bake(mesh, texture, config, Path(args.out), photo=photo, placement=where,
                                     envmap=env, progress=progress(args))
+    if not report["outputs"]:   # another rank of a distributed run writes the outputs
+        return 0
     report["environment"] = environment_info()
     write_report(Path(args.out) / "report.json", report)
-    print(f"adapted '{mesh.name}' ({mode}, {result.iterations} iterations, {result.seconds:.1f} s) -> {args.out}/maps")
+    print(f"adapted '{mesh.name}' ({args.mode}, {result.iterations} iterations, {result.seconds:.1f} s) -> {args.out}/maps")
     return 0
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("adapt", help="restyle a converted texture with diffusion guidance (or texture/edit from a prompt)")
-    add_asset_args(p)
-    p.add_argument("--out", required=True, help="output folder: maps/, checkpoint/ (rerun to resume), report.json")
+    p = sub.add_parser("adapt", help="restyle a converted texture with diffusion guidance (or texture/edit from a "
+                                     "prompt); several GPUs: torchrun --nproc_per_node N -m scenefit.cli adapt ...")
+    add_asset_args(p, optional=True)
+    p.add_argument("--out", help="output folder: maps/, checkpoint/ (rerun to resume), report.json")
     p.add_argument("--mode", choices=("scene", "generate", "edit"), default="scene")
     p.add_argument("--texture", help="texture.pt from `scenefit convert` (required unless --mode generate)")
     p.add_argument("--prompt", help="appearance description, e.g. 'a leather sofa, soggy and stained with mud'")
     p.add_argument("--object-prompt", help="edit mode: the object, e.g. 'a leather sofa'")
     p.add_argument("--instruction", help="edit mode: e.g. 'add dust to the sofa'")
     p.add_argument("--photo", help="scene mode: the photo the object goes into")
-    p.add_argument("--at", default="0.5,0.6", help="X,Y centre of the object in the photo, fractions (default 0.5,0.6)")
-    p.add_argument("--size", type=float, default=0.4, help="object size as a fraction of the photo height")
+    add_placement_args(p)
     p.add_argument("--envmap", help="light the object with this HDR map while adapting (e.g. the estimated one)")
-    p.add_argument("--preset", choices=PRESETS, default="balanced")
+    add_preset_args(p)
     p.add_argument("--iterations", type=int)
-    p.add_argument("--elevation", type=float)
+    add_elevation_arg(p)
     p.add_argument("--seed", type=int)
+    p.add_argument("--views-per-step", type=int, help="views averaged per step (paper: 4, one per GPU)")
+    p.add_argument("--global-crops", type=int, help="global-view crops scored per view (default 2)")
     p.add_argument("--model-resolution", type=int, help="image size the diffusion models see (default 512)")
-    p.add_argument("--render-size", type=int, help="largest render size of the coarse-to-fine stages")
+    p.add_argument("--render-size", type=int, help="cap on every stage's render size (pixels)")
     add_model_args(p)
+    add_dry_run_arg(p)
     p.set_defaults(func=run)

@@ -3,18 +3,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import PRESETS, add_asset_args, load_asset, progress
+from .options import add_preset_args, add_asset_args, load_asset, progress
 
 
 def run(args) -> int:
     from ..core.asset_io import save_asset_folder
-    from ..core.convert import convert_preset
+    from ..core.presets import stage_config
     from ..core.pipeline import convert_and_bake, environment_info, write_report
 
     mesh, maps = load_asset(args.asset, args.object)
     overrides = {k: v for k, v in (("method_type", args.method), ("iterations", args.iterations),
                                    ("resolution", args.resolution), ("seed", args.seed)) if v is not None}
-    config = convert_preset(args.preset, **overrides)
+    config = stage_config("convert", args.preset, **overrides)
     out = Path(args.out)
     result, report = convert_and_bake(mesh, maps, out / "maps", config, progress=progress(args))
     save_asset_folder(mesh, maps, out / "asset")
@@ -29,7 +29,7 @@ def add_parser(sub) -> None:
     p = sub.add_parser("convert", help="fit a neural texture to the asset's own maps and bake it")
     add_asset_args(p)
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--preset", choices=PRESETS, default="balanced", help="speed/accuracy trade (default: balanced)")
+    add_preset_args(p)
     p.add_argument("--method", choices=("direct", "inverse"), help="direct texture-space fit (default) or inverse rendering")
     p.add_argument("--iterations", type=int)
     p.add_argument("--resolution", type=int, help="texture size (default: the asset's, capped by the preset)")

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import PRESETS, progress
+from .options import add_preset_args, progress
 
 
 def run(args) -> int:
@@ -19,7 +19,7 @@ def run(args) -> int:
 def add_parser(sub) -> None:
     p = sub.add_parser("demo", help="run SceneFit on the bundled example (what `make demo` runs)")
     p.add_argument("--out", default="out/demo")
-    p.add_argument("--preset", choices=PRESETS, default="balanced")
+    add_preset_args(p)
     p.add_argument("--refresh", action="store_true", help="re-make the example asset and photo")
     p.add_argument("--guidance", choices=("auto", "sd2", "none"), default="auto",
                    help="texture adaptation: sd2 (needs the Stable Diffusion 2 weights), none, or auto (sd2 when "

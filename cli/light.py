@@ -1,42 +1,64 @@
 """scenefit light: an HDR environment map from a photo and the object's placement."""
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
-from .options import PRESETS, add_model_args, model_config, progress
+from .options import (add_dry_run_arg, add_elevation_arg, add_model_args, add_placement_args, add_preset_args,
+                      model_config, placement, print_config, progress, require)
 
 
-def run(args) -> int:
+def critic_choice(args, models):
+    """--critic auto (as the demo's --guidance and --depth): the diffusion critic when SD2 is on this machine."""
+    from ..core.decision import Decision
     from ..core.guidance import models_available
-    from ..core.lighting import estimate_light, light_preset, light_report, load_photo, parse_placement, write_light_outputs
-    from ..core.lighting.depth import DEFAULT_DEPTH_MODEL, DepthConfig
-    from ..core.pipeline import environment_info, write_report
 
-    photo, info = load_photo(args.photo)
-    placement = parse_placement(args.at, photo.shape[1], photo.shape[0])
-    depth = DepthConfig(depth_type=args.depth, model=args.depth_model or DEFAULT_DEPTH_MODEL)
+    if args.critic != "auto":
+        return Decision(args.critic, "the user's choice")
+    found, where = models_available(models, need_inpaint=False)
+    if found:
+        return Decision("diffusion", f"Stable Diffusion 2 found ({where})")
+    return Decision("none", "Stable Diffusion 2 weights are not on this machine, so the prior sets the scales")
+
+
+def resolve_config(args, critic: str):
+    """The LightConfig the arguments ask for: the preset, then the options given."""
+    from ..core.lighting.depth import DEFAULT_DEPTH_MODEL, DepthConfig
+    from ..core.presets import stage_config
+
+    models = model_config(args)
+    # The depth model follows the same --offline / --cache-dir as the diffusion models.
+    depth = DepthConfig(depth_type=args.depth, model=args.depth_model or DEFAULT_DEPTH_MODEL,
+                        cache_dir=models.cache_dir, local_files_only=True if args.offline else None)
     overrides = {k: v for k, v in (("scene_type", args.scene), ("fov_deg", args.fov), ("tint", args.tint),
                                    ("camera_pitch_deg", -args.elevation if args.elevation is not None else None))
                  if v is not None}
-    models = model_config(args)
-    # --critic auto (as the demo's --guidance and --depth): the diffusion critic when SD2 is on this machine.
-    if args.critic == "auto":
-        found, where = models_available(models, need_inpaint=False)
-        critic_choice = {"asked": "auto", "chosen": "diffusion" if found else "none",
-                         "why": f"Stable Diffusion 2 found ({where})" if found else
-                                "Stable Diffusion 2 weights are not on this machine, so the prior sets the scales"}
-    else:
-        critic_choice = {"asked": args.critic, "chosen": args.critic, "why": "the user's choice"}
-    config = light_preset(args.preset, depth=depth, critic_type=critic_choice["chosen"], models=models, **overrides)
+    config = stage_config("light", args.preset, depth=depth, critic_type=critic, models=models, **overrides)
     if args.iterations is not None:
         config = replace(config, optimise=replace(config.optimise, iterations=args.iterations))
     config = replace(config, outpaint=replace(config.outpaint, completion_type=args.outpaint))
     if args.model_resolution is not None:
         config = replace(config, diffusion=replace(config.diffusion, model_resolution=args.model_resolution),
                          outpaint=replace(config.outpaint, resolution=args.model_resolution))
-    result = estimate_light(photo, placement, config, photo_info=info, progress=progress(args))
-    result.decisions["critic"]["choice"] = critic_choice
+    return config
+
+
+def run(args) -> int:
+    from ..core.lighting import estimate_light, light_report, load_photo, write_light_outputs
+    from ..core.pipeline import environment_info, write_report
+
+    if args.dry_run:
+        config = resolve_config(args, "diffusion" if args.critic == "auto" else args.critic)
+        return print_config({"stage": "light", "preset": args.preset, "config": asdict(config),
+                             "note": "--critic auto resolves to diffusion when the SD2 weights are found"
+                             if args.critic == "auto" else ""})
+    require(args, "--photo", "--out")
+    critic = critic_choice(args, model_config(args))
+    config = resolve_config(args, critic.choice)
+    photo, info = load_photo(args.photo)
+    where = placement(args, photo.shape[:2])
+    result = estimate_light(photo, where.pixel(photo.shape[:2]), config, photo_info=info, progress=progress(args))
+    result.decisions["critic"]["choice"] = {"asked": args.critic, "chosen": critic.choice, "why": critic.reason}
     out = Path(args.out)
     outputs = write_light_outputs(result, out)
     report = light_report(result, config, outputs)
@@ -51,13 +73,13 @@ def run(args) -> int:
 
 def add_parser(sub) -> None:
     p = sub.add_parser("light", help="estimate an HDR environment map from a photo and the object's placement")
-    p.add_argument("--photo", required=True, help="the scene photo (JPEG/PNG/EXR, any size)")
-    p.add_argument("--at", required=True, help="X,Y where the object stands: fractions of width,height (or pixels)")
-    p.add_argument("--out", required=True, help="output folder: light.exr, light_preview.png, report.json")
-    p.add_argument("--preset", choices=PRESETS, default="balanced")
+    p.add_argument("--photo", help="the scene photo (JPEG/PNG/EXR, any size)")
+    add_placement_args(p, required=False)
+    p.add_argument("--out", help="output folder: light.exr, light_preview.png, report.json")
+    add_preset_args(p)
     p.add_argument("--scene", choices=("auto", "indoor", "outdoor"), help="scene type (default: auto)")
     p.add_argument("--fov", type=float, help="horizontal field of view in degrees (default: metadata, else 60)")
-    p.add_argument("--elevation", type=float, help="how far the camera looks down, degrees (default 10)")
+    add_elevation_arg(p)
     p.add_argument("--depth", choices=("auto", "model", "geometric"), default="auto",
                    help="auto: the depth model if it is on this machine, else the geometric room")
     p.add_argument("--depth-model", help="hub id or local folder of a transformers depth model")
@@ -73,4 +95,5 @@ def add_parser(sub) -> None:
                    help="image size the diffusion critic sees and the outpainting height (default 512)")
     add_model_args(p)
     p.add_argument("--quiet", action="store_true")
+    add_dry_run_arg(p)
     p.set_defaults(func=run)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-PRESETS = ("draft", "balanced", "final")
+from ..core.presets import PRESET_NAMES as PRESETS
 
 
 def load_asset(path: str, object_name: str | None = None):
@@ -37,8 +37,10 @@ def environment(args):
     return constant_environment([value] * 3), f"constant environment of radiance {value}"
 
 
-def add_asset_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("asset", help="a SceneFit asset folder (mesh.npz + maps) or a .blend/.glb/.gltf/.obj/.fbx file")
+def add_asset_args(p: argparse.ArgumentParser, optional: bool = False) -> None:
+    """The asset argument; `optional` for commands whose --dry-run needs none."""
+    p.add_argument("asset", nargs="?" if optional else None,
+                   help="a SceneFit asset folder (mesh.npz + maps) or a .blend/.glb/.gltf/.obj/.fbx file")
     p.add_argument("--object", help="mesh object to use from a Blender file (default: the largest)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -62,3 +64,61 @@ def model_config(args):
 
     return ModelConfig(**{k: v for k, v in (("base_model", args.base_model), ("inpaint_model", args.inpaint_model),
                                             ("cache_dir", args.cache_dir)) if v}, local_files_only=args.offline)
+
+
+
+def add_preset_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--preset", choices=PRESETS, default="balanced",
+                   help="draft / balanced / final (the paper's values); core/presets.py says what each changes")
+
+
+def add_elevation_arg(p: argparse.ArgumentParser, default: float | None = None) -> None:
+    """--elevation: the same angle in every command, the camera's height above the object's horizon."""
+    p.add_argument("--elevation", type=float, default=default,
+                   help="degrees above the horizon from which the camera sees the object"
+                        + (f" (default {default:g})" if default is not None else " (default: the stage's)"))
+
+
+def add_size_arg(p: argparse.ArgumentParser, default: int) -> None:
+    """--size: the same thing in every command, the side of the rendered image in pixels."""
+    p.add_argument("--size", type=int, default=default, help=f"rendered image size in pixels (default {default})")
+
+
+def add_placement_args(p: argparse.ArgumentParser, required: bool = False) -> None:
+    """Where the object goes in the photo (core/placement.py): --at and --object-size."""
+    from ..core.placement import DEFAULT_AT, DEFAULT_SIZE
+
+    p.add_argument("--at", required=required, default=None if required else ",".join(f"{v:g}" for v in DEFAULT_AT),
+                   help="X,Y of the object's centre in the photo: fractions of width,height (or pixels)"
+                        + ("" if required else f" (default {DEFAULT_AT[0]:g},{DEFAULT_AT[1]:g})"))
+    p.add_argument("--object-size", type=float, default=DEFAULT_SIZE,
+                   help=f"the object's size as a fraction of the photo's height (default {DEFAULT_SIZE:g})")
+
+
+def placement(args, photo_hw: tuple[int, int]):
+    """The Placement of --at and --object-size in a photo of photo_hw (one parser, one error message)."""
+    from ..core.placement import Placement
+
+    return Placement.parse(args.at, (photo_hw[1], photo_hw[0]), args.object_size)
+
+
+def add_dry_run_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--dry-run", action="store_true",
+                   help="print the resolved configuration as JSON and exit (nothing is loaded or written)")
+
+
+def print_config(config: dict) -> int:
+    """--dry-run: the resolved configuration, as JSON on stdout."""
+    import json
+
+    print(json.dumps(config, indent=2, default=str))
+    return 0
+
+
+def require(args, *names: str) -> None:
+    """Options a command needs unless it is a --dry-run: one sentence naming the missing ones."""
+    from ..core.errors import InputError
+
+    missing = [n for n in names if not getattr(args, n.lstrip("-").replace("-", "_"), None)]
+    if missing:
+        raise InputError(f"`scenefit {args.command}` needs {' and '.join(missing)} (only --dry-run runs without).")

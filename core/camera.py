@@ -14,19 +14,44 @@ from .errors import InputError
 from .mesh import NORMALIZED_RADIUS
 
 CAMERA_DISTANCE = 2.0  # d_cam in the paper
+WORLD_UP = (0.0, 0.0, 1.0)
+
+
+def look_frame(forward) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(forward, right, up) unit vectors of a camera looking along `forward` with the world's +Z up
+    (Blender's convention: right = forward x Z, up = right x forward). The one camera frame every
+    camera in SceneFit uses: orbit cameras, photo cameras, and ε_ψ's camera condition."""
+    f = np.asarray(forward, np.float64)
+    f = f / np.linalg.norm(f)
+    right = np.cross(f, WORLD_UP)
+    norm = np.linalg.norm(right)
+    if norm < 1e-12:
+        raise InputError("A camera looking straight up or down has no horizon to orient it; tilt it a little.")
+    right /= norm
+    return f, right, np.cross(right, f)
 
 
 def fov_from_multiplier(fov_multiplier: float, radius: float = NORMALIZED_RADIUS,
                         distance: float = CAMERA_DISTANCE) -> float:
-    """Full field of view in degrees for the paper's FOV = tanh(r * lambda_FOV / d).
+    """Full field of view in degrees for the paper's FOV = tanh(r * lambda_FOV / d), r = 0.5, d = 2.
 
-    We read tanh(...) as the half-angle in radians: taken as the full angle (14 degrees at
-    lambda = 1) the radius-0.5 sphere, which subtends 29 degrees at d = 2, would not fit in view;
-    as the half-angle it frames the object tightly at lambda = 1 and leaves room at 1.21 and 1.65.
+    tanh(...) is the half-angle in radians. Read as the full angle (14 degrees at lambda = 1) the
+    object would be cut at every multiplier the paper uses, even 1.65, which is there "to include
+    the full shadow"; as the half-angle, lambda = 1 is the tight framing that separates the paper's
+    close-ups (lambda < 1, "detailed close-up renderings of object parts") from whole-object views:
+    the view spans +-r * lambda at the target's depth (tanh x = atan x to 0.02% here, so
+    d * tan(half-angle) = r * lambda). A whole radius-r sphere bulges slightly past that plane in
+    perspective and is inside the view from `whole_object_multiplier()` = 1.033 on.
     """
     if not fov_multiplier > 0:
         raise InputError(f"The FOV multiplier must be positive, got {fov_multiplier}.")
     return math.degrees(2.0 * math.tanh(radius * fov_multiplier / distance))
+
+
+def whole_object_multiplier(radius: float = NORMALIZED_RADIUS, distance: float = CAMERA_DISTANCE) -> float:
+    """The smallest lambda_FOV at which a whole sphere of `radius` (the normalised object's bound) is in
+    view: its silhouette's half-angle asin(r / d) equals the view's tanh(r lambda / d)."""
+    return math.atanh(math.asin(radius / distance)) * distance / radius
 
 
 @dataclass(frozen=True)
@@ -65,10 +90,7 @@ class Camera:
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Pixel coordinates (x right, y down; pixel centres at +0.5) of world points in front of the camera."""
-        forward = self.forward
-        right = np.cross(forward, [0.0, 0.0, 1.0])
-        right /= np.linalg.norm(right)
-        up = np.cross(right, forward)
+        forward, right, up = look_frame(self.forward)
         rel = np.asarray(points, dtype=np.float64) - self.origin
         depth = rel @ forward
         # The FOV applies to the smaller image side (see AssetRenderer._sensor).
@@ -77,9 +99,6 @@ class Camera:
         x = self.width / 2 + (rel @ right) / half * scale
         y = self.height / 2 - (rel @ up) / half * scale
         return np.stack([x, y], axis=-1)
-
-    def with_size(self, width: int, height: int) -> "Camera":
-        return Camera(self.azimuth_deg, self.elevation_deg, self.fov_multiplier, self.distance, width, height, self.target)
 
 
 def orbit_cameras(count: int, elevation_deg: float, fov_multiplier: float = 1.0, size: int = 256,

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -22,7 +22,8 @@ from .mesh import Mesh, NormalizeTransform, normalize_to_unit_sphere
 from .progress import ProgressCallback, emit
 from .texture.fit_direct import fit_direct, masked_psnr
 from .texture.fit_inverse import fit_inverse_rendering
-from .texture.neural_texture import NeuralTexture, NeuralTextureConfig, preset
+from .presets import PRESET_NAMES, stage_config
+from .texture.neural_texture import NeuralTexture, NeuralTextureConfig
 from .texture.uv_raster import UVRaster, rasterize_uv
 
 METHOD_TYPES = ("direct", "inverse")
@@ -30,7 +31,7 @@ METHOD_TYPES = ("direct", "inverse")
 
 @dataclass(frozen=True)
 class ConvertConfig:
-    """How to convert. Defaults are the "balanced" preset; see CONVERT_PRESETS."""
+    """How to convert. Defaults are the "balanced" preset (core/presets.py)."""
 
     method_type: str = "direct"
     texture_preset: str = "balanced"
@@ -51,25 +52,11 @@ class ConvertConfig:
             raise InputError(f"iterations must be at least 1, got {self.iterations}.")
         if self.resolution is not None and not 8 <= self.resolution <= 8192:
             raise InputError(f"resolution must be between 8 and 8192 texels, got {self.resolution}.")
-        preset(self.texture_preset)  # validates the name
+        if self.texture_preset not in PRESET_NAMES:
+            raise InputError(f"texture_preset must be one of {', '.join(PRESET_NAMES)}, got {self.texture_preset!r}.")
 
     def texture_config(self, resolution: int) -> NeuralTextureConfig:
-        return preset(self.texture_preset, resolution=resolution)
-
-
-# Speed/accuracy trade: the README quotes the measured PSNR and seconds of each (make bench).
-CONVERT_PRESETS: dict[str, ConvertConfig] = {
-    "draft": ConvertConfig(texture_preset="draft", iterations=150, max_resolution=512),
-    "balanced": ConvertConfig(texture_preset="balanced", iterations=400, max_resolution=1024),
-    # final: the sparse encoding plan costs ~2 GB at 1024² with the full hash grid (8 GB at 2048²).
-    "final": ConvertConfig(texture_preset="final", iterations=1000, max_resolution=1024),
-}
-
-
-def convert_preset(name: str, **overrides) -> ConvertConfig:
-    if name not in CONVERT_PRESETS:
-        raise InputError(f"Unknown preset '{name}'; choose one of {', '.join(CONVERT_PRESETS)}.")
-    return replace(CONVERT_PRESETS[name], **overrides)
+        return stage_config("texture", self.texture_preset, resolution=resolution)
 
 
 @dataclass

@@ -11,12 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .camera import look_frame
 from .errors import InputError
 from .imageio import linear_to_srgb
 from .render import blender_direction_to_equirect_uv
-
-STUDIOLIGHTS_DEVELOPMENT_SET = ("studio", "interior", "city", "forest")
-
 
 def studiolights_folder() -> Path:
     """The CC0 HDR maps inside the bpy wheel (found without importing bpy)."""
@@ -50,10 +48,7 @@ class PhotoCamera:
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
         """forward, right, up unit vectors and the half extents of the image plane at distance 1."""
         yaw, pitch = np.radians(self.yaw_deg), np.radians(self.pitch_deg)
-        forward = np.array([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)])
-        right = np.cross(forward, [0.0, 0.0, 1.0])
-        right /= np.linalg.norm(right)
-        up = np.cross(right, forward)
+        forward, right, up = look_frame([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)])
         half_w = float(np.tan(np.radians(self.fov_deg) / 2))
         return forward, right, up, half_w, half_w * self.height / self.width
 

@@ -21,7 +21,7 @@ from .mesh import Mesh
 from .progress import ProgressCallback, check_cancel, emit
 from .render import AssetRenderer, SceneOptions
 from .texture.bake import bake_maps
-from .texture.fit_direct import masked_psnr
+from .texture.neural_texture import split_channels
 
 
 def constant_environment(color, height: int = 32) -> np.ndarray:
@@ -48,10 +48,6 @@ def tonemap_srgb(rgb: np.ndarray, exposure: float = 1.0) -> np.ndarray:
     return linear_to_srgb(np.clip(np.asarray(rgb) * exposure, 0.0, 1.0))
 
 
-def maps_tensors(stack: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    return stack[..., 0:3], stack[..., 3:4], stack[..., 4:5]
-
-
 def render_views(normalized_mesh: Mesh, stacks: dict[str, torch.Tensor], envmap: np.ndarray,
                  cameras: list[Camera], spp: int, progress: ProgressCallback | None = None,
                  cancel: threading.Event | None = None) -> dict[str, list[np.ndarray]]:
@@ -67,7 +63,7 @@ def render_views(normalized_mesh: Mesh, stacks: dict[str, torch.Tensor], envmap:
             renderer = renderers[tuple(stack.shape[:2])]
             for i, camera in enumerate(cameras):
                 check_cancel(cancel)
-                out = renderer.render(camera, *maps_tensors(stack), env_t, spp=spp, seed=i)
+                out = renderer.render(camera, *split_channels(stack), env_t, spp=spp, seed=i)
                 images[name].append(out.rgb.numpy())
                 done += 1
                 emit(progress, "render", done, total, f"{name} view {i + 1}")
@@ -127,7 +123,3 @@ def write_report(path: str | Path, report: dict) -> Path:
     report = dict(report)
     report.setdefault("written_at", time.strftime("%Y-%m-%dT%H:%M:%S%z"))
     return write_json_atomic(path, report)
-
-
-def baked_psnr(result: ConvertResult, baked: torch.Tensor) -> float:
-    return masked_psnr(baked, result.target, result.raster.mask)

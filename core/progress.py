@@ -5,7 +5,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -78,5 +78,3 @@ class TerminalProgress:
             self._stage = None
         self.stream.flush()
 
-
-Callback = Callable[[ProgressEvent], None]

@@ -16,7 +16,7 @@ Conventions:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -97,7 +97,6 @@ class RenderOutput:
     rgb: "object"
     alpha: "object"
     seconds: float = 0.0
-    extras: dict = field(default_factory=dict)
 
 
 def _mitsuba_mesh(mi, mesh: Mesh):

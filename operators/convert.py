@@ -22,10 +22,10 @@ def run_conversion(mesh, maps, preset: str, out_dir: Path, progress, cancel=None
 
     Returns {"base_color": path, "roughness": path, "metallic": path} of the baked maps.
     """
-    from ..core.convert import convert_preset
+    from ..core.presets import stage_config
     from ..core.pipeline import convert_and_bake, write_report
 
-    _, report = convert_and_bake(mesh, maps, out_dir, convert_preset(preset), progress=progress, cancel=cancel)
+    _, report = convert_and_bake(mesh, maps, out_dir, stage_config("convert", preset), progress=progress, cancel=cancel)
     write_report(Path(out_dir) / "report.json", report)
     return {key: Path(report["outputs"][key]) for key in ("base_color", "roughness", "metallic")}
 

@@ -33,7 +33,7 @@ def example_asset(tmp_path_factory) -> Path:
     """The bundled example made once by Blender (make_example_asset) into a temp folder."""
     out = tmp_path_factory.mktemp("example_asset")
     run_python(f"""
-        from scenefit.blender_io import make_example_asset
+        from scenefit.devtools.example_asset import make_example_asset
         make_example_asset({str(out)!r})
     """)
     return out

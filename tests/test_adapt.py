@@ -8,13 +8,16 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.adapt import (AdaptConfig, AdaptInputs, StageSpec, adapt_preset, adapt_texture, edit_prompt,
-                                 sample_camera, spherical_gaussian_environment, stage_at, view_suffix)
+from scenefit.core.adapt import (GENERATE_STAGES, SCENE_STAGES, AdaptConfig, AdaptInputs, AdaptSystem, StageSpec,
+                                 adapt_texture, edit_prompt, sample_camera, sample_view,
+                                 spherical_gaussian_environment, stage_at, view_suffix)
 from scenefit.core.errors import Cancelled, InputError, ModelMissingError
-from scenefit.core.guidance import CriticConfig, ModelConfig, Placement
-from scenefit.core.guidance.testing import build_tiny_pair
+from scenefit.core.guidance import CriticConfig, ModelConfig
+from scenefit.core.placement import Placement
+from scenefit.core.presets import stage_config
+from scenefit.devtools.tiny_models import build_tiny_pair
 from scenefit.core.primitives import uv_sphere
-from scenefit.core.texture import NeuralTexture, preset, rasterize_uv
+from scenefit.core.texture import NeuralTexture, rasterize_uv
 
 TINY_STAGES = (StageSpec(0.5, 16, 2, (30, 990)), StageSpec(0.5, 32, 2, (500, 990)))
 
@@ -28,7 +31,7 @@ def tiny_models(tmp_path_factory):
 def asset():
     mesh = uv_sphere(segments=16, rings=8)
     raster = rasterize_uv(mesh, 32)
-    texture = NeuralTexture(preset("draft", resolution=32, log2_table=12), seed=0)
+    texture = NeuralTexture(stage_config("texture", "draft", resolution=32, log2_table=12), seed=0)
     photo = np.random.default_rng(0).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32)
     return mesh, raster, texture, photo
 
@@ -36,7 +39,7 @@ def asset():
 def _config(tiny_models, **overrides) -> AdaptConfig:
     base, inpaint = tiny_models
     values = dict(prompt="a mossy sphere in a swamp", iterations=4, stages=TINY_STAGES, model_resolution=32,
-                  views=4, checkpoint_every=2, preview_every=2, lr_texture=1e-2,
+                  views=4, views_per_step=1, checkpoint_every=2, preview_every=2, lr_texture=1e-2,
                   models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint)))
     values.update(overrides)
     return AdaptConfig(**values)
@@ -83,9 +86,10 @@ def test_short_scene_run_changes_the_texture_and_resumes_exactly(tiny_models, as
     assert all("lora_loss" in h for h in full.history)
     assert [e.step for e in events] == [1, 2, 3, 4]
     assert events[1].preview is not None and events[1].preview.shape == (32, 32, 3) and events[0].preview is None
-    assert full.decisions["reference_injection"] and full.decisions["injected_layers"] == 4
-    for phase in ("render", "vae", "unet", "vae_backward", "render_backward_and_step", "lora"):
-        assert full.timings[phase] > 0
+    assert full.decisions["reference_injection"].choice == 4   # the tiny UNet's 4 self-attention layers
+    # Every phase is timed, and the phases are parts of the run (they cannot add up to more than it).
+    assert set(full.timings) == {"render", "vae", "unet", "vae_backward", "render_backward", "lora", "step"}
+    assert sum(full.timings.values()) <= full.seconds
     # The coarse stage renders 16 px, the fine one 32 px.
     assert [h["stage_size"] for h in full.history] == [16, 16, 32, 32]
 
@@ -124,19 +128,19 @@ def test_cancel_stops_promptly(tiny_models, asset):
 
 def test_generate_and_edit_modes(tiny_models, asset):
     mesh, raster, texture, _ = asset
-    generate = adapt_preset("draft", "generate", prompt="a red umbrella", iterations=2, stages=TINY_STAGES,
+    generate = stage_config("adapt", "draft", mode_type="generate", prompt="a red umbrella", iterations=2, stages=TINY_STAGES,
                             model_resolution=32, light_type="random", light_random_p=1.0, critic=CriticConfig(
                                 critic_type="sds", reference_type="none"),
                             models=_config(tiny_models).models)
     assert generate.views == 72 and generate.fov_range == (0.6, 1.21) and generate.views_type == "local"
     result = adapt_texture(AdaptInputs(mesh=mesh, raster=raster), generate)
     assert torch.isfinite(_maps(result.texture, raster)).all() and "lora_loss" not in result.history[0]
-    edit = adapt_preset("draft", "edit", object_prompt="a leather sofa", instruction="add dust to the sofa",
+    edit = stage_config("adapt", "draft", mode_type="edit", object_prompt="a leather sofa", instruction="add dust to the sofa",
                         iterations=2, stages=(StageSpec(1.0, 16, 2, (500, 990)),), model_resolution=32,
                         models=_config(tiny_models).models)
     assert edit.effective_prompt == "a leather sofa, with dust to the sofa"
     result = adapt_texture(AdaptInputs(mesh=mesh, raster=raster, texture=texture), edit)
-    assert result.decisions["reference_injection"] and torch.isfinite(_maps(result.texture, raster)).all()
+    assert result.decisions["reference_injection"].choice > 0 and torch.isfinite(_maps(result.texture, raster)).all()
 
 
 def test_distributed_single_process_gloo(tiny_models, asset, tmp_path, one_render_thread):
@@ -150,8 +154,50 @@ def test_distributed_single_process_gloo(tiny_models, asset, tmp_path, one_rende
         spread = adapt_texture(_inputs(asset), config)
     finally:
         dist.destroy_process_group()
-    assert spread.decisions["world_size"] == 1
+    assert spread.decisions["world_size"].choice == 1
     assert torch.equal(_maps(spread.texture, asset[1]), _maps(alone.texture, asset[1]))
+
+
+def test_a_step_averages_its_views(tiny_models, asset, one_render_thread):
+    """views_per_step = 2: the step's texture gradient is exactly the sum of each view's (each weighted 1/2),
+    and the two views differ (their own camera, background, t and noise)."""
+    config = _config(tiny_models, views_per_step=2, checkpoint_every=0, preview_every=0)
+    system = AdaptSystem.build(_inputs(asset), config)
+    views = [system.sample(0, j) for j in range(2)]
+    assert views[0].t != views[1].t or views[0].camera != views[1].camera
+
+    def grads(indices):
+        system.optimizer.zero_grad(set_to_none=True)
+        for j in indices:
+            system.train_view(views[j])
+        return [p.grad.clone() for p in system.texture.parameters()]
+
+    g0, g1, both = grads([0]), grads([1]), grads([0, 1])
+    assert any((a - b).abs().max() > 0 for a, b in zip(g0, g1))
+    assert all(torch.equal(a + b, ab) for a, b, ab in zip(g0, g1, both))
+    metrics = system.step(0)
+    assert len(metrics["t"]) == 2 and system.decisions()["views_per_step"].choice == 2
+
+
+def test_dry_run_prints_the_papers_schedule(capsys):
+    import json
+
+    from scenefit.cli import main
+
+    assert main(["adapt", "--mode", "scene", "--preset", "final", "--prompt", "a sofa", "--dry-run"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["schedule"] == [{"fraction": 1.0, "iterations": 4000, "t_range": [500, 990], "t_anneal": "linear",
+                                  "render_size": 512, "spp": 128, "views_per_step": 4, "global_crops": 2}]
+    assert main(["adapt", "--mode", "generate", "--preset", "draft", "--prompt", "a sofa", "--dry-run"]) == 0
+    stages = json.loads(capsys.readouterr().out)["schedule"]
+    assert [(s["render_size"], s["t_range"]) for s in stages] == [(128, [30, 990]), (256, [500, 990])]
+    assert main(["light", "--preset", "final", "--dry-run"]) == 0
+    light = json.loads(capsys.readouterr().out)["config"]
+    assert light["optimise"]["iterations"] == 2000 and light["optimise"]["lr"] == 0.01
+    assert light["optimise"]["t_range"] == [750, 990]
+    # Without --dry-run the inputs are required, and asked for in one sentence.
+    assert main(["adapt", "--prompt", "a sofa"]) == 2
+    assert "needs asset and --out" in capsys.readouterr().err
 
 
 def test_missing_weights_stop_before_any_work(tmp_path, asset, monkeypatch):
@@ -175,13 +221,24 @@ def test_config_validation_and_helpers():
     with pytest.raises(InputError):
         StageSpec(1.0, 64, 4, (30, 1200))
     with pytest.raises(InputError, match="prompt"):
-        adapt_preset("final")  # no prompt
-    draft = adapt_preset("draft", prompt="x")
-    assert draft.iterations < adapt_preset("balanced", prompt="x").iterations < adapt_preset("final", prompt="x").iterations
-    paper = adapt_preset("final", prompt="x")
-    assert paper.stages == (StageSpec(0.2, 256, 64, (30, 990)), StageSpec(0.8, 512, 128, (500, 990)))
+        stage_config("adapt", "final")  # no prompt
+    draft = stage_config("adapt", "draft", prompt="x")
+    assert (draft.iterations < stage_config("adapt", "balanced", prompt="x").iterations
+            < stage_config("adapt", "final", prompt="x").iterations)
+    # "final" is the appendix's setup (m): 512 px, 128 spp, t in [500, 990] throughout, 4 views per step.
+    paper = stage_config("adapt", "final", prompt="x")
+    assert paper == AdaptConfig(prompt="x")
+    assert paper.stages == SCENE_STAGES == (StageSpec(1.0, 512, 128, (500, 990)),)
+    assert paper.views_per_step == 4 and paper.global_crops >= 2 and paper.iterations == 4000
     assert paper.lr_texture == 1e-3 and paper.lr_lora == 1e-4 and paper.views == 24 and paper.fov_range == (1.0, 1.21)
-    assert [stage_at(paper, i).render_size for i in (0, 799, 800, 3999)] == [256, 256, 512, 512]
+    # Scene-agnostic generation keeps the coarse-to-fine schedule (20% at 256 px, t in [30, 990]).
+    generate = stage_config("adapt", "final", mode_type="generate", prompt="x")
+    assert generate.stages == GENERATE_STAGES
+    assert [stage_at(generate, i).render_size for i in (0, 799, 800, 3999)] == [256, 256, 512, 512]
+    # Noise annealed from high to low over the run, inside [500, 990].
+    ts = [[sample_view(paper, it, v, 8, None, None, None).t for v in range(4)] for it in (0, 1999, 3999)]
+    assert min(ts[0]) >= 929 and 684 <= min(ts[1]) and max(ts[1]) <= 806 and max(ts[2]) <= 561
+    assert min(min(t) for t in ts) >= 500
     rng = np.random.default_rng(0)
     cams = [sample_camera(paper, rng, 64) for _ in range(50)]
     assert {c.azimuth_deg % 15 for c in cams} == {0.0} and all(1.0 <= c.fov_multiplier <= 1.21 for c in cams)
@@ -190,7 +247,8 @@ def test_config_validation_and_helpers():
     env = spherical_gaussian_environment((0.25, 0.3, 0.08, 12.0, 0.8), 16)
     assert env.shape == (16, 32, 3) and env.min() >= 0.8 - 1e-6 and env.max() > 10
     with pytest.raises(InputError, match="photo"):
-        _inputs((uv_sphere(), rasterize_uv(uv_sphere(), 16), NeuralTexture(preset("draft", resolution=16)), None),
+        _inputs((uv_sphere(), rasterize_uv(uv_sphere(), 16),
+                  NeuralTexture(stage_config("texture", "draft", resolution=16)), None),
                 placement=None).validate(AdaptConfig(prompt="x"))
     with pytest.raises(InputError, match="convert the asset first"):
         _inputs((uv_sphere(), rasterize_uv(uv_sphere(), 16), None, None)).validate(AdaptConfig(prompt="x"))
@@ -211,7 +269,8 @@ def test_cli_adapt_and_demo_guidance(tiny_models, asset, tmp_path, monkeypatch, 
     write_image(tmp_path / "photo.png", photo)
     base, inpaint = tiny_models
     args = ["adapt", str(folder), "--texture", str(tmp_path / "texture.pt"), "--prompt", "a mossy ball",
-            "--photo", str(tmp_path / "photo.png"), "--at", "0.5,0.6", "--preset", "draft", "--iterations", "2",
+            "--photo", str(tmp_path / "photo.png"), "--at", "0.5,0.6", "--object-size", "0.5", "--preset", "draft",
+            "--iterations", "2",
             "--model-resolution", "32", "--render-size", "16", "--base-model", str(base), "--inpaint-model",
             str(inpaint), "--out", str(tmp_path / "out"), "--quiet"]
     assert main(args) == 0

@@ -12,7 +12,8 @@ import pytest
 import torch
 
 from scenefit.core.asset_io import load_asset_folder, save_asset_folder
-from scenefit.core.convert import ConvertConfig, choose_resolution, convert_asset, convert_preset
+from scenefit.core.convert import ConvertConfig, choose_resolution, convert_asset
+from scenefit.core.presets import stage_config
 from scenefit.core.errors import InputError
 from scenefit.core.imageio import read_image, srgb_to_linear
 from scenefit.core.maps import PBRMaps
@@ -78,10 +79,10 @@ def test_baked_maps_read_back_match_the_network_within_one_level(demo_run, examp
 
 def test_direct_and_inverse_fits_both_learn_the_maps():
     maps = smooth_maps()
-    direct = convert_asset(uv_sphere(), maps, convert_preset("draft", iterations=60))
-    inverse = convert_asset(uv_sphere(), maps, convert_preset("draft", method_type="inverse", iterations=40,
+    direct = convert_asset(uv_sphere(), maps, stage_config("convert", "draft", iterations=60))
+    inverse = convert_asset(uv_sphere(), maps, stage_config("convert", "draft", method_type="inverse", iterations=40,
                                                                 render_size=96, spp=4))
-    untrained = convert_asset(uv_sphere(), maps, convert_preset("draft", iterations=1, lr_start=1e-9, lr_end=1e-9))
+    untrained = convert_asset(uv_sphere(), maps, stage_config("convert", "draft", iterations=1, lr_start=1e-9, lr_end=1e-9))
     assert direct.psnr > 30.0
     # Inverse rendering learns far more slowly per iteration (bench: conversion_psnr.png), but it learns.
     assert inverse.psnr > untrained.psnr + 1.5
@@ -91,7 +92,7 @@ def test_direct_and_inverse_fits_both_learn_the_maps():
 def test_conversion_leaves_the_users_data_untouched():
     mesh, maps = uv_sphere(segments=16, rings=8), smooth_maps(32)
     before = (mesh.positions.copy(), maps.base_color.copy(), maps.roughness.copy())
-    convert_asset(mesh, maps, convert_preset("draft", iterations=2))
+    convert_asset(mesh, maps, stage_config("convert", "draft", iterations=2))
     assert np.array_equal(before[0], mesh.positions)
     assert np.array_equal(before[1], maps.base_color) and np.array_equal(before[2], maps.roughness)
 
@@ -99,7 +100,7 @@ def test_conversion_leaves_the_users_data_untouched():
 def test_resolution_follows_the_asset_and_the_preset_cap():
     small, big = smooth_maps(64), PBRMaps(np.zeros((2048, 2048, 3), np.float32))
     assert choose_resolution(small, ConvertConfig())[0] == 64
-    assert choose_resolution(big, convert_preset("draft"))[0] == 512
+    assert choose_resolution(big, stage_config("convert", "draft"))[0] == 512
     assert choose_resolution(big, ConvertConfig(resolution=256))[0] == 256
     with pytest.raises(InputError):
         ConvertConfig(method_type="magic")

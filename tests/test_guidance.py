@@ -10,8 +10,9 @@ import torch
 from scenefit.core.errors import InputError, ModelMissingError
 from scenefit.core.guidance import (CriticConfig, LoraCritic, ModelConfig, ReferenceInjector, ScoreCritic,
                                     camera_condition, load_guidance_models, locate_models, models_available)
-from scenefit.core.guidance.testing import build_tiny_pair
-from scenefit.core.guidance.views import (Placement, global_view, inpainting_input, latent_mask, local_view,
+from scenefit.devtools.tiny_models import build_tiny_pair
+from scenefit.core.placement import Placement
+from scenefit.core.guidance.views import (global_view, inpainting_input, latent_mask, local_view,
                                           masked_image, sample_crops)
 from scenefit.core.guidance.weighting import (add_noise, guard_gradient, interpolation_lambda, predicted_x0,
                                               sample_timestep)
@@ -112,6 +113,9 @@ def _train(lora, models, steps=2):
 
 
 def test_lora_step_changes_lora_weights_only(models):
+    x, t, text = torch.randn(1, 4, 16, 16, generator=torch.Generator().manual_seed(1)), torch.tensor([500]), models.embed("a sofa")
+    with torch.no_grad():
+        base_output = models.unet(x, t, encoder_hidden_states=text).sample
     lora = _lora(models)
     base_before = {n: p.detach().clone() for n, p in models.unet.named_parameters() if "lora_" not in n}
     lora_before = {n: p.detach().clone() for n, p in models.unet.named_parameters() if "lora_" in n}
@@ -124,9 +128,14 @@ def test_lora_step_changes_lora_weights_only(models):
     changed = [n for n, v in lora_before.items() if not torch.equal(after[n], v)]
     assert len(changed) == len(lora_before)
     assert any(not torch.equal(a, b) for a, b in zip(emb_before, lora.embedding.parameters()))
-    # The adapter is off outside `active()`: ε_φ is the base model.
-    assert not models.unet._hf_peft_config_loaded or all(
-        getattr(m, "disable_adapters", True) for m in models.unet.modules() if hasattr(m, "lora_A"))
+    # The adapter is off outside `active()`: there the UNet is ε_φ, the base model, bit for bit.
+    x, t, text = torch.randn(1, 4, 16, 16, generator=torch.Generator().manual_seed(1)), torch.tensor([500]), models.embed("a sofa")
+    with torch.no_grad():
+        outside = models.unet(x, t, encoder_hidden_states=text).sample
+        with lora.active():
+            inside = models.unet(x, t, encoder_hidden_states=text,
+                                 class_labels=camera_condition([0, -2, 0.5], [0, 1, -0.25])[None]).sample
+    assert torch.equal(outside, base_output) and not torch.equal(inside, outside)
 
 
 def test_vsd_with_lambda_zero_is_sds_and_lambda_one_is_not(models):
@@ -195,7 +204,11 @@ def test_inpainting_input_has_nine_channels_with_the_mask_on_the_object(models):
     ox, oy, oside = placement.box(photo.shape[:2])
     for x0, y0, side in crops:  # every crop holds the whole object
         assert x0 <= ox + 1e-6 and y0 <= oy + 1e-6 and x0 + side >= ox + oside - 1e-6 and y0 + side >= oy + oside - 1e-6
-    assert crops[0][2] == 60  # the first crop is the full photo height
+    # Several scales: crop i's side lies in the i-th third of [object side 30, photo height 60].
+    assert [30 + 10 * i <= side <= 30 + 10 * (i + 1) for i, (_, _, side) in enumerate(crops)] == [True] * 3
+    sides = np.array([[c[2] for c in sample_crops(photo.shape[:2], placement, 2, np.random.default_rng(s))]
+                      for s in range(200)])
+    assert sides[:, 0].max() <= 45 < sides[:, 1].min() and sides.min() < 31 and sides.max() > 59
     # A crop centred on the object (x 30..60 of the photo): the object's square spans pixels 8..24 of 32.
     image, obj_alpha = global_view(rgb, alpha, photo, placement, (15.0, 0.0, 60.0), 32)
     assert image.shape == (1, 3, 32, 32) and obj_alpha.shape == (1, 1, 32, 32)

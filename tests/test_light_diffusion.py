@@ -11,7 +11,7 @@ import torch
 from scenefit.core.errors import ModelMissingError
 from scenefit.core.guidance import ModelConfig, load_guidance_models
 from scenefit.core.guidance.lora import ADAPTER
-from scenefit.core.guidance.testing import build_tiny_sd
+from scenefit.devtools.tiny_models import build_tiny_sd
 from scenefit.core.imageio import write_image
 from scenefit.core.lighting import estimate as estimate_module
 from scenefit.core.lighting.diffusion_critic import DiffusionCriticConfig, DiffusionLightCritic

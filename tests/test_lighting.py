@@ -10,7 +10,8 @@ import torch
 
 from scenefit.core.errors import InputError, ModelMissingError
 from scenefit.core.imageio import read_image, write_image
-from scenefit.core.lighting import estimate_light, light_preset, load_photo
+from scenefit.core.lighting import estimate_light, load_photo
+from scenefit.core.presets import stage_config
 from scenefit.core.lighting.depth import DepthConfig, estimate_ray_distance
 from scenefit.core.lighting.hdr import (ApparatusConfig, ApparatusScene, CriticRequest, OptimiseConfig, compose_hdr,
                                         is_dark_environment, light_prompt, optimise_scales, prior_scales)
@@ -110,7 +111,7 @@ def test_outdoor_has_no_near_light_scale():
     camera = PhotoCamera(yaw_deg=90.0, pitch_deg=-5.0, fov_deg=60.0, width=40, height=30)
     photo = np.full((30, 40, 3), 0.4, np.float32)
     photo[:10] = [0.6, 0.75, 0.98]
-    result = estimate_light(photo, (20.0, 25.0), light_preset("draft", scene_type="outdoor", map_height=16),
+    result = estimate_light(photo, (20.0, 25.0), stage_config("light", "draft", scene_type="outdoor", map_height=16),
                             photo_camera=camera)
     assert set(result.scales) == {"far"} and "near" not in result.regions
     assert result.hdr.shape == (16, 32, 3) and np.isfinite(result.hdr).all()
@@ -289,4 +290,4 @@ def test_bad_placement_and_config_are_rejected(tmp_path):
     assert main(["light", "--photo", str(tmp_path / "p.png"), "--at", "40,3", "--out", str(tmp_path / "o"),
                  "--quiet"]) == 2
     with pytest.raises(InputError):
-        light_preset("draft", scene_type="underwater")
+        stage_config("light", "draft", scene_type="underwater")

@@ -15,7 +15,7 @@ import numpy as np
 import bpy
 import scenefit
 from scenefit.blender_io import maps_from_material, mesh_from_object
-from scenefit.core.convert import convert_preset
+from scenefit.core.presets import stage_config
 from scenefit.core.pipeline import convert_and_bake
 
 tmp = Path(sys.argv[1])
@@ -47,7 +47,7 @@ out["new_images"] = sorted(n.image.filepath for n in obj.active_material.node_tr
 
 # The same conversion through core directly.
 mesh = mesh_from_object(obj, bpy.context.evaluated_depsgraph_get())
-_, report = convert_and_bake(mesh, maps_from_material(mat), tmp / "direct", convert_preset("draft"))
+_, report = convert_and_bake(mesh, maps_from_material(mat), tmp / "direct", stage_config("convert", "draft"))
 out["direct"] = report["outputs"]
 scenefit.unregister()
 print("JSON" + json.dumps(out))

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.camera import Camera, fov_from_multiplier
+from scenefit.core.camera import Camera, fov_from_multiplier, look_frame, whole_object_multiplier
 from scenefit.core.errors import InputError
 from scenefit.core.mesh import Mesh, normalize_to_unit_sphere
 from scenefit.core.primitives import grid_plane, uv_sphere
@@ -125,7 +125,18 @@ def test_equirect_directions_invert_blenders_mapping():
     assert np.allclose(blender_direction_to_equirect_uv(np.array([0.0, 1.0, 0.0])), [0.25, 0.5])
 
 
-def test_object_fits_in_view_at_fov_multiplier_one_and_is_cut_below():
+def test_fov_multiplier_one_spans_the_normalised_radius_at_the_target():
+    """The paper's FOV = tanh(r lambda / d) as the half-angle: at lambda = 1 the image's edge passes
+    through the point r from the target, perpendicular to the view (tight framing); a point at
+    r lambda is on the edge at any lambda. A whole radius-r sphere is inside the view from
+    lambda = 1.033 on (perspective shows a little more than the plane through its centre)."""
+    for multiplier in (1.0, 1.21, 1.65):
+        cam = Camera(azimuth_deg=30.0, elevation_deg=15.0, fov_multiplier=multiplier, width=64, height=64)
+        _, right, up = look_frame(cam.forward)
+        edge = cam.project(np.array([cam.target + 0.5 * multiplier * right, cam.target + 0.5 * multiplier * up]))
+        assert np.allclose(edge, [[64.0, 32.0], [32.0, 0.0]], atol=0.02)
+    assert 1.03 < whole_object_multiplier() < 1.04
+
     renderer = AssetRenderer(uv_sphere(), TEX, constant_env(1.0))
     env = torch.tensor(constant_env(1.0))
 
@@ -135,8 +146,10 @@ def test_object_fits_in_view_at_fov_multiplier_one_and_is_cut_below():
         border = torch.cat([alpha[0], alpha[-1], alpha[:, 0], alpha[:, -1]])
         return float(border.max())
 
-    assert border_coverage(1.12) == 0.0
-    assert border_coverage(0.8) > 0.0
+    # Just below the whole-object multiplier the sphere touches the border; just above it does not.
+    assert border_coverage(1.0) > 0.0
+    assert border_coverage(whole_object_multiplier() + 0.02) == 0.0
+    assert border_coverage(0.8) > 0.5
     assert fov_from_multiplier(1.21) > fov_from_multiplier(1.0)
 
 

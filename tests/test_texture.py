@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+from functools import partial
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ import torch
 from scenefit.core.errors import Cancelled, InputError
 from scenefit.core.imageio import linear_to_srgb, read_image
 from scenefit.core.mesh import Mesh
+from scenefit.core.presets import stage_config
 from scenefit.core.texture import (
     HashGrid3D,
     NeuralTexture,
@@ -19,7 +21,6 @@ from scenefit.core.texture import (
     fit_direct,
     load_neural_texture,
     masked_psnr,
-    preset,
     rasterize_uv,
     seam_fill_index,
 )
@@ -205,11 +206,14 @@ def test_config_validation(change, message):
 
 
 def test_presets_and_config_round_trip():
+    preset = partial(stage_config, "texture")
     assert preset("final") == NeuralTextureConfig()
-    assert preset("draft").n_levels < preset("final").n_levels
+    assert preset("draft").n_levels < preset("balanced").n_levels < preset("final").n_levels
     assert preset("balanced", resolution=256).resolution == 256
     with pytest.raises(InputError, match="preset"):
         preset("ultra")
+    with pytest.raises(InputError, match="stage"):
+        stage_config("bake", "final")
     config = preset("balanced")
     assert NeuralTextureConfig.from_dict(config.to_dict()) == config
 

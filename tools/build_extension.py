@@ -202,7 +202,7 @@ def build(source: Path, out: Path) -> Path:
 def build_without_wheels(out: Path | None = None) -> Path:
     """A pure-Python zip (empty wheels list) from a staged copy; the repository is left untouched."""
     out = out or DIST / f"scenefit-{version()}-nowheels.zip"
-    ignore = shutil.ignore_patterns(".venv", ".git", "dist", "out", "build", "wheels", "tests", "example",
+    ignore = shutil.ignore_patterns(".*", "dist", "out", "build", "wheels", "tests", "devtools", "example",
                                     "__pycache__", "*.egg-info", ".pytest_cache")
     with tempfile.TemporaryDirectory() as tmp:
         stage = Path(tmp) / "scenefit"

@@ -14,6 +14,8 @@ from contextlib import contextmanager
 import numpy as np
 import torch
 
+from ..camera import look_frame
+
 ADAPTER = "scenefit_vsd"
 LIGHT_DIM = 5
 CONDITION_DIM = 16 + LIGHT_DIM
@@ -24,10 +26,7 @@ AMBIENT_LIGHT = (0.25, 0.0, 0.0, 1.0, 1.0)
 
 def camera_condition(origin, forward, light=AMBIENT_LIGHT) -> torch.Tensor:
     """(CONDITION_DIM,) float32: the camera-to-world matrix (Z up) flattened, then the light vector."""
-    f = np.asarray(forward, np.float64)
-    right = np.cross(f, [0.0, 0.0, 1.0])
-    right /= max(np.linalg.norm(right), 1e-12)
-    up = np.cross(right, f)
+    f, right, up = look_frame(forward)
     c2w = np.eye(4)
     c2w[:3, 0], c2w[:3, 1], c2w[:3, 2], c2w[:3, 3] = right, up, -f, np.asarray(origin, np.float64)
     return torch.tensor(np.concatenate([c2w.ravel(), np.asarray(light, np.float64)]), dtype=torch.float32)
@@ -114,10 +113,11 @@ class LoraCritic:
 
     def train_step(self, latents: torch.Tensor, text_embedding: torch.Tensor, condition: torch.Tensor,
                    t: int, noise: torch.Tensor, alpha_bar_t: float, drop_condition: bool,
-                   prediction_type: str = "epsilon") -> float:
-        """One step of the diffusion loss on detached rendered latents; returns the loss.
+                   prediction_type: str = "epsilon", weight: float = 1.0) -> float:
+        """Add the gradient of `weight` x the diffusion loss on detached rendered latents; returns the loss.
 
         ε_ψ learns the distribution of the current renderings (ProlificDreamer's LoRA update).
+        Gradients accumulate over calls (one per view) until `step` applies and clears them.
         """
         from .weighting import add_noise
 
@@ -136,14 +136,26 @@ class LoraCritic:
             else:
                 target = noise.float()
             loss = torch.nn.functional.mse_loss(pred.float(), target)
-            self.optimizer.zero_grad(set_to_none=True)
             # Inside `active()`: leaving it turns requires_grad off, and autograd skips such leaves.
-            loss.backward()
+            (loss * weight).backward()
         return float(loss.detach())
 
+    def learn(self, latents: torch.Tensor, text_embedding: torch.Tensor, condition: torch.Tensor,
+              rng: np.random.Generator, generator: torch.Generator, alpha_bar: torch.Tensor,
+              prediction_type: str = "epsilon", weight: float = 1.0) -> float:
+        """One view's share of ε_ψ's update: t ~ U[0, T), fresh noise, the condition dropped with
+        probability `condition_dropout`, all drawn from the caller's generators (so a resumed run
+        repeats them); then `train_step`. Call `step` once the views (and ranks) are in."""
+        t = int(rng.integers(0, len(alpha_bar)))
+        noise = torch.randn(latents.shape, generator=generator).to(latents.device)
+        drop = bool(rng.uniform() < self.condition_dropout)
+        return self.train_step(latents, text_embedding, condition, t, noise, float(alpha_bar[t]), drop,
+                               prediction_type, weight)
+
     def step(self) -> None:
-        """Apply the gradients of the last train_step (after an all-reduce across ranks, if any)."""
+        """Apply the accumulated gradients (after an all-reduce across ranks, if any), then clear them."""
         for p in self.parameters():
             if p.grad is not None:
                 p.grad.nan_to_num_(0.0, 0.0, 0.0)
         self.optimizer.step()
+        self.optimizer.zero_grad(set_to_none=True)

@@ -1,4 +1,5 @@
-"""The one place diffusion models are found and loaded (Stable Diffusion 2 base and inpainting).
+"""The one place models are found and loaded: Stable Diffusion 2 base and inpainting (guidance,
+outpainting) and the transformers depth estimator (the indoor panorama).
 
 A model is a hub id (looked up in the Hugging Face cache, downloaded only when online and allowed)
 or a local folder laid out like the hub repository (unet/, vae/, text_encoder/, tokenizer/,
@@ -25,6 +26,11 @@ BASE_PARTS = {"unet": "config.json", "vae": "config.json", "text_encoder": "conf
               "tokenizer": None, "scheduler": "scheduler_config.json"}
 INPAINT_PARTS = {"unet": "config.json"}
 _WEIGHT_PATTERNS = ["*.json", "*.txt", "*.safetensors", "*.model"]
+
+
+def hub_offline(local_files_only: bool | None = None) -> bool:
+    """Whether downloads are off: asked for (local_files_only), or HF_HUB_OFFLINE=1 in the environment."""
+    return bool(local_files_only) or os.environ.get("HF_HUB_OFFLINE", "").strip().lower() in ("1", "true", "yes", "on")
 
 
 @dataclass(frozen=True)
@@ -58,7 +64,7 @@ class ModelConfig:
 
     @property
     def offline(self) -> bool:
-        return self.local_files_only or os.environ.get("HF_HUB_OFFLINE", "").strip().lower() in ("1", "true", "yes", "on")
+        return hub_offline(self.local_files_only)
 
     def device(self):
         import torch
@@ -203,6 +209,12 @@ class GuidanceModels:
             self._embeddings[prompt] = hidden.to(self.device, self.dtype)
         return self._embeddings[prompt]
 
+    def encode(self, images):
+        """SD latents (float32) of sRGB images (N, 3, H, W) in [0, 1]: the VAE posterior mean, scaled.
+        Differentiable with respect to `images` (gradients flow back through the encoder)."""
+        x = (images * 2.0 - 1.0).to(self.device, self.vae.dtype)
+        return self.vae.encode(x).latent_dist.mean.float() * self.latent_scale
+
     def release_text_encoder(self) -> None:
         self.text_encoder = None
         _empty_cache(self.device)
@@ -269,3 +281,68 @@ def load_guidance_models(config: ModelConfig, need_inpaint: bool, paths: dict[st
             module.to(device)
     return GuidanceModels(tokenizer=tokenizer, text_encoder=text_encoder, vae=vae, unet=unet, scheduler=scheduler,
                           inpaint_unet=inpaint_unet, device=device, dtype=dtype, paths=paths, config=config)
+
+
+# -- the depth estimator (transformers) ------------------------------------------------------------
+
+class DepthEstimator:
+    """A loaded transformers depth estimator: `predict(photo_srgb) -> (h, w) raw prediction`.
+
+    kind: "disparity" (relative models, inverse depth up to a scale) or "depth" (metric ones)."""
+
+    def __init__(self, model: str, cache_dir: str | None = None, local_files_only: bool | None = None,
+                 device: str = "cpu") -> None:
+        from transformers import AutoImageProcessor, AutoModelForDepthEstimation
+
+        only_local = hub_offline(local_files_only)
+        source = str(Path(model).expanduser()) if Path(model).expanduser().exists() else model
+        try:
+            self.processor = AutoImageProcessor.from_pretrained(source, cache_dir=cache_dir,
+                                                                local_files_only=only_local)
+            self.model = AutoModelForDepthEstimation.from_pretrained(source, cache_dir=cache_dir,
+                                                                     local_files_only=only_local)
+        except (OSError, ValueError) as error:
+            raise ModelMissingError(
+                f"The depth model '{model}' was not found in {_where_looked(model, cache_dir)}"
+                f"{' (offline: downloads are off)' if only_local else ''}. Provide it by downloading it on a "
+                f"connected machine (`huggingface-cli download {model}`) into that cache, or pass a local folder "
+                f"holding config.json, the weights and preprocessor_config.json (--depth-model PATH); or use "
+                f"the geometric fallback (--depth geometric). Cause: {str(error).splitlines()[0][:200]}") from error
+        self.model.eval().to(device)
+        self.device = device
+        self.name = model
+        kind = getattr(self.model.config, "depth_estimation_type", None)
+        self.kind = "depth" if kind == "metric" or "zoedepth" in self.model.config.model_type else "disparity"
+
+    def predict(self, photo_srgb):
+        """Raw prediction resized to the photo: disparity (relative models) or depth (metric ones)."""
+        import numpy as np
+        import torch
+        import torch.nn.functional as F
+
+        image = np.clip(np.round(photo_srgb[..., :3] * 255.0), 0, 255).astype(np.uint8)
+        inputs = self.processor(images=image, return_tensors="pt")
+        with torch.no_grad():
+            pred = self.model(**{k: v.to(self.device) for k, v in inputs.items()}).predicted_depth
+        pred = F.interpolate(pred[:, None].float(), size=image.shape[:2], mode="bilinear", align_corners=False)
+        return pred[0, 0].cpu().numpy().astype(np.float32)
+
+
+def _where_looked(model: str, cache_dir: str | None) -> str:
+    if Path(model).expanduser().exists() or model.startswith((".", "/", "~")):
+        return f"the folder {Path(model).expanduser()}"
+    hub = cache_dir or os.environ.get("HF_HUB_CACHE") or os.path.join(
+        os.environ.get("HF_HOME", os.path.expanduser("~/.cache/huggingface")), "hub")
+    return f"the Hugging Face cache {hub}"
+
+
+_DEPTH_CACHE: dict[tuple, DepthEstimator] = {}
+
+
+def load_depth_estimator(model: str, cache_dir: str | None = None, local_files_only: bool | None = None,
+                         device: str = "cpu") -> DepthEstimator:
+    """The depth estimator `model` (hub id or folder), loaded once per process."""
+    key = (model, cache_dir, hub_offline(local_files_only), device)
+    if key not in _DEPTH_CACHE:
+        _DEPTH_CACHE[key] = DepthEstimator(model, cache_dir, local_files_only, device)
+    return _DEPTH_CACHE[key]

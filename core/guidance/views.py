@@ -6,13 +6,12 @@ premultiplied radiance (background 0, see SceneOptions.hide_emitters) and its al
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import torch
 import torch.nn.functional as F
 
 from ..errors import InputError
+from ..placement import Placement
 
 GREY = (0.5, 0.5, 0.5)
 
@@ -49,41 +48,21 @@ def local_view(rgb: torch.Tensor, alpha: torch.Tensor, color: tuple[float, float
     return image
 
 
-@dataclass(frozen=True)
-class Placement:
-    """Where the object goes in the photo: the centre of its (square) rendering, as fractions of the
-    photo's width and height, and the rendering's side as a fraction of the photo's height."""
-
-    center: tuple[float, float] = (0.5, 0.6)
-    size: float = 0.4
-
-    def __post_init__(self) -> None:
-        x, y = self.center
-        if not (0.0 <= x <= 1.0 and 0.0 <= y <= 1.0):
-            raise InputError(f"The placement {self.center} lies outside the photo; give fractions in [0, 1].")
-        if not 0.0 < self.size <= 1.0:
-            raise InputError(f"The object's size must be a fraction of the photo's height in (0, 1], got {self.size}.")
-
-    def box(self, photo_hw: tuple[int, int]) -> tuple[float, float, float]:
-        """(x0, y0, side) of the object's square in photo pixels."""
-        h, w = photo_hw
-        side = self.size * h
-        return self.center[0] * w - side / 2, self.center[1] * h - side / 2, side
-
-
 def sample_crops(photo_hw: tuple[int, int], placement: Placement, count: int,
                  rng: np.random.Generator) -> list[tuple[float, float, float]]:
-    """`count` square crops (x0, y0, side) that always contain the object's square.
+    """`count` square crops (x0, y0, side) at several scales, each holding the object's whole square.
 
-    The first is the largest square that fits in the photo and holds the object; the others have
-    random sides between the object's and that, at random positions that still hold it.
+    The sides are stratified between the object's square and the largest square the photo holds
+    around it: crop i's side is drawn in the i-th of `count` equal slices of that range, so every
+    step sees a close crop and a wide one (one crop: anywhere in the range). Positions are random
+    among those that keep the object inside (and the crop inside the photo where it can be).
     """
     h, w = photo_hw
     ox, oy, oside = placement.box(photo_hw)
     biggest = max(float(min(h, w)), oside)
     crops = []
     for i in range(count):
-        side = biggest if i == 0 else float(rng.uniform(oside, biggest))
+        side = oside + (biggest - oside) * (i + float(rng.uniform())) / count
         # x0 must satisfy x0 <= ox and x0 + side >= ox + oside, and stay in the photo where it can.
         lo_x, hi_x = ox + oside - side, ox
         lo_y, hi_y = oy + oside - side, oy

@@ -14,15 +14,14 @@ naming the model, where it was looked for and how to provide it.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError, ModelMissingError
+from ..guidance.models import load_depth_estimator
 from ..photo import PhotoCamera
-from .panorama import CAMERA_HEIGHT, Placement, geometric_ray_distance
+from .panorama import CAMERA_HEIGHT, FloorPoint, geometric_ray_distance
 
 DEFAULT_DEPTH_MODEL = "depth-anything/Depth-Anything-V2-Small-hf"
 DEPTH_TYPES = ("auto", "model", "geometric")
@@ -50,76 +49,14 @@ class DepthResult:
     detail: dict
 
 
-def offline(local_files_only: bool | None) -> bool:
-    if local_files_only is not None:
-        return bool(local_files_only)
-    return os.environ.get("HF_HUB_OFFLINE", "").strip().lower() in ("1", "true", "yes", "on")
-
-
-def _where_looked(model: str, cache_dir: str | None) -> str:
-    if Path(model).expanduser().exists() or model.startswith((".", "/", "~")):
-        return f"the folder {Path(model).expanduser()}"
-    hub = cache_dir or os.environ.get("HF_HUB_CACHE") or os.path.join(
-        os.environ.get("HF_HOME", os.path.expanduser("~/.cache/huggingface")), "hub")
-    return f"the Hugging Face cache {hub}"
-
-
-class DepthModel:
-    """A loaded transformers depth estimator: `predict(photo_srgb) -> (h, w) raw prediction`."""
-
-    def __init__(self, model: str, cache_dir: str | None = None, local_files_only: bool | None = None,
-                 device: str = "cpu") -> None:
-        try:
-            from transformers import AutoImageProcessor, AutoModelForDepthEstimation
-        except ImportError as error:  # pragma: no cover - transformers is pinned
-            raise ModelMissingError(f"transformers is not installed, so the depth model '{model}' cannot be "
-                                    f"loaded ({error}).") from error
-        only_local = offline(local_files_only)
-        source = str(Path(model).expanduser()) if Path(model).expanduser().exists() else model
-        try:
-            self.processor = AutoImageProcessor.from_pretrained(source, cache_dir=cache_dir,
-                                                                local_files_only=only_local)
-            self.model = AutoModelForDepthEstimation.from_pretrained(source, cache_dir=cache_dir,
-                                                                     local_files_only=only_local)
-        except (OSError, ValueError) as error:
-            raise ModelMissingError(
-                f"The depth model '{model}' was not found in {_where_looked(model, cache_dir)}"
-                f"{' (offline: downloads are off)' if only_local else ''}. Provide it by downloading it on a "
-                f"connected machine (`huggingface-cli download {model}`) into that cache, or pass a local folder "
-                f"holding config.json, the weights and preprocessor_config.json (--depth-model PATH); or use "
-                f"the geometric fallback (--depth geometric). Cause: {str(error).splitlines()[0][:200]}") from error
-        self.model.eval().to(device)
-        self.device = device
-        self.name = model
-        kind = getattr(self.model.config, "depth_estimation_type", None)
-        self.kind = "depth" if kind == "metric" or "zoedepth" in self.model.config.model_type else "disparity"
-
-    def predict(self, photo_srgb: np.ndarray) -> np.ndarray:
-        """Raw prediction resized to the photo: disparity (relative models) or depth (metric ones)."""
-        import torch
-        import torch.nn.functional as F
-
-        image = np.clip(np.round(photo_srgb[..., :3] * 255.0), 0, 255).astype(np.uint8)
-        inputs = self.processor(images=image, return_tensors="pt")
-        with torch.no_grad():
-            pred = self.model(**{k: v.to(self.device) for k, v in inputs.items()}).predicted_depth
-        pred = F.interpolate(pred[:, None].float(), size=image.shape[:2], mode="bilinear", align_corners=False)
-        return pred[0, 0].cpu().numpy().astype(np.float32)
-
-
-_CACHE: dict[tuple, DepthModel] = {}
-
-
-def load_depth_model(config: DepthConfig) -> DepthModel:
-    """The configured model, loaded once per process. depth_type "auto" looks only on this machine."""
+def load_depth_model(config: DepthConfig):
+    """The configured model through core/guidance/models.py (loaded once per process); depth_type
+    "auto" looks only on this machine."""
     local_only = True if config.depth_type == "auto" else config.local_files_only
-    key = (config.model, config.cache_dir, offline(local_only), config.device)
-    if key not in _CACHE:
-        _CACHE[key] = DepthModel(config.model, config.cache_dir, local_only, config.device)
-    return _CACHE[key]
+    return load_depth_estimator(config.model, config.cache_dir, local_only, config.device)
 
 
-def align_to_floor(prediction: np.ndarray, kind: str, camera: PhotoCamera, placement: Placement,
+def align_to_floor(prediction: np.ndarray, kind: str, camera: PhotoCamera, placement: FloorPoint,
                    height: float = CAMERA_HEIGHT) -> tuple[np.ndarray, dict]:
     """Distances along rays from a relative prediction, scaled so the placement pixel lies on the floor.
 
@@ -129,8 +66,7 @@ def align_to_floor(prediction: np.ndarray, kind: str, camera: PhotoCamera, place
     """
     h, w = prediction.shape
     dirs = camera.ray_directions()
-    yaw, pitch = np.radians(camera.yaw_deg), np.radians(camera.pitch_deg)
-    forward = np.array([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)])
+    forward = camera.basis()[0]
     cos_axis = np.maximum(dirs @ forward, 1e-3)
     pred = prediction.astype(np.float64)
     if kind == "disparity":
@@ -153,7 +89,7 @@ def align_to_floor(prediction: np.ndarray, kind: str, camera: PhotoCamera, place
     return distance, {"scale": round(scale, 6), "prediction_kind": kind, "placement_axis_depth": round(target_z, 4)}
 
 
-def estimate_ray_distance(photo_srgb: np.ndarray, camera: PhotoCamera, placement: Placement,
+def estimate_ray_distance(photo_srgb: np.ndarray, camera: PhotoCamera, placement: FloorPoint,
                           config: DepthConfig = DepthConfig()) -> DepthResult:
     """Distances along the photo's rays: from the depth model, or the geometric room when there is none."""
     geometric_reason = "depth_type='geometric' was asked for"

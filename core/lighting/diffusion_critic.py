@@ -84,10 +84,6 @@ class DiffusionLightCritic:
         self.generator = torch.Generator().manual_seed(config.seed)
         self.history: list[dict] = []
 
-    def _encode(self, image: torch.Tensor) -> torch.Tensor:
-        x = (image * 2.0 - 1.0).to(self.models.device, self.models.vae.dtype)
-        return self.models.vae.encode(x).latent_dist.mean.float() * self.models.latent_scale
-
     def _anneal_lora(self, request: CriticRequest) -> None:
         n = max(request.iterations - 1, 1)
         factor = 1.0 - (1.0 - self.config.lr_lora_final_factor) * min(request.iteration, n) / n
@@ -109,7 +105,7 @@ class DiffusionLightCritic:
                 image = tonemap_srgb_torch(leaf, self.config.l_white).permute(2, 0, 1)[None]
                 if image.shape[-2:] != (size, size):
                     image = F.interpolate(image, size=(size, size), mode="bilinear", align_corners=False)
-                latents = self._encode(image)
+                latents = self.models.encode(image)
                 # VSD at t ~ U[t_range]: ∇z = w_t (ε_φ (CFG) - ε_ψ).
                 t = int(self.rng.integers(request.t_range[0], request.t_range[1] + 1))
                 noise = torch.randn(latents.shape, generator=self.generator).to(latents.device)
@@ -118,14 +114,9 @@ class DiffusionLightCritic:
                 out = self.score(latents, t, noise, text, uncond, lam=self.config.lambda_vsd, condition=condition)
                 out.loss.backward()
             grads.append(torch.nan_to_num(leaf.grad, nan=0.0, posinf=0.0, neginf=0.0))
-            # ε_ψ learns the current renderings (one LoRA step on the detached latents, handed over in the
-            # UNet's dtype: LoraCritic.train_step feeds them to the UNet as they come).
-            t_lora = int(self.rng.integers(0, self.score.num_train_timesteps))
-            unet_dtype = self.models.unet.dtype
-            lora_noise = torch.randn(latents.shape, generator=self.generator).to(latents.device, unet_dtype)
-            drop = bool(self.rng.uniform() < self.config.condition_dropout)
-            lora_loss = self.lora.train_step(latents.detach().to(unet_dtype), text, condition, t_lora, lora_noise,
-                                             float(self.score.alpha_bar[t_lora]), drop, self.score.prediction_type)
+            # ε_ψ learns the current renderings (one LoRA step on the detached latents).
+            lora_loss = self.lora.learn(latents, text, condition, self.rng, self.generator, self.score.alpha_bar,
+                                        self.score.prediction_type)
             self.lora.step()
             self.history.append({"iteration": request.iteration, "view": int(view), "t": t,
                                  "grad_norm": out.metrics["grad_norm"], "lora_loss": round(lora_loss, 6)})

@@ -37,7 +37,6 @@ from .regions import RegionThresholds, bright_regions
 DEFAULT_FOV_DEG = 60.0   # horizontal; a typical phone/kit-lens view (~28 mm full-frame equivalent)
 SCENE_TYPES = ("auto", "indoor", "outdoor")
 CRITIC_TYPES = ("none", "reference", "diffusion")
-PRIOR_TYPES = ("inverse_tonemap",)
 
 
 @dataclass(frozen=True)
@@ -48,7 +47,6 @@ class LightConfig:
     map_height: int = 128                     # the map is map_height x 2 map_height
     depth: DepthConfig = DepthConfig()
     thresholds: RegionThresholds = RegionThresholds()
-    prior_type: str = "inverse_tonemap"
     l_white: float = DEFAULT_L_WHITE
     critic_type: str = "none"
     apparatus: ApparatusConfig = ApparatusConfig()
@@ -64,8 +62,6 @@ class LightConfig:
             raise InputError(f"scene_type must be one of {', '.join(SCENE_TYPES)}, got {self.scene_type!r}.")
         if self.critic_type not in CRITIC_TYPES:
             raise InputError(f"critic_type must be one of {', '.join(CRITIC_TYPES)}, got {self.critic_type!r}.")
-        if self.prior_type not in PRIOR_TYPES:
-            raise InputError(f"prior_type must be one of {', '.join(PRIOR_TYPES)}, got {self.prior_type!r}.")
         if self.fov_deg is not None and not 1.0 <= self.fov_deg <= 170.0:
             raise InputError(f"The photo's field of view must be between 1 and 170 degrees, got {self.fov_deg}.")
         if not -89.0 <= self.camera_pitch_deg <= 89.0:
@@ -74,24 +70,6 @@ class LightConfig:
             raise InputError(f"map_height must be between 8 and 4096, got {self.map_height}.")
         if not self.l_white > 1.0:
             raise InputError(f"l_white must be above 1, got {self.l_white}.")
-
-
-# Paper setting in "final" (2000 iterations, lr 0.01; the paper renders at 512 with 128 spp on GPUs);
-# fewer iterations take a larger lr so the scales can travel as far.
-LIGHT_PRESETS: dict[str, LightConfig] = {
-    "draft": LightConfig(map_height=64, apparatus=ApparatusConfig(render_size=48, spp=4),
-                         optimise=OptimiseConfig(iterations=60, lr=0.1)),
-    "balanced": LightConfig(map_height=128, apparatus=ApparatusConfig(render_size=64, spp=8),
-                            optimise=OptimiseConfig(iterations=200, lr=0.05)),
-    "final": LightConfig(map_height=256, apparatus=ApparatusConfig(render_size=256, spp=32),
-                         optimise=OptimiseConfig(iterations=2000, lr=0.01)),
-}
-
-
-def light_preset(name: str, **overrides) -> LightConfig:
-    if name not in LIGHT_PRESETS:
-        raise InputError(f"Unknown light preset {name!r}; choose one of {', '.join(LIGHT_PRESETS)}.")
-    return replace(LIGHT_PRESETS[name], **overrides)
 
 
 @dataclass
@@ -146,22 +124,6 @@ def load_photo(path: str | Path) -> tuple[np.ndarray, dict]:
         if focal35:
             info["fov_from_metadata_deg"] = round(float(np.degrees(2 * np.arctan(36.0 / (2 * float(focal35))))), 3)
     return rgb, info
-
-
-def parse_placement(text_or_xy, width: int, height: int) -> tuple[float, float]:
-    """`X,Y` as fractions of the photo's width and height when both are <= 1, else as pixels."""
-    if isinstance(text_or_xy, str):
-        try:
-            x, y = (float(v) for v in text_or_xy.split(","))
-        except ValueError:
-            raise InputError(f"--at takes X,Y (fractions of width and height, or pixels), got {text_or_xy!r}.") from None
-    else:
-        x, y = (float(v) for v in text_or_xy)
-    if 0.0 <= x <= 1.0 and 0.0 <= y <= 1.0:
-        x, y = x * width, y * height
-    if not (0.0 <= x <= width and 0.0 <= y <= height):
-        raise InputError(f"The placement ({x:g}, {y:g}) lies outside the {width}x{height} photo.")
-    return x, y
 
 
 def default_object() -> tuple[Mesh, torch.Tensor]:
@@ -242,7 +204,7 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     regions = bright_regions(pano.ldr, pano.distance, scene_type, config.thresholds)
     prior = prior_scales(pano.ldr, regions, config.l_white)
     decisions["regions"] = {name: round(float(mask.mean()), 5) for name, mask in regions.items()}
-    decisions["prior"] = {"type": config.prior_type, "l_white": config.l_white,
+    decisions["prior"] = {"type": "inverse_tonemap", "l_white": config.l_white,
                           "scales": {k: round(v, 5) for k, v in prior.items()}}
     prior_hdr = hdr_from_scales(pano.ldr, regions, prior)
     dark, dark_info = is_dark_environment(prior_hdr, regions)

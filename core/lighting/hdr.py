@@ -31,6 +31,7 @@ from ..imageio import srgb_to_linear
 from ..mesh import Mesh
 from ..progress import ProgressCallback, check_cancel, emit
 from ..render import AssetRenderer, SceneOptions, SphereSpec
+from ..texture.neural_texture import split_channels
 
 LOG_SCALE_MIN = math.log(1e-4)
 LOG_SCALE_MAX = math.log(1e6)
@@ -180,7 +181,7 @@ class ApparatusScene:
         center = (config.sphere_offset[0], config.sphere_offset[1], floor_z + config.sphere_radius)
         self.sphere = SphereSpec(center=center, radius=config.sphere_radius, albedo=1.0)
         h, w = envmap_shape
-        self.maps = (maps[..., 0:3].contiguous(), maps[..., 3:4].contiguous(), maps[..., 4:5].contiguous())
+        self.maps = tuple(m.contiguous() for m in split_channels(maps))
         self.renderer = AssetRenderer(mesh, tuple(maps.shape[:2]), np.full((h, w, 3), 0.5, np.float32),
                                       SceneOptions(floor=config.floor, sphere=self.sphere, max_depth=config.max_depth,
                                                    integrator_type="prb"))

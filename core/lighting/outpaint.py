@@ -51,11 +51,6 @@ class OutpaintConfig:
             raise InputError(f"seam_band_fraction must be in [0, 0.5], got {self.seam_band_fraction}.")
 
 
-def _encode(models: GuidanceModels, image: torch.Tensor) -> torch.Tensor:
-    x = (image * 2.0 - 1.0).to(models.device, models.vae.dtype)
-    return models.vae.encode(x).latent_dist.mean.float() * models.latent_scale
-
-
 def _decode(models: GuidanceModels, latents: torch.Tensor) -> torch.Tensor:
     x = models.vae.decode((latents / models.latent_scale).to(models.vae.dtype)).sample.float()
     return ((x + 1.0) / 2.0).clamp(0.0, 1.0)
@@ -75,7 +70,7 @@ def inpaint(models: GuidanceModels, image: torch.Tensor, paint: torch.Tensor, co
     f = models.vae_scale_factor
     # Masked image (painted part blanked to grey) -> latents; the mask at latent resolution.
     masked = image * (1.0 - paint) + 0.5 * paint
-    masked_latents = _encode(models, masked)
+    masked_latents = models.encode(masked)
     mask = (F.adaptive_max_pool2d(paint, (h // f, w // f)) > 0).float().to(models.device)
     text = torch.cat([models.embed(config.negative_prompt), models.embed(config.prompt)], dim=0)
     latents = torch.randn((1, 4, h // f, w // f), generator=generator).to(models.device) * scheduler.init_noise_sigma

@@ -31,8 +31,8 @@ from ..photo import PhotoCamera
 from ..render import blender_direction_to_equirect_uv, equirect_directions
 
 CAMERA_HEIGHT = 1.0
-MIN_PLACEMENT_DEPRESSION_DEG = 2.0
-ORIGIN_LIFT = 0.05  # the map is seen from this high above the floor point (camera heights): the object's centre  # a placement ray must point at least this far below the horizon
+MIN_PLACEMENT_DEPRESSION_DEG = 2.0  # a placement ray must point at least this far below the horizon
+ORIGIN_LIFT = 0.05  # the map is seen from this high above the floor point (camera heights): the object's centre
 
 
 @dataclass
@@ -48,7 +48,9 @@ class Panorama:
 
 
 @dataclass(frozen=True)
-class Placement:
+class FloorPoint:
+    """Where the ray through the placement's pixel meets the floor: the object stands there."""
+
     pixel: tuple[float, float]     # (x, y) in photo pixels
     object_position: np.ndarray    # world, on the floor z = 0
     clamped: bool                  # the ray was lifted below the horizon to meet the floor
@@ -61,7 +63,7 @@ def pixel_ray(camera: PhotoCamera, x: float, y: float) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
-def place_on_floor(camera: PhotoCamera, pixel: tuple[float, float], height: float = CAMERA_HEIGHT) -> Placement:
+def place_on_floor(camera: PhotoCamera, pixel: tuple[float, float], height: float = CAMERA_HEIGHT) -> FloorPoint:
     """Where the placement pixel's ray meets the floor; rays at or above the horizon are tilted just below it."""
     x, y = pixel
     if not (0 <= x <= camera.width and 0 <= y <= camera.height):
@@ -74,10 +76,10 @@ def place_on_floor(camera: PhotoCamera, pixel: tuple[float, float], height: floa
         d = np.array([*(horizontal * np.cos(np.arcsin(-min_dz))), min_dz])
     t = height / -d[2]
     origin = np.array([0.0, 0.0, height])
-    return Placement((float(x), float(y)), origin + t * d, clamped)
+    return FloorPoint((float(x), float(y)), origin + t * d, clamped)
 
 
-def geometric_ray_distance(camera: PhotoCamera, placement: Placement, height: float = CAMERA_HEIGHT) -> np.ndarray:
+def geometric_ray_distance(camera: PhotoCamera, placement: FloorPoint, height: float = CAMERA_HEIGHT) -> np.ndarray:
     """The fallback room: floor z = 0 and a cylindrical wall around the camera, (H, W) distances along rays.
 
     The wall stands at three times the floor distance to the object (at least 4 camera heights),
@@ -177,7 +179,7 @@ def _resize_for_splat(photo: np.ndarray, distance: np.ndarray, long_side: int) -
     return photo_r, (1.0 / np.maximum(inv, 1e-9)).astype(np.float32)
 
 
-def indoor_panorama(photo: np.ndarray, ray_distance: np.ndarray, camera: PhotoCamera, placement: Placement,
+def indoor_panorama(photo: np.ndarray, ray_distance: np.ndarray, camera: PhotoCamera, placement: FloorPoint,
                     height: int = 128, splat_long_side: int | None = None,
                     height_above_floor: float = CAMERA_HEIGHT) -> Panorama:
     """Unwrap the photo around the object using its per-pixel distance along the camera rays.
@@ -234,14 +236,8 @@ def outdoor_panorama(photo: np.ndarray, camera: PhotoCamera, height: int = 128,
 
     width = 2 * height
     dirs = equirect_directions(height, width)
-    yaw, pitch = np.radians(camera.yaw_deg), np.radians(camera.pitch_deg)
-    forward = np.array([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)])
-    right = np.cross(forward, [0.0, 0.0, 1.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
+    forward, right, up, half_w, half_h = camera.basis()
     z = dirs @ forward
-    half_w = np.tan(np.radians(camera.fov_deg) / 2)
-    half_h = half_w * camera.height / camera.width
     with np.errstate(divide="ignore", invalid="ignore"):
         sx = (dirs @ right) / z / half_w
         sy = (dirs @ up) / z / half_h

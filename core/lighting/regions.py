@@ -20,9 +20,6 @@ import numpy as np
 
 from ..errors import InputError
 
-REGION_NAMES = ("far", "near")
-
-
 @dataclass(frozen=True)
 class RegionThresholds:
     far: float = 0.95          # tau_f

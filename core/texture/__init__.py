@@ -8,11 +8,11 @@ bake_maps(texture, C, border, fill, out_dir)  PNG maps + texture.pt; load_neural
 from .bake import bake_maps, bake_texture, load_neural_texture, save_neural_texture
 from .fit_direct import FitResult, encode_for_metric, fit_direct, masked_psnr
 from .hashgrid import HashGrid3D
-from .neural_texture import CHANNELS, PRESETS, NeuralTexture, NeuralTextureConfig, TexelPlan, preset, split_channels
+from .neural_texture import CHANNELS, NeuralTexture, NeuralTextureConfig, TexelPlan, split_channels
 from .uv_raster import UVRaster, rasterize_uv, seam_fill_index
 
 __all__ = [
-    "CHANNELS", "PRESETS", "FitResult", "HashGrid3D", "NeuralTexture", "NeuralTextureConfig", "TexelPlan",
+    "CHANNELS", "FitResult", "HashGrid3D", "NeuralTexture", "NeuralTextureConfig", "TexelPlan",
     "UVRaster", "bake_maps", "bake_texture", "encode_for_metric", "fit_direct", "load_neural_texture",
-    "masked_psnr", "preset", "rasterize_uv", "save_neural_texture", "seam_fill_index", "split_channels",
+    "masked_psnr", "rasterize_uv", "save_neural_texture", "seam_fill_index", "split_channels",
 ]

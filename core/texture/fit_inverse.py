@@ -21,6 +21,7 @@ from ..camera import Camera
 from ..mesh import Mesh
 from ..progress import ProgressCallback, check_cancel, emit
 from ..render import AssetRenderer, SceneOptions, equirect_directions
+from .neural_texture import split_channels
 
 
 def studio_environment(height: int = 64) -> np.ndarray:
@@ -50,11 +51,6 @@ class InverseFitResult:
     iterations: int
     loss_history: list[float] = field(default_factory=list)
     seconds_per_iteration: float = 0.0
-
-
-def split_channels(stack: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """(H, W, 5) -> base colour (H, W, 3), roughness (H, W, 1), metallic (H, W, 1)."""
-    return stack[..., 0:3], stack[..., 3:4], stack[..., 4:5]
 
 
 def fit_inverse_rendering(texture_fn: Callable[[], torch.Tensor], parameters: Iterable[torch.nn.Parameter],

@@ -21,7 +21,7 @@ CHANNELS = ("base_r", "base_g", "base_b", "roughness", "metallic")
 
 @dataclass(frozen=True)
 class NeuralTextureConfig:
-    """Shape of the neural texture. Defaults follow the paper / Instant-NGP; see PRESETS for faster ones.
+    """Shape of the neural texture. Defaults follow the paper / Instant-NGP; core/presets.py has faster ones.
 
     resolution: texture map size (H = W) the position map is rasterised and the maps are baked at.
     n_levels, n_features, log2_table, base_resolution, finest_resolution: the hash grid (Instant-NGP
@@ -90,21 +90,6 @@ class NeuralTextureConfig:
             raise InputError(f"Neural texture config has unknown fields {unknown}; was it saved by a newer SceneFit?")
         return NeuralTextureConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
 
-
-# Speed/accuracy trade-offs. "final" is the paper's Instant-NGP-sized grid; the others shrink the
-# grid so a CPU converts a 512^2 texture quickly (timings in the module's tests/bench notes).
-PRESETS: dict[str, NeuralTextureConfig] = {
-    "final": NeuralTextureConfig(),
-    "balanced": NeuralTextureConfig(n_levels=12, log2_table=18, finest_resolution=1024),
-    "draft": NeuralTextureConfig(n_levels=8, log2_table=17, finest_resolution=512),
-}
-
-
-def preset(name: str, **overrides) -> NeuralTextureConfig:
-    """A named config ("draft", "balanced", "final"), optionally with fields replaced."""
-    if name not in PRESETS:
-        raise InputError(f"Unknown neural texture preset '{name}'; choose one of {', '.join(PRESETS)}.")
-    return NeuralTextureConfig(**{**PRESETS[name].to_dict(), **overrides})
 
 
 @dataclass(eq=False)
@@ -235,9 +220,10 @@ class NeuralTexture(torch.nn.Module):
         return super()._apply(fn, recurse)
 
 
-def split_channels(texture: torch.Tensor | np.ndarray):
-    """(..., 5) -> base colour (..., 3), roughness (...), metallic (...)."""
-    return texture[..., 0:3], texture[..., 3], texture[..., 4]
+def split_channels(stack: torch.Tensor | np.ndarray):
+    """The 5-channel stack (..., 5) as the renderer takes it: base colour (..., 3), roughness (..., 1),
+    metallic (..., 1) (views, not copies)."""
+    return stack[..., 0:3], stack[..., 3:4], stack[..., 4:5]
 
 
 def _tensor(x) -> torch.Tensor:

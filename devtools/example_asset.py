@@ -1,4 +1,4 @@
-"""The bundled example asset, made by Blender itself: a UV-unwrapped Suzanne with a procedural
+"""The demo's example asset, made by Blender itself (development only: it resets Blender's open file): a UV-unwrapped Suzanne with a procedural
 material baked by Cycles into image maps, saved as a folder core reads without bpy."""
 from __future__ import annotations
 
@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..blender_io.material import image_pixels_linear
+from ..blender_io.mesh import mesh_from_object
 from ..core.asset_io import save_asset_folder
 from ..core.maps import PBRMaps
-from .material import image_pixels_linear
-from .mesh import mesh_from_object
 
 EXAMPLE_SIZE = 512
 

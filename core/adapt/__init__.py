@@ -1,0 +1,32 @@
+"""The adapt stage: a neural texture restyled by diffusion critics (paper §3.1, §3.3, appendix).
+
+Modes (`mode_type`):
+- "scene": the paper's scene-conditional adaptation, complete setup (m): the local view (object on
+  solid colours, vanilla SD with reference feature injection, VSD) and the global views (object
+  composited into the photo at its placement, crops at several scales, SD inpainting), weighed
+  equally. Starts from the converted texture.
+- "generate": scene-agnostic texture generation from a prompt (setup (a)): fresh texture, no
+  reference, 72-view camera sampling over elevations {20, 30, 45}, λ_FOV in [0.6, 1.21],
+  view-dependent prompts, optional random spherical-Gaussian lights, coarse-to-fine stages.
+- "edit": scene-agnostic editing from an instruction (setup (c)): the object prompt and the
+  instruction combined into one description, reference feature injection, local views only.
+
+config.py       AdaptConfig and StageSpec (paper defaults), the modes' settings, the stage schedule
+sampling.py     every random choice of one view of one step
+system.py       AdaptSystem: build / step / finish; adapt_texture and adapt_and_bake
+checkpoint.py   save and resume
+distributed.py  torch.distributed: views spread over ranks, gradients summed
+"""
+from .checkpoint import CHECKPOINT_FILE, load_checkpoint, save_checkpoint
+from .config import (GENERATE_STAGES, MODE_SETTINGS, MODE_TYPES, SCENE_STAGES, AdaptConfig, StageSpec, edit_prompt,
+                     stage_at)
+from .distributed import init_distributed
+from .sampling import sample_camera, sample_view, spherical_gaussian_environment, view_suffix
+from .system import AdaptInputs, AdaptResult, AdaptSystem, adapt_and_bake, adapt_texture
+
+__all__ = [
+    "CHECKPOINT_FILE", "GENERATE_STAGES", "MODE_SETTINGS", "MODE_TYPES", "SCENE_STAGES", "AdaptConfig", "AdaptInputs",
+    "AdaptResult", "AdaptSystem", "StageSpec", "adapt_and_bake", "adapt_texture", "edit_prompt", "init_distributed",
+    "load_checkpoint", "sample_camera", "sample_view", "save_checkpoint", "spherical_gaussian_environment",
+    "stage_at", "view_suffix",
+]

@@ -1,0 +1,474 @@
+"""The adapt stage as a small system: build (models, texture, renderer, critics, resume), step (one
+optimisation step over `views_per_step` views), finish (the result and its decisions).
+
+One view of a step (core/adapt/sampling.py draws its camera, light, background, t and noise):
+  render the texture (Mitsuba, differentiable) -> local view (object on a solid colour) and global
+  views (object in the photo, crops at several scales) -> VAE encode -> critics (UNet passes;
+  local and global weighed equally) -> backward through the VAE and the renderer into the texture,
+  scaled by 1 / views_per_step -> ε_ψ's LoRA loss on the local latents (same weight).
+After the step's views (and the ranks' shares, summed by torch.distributed): one Adam step on the
+texture and one on ε_ψ.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..decision import Decision, decisions_to_dict
+from ..errors import InputError
+from ..guidance.critics import ScoreCritic
+from ..guidance.injection import ReferenceInjector
+from ..guidance.lora import LoraCritic, camera_condition
+from ..guidance.models import GuidanceModels, load_guidance_models, locate_models
+from ..guidance.views import global_view, latent_mask, local_view, masked_image
+from ..guidance.weighting import normal_weight_map
+from ..mesh import Mesh
+from ..placement import Placement
+from ..progress import ProgressCallback, check_cancel, emit
+from ..render import AssetRenderer, RenderOutput, SceneOptions
+from ..presets import stage_config
+from ..texture.neural_texture import NeuralTexture, split_channels
+from ..texture.uv_raster import UVRaster
+from .checkpoint import CHECKPOINT_FILE, load_checkpoint, save_checkpoint
+from .config import AdaptConfig
+from .distributed import join_process_group, rank_world, sum_gradients, views_of_rank
+from .sampling import ViewSample, sample_view
+
+PHASES = ("render", "vae", "unet", "vae_backward", "render_backward", "lora", "step")
+
+
+@dataclass
+class AdaptInputs:
+    """What the stage works on. mesh: normalised (radius 0.5); raster: its UV raster at the texture's
+    resolution; texture: the converted neural texture (None only for "generate"); photo: sRGB float
+    (H, W, 3) in [0, 1] and placement ("scene"); envmap: (He, 2He, 3) linear ("envmap" light)."""
+
+    mesh: Mesh
+    raster: UVRaster
+    texture: NeuralTexture | None = None
+    photo: np.ndarray | None = None
+    placement: Placement | None = None
+    envmap: np.ndarray | None = None
+
+    def validate(self, config: AdaptConfig) -> None:
+        if config.mode_type != "generate" and self.texture is None:
+            raise InputError(f"Mode '{config.mode_type}' adapts an existing texture; convert the asset first.")
+        if config.views_type == "local+global":
+            if self.photo is None or self.placement is None:
+                raise InputError("Scene-conditional adaptation needs the photo and where the object goes in it.")
+            photo = np.asarray(self.photo)
+            if photo.ndim != 3 or photo.shape[2] != 3 or min(photo.shape[:2]) < 8:
+                raise InputError(f"The photo must be an RGB image of at least 8x8 pixels, got {photo.shape}.")
+        if config.light_type == "envmap" and self.envmap is None:
+            raise InputError("light_type 'envmap' needs an environment map (e.g. the estimated HDR map).")
+        if self.texture is not None and self.texture.config.resolution != self.raster.resolution[0]:
+            raise InputError(f"The texture is {self.texture.config.resolution}² but the UV raster is "
+                             f"{self.raster.resolution[0]}²; rasterise at the texture's resolution.")
+
+
+@dataclass
+class AdaptResult:
+    texture: NeuralTexture
+    iterations: int
+    seconds: float
+    history: list[dict]
+    timings: dict[str, float]           # seconds summed over the iterations run here, per phase
+    resumed_from: int = 0
+    decisions: dict[str, Decision] = field(default_factory=dict)
+    peak_memory_mb: float | None = None
+
+    def seconds_per_iteration(self) -> dict[str, float]:
+        n = max(1, self.iterations - self.resumed_from)
+        return {k: v / n for k, v in self.timings.items()}
+
+
+class _Timer:
+    """Seconds per phase, summed; waits for the GPU so a phase is charged its own kernels."""
+
+    def __init__(self, device) -> None:
+        self.totals: dict[str, float] = {}
+        self.cuda = getattr(device, "type", "") == "cuda"
+        self.last = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        if self.cuda:
+            torch.cuda.synchronize()
+        now = time.perf_counter()
+        self.totals[name] = self.totals.get(name, 0.0) + now - self.last
+        self.last = now
+
+    def restart(self) -> None:
+        self.last = time.perf_counter()
+
+
+@dataclass
+class _Critics:
+    local: ScoreCritic
+    glob: ScoreCritic | None
+    lora: LoraCritic | None
+    injector: ReferenceInjector | None
+
+
+class AdaptSystem:
+    """Holds everything a step needs; built once by `build`, stepped, then `finish`ed."""
+
+    def __init__(self, inputs: AdaptInputs, config: AdaptConfig, models: GuidanceModels, texture: NeuralTexture,
+                 renderer: AssetRenderer, critics: _Critics, rank: int, world: Decision,
+                 checkpoint_path: Path | None) -> None:
+        self.inputs, self.config, self.models = inputs, config, models
+        self.texture, self.renderer, self.critics = texture, renderer, critics
+        self.rank, self.world = rank, world
+        self.device = models.device
+        raster = inputs.raster
+        self.plan = texture.plan(raster.position, raster.border, raster.fill_index)
+        self.reference_stack = None
+        if config.uses_reference:
+            with torch.no_grad():
+                self.reference_stack = texture.texture_from_plan(self.plan).detach()
+        self.base_env = torch.from_numpy(np.ascontiguousarray(renderer_environment(inputs, config)))
+        self.photo = None if inputs.photo is None else np.clip(np.asarray(inputs.photo, np.float32), 0.0, 1.0)
+        self.latent_res = config.model_resolution // models.vae_scale_factor
+        self.uncond = models.embed(config.negative_prompt)
+        self.optimizer = torch.optim.Adam(texture.parameters(), lr=config.lr_texture)
+        self.my_views = views_of_rank(config.views_per_step, rank, world.choice)
+        self.checkpoint_path = checkpoint_path
+        self.history: list[dict] = []
+        self.start = 0
+        self.last_image: torch.Tensor | None = None
+        self.timer = _Timer(self.device)
+        self.started = time.perf_counter()
+
+    # -- build -------------------------------------------------------------------------------------
+
+    @classmethod
+    def build(cls, inputs: AdaptInputs, config: AdaptConfig, models: GuidanceModels | None = None,
+              checkpoint_dir: str | Path | None = None) -> "AdaptSystem":
+        """Validate, find and load the models (a missing one fails here, before any work), copy the
+        texture, set up the renderer and critics, and resume from `checkpoint_dir` when it holds one."""
+        inputs.validate(config)
+        need_inpaint = config.views_type == "local+global"
+        if models is None:
+            paths = locate_models(config.models, need_inpaint)
+            models = load_guidance_models(config.models, need_inpaint, paths)
+        elif need_inpaint and models.inpaint_unet is None:
+            raise InputError("Global views need the inpainting model; load the models with need_inpaint=True.")
+        rank, world, why = join_process_group()
+        _embed_prompts(models, config)
+        texture = _working_texture(inputs, config).to(models.device)
+        resolution = inputs.raster.resolution[0]
+        renderer = AssetRenderer(inputs.mesh, (resolution, resolution), renderer_environment(inputs, config),
+                                 SceneOptions(max_depth=config.max_depth, hide_emitters=True))
+        checkpoint_path = Path(checkpoint_dir) / CHECKPOINT_FILE if checkpoint_dir is not None else None
+        system = cls(inputs, config, models, texture, renderer, _build_critics(models, config), rank,
+                     Decision(world, why), checkpoint_path)
+        system.resume()
+        if models.device.type == "cuda":
+            torch.cuda.reset_peak_memory_stats()
+        return system
+
+    def resume(self) -> None:
+        payload = load_checkpoint(self.checkpoint_path, self.config) if self.checkpoint_path is not None else None
+        if payload is None:
+            return
+        self.texture.load_state_dict(payload["texture"])
+        self.optimizer.load_state_dict(payload["optimizer"])
+        if self.critics.lora is not None and payload["lora"] is not None:
+            self.critics.lora.load_state_dict(payload["lora"])
+        self.history, self.start = list(payload["history"]), int(payload["iteration"])
+
+    # -- step --------------------------------------------------------------------------------------
+
+    def step(self, iteration: int) -> dict:
+        """One optimisation step: this rank's views, gradients summed over ranks, Adam on texture and ε_ψ."""
+        self.timer.restart()
+        self.optimizer.zero_grad(set_to_none=True)
+        per_view = [self.train_view(self.sample(iteration, j)) for j in self.my_views]
+        params = list(self.texture.parameters())
+        for p in params:
+            if p.grad is not None:
+                p.grad.nan_to_num_(0.0, 0.0, 0.0)
+        sum_gradients(params)
+        self.optimizer.step()
+        if self.critics.lora is not None:
+            sum_gradients(self.critics.lora.parameters())
+            self.critics.lora.step()
+        self.timer.lap("step")
+        metrics = _mean_metrics(per_view)
+        self.history.append(metrics)
+        return metrics
+
+    def sample(self, iteration: int, index: int) -> ViewSample:
+        hw = None if self.photo is None else self.photo.shape[:2]
+        return sample_view(self.config, iteration, index, self.latent_res, self.inputs.envmap, hw,
+                           self.inputs.placement)
+
+    def train_view(self, view: ViewSample) -> dict:
+        """Render, score and back-propagate one view (its loss weighted 1 / views_per_step); returns its metrics."""
+        weight = 1.0 / self.config.views_per_step
+        env = self.base_env if view.envmap is None else torch.from_numpy(view.envmap)
+        reference_view, weight_map = self._reference_and_weights(view, env)
+        out = self._render_texture(view, env)
+        rendered = torch.cat([out.rgb, out.alpha], dim=-1)
+        self.timer.lap("render")
+        # Gradients stop at `leaf`, so the two halves of backward can be timed.
+        leaf = rendered.detach().to(self.device).requires_grad_(True)
+        image, latents, reference_latents, global_inputs = self._encode_views(view, leaf, reference_view)
+        self.timer.lap("vae")
+        loss, metrics = self._score(view, latents, reference_latents, weight_map, global_inputs)
+        self.timer.lap("unet")
+        (loss * weight).backward()
+        self.timer.lap("vae_backward")
+        rendered.backward(torch.nan_to_num(leaf.grad, nan=0.0, posinf=0.0, neginf=0.0).to(rendered.device))
+        self.timer.lap("render_backward")
+        if self.critics.lora is not None:
+            # ε_ψ learns the current renderings (its LoRA loss on the detached local latents).
+            metrics["lora_loss"] = self.critics.lora.learn(
+                latents, self.models.embed(view.prompt), self._condition(view), view.rng, view.generator,
+                self.critics.local.alpha_bar, self.critics.local.prediction_type, weight)
+            self.timer.lap("lora")
+        if view.index == self.my_views[0]:
+            self.last_image = image.detach()
+        metrics.update({"t": view.t, "lambda": round(view.lam, 4), "stage_size": view.stage.render_size})
+        return metrics
+
+    def _condition(self, view: ViewSample) -> torch.Tensor:
+        return camera_condition(view.camera.origin, view.camera.forward, view.light)
+
+    def _reference_and_weights(self, view: ViewSample, env: torch.Tensor):
+        """The frozen reference's local view and the ⟨camera, normal⟩ weights, both without gradients
+        (rendered first, so the scene holds the texture's maps when its backward pass replays the paths)."""
+        reference_view = weight_map = None
+        if self.reference_stack is not None:
+            with torch.no_grad():
+                ref = self.renderer.render(view.camera, *split_channels(self.reference_stack), env,
+                                           spp=view.stage.spp, seed=view.render_seed)
+                reference_view = local_view(ref.rgb, ref.alpha, view.background, self.config.model_resolution)
+        if self.config.normal_weight_type != "none":
+            aov = self.renderer.render_aovs(view.camera)
+            weight_map = normal_weight_map(aov["normal"], aov["coverage"], view.camera.forward,
+                                           (self.latent_res, self.latent_res),
+                                           weight_type=self.config.normal_weight_type).to(self.device)
+        return reference_view, weight_map
+
+    def _render_texture(self, view: ViewSample, env: torch.Tensor) -> RenderOutput:
+        stack = self.texture.texture_from_plan(self.plan)
+        return self.renderer.render(view.camera, *split_channels(stack), env, spp=view.stage.spp,
+                                    seed=view.render_seed)
+
+    def _encode_views(self, view: ViewSample, leaf: torch.Tensor, reference_view: torch.Tensor | None):
+        """Local view, reference and global views -> latents (global: with mask and masked-photo latents)."""
+        rgb, alpha = leaf[..., 0:3], leaf[..., 3:4]
+        image = local_view(rgb, alpha, view.background, self.config.model_resolution)
+        latents = self.models.encode(image)
+        reference_latents = None
+        if reference_view is not None:
+            with torch.no_grad():
+                reference_latents = self.models.encode(reference_view)
+        global_inputs = []
+        for crop in view.crops:
+            g_image, g_alpha = global_view(rgb, alpha, self.photo, self.inputs.placement, crop,
+                                           self.config.model_resolution)
+            with torch.no_grad():
+                masked_latents = self.models.encode(masked_image(g_image, g_alpha))
+            global_inputs.append((self.models.encode(g_image), latent_mask(g_alpha, (self.latent_res,) * 2),
+                                  masked_latents))
+        return image, latents, reference_latents, global_inputs
+
+    def _score(self, view: ViewSample, latents, reference_latents, weight_map, global_inputs):
+        """The critics' surrogate loss (∇z = w_t w_n (ε_φ - ε̂)); local and global weighed equally."""
+        noise = view.noise.to(self.device)
+        text = self.models.embed(view.prompt)
+        local = self.critics.local(latents, view.t, noise, text, self.uncond, lam=view.lam,
+                                   condition=self._condition(view), reference_latents=reference_latents,
+                                   weight_map=weight_map)
+        metrics = {"local_grad_norm": local.metrics["grad_norm"], "nonfinite": local.metrics["nonfinite"]}
+        if not global_inputs:
+            return local.loss, metrics
+        losses, norms = [], []
+        for g_latents, mask, masked_latents in global_inputs:
+            g = self.critics.glob(g_latents, view.t, noise, text, self.uncond, extra=(mask, masked_latents))
+            losses.append(g.loss)
+            norms.append(g.metrics["grad_norm"])
+            metrics["nonfinite"] += g.metrics["nonfinite"]
+        metrics["global_grad_norm"] = float(np.mean(norms))
+        return 0.5 * local.loss + 0.5 * torch.stack(losses).mean(), metrics
+
+    # -- reporting and finish ------------------------------------------------------------------------
+
+    def after_step(self, iteration: int, metrics: dict, progress: ProgressCallback | None) -> None:
+        """Progress (with a preview now and then) and the checkpoint, on rank 0."""
+        if self.rank != 0:
+            return
+        config, done = self.config, iteration + 1
+        preview = None
+        if config.preview_every and (done % config.preview_every == 0 or done == config.iterations):
+            image = self.last_image[0].permute(1, 2, 0).clamp(0, 1).cpu().numpy()
+            preview = (image * 255).round().astype(np.uint8)
+        emit(progress, "adapt", done, config.iterations,
+             f"{config.mode_type}: {metrics['stage_size']} px, t={metrics['t']}", metrics, preview)
+        if self.checkpoint_path is not None and config.checkpoint_every and (
+                done % config.checkpoint_every == 0 or done == config.iterations):
+            save_checkpoint(self.checkpoint_path, done, config, self.texture, self.optimizer, self.critics.lora,
+                            self.history)
+
+    def finish(self) -> AdaptResult:
+        return AdaptResult(texture=self.texture, iterations=self.config.iterations,
+                           seconds=time.perf_counter() - self.started, history=self.history,
+                           timings=dict(self.timer.totals), resumed_from=self.start, decisions=self.decisions(),
+                           peak_memory_mb=_peak_memory_mb(self.device))
+
+    def decisions(self) -> dict[str, Decision]:
+        config, world = self.config, self.world.choice
+        mine = len(self.my_views)
+        injected = 0 if self.critics.injector is None else len(self.critics.injector.injected)
+        return {
+            "mode": Decision(config.mode_type, "the adapt mode asked for"),
+            "prompt": Decision(config.effective_prompt, "the prompt given" if config.prompt.strip() else
+                               "the object prompt and the instruction combined (appendix, editing)"),
+            "critic": Decision(config.critic.critic_type, "VSD with a LoRA ε_ψ (the paper)"
+                               if config.critic.critic_type == "vsd" else "SDS (no ε_ψ), as configured"),
+            "views": Decision(config.views_type, "local and global views (setup (m))" if config.views_type ==
+                              "local+global" else "local views only (no photo)"),
+            "reference_injection": Decision(injected, f"the reference's keys and values injected into {injected} "
+                                            "attention layers" if injected else "no reference injection"),
+            "world_size": self.world,
+            "views_per_step": Decision(config.views_per_step,
+                                       f"{mine} view(s) rendered in turn on this rank, gradients averaged"
+                                       + (f" over {world} ranks" if world > 1 else "")),
+            "models": Decision({k: str(v) for k, v in self.models.paths.items()}, "where the weights were found"),
+            "device": Decision(str(self.device), f"{str(self.models.dtype).replace('torch.', '')} UNet"),
+        }
+
+
+def renderer_environment(inputs: AdaptInputs, config: AdaptConfig) -> np.ndarray:
+    """The map the renderer starts with: the user's (light_type "envmap") or the constant ambient one."""
+    if config.light_type == "envmap":
+        return np.asarray(inputs.envmap, np.float32)
+    return np.full((16, 32, 3), config.ambient, np.float32)
+
+
+def _embed_prompts(models: GuidanceModels, config: AdaptConfig) -> None:
+    """Every prompt the run will use, embedded once; the text encoder is released afterwards."""
+    prompt = config.effective_prompt
+    prompts = ([f"{prompt}, {v}" for v in ("front view", "side view", "back view")]
+               if config.mode_type == "generate" else [prompt])
+    for p in prompts + [config.negative_prompt]:
+        models.embed(p)
+    models.release_text_encoder()
+
+
+def _working_texture(inputs: AdaptInputs, config: AdaptConfig) -> NeuralTexture:
+    """A copy of the input texture (left as it was), or a fresh one for "generate"."""
+    if inputs.texture is None:
+        return NeuralTexture(stage_config("texture", config.texture_preset, resolution=inputs.raster.resolution[0]),
+                             seed=config.seed)
+    texture = NeuralTexture(inputs.texture.config, seed=None)
+    texture.load_state_dict(inputs.texture.state_dict())
+    return texture
+
+
+def _build_critics(models: GuidanceModels, config: AdaptConfig) -> _Critics:
+    lora = None
+    if config.critic.critic_type == "vsd":
+        lora = LoraCritic(models.unet, rank=config.lora_rank, lr=config.lr_lora,
+                          condition_dropout=config.condition_dropout, seed=config.seed)
+    injector = ReferenceInjector(models.unet, config.critic.injection_fraction) if config.uses_reference else None
+    local = ScoreCritic(models.unet, models.scheduler, config.critic, lora=lora, injector=injector)
+    glob = None
+    if config.views_type == "local+global":
+        glob = ScoreCritic(models.inpaint_unet, models.scheduler,
+                           replace(config.critic, critic_type="sds", reference_type="none"))
+    return _Critics(local, glob, lora, injector)
+
+
+def _mean_metrics(per_view: list[dict]) -> dict:
+    """One history entry: numbers averaged over the views (t listed per view, nonfinite summed)."""
+    out: dict = {"t": [m["t"] for m in per_view]}
+    for key in per_view[0]:
+        if key == "t":
+            continue
+        values = [m[key] for m in per_view if key in m]
+        if key == "nonfinite":
+            out[key] = int(sum(values))
+        elif key in ("lambda", "stage_size"):
+            out[key] = values[0]
+        else:
+            out[key] = round(float(np.mean(values)), 6)
+    if len(out["t"]) == 1:
+        out["t"] = out["t"][0]
+    return out
+
+
+def _peak_memory_mb(device) -> float | None:
+    if device.type == "cuda":
+        return torch.cuda.max_memory_allocated() / 2**20
+    try:
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    except (ImportError, OSError):
+        return None
+
+
+def adapt_texture(inputs: AdaptInputs, config: AdaptConfig, progress: ProgressCallback | None = None,
+                  cancel: threading.Event | None = None, checkpoint_dir: str | Path | None = None,
+                  models: GuidanceModels | None = None) -> AdaptResult:
+    """Run the adapt stage; returns a new NeuralTexture (the input texture is left as it was).
+
+    Models are located (and a missing one reported) before any work. With `checkpoint_dir`, a
+    checkpoint is written every `checkpoint_every` iterations and a run with the same settings
+    resumes from it.
+    """
+    system = AdaptSystem.build(inputs, config, models, checkpoint_dir)
+    for iteration in range(system.start, config.iterations):
+        check_cancel(cancel)
+        metrics = system.step(iteration)
+        system.after_step(iteration, metrics, progress)
+    return system.finish()
+
+
+def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfig, out_dir: str | Path,
+                   photo: np.ndarray | None = None, placement: Placement | None = None,
+                   envmap: np.ndarray | None = None, resolution: int | None = None,
+                   progress: ProgressCallback | None = None, cancel: threading.Event | None = None,
+                   models: GuidanceModels | None = None) -> tuple[AdaptResult, dict]:
+    """Adapt (or, for "generate", make) the asset's texture and bake it into out_dir/maps.
+
+    mesh is the asset as given (normalised here); checkpoints go to out_dir/checkpoint so that
+    running the same command again resumes. Returns the result and a report dict (on ranks other
+    than 0 of a distributed run nothing is written and the report's outputs are empty).
+    """
+    from ..mesh import normalize_to_unit_sphere
+    from ..texture.bake import bake_maps
+    from ..texture.uv_raster import rasterize_uv
+
+    out_dir = Path(out_dir)
+    if models is None:  # missing weights stop the run here, before any work
+        models = load_guidance_models(config.models, config.views_type == "local+global")
+    normalized, _ = normalize_to_unit_sphere(mesh)
+    res = texture.config.resolution if texture is not None else int(resolution or stage_config("texture", config.texture_preset).resolution)
+    raster = rasterize_uv(normalized, res)
+    inputs = AdaptInputs(mesh=normalized, raster=raster, texture=texture, photo=photo, placement=placement,
+                         envmap=envmap)
+    result = adapt_texture(inputs, config, progress=progress, cancel=cancel, checkpoint_dir=out_dir / "checkpoint",
+                           models=models)
+    check_cancel(cancel)
+    paths = {}
+    if rank_world()[0] == 0:  # one writer in a distributed run
+        paths = bake_maps(result.texture, raster.position, raster.border, raster.fill_index, out_dir / "maps")
+    per_it = result.seconds_per_iteration()
+    report = {
+        "stage": "adapt", "config": config.to_dict(), "schedule": config.schedule(),
+        "decisions": decisions_to_dict(result.decisions),
+        "iterations": result.iterations, "resumed_from": result.resumed_from, "seconds": round(result.seconds, 3),
+        "seconds_per_iteration": {k: round(v, 4) for k, v in per_it.items()},
+        "peak_memory_mb": None if result.peak_memory_mb is None else round(result.peak_memory_mb, 1),
+        "last_metrics": result.history[-1] if result.history else {},
+        "outputs": {k: str(v) for k, v in paths.items()},
+    }
+    return result, report
