@@ -5,11 +5,30 @@ from dataclasses import replace
 from pathlib import Path
 
 from .options import (add_asset_args, add_dry_run_arg, add_elevation_arg, add_model_args, add_placement_args,
-                      add_preset_args, environment, load_asset, model_config, placement, print_config, progress,
-                      require)
+                      add_preset_args, add_prompt_service_args, environment, load_asset, model_config, placement,
+                      print_config, progress, require, write_prompt_from_args)
+
+# What --dry-run shows when the prompt would be given or written at run time.
+PROMPT_PLACEHOLDER = "<the prompt: --prompt, or written from --object-prompt and --scene-prompt at run time>"
 
 
-def resolve_config(args):
+def scene_conditional_prompt(args, mode: str):
+    """(prompt, instruction, record) for the run: the user's --prompt/--instruction when given, else
+    written from --object-prompt and --scene-prompt (a description; edit mode: an instruction)."""
+    prompt, instruction = args.prompt or "", args.instruction or ""
+    given = prompt or (instruction if mode == "edit" else "")
+    if given or not args.object_prompt or not (args.scene_prompt or (args.photo and mode == "scene")):
+        return prompt, instruction, None
+    result = write_prompt_from_args(args, args.object_prompt, args.scene_prompt, "instruct" if mode == "edit" else "describe",
+                                    args.photo if mode == "scene" else "")
+    source = f"written by '{result.model}'" if result.model_written else f"template ({result.reason})"
+    print(f"prompt ({source}): {result.prompt}")
+    if mode == "edit":
+        return prompt, result.prompt, result
+    return result.prompt, instruction, result
+
+
+def resolve_config(args, prompt: str, instruction: str):
     """The AdaptConfig the arguments ask for: the preset for the mode, then the options given."""
     from ..core.adapt import StageSpec
     from ..core.presets import stage_config
@@ -21,8 +40,8 @@ def resolve_config(args):
         overrides["views_type"] = "local"   # no photo: no global views (a dry run shows the scene setup)
     if args.envmap:
         overrides["light_type"] = "envmap"
-    config = stage_config("adapt", args.preset, mode_type=args.mode, prompt=args.prompt or "",
-                          object_prompt=args.object_prompt or "", instruction=args.instruction or "",
+    config = stage_config("adapt", args.preset, mode_type=args.mode, prompt=prompt,
+                          object_prompt=args.object_prompt or "", instruction=instruction,
                           models=model_config(args), **overrides)
     if args.render_size:
         config = replace(config, stages=tuple(StageSpec(s.fraction, min(s.render_size, args.render_size), s.spp,
@@ -38,11 +57,15 @@ def run(args) -> int:
     from ..core.pipeline import environment_info, write_report
     from ..core.texture.bake import load_neural_texture
 
-    config = resolve_config(args)
-    if args.dry_run:
+    if args.dry_run:   # nothing is asked of the prompt service, loaded or written
+        prompt = args.prompt or ("" if args.mode == "edit" else PROMPT_PLACEHOLDER)
+        instruction = args.instruction or (PROMPT_PLACEHOLDER if args.mode == "edit" else "")
+        config = resolve_config(args, prompt, instruction)
         return print_config({"stage": "adapt", "preset": args.preset, "schedule": config.schedule(),
                              "config": config.to_dict()})
     require(args, "asset", "--out")
+    prompt, instruction, written = scene_conditional_prompt(args, args.mode)
+    config = resolve_config(args, prompt, instruction)
     mesh, _ = load_asset(args.asset, args.object)
     texture = load_neural_texture(args.texture) if args.texture else None
     photo = where = None
@@ -55,6 +78,8 @@ def run(args) -> int:
     if not report["outputs"]:   # another rank of a distributed run writes the outputs
         return 0
     report["environment"] = environment_info()
+    if written is not None:
+        report["prompt_writing"] = written.to_report()
     write_report(Path(args.out) / "report.json", report)
     print(f"adapted '{mesh.name}' ({args.mode}, {result.iterations} iterations, {result.seconds:.1f} s) -> {args.out}/maps")
     return 0
@@ -68,7 +93,9 @@ def add_parser(sub) -> None:
     p.add_argument("--mode", choices=("scene", "generate", "edit"), default="scene")
     p.add_argument("--texture", help="texture.pt from `scenefit convert` (required unless --mode generate)")
     p.add_argument("--prompt", help="appearance description, e.g. 'a leather sofa, soggy and stained with mud'")
-    p.add_argument("--object-prompt", help="edit mode: the object, e.g. 'a leather sofa'")
+    p.add_argument("--object-prompt", help="the object, e.g. 'a leather sofa' (edit mode, and for writing the prompt)")
+    p.add_argument("--scene-prompt", help="the scene, e.g. 'a swamp': without --prompt, a language model writes the "
+                                          "prompt from the object and scene (edit mode: the instruction)")
     p.add_argument("--instruction", help="edit mode: e.g. 'add dust to the sofa'")
     p.add_argument("--photo", help="scene mode: the photo the object goes into")
     add_placement_args(p)
@@ -82,5 +109,6 @@ def add_parser(sub) -> None:
     p.add_argument("--model-resolution", type=int, help="image size the diffusion models see (default 512)")
     p.add_argument("--render-size", type=int, help="cap on every stage's render size (pixels)")
     add_model_args(p)
+    add_prompt_service_args(p, prefix="prompt-")
     add_dry_run_arg(p)
     p.set_defaults(func=run)
