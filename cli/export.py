@@ -1,7 +1,7 @@
 """scenefit export: the asset, maps, camera and light as a Mitsuba scene (XML + PLY + images)."""
 from __future__ import annotations
 
-from .options import add_asset_args, add_elevation_arg, add_lighting_args, add_size_arg, environment, load_asset
+from .options import add_asset_args, add_lighting_args, add_view_args, environment, load_asset
 
 
 def run(args) -> int:
@@ -24,7 +24,5 @@ def add_parser(sub) -> None:
     add_lighting_args(p)
     p.add_argument("--out", required=True)
     p.add_argument("--azimuth", type=float, default=30.0)
-    add_elevation_arg(p, 15.0)
-    add_size_arg(p, 512)
-    p.add_argument("--spp", type=int, default=256)
+    add_view_args(p, size=512, spp=256)
     p.set_defaults(func=run)

@@ -85,6 +85,13 @@ def add_size_arg(p: argparse.ArgumentParser, default: int) -> None:
     p.add_argument("--size", type=int, default=default, help=f"rendered image size in pixels (default {default})")
 
 
+def add_view_args(p: argparse.ArgumentParser, size: int, spp: int) -> None:
+    """How render and export look at the asset: --elevation, --size (pixels), --spp."""
+    add_elevation_arg(p, 15.0)
+    add_size_arg(p, size)
+    p.add_argument("--spp", type=int, default=spp, help=f"samples per pixel (default {spp})")
+
+
 def add_placement_args(p: argparse.ArgumentParser, required: bool = False) -> None:
     """Where the object goes in the photo (core/placement.py): --at and --object-size."""
     from ..core.placement import DEFAULT_AT, DEFAULT_SIZE

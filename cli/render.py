@@ -3,8 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import (add_asset_args, add_elevation_arg, add_lighting_args, add_size_arg, environment, load_asset,
-                      progress)
+from .options import add_asset_args, add_lighting_args, add_view_args, environment, load_asset, progress
 
 
 def run(args) -> int:
@@ -51,8 +50,6 @@ def add_parser(sub) -> None:
     p.add_argument("--out", required=True)
     p.add_argument("--texture", help="a texture.pt written by `scenefit convert` (default: the asset's maps)")
     p.add_argument("--views", type=int, default=4)
-    add_elevation_arg(p, 15.0)
-    add_size_arg(p, 256)
-    p.add_argument("--spp", type=int, default=64)
+    add_view_args(p, size=256, spp=64)
     p.add_argument("--exposure", type=float, default=1.0)
     p.set_defaults(func=run)
