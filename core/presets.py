@@ -12,6 +12,12 @@ from dataclasses import fields, replace
 from .errors import InputError
 
 PRESET_NAMES = ("draft", "balanced", "final")
+# What a person picking one should know (the Blender panel's choices say the same).
+PRESET_DESCRIPTIONS = {
+    "draft": "Fewest iterations, small renders: a quick look",
+    "balanced": "The default trade-off between time and quality",
+    "final": "The paper's settings: slowest, best",
+}
 STAGES = ("texture", "convert", "light", "adapt")
 
 TABLES: dict[str, dict[str, dict]] = {

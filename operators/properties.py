@@ -2,17 +2,17 @@
 import bpy
 from bpy.props import EnumProperty, FloatProperty, FloatVectorProperty, PointerProperty, StringProperty
 
-PRESETS = (
-    ("draft", "Draft", "Fewest iterations: a quick look"),
-    ("balanced", "Balanced", "The default trade-off between time and quality"),
-    ("final", "Final", "The paper's iteration counts: slowest, best"),
-)
+from ..core.placement import DEFAULT_AT
+from ..core.presets import PRESET_DESCRIPTIONS, PRESET_NAMES
+
+PRESETS = tuple((name, name.capitalize(), PRESET_DESCRIPTIONS[name]) for name in PRESET_NAMES)
 
 
 class SceneFitSettings(bpy.types.PropertyGroup):
     photo_path: StringProperty(name="Photo", subtype="FILE_PATH", description="Photo to fit the asset into")
-    placement: FloatVectorProperty(name="Placement", size=2, min=0.0, max=1.0, default=(0.5, 0.5),
-                                   description="Where the asset stands in the photo (x, y as fractions)")
+    placement: FloatVectorProperty(name="Placement", size=2, min=0.0, max=1.0, default=DEFAULT_AT,
+                                   description="The asset's centre in the photo (x, y as fractions of width and "
+                                               "height), as --at on the command line")
     elevation: FloatProperty(name="Elevation", subtype="ANGLE", default=0.0, min=-1.2, max=1.2,
                              description="Camera elevation above the asset's horizon")
     preset: EnumProperty(name="Preset", items=PRESETS, default="balanced")

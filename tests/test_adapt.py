@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -115,15 +114,16 @@ def test_short_scene_run_changes_the_texture_and_resumes_exactly(tiny_models, as
         adapt_texture(_inputs(asset), _config(tiny_models, seed=1), checkpoint_dir=tmp_path)
 
 
-def test_cancel_stops_promptly(tiny_models, asset):
+def test_cancel_stops_before_the_first_step(tiny_models, asset, tmp_path):
     cancel = threading.Event()
     cancel.set()
     events = []
-    start = time.perf_counter()
     with pytest.raises(Cancelled):
-        adapt_texture(_inputs(asset), _config(tiny_models, iterations=50), cancel=cancel, progress=events.append)
-    # Only model loading happened: no iteration ran (50 would take far longer than the bound on a loaded machine).
-    assert events == [] and time.perf_counter() - start < 60
+        adapt_texture(_inputs(asset), _config(tiny_models, iterations=50), cancel=cancel, progress=events.append,
+                      checkpoint_dir=tmp_path)
+    # Cancelled before the first step: no iteration reported, no checkpoint written (what ran is not
+    # judged by the clock, which depends on the machine and its load).
+    assert events == [] and not any(tmp_path.iterdir())
 
 
 def test_generate_and_edit_modes(tiny_models, asset):

@@ -151,13 +151,14 @@ class AdaptSystem:
         """Validate, find and load the models (a missing one fails here, before any work), copy the
         texture, set up the renderer and critics, and resume from `checkpoint_dir` when it holds one."""
         inputs.validate(config)
+        # Join torchrun's group first: it picks this rank's GPU, where the models must then go.
+        rank, _, world = join_process_group()
         need_inpaint = config.views_type == "local+global"
         if models is None:
             paths = locate_models(config.models, need_inpaint)
             models = load_guidance_models(config.models, need_inpaint, paths)
         elif need_inpaint and models.inpaint_unet is None:
             raise InputError("Global views need the inpainting model; load the models with need_inpaint=True.")
-        rank, world, why = join_process_group()
         _embed_prompts(models, config)
         texture = _working_texture(inputs, config).to(models.device)
         resolution = inputs.raster.resolution[0]
@@ -165,7 +166,7 @@ class AdaptSystem:
                                  SceneOptions(max_depth=config.max_depth, hide_emitters=True))
         checkpoint_path = Path(checkpoint_dir) / CHECKPOINT_FILE if checkpoint_dir is not None else None
         system = cls(inputs, config, models, texture, renderer, _build_critics(models, config), rank,
-                     Decision(world, why), checkpoint_path)
+                     world, checkpoint_path)
         system.resume()
         if models.device.type == "cuda":
             torch.cuda.reset_peak_memory_stats()
@@ -448,6 +449,7 @@ def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfi
     from ..texture.uv_raster import rasterize_uv
 
     out_dir = Path(out_dir)
+    join_process_group()  # under torchrun: this rank's GPU is chosen before the models load
     if models is None:  # missing weights stop the run here, before any work
         models = load_guidance_models(config.models, config.views_type == "local+global")
     normalized, _ = normalize_to_unit_sphere(mesh)
