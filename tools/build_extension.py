@@ -44,7 +44,7 @@ DIST = ROOT / "dist"
 # What the extension needs at run time (not bpy, pytest or matplotlib: development only).
 RUNTIME = [
     "mitsuba", "drjit", "torch", "diffusers", "transformers", "peft", "accelerate",
-    "opencv-contrib-python-headless", "OpenImageIO",
+    "opencv-contrib-python-headless", "OpenImageIO", "openai",
 ]
 LEFT_OUT = {"numpy": "Blender ships numpy"}
 
