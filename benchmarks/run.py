@@ -29,7 +29,7 @@ from scenefit.core.primitives import uv_sphere
 from scenefit.core.render import AssetRenderer
 from scenefit.core.texture.fit_direct import fit_direct, masked_psnr
 from scenefit.core.texture.fit_inverse import fit_inverse_rendering, studio_environment
-from scenefit.core.texture.neural_texture import NeuralTexture, preset
+from scenefit.core.texture.neural_texture import NeuralTexture
 from scenefit.core.texture.uv_raster import rasterize_uv
 
 RESULTS = Path(__file__).resolve().parent / "results"
