@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import replace_atomic
+from .atomic import replace_atomic, temp_affixes
 from .errors import InputError
+from .quiet import native_output_captured
 
 
 def srgb_to_linear(x: np.ndarray) -> np.ndarray:
@@ -22,25 +23,44 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:
-    """Pixels as float32 (H, W, C) exactly as stored (8-bit files scaled to [0, 1], no colour change)."""
+    """Pixels as float32 (H, W, C) exactly as stored (8-bit files scaled to [0, 1], no colour change).
+
+    Colour channels of RGBA files are read as stored, not multiplied by alpha (OpenImageIO's
+    default would darken them wherever alpha < 1).
+    """
     import OpenImageIO as oiio
 
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"'{path}' is a folder, not an image; give the image file's path.")
     if not path.is_file():
         raise InputError(f"Image '{path}' does not exist.")
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise InputError(f"Image '{path}' cannot be read: {oiio.geterror()}")
-    try:
-        pixels = inp.read_image("float")
-    finally:
-        inp.close()
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    with native_output_captured() as chatter:
+        inp = oiio.ImageInput.open(str(path), config)
+        pixels = None
+        if inp is not None:
+            try:
+                pixels = inp.read_image("float")
+                reason = inp.geterror()
+            finally:
+                inp.close()
+        else:
+            reason = oiio.geterror()
     if pixels is None:
-        raise InputError(f"Image '{path}' cannot be decoded: {oiio.geterror()}")
+        reason = _first_line(reason) or chatter.last_line() or "the file is empty, truncated or not an image"
+        what = "read" if inp is None else "decoded"
+        raise InputError(f"Image '{path}' cannot be {what} ({reason}); re-export it as PNG, JPEG or EXR.")
     pixels = np.asarray(pixels, dtype=np.float32)
     if pixels.ndim == 2:
         pixels = pixels[..., None]
     return pixels
+
+
+def _first_line(text: str) -> str:
+    lines = [line.strip() for line in (text or "").splitlines() if line.strip()]
+    return lines[0] if lines else ""
 
 
 def read_color_image(path: str | os.PathLike) -> np.ndarray:
@@ -72,7 +92,7 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, dtype: str | None =
     if dtype in ("uint8", "uint16"):
         pixels = np.clip(pixels, 0.0, 1.0)
     h, w, c = pixels.shape
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    fd, tmp = tempfile.mkstemp(**temp_affixes(path, keep_suffix=True))
     os.close(fd)
     try:
         out = oiio.ImageOutput.create(tmp)
@@ -81,6 +101,7 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, dtype: str | None =
         spec = oiio.ImageSpec(w, h, c, dtype)
         if path.suffix.lower() == ".exr":
             spec.attribute("compression", "zip")
+        spec.attribute("oiio:UnassociatedAlpha", 1)  # colour is stored as given, never divided by alpha
         if not out.open(tmp, spec):
             raise InputError(f"Cannot open '{path}' for writing: {out.geterror()}")
         ok = out.write_image(np.ascontiguousarray(pixels))

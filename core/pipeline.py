@@ -38,9 +38,18 @@ def load_environment(path: str | Path, max_height: int = 256) -> np.ndarray:
     h, w = env.shape[:2]
     if w != 2 * h:
         raise InputError(f"Environment map '{path}' is {w}x{h}; a latitude-longitude map is twice as wide as high.")
+    check_environment(env, f"Environment map '{path}'")
     if h > max_height:
         env = cv2.resize(env, (2 * max_height, max_height), interpolation=cv2.INTER_AREA)
-    return np.maximum(env, 0.0).astype(np.float32)
+    return env.astype(np.float32)
+
+
+def check_environment(env: np.ndarray, what: str = "The environment map") -> None:
+    """Radiance is finite and never negative; anything else makes renders (and `mitsuba`) fail later."""
+    if not np.isfinite(env).all():
+        raise InputError(f"{what} holds NaN or infinite pixels; repair or re-export it.")
+    if (env < 0).any():
+        raise InputError(f"{what} holds negative pixels (light cannot be negative); clamp them to 0 and re-export.")
 
 
 def tonemap_srgb(rgb: np.ndarray, exposure: float = 1.0) -> np.ndarray:
@@ -124,9 +133,27 @@ def convert_and_bake(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, config: Con
 
 
 def write_report(path: str | Path, report: dict) -> Path:
+    """report.json in strict JSON; paths inside the report's folder are written relative to it, so
+    they stay right when the run's folder is swapped into place or moved."""
+    path = Path(path)
     report = dict(report)
     report.setdefault("written_at", time.strftime("%Y-%m-%dT%H:%M:%S%z"))
-    return write_json_atomic(path, report)
+    return write_json_atomic(path, _relative_paths(report, path.parent.absolute()))
+
+
+def _relative_paths(value, folder: Path):
+    if isinstance(value, dict):
+        return {k: _relative_paths(v, folder) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_relative_paths(v, folder) for v in value]
+    if isinstance(value, (str, Path)) and str(value):
+        candidate = Path(value)
+        if candidate.is_absolute() or isinstance(value, Path):
+            try:
+                return candidate.absolute().relative_to(folder).as_posix()
+            except ValueError:
+                return str(value) if isinstance(value, Path) else value
+    return value
 
 
 def baked_psnr(result: ConvertResult, baked: torch.Tensor) -> float:

@@ -58,6 +58,15 @@ def save_neural_texture(texture: NeuralTexture, path: str | os.PathLike) -> Path
     return write_bytes_atomic(path, buffer.getvalue())
 
 
+def torch_load_reason(error: Exception) -> str:
+    """Why torch.load failed, in a few words (its own message advises unsafe loading, which is not for users)."""
+    text = str(error)
+    if "weights_only" in text or "Weights only" in text:
+        return "it holds more than tensors or is not a file SceneFit saved"
+    first = next((line.strip() for line in text.splitlines() if line.strip()), "")
+    return first[:200] or type(error).__name__
+
+
 def load_neural_texture(path: str | os.PathLike, device: str | torch.device = "cpu") -> NeuralTexture:
     """The NeuralTexture saved by bake_maps / save_neural_texture, on `device`."""
     path = Path(path)
@@ -68,7 +77,8 @@ def load_neural_texture(path: str | os.PathLike, device: str | torch.device = "c
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as error:  # torch raises several types for truncated or foreign files
-        raise InputError(f"'{path}' is not a readable neural texture file ({error}).") from error
+        raise InputError(f"'{path}' is not a readable neural texture file ({torch_load_reason(error)}); "
+                         "convert the asset again to make one.") from None
     if not isinstance(payload, dict) or payload.get("format") != WEIGHTS_FORMAT:
         raise InputError(f"'{path}' is not a SceneFit neural texture file.")
     if payload.get("version") != WEIGHTS_VERSION:
