@@ -12,7 +12,8 @@ def run(args) -> int:
     from ..core.pipeline import convert_and_bake, environment_info, write_report
 
     overrides = {k: v for k, v in (("method_type", args.method), ("iterations", args.iterations),
-                                   ("resolution", args.resolution), ("seed", args.seed)) if v is not None}
+                                   ("resolution", args.resolution), ("seed", args.seed),
+                                   ("screen_px", args.screen_px)) if v is not None}
     config = convert_preset(args.preset, **overrides)
     with output(args) as out:
         mesh, maps = load_asset(args.asset, args.object)
@@ -34,4 +35,6 @@ def add_parser(sub) -> None:
     p.add_argument("--iterations", type=positive_int)
     p.add_argument("--resolution", type=positive_int, help="texture size (default: the asset's, capped by the preset)")
     p.add_argument("--seed", type=int)
+    p.add_argument("--screen-px", type=positive_int,
+                   help="the object's height in the final image, pixels: the texture gets no more texels than it shows")
     p.set_defaults(func=run)

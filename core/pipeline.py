@@ -20,6 +20,7 @@ from .maps import PBRMaps
 from .mesh import Mesh
 from .progress import ProgressCallback, check_cancel, emit
 from .render import AssetRenderer, SceneOptions
+from .scene_needs import constant_channels
 from .texture.bake import bake_maps
 from .texture.fit_direct import masked_psnr
 
@@ -119,7 +120,11 @@ def convert_and_bake(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, config: Con
     out_dir = Path(out_dir)
     result = convert_asset(mesh, maps, config, progress=progress, cancel=cancel)
     check_cancel(cancel)
-    paths = bake_maps(result.texture, result.raster.position, result.raster.border, result.raster.fill_index, out_dir)
+    channels = constant_channels(maps)
+    constants = {name: d.value for name, d in channels.items() if d.value != "map"}
+    paths = bake_maps(result.texture, result.raster.position, result.raster.border, result.raster.fill_index, out_dir,
+                      constants=constants)
+    result.decisions["channels"] = {name: d.to_dict() for name, d in channels.items()}
     report = {
         "stage": "convert",
         "config": asdict(config),
@@ -127,7 +132,7 @@ def convert_and_bake(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, config: Con
         "psnr_covered_texels_db": round(result.psnr, 3),
         "seconds": round(result.seconds, 3),
         "iterations": result.iterations,
-        "outputs": {k: str(v) for k, v in paths.items()},
+        "outputs": {k: v if isinstance(v, float) else str(v) for k, v in paths.items()},
     }
     return result, report
 

@@ -27,7 +27,9 @@ def run_conversion(mesh, maps, preset: str, out_dir: Path, progress, cancel=None
 
     _, report = convert_and_bake(mesh, maps, out_dir, convert_preset(preset), progress=progress, cancel=cancel)
     write_report(Path(out_dir) / "report.json", report)
-    return {key: Path(report["outputs"][key]) for key in ("base_color", "roughness", "metallic")}
+    outputs = report["outputs"]  # a constant roughness/metallic is a float, not a map
+    return {key: outputs[key] if isinstance(outputs[key], float) else Path(outputs[key])
+            for key in ("base_color", "roughness", "metallic")}
 
 
 class SCENEFIT_OT_convert(bpy.types.Operator):

@@ -32,20 +32,24 @@ def bake_texture(texture: NeuralTexture, position_map, mask, fill_index) -> np.n
         return texture.texture(position_map, mask, fill_index).cpu().numpy().astype(np.float32)
 
 
-def bake_maps(texture: NeuralTexture, position_map, mask, fill_index, out_dir: str | os.PathLike) -> dict[str, Path]:
+def bake_maps(texture: NeuralTexture, position_map, mask, fill_index, out_dir: str | os.PathLike,
+              constants: dict[str, float] | None = None) -> dict[str, Path | float]:
     """Write base_color.png, roughness.png, metallic.png and texture.pt into out_dir (atomically).
 
     Pass a UVRaster's `position`, `border` and `fill_index`. Returns {"base_color", "roughness",
-    "metallic", "weights"} -> path.
+    "metallic", "weights"} -> path. constants: roughness/metallic that stay one value; they are
+    returned as that float and get no map (write_result_material sets the socket's value).
     """
     out_dir = Path(out_dir)
+    constants = constants or {}
     maps = bake_texture(texture, position_map, mask, fill_index)
-    return {
-        "base_color": write_image(out_dir / MAP_FILES["base_color"], linear_to_srgb(maps[..., 0:3]), dtype="uint8"),
-        "roughness": write_image(out_dir / MAP_FILES["roughness"], maps[..., 3], dtype="uint16"),
-        "metallic": write_image(out_dir / MAP_FILES["metallic"], maps[..., 4], dtype="uint16"),
-        "weights": save_neural_texture(texture, out_dir / WEIGHTS_FILE),
-    }
+    out: dict[str, Path | float] = {
+        "base_color": write_image(out_dir / MAP_FILES["base_color"], linear_to_srgb(maps[..., 0:3]), dtype="uint8")}
+    for channel, name in ((3, "roughness"), (4, "metallic")):
+        out[name] = float(constants[name]) if name in constants else \
+            write_image(out_dir / MAP_FILES[name], maps[..., channel], dtype="uint16")
+    out["weights"] = save_neural_texture(texture, out_dir / WEIGHTS_FILE)
+    return out
 
 
 def save_neural_texture(texture: NeuralTexture, path: str | os.PathLike) -> Path:
