@@ -21,7 +21,9 @@ def _light(args, out: Path) -> int:
 
     photo, info = load_photo(args.photo)
     placement = parse_placement(args.at, photo.shape[1], photo.shape[0])
-    depth = DepthConfig(depth_type=args.depth, model=args.depth_model or DEFAULT_DEPTH_MODEL)
+    # --offline and --cache-dir apply to the depth model as to the diffusion models (no network retries).
+    depth = DepthConfig(depth_type=args.depth, model=args.depth_model or DEFAULT_DEPTH_MODEL, cache_dir=args.cache_dir,
+                        local_files_only=True if args.offline else None)
     overrides = {k: v for k, v in (("scene_type", args.scene), ("fov_deg", args.fov), ("tint", args.tint),
                                    ("camera_pitch_deg", -args.elevation if args.elevation is not None else None))
                  if v is not None}

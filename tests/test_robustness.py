@@ -230,6 +230,33 @@ def test_light_takes_fractions_like_adapt(tmp_path, capsys):
     assert "fractions" in capsys.readouterr().err
 
 
+def test_light_messages_name_options_not_fields_and_offline_never_touches_the_network(tmp_path, capsys,
+                                                                                     monkeypatch):
+    import socket
+
+    photo = tmp_path / "photo.png"
+    write_image(photo, np.full((8, 8, 3), 0.5, np.float32))
+    assert cli("light", "--photo", str(photo), "--at", "0.5,0.8", "--elevation", "100", "--out",
+               str(tmp_path / "a"), "--quiet") == 2
+    err = capsys.readouterr().err
+    assert "elevation" in err and "camera_pitch_deg" not in err
+    # --depth model --offline: a missing model is reported at once, without one connection attempt
+    # (it used to retry the network for 98 s).
+    attempts = []
+
+    def no_network(self, address):
+        attempts.append(address)
+        raise OSError("network disabled by the test")
+
+    monkeypatch.setattr(socket.socket, "connect", no_network)
+    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
+    monkeypatch.setenv("HF_HUB_CACHE", str(tmp_path / "empty_cache"))
+    assert cli("light", "--photo", str(photo), "--at", "0.5,0.8", "--depth", "model", "--offline", "--out",
+               str(tmp_path / "b"), "--quiet") == 2
+    assert attempts == []
+    assert "offline" in capsys.readouterr().err and not (tmp_path / "b").exists()
+
+
 @pytest.mark.parametrize("value", [np.nan, np.inf, -1.0])
 def test_export_refuses_a_broken_environment_map(tmp_path, asset, capsys, value):
     env = np.ones((8, 16, 3), np.float32)

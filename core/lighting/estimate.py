@@ -74,7 +74,8 @@ class LightConfig:
         if self.fov_deg is not None and not 1.0 <= self.fov_deg <= 170.0:
             raise InputError(f"The photo's field of view must be between 1 and 170 degrees, got {self.fov_deg}.")
         if not -89.0 <= self.camera_pitch_deg <= 89.0:
-            raise InputError(f"camera_pitch_deg must be within +-89 degrees, got {self.camera_pitch_deg}.")
+            raise InputError(f"The photo camera's elevation must be within +-89 degrees (how far it looks down), "
+                             f"got {-self.camera_pitch_deg:g}.")
         if not 8 <= self.map_height <= 4096:
             raise InputError(f"map_height must be between 8 and 4096, got {self.map_height}.")
         if not self.l_white > 1.0:
