@@ -104,7 +104,8 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
 
     # Convert the asset's own maps into the neural texture and bake it.
     config = convert_preset(preset)
-    result, convert_report = convert_and_bake(mesh, maps, out / "converted", config, progress=progress)
+    result, convert_report = convert_and_bake(mesh, maps, out / "converted", config, progress=progress,
+                                              keep_constants=True)
     timings["convert"] = result.seconds
 
     # The original maps, next to the converted ones.

@@ -107,14 +107,6 @@ def child(code: str, **values) -> dict:
     return json.loads(line[len("RESULT "):])
 
 
-def table(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
-    head = "| " + " | ".join(title for title, _, _ in columns) + " |"
-    rule = "|" + "|".join("---" for _ in columns) + "|"
-    body = ["| " + " | ".join(format(row[key], fmt) if fmt else str(row[key]) for _, key, fmt in columns) + " |"
-            for row in rows]
-    return "\n".join([head, rule, *body])
-
-
 def plot(stages: dict[str, tuple[list[dict], str, str, bool]], path: Path) -> None:
     import matplotlib
 
@@ -140,6 +132,7 @@ def plot(stages: dict[str, tuple[list[dict], str, str, bool]], path: Path) -> No
 
 
 def bench_presets(asset: Path, quick: bool = False, presets=PRESETS, demo_presets=PRESETS) -> dict:
+    from run import table  # benchmarks/ is on sys.path (run.py and main() below put it there)
     from scenefit.core.convert import CONVERT_PRESETS
 
     started = time.perf_counter()

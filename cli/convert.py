@@ -17,7 +17,8 @@ def run(args) -> int:
     config = convert_preset(args.preset, **overrides)
     with output(args) as out:
         mesh, maps = load_asset(args.asset, args.object)
-        result, report = convert_and_bake(mesh, maps, out / "maps", config, progress=progress(args))
+        result, report = convert_and_bake(mesh, maps, out / "maps", config, progress=progress(args),
+                                          keep_constants=True)
         save_asset_folder(mesh, maps, out / "asset")
         report["environment"] = environment_info()
         write_report(out / "report.json", report)

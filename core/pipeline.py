@@ -114,17 +114,23 @@ def environment_info() -> dict:
 
 
 def convert_and_bake(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, config: ConvertConfig = ConvertConfig(),
-                     progress: ProgressCallback | None = None,
-                     cancel: threading.Event | None = None) -> tuple[ConvertResult, dict]:
-    """Convert the asset's maps to a neural texture and bake it into `out_dir`; returns the result and report."""
+                     progress: ProgressCallback | None = None, cancel: threading.Event | None = None,
+                     keep_constants: bool = False) -> tuple[ConvertResult, dict]:
+    """Convert the asset's maps to a neural texture and bake it into `out_dir`; returns the result and report.
+
+    keep_constants: a roughness/metallic that holds one value stays that number (reported in
+    decisions > channels, returned in outputs as a float) instead of a baked 16-bit map.
+    """
     out_dir = Path(out_dir)
     result = convert_asset(mesh, maps, config, progress=progress, cancel=cancel)
     check_cancel(cancel)
-    channels = constant_channels(maps)
-    constants = {name: d.value for name, d in channels.items() if d.value != "map"}
+    constants = {}
+    if keep_constants:
+        channels = constant_channels(maps)
+        constants = {name: d.value for name, d in channels.items() if d.value != "map"}
+        result.decisions["channels"] = {name: d.to_dict() for name, d in channels.items()}
     paths = bake_maps(result.texture, result.raster.position, result.raster.border, result.raster.fill_index, out_dir,
                       constants=constants)
-    result.decisions["channels"] = {name: d.to_dict() for name, d in channels.items()}
     report = {
         "stage": "convert",
         "config": asdict(config),

@@ -23,7 +23,7 @@ def test_constant_channels_stay_constants_and_the_report_says_why(tmp_path):
     rough = (0.2 + 0.6 * base()[..., 0]).astype(np.float32)
     maps = PBRMaps(base(), rough, np.zeros((16, 16), np.float32))
     result, report = convert_and_bake(uv_sphere(segments=12, rings=6), maps, tmp_path / "maps",
-                                      convert_preset("draft", iterations=3))
+                                      convert_preset("draft", iterations=3), keep_constants=True)
     assert report["outputs"]["metallic"] == 0.0 and not (tmp_path / "maps" / "metallic.png").exists()
     assert (tmp_path / "maps" / "roughness.png").is_file()
     channels = report["decisions"]["channels"]
