@@ -28,6 +28,8 @@ from .core.pipeline import (contact_sheet, convert_and_bake, environment_info, i
 from .core.placement import Placement
 from .core.presets import stage_config
 from .core.progress import ProgressCallback, emit
+from .core.scene_needs import envmap_height_for
+from .core.texture.uv_raster import rasterize_uv
 
 DEMO_STUDIOLIGHT = "interior"
 DEMO_PHOTO_CAMERA = PhotoCamera(yaw_deg=60.0, pitch_deg=-12.0, fov_deg=60.0, width=768, height=512)
@@ -89,17 +91,23 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     t = time.perf_counter()
     photo_srgb, photo_read = load_photo(inputs / "photo.png")
     placement_px = DEMO_PLACEMENT.pixel(photo_srgb.shape[:2])
-    light_config = stage_config("light", preset)
+    # Only what the scene needs: the map is as sharp as the asset's glossiest reflections.
+    normalized, _ = normalize_to_unit_sphere(mesh)
+    covered = rasterize_uv(normalized, max(maps.resolution)).mask
+    envmap_height = envmap_height_for(maps, covered)
+    light_config = stage_config("light", preset, map_height=envmap_height.value)
     light = estimate_light(photo_srgb, placement_px, light_config, photo_camera=DEMO_PHOTO_CAMERA,
                            photo_info=photo_read, progress=progress)
     light_outputs = write_light_outputs(light, out / "light")
     env = light.hdr.astype(np.float32)
     lighting = light_report(light, light_config, light_outputs)
+    lighting["decisions"]["envmap_height"] = envmap_height.to_dict()
     timings["light"] = time.perf_counter() - t
 
     # Convert the asset's own maps into the neural texture and bake it.
     config = stage_config("convert", preset)
-    result, convert_report = convert_and_bake(mesh, maps, out / "converted", config, progress=progress)
+    result, convert_report = convert_and_bake(mesh, maps, out / "converted", config, progress=progress,
+                                              keep_constants=True)
     timings["convert"] = result.seconds
 
     # The original maps, next to the converted ones.

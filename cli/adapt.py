@@ -4,9 +4,10 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-from .options import (add_asset_args, add_dry_run_arg, add_elevation_arg, add_model_args, add_placement_args,
-                      add_preset_args, add_prompt_service_args, environment, load_asset, model_config, placement,
-                      print_config, progress, require, write_prompt_from_args)
+from .options import (add_asset_args, add_dry_run_arg, add_elevation_arg, add_model_args, add_output_args,
+                      add_placement_args, add_preset_args, add_prompt_service_args, environment, load_asset,
+                      model_config, output, placement, positive_int, print_config, progress, require,
+                      write_prompt_from_args)
 
 # What --dry-run shows when the prompt would be given or written at run time.
 PROMPT_PLACEHOLDER = "<the prompt: --prompt, or written from --object-prompt and --scene-prompt at run time>"
@@ -50,13 +51,6 @@ def resolve_config(args, prompt: str, instruction: str):
 
 
 def run(args) -> int:
-    import numpy as np
-
-    from ..core.adapt import adapt_and_bake
-    from ..core.imageio import linear_to_srgb, read_color_image
-    from ..core.pipeline import environment_info, write_report
-    from ..core.texture.bake import load_neural_texture
-
     if args.dry_run:   # nothing is asked of the prompt service, loaded or written
         prompt = args.prompt or ("" if args.mode == "edit" else PROMPT_PLACEHOLDER)
         instruction = args.instruction or (PROMPT_PLACEHOLDER if args.mode == "edit" else "")
@@ -64,6 +58,19 @@ def run(args) -> int:
         return print_config({"stage": "adapt", "preset": args.preset, "schedule": config.schedule(),
                              "config": config.to_dict()})
     require(args, "asset", "--out")
+    # Checkpoints live in the run's folder while it is written, so an interrupted run resumes.
+    with output(args, resume=True) as out:
+        return _adapt(args, out)
+
+
+def _adapt(args, out: Path) -> int:
+    import numpy as np
+
+    from ..core.adapt import adapt_and_bake
+    from ..core.imageio import linear_to_srgb, read_color_image
+    from ..core.pipeline import environment_info, write_report
+    from ..core.texture.bake import load_neural_texture
+
     prompt, instruction, written = scene_conditional_prompt(args, args.mode)
     config = resolve_config(args, prompt, instruction)
     mesh, _ = load_asset(args.asset, args.object)
@@ -73,14 +80,14 @@ def run(args) -> int:
         photo = linear_to_srgb(np.clip(read_color_image(args.photo), 0.0, 1.0))
         where = placement(args, photo.shape[:2])
     env = environment(args)[0] if args.envmap else None
-    result, report = adapt_and_bake(mesh, texture, config, Path(args.out), photo=photo, placement=where,
+    result, report = adapt_and_bake(mesh, texture, config, out, photo=photo, placement=where,
                                     envmap=env, progress=progress(args))
     if not report["outputs"]:   # another rank of a distributed run writes the outputs
         return 0
     report["environment"] = environment_info()
     if written is not None:
         report["prompt_writing"] = written.to_report()
-    write_report(Path(args.out) / "report.json", report)
+    write_report(out / "report.json", report)
     print(f"adapted '{mesh.name}' ({args.mode}, {result.iterations} iterations, {result.seconds:.1f} s) -> {args.out}/maps")
     return 0
 
@@ -89,7 +96,8 @@ def add_parser(sub) -> None:
     p = sub.add_parser("adapt", help="restyle a converted texture with diffusion guidance (or texture/edit from a "
                                      "prompt); several GPUs: torchrun --nproc_per_node N -m scenefit.cli adapt ...")
     add_asset_args(p, optional=True)
-    p.add_argument("--out", help="output folder: maps/, checkpoint/ (rerun to resume), report.json")
+    add_output_args(p, help="output folder: maps/, checkpoint/, report.json (an interrupted run resumes when rerun)",
+                    required=False)
     p.add_argument("--mode", choices=("scene", "generate", "edit"), default="scene")
     p.add_argument("--texture", help="texture.pt from `scenefit convert` (required unless --mode generate)")
     p.add_argument("--prompt", help="appearance description, e.g. 'a leather sofa, soggy and stained with mud'")
@@ -101,13 +109,13 @@ def add_parser(sub) -> None:
     add_placement_args(p)
     p.add_argument("--envmap", help="light the object with this HDR map while adapting (e.g. the estimated one)")
     add_preset_args(p)
-    p.add_argument("--iterations", type=int)
+    p.add_argument("--iterations", type=positive_int)
     add_elevation_arg(p)
     p.add_argument("--seed", type=int)
-    p.add_argument("--views-per-step", type=int, help="views averaged per step (paper: 4, one per GPU)")
-    p.add_argument("--global-crops", type=int, help="global-view crops scored per view (default 2)")
-    p.add_argument("--model-resolution", type=int, help="image size the diffusion models see (default 512)")
-    p.add_argument("--render-size", type=int, help="cap on every stage's render size (pixels)")
+    p.add_argument("--views-per-step", type=positive_int, help="views averaged per step (paper: 4, one per GPU)")
+    p.add_argument("--global-crops", type=positive_int, help="global-view crops scored per view (default 2)")
+    p.add_argument("--model-resolution", type=positive_int, help="image size the diffusion models see (default 512)")
+    p.add_argument("--render-size", type=positive_int, help="cap on every stage's render size (pixels)")
     add_model_args(p)
     add_prompt_service_args(p, prefix="prompt-")
     add_dry_run_arg(p)

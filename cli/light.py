@@ -4,8 +4,9 @@ from __future__ import annotations
 from dataclasses import asdict, replace
 from pathlib import Path
 
-from .options import (add_dry_run_arg, add_elevation_arg, add_model_args, add_placement_args, add_preset_args,
-                      model_config, placement, print_config, progress, require)
+from .options import (add_dry_run_arg, add_elevation_arg, add_model_args, add_output_args, add_placement_args,
+                      add_preset_args, model_config, output, placement, positive_float, positive_int, print_config,
+                      progress, require)
 
 
 def critic_choice(args, models):
@@ -44,22 +45,26 @@ def resolve_config(args, critic: str):
 
 
 def run(args) -> int:
-    from ..core.lighting import estimate_light, light_report, load_photo, write_light_outputs
-    from ..core.pipeline import environment_info, write_report
-
     if args.dry_run:
         config = resolve_config(args, "diffusion" if args.critic == "auto" else args.critic)
         return print_config({"stage": "light", "preset": args.preset, "config": asdict(config),
                              "note": "--critic auto resolves to diffusion when the SD2 weights are found"
                              if args.critic == "auto" else ""})
     require(args, "--photo", "--out")
+    with output(args) as out:
+        return _light(args, out)
+
+
+def _light(args, out: Path) -> int:
+    from ..core.lighting import estimate_light, light_report, load_photo, write_light_outputs
+    from ..core.pipeline import environment_info, write_report
+
     critic = critic_choice(args, model_config(args))
     config = resolve_config(args, critic.choice)
     photo, info = load_photo(args.photo)
     where = placement(args, photo.shape[:2])
     result = estimate_light(photo, where.pixel(photo.shape[:2]), config, photo_info=info, progress=progress(args))
     result.decisions["critic"]["choice"] = {"asked": args.critic, "chosen": critic.choice, "why": critic.reason}
-    out = Path(args.out)
     outputs = write_light_outputs(result, out)
     report = light_report(result, config, outputs)
     report["photo"] = info
@@ -67,7 +72,7 @@ def run(args) -> int:
     write_report(out / "report.json", report)
     depth_used = result.decisions.get("depth", {}).get("method", "none (outdoor)")
     print(f"light: {result.decisions['scene_type']['chosen']} scene, depth {depth_used}, scales "
-          f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {out}/light.exr")
+          f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {Path(args.out) / 'light.exr'}")
     return 0
 
 
@@ -75,10 +80,10 @@ def add_parser(sub) -> None:
     p = sub.add_parser("light", help="estimate an HDR environment map from a photo and the object's placement")
     p.add_argument("--photo", help="the scene photo (JPEG/PNG/EXR, any size)")
     add_placement_args(p, required=False)
-    p.add_argument("--out", help="output folder: light.exr, light_preview.png, report.json")
+    add_output_args(p, help="output folder: light.exr, light_preview.png, report.json", required=False)
     add_preset_args(p)
     p.add_argument("--scene", choices=("auto", "indoor", "outdoor"), help="scene type (default: auto)")
-    p.add_argument("--fov", type=float, help="horizontal field of view in degrees (default: metadata, else 60)")
+    p.add_argument("--fov", type=positive_float, help="horizontal field of view in degrees (default: metadata, else 60)")
     add_elevation_arg(p)
     p.add_argument("--depth", choices=("auto", "model", "geometric"), default="auto",
                    help="auto: the depth model if it is on this machine, else the geometric room")
@@ -87,11 +92,11 @@ def add_parser(sub) -> None:
     p.add_argument("--critic", choices=("auto", "diffusion", "none"), default="auto",
                    help="what refines the light scales: diffusion (VSD with Stable Diffusion 2 base), none (the "
                         "inverse-tone-mapping prior alone), or auto (diffusion when its weights are on this machine)")
-    p.add_argument("--iterations", type=int, help="light-scale optimisation steps (default: the preset's)")
+    p.add_argument("--iterations", type=positive_int, help="light-scale optimisation steps (default: the preset's)")
     p.add_argument("--outpaint", choices=("auto", "sd2", "prior"), default="auto",
                    help="outdoor: complete the unseen map by SD2 inpainting (sd2), the sky/ground prior (prior), or "
                         "auto (sd2 when its weights are on this machine)")
-    p.add_argument("--model-resolution", type=int,
+    p.add_argument("--model-resolution", type=positive_int,
                    help="image size the diffusion critic sees and the outpainting height (default 512)")
     add_model_args(p)
     p.add_argument("--quiet", action="store_true")

@@ -3,8 +3,80 @@ model options. Declared once so an option means the same thing in every command.
 from __future__ import annotations
 
 import argparse
+import math
 
 from ..core.presets import PRESET_NAMES as PRESETS
+
+
+# -- option types: a bad value is refused by argparse (one line, exit 2) before any work ---------------
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def finite_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
+
+
+def nonnegative_float(text: str) -> float:
+    value = finite_float(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be zero or more, got {text!r}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    value = finite_float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be more than zero, got {text!r}")
+    return value
+
+
+def placement_fractions(text: str) -> tuple[float, float]:
+    """--at X,Y: where the object stands, as fractions of the photo's width and height (every command)."""
+    parts = text.split(",")
+    try:
+        x, y = (float(v) for v in parts) if len(parts) == 2 else (None, None)
+    except ValueError:
+        x = y = None
+    if x is None or not (math.isfinite(x) and math.isfinite(y)):
+        raise argparse.ArgumentTypeError(f"takes X,Y as fractions of the photo's width and height, e.g. 0.5,0.7; "
+                                         f"got {text!r}")
+    if not (0.0 <= x <= 1.0 and 0.0 <= y <= 1.0):
+        raise argparse.ArgumentTypeError(f"takes fractions of the photo's width and height between 0 and 1; got "
+                                         f"{text!r}")
+    return x, y
+
+
+def add_output_args(p: argparse.ArgumentParser, default: str | None = None, help: str = "output folder",
+                    required: bool = True) -> None:
+    """--out and --replace: the run's folder is written whole (see core/output_folder.py). `required`
+    False: the command checks it itself (its --dry-run needs none)."""
+    if default is None:
+        p.add_argument("--out", required=required, help=help)
+    else:
+        p.add_argument("--out", default=default, help=f"{help} (default {default})")
+    p.add_argument("--replace", action="store_true",
+                   help="replace the output folder when it already holds files (default: refuse)")
+
+
+def output(args, resume: bool = False):
+    """The run's output folder as a context manager yielding the folder to write into."""
+    from ..core.output_folder import output_folder
+
+    args.resumable = resume
+    return output_folder(args.out, replace=args.replace, resume=resume)
 
 
 def load_asset(path: str, object_name: str | None = None):
@@ -48,7 +120,7 @@ def add_asset_args(p: argparse.ArgumentParser, optional: bool = False) -> None:
 def add_lighting_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--envmap", help="equirectangular HDR map (EXR/HDR) to light the asset")
     p.add_argument("--studiolight", help="one of Blender's bundled HDR maps (studio, interior, city, forest, ...)")
-    p.add_argument("--ambient", type=float, default=1.0, help="constant environment radiance when no map is given")
+    p.add_argument("--ambient", type=nonnegative_float, default=1.0, help="constant environment radiance when no map is given")
 
 
 def add_model_args(p: argparse.ArgumentParser) -> None:
@@ -75,31 +147,19 @@ def add_preset_args(p: argparse.ArgumentParser) -> None:
 
 def add_elevation_arg(p: argparse.ArgumentParser, default: float | None = None) -> None:
     """--elevation: the same angle in every command, the camera's height above the object's horizon."""
-    p.add_argument("--elevation", type=float, default=default,
+    p.add_argument("--elevation", type=finite_float, default=default,
                    help="degrees above the horizon from which the camera sees the object"
                         + (f" (default {default:g})" if default is not None else " (default: the stage's)"))
-
-
-def add_size_arg(p: argparse.ArgumentParser, default: int) -> None:
-    """--size: the same thing in every command, the side of the rendered image in pixels."""
-    p.add_argument("--size", type=int, default=default, help=f"rendered image size in pixels (default {default})")
-
-
-def add_view_args(p: argparse.ArgumentParser, size: int, spp: int) -> None:
-    """How render and export look at the asset: --elevation, --size (pixels), --spp."""
-    add_elevation_arg(p, 15.0)
-    add_size_arg(p, size)
-    p.add_argument("--spp", type=int, default=spp, help=f"samples per pixel (default {spp})")
 
 
 def add_placement_args(p: argparse.ArgumentParser, required: bool = False) -> None:
     """Where the object goes in the photo (core/placement.py): --at and --object-size."""
     from ..core.placement import DEFAULT_AT, DEFAULT_SIZE
 
-    p.add_argument("--at", required=required, default=None if required else ",".join(f"{v:g}" for v in DEFAULT_AT),
-                   help="X,Y of the object's centre in the photo: fractions of width,height (or pixels)"
+    p.add_argument("--at", required=required, type=placement_fractions, default=None if required else DEFAULT_AT,
+                   help="X,Y of the object in the photo: fractions of its width and height"
                         + ("" if required else f" (default {DEFAULT_AT[0]:g},{DEFAULT_AT[1]:g})"))
-    p.add_argument("--object-size", type=float, default=DEFAULT_SIZE,
+    p.add_argument("--object-size", type=positive_float, default=DEFAULT_SIZE,
                    help=f"the object's size as a fraction of the photo's height (default {DEFAULT_SIZE:g})")
 
 

@@ -9,6 +9,7 @@ import torch
 from ..atomic import write_bytes_atomic
 from ..errors import InputError
 from ..guidance.lora import LoraCritic
+from ..texture.bake import torch_load_reason
 from ..texture.neural_texture import NeuralTexture
 from .config import AdaptConfig
 
@@ -46,7 +47,8 @@ def load_checkpoint(path: Path, config: AdaptConfig) -> dict | None:
     try:
         payload = torch.load(path, map_location="cpu", weights_only=False)
     except Exception as error:
-        raise InputError(f"The checkpoint '{path}' cannot be read ({error}); delete it to start over.") from error
+        raise InputError(f"The checkpoint '{path}' cannot be read ({torch_load_reason(error)}); delete it to start "
+                         "over.") from None
     if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
         raise InputError(f"'{path}' is not a SceneFit adapt checkpoint; delete it to start over.")
     if payload["settings"] != settings_key(config):

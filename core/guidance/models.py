@@ -307,7 +307,7 @@ class DepthEstimator:
                 f"{' (offline: downloads are off)' if only_local else ''}. Provide it by downloading it on a "
                 f"connected machine (`huggingface-cli download {model}`) into that cache, or pass a local folder "
                 f"holding config.json, the weights and preprocessor_config.json (--depth-model PATH); or use "
-                f"the geometric fallback (--depth geometric). Cause: {str(error).splitlines()[0][:200]}") from error
+                f"the geometric fallback (--depth geometric). Cause: {_first_sentence(error)}") from error
         self.model.eval().to(device)
         self.device = device
         self.name = model
@@ -326,6 +326,12 @@ class DepthEstimator:
             pred = self.model(**{k: v.to(self.device) for k, v in inputs.items()}).predicted_depth
         pred = F.interpolate(pred[:, None].float(), size=image.shape[:2], mode="bilinear", align_corners=False)
         return pred[0, 0].cpu().numpy().astype(np.float32)
+
+
+def _first_sentence(error: Exception) -> str:
+    """The library's own reason, without its advice to the library's users (URLs, local directories)."""
+    lines = str(error).strip().splitlines()
+    return (lines[0].split(". ")[0] if lines else type(error).__name__)[:200]
 
 
 def _where_looked(model: str, cache_dir: str | None) -> str:
