@@ -99,3 +99,19 @@ def write_prompt_from_args(args, object_prompt: str, scene_prompt: str, mode_typ
     return write_prompt(request, service, offline=offline,
                         cache_dir=Path(args.prompt_cache) if args.prompt_cache else None,
                         use_cache=not args.no_prompt_cache)
+
+
+def scene_conditional_prompt(args, mode: str):
+    """(prompt, instruction, record) for the run: the user's --prompt/--instruction when given, else
+    written from --object-prompt and --scene-prompt (a description; edit mode: an instruction)."""
+    prompt, instruction, photo = args.prompt or "", getattr(args, "instruction", None) or "", args.photo or ""
+    given = prompt or (instruction if mode == "edit" else "")
+    if given or not args.object_prompt or not (args.scene_prompt or (photo and mode == "scene")):
+        return prompt, instruction, None
+    result = write_prompt_from_args(args, args.object_prompt, args.scene_prompt, "instruct" if mode == "edit" else "describe",
+                                    photo if mode == "scene" else "")
+    source = f"written by '{result.model}'" if result.model_written else f"template ({result.reason})"
+    print(f"prompt ({source}): {result.prompt}")
+    if mode == "edit":
+        return prompt, result.prompt, result
+    return result.prompt, instruction, result

@@ -282,7 +282,7 @@ def test_adapt_writes_its_prompt_from_object_and_scene(server, tmp_path, capsys)
     """`scenefit adapt --object-prompt --scene-prompt` without --prompt: the model's description is
     the prompt the critics get (edit mode: its instruction), and the report keeps the analysis."""
     from scenefit.cli import build_parser, main
-    from scenefit.cli.adapt import scene_conditional_prompt
+    from scenefit.cli.options import scene_conditional_prompt
     from scenefit.core.asset_io import save_asset_folder
     from scenefit.core.guidance.testing import build_tiny_pair
     from scenefit.core.maps import PBRMaps
