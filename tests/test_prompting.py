@@ -141,6 +141,14 @@ def test_follow_up_turn_continues_the_conversation(server, cache):
     assert write_prompt(request, None, cache_dir=cache).warnings == ("the follow-up needs a language model and was not used",)
 
 
+def test_missing_openai_package_is_one_sentence(server, cache, monkeypatch):
+    monkeypatch.setitem(__import__("sys").modules, "openai", None)      # `import openai` now fails
+    with pytest.raises(PromptServiceError, match="'openai' Python package is missing"):
+        write_prompt(SOFA, service(server), cache_dir=cache)
+    assert server.connections == 0
+    assert write_prompt(SOFA, service(server), offline=True, cache_dir=cache).prompt == "a leather sofa in a swamp"
+
+
 def test_time_out_is_one_clear_sentence(server, cache):
     server.replies = [Reply(answer(GOOD), delay_s=5)]
     with pytest.raises(PromptServiceError, match=r"did not answer within 0.5 s") as error:
