@@ -203,7 +203,7 @@ def build_without_wheels(out: Path | None = None) -> Path:
     """A pure-Python zip (empty wheels list) from a staged copy; the repository is left untouched."""
     out = out or DIST / f"scenefit-{version()}-nowheels.zip"
     ignore = shutil.ignore_patterns(".venv", ".git", "dist", "out", "build", "wheels", "tests", "example",
-                                    "__pycache__", "*.egg-info", ".pytest_cache")
+                                    "__pycache__", "*.egg-info", ".pytest_cache", ".pyroot")
     with tempfile.TemporaryDirectory() as tmp:
         stage = Path(tmp) / "scenefit"
         shutil.copytree(ROOT, stage, ignore=ignore)
