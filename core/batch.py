@@ -19,6 +19,7 @@ import math
 import shutil
 import tarfile
 import tempfile
+import threading
 import time
 import traceback
 from dataclasses import dataclass, field, replace
@@ -98,16 +99,20 @@ class JobWorker:
         from .guidance.models import ModelCache
 
         self.threads_before = set_threads(threads) if threads is not None else None
+        self.cancel_event = threading.Event()
         self.models = ModelCache()
         self.jobs_run = 0
 
-    def run(self, payload: JobPayload) -> JobResult:
+    def run(self, payload: JobPayload, progress_sink=None) -> JobResult:
+        """Run one job; progress events go to `progress_sink` (a queue: ray.util.queue.Queue on Ray)."""
         started = time.perf_counter()
+        self.cancel_event.clear()
+        progress = None if progress_sink is None else SinkProgress(progress_sink, payload.job.name)
         with tempfile.TemporaryDirectory(prefix="scenefit-job-") as tmp:
             job = unpacked_job(payload, Path(tmp) / "in")
             out = Path(tmp) / "out"
             out.mkdir()
-            stages = run_job_stages(job, out, models=self.models)
+            stages = run_job_stages(job, out, models=self.models, progress=progress, cancel=self.cancel_event)
             self.jobs_run += 1
             report = {"status": "done", "job": payload.job.to_dict(), "attempts": payload.attempt,
                       "seconds": round(time.perf_counter() - started, 3), "quality": quality_figures(stages),
@@ -115,8 +120,34 @@ class JobWorker:
             write_json_atomic(out / REPORT, report)
             return JobResult(payload.job.name, report, pack({".": out}))
 
+    def cancel(self) -> None:
+        """Stop the running job at its next check (a Ray actor takes this call while `run` runs)."""
+        self.cancel_event.set()
+
     def ping(self) -> str:
         return "ready"
+
+
+class SinkProgress:
+    """A progress callback that puts plain dicts into a queue, at most every `interval` seconds
+    (always for a stage's last step and for previews); a full queue drops the event rather than wait."""
+
+    def __init__(self, sink, job: str, interval: float = 0.25) -> None:
+        self.sink, self.job, self.interval = sink, job, interval
+        self._last = 0.0
+
+    def __call__(self, event) -> None:
+        now = time.perf_counter()
+        last_step = event.step >= event.total
+        if not last_step and event.preview is None and now - self._last < self.interval:
+            return
+        self._last = now
+        metrics = {k: v for k, v in (event.metrics or {}).items() if isinstance(v, (int, float, str))}
+        try:
+            self.sink.put_nowait({"job": self.job, "stage": event.stage, "step": event.step, "total": event.total,
+                                  "message": event.message, "metrics": metrics, "preview": event.preview})
+        except Exception:   # queue.Full / ray.util.queue.Full: progress is best effort, the job goes on
+            pass
 
 
 def set_threads(threads: int | tuple[int, int]) -> tuple[int, int]:

@@ -205,3 +205,34 @@ def test_model_cache_loads_once_and_survives_a_released_text_encoder(tmp_path):
     second = cache.get(config, need_inpaint=False)
     assert cache.loads == 1 and second.unet is first.unet
     assert second.embed("a muddy ball").shape[1] == 77
+
+
+def test_remote_job_streams_progress_cancels_and_returns_its_folder(in_process, tmp_path):
+    """What the add-on does with a worker environment: hand a job to Ray, follow it, cancel it, fetch it."""
+    ray = pytest.importorskip("ray")
+    import threading
+    from dataclasses import replace
+
+    from scenefit.core.errors import Cancelled
+    from scenefit.core.remote import run_remote
+
+    jobs_path, reference, _ = in_process
+    job = load_jobs(jobs_path).jobs[0]
+    ray.init(num_cpus=2, object_store_memory=80 * 2**20, include_dashboard=False, log_to_driver=False)
+    try:
+        events = []
+        folder, report = run_remote(job, tmp_path / "back", progress=events.append)
+        assert folder == tmp_path / "back" / "a" and report["status"] == "done"
+        stages = [e.stage for e in events]
+        assert "convert" in stages and "light" in stages and stages.index("convert") < stages.index("light")
+        assert all(0 <= e.step <= e.total for e in events) and events[-1].fraction == 1.0
+        assert outputs(folder) == outputs(reference / "a")
+
+        # Cancelled at its first progress event: the worker stops with Cancelled and nothing comes back.
+        cancel = threading.Event()
+        long_job = replace(job, name="long", preset="final", stages=("convert",))
+        with pytest.raises(Cancelled):
+            run_remote(long_job, tmp_path / "back", progress=lambda event: cancel.set(), cancel=cancel)
+        assert not (tmp_path / "back" / "long").exists()
+    finally:
+        ray.shutdown()

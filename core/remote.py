@@ -1,0 +1,126 @@
+"""Hand one job to a SceneFit worker environment with GPUs and follow it from here (the Blender side).
+
+The extension bundles CPU torch, so the adapt stage at the paper's settings would take a day on an
+artist's laptop. `RemoteJob` starts the job on a Ray cluster (its address from the add-on's
+preferences; "local" for a cluster on this machine) as a JobWorker actor with the job's CPUs and
+GPUs, and streams its progress events (stage, step, metrics, the occasional preview image) back
+through a Ray queue. The job's inputs travel as bytes and its output folder comes back as bytes, so
+the cluster needs no access to the artist's disk. Nothing here blocks: a modal operator calls
+`events()` and `finished()` from its timer, then `result(folder)` to unpack the outputs, which it
+applies on Blender's main thread.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .batch import JobResult, JobWorker, install_folder, make_payload, unpack
+from .batch_ray import connect, import_ray, job_resources
+from .errors import Cancelled, SceneFitError
+from .jobs import BatchSettings, Job
+
+
+class RemoteJob:
+    """One job running on a Ray cluster; poll it, cancel it, fetch its outputs."""
+
+    def __init__(self, job: Job, address: str = "auto", settings: BatchSettings = BatchSettings(),
+                 queue_size: int = 256) -> None:
+        ray = import_ray()
+        from ray.util.queue import Queue
+
+        self.ray, self.job = ray, job
+        self.started_ray = connect(address)
+        try:
+            options = job_resources(settings, ray.cluster_resources())
+            # Two calls at once: `run`, and `cancel` while it runs.
+            self.actor = ray.remote(JobWorker).options(max_concurrency=2, **options).remote(
+                threads=max(1, int(settings.num_cpus)))
+            self.queue = Queue(maxsize=queue_size)
+            self.ref = self.actor.run.remote(make_payload(job), self.queue)
+        except BaseException:
+            self.close()
+            raise
+        self._result: JobResult | None = None
+
+    def events(self, limit: int | None = None) -> list[dict]:
+        """Progress events that arrived since the last call, oldest first (never waits)."""
+        out = []
+        while (limit is None or len(out) < limit) and not self.queue.empty():
+            try:
+                out.append(self.queue.get_nowait())
+            except Exception:   # emptied between the check and the get
+                break
+        return out
+
+    def finished(self) -> bool:
+        ready, _ = self.ray.wait([self.ref], timeout=0)
+        return bool(ready)
+
+    def cancel(self) -> None:
+        self.actor.cancel.remote()
+
+    def result(self, out_dir: str | Path, timeout: float | None = None) -> Path:
+        """Wait for the job, unpack its folder into OUT_DIR/<job name>/ (whole), return that folder.
+
+        Raises the job's own SceneFitError (bad input, Cancelled, ...) as it was raised on the worker.
+        """
+        if self._result is None:
+            try:
+                self._result = self.ray.get(self.ref, timeout=timeout)
+            except self.ray.exceptions.RayTaskError as error:
+                cause = getattr(error, "cause", None)
+                if isinstance(cause, (SceneFitError, Cancelled)):
+                    raise cause from None
+                raise
+        outputs = self._result.outputs
+        return install_folder(Path(out_dir), self.job.name, lambda folder: unpack(outputs, folder))
+
+    @property
+    def report(self) -> dict | None:
+        return None if self._result is None else self._result.report
+
+    def close(self) -> None:
+        """Free the worker and the queue (and Ray itself when this job started it)."""
+        for name in ("actor",):
+            handle = getattr(self, name, None)
+            if handle is not None:
+                self.ray.kill(handle)
+        queue = getattr(self, "queue", None)
+        if queue is not None:
+            queue.shutdown()
+        if self.started_ray:
+            self.ray.shutdown()
+
+    def __enter__(self) -> RemoteJob:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def run_remote(job: Job, out_dir: str | Path, address: str = "auto", settings: BatchSettings = BatchSettings(),
+               progress=None, cancel=None, poll_seconds: float = 0.2) -> tuple[Path, dict]:
+    """Run `job` on the cluster at `address` and wait: the shape of a background-job work function.
+
+    Streams the worker's events to `progress` as ProgressEvents (previews included), passes a set
+    `cancel` event on to the worker, and returns (OUT_DIR/<job name>, the job's report).
+    """
+    import time
+
+    from .progress import ProgressEvent
+
+    with RemoteJob(job, address, settings) as remote:
+        asked_to_cancel = False
+        while True:
+            finished = remote.finished()
+            for e in remote.events():
+                if progress is not None:
+                    progress(ProgressEvent(e["stage"], e["step"], e["total"], e["message"], e["metrics"],
+                                           e["preview"]))
+            if finished:
+                break
+            if cancel is not None and cancel.is_set() and not asked_to_cancel:
+                remote.cancel()
+                asked_to_cancel = True
+            time.sleep(poll_seconds)
+        folder = remote.result(out_dir)
+        return folder, remote.report
