@@ -10,10 +10,10 @@ import argparse
 import sys
 
 from ..core.errors import Cancelled, SceneFitError
-from . import adapt, batch, convert, demo, export, light, render
+from . import adapt, batch, convert, demo, export, light, prompt, render
 
 # The order `scenefit --help` lists them in.
-COMMANDS = (convert, render, export, light, adapt, batch, demo)
+COMMANDS = (convert, render, export, light, prompt, adapt, batch, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:
