@@ -22,7 +22,7 @@ def run(args) -> int:
         mode = None
     try:
         if mode is None:
-            dispatcher = InProcessDispatcher(jobs.settings)
+            dispatcher = InProcessDispatcher(jobs.settings, progress_sink=EventLines() if args.events else None)
             where = "in this process"
         else:
             started_ray = connect(mode)
@@ -46,6 +46,31 @@ def run(args) -> int:
     return 0
 
 
+class EventLines:
+    """Progress events as JSON lines on stdout (`--events`): how a caller in another process, such as
+    the Blender add-on driving a local install with CUDA torch, follows the jobs. A preview becomes
+    a PNG file beside the outputs, named in the line."""
+
+    def __init__(self, stream=None) -> None:
+        self.stream = stream or sys.stdout
+        self.previews = 0
+
+    def put_nowait(self, event: dict) -> None:
+        import json
+        import tempfile
+
+        event = dict(event)
+        preview = event.pop("preview", None)
+        if preview is not None:
+            from ..core.imageio import write_image
+
+            self.previews += 1
+            path = f"{tempfile.gettempdir()}/scenefit-preview-{__import__('os').getpid()}-{self.previews % 4}.png"
+            event["preview_png"] = str(write_image(path, preview / 255.0))
+        self.stream.write(json.dumps({"event": "progress", **event}, default=str) + "\n")
+        self.stream.flush()
+
+
 def add_parser(sub) -> None:
     p = sub.add_parser("batch", help="run many asset x scene jobs from a jobs file (in-process or on Ray)")
     p.add_argument("jobs", help="the jobs file (TOML, [[job]] tables; see README 'Batches')")
@@ -53,5 +78,7 @@ def add_parser(sub) -> None:
     p.add_argument("--ray", nargs="?", const="auto", metavar="auto|local|ADDRESS",
                    help="run the jobs as Ray tasks: auto (a running cluster, else a local one; here without Ray "
                         "installed), local (a new local cluster) or a cluster address; absent: in this process")
+    p.add_argument("--events", action="store_true",
+                   help="in-process: print each progress event as a JSON line on stdout (for a calling program)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=run)

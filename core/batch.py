@@ -331,8 +331,10 @@ class Dispatcher:
 class InProcessDispatcher(Dispatcher):
     """One JobWorker in this process, jobs one after another."""
 
-    def __init__(self, settings: BatchSettings = BatchSettings(), worker_class: type[JobWorker] = JobWorker) -> None:
+    def __init__(self, settings: BatchSettings = BatchSettings(), worker_class: type[JobWorker] = JobWorker,
+                 progress_sink=None) -> None:
         self.worker = worker_class(threads=job_threads(settings))
+        self.progress_sink = progress_sink
         self.queue: list[JobPayload] = []
         self.workers = 1
 
@@ -342,7 +344,7 @@ class InProcessDispatcher(Dispatcher):
     def next_done(self):
         payload = self.queue.pop(0)
         try:
-            return payload, self.worker.run(payload)
+            return payload, self.worker.run(payload, self.progress_sink)
         except Exception as error:   # reported and retried by the driver, never lost
             return payload, error
 

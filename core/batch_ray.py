@@ -120,4 +120,67 @@ class RayDispatcher(Dispatcher):
         self.idle, self.running = [], {}
 
 
-__all__ = ["RAY_MODES", "RayDispatcher", "connect", "import_ray", "job_resources", "ray_available", "worker_count"]
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("", 0))
+        return s.getsockname()[1]
+
+
+class _Rank:
+    """One process of a torch.distributed group started by Ray (what torchrun would start)."""
+
+    def address(self) -> tuple[str, int]:
+        import ray
+
+        return ray.util.get_node_ip_address(), _free_port()
+
+    def run(self, rank: int, world: int, master: tuple[str, int], local_rank: int, function, args: tuple):
+        import os
+
+        import torch.distributed as dist
+
+        os.environ.update(RANK=str(rank), WORLD_SIZE=str(world), LOCAL_RANK=str(local_rank),
+                          LOCAL_WORLD_SIZE=str(world), MASTER_ADDR=master[0], MASTER_PORT=str(master[1]))
+        try:
+            return function(*args)
+        finally:
+            if dist.is_available() and dist.is_initialized():
+                dist.destroy_process_group()
+            for key in ("RANK", "WORLD_SIZE", "LOCAL_RANK", "LOCAL_WORLD_SIZE", "MASTER_ADDR", "MASTER_PORT"):
+                os.environ.pop(key, None)
+
+
+def run_on_ranks(function, args: tuple, world: int, num_gpus_per_rank: float = 0.0,
+                 num_cpus_per_rank: float = 1.0) -> list:
+    """`function(*args)` on `world` Ray processes of one node, with torchrun's environment set, so the
+    adapt stage's `join_process_group` joins them into one torch.distributed group (nccl on GPUs,
+    gloo on CPUs): the paper's 4 views on 4 GPUs from a Ray task. Returns each rank's result.
+
+    The ranks sit in one placement group packed onto one node. Ray shows each GPU actor only its
+    own GPU, so every rank's LOCAL_RANK is 0 there (cuda:0 is its GPU); on CPUs it is the rank.
+    """
+    ray = import_ray()
+    from ray.util.placement_group import placement_group, remove_placement_group
+    from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
+
+    bundle = {"CPU": num_cpus_per_rank, **({"GPU": num_gpus_per_rank} if num_gpus_per_rank else {})}
+    group = placement_group([bundle] * world, strategy="STRICT_PACK")
+    try:
+        ray.get(group.ready(), timeout=600)
+        ranks = [ray.remote(_Rank).options(
+            num_cpus=num_cpus_per_rank, num_gpus=num_gpus_per_rank,
+            scheduling_strategy=PlacementGroupSchedulingStrategy(group, placement_group_bundle_index=i)).remote()
+            for i in range(world)]
+        master = ray.get(ranks[0].address.remote())
+        results = ray.get([r.run.remote(i, world, master, 0 if num_gpus_per_rank else i, function, args)
+                           for i, r in enumerate(ranks)])
+        for r in ranks:
+            ray.kill(r)
+        return results
+    finally:
+        remove_placement_group(group)
+
+
+__all__ = ["run_on_ranks", "RAY_MODES", "RayDispatcher", "connect", "import_ray", "job_resources", "ray_available", "worker_count"]

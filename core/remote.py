@@ -7,10 +7,12 @@ GPUs, and streams its progress events (stage, step, metrics, the occasional prev
 through a Ray queue. The job's inputs travel as bytes and its output folder comes back as bytes, so
 the cluster needs no access to the artist's disk. Nothing here blocks: a modal operator calls
 `events()` and `finished()` from its timer, then `result(folder)` to unpack the outputs, which it
-applies on Blender's main thread.
+applies on Blender's main thread. `LocalProcessJob` is the same for a SceneFit install with CUDA
+torch on this machine, without Ray: it runs `scenefit batch --events` with that install's Python.
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from .batch import JobResult, JobWorker, install_folder, make_payload, unpack
@@ -97,9 +99,18 @@ class RemoteJob:
         self.close()
 
 
+def open_worker(job: Job, address: str, settings: BatchSettings = BatchSettings()):
+    """The worker environment the add-on's preference names: a Python interpreter of another SceneFit
+    install (a path to a file) runs the job as a local process; anything else is a Ray address."""
+    if Path(address).expanduser().is_file():
+        return LocalProcessJob(job, str(Path(address).expanduser()), settings)
+    return RemoteJob(job, address, settings)
+
+
 def run_remote(job: Job, out_dir: str | Path, address: str = "auto", settings: BatchSettings = BatchSettings(),
                progress=None, cancel=None, poll_seconds: float = 0.2) -> tuple[Path, dict]:
-    """Run `job` on the cluster at `address` and wait: the shape of a background-job work function.
+    """Run `job` in the worker environment at `address` (open_worker) and wait: the shape of a
+    background-job work function.
 
     Streams the worker's events to `progress` as ProgressEvents (previews included), passes a set
     `cancel` event on to the worker, and returns (OUT_DIR/<job name>, the job's report).
@@ -108,7 +119,7 @@ def run_remote(job: Job, out_dir: str | Path, address: str = "auto", settings: B
 
     from .progress import ProgressEvent
 
-    with RemoteJob(job, address, settings) as remote:
+    with open_worker(job, address, settings) as remote:
         asked_to_cancel = False
         while True:
             finished = remote.finished()
@@ -124,3 +135,110 @@ def run_remote(job: Job, out_dir: str | Path, address: str = "auto", settings: B
             time.sleep(poll_seconds)
         folder = remote.result(out_dir)
         return folder, remote.report
+
+
+class LocalProcessJob:
+    """One job run by another SceneFit install on this machine (e.g. one with CUDA torch), followed
+    through `scenefit batch --events`: the same interface as RemoteJob, without Ray.
+
+    `python` is that install's interpreter. The job goes in a one-job jobs file beside its inputs
+    (paths made absolute); progress comes back as JSON lines; cancel sends SIGINT, which the
+    command line turns into a clean stop.
+    """
+
+    def __init__(self, job: Job, python: str, settings: BatchSettings = BatchSettings(), env: dict | None = None) -> None:
+        import json
+        import os
+        import queue
+        import subprocess
+        import tempfile
+        import threading
+
+        self.job, self.report = job, None
+        self.tmp = tempfile.TemporaryDirectory(prefix="scenefit-remote-")
+        root = Path(self.tmp.name)
+        entry = {k: v for k, v in job.to_dict().items() if v not in (None, "")}
+        entry["stages"] = list(job.stages)
+        lines = ["[batch]", f"retries = 0", f"num_cpus = {settings.num_cpus:g}", "", "[[job]]"]
+        lines += [f"{k} = {json.dumps(v)}" for k, v in entry.items()]   # JSON strings/lists are TOML too
+        (root / "jobs.toml").write_text("\n".join(lines) + "\n")
+        self.out = root / "out"
+        self.process = subprocess.Popen([python, "-m", "scenefit.cli", "batch", str(root / "jobs.toml"), "--out",
+                                         str(self.out), "--events", "--quiet"], stdout=subprocess.PIPE,
+                                        stderr=subprocess.PIPE, text=True, env={**os.environ, **(env or {})})
+        self._events: queue.Queue = queue.Queue()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        import json
+
+        for line in self.process.stdout:
+            try:
+                event = json.loads(line)
+            except ValueError:
+                continue   # the command's own summary line
+            if isinstance(event, dict) and event.get("event") == "progress":
+                event.pop("event")
+                path = event.pop("preview_png", None)
+                event["preview"] = _read_preview(path) if path else None
+                self._events.put(event)
+
+    def events(self, limit: int | None = None) -> list[dict]:
+        out = []
+        while limit is None or len(out) < limit:
+            try:
+                out.append(self._events.get_nowait())
+            except Exception:
+                break
+        return out
+
+    def finished(self) -> bool:
+        return self.process.poll() is not None
+
+    def cancel(self) -> None:
+        import signal
+
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+
+    def result(self, out_dir: str | Path, timeout: float | None = None) -> Path:
+        import shutil
+
+        code = self.process.wait(timeout=timeout)
+        self._reader.join(timeout=10)
+        error = self.process.stderr.read().strip()
+        if code == 130:
+            raise Cancelled("Cancelled by the user; the worker stopped and nothing came back.")
+        report = json.loads((self.out / self.job.name / "report.json").read_text()) if (
+            self.out / self.job.name / "report.json").is_file() else None
+        self.report = report
+        if code != 0 or report is None or report.get("status") != "done":
+            why = (report or {}).get("error") or (error.splitlines()[-1] if error else f"exit code {code}")
+            raise SceneFitError(f"The SceneFit worker failed job '{self.job.name}': {why}")
+        source = self.out / self.job.name
+        return install_folder(Path(out_dir), self.job.name, lambda folder: shutil.copytree(source, folder,
+                                                                                         dirs_exist_ok=True))
+
+    def close(self) -> None:
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()
+        self.tmp.cleanup()
+
+    def __enter__(self) -> LocalProcessJob:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _read_preview(path: str):
+    import numpy as np
+
+    from .imageio import read_image
+
+    try:
+        return (np.clip(read_image(path)[..., :3], 0.0, 1.0) * 255).round().astype(np.uint8)
+    except Exception:
+        return None

@@ -236,3 +236,55 @@ def test_remote_job_streams_progress_cancels_and_returns_its_folder(in_process, 
         assert not (tmp_path / "back" / "long").exists()
     finally:
         ray.shutdown()
+
+
+def _sum_over_ranks(value_per_rank: float) -> tuple[int, int, float]:
+    """One rank's part: join the group from torchrun's environment (as the adapt stage does) and sum."""
+    import os
+
+    import torch
+    import torch.distributed as dist
+
+    dist.init_process_group("gloo")
+    x = torch.tensor([value_per_rank * (dist.get_rank() + 1)])
+    dist.all_reduce(x)
+    return dist.get_rank(), int(os.environ["WORLD_SIZE"]), float(x)
+
+
+def test_ray_launches_a_torch_distributed_group_on_one_node():
+    ray = pytest.importorskip("ray")
+    from ray import cloudpickle
+
+    from scenefit.core.batch_ray import run_on_ranks
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    ray.init(num_cpus=2, object_store_memory=80 * 2**20, include_dashboard=False, log_to_driver=False)
+    try:
+        assert run_on_ranks(_sum_over_ranks, (0.5,), world=2) == [(0, 2, 1.5), (1, 2, 1.5)]
+    finally:
+        ray.shutdown()
+        cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
+
+
+def test_local_install_worker_streams_events_and_returns_the_same_folder(in_process, tmp_path):
+    """The other worker environment: a SceneFit install on this machine, driven by its own interpreter."""
+    import threading
+    from dataclasses import replace
+
+    from scenefit.core.errors import Cancelled
+    from scenefit.core.remote import run_remote
+
+    jobs_path, reference, _ = in_process
+    job = load_jobs(jobs_path).jobs[0]
+    events = []
+    folder, report = run_remote(job, tmp_path / "back", address=sys.executable, progress=events.append)
+    assert folder == tmp_path / "back" / "a" and report["status"] == "done"
+    stages = [e.stage for e in events]
+    assert "convert" in stages and "light" in stages and stages.index("convert") < stages.index("light")
+    assert outputs(folder) == outputs(reference / "a")
+
+    cancel = threading.Event()
+    with pytest.raises(Cancelled):
+        run_remote(replace(job, name="long", preset="final", stages=("convert",)), tmp_path / "back",
+                   address=sys.executable, progress=lambda event: cancel.set(), cancel=cancel)
+    assert not (tmp_path / "back" / "long").exists()
