@@ -112,5 +112,27 @@ def paper_estimate(adapt_rows: list[dict], batch_rows: list[dict], gpus=(4, 8, 3
     return {"iteration_s": t, "overhead_s": overhead, "per_gpus": per_gpus, "text": text}
 
 
+def main() -> int:
+    import argparse
+    import json
+
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true", help="4 jobs per run instead of 8")
+    parser.add_argument("--iteration-seconds", type=float,
+                        help="an adapt iteration's cost measured elsewhere (one view, SD2 at 512 px on one GPU) "
+                             "for the paper-settings estimate")
+    args = parser.parse_args()
+    adapt_rows = [{"setup": "SD2 (given on the command line)", "iteration_s": args.iteration_seconds}] \
+        if args.iteration_seconds else None
+    result = bench_batch(quick=args.quick, adapt_rows=adapt_rows)
+    results = Path(__file__).resolve().parent / "results"
+    results.mkdir(exist_ok=True)
+    (results / "batch.md").write_text(result["markdown"] + "\n")
+    (results / "batch.json").write_text(json.dumps({"rows": result["rows"], "estimate": result["estimate"]},
+                                                   indent=1, default=float))
+    print(result["markdown"])
+    return 0
+
+
 if __name__ == "__main__":
-    print(bench_batch(quick="--quick" in sys.argv)["markdown"])
+    sys.exit(main())

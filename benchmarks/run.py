@@ -210,6 +210,7 @@ def main() -> int:
 
     batch = bench_batch(quick=args.quick, adapt_rows=adapt["rows"])
     md += ["", "## Batches", "", batch["markdown"]]
+    (RESULTS / "batch.md").write_text(batch["markdown"] + "\n")
     (RESULTS / "batch.json").write_text(json.dumps({"rows": batch["rows"], "estimate": batch["estimate"]},
                                                    indent=1, default=float))
     (RESULTS / "bench.json").write_text(json.dumps({"machine": machine(), "environment": env, "render": renders,

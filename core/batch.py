@@ -34,7 +34,6 @@ REPORT = "report.json"
 SUMMARY_JSON, SUMMARY_MD, CONTACT_SHEET = "summary.json", "summary.md", "contact_sheet.png"
 # What a job's contact-sheet cell shows, the first that exists (the composite once compose runs).
 SHEET_IMAGES = ("composite.png", "compose/composite.png", "light/light_preview.png", "convert/maps/base_color.png")
-RAY_MODES = ("auto", "local")   # or a cluster address
 
 
 # -- packing files as bytes ------------------------------------------------------------------------
@@ -92,7 +91,8 @@ class JobResult:
 class JobWorker:
     """Runs jobs one after another; what it loads (models) stays loaded for its next job.
 
-    On Ray this class is the actor; in-process one instance serves the whole batch.
+    On Ray this class is the actor; in-process one instance serves the whole batch. `models` (a
+    ModelCache) is for the pipeline's diffusion models once run_pipeline takes loaded models.
     """
 
     def __init__(self, threads: int | None = None) -> None:
@@ -112,7 +112,7 @@ class JobWorker:
             job = unpacked_job(payload, Path(tmp) / "in")
             out = Path(tmp) / "out"
             out.mkdir()
-            stages = run_job_stages(job, out, models=self.models, progress=progress, cancel=self.cancel_event)
+            stages = run_job_stages(job, out, progress=progress, cancel=self.cancel_event)
             self.jobs_run += 1
             report = {"status": "done", "job": payload.job.to_dict(), "attempts": payload.attempt,
                       "seconds": round(time.perf_counter() - started, 3), "quality": quality_figures(stages),
@@ -180,43 +180,53 @@ def worker_info(jobs_run: int, model_loads: int) -> dict:
             "model_loads_by_this_worker": model_loads, "torch_threads": torch.get_num_threads()}
 
 
-def run_job_stages(job: Job, out: Path, models=None, progress=None, cancel=None) -> dict:
+def run_job_stages(job: Job, out: Path, progress=None, cancel=None) -> dict:
     """Run the job's stages into `out`; returns each stage's report.
 
-    This is `scenefit run`'s pipeline when it exists (core/run.py); until then the stages that
-    exist as functions (convert, light) run here, and others are refused with a sentence.
+    A job that composes runs `scenefit run`'s pipeline (core/run.py, adapt included when its stages
+    list it); a job of convert and/or light alone runs those stage functions.
     """
-    try:
-        from .run import run_pipeline  # noqa: F401  (the whole pipeline, once it lands)
-    except ImportError:
-        return _available_stages(job, out, progress, cancel)
-    return run_pipeline_for_job(job, out, models=models, progress=progress, cancel=cancel)
+    if "compose" in job.stages or "bake" in job.stages:
+        try:
+            from .run import run_pipeline  # noqa: F401
+        except ImportError:
+            raise InputError(f"Job '{job.name}': stages compose and bake need `scenefit run`'s pipeline, which "
+                             f"this version lacks; use stages convert and light.") from None
+        return _relative_outputs({"run": run_pipeline_for_job(job, out, progress, cancel)}, out)
+    return _available_stages(job, out, progress, cancel)
 
 
-def run_pipeline_for_job(job: Job, out: Path, models=None, progress=None, cancel=None) -> dict:
-    from .run import run_pipeline
+def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None) -> dict:
+    """The job through core/run.py's run_pipeline: adapt when listed (and its weights are found)."""
+    from .run import RunConfig, run_pipeline
 
-    return run_pipeline(job, out, models=models, progress=progress, cancel=cancel)
+    mesh, maps = _load_asset(job)
+    config = RunConfig(preset=job.preset, prompt=job.prompt,
+                       guidance_type="auto" if "adapt" in job.stages else "none")
+    return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel)
+
+
+def _load_asset(job: Job):
+    from .asset_io import is_asset_folder, load_asset_folder
+
+    if is_asset_folder(job.asset):
+        return load_asset_folder(job.asset)
+    from ..blender_io.asset_file import load_asset_file   # a Blender/glTF file: bpy in this worker
+
+    return load_asset_file(str(job.asset), job.object)
 
 
 def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
-    from .asset_io import is_asset_folder, load_asset_folder
     from .convert import convert_preset
     from .lighting import estimate_light, light_preset, light_report, load_photo, parse_placement, write_light_outputs
     from .pipeline import convert_and_bake
 
-    missing = [s for s in job.stages if s not in ("convert", "light")]
-    if missing:
-        raise InputError(f"Job '{job.name}': stage '{missing[0]}' is not available to batches in this version "
-                         f"(it needs `scenefit run`'s pipeline); use stages convert and light.")
+    if "adapt" in job.stages:
+        raise InputError(f"Job '{job.name}': stage adapt runs inside the whole pipeline in a batch; "
+                         f"list compose too, or use stages convert and light.")
     reports: dict = {}
     if "convert" in job.stages:
-        if is_asset_folder(job.asset):
-            mesh, maps = load_asset_folder(job.asset)
-        else:
-            from ..blender_io.asset_file import load_asset_file   # a Blender file: bpy in this worker
-
-            mesh, maps = load_asset_file(str(job.asset), job.object)
+        mesh, maps = _load_asset(job)
         overrides = {} if job.seed is None else {"seed": job.seed}
         _, reports["convert"] = convert_and_bake(mesh, maps, out / "convert" / "maps",
                                                  convert_preset(job.preset, **overrides), progress, cancel)
@@ -242,6 +252,9 @@ def _relative_outputs(value, out: Path):
 
 def quality_figures(stages: dict) -> dict:
     """The numbers the summary shows per job, from whichever stages ran."""
+    if "run" in stages:   # the whole pipeline's report: each stage's own report inside
+        run = stages["run"].get("stages", {})
+        stages = {name: s["report"] for name, s in run.items() if isinstance(s, dict) and "report" in s}
     q: dict = {}
     convert = stages.get("convert", {})
     if "psnr_covered_texels_db" in convert:

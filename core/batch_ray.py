@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from .batch import RAY_MODES, Dispatcher, JobPayload, JobWorker, job_threads
+from .batch import Dispatcher, JobPayload, JobWorker, job_threads
 from .errors import InputError
 from .jobs import BatchSettings
 
@@ -183,4 +183,4 @@ def run_on_ranks(function, args: tuple, world: int, num_gpus_per_rank: float = 0
         remove_placement_group(group)
 
 
-__all__ = ["run_on_ranks", "RAY_MODES", "RayDispatcher", "connect", "import_ray", "job_resources", "ray_available", "worker_count"]
+__all__ = ["run_on_ranks", "RayDispatcher", "connect", "import_ray", "job_resources", "ray_available", "worker_count"]

@@ -54,17 +54,17 @@ def make_inputs(folder: Path, retries: int = 1) -> Path:
 class FailingOnceWorker(JobWorker):
     """Job 'b' fails on its first attempt, wherever it runs."""
 
-    def run(self, payload):
+    def run(self, payload, progress_sink=None):
         if payload.job.name == "b" and payload.attempt == 1:
             raise RuntimeError("injected failure of job b's first attempt")
-        return super().run(payload)
+        return super().run(payload, progress_sink)
 
 
 class AlwaysFailingWorker(JobWorker):
-    def run(self, payload):
+    def run(self, payload, progress_sink=None):
         if payload.job.name == "b":
             raise RuntimeError("injected failure of job b")
-        return super().run(payload)
+        return super().run(payload, progress_sink)
 
 
 def outputs(folder: Path) -> dict[str, bytes]:
@@ -81,6 +81,20 @@ def in_process(tmp_path_factory):
     jobs_path = make_inputs(root / "in")
     outcomes = run_batch(load_jobs(jobs_path), root / "out")
     return jobs_path, root / "out", outcomes
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    """One small local Ray cluster for this module's Ray tests; the module's functions and classes
+    travel to its workers by value (the workers cannot import the test module)."""
+    ray = pytest.importorskip("ray")
+    from ray import cloudpickle
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    ray.init(num_cpus=2, object_store_memory=80 * 2**20, include_dashboard=False, log_to_driver=False)
+    yield ray
+    ray.shutdown()
+    cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
 
 
 def test_jobs_file_paths_defaults_and_order(tmp_path):
@@ -162,31 +176,22 @@ def test_cli_bad_jobs_file_exits_2(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
-def test_ray_batch_retries_resumes_and_matches_in_process(in_process, tmp_path):
-    ray = pytest.importorskip("ray")
-    from ray import cloudpickle
-
+def test_ray_batch_retries_resumes_and_matches_in_process(in_process, local_ray, tmp_path):
     from scenefit.core.batch_ray import RayDispatcher
 
     jobs_path, reference, _ = in_process
     jobs = load_jobs(jobs_path)
-    cloudpickle.register_pickle_by_value(sys.modules[__name__])   # the test's worker class travels by value
-    ray.init(num_cpus=2, object_store_memory=80 * 2**20, include_dashboard=False, log_to_driver=False)
-    try:
-        dispatcher = RayDispatcher(jobs.settings, len(jobs.jobs), worker_class=FailingOnceWorker)
-        assert dispatcher.workers == 2 and dispatcher.options == {"num_cpus": 1.0, "num_gpus": 0.0}
-        outcomes = run_batch(jobs, tmp_path / "out", dispatcher)
-        assert [(o.name, o.status, o.attempts) for o in outcomes] == [("a", "done", 1), ("b", "done", 2),
-                                                                      ("c", "done", 1)]
-        report = json.loads((tmp_path / "out" / "b" / "report.json").read_text())
-        assert report["attempts"] == 2 and report["worker"]["pid"] != __import__("os").getpid()
+    dispatcher = RayDispatcher(jobs.settings, len(jobs.jobs), worker_class=FailingOnceWorker)
+    assert dispatcher.workers == 2 and dispatcher.options == {"num_cpus": 1.0, "num_gpus": 0.0}
+    outcomes = run_batch(jobs, tmp_path / "out", dispatcher)
+    assert [(o.name, o.status, o.attempts) for o in outcomes] == [("a", "done", 1), ("b", "done", 2),
+                                                                  ("c", "done", 1)]
+    report = json.loads((tmp_path / "out" / "b" / "report.json").read_text())
+    assert report["attempts"] == 2 and report["worker"]["pid"] != __import__("os").getpid()
 
-        # A second run does nothing.
-        again = run_batch(jobs, tmp_path / "out", RayDispatcher(jobs.settings, len(jobs.jobs)))
-        assert [o.status for o in again] == ["skipped"] * 3
-    finally:
-        ray.shutdown()
-        cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
+    # A second run does nothing.
+    again = run_batch(jobs, tmp_path / "out", RayDispatcher(jobs.settings, len(jobs.jobs)))
+    assert [o.status for o in again] == ["skipped"] * 3
     # Same outputs as in-process: the same threads per job give the same bytes.
     for name in "abc":
         assert outputs(tmp_path / "out" / name) == outputs(reference / name), name
@@ -207,9 +212,8 @@ def test_model_cache_loads_once_and_survives_a_released_text_encoder(tmp_path):
     assert second.embed("a muddy ball").shape[1] == 77
 
 
-def test_remote_job_streams_progress_cancels_and_returns_its_folder(in_process, tmp_path):
+def test_remote_job_streams_progress_cancels_and_returns_its_folder(in_process, local_ray, tmp_path):
     """What the add-on does with a worker environment: hand a job to Ray, follow it, cancel it, fetch it."""
-    ray = pytest.importorskip("ray")
     import threading
     from dataclasses import replace
 
@@ -218,24 +222,20 @@ def test_remote_job_streams_progress_cancels_and_returns_its_folder(in_process, 
 
     jobs_path, reference, _ = in_process
     job = load_jobs(jobs_path).jobs[0]
-    ray.init(num_cpus=2, object_store_memory=80 * 2**20, include_dashboard=False, log_to_driver=False)
-    try:
-        events = []
-        folder, report = run_remote(job, tmp_path / "back", progress=events.append)
-        assert folder == tmp_path / "back" / "a" and report["status"] == "done"
-        stages = [e.stage for e in events]
-        assert "convert" in stages and "light" in stages and stages.index("convert") < stages.index("light")
-        assert all(0 <= e.step <= e.total for e in events) and events[-1].fraction == 1.0
-        assert outputs(folder) == outputs(reference / "a")
+    events = []
+    folder, report = run_remote(job, tmp_path / "back", progress=events.append)
+    assert folder == tmp_path / "back" / "a" and report["status"] == "done"
+    stages = [e.stage for e in events]
+    assert "convert" in stages and "light" in stages and stages.index("convert") < stages.index("light")
+    assert all(0 <= e.step <= e.total for e in events) and events[-1].fraction == 1.0
+    assert outputs(folder) == outputs(reference / "a")
 
-        # Cancelled at its first progress event: the worker stops with Cancelled and nothing comes back.
-        cancel = threading.Event()
-        long_job = replace(job, name="long", preset="final", stages=("convert",))
-        with pytest.raises(Cancelled):
-            run_remote(long_job, tmp_path / "back", progress=lambda event: cancel.set(), cancel=cancel)
-        assert not (tmp_path / "back" / "long").exists()
-    finally:
-        ray.shutdown()
+    # Cancelled at its first progress event: the worker stops with Cancelled and nothing comes back.
+    cancel = threading.Event()
+    long_job = replace(job, name="long", preset="final", stages=("convert",))
+    with pytest.raises(Cancelled):
+        run_remote(long_job, tmp_path / "back", progress=lambda event: cancel.set(), cancel=cancel)
+    assert not (tmp_path / "back" / "long").exists()
 
 
 def _sum_over_ranks(value_per_rank: float) -> tuple[int, int, float]:
@@ -251,40 +251,7 @@ def _sum_over_ranks(value_per_rank: float) -> tuple[int, int, float]:
     return dist.get_rank(), int(os.environ["WORLD_SIZE"]), float(x)
 
 
-def test_ray_launches_a_torch_distributed_group_on_one_node():
-    ray = pytest.importorskip("ray")
-    from ray import cloudpickle
-
+def test_ray_launches_a_torch_distributed_group_on_one_node(local_ray):
     from scenefit.core.batch_ray import run_on_ranks
 
-    cloudpickle.register_pickle_by_value(sys.modules[__name__])
-    ray.init(num_cpus=2, object_store_memory=80 * 2**20, include_dashboard=False, log_to_driver=False)
-    try:
-        assert run_on_ranks(_sum_over_ranks, (0.5,), world=2) == [(0, 2, 1.5), (1, 2, 1.5)]
-    finally:
-        ray.shutdown()
-        cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
-
-
-def test_local_install_worker_streams_events_and_returns_the_same_folder(in_process, tmp_path):
-    """The other worker environment: a SceneFit install on this machine, driven by its own interpreter."""
-    import threading
-    from dataclasses import replace
-
-    from scenefit.core.errors import Cancelled
-    from scenefit.core.remote import run_remote
-
-    jobs_path, reference, _ = in_process
-    job = load_jobs(jobs_path).jobs[0]
-    events = []
-    folder, report = run_remote(job, tmp_path / "back", address=sys.executable, progress=events.append)
-    assert folder == tmp_path / "back" / "a" and report["status"] == "done"
-    stages = [e.stage for e in events]
-    assert "convert" in stages and "light" in stages and stages.index("convert") < stages.index("light")
-    assert outputs(folder) == outputs(reference / "a")
-
-    cancel = threading.Event()
-    with pytest.raises(Cancelled):
-        run_remote(replace(job, name="long", preset="final", stages=("convert",)), tmp_path / "back",
-                   address=sys.executable, progress=lambda event: cancel.set(), cancel=cancel)
-    assert not (tmp_path / "back" / "long").exists()
+    assert run_on_ranks(_sum_over_ranks, (0.5,), world=2) == [(0, 2, 1.5), (1, 2, 1.5)]
