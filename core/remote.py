@@ -242,3 +242,25 @@ def _read_preview(path: str):
         return (np.clip(read_image(path)[..., :3], 0.0, 1.0) * 255).round().astype(np.uint8)
     except Exception:
         return None
+
+
+def work_remotely(data: dict, progress=None, cancel=None) -> dict:
+    """A background-job work function for the add-on: plain data in (the asset as arrays, the photo,
+    the placement), the job run in the worker environment `data["worker"]`, its folder back in
+    `data["out"]`. Keys: mesh, maps, photo, at, worker, out; optional name, preset, stages, prompt,
+    mode, object_prompt, instruction, negative_prompt, seed.
+    """
+    import tempfile
+
+    from .asset_io import save_asset_folder
+    from .jobs import STAGE_TYPES
+
+    with tempfile.TemporaryDirectory(prefix="scenefit-asset-") as tmp:
+        asset = save_asset_folder(data["mesh"], data["maps"], Path(tmp) / "asset")
+        optional = {k: data[k] for k in ("mode", "prompt", "object_prompt", "instruction", "negative_prompt", "seed")
+                    if data.get(k) is not None}
+        job = Job(name=data.get("name", "scenefit"), asset=asset, stages=tuple(data.get("stages", STAGE_TYPES)),
+                  preset=data.get("preset", "balanced"), photo=Path(data["photo"]) if data.get("photo") else None,
+                  at=tuple(data["at"]) if data.get("at") is not None else None, **optional)
+        folder, report = run_remote(job, data["out"], data["worker"], progress=progress, cancel=cancel)
+    return {"folder": str(folder), "report": report}

@@ -255,3 +255,19 @@ def test_ray_launches_a_torch_distributed_group_on_one_node(local_ray):
     from scenefit.core.batch_ray import run_on_ranks
 
     assert run_on_ranks(_sum_over_ranks, (0.5,), world=2) == [(0, 2, 1.5), (1, 2, 1.5)]
+
+
+def test_work_remotely_takes_the_add_ons_plain_data(tmp_path):
+    """The add-on's background job hands arrays and a worker address; the folder comes back."""
+    from scenefit.core.asset_io import load_asset_folder
+    from scenefit.core.remote import work_remotely
+
+    make_inputs(tmp_path / "in")
+    mesh, maps = load_asset_folder(tmp_path / "in" / "ball")
+    events = []
+    result = work_remotely({"mesh": mesh, "maps": maps, "photo": str(tmp_path / "in" / "room.png"), "at": (0.5, 0.7),
+                            "stages": ["light"], "preset": "draft", "name": "blend-job", "worker": sys.executable,
+                            "out": str(tmp_path / "back")}, progress=events.append)
+    assert result["folder"] == str(tmp_path / "back" / "blend-job") and result["report"]["status"] == "done"
+    assert (tmp_path / "back" / "blend-job" / "light" / "light.exr").is_file()
+    assert result["report"]["job"]["stages"] == ["light"] and [e.stage for e in events][-1] == "light"
