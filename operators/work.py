@@ -106,3 +106,24 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
     return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
             "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
             "iterations": result.iterations}
+
+
+def run_all(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+    """Convert -> light -> adapt in one job (each into its own run folder); adapt is skipped, with the
+    reason, when it has no prompt or its diffusion weights are not on this machine."""
+    from ..core.guidance import models_available
+
+    out: dict = {"convert": convert(data["convert"], progress, cancel)}
+    if data.get("light"):
+        out["light"] = estimate_light(data["light"], progress, cancel)
+    adapt_data = data.get("adapt")
+    if adapt_data:
+        found, why = models_available(adapt_data["models"], need_inpaint=bool(adapt_data.get("photo")))
+        if not found:
+            out["adapt_skipped"] = f"Adapt skipped: {why}"
+        elif adapt_data["mode"] != "edit" and not adapt_data["prompt"]:
+            out["adapt_skipped"] = "Adapt skipped: the Style section has no prompt."
+        else:
+            envmap = out["light"]["hdr"] if "light" in out else adapt_data.get("envmap", "")
+            out["adapt"] = adapt(dict(adapt_data, texture=out["convert"]["texture"], envmap=envmap), progress, cancel)
+    return out

@@ -149,8 +149,7 @@ class SCENEFIT_PT_run(_Section, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        if "run" in dir(bpy.ops.scenefit):
-            layout.operator("scenefit.run", icon="PLAY")
+        layout.operator("scenefit.run", icon="PLAY")
         col = layout.column(align=True)
         col.operator("scenefit.convert", icon="TEXTURE")
         col.operator("scenefit.estimate_light", icon="WORLD")

@@ -166,6 +166,13 @@ out["job"] = {"status": state.status, "stages": sorted({s for s, _ in seen if s}
 out["worker_touched_bpy"] = list(touched)
 timings["profiled_job"] = round(time.perf_counter() - t_job, 2)
 mat_from_job = results.apply_result_material(bpy.context, "Sphere", state.result, "convert")  # main thread
+# What the modal timer does with a state: runtime on the WindowManager, the preview as an icon.
+jobs_ui = import_module(MODULE + ".operators.jobs")
+jobs_ui.update_runtime(bpy.context, jobs.JobState("convert", stage="fit", step=3, total=6, fraction=0.5,
+                                                  preview=np.zeros((8, 8, 3), np.uint8), preview_serial=1))
+rt = bpy.context.window_manager.scenefit_runtime
+# (no icon ids without a UI: check the preview's pixels instead)
+out["runtime"] = [rt.running, rt.progress, rt.status, rt.has_preview, list(jobs_ui._previews["live"].image_size)]
 out["job_material"] = mat_from_job.name
 
 # The hook would see it: a worker that does touch bpy is caught (so the check can fail).
@@ -197,11 +204,15 @@ out["after_load"] = [job.poll().status, jobs.active_job() is None, job.alive]
 
 timings["job_section"] = round(time.perf_counter() - t_job, 2)
 
-# --- 3. an unsaved file: results packed, not in Blender's temp dir or the add-on's folder ---------
+# --- 3. an unsaved file (Run All): results packed, not in Blender's temp dir or the add-on's folder --
 obj, mat, image, world = make_scene()
 before = snapshot()
-ops = [bpy.ops.scenefit.convert(iterations=20), bpy.ops.scenefit.estimate_light(critic="none", outpaint="prior")]
+bpy.context.scene.scenefit.prompt = ""  # Run All: convert, light, the composite set up; adapt skipped (no prompt)
+with timed("run_all"):
+    ops = [bpy.ops.scenefit.run(iterations=20, critic="none", outpaint="prior")]
 out["unsaved_ops"] = [sorted(o) for o in ops]
+out["run_all"] = [bpy.context.scene.camera.name if bpy.context.scene.camera else None,
+                  bpy.context.scene.world.name, bpy.context.active_object.active_material.name]
 made = [i for i in bpy.data.images if "scenefit" in i]
 out["unsaved_packed"] = [(i.name, i.packed_file is not None) for i in made]
 folders = [Path(bpy.path.abspath(i.filepath)).parent for i in made]
@@ -294,6 +305,7 @@ def test_the_job_path_reports_progress_cancels_fails_cleanly_and_never_touches_b
     assert job["result_files"] == ["base_color.png", "metallic.png", "roughness.png"]
     assert out["worker_touched_bpy"] == [] and out["control_caught"]
     assert out["job_material"].startswith("Sphere SceneFit convert")
+    assert out["runtime"] == [True, 0.5, "convert: fit 3/6", True, [8, 8]]
     assert out["cancelled"] == "cancelled"
     status, error = out["error"]
     assert status == "failed" and "missing.png" in error and "Traceback" not in error
@@ -302,7 +314,8 @@ def test_the_job_path_reports_progress_cancels_fails_cleanly_and_never_touches_b
 
 def test_unsaved_file_results_are_packed_and_survive_saving(operated):
     _, out, _ = operated
-    assert out["unsaved_ops"] == [["FINISHED"], ["FINISHED"]]
+    assert out["unsaved_ops"] == [["FINISHED"]]
+    assert out["run_all"] == ["SceneFit Camera", "SceneFit Light", "Sphere SceneFit convert"]
     assert len(out["unsaved_packed"]) == 4 and all(packed for _, packed in out["unsaved_packed"])
     assert out["unsaved_outside_temp_and_addon"]
     assert len(out["unsaved_reopened"]) == 4 and all(w > 0 and h > 0 for _, (w, h) in out["unsaved_reopened"])
