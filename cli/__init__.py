@@ -10,10 +10,10 @@ import argparse
 import sys
 
 from ..core.errors import Cancelled, SceneFitError
-from . import adapt, convert, demo, export, light, render
+from . import adapt, compose, convert, demo, export, light, render
 
 # The order `scenefit --help` lists them in.
-COMMANDS = (convert, render, export, light, adapt, demo)
+COMMANDS = (convert, render, export, light, adapt, compose, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:
