@@ -10,10 +10,10 @@ import argparse
 import sys
 
 from ..core.errors import Cancelled, SceneFitError
-from . import adapt, compose, convert, demo, export, light, render
+from . import adapt, compose, convert, demo, export, light, render, run
 
 # The order `scenefit --help` lists them in.
-COMMANDS = (convert, render, export, light, adapt, compose, demo)
+COMMANDS = (convert, render, export, light, adapt, compose, run, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:
