@@ -11,8 +11,8 @@ def run(args) -> int:
 
     report = run_demo(Path(args.out), preset=args.preset, progress=progress(args), refresh=args.refresh,
                       guidance=args.guidance)
-    print(f"demo done in {report['seconds_total']:.1f} s: conversion {report['convert']['psnr_covered_texels_db']:.2f} dB "
-          f"-> {args.out}/report.json")
+    print(f"demo done in {report['seconds_total']:.1f} s: conversion {report['convert']['psnr_covered_texels_db']:.2f} dB, "
+          f"composite {args.out}/compose/composite.png, sheet {report['sheet']}")
     return 0
 
 

@@ -426,7 +426,9 @@ class ComposeJob:
 
         with_object, _ = self._floor_radiance("floor_with_object")
         without, _ = self._floor_radiance("floor_without_object")
-        raw = np.where(without > 0, with_object / np.where(without > 0, without, 1.0), 1.0)
+        # Where the asset hides the floor entirely its shadow there is unseen (and covered): keep 1.
+        seen = (self.images["floor_with_object"][..., 4:5] > 1e-3 * self.config.floor_albedo)
+        raw = np.where((without > 0) & seen, with_object / np.where(without > 0, without, 1.0), 1.0)
         # Where the object changed no sample, both passes are identical: keep those pixels exactly 1.
         same = (self.images["floor_with_object"] == self.images["floor_without_object"]).all(axis=-1)
         raw = np.clip(np.where(same[..., None], 1.0, raw), 0.0, 1.0).astype(np.float32)

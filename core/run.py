@@ -135,7 +135,7 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     from .texture.bake import WEIGHTS_FILE, load_neural_texture, texture_maps_for_mesh
 
     started = time.perf_counter()
-    out = Path(out_dir)
+    out = Path(out_dir).resolve()   # stage.json lists absolute outputs, whatever the working folder
     photo_path = Path(photo_path)
     # Everything that can be wrong with the inputs is found before any work.
     photo, photo_info = load_photo(photo_path)
