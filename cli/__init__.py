@@ -10,10 +10,10 @@ import argparse
 import sys
 
 from ..core.errors import Cancelled, SceneFitError
-from . import adapt, compose, convert, demo, export, light, render, run
+from . import adapt, compose, convert, demo, export, light, prompt, render, run
 
 # The order `scenefit --help` lists them in.
-COMMANDS = (convert, render, export, light, adapt, compose, run, demo)
+COMMANDS = (convert, render, export, light, prompt, adapt, compose, run, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:
