@@ -1,6 +1,7 @@
-"""The composite set up in Blender: the photo camera, the light map as a new World, the placed asset,
-a floor and a transparent film. The same scene core/compose.py renders in Mitsuba;
-tests/test_compose_cycles.py compares the two.
+"""core/compose.py's scene rebuilt in Blender for Cycles, to cross-check the Mitsuba composite: the
+photo camera, the light map as a new World, the placed asset, a floor and a transparent film
+(tests/test_compose_cycles.py compares the two). The artist-facing set-up (camera around the
+asset, photo behind, shadow catcher) is blender_io/compose.py.
 
 Cycles renders three passes: the asset alone (floor hidden) over nothing, and the floor with and
 without the asset's shadow: the asset stays in the scene but invisible to camera rays
