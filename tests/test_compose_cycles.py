@@ -19,10 +19,11 @@ MIN_IOU, MIN_SHADOW_CORRELATION, MIN_PSNR_DB = 0.97, 0.95, 35.0
 
 
 def test_mitsuba_composite_matches_cycles(tmp_path, run_py):
-    # A half-red, half-blue base colour (left/right of the UV square) also checks both UV conventions.
+    # A base colour red in the image's top half and blue in its bottom half (the sphere's v runs
+    # pole to pole) also checks that both renderers read the UVs the same way up.
     base = np.zeros((16, 16, 3), np.float32)
-    base[:, :8] = (0.7, 0.15, 0.1)
-    base[:, 8:] = (0.1, 0.2, 0.7)
+    base[:8] = (0.7, 0.15, 0.1)
+    base[8:] = (0.1, 0.2, 0.7)
     maps = np.concatenate([base, np.full((16, 16, 1), 0.5, np.float32), np.zeros((16, 16, 1), np.float32)], -1)
     photo = np.full((CAMERA.height, CAMERA.width, 3), 0.6, np.float32)
     env = sun_environment([1.0, 0.3, 0.8], sun_radiance=500.0, sky_radiance=0.3)
