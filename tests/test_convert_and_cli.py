@@ -29,9 +29,9 @@ def smooth_maps(size: int = 64) -> PBRMaps:
     return PBRMaps(base.astype(np.float32), (0.3 + 0.5 * xx).astype(np.float32), 0.0)
 
 
-def scenefit(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+def scenefit(*args: str, cwd: Path | None = None, timeout: float = 600) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "scenefit.cli", *args], capture_output=True, text=True,
-                          cwd=cwd, timeout=600)
+                          cwd=cwd, timeout=timeout)
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +39,8 @@ def demo_run(tmp_path_factory, example_asset):
     """`scenefit demo --preset draft`, with the example asset the session already made."""
     out = tmp_path_factory.mktemp("demo")
     shutil.copytree(example_asset, out / "input" / "asset")
-    proc = scenefit("demo", "--out", str(out), "--preset", "draft")
+    # Every stage runs (about 2 minutes on a quiet 2-core machine); room for a machine shared with others.
+    proc = scenefit("demo", "--out", str(out), "--preset", "draft", timeout=1800)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out, json.loads((out / "report.json").read_text())
 
