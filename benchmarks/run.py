@@ -204,9 +204,25 @@ def main() -> int:
 
     adapt = bench_adapt(quick=args.quick)
     md += ["", "## Adapt", "", adapt["markdown"]]
+
+    # Batches: jobs per hour in-process and on 1 and 2 local Ray workers; the paper's settings on N GPUs.
+    from bench_batch import bench_batch
+
+    batch = bench_batch(quick=args.quick, adapt_rows=adapt["rows"])
+    md += ["", "## Batches", "", batch["markdown"]]
+    (RESULTS / "batch.md").write_text(batch["markdown"] + "\n")
+    (RESULTS / "batch.json").write_text(json.dumps({"rows": batch["rows"], "estimate": batch["estimate"]},
+                                                   indent=1, default=float))
     (RESULTS / "bench.json").write_text(json.dumps({"machine": machine(), "environment": env, "render": renders,
                                                      "texture": textures, "conversion": conversions,
                                                      "adapt": adapt["rows"]}, indent=1, default=float))
+
+    # Speed against accuracy per preset, for each stage and end to end (each in its own process).
+    from bench_presets import bench_presets
+
+    presets = bench_presets(example_asset(), quick=args.quick,
+                            demo_presets=("draft",) if args.quick else ("draft", "balanced", "final"))
+    md += ["", "## Presets: speed against accuracy", "", presets["markdown"]]
 
     # Light estimation against ground-truth HDR maps (its own script: writes light.md/json and the curve).
     subprocess.run([sys.executable, str(Path(__file__).with_name("bench_light.py"))] + (["--quick"] if args.quick else []),

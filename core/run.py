@@ -161,14 +161,22 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     convert_key = _digest("convert", asdict(convert_config), asset_key)
 
     def convert(folder: Path) -> dict:
-        _, report = convert_and_bake(mesh, maps, folder / "maps", convert_config, progress=progress, cancel=cancel)
+        _, report = convert_and_bake(mesh, maps, folder / "maps", convert_config, progress=progress, cancel=cancel,
+                                     keep_constants=True)
         return report
 
     runner.run("convert", convert_key, convert)
     texture_path = out / "convert" / "maps" / WEIGHTS_FILE
 
     # light: photo + placement -> light.exr (+ its report, which carries the photo camera)
-    light_config = light_preset(config.preset, critic_type="diffusion" if found else "none", models=config.models)
+    # Only what the scene needs: the map is as sharp as the asset's glossiest reflections.
+    from .scene_needs import envmap_height_for
+    from .texture.uv_raster import rasterize_uv
+
+    normalized, _ = normalize_to_unit_sphere(mesh)
+    envmap_height = envmap_height_for(maps, rasterize_uv(normalized, max(maps.resolution)).mask)
+    light_config = light_preset(config.preset, critic_type="diffusion" if found else "none", models=config.models,
+                                map_height=envmap_height.value)
     light_key = _digest("light", asdict(light_config), photo_key, placement_px,
                         asdict(config.photo_camera) if config.photo_camera else None)
 
@@ -177,6 +185,7 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
                                 photo_info=photo_info, progress=progress, cancel=cancel)
         outputs = write_light_outputs(result, folder)
         report = light_report(result, light_config, outputs)
+        report["decisions"]["envmap_height"] = envmap_height.to_dict()
         write_json_atomic(folder / "report.json", report)
         return report
 
@@ -210,7 +219,6 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     compose_key = _digest("compose", asdict(compose_config), upstream, light_key, photo_key, placement_px)
 
     def compose(folder: Path) -> dict:
-        normalized, _ = normalize_to_unit_sphere(mesh)
         stack = texture_maps_for_mesh(load_neural_texture(texture_path), normalized)
         camera, camera_from = light_camera(light_path, photo_info, w, h)
         return compose_to_folder(ComposeInputs(mesh, stack, photo, placement_px, load_environment(light_path), camera),

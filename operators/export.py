@@ -10,7 +10,7 @@ import bpy
 from ..blender_io import mesh_from_object
 from ..blender_io.compose import CAMERA_NAME
 from ..core.errors import SceneFitError
-from .common import gather_asset, poll_mesh, run_folder
+from .common import check_dependencies, gather_asset, poll_mesh, run_folder
 
 
 def photo_look_at(context):
@@ -47,6 +47,11 @@ class SCENEFIT_OT_export_mitsuba(bpy.types.Operator):
         return poll_mesh(context)
 
     def execute(self, context):
+        try:
+            check_dependencies()
+        except SceneFitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
         from ..core.camera import Camera
         from ..core.export import export_mitsuba_scene  # Mitsuba starts only when asked for
         from ..core.pipeline import load_environment

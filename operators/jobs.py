@@ -18,6 +18,7 @@ from bpy.props import BoolProperty, FloatProperty, PointerProperty, StringProper
 from ..core import background
 from ..core.errors import SceneFitError
 from ..core.progress import TerminalProgress
+from .common import check_dependencies
 
 TIMER_SECONDS = 0.25
 _previews = None  # bpy.utils.previews collection, made on register
@@ -95,6 +96,7 @@ class JobOperator(bpy.types.Operator):
     # -- synchronous: scripts and `blender -b` -------------------------------------------------------
     def execute(self, context):
         try:
+            check_dependencies()
             work, data = self.prepare(context)
             result = background.run_inline(work, data, TerminalProgress())
             message = self.apply(context, result)
@@ -109,6 +111,7 @@ class JobOperator(bpy.types.Operator):
         if context.window is None or bpy.app.background:
             return self.execute(context)
         try:
+            check_dependencies()
             work, data = self.prepare(context)
             self._job = background.start_job(background.Job(self.job_name, work, data))
         except SceneFitError as error:

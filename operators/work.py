@@ -127,3 +127,17 @@ def run_all(data: dict, progress: ProgressCallback, cancel: threading.Event) -> 
             envmap = out["light"]["hdr"] if "light" in out else adapt_data.get("envmap", "")
             out["adapt"] = adapt(dict(adapt_data, texture=out["convert"]["texture"], envmap=envmap), progress, cancel)
     return out
+
+
+def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+    """The neural texture baked per material at data['size']² (0: the fitted size) for glTF."""
+    from ..core.game_bake import bake_game_maps as bake, default_texture_size
+    from ..core.progress import emit
+    from ..core.texture.bake import load_neural_texture
+
+    texture = load_neural_texture(data["texture"])
+    size = data["size"] or default_texture_size(texture, len(data["names"]))
+    emit(progress, "bake", 0, 1, f"{len(data['names'])} material(s) at {size}²")
+    baked = bake(texture, data["mesh"], list(data["names"]), size, [set(c) for c in data["constants"]])
+    emit(progress, "bake", 1, 1, "maps ready")
+    return {"baked": baked, "size": size}

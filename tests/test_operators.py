@@ -223,6 +223,13 @@ bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "was_unsaved.blend"))
 bpy.ops.wm.open_mainfile(filepath=str(tmp / "was_unsaved.blend"))
 out["unsaved_reopened"] = sorted((i.name, list(i.size)) for i in bpy.data.images if "scenefit" in i)
 out["unsaved_unchanged"] = snapshot() == before
+# A zip without its wheels: one sentence, no traceback, nothing run.
+common.REQUIRED_MODULES["scenefit_no_such_module"] = "NoSuchModule"
+common._missing = None
+try:
+    out["missing"] = [sorted(bpy.ops.scenefit.convert()), common.dependency_sentence()]
+except RuntimeError as error:  # bpy.ops raises what the operator reported as an error
+    out["missing"] = [str(error), common.dependency_sentence()]
 addon_utils.disable(MODULE, default_set=True)
 print("JSON" + json.dumps(out))
 """
@@ -320,3 +327,10 @@ def test_unsaved_file_results_are_packed_and_survive_saving(operated):
     assert out["unsaved_outside_temp_and_addon"]
     assert len(out["unsaved_reopened"]) == 4 and all(w > 0 and h > 0 for _, (w, h) in out["unsaved_reopened"])
     assert out["unsaved_unchanged"]
+
+
+def test_missing_dependencies_are_one_sentence(operated):
+    _, out, _ = operated
+    reported, sentence = out["missing"]
+    assert sentence.startswith("Missing Python modules: NoSuchModule;") and sentence.count(".") == 1
+    assert sentence in reported and "Traceback" not in reported

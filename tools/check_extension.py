@@ -41,8 +41,8 @@ t = time.perf_counter()
 bpy.ops.extensions.package_install_files(repo="user_default", filepath=zip_path, enable_on_install=True)
 report["enabled"] = module in bpy.context.preferences.addons
 report["install_s"] = round(time.perf_counter() - t, 1)
-panels = __import__(module + ".panels.main", fromlist=["missing_modules"])
-report["missing_modules"] = panels.missing_modules()
+common = __import__(module + ".operators.common", fromlist=["missing_modules"])
+report["missing_modules"] = common.missing_modules()
 bpy.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16)
 obj = bpy.context.active_object
 image = bpy.data.images.new("color", 64, 64)
