@@ -26,6 +26,7 @@ from ..photo import PhotoCamera, camera_exposure
 from ..primitives import uv_sphere
 from ..progress import ProgressCallback, check_cancel, emit
 from .depth import DepthConfig, estimate_ray_distance
+from .cues import CueConfig, build_cues
 from .diffusion_critic import DiffusionCriticConfig
 from .outpaint import OutpaintConfig
 from .hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, Critic, OptimiseConfig, OptimiseResult,
@@ -37,7 +38,7 @@ from .regions import RegionThresholds, bright_regions
 DEFAULT_FOV_DEG = 60.0   # horizontal; a typical phone/kit-lens view (~28 mm full-frame equivalent)
 SCENE_TYPES = ("auto", "indoor", "outdoor")
 CRITIC_TYPES = ("none", "reference", "diffusion")
-PRIOR_TYPES = ("inverse_tonemap",)
+PRIOR_TYPES = ("cues", "inverse_tonemap")   # cues: cues.py (default); inverse_tonemap: the paper's prior
 
 
 @dataclass(frozen=True)
@@ -48,7 +49,8 @@ class LightConfig:
     map_height: int = 128                     # the map is map_height x 2 map_height
     depth: DepthConfig = DepthConfig()
     thresholds: RegionThresholds = RegionThresholds()
-    prior_type: str = "inverse_tonemap"
+    prior_type: str = "cues"
+    cues: CueConfig = CueConfig()
     l_white: float = DEFAULT_L_WHITE
     critic_type: str = "none"
     apparatus: ApparatusConfig = ApparatusConfig()
@@ -239,12 +241,18 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     check_cancel(cancel)
 
     # Bright regions and the prior.
-    regions = bright_regions(pano.ldr, pano.distance, scene_type, config.thresholds)
-    prior = prior_scales(pano.ldr, regions, config.l_white)
+    ldr = pano.ldr
+    regions = bright_regions(ldr, pano.distance, scene_type, config.thresholds)
+    if config.prior_type == "cues":
+        cues = build_cues(photo, ldr, pano.unseen, regions, config.thresholds, config.cues)
+        ldr, regions, prior = cues.ldr, cues.regions, cues.scales
+        decisions["cues"] = cues.report
+    else:
+        prior = prior_scales(ldr, regions, config.l_white)
     decisions["regions"] = {name: round(float(mask.mean()), 5) for name, mask in regions.items()}
     decisions["prior"] = {"type": config.prior_type, "l_white": config.l_white,
                           "scales": {k: round(v, 5) for k, v in prior.items()}}
-    prior_hdr = hdr_from_scales(pano.ldr, regions, prior)
+    prior_hdr = hdr_from_scales(ldr, regions, prior)
     dark, dark_info = is_dark_environment(prior_hdr, regions)
     prompts = tuple(light_prompt(config.object_prompt, dark, config.tint) for _ in config.apparatus.object_azimuths) \
         + (light_prompt(SPHERE_PROMPT, dark, config.tint),)
@@ -262,12 +270,12 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
         else:
             mesh, _ = normalize_to_unit_sphere(mesh)
             decisions["object"] = f"the asset '{mesh.name}' with its own maps"
-        scene = ApparatusScene(mesh, maps, pano.ldr.shape[:2], config.apparatus,
+        scene = ApparatusScene(mesh, maps, ldr.shape[:2], config.apparatus,
                                photo_azimuth_deg=photo_camera.yaw_deg - 90.0)
         if config.critic_type == "reference":
             from .reference_critic import ReferenceCritic
 
-            use_critic = ReferenceCritic.from_true_map(scene, _fit_map(reference_envmap, pano.ldr.shape[:2]))
+            use_critic = ReferenceCritic.from_true_map(scene, _fit_map(reference_envmap, ldr.shape[:2]))
         elif use_critic is None:   # diffusion, with the models located above
             from .diffusion_critic import DiffusionLightCritic
 
@@ -277,15 +285,15 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
             decisions["critic"].update({"models": {k: str(v) for k, v in models.paths.items()},
                                         "device": str(models.device), "dtype": str(models.dtype).replace("torch.", ""),
                                         **{k: v for k, v in asdict(config.diffusion).items()}})
-        optimisation = optimise_scales(scene, pano.ldr, regions, prior, use_critic, prompts, config.optimise,
+        optimisation = optimise_scales(scene, ldr, regions, prior, use_critic, prompts, config.optimise,
                                        progress=progress, cancel=cancel, on_iteration=on_iteration)
         scales = {k: math.exp(v) for k, v in optimisation.log_scales.items()}
         decisions["optimisation"] = {"iterations": config.optimise.iterations, "lr": config.optimise.lr,
                                      "final_loss": optimisation.loss_history[-1] if optimisation.loss_history else None,
                                      "seconds": round(optimisation.seconds, 3)}
-    hdr = hdr_from_scales(pano.ldr, regions, scales)
+    hdr = hdr_from_scales(ldr, regions, scales)
     emit(progress, "light", max(config.optimise.iterations, 1), max(config.optimise.iterations, 1), "HDR map ready")
-    return LightResult(pano.ldr, hdr, regions, scales, prior, pano, photo_camera, decisions, optimisation,
+    return LightResult(ldr, hdr, regions, scales, prior, pano, photo_camera, decisions, optimisation,
                        time.perf_counter() - t0)
 
 
