@@ -111,3 +111,54 @@ def test_a_dark_scene_stays_dark():
     # Nothing brighter than the surfaces call for: the map's mean stays within the energy bound.
     surfaces = srgb_to_linear(photo)[photo.max(-1) < 0.8].mean()
     assert result.hdr.mean() < surfaces * (2 / 0.15 - 1)
+
+
+# -- indoor or outdoor -----------------------------------------------------------------------------
+DEVELOPMENT = {"studio": "indoor", "interior": "indoor", "city": "outdoor", "forest": "outdoor"}
+
+
+@pytest.fixture(scope="module")
+def development_photos():
+    from scenefit.core.imageio import read_image
+    from scenefit.core.photo import perspective_view, studiolight_path
+
+    photos = []
+    for name, truth in DEVELOPMENT.items():
+        hdr = read_image(studiolight_path(name))[..., :3]
+        for pitch in (-10.0, 10.0):
+            for yaw in (0.0, 120.0, 240.0):
+                camera = PhotoCamera(yaw_deg=yaw, pitch_deg=pitch, fov_deg=60.0, width=320, height=240)
+                photos.append((name, yaw, pitch, truth, develop_photo(perspective_view(hdr, camera)) / 255.0))
+    return photos
+
+
+def test_auto_scene_type_is_right_on_every_development_photo(development_photos):
+    from scenefit.core.lighting.scene_type import scene_type_cue
+
+    wrong = [(name, yaw, pitch, cue["score"]) for name, yaw, pitch, truth, photo in development_photos
+             if (cue := scene_type_cue(photo.astype(np.float32)))["scene_type"] != truth]
+    assert not wrong, wrong
+    # The same call at another photo size (the cue works on a fixed width).
+    name, _, _, truth, photo = development_photos[-1]
+    import cv2
+
+    assert scene_type_cue(cv2.resize(photo.astype(np.float32), (640, 480)))["scene_type"] == truth
+
+
+def test_an_ambiguous_photo_is_called_unsure_and_the_report_says_so():
+    from scenefit.core.lighting.scene_type import SKY_RATIO_AT, scene_type_cue
+
+    # Smooth, no clutter; the top eighth exactly SKY_RATIO_AT times brighter than the bottom: score 1.
+    linear = np.full((80, 64, 3), 0.1, np.float32)
+    linear[:10] = 0.1 * SKY_RATIO_AT
+    from scenefit.core.imageio import linear_to_srgb
+
+    photo = linear_to_srgb(linear)
+    cue = scene_type_cue(photo)
+    assert cue["unsure"] and cue["score"] == pytest.approx(1.0, abs=0.02) and cue["clutter"] == 0.0
+    result = estimate_light(photo, (32.0, 70.0), light_preset("draft", map_height=16, depth=_geometric()))
+    assert "unsure" in result.decisions["scene_type"]["note"]
+    assert result.decisions["scene_type"]["auto"]["score"] == cue["score"]
+    # A clearly dark, smooth room is indoor and sure.
+    room = linear_to_srgb(np.full((80, 64, 3), 0.05, np.float32))
+    assert scene_type_cue(room)["scene_type"] == "indoor" and not scene_type_cue(room)["unsure"]

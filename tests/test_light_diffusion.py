@@ -98,7 +98,7 @@ def test_missing_weights_fail_before_any_work_with_a_clear_message(tmp_path, mon
     def no_work(*args, **kwargs):
         raise AssertionError("the panorama was started before the models were located")
 
-    monkeypatch.setattr(estimate_module, "sky_score", no_work)
+    monkeypatch.setattr(estimate_module, "scene_type_cue", no_work)
     config = LightConfig(critic_type="diffusion", models=ModelConfig(cache_dir=str(empty), local_files_only=True))
     with pytest.raises(ModelMissingError) as info:
         estimate_light(np.full((8, 12, 3), 0.5, np.float32), (6, 6), config)
@@ -241,7 +241,7 @@ def test_outdoor_completion_falls_back_to_the_prior_without_weights(tmp_path, mo
     assert info["asked"] == "auto" and not info["used"] and "not on this machine" in info["why"]
     assert "prior" in info["completion"]
     # Asked for explicitly, the model must be there: a clear error before any work.
-    monkeypatch.setattr(estimate_module, "sky_score", lambda *a: (_ for _ in ()).throw(AssertionError("work began")))
+    monkeypatch.setattr(estimate_module, "scene_type_cue", lambda *a: (_ for _ in ()).throw(AssertionError("work began")))
     with pytest.raises(ModelMissingError, match="--outpaint prior"):
         estimate_light(_outdoor_photo(), (16, 20), LightConfig(scene_type="outdoor", models=models,
                                                                outpaint=OutpaintConfig(completion_type="sd2")))

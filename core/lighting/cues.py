@@ -2,23 +2,26 @@
 
 The paper's pipeline stays: LDR panorama -> bright regions -> one scale per region. These cues give
 the scales a physical starting point instead of one global inverse-tone-mapping prior, and give the
-part of the map the photo never saw a level and a direction:
+part of the map the photo never saw a level and a direction. Each can be switched off (CueConfig)
+and the report records which were used and each region's share of the map's power.
 
-- surface energy: the photo's non-emitting surfaces (texels below the near-light threshold) are lit
-  by something. A diffuse surface of albedo rho under a mean incident radiance L_in shows rho * L_in,
-  so the light the photo does not show has mean radiance S / rho, S being the surfaces' mean linear
-  radiance (photo exposure units) and rho a plausible mean albedo (0.25; the report gives the bound
-  for rho in [0.15, 0.5]). This sets the scale of the unseen upper hemisphere ("unseen" region).
-- light direction: the unseen light is placed as a broad lobe at the centroid of the unseen upper
-  hemisphere (where a light that is not in the photo must be), not spread evenly.
-- clipped size: a bright region's true intensity follows from the power needed to light those
-  surfaces, P = pi * S / rho (an irradiance pi * S / rho at normal incidence), spread over the
-  region's solid angle: small clipped blobs (a bulb, the sun) become bright, a large clipped
-  window or overcast sky stays near its clipped level. Scale = P / sum(solid angle * intensity).
-- exposure: every level is in units of the photo's own exposure (mid-grey of the photo), so a
-  dark photo's surfaces give a dark map: nothing is added that the surfaces do not call for.
+- exposure (clipped texels): an auto-exposed photo maps its log-average luminance to mid-grey
+  (0.18). The unclipped pixels keep their values, so the clipped ones must hold the rest of the
+  log-average: that fixes their geometric-mean radiance (`exposure_clip_scale`), a lower bound on
+  their mean. Clipped texels become their own region "clipped" with that scale; bright texels that
+  did not clip keep their stored radiance (scale 1). A photo more than 3 stops darker than
+  mid-grey was not metered that way (night, kept dark): its clipped texels then get the power the
+  surfaces call for (below), spread over their solid angle, so a dark scene stays dark.
+- surface energy (unseen upper hemisphere): the photo's surfaces (texels below the near-light
+  threshold, mean linear radiance S in photo exposure units) are lit by something. A camera-facing
+  diffuse surface of albedo rho sees about half unseen light L and half ground (~S), so
+  S = rho (L + S) / 2 and L = S (2 / rho - 1); rho = 0.25 by default, the report gives L for rho in
+  [0.15, 0.5]. The upper hemisphere the photo did not see becomes the region "unseen" at mean L.
+- lobe (direction of the unseen light): a light that is not in the photo is where the photo did
+  not look: the unseen light is a cos^4 lobe (over a floor of 0.25) around the solid-angle
+  centroid of the unseen upper hemisphere, behind the camera and up, rather than spread evenly.
 
-    build_cues(photo, pano, regions, config) -> Cues (the regions to add, LDR edits, scales, report)
+    build_cues(photo, ldr, unseen, regions, thresholds, config) -> Cues (LDR, regions, scales, report)
 """
 from __future__ import annotations
 
@@ -42,6 +45,9 @@ class CueConfig:
     lobe_sharpness: float = 4.0        # cos^k lobe of the unseen light around its centroid direction
     lobe_floor: float = 0.25           # the lobe's lowest value (relative), so no unseen texel is black
     max_scale: float = 1e5
+    use_exposure: bool = True          # the cues can be switched off one by one (the bench's ablation)
+    use_energy: bool = True
+    use_lobe: bool = True
     clipped_level: float = 0.98        # stored (sRGB) intensity at which a texel counts as clipped
     key: float = 0.18                  # the photo's metering: log-average luminance -> this (mid-grey)
 
@@ -110,7 +116,7 @@ def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regi
             scales[name] = 1.0
         else:
             del out_regions[name]
-    if clipped_all.any():
+    if clipped_all.any() and config.use_exposure:
         if clip_scale is None:   # not metered: the power the surfaces call for, over the clipped texels
             level = srgb_to_linear(ldr).mean(axis=-1).astype(np.float64)
             clip_scale = power / max(float((level * omega)[clipped_all].sum()), 1e-12)
@@ -123,12 +129,12 @@ def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regi
                              "scale": round(scales["clipped"], 4)}
 
     # The unseen light: mean radiance S / rho over the hidden upper hemisphere, as a lobe at its centroid.
-    if hidden.any():
+    if hidden.any() and config.use_energy:
         weights = (omega * np.ones((1, w)))[hidden]
         centroid = (dirs[hidden] * weights[:, None]).sum(axis=0)
         centroid /= max(np.linalg.norm(centroid), 1e-12)
         lobe = np.maximum(dirs @ centroid, 0.0) ** config.lobe_sharpness
-        shade = config.lobe_floor + (1.0 - config.lobe_floor) * lobe
+        shade = config.lobe_floor + (1.0 - config.lobe_floor) * lobe if config.use_lobe else np.ones((h, w))
         linear = srgb_to_linear(out_ldr)
         linear[hidden] *= shade[hidden, None]
         from ..imageio import linear_to_srgb
@@ -144,8 +150,25 @@ def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regi
                             "mean_radiance": round(target, 5),
                             "mean_radiance_range": [round(s_level * (2 / hi - 1), 5), round(s_level * (2 / lo - 1), 5)],
                             "fraction_of_map": round(float(hidden.mean()), 4)}
+    report["used"] = [name for name, on in (("exposure", config.use_exposure and "clipped" in scales),
+                                            ("energy", "unseen" in scales),
+                                            ("lobe", config.use_lobe and "unseen" in scales)) if on]
+    report["energy_share"] = _energy_shares(out_ldr, out_regions, scales, omega)
     return Cues(out_ldr, out_regions, scales, report)
 
+
+def _energy_shares(ldr: np.ndarray, regions: dict[str, np.ndarray], scales: dict[str, float],
+                   omega: np.ndarray) -> dict[str, float]:
+    """Each region's share of the map's power (radiance x solid angle), after its scale: what each cue moved."""
+    level = srgb_to_linear(ldr).mean(axis=-1).astype(np.float64) * omega
+    rest = np.ones(level.shape, bool)
+    shares = {}
+    for name, mask in regions.items():
+        shares[name] = float(level[mask].sum()) * scales.get(name, 1.0)
+        rest &= ~mask
+    shares["rest"] = float(level[rest].sum())
+    total = max(sum(shares.values()), 1e-12)
+    return {k: round(v / total, 4) for k, v in shares.items()}
 
 
 def exposure_clip_scale(photo_srgb: np.ndarray, clipped_level: float, key: float = 0.18,

@@ -32,7 +32,8 @@ from .outpaint import OutpaintConfig
 from .hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, Critic, OptimiseConfig, OptimiseResult,
                   hdr_from_scales, is_dark_environment, light_prompt, optimise_scales, prior_scales, tonemap_preview,
                   DEFAULT_L_WHITE)
-from .panorama import Panorama, indoor_panorama, outdoor_panorama, place_on_floor, sky_score
+from .panorama import Panorama, indoor_panorama, outdoor_panorama, place_on_floor
+from .scene_type import scene_type_cue
 from .regions import RegionThresholds, bright_regions
 
 DEFAULT_FOV_DEG = 60.0   # horizontal; a typical phone/kit-lens view (~28 mm full-frame equivalent)
@@ -94,6 +95,14 @@ def light_preset(name: str, **overrides) -> LightConfig:
     if name not in LIGHT_PRESETS:
         raise InputError(f"Unknown light preset {name!r}; choose one of {', '.join(LIGHT_PRESETS)}.")
     return replace(LIGHT_PRESETS[name], **overrides)
+
+
+@dataclass(frozen=True)
+class Decision:
+    """A choice the stage made and why (the report's wording); code branches on `choice`, never on `reason`."""
+
+    choice: str
+    reason: str
 
 
 @dataclass
@@ -187,7 +196,8 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     """
     t0 = time.perf_counter()
     # The diffusion models are found before any work (a missing one is a clear error).
-    want_outpaint, outpaint_why = _want_outpaint(config)
+    outpainting = _choose_completion(config)
+    want_outpaint = outpainting.choice == "sd2"
     model_paths = None
     if (config.critic_type == "diffusion" and critic is None) or want_outpaint:
         model_paths = _locate_light_models(config.models, want_outpaint)
@@ -214,9 +224,12 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     decisions["photo_camera"] = asdict(photo_camera)
 
     # Indoor or outdoor.
-    cue = sky_score(photo)
+    cue = scene_type_cue(photo)
     scene_type = cue["scene_type"] if config.scene_type == "auto" else config.scene_type
-    decisions["scene_type"] = {"chosen": scene_type, "by": "auto" if config.scene_type == "auto" else "user", **cue}
+    decisions["scene_type"] = {"chosen": scene_type, "by": "auto" if config.scene_type == "auto" else "user", "auto": cue}
+    if config.scene_type == "auto" and cue["unsure"]:
+        decisions["scene_type"]["note"] = (f"unsure (score {cue['score']:.2f}, near 1): chose {scene_type}; "
+                                           "--scene indoor|outdoor decides")
     emit(progress, "light", 0, max(config.optimise.iterations, 1), f"{scene_type} panorama")
 
     # The LDR panorama.
@@ -236,7 +249,7 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
                 return outpaint_panorama(ldr, seen, guidance_models(), config.outpaint)
         pano = outdoor_panorama(photo, photo_camera, config.map_height, outpaint=outpaint)
         decisions["outpainting"] = {"asked": config.outpaint.completion_type, "used": want_outpaint,
-                                    "why": outpaint_why, "completion": pano.decisions["completion"]}
+                                    "why": outpainting.reason, "completion": pano.decisions["completion"]}
     decisions["panorama"] = pano.decisions
     check_cancel(cancel)
 
@@ -261,9 +274,9 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
 
     # Optimise the scales with a critic, when there is one.
     scales, optimisation = dict(prior), None
-    use_critic, why = _pick_critic(config, critic, reference_envmap, regions)
-    decisions["critic"] = {"type": config.critic_type, "used": why.startswith("ok"), "why": why}
-    if config.critic_type in ("reference", "diffusion") and why.startswith("ok"):
+    use_critic, chosen = _choose_critic(config, critic, reference_envmap, regions)
+    decisions["critic"] = {"type": config.critic_type, "used": chosen.choice != "none", "why": chosen.reason}
+    if chosen.choice != "none":
         if mesh is None or maps is None:
             mesh, maps = default_object()
             decisions["object"] = "default grey sphere (no asset given)"
@@ -306,18 +319,19 @@ def _fit_map(envmap: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     return envmap
 
 
-def _pick_critic(config: LightConfig, critic, reference_envmap, regions) -> tuple[Critic | None, str]:
+def _choose_critic(config: LightConfig, critic, reference_envmap, regions) -> tuple[Critic | None, Decision]:
+    """Which critic optimises the scales: "none", "reference" or "diffusion" (a given critic counts as diffusion)."""
     if not regions:
-        return None, "no bright region, so no scale to optimise"
+        return None, Decision("none", "no bright region, so no scale to optimise")
     if config.critic_type == "none":
-        return None, "critic_type 'none': the inverse-tone-mapping prior sets the scales"
+        return None, Decision("none", f"critic_type 'none': the {config.prior_type} prior sets the scales")
     if config.critic_type == "reference":
         if reference_envmap is None:
             raise InputError("critic_type 'reference' needs the true map (reference_envmap).")
-        return None, "ok: pixel loss against renders under the true map"
+        return None, Decision("reference", "pixel loss against renders under the true map")
     if critic is None:
-        return None, "ok: diffusion critic (VSD with Stable Diffusion 2 base, core/guidance)"
-    return critic, "ok: diffusion critic (given by the caller)"
+        return None, Decision("diffusion", "diffusion critic (VSD with Stable Diffusion 2 base, core/guidance)")
+    return critic, Decision("diffusion", "diffusion critic (given by the caller)")
 
 
 def _locate_light_models(models: ModelConfig, need_inpaint: bool) -> dict:
@@ -331,21 +345,22 @@ def _locate_light_models(models: ModelConfig, need_inpaint: bool) -> dict:
                                 f"`--outpaint prior` completes an outdoor map without the model.") from None
 
 
-def _want_outpaint(config: LightConfig) -> tuple[bool, str]:
-    """Whether an outdoor map is outpainted by SD2 inpainting, decided before any work."""
+def _choose_completion(config: LightConfig) -> Decision:
+    """How an outdoor map's unseen part is completed: "sd2" (inpainting model) or "prior", before any work."""
     kind = config.outpaint.completion_type
     if config.scene_type == "indoor":
-        return False, "indoor scene: no outpainting"
+        return Decision("prior", "indoor scene: no outpainting")
     if kind == "prior":
-        return False, "completion_type 'prior': the sky/ground prior completes the map"
+        return Decision("prior", "completion_type 'prior': the sky/ground prior completes the map")
     if kind == "sd2":
-        return True, "completion_type 'sd2'"
+        return Decision("sd2", "completion_type 'sd2'")
     from ..guidance.models import models_available
 
     found, where = models_available(config.models, need_inpaint=True)
     if found:
-        return True, f"auto: Stable Diffusion 2 inpainting found ({where})"
-    return False, "auto: Stable Diffusion 2 inpainting is not on this machine, so the sky/ground prior completes the map"
+        return Decision("sd2", f"auto: Stable Diffusion 2 inpainting found ({where})")
+    return Decision("prior", "auto: Stable Diffusion 2 inpainting is not on this machine, so the sky/ground prior "
+                             "completes the map")
 
 
 def write_light_outputs(result: LightResult, out_dir: str | Path) -> dict[str, str]:
