@@ -204,6 +204,15 @@ def main() -> int:
 
     adapt = bench_adapt(quick=args.quick)
     md += ["", "## Adapt", "", adapt["markdown"]]
+
+    # Batches: jobs per hour in-process and on 1 and 2 local Ray workers; the paper's settings on N GPUs.
+    from bench_batch import bench_batch
+
+    batch = bench_batch(quick=args.quick, adapt_rows=adapt["rows"])
+    md += ["", "## Batches", "", batch["markdown"]]
+    (RESULTS / "batch.md").write_text(batch["markdown"] + "\n")
+    (RESULTS / "batch.json").write_text(json.dumps({"rows": batch["rows"], "estimate": batch["estimate"]},
+                                                   indent=1, default=float))
     (RESULTS / "bench.json").write_text(json.dumps({"machine": machine(), "environment": env, "render": renders,
                                                      "texture": textures, "conversion": conversions,
                                                      "adapt": adapt["rows"]}, indent=1, default=float))
