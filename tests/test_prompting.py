@@ -327,3 +327,22 @@ def test_adapt_writes_its_prompt_from_object_and_scene(server, tmp_path, capsys)
     assert report["prompt_writing"]["prompt"] == GOOD_INSTRUCTION and report["prompt_writing"]["analysis"] == ANALYSIS
     # The critics' prompt is the object and the model's instruction combined (adapt's edit mode).
     assert report["decisions"]["prompt"].startswith("a leather sofa, Soak the leather sofa, darken the leather")
+
+
+def test_run_takes_its_prompt_from_object_and_scene(server, tmp_path):
+    """`scenefit run --object-prompt --scene-prompt` without --prompt: the written description is the
+    RunConfig's prompt (adapt's); with --prompt nothing is asked."""
+    from scenefit.cli import build_parser
+    from scenefit.cli.run import run_config
+
+    base = ["run", "asset", "--photo", str(tmp_path / "photo.png"), "--at", "0.5,0.8", "--out", str(tmp_path / "o"),
+            "--prompt-cache", str(tmp_path / "c"), "--config", str(tmp_path / "none.toml"),
+            "--prompt-endpoint", server.url, "--prompt-model", "text-llm"]
+    server.replies = [Reply(answer(GOOD))]
+    config, written = run_config(build_parser().parse_args(base + ["--object-prompt", "a leather sofa",
+                                                                   "--scene-prompt", "a swamp"]))
+    assert config.prompt == GOOD and written.analysis == ANALYSIS and not written.photo_sent
+    assert "[the scene]: a swamp" in user_text(server.requests[0]["body"])
+    config, written = run_config(build_parser().parse_args(base + ["--prompt", "mine", "--object-prompt", "a sofa",
+                                                                   "--scene-prompt", "a bog"]))
+    assert (config.prompt, written, len(server.requests)) == ("mine", None, 1)
