@@ -1,4 +1,4 @@
-"""`make bench`: speed and accuracy of the rendering core and of texture conversion.
+"""`make bench`: speed and accuracy of the rendering core, texture conversion, light and composition.
 
 Writes benchmarks/results/bench.md (the tables the README quotes), bench.json and
 conversion_psnr.png (PSNR against iterations and seconds for both conversion methods).
@@ -228,6 +228,11 @@ def main() -> int:
     subprocess.run([sys.executable, str(Path(__file__).with_name("bench_light.py"))] + (["--quick"] if args.quick else []),
                    check=True)
     md += ["", "## Light estimation", "", (RESULTS / "light.md").read_text()]
+
+    # Composition: noise of the final render against a high-sample reference, raw and denoised.
+    subprocess.run([sys.executable, str(Path(__file__).with_name("bench_compose.py"))] + (["--quick"] if args.quick else []),
+                   check=True)
+    md += ["", "## Composition", "", (RESULTS / "compose.md").read_text()]
     (RESULTS / "bench.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))
     return 0

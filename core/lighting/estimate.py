@@ -205,6 +205,15 @@ def parse_placement(text_or_xy, width: int, height: int) -> tuple[float, float]:
     return x, y
 
 
+def default_photo_camera(config: LightConfig, photo_info: dict, width: int, height: int) -> tuple[PhotoCamera, dict]:
+    """The camera the light stage assumes for a photo: looking along +Y (the composition's azimuth 0),
+    pitched by config.camera_pitch_deg, field of view from the config, else the photo's metadata, else 60."""
+    fov = config.fov_deg or photo_info.get("fov_from_metadata_deg") or DEFAULT_FOV_DEG
+    why = {"deg": fov, "from": "config" if config.fov_deg else
+           ("photo metadata" if photo_info.get("fov_from_metadata_deg") else "default (horizontal 60 deg)")}
+    return PhotoCamera(yaw_deg=90.0, pitch_deg=config.camera_pitch_deg, fov_deg=fov, width=width, height=height), why
+
+
 def default_object() -> tuple[Mesh, torch.Tensor]:
     """When no asset is given: a mid-grey, medium-rough sphere of the normalised radius."""
     maps = torch.cat([torch.full((8, 8, 3), 0.5), torch.full((8, 8, 1), 0.5), torch.zeros(8, 8, 1)], dim=-1)
@@ -245,10 +254,7 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     info = dict(photo_info or {})
     decisions: dict = {}
     if photo_camera is None:
-        fov = config.fov_deg or info.get("fov_from_metadata_deg") or DEFAULT_FOV_DEG
-        decisions["fov"] = {"deg": fov, "from": "config" if config.fov_deg else
-                            ("photo metadata" if info.get("fov_from_metadata_deg") else "default (horizontal 60 deg)")}
-        photo_camera = PhotoCamera(yaw_deg=90.0, pitch_deg=config.camera_pitch_deg, fov_deg=fov, width=w, height=h)
+        photo_camera, decisions["fov"] = default_photo_camera(config, info, w, h)
     elif (photo_camera.width, photo_camera.height) != (w, h):
         photo_camera = replace(photo_camera, width=w, height=h)
     decisions["photo_camera"] = asdict(photo_camera)
