@@ -141,6 +141,14 @@ def test_follow_up_turn_continues_the_conversation(server, cache):
     assert write_prompt(request, None, cache_dir=cache).warnings == ("the follow-up needs a language model and was not used",)
 
 
+def test_missing_openai_package_is_one_sentence(server, cache, monkeypatch):
+    monkeypatch.setitem(__import__("sys").modules, "openai", None)      # `import openai` now fails
+    with pytest.raises(PromptServiceError, match="'openai' Python package is missing"):
+        write_prompt(SOFA, service(server), cache_dir=cache)
+    assert server.connections == 0
+    assert write_prompt(SOFA, service(server), offline=True, cache_dir=cache).prompt == "a leather sofa in a swamp"
+
+
 def test_time_out_is_one_clear_sentence(server, cache):
     server.replies = [Reply(answer(GOOD), delay_s=5)]
     with pytest.raises(PromptServiceError, match=r"did not answer within 0.5 s") as error:
@@ -282,7 +290,7 @@ def test_adapt_writes_its_prompt_from_object_and_scene(server, tmp_path, capsys)
     """`scenefit adapt --object-prompt --scene-prompt` without --prompt: the model's description is
     the prompt the critics get (edit mode: its instruction), and the report keeps the analysis."""
     from scenefit.cli import build_parser, main
-    from scenefit.cli.adapt import scene_conditional_prompt
+    from scenefit.cli.options import scene_conditional_prompt
     from scenefit.core.asset_io import save_asset_folder
     from scenefit.core.guidance.testing import build_tiny_pair
     from scenefit.core.maps import PBRMaps
