@@ -200,7 +200,10 @@ def test_ray_batch_retries_resumes_and_matches_in_process(in_process, local_ray,
 def test_model_cache_loads_once_and_survives_a_released_text_encoder(tmp_path):
     from scenefit.core.guidance import ModelConfig
     from scenefit.core.guidance.models import ModelCache
-    from scenefit.core.guidance.testing import build_tiny_sd
+    try:   # the tiny models' builder is moving from core/guidance/testing.py to devtools/
+        from scenefit.devtools.tiny_models import build_tiny_sd
+    except ImportError:
+        from scenefit.core.guidance.testing import build_tiny_sd
 
     config = ModelConfig(base_model=str(build_tiny_sd(tmp_path / "sd")), local_files_only=True)
     cache = ModelCache()
