@@ -95,7 +95,7 @@ except SystemExit as stop:
 report = json.loads(open(OUT + "/report.json").read())
 print("RESULT", json.dumps({{"seconds": time.perf_counter() - t, "peak_mb": peak_mb(),
                              "psnr_db": report["convert"]["psnr_covered_texels_db"],
-                             "render_psnr_db": report["renders"]["psnr_original_vs_converted_db"],
+                             "compose_spp": report["compose"]["spp"],
                              "timings": report["timings_seconds"]}}))
 """
 
@@ -135,13 +135,13 @@ def plot(stages: dict[str, tuple[list[dict], str, str, bool]], path: Path) -> No
 
 def bench_presets(asset: Path, quick: bool = False, presets=PRESETS, demo_presets=PRESETS) -> dict:
     from run import table  # benchmarks/ is on sys.path (run.py and main() below put it there)
-    from scenefit.core.convert import CONVERT_PRESETS
+    from scenefit.core.presets import stage_config
 
     started = time.perf_counter()
     baseline = child(BASELINE)["peak_mb"]
     resolution = 256
     convert = [{"preset": p, **child(CONVERT, ASSET=str(asset), PRESET=p, RESOLUTION=resolution,
-                                     ITERATIONS=max(10, CONVERT_PRESETS[p].iterations // 5) if quick else None)}
+                                     ITERATIONS=max(10, stage_config("convert", p).iterations // 5) if quick else None)}
                for p in presets]
     light = [{"preset": p, **child(LIGHT, PRESET=p)} for p in presets]
     demo = []
@@ -165,9 +165,9 @@ def bench_presets(asset: Path, quick: bool = False, presets=PRESETS, demo_preset
           table(light, [("preset", "preset", ""), ("map rows", "map_height", ""), ("seconds", "seconds", ".2f"),
                         ("peak MB", "peak_mb", ".0f"), ("diffuse RMSE", "diffuse_rmse", ".4g"),
                         ("glossy si-RMSE", "glossy_si_rmse", ".4g")]), "",
-          "End to end (`scenefit demo --guidance none`: light, convert at the asset's 512², bake, 8 renders):", "",
+          "End to end (`scenefit demo --guidance none`: light, convert at the asset's 512², bake, compose twice):", "",
           table(demo, [("preset", "preset", ""), ("seconds", "seconds", ".1f"), ("peak MB", "peak_mb", ".0f"),
-                       ("conversion PSNR dB", "psnr_db", ".2f"), ("render PSNR dB", "render_psnr_db", ".2f")]), "",
+                       ("conversion PSNR dB", "psnr_db", ".2f"), ("composite spp", "compose_spp", "")]), "",
           "Cost against quality: `presets.png`."]
     RESULTS.mkdir(parents=True, exist_ok=True)
     plot({"convert": (convert, "psnr_db", "texture PSNR dB", True),
