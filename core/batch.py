@@ -220,6 +220,7 @@ def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
     from .presets import stage_config
     from .lighting import estimate_light, light_report, load_photo, write_light_outputs
     from .pipeline import convert_and_bake
+    from .placement import Placement
 
     if "adapt" in job.stages:
         raise InputError(f"Job '{job.name}': stage adapt runs inside the whole pipeline in a batch; "

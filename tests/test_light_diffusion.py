@@ -115,7 +115,7 @@ def test_diffusion_steps_move_the_scale_toward_the_truth(tiny_base, start):
     with torch.no_grad():
         target, _ = scene.render_view(true_map, 0, spp=64, seed=99)
         image = tonemap_srgb_torch(target, critic.config.l_white).permute(2, 0, 1)[None]
-        critic.score.predict_phi = _optimal_denoiser(critic.score, critic._encode(image))
+        critic.score.predict_phi = _optimal_denoiser(critic.score, critic.models.encode(image))
     result = optimise_scales(scene, ldr, regions, {"near": start}, critic, (SPHERE_PROMPT,),
                              OptimiseConfig(iterations=6, lr=0.3))
     end = result.log_scales["near"]

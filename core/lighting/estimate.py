@@ -73,6 +73,8 @@ class LightConfig:
             raise InputError(f"scene_type must be one of {', '.join(SCENE_TYPES)}, got {self.scene_type!r}.")
         if self.critic_type not in CRITIC_TYPES:
             raise InputError(f"critic_type must be one of {', '.join(CRITIC_TYPES)}, got {self.critic_type!r}.")
+        if self.prior_type not in PRIOR_TYPES:
+            raise InputError(f"prior_type must be one of {', '.join(PRIOR_TYPES)}, got {self.prior_type!r}.")
         if self.fov_deg is not None and not 1.0 <= self.fov_deg <= 170.0:
             raise InputError(f"The photo's field of view must be between 1 and 170 degrees, got {self.fov_deg}.")
         if not -89.0 <= self.camera_pitch_deg <= 89.0:
@@ -260,7 +262,7 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     else:
         prior = prior_scales(ldr, regions, config.l_white)
     decisions["regions"] = {name: round(float(mask.mean()), 5) for name, mask in regions.items()}
-    decisions["prior"] = {"type": "inverse_tonemap", "l_white": config.l_white,
+    decisions["prior"] = {"type": config.prior_type, "l_white": config.l_white,
                           "scales": {k: round(v, 5) for k, v in prior.items()}}
     prior_hdr = hdr_from_scales(ldr, regions, prior)
     dark, dark_info = is_dark_environment(prior_hdr, regions)
