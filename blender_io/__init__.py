@@ -3,8 +3,8 @@
 Everything here runs on Blender's main thread and may import bpy; core/ never does.
 """
 from .mesh import mesh_from_object, world_matrix
-from .material import maps_from_material, write_result_material
+from .material import maps_from_material, read_material, read_object_materials, write_result_material
 from .example import make_example_asset
 
-__all__ = ["mesh_from_object", "world_matrix", "maps_from_material", "write_result_material",
-           "make_example_asset"]
+__all__ = ["mesh_from_object", "world_matrix", "maps_from_material", "read_material", "read_object_materials",
+           "write_result_material", "make_example_asset"]

@@ -8,9 +8,9 @@ from pathlib import Path
 
 from ..core.errors import InputError
 from ..core.maps import PBRMaps
+from ..core.materials import AssetMaterials
 from ..core.mesh import Mesh
-from .material import maps_from_material
-from .mesh import mesh_from_object
+from .material import read_object_materials
 
 IMPORTERS = {
     ".glb": ("import_scene", "gltf"), ".gltf": ("import_scene", "gltf"),
@@ -21,7 +21,18 @@ IMPORTERS = {
 
 
 def load_asset_file(path: str | Path, object_name: str | None = None) -> tuple[Mesh, PBRMaps]:
-    """The named mesh object (or the one with most faces) and its material's maps."""
+    """The named mesh object (or the one with most faces) and its maps; several materials come as
+    one atlas (see AssetMaterials.fitting_view)."""
+    return load_asset_materials(path, object_name).fitting_view()
+
+
+def load_asset_materials(path: str | Path, object_name: str | None = None) -> AssetMaterials:
+    """The named mesh object (or the one with most faces) with every material its faces use."""
+    return read_object_materials(*import_asset_file(path, object_name))
+
+
+def import_asset_file(path: str | Path, object_name: str | None = None):
+    """(object, depsgraph): the file opened or imported into a fresh, empty Blender session."""
     import bpy
 
     path = Path(path)
@@ -52,8 +63,4 @@ def load_asset_file(path: str | Path, object_name: str | None = None) -> tuple[M
         obj = max(meshes, key=lambda o: len(o.data.polygons))
     else:
         raise InputError(f"'{path.name}' holds no mesh object.")
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    mesh = mesh_from_object(obj, depsgraph)
-    if not obj.material_slots or obj.material_slots[0].material is None:
-        raise InputError(f"Object '{obj.name}' has no material; give it a Principled BSDF with image textures.")
-    return mesh, maps_from_material(obj.material_slots[0].material)
+    return obj, bpy.context.evaluated_depsgraph_get()
