@@ -10,10 +10,10 @@ import argparse
 import sys
 
 from ..core.errors import Cancelled, SceneFitError
-from . import adapt, bake, convert, demo, export, light, render
+from . import adapt, bake, convert, demo, export, light, prompt, render
 
 # The order `scenefit --help` lists them in.
-COMMANDS = (convert, render, export, bake, light, adapt, demo)
+COMMANDS = (convert, render, export, bake, light, prompt, adapt, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:

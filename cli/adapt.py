@@ -4,7 +4,24 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-from .options import PRESETS, add_asset_args, add_model_args, environment, load_asset, model_config, progress
+from .options import (PRESETS, add_asset_args, add_model_args, add_prompt_service_args, environment, load_asset,
+                      model_config, progress, write_prompt_from_args)
+
+
+def scene_conditional_prompt(args, mode: str):
+    """(prompt, instruction, record) for the run: the user's --prompt/--instruction when given, else
+    written from --object-prompt and --scene-prompt (a description; edit mode: an instruction)."""
+    prompt, instruction = args.prompt or "", args.instruction or ""
+    given = prompt or (instruction if mode == "edit" else "")
+    if given or not args.object_prompt or not (args.scene_prompt or (args.photo and mode == "scene")):
+        return prompt, instruction, None
+    result = write_prompt_from_args(args, args.object_prompt, args.scene_prompt, "instruct" if mode == "edit" else "describe",
+                                    args.photo if mode == "scene" else "")
+    source = f"written by '{result.model}'" if result.model_written else f"template ({result.reason})"
+    print(f"prompt ({source}): {result.prompt}")
+    if mode == "edit":
+        return prompt, result.prompt, result
+    return result.prompt, instruction, result
 
 
 def run(args) -> int:
@@ -20,8 +37,9 @@ def run(args) -> int:
     overrides = {k: v for k, v in (("iterations", args.iterations), ("seed", args.seed),
                                    ("elevation", args.elevation)) if v is not None}
     mode = args.mode
-    config = adapt_preset(args.preset, mode, prompt=args.prompt or "", object_prompt=args.object_prompt or "",
-                          instruction=args.instruction or "", models=model_config(args),
+    prompt, instruction, written = scene_conditional_prompt(args, mode)
+    config = adapt_preset(args.preset, mode, prompt=prompt, object_prompt=args.object_prompt or "",
+                          instruction=instruction, models=model_config(args),
                           **({"views_type": "local"} if mode == "scene" and not args.photo else {}),
                           **({"light_type": "envmap"} if args.envmap else {}), **overrides)
     if args.model_resolution or args.render_size:
@@ -38,6 +56,8 @@ def run(args) -> int:
     result, report = adapt_and_bake(mesh, texture, config, Path(args.out), photo=photo, placement=placement,
                                     envmap=env, progress=progress(args))
     report["environment"] = environment_info()
+    if written is not None:
+        report["prompt_writing"] = written.to_report()
     write_report(Path(args.out) / "report.json", report)
     print(f"adapted '{mesh.name}' ({mode}, {result.iterations} iterations, {result.seconds:.1f} s) -> {args.out}/maps")
     return 0
@@ -50,7 +70,9 @@ def add_parser(sub) -> None:
     p.add_argument("--mode", choices=("scene", "generate", "edit"), default="scene")
     p.add_argument("--texture", help="texture.pt from `scenefit convert` (required unless --mode generate)")
     p.add_argument("--prompt", help="appearance description, e.g. 'a leather sofa, soggy and stained with mud'")
-    p.add_argument("--object-prompt", help="edit mode: the object, e.g. 'a leather sofa'")
+    p.add_argument("--object-prompt", help="the object, e.g. 'a leather sofa' (edit mode, and for writing the prompt)")
+    p.add_argument("--scene-prompt", help="the scene, e.g. 'a swamp': without --prompt, a language model writes the "
+                                          "prompt from the object and scene (edit mode: the instruction)")
     p.add_argument("--instruction", help="edit mode: e.g. 'add dust to the sofa'")
     p.add_argument("--photo", help="scene mode: the photo the object goes into")
     p.add_argument("--at", default="0.5,0.6", help="X,Y centre of the object in the photo, fractions (default 0.5,0.6)")
@@ -63,4 +85,5 @@ def add_parser(sub) -> None:
     p.add_argument("--model-resolution", type=int, help="image size the diffusion models see (default 512)")
     p.add_argument("--render-size", type=int, help="largest render size of the coarse-to-fine stages")
     add_model_args(p)
+    add_prompt_service_args(p, prefix="prompt-")
     p.set_defaults(func=run)

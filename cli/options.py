@@ -68,7 +68,8 @@ def add_model_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--base-model", help="hub id or folder (default stabilityai/stable-diffusion-2-base)")
     p.add_argument("--inpaint-model", help="hub id or folder (default stabilityai/stable-diffusion-2-inpainting)")
     p.add_argument("--cache-dir", help="Hugging Face cache folder to look in")
-    p.add_argument("--offline", action="store_true", help="never download (also HF_HUB_OFFLINE=1)")
+    p.add_argument("--offline", action="store_true",
+                   help="never use the network: no model downloads (also HF_HUB_OFFLINE=1), template prompts")
 
 
 def model_config(args):
@@ -76,3 +77,45 @@ def model_config(args):
 
     return ModelConfig(**{k: v for k, v in (("base_model", args.base_model), ("inpaint_model", args.inpaint_model),
                                             ("cache_dir", args.cache_dir)) if v}, local_files_only=args.offline)
+
+
+def add_prompt_service_args(p: argparse.ArgumentParser, prefix: str = "") -> None:
+    """The chat endpoint that writes scene-conditional prompts. `prefix` ("prompt-") keeps them apart
+    from a command's own --model/--timeout; dests are the same either way."""
+    p.add_argument(f"--{prefix}endpoint", dest="prompt_endpoint", default="", metavar="URL",
+                   help="OpenAI-compatible base URL, e.g. http://127.0.0.1:8080/v1 (also: config file, OPENAI_BASE_URL)")
+    p.add_argument(f"--{prefix}model", dest="prompt_model", default="", metavar="NAME", help="chat model name at that endpoint")
+    p.add_argument(f"--{prefix}timeout", dest="prompt_timeout", type=float, metavar="S", help="seconds to wait for the answer (default 60)")
+    p.add_argument(f"--{'prompt-' if prefix else ''}vision", dest="prompt_vision", action=argparse.BooleanOptionalAction,
+                   help="the model reads images: send the photo (default: guessed from the model name)")
+    p.add_argument("--prompt-cache", metavar="DIR", help="folder of cached answers (default ~/.cache/scenefit/prompts)")
+    p.add_argument("--no-prompt-cache", action="store_true", help="always ask the model, never reuse an answer")
+    p.add_argument("--config", metavar="FILE", help="config file with a [prompting] table (default ~/.config/scenefit/config.toml)")
+
+
+def online_access() -> bool:
+    """Blender's 'Allow Online Access' when running inside Blender; bpy is never imported just to ask."""
+    import sys
+
+    bpy = sys.modules.get("bpy")
+    return bool(getattr(getattr(bpy, "app", None), "online_access", True))
+
+
+def write_prompt_from_args(args, object_prompt: str, scene_prompt: str, mode_type: str, photo: str = "",
+                           stream: bool = False):
+    """A PromptResult from the prompt-service options (a template one when offline)."""
+    from pathlib import Path
+
+    from ..core.prompting import PromptRequest, resolve_service, write_prompt
+
+    request = PromptRequest(object_prompt=object_prompt or "", scene_prompt=scene_prompt or "", mode_type=mode_type,
+                            photo=photo or "")
+    vision = {True: "yes", False: "no", None: ""}[args.prompt_vision]
+    offline = bool(getattr(args, "offline", False))
+    # Offline the config file is not even read: nothing about the service matters then.
+    service = None if offline else resolve_service(
+        args.prompt_endpoint, args.prompt_model, timeout_s=args.prompt_timeout, vision_type=vision, stream=stream,
+        config_path=Path(args.config) if args.config else None)
+    return write_prompt(request, service, offline=offline, online_access=online_access(),
+                        cache_dir=Path(args.prompt_cache) if args.prompt_cache else None,
+                        use_cache=not args.no_prompt_cache)

@@ -19,3 +19,7 @@ class RendererUnavailableError(SceneFitError):
 
 class Cancelled(SceneFitError):
     """The user cancelled a running job; work done so far is kept."""
+
+
+class PromptServiceError(SceneFitError):
+    """The language model that writes prompts timed out, refused, or answered with an error."""

@@ -43,7 +43,7 @@ DIST = ROOT / "dist"
 # What the extension needs at run time (not bpy, pytest or matplotlib: development only).
 RUNTIME = [
     "mitsuba", "drjit", "torch", "diffusers", "transformers", "peft", "accelerate",
-    "opencv-contrib-python-headless",
+    "opencv-contrib-python-headless", "openai",
 ]
 LEFT_OUT = {"numpy": "Blender ships numpy", "openimageio": "Blender ships OpenImageIO's Python module"}
 
