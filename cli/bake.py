@@ -10,8 +10,13 @@ def run(args) -> int:
     import json
 
     from ..blender_io.gltf_export import bake_asset_file
+    from ..core.asset_io import is_asset_folder
+    from ..core.errors import InputError
     from ..core.game_bake import check_texture_size
 
+    if is_asset_folder(args.asset):
+        raise InputError(f"'{args.asset}' is a SceneFit asset folder; scenefit bake rewrites the asset's own file "
+                         "(.glb, .gltf, .obj, .fbx, .blend), so give the file it came from.")
     if args.texture_size is not None:
         check_texture_size(args.texture_size)
     report = bake_asset_file(args.asset, Path(args.texture), args.out, args.format, args.texture_size, args.object)

@@ -352,3 +352,12 @@ def test_baking_inside_a_users_session_changes_nothing_of_theirs(run_py, tmp_pat
     exported = gltf_json(str(out))
     assert sorted(m["name"] for m in exported["materials"]) == ["Blue", "Red"]
     assert [n["name"] for n in exported["nodes"]] == ["Mine"]
+
+
+def test_bake_refuses_an_asset_folder_in_one_sentence(tmp_path, example_asset):
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "scenefit.cli", "bake", str(example_asset), "--texture", "t.pt",
+                           "--out", str(tmp_path / "x.glb")], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert proc.returncode == 2 and "asset folder" in proc.stderr and "Traceback" not in proc.stderr
+    assert not (tmp_path / "x.glb").exists()
