@@ -10,7 +10,7 @@ PLATFORM ?= linux-x64
 # Mitsuba's llvm variant loads this library (found lazily, after `setup` may have installed it).
 export DRJIT_LIBLLVM_PATH ?= $(shell tools/find_llvm.sh 2>/dev/null)
 
-.PHONY: help setup test demo bench extension extension-nowheels validate clean
+.PHONY: help setup test demo bench extension extension-nowheels check-extension validate clean
 
 help:
 	@echo "make demo       set up on first use, run SceneFit on the bundled example -> out/demo/"
@@ -19,6 +19,8 @@ help:
 	@echo "make extension PLATFORM=linux-x64|linux-arm64|windows-x64|macos-arm64|macos-x64"
 	@echo "                download runtime wheels, list them in the manifest, build dist/*.zip"
 	@echo "make extension-nowheels   pure-Python zip without wheels (what the install test uses)"
+	@echo "make check-extension PLATFORM=...  build the zip, install it into a bare bpy venv, run the"
+	@echo "                stages there (slow; not part of make test)"
 
 setup: $(STAMP)
 
@@ -42,6 +44,9 @@ validate: setup
 extension: setup
 	$(PY) tools/build_extension.py wheels --platform $(PLATFORM)
 	$(PY) tools/build_extension.py build --platform $(PLATFORM)
+
+check-extension: setup
+	$(PY) tools/check_extension.py --platform $(PLATFORM)
 
 extension-nowheels: setup
 	$(PY) tools/build_extension.py nowheels

@@ -1,9 +1,12 @@
-"""Loading an asset from any file Blender reads (.blend, glTF, OBJ, FBX, PLY, USD) for the command line.
+"""Loading an asset from any file Blender reads (.blend, glTF, OBJ, FBX, PLY, USD).
 
-The file is opened or imported into a fresh, empty Blender session; the user's file is only read.
+The open file is never reset or replaced: a .blend's object is appended, an import goes into a
+temporary scene, the mesh and maps are read, and every datablock that arrived is removed again.
+So the command line (a fresh bpy) and an artist's running Blender use the same loader.
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..core.errors import InputError
@@ -18,6 +21,48 @@ IMPORTERS = {
     ".usd": ("wm", "usd_import"), ".usda": ("wm", "usd_import"), ".usdc": ("wm", "usd_import"),
     ".usdz": ("wm", "usd_import"),
 }
+# The kinds of datablock a load may add (and that are removed again afterwards).
+_ID_COLLECTIONS = ("objects", "meshes", "materials", "images", "textures", "node_groups", "collections",
+                   "cameras", "lights", "actions", "armatures", "curves", "worlds", "scenes", "libraries")
+
+
+def _all_ids(bpy) -> set:
+    return {id_ for name in _ID_COLLECTIONS for id_ in getattr(bpy.data, name)}
+
+
+@contextmanager
+def _temporary_data(bpy):
+    """A temporary scene to load into; on exit every datablock that arrived meanwhile is removed."""
+    before = _all_ids(bpy)
+    scene = bpy.data.scenes.new("SceneFit temporary import")
+    try:
+        yield scene
+    finally:
+        added = [id_ for id_ in _all_ids(bpy) if id_ not in before]
+        bpy.data.batch_remove(added)
+
+
+def _import_into(bpy, scene, path: Path, suffix: str) -> None:
+    module, op = IMPORTERS[suffix]
+    if module == "import_scene":
+        import addon_utils
+
+        addon_utils.enable("io_scene_gltf2" if "gltf" in suffix or suffix == ".glb" else "io_scene_fbx",
+                           default_set=False)
+    with bpy.context.temp_override(scene=scene, view_layer=scene.view_layers[0],
+                                   collection=scene.collection):
+        getattr(getattr(bpy.ops, module), op)(filepath=str(path))
+
+
+def _append_blend(bpy, scene, path: Path, object_name: str | None) -> None:
+    with bpy.data.libraries.load(str(path), link=False) as (source, target):
+        names = list(source.objects)
+        if object_name is not None and object_name not in names:
+            raise InputError(f"No object '{object_name}' in '{path.name}'; objects: {', '.join(names) or 'none'}.")
+        target.objects = [object_name] if object_name is not None else names
+    for obj in target.objects:
+        if obj is not None:
+            scene.collection.objects.link(obj)
 
 
 def load_asset_file(path: str | Path, object_name: str | None = None) -> tuple[Mesh, PBRMaps]:
@@ -28,39 +73,39 @@ def load_asset_file(path: str | Path, object_name: str | None = None) -> tuple[M
 
 def load_asset_materials(path: str | Path, object_name: str | None = None) -> AssetMaterials:
     """The named mesh object (or the one with most faces) with every material its faces use."""
-    return read_object_materials(*import_asset_file(path, object_name))
+    import bpy
+
+    with loaded_asset(path, object_name) as (obj, scene):
+        return read_object_materials(obj, bpy.context.evaluated_depsgraph_get())
 
 
-def import_asset_file(path: str | Path, object_name: str | None = None):
-    """(object, depsgraph): the file opened or imported into a fresh, empty Blender session."""
+@contextmanager
+def loaded_asset(path: str | Path, object_name: str | None = None):
+    """(object, temporary scene), with the context pointing at that scene, while the block runs;
+    everything the load brought is removed afterwards (see the module's note)."""
     import bpy
 
     path = Path(path)
     if not path.is_file():
         raise InputError(f"Asset file '{path}' does not exist.")
     suffix = path.suffix.lower()
-    if suffix == ".blend":
-        bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
-    elif suffix in IMPORTERS:
-        bpy.ops.wm.read_factory_settings(use_empty=True)
-        module, op = IMPORTERS[suffix]
-        if suffix in (".fbx",) or module == "import_scene":
-            import addon_utils
-
-            addon_utils.enable("io_scene_gltf2" if "gltf" in suffix else "io_scene_fbx", default_set=False)
-        getattr(getattr(bpy.ops, module), op)(filepath=str(path))
-    else:
+    if suffix != ".blend" and suffix not in IMPORTERS:
         known = ", ".join(sorted({".blend", *IMPORTERS}))
         raise InputError(f"SceneFit cannot read '{suffix}' files; use one of {known}, or an asset folder.")
-
-    meshes = [o for o in bpy.data.objects if o.type == "MESH"]
-    if object_name is not None:
-        obj = bpy.data.objects.get(object_name)
-        if obj is None or obj.type != "MESH":
-            names = ", ".join(o.name for o in meshes) or "none"
-            raise InputError(f"No mesh object '{object_name}' in '{path.name}'; mesh objects: {names}.")
-    elif meshes:
-        obj = max(meshes, key=lambda o: len(o.data.polygons))
-    else:
-        raise InputError(f"'{path.name}' holds no mesh object.")
-    return obj, bpy.context.evaluated_depsgraph_get()
+    with _temporary_data(bpy) as scene:
+        if suffix == ".blend":
+            _append_blend(bpy, scene, path, object_name)
+        else:
+            _import_into(bpy, scene, path, suffix)
+        meshes = [o for o in scene.objects if o.type == "MESH"]
+        if object_name is not None:
+            obj = next((o for o in meshes if o.name == object_name or o.name.startswith(object_name + ".")), None)
+            if obj is None:
+                names = ", ".join(o.name for o in meshes) or "none"
+                raise InputError(f"No mesh object '{object_name}' in '{path.name}'; mesh objects: {names}.")
+        elif meshes:
+            obj = max(meshes, key=lambda o: len(o.data.polygons))
+        else:
+            raise InputError(f"'{path.name}' holds no mesh object.")
+        with bpy.context.temp_override(scene=scene, view_layer=scene.view_layers[0]):
+            yield obj, scene

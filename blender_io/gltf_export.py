@@ -133,7 +133,8 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
             for obj in layer.objects:
                 obj.select_set(obj in selection_only)
         bpy.ops.export_scene.gltf(filepath=str(staging / out_file.name), export_format=FORMATS[file_format],
-                                  use_selection=selection_only is not None, export_apply=True,
+                                  use_selection=selection_only is not None, use_active_scene=True,
+                                  export_apply=True,
                                   export_image_format="AUTO", export_materials="EXPORT")
         written = []
         for path in sorted(staging.iterdir()):
@@ -151,9 +152,9 @@ def bake_object_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_f
                         file_format: str = "glb", whole_scene: bool = True) -> dict:
     """Put the baked maps into `obj`'s materials (slot `slots[i]` gets `baked[i]`) and export glTF.
 
-    For a fresh session holding an imported asset (the command line): the materials are changed in
-    place and `whole_scene` exports every object, so the asset keeps its structure. Inside a user's
-    session call it on a copy of the object and its materials (see the Blender operator).
+    For an asset loaded into a temporary scene (blender_io.asset_file.loaded_asset): the materials
+    are changed in place and `whole_scene` exports every object of that scene, so the asset keeps
+    its structure. For the user's own object use bake_copy_to_gltf.
     """
     if len(baked) != len(slots):
         raise InputError(f"{len(baked)} baked materials for {len(slots)} material slots.")
@@ -174,23 +175,25 @@ def bake_object_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_f
 
 def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_format: str = "glb",
                     texture_size: int | None = None, object_name: str | None = None) -> dict:
-    """`scenefit bake`: the asset file re-imported in a fresh session, the neural texture baked per
+    """`scenefit bake`: the asset file loaded into a temporary scene, the neural texture baked per
     material at `texture_size`² (default: the fitted size, rounded up to a power of two), written
     as glTF 2.0. `texture` is a NeuralTexture or the path of a texture.pt. Returns the report."""
     from ..core.game_bake import bake_game_maps, default_texture_size
     from ..core.texture.bake import load_neural_texture
-    from .asset_file import import_asset_file
+    import bpy
+
+    from .asset_file import loaded_asset
     from .material import object_mesh_and_slots
 
     if not hasattr(texture, "texture"):
         texture = load_neural_texture(texture)
-    obj, depsgraph = import_asset_file(asset_path, object_name)
-    mesh, slots = object_mesh_and_slots(obj, depsgraph)
-    size = texture_size or default_texture_size(texture, len(slots))
-    materials = [obj.material_slots[s].material for s in slots]
-    baked = bake_game_maps(texture, mesh, [m.name for m in materials], size,
-                           [constant_channels(m) for m in materials])
-    report = bake_object_to_gltf(obj, baked, slots, out_file, file_format, whole_scene=True)
+    with loaded_asset(asset_path, object_name) as (obj, scene):
+        mesh, slots = object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())
+        size = texture_size or default_texture_size(texture, len(slots))
+        materials = [obj.material_slots[s].material for s in slots]
+        baked = bake_game_maps(texture, mesh, [m.name for m in materials], size,
+                               [constant_channels(m) for m in materials])
+        report = bake_object_to_gltf(obj, baked, slots, out_file, file_format, whole_scene=True)
     report.update({"asset": str(asset_path), "object": obj.name, "format": file_format, "texture_size": size})
     return report
 

@@ -283,3 +283,26 @@ def write_result_material(obj, maps_paths: dict, name: str | None = None, assign
         else:
             obj.data.materials.append(mat)
     return mat
+
+
+# Principled BSDF inputs SceneFit reads; every other linked input is left out of its result material.
+READ_INPUTS = ("Base Color", "Roughness", "Metallic")
+
+
+def material_summary(material) -> tuple[list[str], list[str]]:
+    """(what SceneFit will read, what it will drop) from the material, without reading any pixels.
+
+    Cheap enough for a panel's draw(): it only looks at the Principled BSDF's links.
+    """
+    bsdf = principled_bsdf(material)
+    found = []
+    for name in READ_INPUTS:
+        socket = bsdf.inputs[name]
+        if socket.is_linked:
+            node = socket.links[0].from_node
+            image = getattr(node, "image", None)
+            found.append(f"{name}: image '{image.name}'" if image is not None else f"{name}: '{node.name}' node")
+        else:
+            found.append(f"{name}: value")
+    dropped = [socket.name for socket in bsdf.inputs if socket.is_linked and socket.name not in READ_INPUTS]
+    return found, dropped

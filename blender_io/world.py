@@ -1,7 +1,8 @@
 """A new Blender World lit by an estimated HDR map (the user's worlds are never modified).
 
-Node setup: Environment Texture (the EXR, linear, equirectangular, default vector) -> Background
-(strength 1) -> World Output. With no Mapping node Blender looks the map up with
+Node setup: Texture Coordinate (Generated: the ray direction) -> Mapping (rotation, 0 by default:
+the artist turns the light with its Z) -> Environment Texture (the EXR, linear, equirectangular) ->
+Background (strength) -> World Output. At rotation 0 Blender looks the map up with
 
     u = 0.5 - atan2(d.y, d.x) / 2pi,    v = atan2(d.z, hypot(d.x, d.y)) / pi + 0.5  (v from the bottom)
 
@@ -13,6 +14,18 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..core.errors import InputError
+
+
+MAPPING_NODE = "SceneFit Rotation"
+BACKGROUND_NODE = "SceneFit Strength"
+
+
+def world_controls(world):
+    """(Mapping node, Background node) of a World made by world_from_hdr, else (None, None)."""
+    if world is None or world.node_tree is None:
+        return None, None
+    nodes = world.node_tree.nodes
+    return nodes.get(MAPPING_NODE), nodes.get(BACKGROUND_NODE)
 
 
 def world_from_hdr(path: str | Path, name: str = "SceneFit Light", strength: float = 1.0):
@@ -34,7 +47,15 @@ def world_from_hdr(path: str | Path, name: str = "SceneFit Light", strength: flo
     env.projection = "EQUIRECTANGULAR"
     env.interpolation = "Linear"
     env.location = (-300, 0)
+    coords = tree.nodes.new("ShaderNodeTexCoord")
+    coords.location = (-900, 0)
+    mapping = tree.nodes.new("ShaderNodeMapping")
+    mapping.name = mapping.label = MAPPING_NODE
+    mapping.location = (-700, 0)
+    tree.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+    tree.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
     background = tree.nodes.new("ShaderNodeBackground")
+    background.name = background.label = BACKGROUND_NODE
     background.inputs["Strength"].default_value = float(strength)
     output = tree.nodes.new("ShaderNodeOutputWorld")
     output.location = (250, 0)

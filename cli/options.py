@@ -93,29 +93,23 @@ def add_prompt_service_args(p: argparse.ArgumentParser, prefix: str = "") -> Non
     p.add_argument("--config", metavar="FILE", help="config file with a [prompting] table (default ~/.config/scenefit/config.toml)")
 
 
-def online_access() -> bool:
-    """Blender's 'Allow Online Access' when running inside Blender; bpy is never imported just to ask."""
-    import sys
-
-    bpy = sys.modules.get("bpy")
-    return bool(getattr(getattr(bpy, "app", None), "online_access", True))
-
-
 def write_prompt_from_args(args, object_prompt: str, scene_prompt: str, mode_type: str, photo: str = "",
-                           stream: bool = False):
+                           stream: bool = False, follow_up: str = ""):
     """A PromptResult from the prompt-service options (a template one when offline)."""
     from pathlib import Path
 
     from ..core.prompting import PromptRequest, resolve_service, write_prompt
 
     request = PromptRequest(object_prompt=object_prompt or "", scene_prompt=scene_prompt or "", mode_type=mode_type,
-                            photo=photo or "")
+                            photo=photo or "", follow_up=follow_up or "")
     vision = {True: "yes", False: "no", None: ""}[args.prompt_vision]
     offline = bool(getattr(args, "offline", False))
     # Offline the config file is not even read: nothing about the service matters then.
     service = None if offline else resolve_service(
         args.prompt_endpoint, args.prompt_model, timeout_s=args.prompt_timeout, vision_type=vision, stream=stream,
         config_path=Path(args.config) if args.config else None)
-    return write_prompt(request, service, offline=offline, online_access=online_access(),
+    # Not bpy.app.online_access: bpy as a module (loaded here only to read .blend files) starts with
+    # it off, and on the command line --offline is the user's switch. The Blender operator passes it.
+    return write_prompt(request, service, offline=offline,
                         cache_dir=Path(args.prompt_cache) if args.prompt_cache else None,
                         use_cache=not args.no_prompt_cache)

@@ -9,7 +9,8 @@ from .options import add_prompt_service_args, write_prompt_from_args
 
 
 def run(args) -> int:
-    result = write_prompt_from_args(args, args.object, args.scene, args.mode, args.photo, stream=args.stream)
+    result = write_prompt_from_args(args, args.object, args.scene, args.mode, args.photo, stream=args.stream,
+                                    follow_up=args.follow_up)
     report = result.to_report()
     if args.report:
         from pathlib import Path
@@ -39,6 +40,10 @@ def add_parser(sub) -> None:
                    help="describe: 25-35-word appearance description (adapt's scene mode); "
                         "instruct: 20-30-word edit instructions")
     p.add_argument("--photo", default="", help="the scene photo, sent to vision-capable models")
+    p.add_argument("--follow-up", default="", metavar="TEXT",
+                   help="a further instruction after the first answer, as in the paper's appendix, e.g. "
+                        "\"Let's suppose the sofa has been placed there for decades. Consider the consequences "
+                        "and give me another description.\"")
     add_prompt_service_args(p)
     p.add_argument("--stream", action="store_true", help="ask for a streamed answer")
     p.add_argument("--offline", action="store_true", help="never use the network: the manually combined template")

@@ -6,6 +6,7 @@ Layout written into `out_dir`:
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -37,13 +38,25 @@ def _texture_or_value(parent: ET.Element, name: str, value, filename: str | None
     _add(tex, "boolean", name="raw", value="true")
 
 
-def export_mitsuba_scene(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, camera: Camera | None = None,
+@dataclass(frozen=True)
+class LookAt:
+    """A camera given in the mesh's own frame (e.g. the photo's camera in Blender's world space)."""
+
+    origin: tuple[float, float, float]
+    target: tuple[float, float, float]
+    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    fov_deg: float = 60.0   # horizontal
+    width: int = 512
+    height: int = 512
+
+
+def export_mitsuba_scene(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, camera: Camera | LookAt | None = None,
                          envmap: np.ndarray | None = None, spp: int = 256, max_depth: int = 8) -> Path:
     """Write the scene; returns the path of scene.xml. Nothing outside `out_dir` is touched.
 
     The mesh keeps its own size and place; `camera` is given in SceneFit's normalised frame (asset in
     the radius-0.5 sphere at the origin) and is carried into the asset's frame, so it frames the
-    asset as SceneFit's renders do.
+    asset as SceneFit's renders do. A `LookAt` is used as given (the mesh's frame, horizontal FOV).
 
     envmap: linear (H, 2H, 3) radiance in Blender's equirectangular convention; None writes a
     constant white environment.
@@ -54,9 +67,14 @@ def export_mitsuba_scene(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, camera:
     import mitsuba as mi
 
     camera = camera or Camera(width=512, height=512)
-    _, transform = normalize_to_unit_sphere(mesh)
-    origin = transform.to_object(camera.origin)
-    target = transform.to_object(np.asarray(camera.target, dtype=np.float64))
+    if isinstance(camera, LookAt):
+        origin, target, up = (np.asarray(v, np.float64) for v in (camera.origin, camera.target, camera.up))
+        fov_axis = "x"
+    else:
+        _, transform = normalize_to_unit_sphere(mesh)
+        origin = transform.to_object(camera.origin)
+        target = transform.to_object(np.asarray(camera.target, dtype=np.float64))
+        up, fov_axis = np.array([0.0, 0.0, 1.0]), "smaller"
     # The PLY holds Mitsuba's own texture convention (v = 0 at the top row), so it is read unflipped.
     tmp_ply = out_dir / ".mesh.ply.tmp"
     _mitsuba_mesh(mi, mesh).write_ply(str(tmp_ply))
@@ -76,10 +94,10 @@ def export_mitsuba_scene(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, camera:
     _add(integrator, "integer", name="max_depth", value=max_depth)
 
     sensor = _add(scene, "sensor", type="perspective")
-    _add(sensor, "string", name="fov_axis", value="smaller")
+    _add(sensor, "string", name="fov_axis", value=fov_axis)
     _add(sensor, "float", name="fov", value=f"{camera.fov_deg:.9g}")
     _add(_add(sensor, "transform", name="to_world"), "lookat", origin=",".join(f"{x:.9g}" for x in origin),
-         target=",".join(f"{x:.9g}" for x in target), up="0,0,1")
+         target=",".join(f"{x:.9g}" for x in target), up=",".join(f"{x:.9g}" for x in up))
     _add(_add(sensor, "sampler", type="independent"), "integer", name="sample_count", value=spp)
     film = _add(sensor, "film", type="hdrfilm")
     _add(film, "integer", name="width", value=camera.width)

@@ -90,6 +90,7 @@ class PromptRequest:
     scene_prompt: str = ""
     mode_type: str = "describe"
     photo: str = ""                   # path of the scene photo (sent only to a vision model)
+    follow_up: str = ""               # a further turn, e.g. "Suppose it has stood there for decades."
 
     def __post_init__(self) -> None:
         if self.mode_type not in MODE_TYPES:
@@ -388,8 +389,8 @@ def retry_message(request: PromptRequest, found: list[str]) -> dict:
 
 def cache_key(service: ServiceConfig, request: PromptRequest, photo: bytes | None) -> str:
     """Everything that shapes the answer: the endpoint, the model, the exact message, the photo."""
-    parts = {"v": CACHE_VERSION, "endpoint": service.base_url, "model": service.model,
-             "mode": request.mode_type, "message": instruction_text(request, photo is not None),
+    parts = {"v": CACHE_VERSION, "endpoint": service.base_url, "model": service.model, "mode": request.mode_type,
+             "message": instruction_text(request, photo is not None), "follow_up": request.follow_up.strip(),
              "photo": hashlib.sha256(photo).hexdigest() if photo is not None else ""}
     return hashlib.sha256(json.dumps(parts, sort_keys=True).encode("utf-8")).hexdigest()
 
@@ -460,11 +461,9 @@ def short(text: str, limit: int = 120) -> str:
     return text if len(text) <= limit else text[:limit - 1] + "…"
 
 
-def ask_model(request: PromptRequest, service: ServiceConfig, photo: bytes | None,
-              on_text: Callable[[str], None] | None = None) -> dict:
-    """Ask, check, retry once with the problem stated, repair. Returns the cacheable record."""
-    client = ChatClient(service, on_text)
-    messages = [first_message(request, photo)]
+def checked_turn(client: ChatClient, messages: list[dict], request: PromptRequest) -> tuple[str, str, list[str], list[str]]:
+    """One turn of the conversation: ask, check, ask once more with the problem stated, repair.
+    Returns (analysis, prompt, answers, repairs); `messages` ends with the last answer."""
     answers = [client.ask(messages)]
     analysis, final = split_answer(answers[0])
     prompt, repairs = one_line(final)
@@ -473,17 +472,39 @@ def ask_model(request: PromptRequest, service: ServiceConfig, photo: bytes | Non
         repairs.append("asked again: " + "; ".join(found))
         messages += [{"role": "assistant", "content": answers[0]}, retry_message(request, found)]
         answers.append(client.ask(messages))
-        final = split_answer(answers[1])[1]
-        prompt, fixes = one_line(final)
+        prompt, fixes = one_line(split_answer(answers[1])[1])
         repairs += fixes
         prompt, fixes = repair(prompt, request)
         repairs += fixes
-    warnings = problems(prompt, request)
+    messages.append({"role": "assistant", "content": answers[-1]})
     if count_words(prompt) < 3:
-        raise PromptServiceError(f"The language model '{service.model}' gave no usable prompt "
+        raise PromptServiceError(f"The language model '{client.service.model}' gave no usable prompt "
                                  f"({short(answers[-1])!r}); write one with --prompt or use --offline.")
+    return analysis, prompt, answers, repairs
+
+
+def follow_up_message(request: PromptRequest) -> dict:
+    """The appendix's follow-up turn ("Let's suppose the leather sofa has been placed ... for decades.
+    Consider the consequences and give me another description."), with the answer format again."""
+    spec = MODES[request.mode_type]
+    return {"role": "user", "content": f"{request.follow_up.strip()}\n\n"
+                                       f"Write the new {spec.what} alone on the last line, beginning with \"{spec.label}:\"."}
+
+
+def ask_model(request: PromptRequest, service: ServiceConfig, photo: bytes | None,
+              on_text: Callable[[str], None] | None = None) -> dict:
+    """The two-step request (and the user's follow-up, if any), each answer checked. Returns the
+    cacheable record."""
+    client = ChatClient(service, on_text)
+    messages = [first_message(request, photo)]
+    analysis, prompt, answers, repairs = checked_turn(client, messages, request)
+    if request.follow_up.strip():
+        messages.append(follow_up_message(request))
+        more, prompt, later, fixes = checked_turn(client, messages, request)
+        analysis = "\n\n".join(a for a in (analysis, more) if a)
+        answers, repairs = answers + later, repairs + [f"follow-up: {f}" for f in fixes]
     return {"prompt": prompt, "analysis": analysis, "answers": answers, "repairs": repairs,
-            "warnings": warnings, "requests": client.requests}
+            "warnings": problems(prompt, request), "requests": client.requests}
 
 
 def write_prompt(request: PromptRequest, service: ServiceConfig | None, *, offline: bool = False,
@@ -494,8 +515,9 @@ def write_prompt(request: PromptRequest, service: ServiceConfig | None, *, offli
     start = time.perf_counter()
     reason = offline_reason(service, offline, online_access)
     if reason:
+        ignored = ("the follow-up needs a language model and was not used",) if request.follow_up.strip() else ()
         return PromptResult(prompt=template_prompt(request), mode_type=request.mode_type, source="template",
-                            reason=reason, seconds=time.perf_counter() - start)
+                            reason=reason, warnings=ignored, seconds=time.perf_counter() - start)
     assert service is not None
     photo_sent = bool(request.photo) and service.reads_images
     warnings = []

@@ -1,26 +1,54 @@
-"""Helpers shared by the operators (main thread only)."""
+"""Helpers shared by the operators (main thread only): inputs, preferences, the run folders."""
 from __future__ import annotations
 
+import importlib.util
+import os
+import tempfile
+import time
 from pathlib import Path
 
 import bpy
 
 from ..blender_io import maps_from_material, mesh_from_object
+from ..core.errors import InputError
+
+ADDON_PACKAGE = __package__.rpartition(".")[0]
 
 
-def output_dir(context, sub: str) -> Path:
-    """The scene's output folder (Blender-relative '//' resolved) plus `sub`, created."""
-    settings = context.scene.scenefit
-    base = Path(bpy.path.abspath(settings.output_dir or "//scenefit/"))
-    if not base.is_absolute() or str(base).startswith("//"):
-        base = Path(bpy.app.tempdir or "/tmp") / "scenefit"
-    folder = base / bpy.path.clean_name(context.active_object.name) / sub
-    folder.mkdir(parents=True, exist_ok=True)
-    return folder
+# -- dependencies ------------------------------------------------------------------------------------
+# Python modules the stages import, by the name the artist would install.
+REQUIRED_MODULES = {"torch": "torch", "mitsuba": "mitsuba", "drjit": "drjit", "cv2": "OpenCV",
+                    "OpenImageIO": "OpenImageIO", "diffusers": "diffusers", "transformers": "transformers",
+                    "peft": "peft"}
+_missing: list[str] | None = None
 
 
+def missing_modules() -> list[str]:
+    """The required modules this Blender cannot import (looked up once per session)."""
+    global _missing
+    if _missing is None:
+        _missing = [label for name, label in REQUIRED_MODULES.items() if importlib.util.find_spec(name) is None]
+    return _missing
+
+
+def dependency_sentence() -> str:
+    missing = missing_modules()
+    if not missing:
+        return ""
+    return (f"Missing Python modules: {', '.join(missing)}; install the SceneFit build for your platform "
+            "(it bundles them).")
+
+
+def check_dependencies() -> None:
+    """One sentence (InputError) instead of an ImportError traceback when the zip lacks its wheels."""
+    sentence = dependency_sentence()
+    if sentence:
+        raise InputError(sentence)
+
+
+# -- inputs ------------------------------------------------------------------------------------------
 def gather_asset(context):
-    """The active object's mesh (object space) and material maps, as core data."""
+    """The active object, its mesh (object space) and material maps, as core data."""
     obj = context.active_object
     mesh = mesh_from_object(obj, context.evaluated_depsgraph_get())
     maps = maps_from_material(obj.active_material)
@@ -30,3 +58,122 @@ def gather_asset(context):
 def poll_mesh(context) -> bool:
     obj = context.active_object
     return obj is not None and obj.type == "MESH"
+
+
+def photo_path(context) -> Path:
+    """The photo chosen in the panel, resolved ('//' is the .blend's folder); one sentence if missing."""
+    text = context.scene.scenefit.photo_path
+    if not text:
+        raise InputError("No photo is chosen; pick one in the SceneFit panel's Scene section.")
+    path = Path(bpy.path.abspath(text))
+    if not path.is_file():
+        raise InputError(f"The photo '{path}' does not exist; choose another in the Scene section.")
+    return path
+
+
+# -- preferences -------------------------------------------------------------------------------------
+def preferences(context=None):
+    """The add-on preferences, or None when SceneFit was registered without being enabled as an add-on."""
+    addon = (context or bpy.context).preferences.addons.get(ADDON_PACKAGE)
+    return addon.preferences if addon is not None else None
+
+
+def offline(context=None) -> bool:
+    """No downloads when the artist asked for it or Blender's online access is off."""
+    prefs = preferences(context)
+    return bool(prefs.offline if prefs is not None else False) or not bpy.app.online_access
+
+
+def model_cache(context=None) -> str | None:
+    """The preference's folder, else 'models' in this extension's user folder (None in development)."""
+    prefs = preferences(context)
+    if prefs is not None and prefs.model_cache:
+        return bpy.path.abspath(prefs.model_cache)
+    try:
+        return bpy.utils.extension_path_user(ADDON_PACKAGE, path="models", create=True)
+    except (ValueError, KeyError):  # not installed as an extension (tests, development)
+        return None
+
+
+def model_settings(context=None):
+    """(ModelConfig, DepthConfig) from the preferences: hub ids or folders, cache, offline, device."""
+    from ..core.guidance import ModelConfig
+    from ..core.lighting.depth import DepthConfig
+
+    prefs = preferences(context)
+    cache, local_only = model_cache(context), offline(context)
+    device = prefs.device if prefs is not None else "auto"
+    kwargs = {}
+    if prefs is not None:
+        kwargs = {"base_model": prefs.base_model, "inpaint_model": prefs.inpaint_model}
+    models = ModelConfig(cache_dir=cache, local_files_only=local_only, device_type=device, **kwargs)
+    depth_kwargs = {"model": prefs.depth_model} if prefs is not None and prefs.depth_model else {}
+    depth = DepthConfig(depth_type="auto", cache_dir=cache, local_files_only=local_only,
+                        device="cuda" if device == "cuda" else "cpu", **depth_kwargs)
+    return models, depth
+
+
+# -- where results go --------------------------------------------------------------------------------
+def _forbidden_roots() -> list[Path]:
+    """Blender deletes its temp dir on exit; the add-on folder is replaced on every update."""
+    roots = [Path(__file__).resolve().parent.parent]
+    if bpy.app.tempdir:
+        roots.append(Path(bpy.app.tempdir).resolve())
+    return roots
+
+
+def _unsaved_root() -> Path:
+    """Where an unsaved file's runs go (its images are also packed into the .blend)."""
+    try:
+        return Path(bpy.utils.extension_path_user(ADDON_PACKAGE, path="unsaved", create=True))
+    except (ValueError, KeyError):  # not installed as an extension
+        return Path(tempfile.gettempdir()) / "scenefit-unsaved"
+
+
+def output_root(context) -> Path:
+    """The panel's Output folder resolved against the .blend ('//'), or the unsaved-file folder."""
+    text = context.scene.scenefit.output_dir or "//scenefit/"
+    if text.startswith("//") and not bpy.data.is_saved:
+        return _unsaved_root()
+    return Path(bpy.path.abspath(text))
+
+
+def run_folder(context, stage: str, name: str = "") -> Path:
+    """A NEW folder for one run of `stage` (never an earlier run's): <output>/<name>/<stage>-<time>[-n]."""
+    root = output_root(context).resolve()
+    for forbidden in _forbidden_roots():
+        if root == forbidden or forbidden in root.parents:
+            raise InputError(f"SceneFit does not write into '{root}' (Blender's temporary or the add-on's own "
+                             "folder); set the Output folder in the SceneFit panel.")
+    parent = root / bpy.path.clean_name(name) if name else root
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        for n in range(1, 1000):
+            folder = parent / (f"{stage}-{stamp}" if n == 1 else f"{stage}-{stamp}-{n}")
+            try:
+                folder.mkdir()
+                return folder
+            except FileExistsError:
+                continue
+    except OSError as error:
+        raise InputError(f"Cannot write into '{parent}' ({error.strerror or error}); choose another Output "
+                         "folder in the SceneFit panel.") from None
+    raise InputError(f"Too many runs in '{parent}' this second; try again.")
+
+
+def keep_image(image) -> None:
+    """An unsaved file cannot refer to files next to it: pack the image into the .blend instead."""
+    if not bpy.data.is_saved and image.packed_file is None:
+        image.pack()
+
+
+def relative_if_saved(path: str | os.PathLike) -> str:
+    """'//…' relative to the .blend when it is saved (the file and its run folders move together)."""
+    path = str(path)
+    if bpy.data.is_saved:
+        try:
+            return bpy.path.relpath(path)
+        except ValueError:  # another drive on Windows
+            return path
+    return path

@@ -1,40 +1,80 @@
-"""Export to Mitsuba: the active object, its maps and a camera as a scene `mitsuba` renders alone."""
+"""Export to Mitsuba: the active object, its maps, and the photo's camera and estimated light when
+SceneFit made them (else an orbit camera and a white environment), as a scene `mitsuba` renders alone."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
 import bpy
 
+from ..blender_io import mesh_from_object
+from ..blender_io.compose import CAMERA_NAME
 from ..core.errors import SceneFitError
-from .common import gather_asset, output_dir, poll_mesh
+from .common import check_dependencies, gather_asset, poll_mesh, run_folder
+
+
+def photo_look_at(context):
+    """SceneFit's photo camera as a LookAt in world space, or None when it has not been set up."""
+    from mathutils import Vector
+
+    from ..core.export import LookAt
+
+    cam = bpy.data.objects.get(CAMERA_NAME)
+    if cam is None or cam.type != "CAMERA" or "scenefit" not in cam:
+        return None
+    m = cam.matrix_world
+    origin = m.translation
+    forward = (m.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
+    up = (m.to_3x3() @ Vector((0.0, 1.0, 0.0))).normalized()
+    render = context.scene.render
+    return LookAt(origin=tuple(origin), target=tuple(origin + forward), up=tuple(up),
+                  fov_deg=math.degrees(cam.data.angle_x), width=render.resolution_x, height=render.resolution_y)
 
 
 class SCENEFIT_OT_export_mitsuba(bpy.types.Operator):
-    """Write the active object, its material maps and a camera as a Mitsuba 3 scene (XML, PLY, images)"""
+    """Write the active object, its material maps, the photo's camera and the estimated light as a Mitsuba 3
+    scene (XML, PLY, images)"""
 
     bl_idname = "scenefit.export_mitsuba"
     bl_label = "Export to Mitsuba"
     bl_options = {"REGISTER"}
 
     directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH", default="",
-                                        description="Where to write; empty uses the panel's output folder")
+                                        description="Where to write; empty makes a new run folder")
 
     @classmethod
     def poll(cls, context):
         return poll_mesh(context)
 
     def execute(self, context):
-        import math
-
-        from ..core.camera import Camera
-        from ..core.export import export_mitsuba_scene  # Mitsuba starts only when asked for
-
         try:
-            _, mesh, maps = gather_asset(context)
-            out = bpy.path.abspath(self.directory) if self.directory else output_dir(context, "mitsuba")
-            camera = Camera(azimuth_deg=30.0, elevation_deg=math.degrees(context.scene.scenefit.elevation),
-                            width=512, height=512)
-            xml = export_mitsuba_scene(mesh, maps, out, camera=camera)
+            check_dependencies()
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        self.report({"INFO"}, f"Mitsuba scene written to {xml}")
+        from ..core.camera import Camera
+        from ..core.export import export_mitsuba_scene  # Mitsuba starts only when asked for
+        from ..core.pipeline import load_environment
+
+        settings = context.scene.scenefit
+        try:
+            obj, mesh, maps = gather_asset(context)
+            out = bpy.path.abspath(self.directory) if self.directory else run_folder(context, "mitsuba", obj.name)
+            camera = photo_look_at(context)
+            if camera is not None:  # the photo's camera sees the world: the mesh goes in world space
+                mesh = mesh_from_object(obj, context.evaluated_depsgraph_get(), space="world")
+            else:
+                camera = Camera(azimuth_deg=30.0, elevation_deg=math.degrees(settings.elevation), width=512,
+                                height=512)
+            light = Path(bpy.path.abspath(settings.light_path)) if settings.light_path else None
+            envmap = load_environment(light) if light is not None and light.is_file() else None
+            xml = export_mitsuba_scene(mesh, maps, out, camera=camera, envmap=envmap)
+        except SceneFitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        used = ", ".join(n for n, on in (("the photo's camera", camera.__class__.__name__ == "LookAt"),
+                                          ("the estimated light", envmap is not None)) if on)
+        self.report({"INFO"}, f"Mitsuba scene written to {xml}" + (f" (with {used})" if used else ""))
         return {"FINISHED"}
 
 

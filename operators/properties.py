@@ -1,4 +1,8 @@
-"""Per-scene SceneFit settings (what the N-panel edits)."""
+"""Per-scene SceneFit settings (what the panel edits) and the results they point to.
+
+Runtime state (progress, the running job) is on the WindowManager (operators/jobs.py), not here:
+only the artist's choices and the datablocks SceneFit made are saved with the .blend.
+"""
 import bpy
 from bpy.props import EnumProperty, FloatProperty, FloatVectorProperty, PointerProperty, StringProperty
 
@@ -7,20 +11,63 @@ PRESETS = (
     ("balanced", "Balanced", "The default trade-off between time and quality"),
     ("final", "Final", "The paper's iteration counts: slowest, best"),
 )
+SCENE_TYPES = (
+    ("auto", "Auto", "Decide from the photo (sky at the top: outdoor)"),
+    ("indoor", "Indoor", "A room: the unseen walls are completed from depth"),
+    ("outdoor", "Outdoor", "Open sky: the unseen map is completed by outpainting or the sky/ground prior"),
+)
+MODES = (
+    ("scene", "Scene", "Restyle the asset so it fits the photo (the prompt describes how it should look there)"),
+    ("generate", "Generate", "Make a new texture from the prompt alone"),
+    ("edit", "Edit", "Change the asset by an instruction ('add dust to the sofa')"),
+)
+
+
+def _path_options() -> set[str]:
+    """'//' (relative to the .blend) is accepted in path settings; Blender 4.5+ asks for it explicitly."""
+    try:
+        StringProperty(options={"PATH_SUPPORTS_BLEND_RELATIVE"})
+    except (TypeError, ValueError):
+        return set()
+    return {"PATH_SUPPORTS_BLEND_RELATIVE"}
+
+
+PATH = _path_options()
 
 
 class SceneFitSettings(bpy.types.PropertyGroup):
-    photo_path: StringProperty(name="Photo", subtype="FILE_PATH", description="Photo to fit the asset into")
-    placement: FloatVectorProperty(name="Placement", size=2, min=0.0, max=1.0, default=(0.5, 0.5),
-                                   description="Where the asset stands in the photo (x, y as fractions)")
-    elevation: FloatProperty(name="Elevation", subtype="ANGLE", default=0.0, min=-1.2, max=1.2,
-                             description="Camera elevation above the asset's horizon")
+    # Scene
+    photo_path: StringProperty(name="Photo", subtype="FILE_PATH", options=PATH, description="Photo to fit the asset into")
+    placement: FloatVectorProperty(name="Placement", size=2, min=0.0, max=1.0, default=(0.5, 0.75),
+                                   description="Where the asset stands in the photo: x from the left, y from "
+                                               "the top, as fractions (Pick Placement sets it by a click)")
+    size: FloatProperty(name="Size", min=0.02, max=1.0, default=0.4, subtype="FACTOR",
+                        description="The asset's height as a fraction of the photo's height")
+    scene_type: EnumProperty(name="Scene type", items=SCENE_TYPES, default="auto")
+    fov: FloatProperty(name="Field of view", subtype="ANGLE", default=1.0471976, min=0.1, max=2.8,
+                       description="The photo's horizontal field of view (60° unless the camera says otherwise)")
+    elevation: FloatProperty(name="Elevation", subtype="ANGLE", default=0.17453, min=-1.2, max=1.2,
+                             description="How far the photo's camera looks down")
+    # Style
+    mode: EnumProperty(name="Mode", items=MODES, default="scene")
+    prompt: StringProperty(name="Prompt", description="How the asset should look, e.g. 'a leather sofa, "
+                                                      "soggy and stained with mud'")
+    object_prompt: StringProperty(name="Object", description="Edit mode: what the asset is, e.g. 'a leather sofa'")
+    instruction: StringProperty(name="Instruction", description="Edit mode: e.g. 'add dust to the sofa'")
+    # Quality and output
     preset: EnumProperty(name="Preset", items=PRESETS, default="balanced")
-    output_dir: StringProperty(name="Output", subtype="DIR_PATH", default="//scenefit/",
-                               description="Folder for maps, renders and exported scenes")
-    # Shown by the panel while a job runs.
-    progress: FloatProperty(name="Progress", subtype="PERCENTAGE", min=0.0, max=100.0, default=0.0)
-    status: StringProperty(name="Status", default="")
+    output_dir: StringProperty(name="Output", subtype="DIR_PATH", options=PATH, default="//scenefit/",
+                               description="Each run writes a new folder here ('//' is the .blend's folder)")
+    # Results (datablocks SceneFit made, and the originals they replaced)
+    result_material: PointerProperty(name="SceneFit material", type=bpy.types.Material)
+    original_material: PointerProperty(name="Original material", type=bpy.types.Material)
+    result_object: PointerProperty(name="Asset", type=bpy.types.Object)
+    result_world: PointerProperty(name="SceneFit World", type=bpy.types.World)
+    original_world: PointerProperty(name="Original World", type=bpy.types.World)
+    texture_path: StringProperty(name="Neural texture", subtype="FILE_PATH", options=PATH,
+                                 description="texture.pt of the last conversion or adaptation (adapt starts here)")
+    light_path: StringProperty(name="Light", subtype="FILE_PATH", options=PATH, description="light.exr of the last estimate")
+    composite_path: StringProperty(name="Composite", subtype="FILE_PATH", options=PATH, description="The last composite render")
 
 
 classes = (SceneFitSettings,)

@@ -30,13 +30,14 @@ PIPELINE = r"""
 import json, sys
 from pathlib import Path
 import numpy as np
+import bpy
 sys.path.insert(0, "tests")
 from asset_builder import build_assets
 from scenefit.cli import main
 from scenefit.core.game_bake import bake_game_maps
 from scenefit.core.imageio import linear_to_srgb
 from scenefit.core.texture.bake import load_neural_texture
-from scenefit.blender_io.asset_file import import_asset_file, load_asset_materials
+from scenefit.blender_io.asset_file import load_asset_materials, loaded_asset
 from scenefit.blender_io.gltf_export import constant_channels
 from scenefit.blender_io.material import object_mesh_and_slots
 
@@ -52,12 +53,12 @@ for name, path in assets.items():
     assert main(["bake", path, "--texture", str(run / "convert/maps/texture.pt"), "--format", fmt,
                  "--out", str(baked_file), "--texture-size", str(BAKE_SIZE), "--report", str(run / "bake.json")]) == 0
     # What bake wrote, recomputed from the same texture and mesh (the bake is deterministic).
-    obj, depsgraph = import_asset_file(path)
-    mesh, slots = object_mesh_and_slots(obj, depsgraph)
-    materials = [obj.material_slots[s].material for s in slots]
-    expected = {b.name: b for b in bake_game_maps(load_neural_texture(run / "convert/maps/texture.pt"), mesh,
-                                                   [m.name for m in materials], BAKE_SIZE,
-                                                   [constant_channels(m) for m in materials])}
+    with loaded_asset(path) as (obj, scene):
+        mesh, slots = object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())
+        materials = [obj.material_slots[s].material for s in slots]
+        expected = {b.name: b for b in bake_game_maps(load_neural_texture(run / "convert/maps/texture.pt"), mesh,
+                                                       [m.name for m in materials], BAKE_SIZE,
+                                                       [constant_channels(m) for m in materials])}
     # The baked file read back by Blender's glTF importer and SceneFit's reader.
     again = load_asset_materials(baked_file)
     errors = {}

@@ -80,7 +80,8 @@ def test_estimated_map_lights_a_sphere_from_the_same_side_in_blender_and_mitsuba
     info = json.loads(proc.stdout.split("RESULT", 1)[1])
     assert info["before"] == info["after"] and info["fake_user"]     # the user's world is untouched and kept
     assert info["world"] == "SceneFit Light"
-    assert info["nodes"] == ["ShaderNodeBackground", "ShaderNodeOutputWorld", "ShaderNodeTexEnvironment"]
+    assert info["nodes"] == ["ShaderNodeBackground", "ShaderNodeMapping", "ShaderNodeOutputWorld",
+                             "ShaderNodeTexCoord", "ShaderNodeTexEnvironment"]
     cycles = read_image(tmp_path / "cycles.exr")[..., :3]
 
     a, b = lit_centroid(mitsuba), lit_centroid(cycles)

@@ -1,5 +1,13 @@
-"""The Blender operators against calling core directly, in a real bpy session."""
+"""The operators in bpy with the extension installed from its zip, on a scene made here.
+
+One Blender process does it all (each bpy start costs seconds): every operator through EXEC_DEFAULT,
+the background-job path through its job object (progress, preview, cancel, error, no bpy access
+from the worker thread), the file-load handler ending a job, save -> reopen with every SceneFit image
+present and the artist's material, World and objects unchanged, and an unsaved file's images packed.
+"""
 import json
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -8,73 +16,321 @@ from scenefit.core.imageio import read_image
 
 pytestmark = pytest.mark.blender
 
+ROOT = Path(__file__).resolve().parent.parent
+
 SCRIPT = r"""
-import json, sys
+import json, sys, threading, time
 from pathlib import Path
 import numpy as np
-import bpy
-import scenefit
-from scenefit.blender_io import maps_from_material, mesh_from_object
-from scenefit.core.convert import convert_preset
-from scenefit.core.pipeline import convert_and_bake
+import bpy, addon_utils
 
-tmp = Path(sys.argv[1])
-bpy.ops.wm.read_factory_settings(use_empty=True)
-scenefit.register()
-
-bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
-obj = bpy.context.active_object
-rng = np.random.default_rng(0)
-image = bpy.data.images.new("asset_color", 32, 32, alpha=True)
-pixels = np.ones((32, 32, 4), np.float32); pixels[..., :3] = rng.uniform(0.1, 0.9, (32, 32, 3))
-image.pixels.foreach_set(pixels.ravel())
-mat = bpy.data.materials.new("AssetMaterial")
-nodes, links = mat.node_tree.nodes, mat.node_tree.links
-tex = nodes.new("ShaderNodeTexImage"); tex.image = image
-links.new(tex.outputs["Color"], nodes["Principled BSDF"].inputs["Base Color"])
-obj.data.materials.append(mat)
-settings = bpy.context.scene.scenefit
-settings.preset = "draft"
-settings.output_dir = str(tmp / "blender_out") + "/"
-pixels_before = list(image.pixels)
-
+tmp, zip_path, tiny = Path(TMP), ZIP, TINY
+MODULE = "bl_ext.user_default.scenefit"
 out = {}
-out["export"] = list(bpy.ops.scenefit.export_mitsuba(directory=str(tmp / "mitsuba")))
-out["convert"] = list(bpy.ops.scenefit.convert())
-out["active_material"] = obj.active_material.name
-out["original_kept"] = "AssetMaterial" in bpy.data.materials and list(image.pixels) == pixels_before
-out["new_images"] = sorted(n.image.filepath for n in obj.active_material.node_tree.nodes if n.type == "TEX_IMAGE")
+bpy.ops.extensions.package_install_files(repo="user_default", filepath=zip_path, enable_on_install=True)
+sf = sys.modules[MODULE]
+out["module_file"] = sf.__file__
+prefs = bpy.context.preferences.addons[MODULE].preferences
+prefs.base_model, prefs.inpaint_model = str(Path(tiny) / "sd2-base"), str(Path(tiny) / "sd2-inpaint")
+prefs.offline = True
+from importlib import import_module
+jobs = import_module(MODULE + ".core.background")
+work = import_module(MODULE + ".operators.work")
+common = import_module(MODULE + ".operators.common")
+results = import_module(MODULE + ".operators.results")
+imageio = import_module(MODULE + ".core.imageio")
 
-# The same conversion through core directly.
-mesh = mesh_from_object(obj, bpy.context.evaluated_depsgraph_get())
-_, report = convert_and_bake(mesh, maps_from_material(mat), tmp / "direct", convert_preset("draft"))
-out["direct"] = report["outputs"]
-scenefit.unregister()
+def make_scene():
+    bpy.ops.wm.read_homefile(use_empty=True)  # (factory settings would disable the extension)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
+    obj = bpy.context.active_object
+    image = bpy.data.images.new("asset_color", 32, 32, alpha=True)
+    pixels = np.ones((32, 32, 4), np.float32)
+    pixels[..., :3] = np.random.default_rng(0).uniform(0.1, 0.9, (32, 32, 3))
+    image.pixels.foreach_set(pixels.ravel())
+    image.pack()
+    mat = bpy.data.materials.new("AssetMaterial")
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    tex = nodes.new("ShaderNodeTexImage"); tex.image = image
+    links.new(tex.outputs["Color"], nodes["Principled BSDF"].inputs["Base Color"])
+    links.new(tex.outputs["Alpha"], nodes["Principled BSDF"].inputs["Alpha"])
+    obj.data.materials.append(mat)
+    world = bpy.data.worlds.new("User World")
+    bpy.context.scene.world = world
+    settings = bpy.context.scene.scenefit
+    settings.preset, settings.photo_path, settings.prompt = "draft", str(tmp / "photo.png"), "a mossy ball"
+    return obj, mat, image, world
+
+def snapshot(obj_name="Sphere"):
+    obj = bpy.data.objects[obj_name]
+    mat, world = bpy.data.materials["AssetMaterial"], bpy.data.worlds["User World"]
+    return {"pixels": float(np.sum(np.array(bpy.data.images["asset_color"].pixels[:]))),
+            "material_nodes": sorted(n.bl_idname for n in mat.node_tree.nodes),
+            "world_nodes": len(world.node_tree.nodes) if world.node_tree else 0,
+            "location": list(obj.location), "vertices": len(obj.data.vertices),
+            "user_objects": sorted(o.name for o in bpy.data.objects if "scenefit" not in o)}
+
+photo = np.random.default_rng(1).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32)
+imageio.write_image(tmp / "photo.png", photo)
+
+# --- 1. every operator through EXEC_DEFAULT, in a saved file -----------------------------------------
+obj, mat, image, world = make_scene()
+bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "scene.blend"))
+before = snapshot()
+# Loading an asset file inside the open session leaves the open file as it was.
+loader = import_module(MODULE + ".blender_io.asset_file")
+bpy.data.libraries.write(str(tmp / "props.blend"), {obj})
+counts = lambda: {k: len(getattr(bpy.data, k)) for k in ("objects", "meshes", "materials", "images", "scenes",
+                                                          "libraries", "collections")}
+ids_before = counts()
+loaded, _ = loader.load_asset_file(tmp / "props.blend", "Sphere")
+out["loader"] = [len(loaded.faces), counts() == ids_before, bpy.data.filepath == str(tmp / "scene.blend")]
+out["panel_sections"] = sorted(c for c in dir(bpy.types) if c.startswith("SCENEFIT_PT_"))
+found, dropped = import_module(MODULE + ".blender_io.material").material_summary(mat)
+out["summary"] = [found, dropped]
+ops = {}
+timings = out["timings"] = {}
+class timed:  # seconds per operator, printed by the test for the README
+    def __init__(self, name): self.name = name
+    def __enter__(self): self.t = time.perf_counter()
+    def __exit__(self, *exc): timings[self.name] = round(time.perf_counter() - self.t, 2)
+ops["pick"] = bpy.ops.scenefit.pick_placement(x=0.5, y=0.8)
+with timed("convert"):
+    ops["convert"] = bpy.ops.scenefit.convert(iterations=30)
+first_convert = bpy.context.scene.scenefit.result_material.name
+ops["convert_again"] = bpy.ops.scenefit.convert(iterations=30)
+with timed("light"):
+    ops["light"] = bpy.ops.scenefit.estimate_light(critic="none", outpaint="prior")
+with timed("adapt"):
+    ops["adapt"] = bpy.ops.scenefit.adapt(iterations=2, model_resolution=32, render_size=16)
+with timed("compose"):
+    ops["compose"] = bpy.ops.scenefit.compose(samples=2)
+with timed("export"):
+    ops["export"] = bpy.ops.scenefit.export_mitsuba()
+ops["revert_material"] = bpy.ops.scenefit.use_result(target="MATERIAL", which="ORIGINAL")
+out["after_revert"] = obj.active_material.name
+ops["apply_material"] = bpy.ops.scenefit.use_result(target="MATERIAL", which="RESULT")
+ops["revert_world"] = bpy.ops.scenefit.use_result(target="WORLD", which="ORIGINAL")
+out["world_after_revert"] = bpy.context.scene.world.name
+bpy.ops.scenefit.use_result(target="WORLD", which="RESULT")
+out["ops"] = {k: sorted(v) for k, v in ops.items()}
+s = bpy.context.scene.scenefit
+out["placement"] = list(s.placement)
+out["materials"] = [first_convert, s.result_material.name, obj.active_material.name]
+out["world"] = bpy.context.scene.world.name
+out["camera"] = bpy.context.scene.camera.name
+out["shadow_catcher"] = bpy.data.objects["SceneFit Shadow Catcher"].is_shadow_catcher
+out["paths"] = {"composite": s.composite_path, "texture": s.texture_path, "light": s.light_path}
+out["run_folders"] = sorted(str(p.relative_to(tmp)) for p in (tmp / "scenefit").glob("*/*"))
+out["images"] = sorted((i.name, i.filepath) for i in bpy.data.images if "scenefit" in i)
+out["unchanged_before_save"] = snapshot() == before
+bpy.ops.wm.save_mainfile()
+bpy.ops.wm.open_mainfile(filepath=str(tmp / "scene.blend"))
+out["reopened_images"] = sorted((i.name, list(i.size), i.has_data or bool(i.pixels[:4]))
+                                for i in bpy.data.images if "scenefit" in i)
+out["unchanged_after_reopen"] = snapshot() == before
+out["snapshot"] = [snapshot(), before]
+
+# --- 2. the job path without a window: progress, preview, cancel, error; no bpy in the worker -------
+obj = bpy.data.objects["Sphere"]
+bpy.context.view_layer.objects.active = obj
+obj.active_material = bpy.data.materials["AssetMaterial"]
+_, mesh, maps = common.gather_asset(bpy.context)
+touched = []
+
+def profile(frame, event, arg):  # every Python call and C call in threads started from here on
+    if threading.current_thread() is threading.main_thread():
+        return
+    if event == "call":
+        name = frame.f_globals.get("__name__", "")
+    elif event == "c_call":
+        owner = getattr(arg, "__self__", None)
+        name = getattr(arg, "__module__", None) or type(owner).__module__
+    else:
+        return
+    if (name or "").startswith(("bpy", "_bpy")) or type(getattr(arg, "__self__", None)).__name__.startswith("bpy_"):
+        touched.append(f"{event} {name} {getattr(arg, '__name__', '')}")
+
+t_job = time.perf_counter()
+threading.setprofile(profile)
+data = {"mesh": mesh, "maps": maps, "preset": "draft", "iterations": 12, "out": str(tmp / "job_convert")}
+job = jobs.start_job(jobs.Job("convert", work.convert, data))
+seen = []
+while not job.poll().finished:
+    seen.append((job.state.stage, job.state.step))
+    time.sleep(0.02)
+state = job.state
+jobs.release_job(job)
+out["job"] = {"status": state.status, "stages": sorted({s for s, _ in seen if s}), "steps": max(s for _, s in seen),
+              "result_files": sorted(Path(p).name for p in state.result["maps"].values())}
+out["worker_touched_bpy"] = list(touched)
+timings["profiled_job"] = round(time.perf_counter() - t_job, 2)
+mat_from_job = results.apply_result_material(bpy.context, "Sphere", state.result, "convert")  # main thread
+# What the modal timer does with a state: runtime on the WindowManager, the preview as an icon.
+jobs_ui = import_module(MODULE + ".operators.jobs")
+jobs_ui.update_runtime(bpy.context, jobs.JobState("convert", stage="fit", step=3, total=6, fraction=0.5,
+                                                  preview=np.zeros((8, 8, 3), np.uint8), preview_serial=1))
+rt = bpy.context.window_manager.scenefit_runtime
+# (no icon ids without a UI: check the preview's pixels instead)
+out["runtime"] = [rt.running, rt.progress, rt.status, rt.has_preview, list(jobs_ui._previews["live"].image_size)]
+out["job_material"] = mat_from_job.name
+
+# The hook would see it: a worker that does touch bpy is caught (so the check can fail).
+touched.clear()
+bad = jobs.start_job(jobs.Job("bad", lambda d, p, c: bpy.path.abspath("//x"), None))
+bad.wait(10)
+jobs.release_job(bad)
+out["control_caught"] = len(touched) > 0
+threading.setprofile(None)
+
+data = dict(data, iterations=100000, out=str(tmp / "job_cancel"))
+job = jobs.start_job(jobs.Job("convert", work.convert, data))
+while job.poll().step < 2:
+    time.sleep(0.02)
+job.cancel()
+out["cancelled"] = job.wait(30).status
+jobs.release_job(job)
+job = jobs.start_job(jobs.Job("light", work.estimate_light, {"photo": str(tmp / "missing.png")}))
+state = job.wait(30)
+jobs.release_job(job)
+out["error"] = [state.status, state.error]
+
+# Loading a file ends a running job (load_pre handler) and frees the slot.
+job = jobs.start_job(jobs.Job("convert", work.convert, data))
+while job.poll().step < 1:
+    time.sleep(0.02)
+bpy.ops.wm.read_homefile(use_empty=True)
+out["after_load"] = [job.poll().status, jobs.active_job() is None, job.alive]
+
+timings["job_section"] = round(time.perf_counter() - t_job, 2)
+
+# --- 3. an unsaved file (Run All): results packed, not in Blender's temp dir or the add-on's folder --
+obj, mat, image, world = make_scene()
+before = snapshot()
+bpy.context.scene.scenefit.prompt = ""  # Run All: convert, light, the composite set up; adapt skipped (no prompt)
+with timed("run_all"):
+    ops = [bpy.ops.scenefit.run(iterations=20, critic="none", outpaint="prior")]
+out["unsaved_ops"] = [sorted(o) for o in ops]
+out["run_all"] = [bpy.context.scene.camera.name if bpy.context.scene.camera else None,
+                  bpy.context.scene.world.name, bpy.context.active_object.active_material.name]
+made = [i for i in bpy.data.images if "scenefit" in i]
+out["unsaved_packed"] = [(i.name, i.packed_file is not None) for i in made]
+folders = [Path(bpy.path.abspath(i.filepath)).parent for i in made]
+addon_dir = Path(sf.__file__).parent
+out["unsaved_outside_temp_and_addon"] = all(Path(bpy.app.tempdir) not in f.parents and addon_dir not in f.parents
+                                            for f in folders)
+bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "was_unsaved.blend"))
+bpy.ops.wm.open_mainfile(filepath=str(tmp / "was_unsaved.blend"))
+out["unsaved_reopened"] = sorted((i.name, list(i.size)) for i in bpy.data.images if "scenefit" in i)
+out["unsaved_unchanged"] = snapshot() == before
+# A zip without its wheels: one sentence, no traceback, nothing run.
+common.REQUIRED_MODULES["scenefit_no_such_module"] = "NoSuchModule"
+common._missing = None
+try:
+    out["missing"] = [sorted(bpy.ops.scenefit.convert()), common.dependency_sentence()]
+except RuntimeError as error:  # bpy.ops raises what the operator reported as an error
+    out["missing"] = [str(error), common.dependency_sentence()]
+addon_utils.disable(MODULE, default_set=True)
 print("JSON" + json.dumps(out))
 """
 
 
 @pytest.fixture(scope="module")
 def operated(run_py, tmp_path_factory):
+    sys.path.insert(0, str(ROOT / "tools"))
+    import build_extension
+    from scenefit.core.guidance.testing import build_tiny_pair
+
     tmp = tmp_path_factory.mktemp("operators")
-    proc = run_py(SCRIPT.replace("sys.argv[1]", repr(str(tmp))))
+    zip_path = build_extension.build_without_wheels(tmp / "scenefit.zip")
+    build_tiny_pair(tmp / "tiny")
+    user = tmp / "blender_user"
+    user.mkdir()
+    code = (SCRIPT.replace("TMP", repr(str(tmp))).replace("ZIP", repr(str(zip_path)))
+            .replace("TINY", repr(str(tmp / "tiny"))))
+    proc = run_py(code, env={"BLENDER_USER_RESOURCES": str(user)}, timeout=900)
     line = next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))
-    return tmp, json.loads(line[4:])
+    return tmp, json.loads(line[4:]), user
 
 
-def test_export_operator_writes_a_mitsuba_scene(operated):
-    tmp, out = operated
-    assert out["export"] == ["FINISHED"]
-    assert {p.name for p in (tmp / "mitsuba").iterdir()} >= {"scene.xml", "mesh.ply", "base_color.png"}
+def test_every_operator_finishes_with_exec_default(operated):
+    tmp, out, user = operated
+    print("seconds per operator:", out["timings"])
+    assert out["module_file"].startswith(str(user))  # the installed copy
+    assert out["loader"][0] > 0 and out["loader"][1:] == [True, True]  # the open file was not reset or changed
+    assert all(v == ["FINISHED"] for v in out["ops"].values()), out["ops"]
+    assert {"SCENEFIT_PT_asset", "SCENEFIT_PT_scene", "SCENEFIT_PT_style", "SCENEFIT_PT_quality",
+            "SCENEFIT_PT_run", "SCENEFIT_PT_results"} <= set(out["panel_sections"])
+    found, dropped = out["summary"]
+    assert found[0] == "Base Color: image 'asset_color'" and found[1] == "Roughness: value" and dropped == ["Alpha"]
+    assert out["placement"] == pytest.approx([0.5, 0.8])
+    # A new material per run; each run in its own folder (the second convert overwrote nothing).
+    first, last, active = out["materials"]
+    assert first != last and active == last and "adapt" in last
+    assert out["after_revert"] == "AssetMaterial" and out["world_after_revert"] == "User World"
+    assert out["world"] == "SceneFit Light" and out["camera"] == "SceneFit Camera" and out["shadow_catcher"]
+    kinds = sorted(Path(f).name.split("-")[0] for f in out["run_folders"])
+    assert kinds == ["adapt", "compose", "convert", "convert", "light", "mitsuba"], out["run_folders"]
+    assert all(p.startswith("//scenefit/") for p in out["paths"].values()), out["paths"]
+    assert all(path.startswith("//scenefit/") for _, path in out["images"]), out["images"]
 
 
-def test_convert_operator_matches_core_and_keeps_the_original(operated):
-    tmp, out = operated
-    assert out["convert"] == ["FINISHED"]
-    assert out["active_material"] != "AssetMaterial" and out["original_kept"]
-    made = sorted((tmp / "blender_out").rglob("base_color.png"))
-    assert len(made) == 1 and any(str(made[0]) in path for path in out["new_images"])
-    operator_map = read_image(made[0])
-    direct_map = read_image(out["direct"]["base_color"])
-    assert operator_map.shape == direct_map.shape == (32, 32, 3)
-    assert np.abs(operator_map - direct_map).max() <= 1 / 255 + 1e-6
+def test_composite_shows_the_photo_around_the_asset(operated):
+    tmp, out, _ = operated
+    composite = read_image(tmp / out["paths"]["composite"][2:])[..., :3]
+    photo = read_image(tmp / "photo.png")
+    assert composite.shape == photo.shape == (48, 64, 3)
+    same = np.abs(composite - photo).max(axis=2) < 2 / 255
+    assert same[:8].mean() > 0.9  # the top rows (sky of the photo) come through the compositor unchanged
+    assert not same[30:42, 26:38].all()  # the asset stands around (0.5, 0.8)
+
+
+def test_export_uses_the_photo_camera_and_the_estimated_light(operated):
+    tmp, out, _ = operated
+    (folder,) = [tmp / f for f in out["run_folders"] if Path(f).name.startswith("mitsuba")]
+    xml = (folder / "scene.xml").read_text()
+    assert 'name="fov_axis" value="x"' in xml and 'name="width" value="64"' in xml
+    light = read_image(tmp / out["paths"]["light"][2:])
+    env = read_image(folder / "envmap.exr")
+    assert env.shape[0] > 16 and np.allclose(env.mean(), light.mean(), rtol=0.1)
+
+
+def test_results_survive_save_and_reopen_and_the_artists_data_is_unchanged(operated):
+    _, out, _ = operated
+    assert out["unchanged_before_save"] and out["unchanged_after_reopen"], out["snapshot"]
+    names = {name for name, _ in out["images"]}
+    assert len(names) >= 7  # 3 maps per material x 3 runs + the light
+    reopened = {name: (size, ok) for name, size, ok in out["reopened_images"]}
+    assert set(reopened) == names
+    assert all(size[0] > 0 and size[1] > 0 and ok for size, ok in reopened.values()), reopened
+
+
+def test_the_job_path_reports_progress_cancels_fails_cleanly_and_never_touches_bpy(operated):
+    _, out, _ = operated
+    job = out["job"]
+    assert job["status"] == "done" and "convert" in job["stages"] and job["steps"] >= 1
+    assert job["result_files"] == ["base_color.png", "metallic.png", "roughness.png"]
+    assert out["worker_touched_bpy"] == [] and out["control_caught"]
+    assert out["job_material"].startswith("Sphere SceneFit convert")
+    assert out["runtime"] == [True, 0.5, "convert: fit 3/6", True, [8, 8]]
+    assert out["cancelled"] == "cancelled"
+    status, error = out["error"]
+    assert status == "failed" and "missing.png" in error and "Traceback" not in error
+    assert out["after_load"] == ["cancelled", True, False]
+
+
+def test_unsaved_file_results_are_packed_and_survive_saving(operated):
+    _, out, _ = operated
+    assert out["unsaved_ops"] == [["FINISHED"]]
+    assert out["run_all"] == ["SceneFit Camera", "SceneFit Light", "Sphere SceneFit convert"]
+    assert len(out["unsaved_packed"]) == 4 and all(packed for _, packed in out["unsaved_packed"])
+    assert out["unsaved_outside_temp_and_addon"]
+    assert len(out["unsaved_reopened"]) == 4 and all(w > 0 and h > 0 for _, (w, h) in out["unsaved_reopened"])
+    assert out["unsaved_unchanged"]
+
+
+def test_missing_dependencies_are_one_sentence(operated):
+    _, out, _ = operated
+    reported, sentence = out["missing"]
+    assert sentence.startswith("Missing Python modules: NoSuchModule;") and sentence.count(".") == 1
+    assert sentence in reported and "Traceback" not in reported

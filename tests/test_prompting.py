@@ -122,6 +122,25 @@ def test_multi_line_and_quoted_answers_become_one_line(server, cache):
     assert any("joined" in r for r in result.repairs)
 
 
+def test_follow_up_turn_continues_the_conversation(server, cache):
+    """The appendix's follow-up ("... placed in the painting studio for decades ...") is a third message
+    after the model's first answer; its answer is checked the same way and becomes the prompt."""
+    decades = ("A leather sofa, surface cracked and color faded, sits under a veil of dust and dried paint "
+               "splatters, a silent witness to the studio's years of creative toil.")
+    follow = "Let's suppose the leather sofa has been placed in the painting studio for decades."
+    request = PromptRequest("a leather sofa", "a chaotic painting studio", follow_up=follow)
+    server.replies = [Reply(answer(GOOD)), Reply(f"Decades of dust would settle.\n\nDescription: {decades}")]
+    result = write_prompt(request, service(server), cache_dir=cache)
+    assert result.prompt == decades and result.requests == 2
+    messages = server.requests[1]["body"]["messages"]
+    assert [m["role"] for m in messages] == ["user", "assistant", "user"]
+    assert messages[1]["content"] == answer(GOOD) and messages[2]["content"].startswith(follow)
+    assert "Decades of dust would settle." in result.analysis and ANALYSIS in result.analysis
+    # The follow-up is part of the cache key; offline it is not used and the report says so.
+    assert write_prompt(request, service(server), cache_dir=cache).cached
+    assert write_prompt(request, None, cache_dir=cache).warnings == ("the follow-up needs a language model and was not used",)
+
+
 def test_time_out_is_one_clear_sentence(server, cache):
     server.replies = [Reply(answer(GOOD), delay_s=5)]
     with pytest.raises(PromptServiceError, match=r"did not answer within 0.5 s") as error:

@@ -13,8 +13,9 @@ the target, and the closure downloaded the same way. Where the development envir
 version installed that satisfies the requirement, that version is taken, so the extension runs
 what the tests ran.
 
-Left out: numpy (Blender ships it, and a second copy breaks bpy's own modules) and OpenImageIO
-(Blender ships its Python module in its bundled site-packages).
+Left out: numpy (Blender ships it, and a second copy breaks bpy's own modules). OpenImageIO IS
+bundled: Blender ships its Python module, but the `bpy` module from PyPI does not, and baking failed
+there without it (the development environment runs the same wheel beside bpy).
 """
 from __future__ import annotations
 
@@ -43,9 +44,9 @@ DIST = ROOT / "dist"
 # What the extension needs at run time (not bpy, pytest or matplotlib: development only).
 RUNTIME = [
     "mitsuba", "drjit", "torch", "diffusers", "transformers", "peft", "accelerate",
-    "opencv-contrib-python-headless", "openai",
+    "opencv-contrib-python-headless", "OpenImageIO", "openai",
 ]
-LEFT_OUT = {"numpy": "Blender ships numpy", "openimageio": "Blender ships OpenImageIO's Python module"}
+LEFT_OUT = {"numpy": "Blender ships numpy"}
 
 # Blender platform -> pip platform tags (pip does not expand manylinux_2_x to older glibc tags itself)
 # and the marker environment of that platform.
@@ -202,7 +203,7 @@ def build(source: Path, out: Path) -> Path:
 def build_without_wheels(out: Path | None = None) -> Path:
     """A pure-Python zip (empty wheels list) from a staged copy; the repository is left untouched."""
     out = out or DIST / f"scenefit-{version()}-nowheels.zip"
-    ignore = shutil.ignore_patterns(".venv", ".git", "dist", "out", "build", "wheels", "tests", "example",
+    ignore = shutil.ignore_patterns(".*", "dist", "out", "build", "wheels", "tests", "example",
                                     "__pycache__", "*.egg-info", ".pytest_cache")
     with tempfile.TemporaryDirectory() as tmp:
         stage = Path(tmp) / "scenefit"

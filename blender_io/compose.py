@@ -1,0 +1,157 @@
+"""The composite set up in Blender: a camera matched to the photo, the photo behind the render, a
+shadow-catcher floor under the asset. After `setup_composite`, F12 in Cycles renders the composite.
+
+Only new objects and data are made (tagged ["scenefit"]); the asset is not moved: the camera is
+placed around it (blender_io/placement.py) looking along +Y, the direction the light stage takes
+for the photo, so the estimated World lights the asset from the right side.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import InputError
+from .placement import camera_for_placement
+
+TAG = "scenefit"
+CAMERA_NAME = "SceneFit Camera"
+FLOOR_NAME = "SceneFit Shadow Catcher"
+COMPOSITOR_NAME = "SceneFit Composite"
+
+
+def load_photo_image(path: str | Path):
+    """The photo as a Blender image (reused when already loaded); one sentence when unreadable."""
+    import bpy
+
+    path = Path(path)
+    image = bpy.data.images.load(str(path), check_existing=True)
+    if image.size[0] == 0 or image.size[1] == 0:
+        raise InputError(f"Blender cannot read the photo '{path}'; save it as PNG or JPEG.")
+    return image
+
+
+def _tagged(collection, name: str):
+    item = collection.get(name)
+    return item if item is not None and TAG in item else None
+
+
+def ensure_photo_camera(scene, image, fov: float, elevation: float):
+    """SceneFit's camera (made once per file): the photo's aspect and FOV, pitched down by `elevation`,
+    the photo as its background. Becomes the scene camera; the artist's camera object is untouched."""
+    import bpy
+
+    cam = _tagged(bpy.data.objects, CAMERA_NAME)
+    if cam is None:
+        data = bpy.data.cameras.new(CAMERA_NAME)
+        cam = bpy.data.objects.new(CAMERA_NAME, data)
+        cam[TAG] = "camera"
+        data[TAG] = "camera"
+    if cam.name not in scene.collection.objects and scene not in cam.users_scene:
+        scene.collection.objects.link(cam)
+    data = cam.data
+    data.sensor_fit = "HORIZONTAL"
+    data.angle = fov
+    cam.rotation_mode = "XYZ"
+    cam.rotation_euler = (math.pi / 2 - elevation, 0.0, 0.0)  # -Z (a camera's view) turned to +Y, then down
+    w, h = image.size
+    scene.render.resolution_x, scene.render.resolution_y = int(w), int(h)
+    scene.render.resolution_percentage = 100
+    scene.render.pixel_aspect_x = scene.render.pixel_aspect_y = 1.0
+    data.show_background_images = True
+    backgrounds = [bg for bg in data.background_images if bg.image == image]
+    for bg in data.background_images:
+        bg.show_background_image = bg.image == image
+    if not backgrounds:
+        bg = data.background_images.new()
+        bg.image, bg.alpha, bg.display_depth, bg.frame_method = image, 1.0, "BACK", "FIT"
+    scene.camera = cam
+    return cam
+
+
+def object_base(obj) -> tuple[np.ndarray, float]:
+    """The object's bottom centre in world space and its height (evaluated bounding box)."""
+    corners = np.array([obj.matrix_world @ _vector(c) for c in obj.bound_box], dtype=np.float64)
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    return np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]]), float(hi[2] - lo[2])
+
+
+def _vector(values):
+    from mathutils import Vector
+
+    return Vector(values)
+
+
+def ensure_shadow_catcher(scene, base: np.ndarray, extent: float):
+    """A large plane under the asset that only catches shadows (Cycles), made once per file."""
+    import bpy
+
+    floor = _tagged(bpy.data.objects, FLOOR_NAME)
+    if floor is None:
+        mesh = bpy.data.meshes.new(FLOOR_NAME)
+        mesh.from_pydata([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], [], [(0, 1, 2, 3)])
+        mesh[TAG] = "floor"
+        floor = bpy.data.objects.new(FLOOR_NAME, mesh)
+        floor[TAG] = "floor"
+    if scene not in floor.users_scene:
+        scene.collection.objects.link(floor)
+    floor.location = (float(base[0]), float(base[1]), float(base[2]))
+    floor.scale = (extent, extent, 1.0)
+    floor.is_shadow_catcher = True
+    return floor
+
+
+def photo_behind_render(scene, image) -> None:
+    """Film transparent, and the compositor puts the render over the photo (Standard view: the photo's
+    pixels come out as they went in)."""
+    import bpy
+
+    scene.render.engine = "CYCLES"
+    scene.render.film_transparent = True
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.look = "None"
+    scene.view_settings.exposure, scene.view_settings.gamma = 0.0, 1.0
+    if hasattr(scene, "compositing_node_group"):  # Blender 5: a compositor node group per scene
+        tree = _tagged(bpy.data.node_groups, COMPOSITOR_NAME)
+        if tree is None:
+            tree = bpy.data.node_groups.new(COMPOSITOR_NAME, "CompositorNodeTree")
+            tree[TAG] = "compositor"
+            tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+        tree.nodes.clear()
+        output = tree.nodes.new("NodeGroupOutput")
+        image_socket = output.inputs[0]
+        scene.compositing_node_group = tree
+    else:  # Blender 4.x
+        scene.use_nodes = True
+        tree = scene.node_tree
+        tree.nodes.clear()
+        output = tree.nodes.new("CompositorNodeComposite")
+        image_socket = output.inputs["Image"]
+    layers = tree.nodes.new("CompositorNodeRLayers")
+    layers.scene = scene
+    photo = tree.nodes.new("CompositorNodeImage")
+    photo.image = image
+    over = tree.nodes.new("CompositorNodeAlphaOver")
+    photo.location, layers.location, over.location, output.location = (-400, 200), (-400, -100), (-100, 0), (200, 0)
+    background_input, foreground_input = [s for s in over.inputs if s.type == "RGBA"][:2]
+    tree.links.new(photo.outputs["Image"], background_input)
+    tree.links.new(layers.outputs["Image"], foreground_input)
+    tree.links.new(over.outputs[0], image_socket)
+
+
+def setup_composite(context, obj, photo_path: str | Path, placement: tuple[float, float], size: float,
+                    fov: float, elevation: float) -> dict:
+    """Camera, photo background, shadow catcher and compositing for `obj` in the photo; returns them."""
+    scene = context.scene
+    image = load_photo_image(photo_path)
+    w, h = image.size
+    base, height = object_base(obj)
+    position = camera_for_placement(base, height, placement, size, math.degrees(fov), math.degrees(elevation),
+                                    w / h)
+    cam = ensure_photo_camera(scene, image, fov, elevation)
+    cam.location = tuple(float(v) for v in position)
+    reach = float(np.linalg.norm(position - base))
+    floor = ensure_shadow_catcher(scene, base, extent=4.0 * reach)
+    photo_behind_render(scene, image)
+    return {"camera": cam, "floor": floor, "photo": image}

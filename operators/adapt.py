@@ -1,0 +1,69 @@
+"""Adapt: restyle the converted texture to fit the photo (or from a prompt), as a background job."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import bpy
+from bpy.props import IntProperty
+
+from ..blender_io import mesh_from_object
+from ..core.errors import InputError
+from . import work
+from .common import model_settings, photo_path, poll_mesh, run_folder
+from .jobs import JobOperator
+from .results import apply_result_material
+
+
+def gather_adapt(op, context, texture: str) -> dict:
+    """Adapt's plain inputs from the scene settings; `op` gives iterations / model_resolution / render_size."""
+    settings = context.scene.scenefit
+    obj = context.active_object
+    mesh = mesh_from_object(obj, context.evaluated_depsgraph_get())
+    photo = str(photo_path(context)) if settings.mode == "scene" and settings.photo_path else ""
+    light = bpy.path.abspath(settings.light_path) if settings.light_path else ""
+    x, y = settings.placement
+    models, _ = model_settings(context)
+    op._object_name = obj.name
+    return {
+        "mesh": mesh, "texture": texture, "mode": settings.mode, "prompt": settings.prompt,
+        "object_prompt": settings.object_prompt, "instruction": settings.instruction, "photo": photo,
+        # The panel's placement is where the asset stands; adapt wants the centre of its square view.
+        "placement": (x, max(0.0, y - settings.size / 2)), "size": settings.size,
+        "envmap": light if light and Path(light).is_file() else "", "preset": settings.preset,
+        "models": models, "iterations": op.iterations, "model_resolution": op.model_resolution,
+        "render_size": op.render_size, "out": str(run_folder(context, "adapt", obj.name))}
+
+
+class SCENEFIT_OT_adapt(JobOperator):
+    """Restyle the asset's converted texture with diffusion guidance so it fits the photo (Esc cancels)"""
+
+    bl_idname = "scenefit.adapt"
+    bl_label = "Adapt"
+    job_name = "adapt"
+
+    # For scripts and quick looks; 0 keeps the preset's value.
+    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE"})
+    model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE"})
+    render_size: IntProperty(name="Render size", default=0, min=0, options={"SKIP_SAVE"})
+
+    @classmethod
+    def poll(cls, context):
+        return poll_mesh(context)
+
+    def prepare(self, context):
+        settings = context.scene.scenefit
+        texture = ""
+        if settings.mode != "generate":
+            texture = bpy.path.abspath(settings.texture_path) if settings.texture_path else ""
+            if not texture or not Path(texture).is_file():
+                raise InputError("Adapt starts from the converted texture; run Convert on this asset first.")
+        return work.adapt, gather_adapt(self, context, texture)
+
+    def apply(self, context, result) -> str:
+        mat = apply_result_material(context, self._object_name, result, "adapt")
+        return f"Adapted ({result['iterations']} iterations): material '{mat.name}'"
+
+
+classes = (SCENEFIT_OT_adapt,)
+
+register, unregister = bpy.utils.register_classes_factory(classes)

@@ -1,0 +1,65 @@
+"""Compose: the asset in the photo, set up in Blender so that F12 in Cycles renders the composite."""
+from __future__ import annotations
+
+import bpy
+from bpy.props import BoolProperty, IntProperty
+
+from ..blender_io.compose import setup_composite
+from ..core.errors import SceneFitError
+from .common import photo_path, poll_mesh, relative_if_saved, run_folder
+
+
+class SCENEFIT_OT_compose(bpy.types.Operator):
+    """Set up a camera matched to the photo, the photo behind the render and a shadow-catcher floor under
+    the asset (lit by the estimated World when there is one); F12 in Cycles then renders the composite"""
+
+    bl_idname = "scenefit.compose"
+    bl_label = "Compose"
+    bl_options = {"REGISTER", "UNDO"}
+
+    render: BoolProperty(name="Render", default=True,
+                         description="Render the composite now and save it in a new run folder")
+    samples: IntProperty(name="Samples", default=0, min=0, options={"SKIP_SAVE"},
+                         description="Cycles samples for this render (0: the scene's own setting)")
+
+    @classmethod
+    def poll(cls, context):
+        return poll_mesh(context)
+
+    def execute(self, context):
+        settings = context.scene.scenefit
+        obj = context.active_object
+        try:
+            made = setup_composite(context, obj, photo_path(context), tuple(settings.placement), settings.size,
+                                   settings.fov, settings.elevation)
+            if settings.result_world is not None:
+                context.scene.world = settings.result_world
+            if not self.render:
+                self.report({"INFO"}, f"Composite set up with '{made['camera'].name}': F12 renders it")
+                return {"FINISHED"}
+            out = run_folder(context, "compose", obj.name) / "composite.png"
+        except SceneFitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        if context.window is not None and not bpy.app.background:
+            # In the UI Blender's own render job runs it (progress, Esc); the artist saves it from there.
+            bpy.ops.render.render("INVOKE_DEFAULT")
+            return {"FINISHED"}
+        scene = context.scene
+        samples_before, path_before = scene.cycles.samples, scene.render.filepath
+        try:
+            if self.samples:
+                scene.cycles.samples = self.samples
+            scene.render.filepath = str(out)
+            scene.render.image_settings.file_format = "PNG"
+            bpy.ops.render.render(write_still=True)
+        finally:
+            scene.cycles.samples, scene.render.filepath = samples_before, path_before
+        settings.composite_path = relative_if_saved(out)
+        self.report({"INFO"}, f"Composite rendered: {out}")
+        return {"FINISHED"}
+
+
+classes = (SCENEFIT_OT_compose,)
+
+register, unregister = bpy.utils.register_classes_factory(classes)

@@ -1,0 +1,247 @@
+"""Blender's side of core/background.py: the modal operator base, runtime state, previews, the status bar.
+
+An operator subclassing JobOperator says how to gather its inputs (`prepare`, main thread, returns
+the work function and plain data) and how to write results back (`apply`, main thread). Invoked
+from the UI it runs as a background job polled by a timer, with Esc, a Cancel button and
+`cancel()`; called with EXEC_DEFAULT (scripts, `blender -b`) it runs the same work inline.
+
+Runtime state lives on the WindowManager (never saved into the .blend); the live preview is a
+`bpy.utils.previews` icon (not a datablock either). Loading another file ends the job first.
+"""
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from bpy.app.handlers import persistent
+from bpy.props import BoolProperty, FloatProperty, PointerProperty, StringProperty
+
+from ..core import background
+from ..core.errors import SceneFitError
+from ..core.progress import TerminalProgress
+from .common import check_dependencies
+
+TIMER_SECONDS = 0.25
+_previews = None  # bpy.utils.previews collection, made on register
+_preview_serial = (None, 0)  # (job, serial) of the preview shown
+
+
+class SceneFitRuntime(bpy.types.PropertyGroup):
+    """What the panel and the status bar show while a job runs (WindowManager: not saved)."""
+
+    running: BoolProperty(default=False)
+    job: StringProperty(name="Job")
+    stage: StringProperty(name="Stage")
+    status: StringProperty(name="Status")
+    progress: FloatProperty(name="Progress", min=0.0, max=1.0, subtype="FACTOR")
+    has_preview: BoolProperty(default=False)
+
+
+def runtime(context=None) -> SceneFitRuntime:
+    return (context or bpy.context).window_manager.scenefit_runtime
+
+
+def preview_icon_id() -> int:
+    """The live preview's icon id (0 when there is none)."""
+    if _previews is None or "live" not in _previews:
+        return 0
+    return _previews["live"].icon_id
+
+
+def show_preview(image: np.ndarray) -> None:
+    """Put a (h, w, 3) sRGB uint8 preview into the panel's icon (main thread)."""
+    if _previews is None:
+        return
+    item = _previews["live"] if "live" in _previews else _previews.new("live")
+    h, w = image.shape[:2]
+    rgba = np.ones((h, w, 4), np.float32)
+    rgba[..., :3] = np.asarray(image, np.float32)[..., :3] / 255.0
+    item.image_size = (w, h)
+    item.image_pixels_float = rgba[::-1].ravel()  # Blender's first row is the bottom one
+
+
+def update_runtime(context, state: background.JobState) -> None:
+    global _preview_serial
+    rt = runtime(context)
+    rt.running = not state.finished
+    rt.job, rt.stage, rt.status = state.name, state.stage, state.status_line()
+    rt.progress = state.fraction
+    if state.preview is not None and _preview_serial != (id(state), state.preview_serial):
+        show_preview(state.preview)
+        _preview_serial = (id(state), state.preview_serial)
+        rt.has_preview = True
+
+
+def redraw(context) -> None:
+    for window in context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type in ("VIEW_3D", "STATUSBAR"):
+                area.tag_redraw()
+
+
+class JobOperator(bpy.types.Operator):
+    """Base of the operators that run a long stage. Subclasses set job_name and define prepare/apply."""
+
+    bl_options = {"REGISTER", "UNDO"}
+    job_name = "job"
+
+    # -- to override ---------------------------------------------------------------------------------
+    def prepare(self, context) -> tuple:
+        """(work function, plain data) gathered from Blender on the main thread."""
+        raise NotImplementedError
+
+    def apply(self, context, result) -> str:
+        """Write the job's result back into Blender (main thread); returns the line to report."""
+        raise NotImplementedError
+
+    # -- synchronous: scripts and `blender -b` -------------------------------------------------------
+    def execute(self, context):
+        try:
+            check_dependencies()
+            work, data = self.prepare(context)
+            result = background.run_inline(work, data, TerminalProgress())
+            message = self.apply(context, result)
+        except SceneFitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        self.report({"INFO"}, message)
+        return {"FINISHED"}
+
+    # -- background job from the UI ------------------------------------------------------------------
+    def invoke(self, context, event):
+        if context.window is None or bpy.app.background:
+            return self.execute(context)
+        try:
+            check_dependencies()
+            work, data = self.prepare(context)
+            self._job = background.start_job(background.Job(self.job_name, work, data))
+        except SceneFitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        update_runtime(context, self._job.state)
+        runtime(context).has_preview = False
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(TIMER_SECONDS, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC" and event.value == "PRESS":
+            self._job.cancel()
+            runtime(context).status = f"{self.job_name}: cancelling…"
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        state = self._job.poll()
+        update_runtime(context, state)
+        redraw(context)
+        if not state.finished:
+            return {"RUNNING_MODAL"}
+        return self._finish(context, state)
+
+    def cancel(self, context):
+        """Blender ends the modal (file load, window closed): stop the worker, keep Blender's data as is."""
+        job = getattr(self, "_job", None)
+        if job is not None:
+            job.cancel()
+        self._remove_timer(context)
+        runtime(context).running = False
+
+    def _remove_timer(self, context) -> None:
+        timer = getattr(self, "_timer", None)
+        if timer is not None:
+            context.window_manager.event_timer_remove(timer)
+            self._timer = None
+
+    def _finish(self, context, state: background.JobState):
+        self._remove_timer(context)
+        background.release_job(self._job)
+        rt = runtime(context)
+        rt.running = False
+        if state.status == background.DONE:
+            try:
+                message = self.apply(context, state.result)
+            except SceneFitError as error:
+                rt.status = str(error)
+                self.report({"ERROR"}, rt.status)
+                return {"CANCELLED"}
+            rt.status = message
+            self.report({"INFO"}, message)
+            return {"FINISHED"}
+        if state.details:
+            print(state.details)  # the traceback of an unexpected failure, for the console
+        rt.status = state.status_line()
+        self.report({"WARNING"} if state.status == background.CANCELLED else {"ERROR"}, rt.status)
+        return {"CANCELLED"}
+
+
+class SCENEFIT_OT_cancel_job(bpy.types.Operator):
+    """Stop the running SceneFit job after its current step (results written so far are kept)"""
+
+    bl_idname = "scenefit.cancel_job"
+    bl_label = "Cancel"
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context):
+        job = background.active_job()
+        return job is not None and not job.state.finished
+
+    def execute(self, context):
+        job = background.active_job()
+        job.cancel()
+        runtime(context).status = f"{job.name}: cancelling…"
+        return {"FINISHED"}
+
+
+def draw_status_bar(self, context) -> None:
+    rt = context.window_manager.scenefit_runtime
+    if rt.running:
+        row = self.layout.row(align=True)
+        row.progress(factor=rt.progress, type="BAR", text=rt.status)
+        row.operator("scenefit.cancel_job", text="", icon="X")
+
+
+@persistent
+def _end_job_before_load(*_args) -> None:
+    """Loading a file frees the data a job would write into: cancel it and wait for its worker."""
+    state = background.end_active_job(timeout=30.0)
+    if state is not None:
+        print(f"SceneFit: '{state.name}' ended because another file is being loaded ({state.status}).")
+
+
+@persistent
+def _reset_after_load(*_args) -> None:
+    wm = bpy.context.window_manager
+    if wm is not None and hasattr(wm, "scenefit_runtime"):
+        wm.scenefit_runtime.running = False
+
+
+classes = (SceneFitRuntime, SCENEFIT_OT_cancel_job)
+
+
+def register() -> None:
+    global _previews
+    import bpy.utils.previews
+
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.WindowManager.scenefit_runtime = PointerProperty(type=SceneFitRuntime)
+    _previews = bpy.utils.previews.new()
+    bpy.types.STATUSBAR_HT_header.append(draw_status_bar)
+    bpy.app.handlers.load_pre.append(_end_job_before_load)
+    bpy.app.handlers.load_post.append(_reset_after_load)
+
+
+def unregister() -> None:
+    global _previews
+    import bpy.utils.previews
+
+    background.end_active_job(timeout=30.0)
+    bpy.app.handlers.load_post.remove(_reset_after_load)
+    bpy.app.handlers.load_pre.remove(_end_job_before_load)
+    bpy.types.STATUSBAR_HT_header.remove(draw_status_bar)
+    if _previews is not None:
+        bpy.utils.previews.remove(_previews)
+        _previews = None
+    del bpy.types.WindowManager.scenefit_runtime
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,52 @@
+"""Estimate Light: an HDR World from the photo and the placement, as a background job."""
+from __future__ import annotations
+
+import math
+
+import bpy
+from bpy.props import EnumProperty, IntProperty
+
+from . import work
+from .common import model_settings, photo_path, run_folder
+from .jobs import JobOperator
+from .results import apply_result_world
+
+
+class SCENEFIT_OT_estimate_light(JobOperator):
+    """Estimate an HDR environment map from the photo and make it a new World (the current World is kept)"""
+
+    bl_idname = "scenefit.estimate_light"
+    bl_label = "Estimate Light"
+    job_name = "light"
+
+    critic: EnumProperty(name="Critic", default="auto", items=(
+        ("auto", "Auto", "The diffusion critic when Stable Diffusion 2 is on this machine, else the prior alone"),
+        ("diffusion", "Diffusion", "Refine the light scales with Stable Diffusion 2 (VSD)"),
+        ("none", "Prior only", "The inverse-tone-mapping prior sets the scales (fast)")))
+    outpaint: EnumProperty(name="Outpaint", default="auto", items=(
+        ("auto", "Auto", "Outdoor: SD2 inpainting when it is on this machine, else the sky/ground prior"),
+        ("sd2", "SD2", "Complete the unseen map with Stable Diffusion 2 inpainting"),
+        ("prior", "Prior", "Complete the unseen map with the sky/ground prior (fast)")))
+    # For scripts and quick looks; 0 keeps the preset's value.
+    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE"})
+    model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE"})
+
+    def prepare(self, context):
+        settings = context.scene.scenefit
+        photo = photo_path(context)
+        models, depth = model_settings(context)
+        out = run_folder(context, "light", photo.stem)
+        return work.estimate_light, {
+            "photo": str(photo), "placement": tuple(settings.placement), "scene_type": settings.scene_type,
+            "preset": settings.preset, "fov_deg": math.degrees(settings.fov),
+            "camera_pitch_deg": -math.degrees(settings.elevation), "models": models, "depth": depth,
+            "critic": self.critic, "outpaint": self.outpaint, "iterations": self.iterations, "model_resolution": self.model_resolution, "out": str(out)}
+
+    def apply(self, context, result) -> str:
+        world = apply_result_world(context, result["hdr"])
+        return f"Light estimated ({result['scene_type']} scene): World '{world.name}'"
+
+
+classes = (SCENEFIT_OT_estimate_light,)
+
+register, unregister = bpy.utils.register_classes_factory(classes)

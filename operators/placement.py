@@ -1,0 +1,150 @@
+"""Pick Placement: the photo behind SceneFit's camera, a click says where the asset stands.
+
+Modal in the 3D viewport: the view goes into the camera, the click inside the photo's frame sets
+the placement (a marker stays drawn there), Esc or a right click cancels and restores the view.
+With EXEC_DEFAULT (scripts) the x, y properties set the placement directly.
+"""
+from __future__ import annotations
+
+import bpy
+from bpy.props import FloatProperty
+
+from ..blender_io.compose import CAMERA_NAME, ensure_photo_camera, load_photo_image
+from ..blender_io.placement import CANCEL, CLICK, classify_event, frame_rect, placement_from_click, \
+    region_from_placement
+from ..core.errors import SceneFitError
+from .common import photo_path
+
+_draw_handle = None
+
+
+def camera_frame_in_region(context):
+    """(x_min, y_min, x_max, y_max) of the scene camera's frame in the region, or None."""
+    from bpy_extras.view3d_utils import location_3d_to_region_2d
+
+    scene, region, rv3d = context.scene, context.region, context.region_data
+    cam = scene.camera
+    if cam is None or region is None or rv3d is None:
+        return None
+    corners = [cam.matrix_world @ c for c in cam.data.view_frame(scene=scene)]
+    points = [location_3d_to_region_2d(region, rv3d, c) for c in corners]
+    if any(p is None for p in points):
+        return None
+    return frame_rect([(p.x, p.y) for p in points])
+
+
+def draw_marker() -> None:
+    """A cross where the asset stands, while looking through SceneFit's camera (not saved anywhere)."""
+    context = bpy.context
+    rv3d = context.region_data
+    scene = context.scene
+    if rv3d is None or rv3d.view_perspective != "CAMERA" or scene.camera is None or \
+            scene.camera.name != CAMERA_NAME or not scene.scenefit.photo_path:
+        return
+    rect = camera_frame_in_region(context)
+    if rect is None:
+        return
+    import gpu
+    from gpu_extras.batch import batch_for_shader
+
+    x, y = region_from_placement(tuple(scene.scenefit.placement), rect)
+    r = 12.0
+    shader = gpu.shader.from_builtin("UNIFORM_COLOR")
+    batch = batch_for_shader(shader, "LINES", {"pos": [(x - r, y), (x + r, y), (x, y - r), (x, y + r)]})
+    gpu.state.line_width_set(2.0)
+    shader.uniform_float("color", (1.0, 0.35, 0.1, 1.0))
+    batch.draw(shader)
+    gpu.state.line_width_set(1.0)
+
+
+class SCENEFIT_OT_pick_placement(bpy.types.Operator):
+    """Show the photo through SceneFit's camera and click where the asset stands (Esc or right click cancels)"""
+
+    bl_idname = "scenefit.pick_placement"
+    bl_label = "Pick Placement"
+    bl_options = {"REGISTER", "UNDO"}
+
+    x: FloatProperty(name="X", min=0.0, max=1.0, default=0.5, description="From the left, fraction of the width")
+    y: FloatProperty(name="Y", min=0.0, max=1.0, default=0.75, description="From the top, fraction of the height")
+
+    def _camera(self, context):
+        settings = context.scene.scenefit
+        image = load_photo_image(photo_path(context))
+        return ensure_photo_camera(context.scene, image, settings.fov, settings.elevation)
+
+    def execute(self, context):
+        try:
+            self._camera(context)
+        except SceneFitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        context.scene.scenefit.placement = (self.x, self.y)
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if context.area is None or context.area.type != "VIEW_3D":
+            self.report({"ERROR"}, "Pick Placement works in a 3D Viewport; run it from the SceneFit panel there.")
+            return {"CANCELLED"}
+        try:
+            self._camera(context)
+        except SceneFitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        rv3d = context.region_data
+        self._view_before = rv3d.view_perspective
+        rv3d.view_perspective = "CAMERA"
+        context.area.header_text_set("Click where the asset stands in the photo; Esc or right click cancels")
+        context.window.cursor_modal_set("CROSSHAIR")
+        context.window_manager.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        action = classify_event(event.type, event.value)
+        if action == CANCEL:
+            context.region_data.view_perspective = self._view_before
+            self._end(context)
+            return {"CANCELLED"}
+        if action != CLICK:
+            return {"RUNNING_MODAL"} if event.type in ("LEFTMOUSE", "RIGHTMOUSE") else {"PASS_THROUGH"}
+        # The click is in window coordinates: find the viewport region under it.
+        region = next((r for r in context.area.regions if r.type == "WINDOW"), None)
+        mouse = (event.mouse_x - region.x, event.mouse_y - region.y)
+        rect = camera_frame_in_region(context)
+        placement = placement_from_click(mouse, rect) if rect is not None else None
+        if placement is None:
+            self.report({"WARNING"}, "Click inside the photo's frame.")
+            return {"RUNNING_MODAL"}
+        self.x, self.y = placement
+        context.scene.scenefit.placement = placement
+        self._end(context)
+        self.report({"INFO"}, f"Placement {placement[0]:.3f}, {placement[1]:.3f}")
+        return {"FINISHED"}
+
+    def cancel(self, context):
+        self._end(context)
+
+    def _end(self, context):
+        if context.area is not None:
+            context.area.header_text_set(None)
+            context.area.tag_redraw()
+        if context.window is not None:
+            context.window.cursor_modal_restore()
+
+
+classes = (SCENEFIT_OT_pick_placement,)
+
+
+def register() -> None:
+    global _draw_handle
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    _draw_handle = bpy.types.SpaceView3D.draw_handler_add(draw_marker, (), "WINDOW", "POST_PIXEL")
+
+
+def unregister() -> None:
+    global _draw_handle
+    if _draw_handle is not None:
+        bpy.types.SpaceView3D.draw_handler_remove(_draw_handle, "WINDOW")
+        _draw_handle = None
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

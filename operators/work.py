@@ -1,0 +1,143 @@
+"""What each operator's job runs: plain data in, plain data (paths, numbers) out.
+
+These functions run in a job's worker thread (or inline under `blender -b`), so they never import
+bpy: the operators gather Blender data into the `data` dicts on the main thread, and write the
+results back on the main thread once the job ends. Each writes only into its own run folder.
+"""
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+from ..core.progress import ProgressCallback
+
+
+def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+    """Fit the neural texture to the asset's maps; bake base colour, roughness, metallic into data['out']."""
+    from ..core.convert import convert_preset
+    from ..core.pipeline import convert_and_bake, write_report
+
+    out = Path(data["out"])
+    overrides = {"iterations": int(data["iterations"])} if data.get("iterations") else {}
+    _, report = convert_and_bake(data["mesh"], data["maps"], out, convert_preset(data["preset"], **overrides),
+                                 progress=progress, cancel=cancel)
+    write_report(out / "report.json", report)
+    return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
+            "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
+            "psnr_db": report["psnr_covered_texels_db"]}
+
+
+def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+    """Photo + placement -> light.exr (Blender's equirectangular convention) in data['out']."""
+    from dataclasses import replace
+
+    from ..core.lighting import estimate_light as estimate, light_preset, light_report, load_photo, \
+        parse_placement, write_light_outputs
+    from ..core.guidance import models_available
+    from ..core.pipeline import write_report
+
+    photo, info = load_photo(data["photo"])
+    h, w = photo.shape[:2]
+    placement = parse_placement(data["placement"], w, h)
+    critic = data.get("critic", "auto")
+    if critic == "auto":  # the diffusion critic when its weights are on this machine (never downloads)
+        critic = "diffusion" if models_available(data["models"], need_inpaint=False)[0] else "none"
+    overrides = {"scene_type": data["scene_type"], "critic_type": critic, "models": data["models"],
+                 "depth": data["depth"]}
+    if data.get("fov_deg"):
+        overrides["fov_deg"] = float(data["fov_deg"])
+    if data.get("camera_pitch_deg") is not None:
+        overrides["camera_pitch_deg"] = float(data["camera_pitch_deg"])
+    config = light_preset(data["preset"], **overrides)
+    config = replace(config, outpaint=replace(config.outpaint, completion_type=data.get("outpaint", "auto")))
+    if data.get("iterations"):  # quick looks and tests
+        config = replace(config, optimise=replace(config.optimise, iterations=int(data["iterations"])))
+    if data.get("model_resolution"):
+        size = int(data["model_resolution"])
+        config = replace(config, diffusion=replace(config.diffusion, model_resolution=size),
+                         outpaint=replace(config.outpaint, resolution=size))
+    result = estimate(photo, placement, config, photo_info=info, progress=progress, cancel=cancel)
+    out = Path(data["out"])
+    outputs = write_light_outputs(result, out)
+    report = light_report(result, config, outputs)
+    report["photo"] = info
+    write_report(out / "report.json", report)
+    camera = result.photo_camera
+    return {"hdr": outputs["hdr_exr"], "preview": outputs["preview_png"], "report": str(out / "report.json"),
+            "scene_type": result.decisions.get("scene_type", {}).get("chosen", ""),
+            "camera": {"yaw_deg": camera.yaw_deg, "pitch_deg": camera.pitch_deg, "fov_deg": camera.fov_deg}}
+
+
+def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+    """Restyle the converted texture (or make one, mode 'generate') and bake the maps into data['out']/maps."""
+    import numpy as np
+
+    from dataclasses import replace
+
+    from ..core.adapt import StageSpec, adapt_and_bake, adapt_preset
+    from ..core.guidance import Placement
+    from ..core.imageio import linear_to_srgb, read_color_image
+    from ..core.pipeline import load_environment, write_report
+    from ..core.texture.bake import load_neural_texture
+
+    mode = data["mode"]
+    photo = placement = None
+    if mode == "scene" and data.get("photo"):
+        photo = linear_to_srgb(np.clip(read_color_image(data["photo"]), 0.0, 1.0))
+        placement = Placement(tuple(data["placement"]), data["size"])
+    overrides = {"views_type": "local"} if mode == "scene" and photo is None else {}
+    envmap = load_environment(data["envmap"]) if data.get("envmap") else None
+    if envmap is not None:
+        overrides["light_type"] = "envmap"
+    if data.get("iterations"):
+        overrides["iterations"] = int(data["iterations"])
+    config = adapt_preset(data["preset"], mode, prompt=data["prompt"], object_prompt=data["object_prompt"],
+                          instruction=data["instruction"], models=data["models"], **overrides)
+    if data.get("model_resolution") or data.get("render_size"):  # quick looks and tests
+        size = data.get("render_size") or None
+        stages = tuple(StageSpec(st.fraction, min(st.render_size, size or st.render_size), st.spp, st.t_range)
+                       for st in config.stages)
+        config = replace(config, stages=stages, model_resolution=data.get("model_resolution") or config.model_resolution)
+    texture = load_neural_texture(data["texture"]) if data.get("texture") else None
+    out = Path(data["out"])
+    result, report = adapt_and_bake(data["mesh"], texture, config, out, photo=photo, placement=placement,
+                                    envmap=envmap, progress=progress, cancel=cancel)
+    write_report(out / "report.json", report)
+    return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
+            "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
+            "iterations": result.iterations}
+
+
+def run_all(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+    """Convert -> light -> adapt in one job (each into its own run folder); adapt is skipped, with the
+    reason, when it has no prompt or its diffusion weights are not on this machine."""
+    from ..core.guidance import models_available
+
+    out: dict = {"convert": convert(data["convert"], progress, cancel)}
+    if data.get("light"):
+        out["light"] = estimate_light(data["light"], progress, cancel)
+    adapt_data = data.get("adapt")
+    if adapt_data:
+        found, why = models_available(adapt_data["models"], need_inpaint=bool(adapt_data.get("photo")))
+        if not found:
+            out["adapt_skipped"] = f"Adapt skipped: {why}"
+        elif adapt_data["mode"] != "edit" and not adapt_data["prompt"]:
+            out["adapt_skipped"] = "Adapt skipped: the Style section has no prompt."
+        else:
+            envmap = out["light"]["hdr"] if "light" in out else adapt_data.get("envmap", "")
+            out["adapt"] = adapt(dict(adapt_data, texture=out["convert"]["texture"], envmap=envmap), progress, cancel)
+    return out
+
+
+def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+    """The neural texture baked per material at data['size']² (0: the fitted size) for glTF."""
+    from ..core.game_bake import bake_game_maps as bake, default_texture_size
+    from ..core.progress import emit
+    from ..core.texture.bake import load_neural_texture
+
+    texture = load_neural_texture(data["texture"])
+    size = data["size"] or default_texture_size(texture, len(data["names"]))
+    emit(progress, "bake", 0, 1, f"{len(data['names'])} material(s) at {size}²")
+    baked = bake(texture, data["mesh"], list(data["names"]), size, [set(c) for c in data["constants"]])
+    emit(progress, "bake", 1, 1, "maps ready")
+    return {"baked": baked, "size": size}

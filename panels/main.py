@@ -1,0 +1,171 @@
+"""The SceneFit N-panel in the 3D viewport: Asset, Scene, Style, Quality, Run, Results.
+
+Drawing only reads: the material summary looks at node links (no pixels), the dependency check
+asks importlib where modules are (once), and runtime state comes from the WindowManager.
+"""
+from __future__ import annotations
+
+import bpy
+
+from ..core.errors import SceneFitError
+from ..operators.common import dependency_sentence, missing_modules
+from .quality import BENCH_MACHINE, expected_line
+
+class _Section:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "SceneFit"
+
+
+class SCENEFIT_PT_main(_Section, bpy.types.Panel):
+    bl_idname = "SCENEFIT_PT_main"
+    bl_label = "SceneFit"
+
+    def draw(self, context):
+        layout = self.layout
+        sentence = dependency_sentence()
+        if sentence:
+            layout.label(text=sentence, icon="ERROR")
+        rt = context.window_manager.scenefit_runtime
+        if rt.running or rt.status:
+            box = layout.box()
+            if rt.running:
+                row = box.row(align=True)
+                row.progress(factor=rt.progress, type="BAR", text=rt.status)
+                row.operator("scenefit.cancel_job", text="", icon="X")
+            else:
+                box.label(text=rt.status)
+            if rt.has_preview:
+                from ..operators.jobs import preview_icon_id
+
+                box.template_icon(icon_value=preview_icon_id(), scale=8.0)
+        if not bpy.data.is_saved:
+            layout.label(text="Unsaved file: results are packed into it (save first to keep them as files).",
+                         icon="INFO")
+
+
+class SCENEFIT_PT_asset(_Section, bpy.types.Panel):
+    bl_label = "Asset"
+    bl_parent_id = "SCENEFIT_PT_main"
+
+    def draw(self, context):
+        from ..blender_io.material import material_summary
+
+        layout = self.layout
+        obj = context.active_object
+        if obj is None or obj.type != "MESH":
+            layout.label(text="Select a mesh object.", icon="INFO")
+            return
+        layout.label(text=obj.name, icon="OBJECT_DATA")
+        try:
+            found, dropped = material_summary(obj.active_material)
+        except SceneFitError as error:
+            layout.label(text=str(error), icon="ERROR")
+            return
+        col = layout.column(align=True)
+        for line in found:
+            col.label(text=line, icon="CHECKMARK")
+        if dropped:
+            col.label(text=f"Dropped: {', '.join(dropped)}", icon="TRASH")
+        if not obj.data.uv_layers:
+            layout.label(text="No UV map: unwrap it first (UV > Smart UV Project).", icon="ERROR")
+
+
+class SCENEFIT_PT_scene(_Section, bpy.types.Panel):
+    bl_label = "Scene"
+    bl_parent_id = "SCENEFIT_PT_main"
+
+    def draw(self, context):
+        settings = context.scene.scenefit
+        col = self.layout.column()
+        col.prop(settings, "photo_path")
+        row = col.row(align=True)
+        row.prop(settings, "placement", text="")
+        row.operator("scenefit.pick_placement", text="", icon="RESTRICT_SELECT_OFF")
+        col.prop(settings, "size")
+        col.prop(settings, "scene_type")
+        col.prop(settings, "fov")
+        col.prop(settings, "elevation")
+
+
+class SCENEFIT_PT_style(_Section, bpy.types.Panel):
+    bl_label = "Style"
+    bl_parent_id = "SCENEFIT_PT_main"
+
+    def draw(self, context):
+        settings = context.scene.scenefit
+        col = self.layout.column()
+        col.prop(settings, "mode", expand=True)
+        if settings.mode == "edit":
+            col.prop(settings, "object_prompt")
+            col.prop(settings, "instruction")
+        else:
+            col.prop(settings, "prompt")
+
+
+class SCENEFIT_PT_quality(_Section, bpy.types.Panel):
+    bl_label = "Quality"
+    bl_parent_id = "SCENEFIT_PT_main"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        settings = context.scene.scenefit
+        col = self.layout.column()
+        col.prop(settings, "preset", expand=True)
+        col.prop(settings, "output_dir")
+        sub = col.column(align=True)
+        for stage in ("convert", "light", "adapt"):
+            sub.label(text=expected_line(stage, settings.preset))
+        sub.label(text=f"(the example asset on a {BENCH_MACHINE})")
+
+
+class SCENEFIT_PT_run(_Section, bpy.types.Panel):
+    bl_label = "Run"
+    bl_parent_id = "SCENEFIT_PT_main"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator("scenefit.run", icon="PLAY")
+        col = layout.column(align=True)
+        col.operator("scenefit.convert", icon="TEXTURE")
+        col.operator("scenefit.estimate_light", icon="WORLD")
+        col.operator("scenefit.adapt", icon="BRUSH_DATA")
+        col.operator("scenefit.compose", icon="RENDER_STILL")
+        layout.operator("scenefit.export_mitsuba", icon="EXPORT")
+
+
+class SCENEFIT_PT_results(_Section, bpy.types.Panel):
+    bl_label = "Results"
+    bl_parent_id = "SCENEFIT_PT_main"
+
+    def draw(self, context):
+        from ..blender_io.world import world_controls
+
+        settings = context.scene.scenefit
+        layout = self.layout
+        layout.operator("scenefit.open_composite", icon="IMAGE")
+        if settings.result_material is not None:
+            row = layout.row(align=True)
+            row.label(text="Material")
+            op = row.operator("scenefit.use_result", text="SceneFit")
+            op.target, op.which = "MATERIAL", "RESULT"
+            op = row.operator("scenefit.use_result", text="Original")
+            op.target, op.which = "MATERIAL", "ORIGINAL"
+        if settings.result_world is not None:
+            row = layout.row(align=True)
+            row.label(text="World")
+            op = row.operator("scenefit.use_result", text="SceneFit")
+            op.target, op.which = "WORLD", "RESULT"
+            op = row.operator("scenefit.use_result", text="Original")
+            op.target, op.which = "WORLD", "ORIGINAL"
+            mapping, background = world_controls(settings.result_world)
+            if mapping is not None:
+                layout.prop(mapping.inputs["Rotation"], "default_value", index=2, text="Light rotation")
+            if background is not None:
+                layout.prop(background.inputs["Strength"], "default_value", text="Light strength")
+
+
+classes = (SCENEFIT_PT_main, SCENEFIT_PT_asset, SCENEFIT_PT_scene, SCENEFIT_PT_style, SCENEFIT_PT_quality,
+           SCENEFIT_PT_run, SCENEFIT_PT_results)
+
+__all__ = ["classes", "dependency_sentence", "missing_modules"]

@@ -1,0 +1,45 @@
+"""The add-on preferences: where models come from, the cache, offline, the device."""
+import bpy
+from bpy.props import BoolProperty, EnumProperty, StringProperty
+
+# The add-on's own module name: `bl_ext.<repo>.scenefit` installed, `scenefit` in development.
+ADDON_PACKAGE = __package__.rpartition(".")[0]
+
+DEVICES = (
+    ("auto", "Auto", "The GPU when torch sees one (CUDA), else the CPU"),
+    ("cpu", "CPU", "Always the CPU"),
+    ("cuda", "CUDA", "An NVIDIA GPU"),
+)
+
+
+class SceneFitPreferences(bpy.types.AddonPreferences):
+    bl_idname = ADDON_PACKAGE
+
+    base_model: StringProperty(name="Diffusion model", default="stabilityai/stable-diffusion-2-base",
+                               description="Hub id or local folder of Stable Diffusion 2 base")
+    inpaint_model: StringProperty(name="Inpainting model", default="stabilityai/stable-diffusion-2-inpainting",
+                                  description="Hub id or local folder of Stable Diffusion 2 inpainting")
+    depth_model: StringProperty(name="Depth model", default="depth-anything/Depth-Anything-V2-Small-hf",
+                                description="Hub id or local folder of a transformers depth model")
+    model_cache: StringProperty(name="Model cache", subtype="DIR_PATH", default="",
+                                description="Folder for downloaded models (empty: 'models' in this extension's "
+                                            "user folder)")
+    offline: BoolProperty(name="Offline", default=False,
+                          description="Never use the network: models must already be in the cache. Blender's "
+                                      "'Allow Online Access' must also be on for any download")
+    device: EnumProperty(name="Device", items=DEVICES, default="auto")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.prop(self, "base_model")
+        layout.prop(self, "inpaint_model")
+        layout.prop(self, "depth_model")
+        layout.prop(self, "model_cache")
+        row = layout.row()
+        row.prop(self, "offline")
+        row.prop(self, "device")
+        if not bpy.app.online_access:
+            layout.label(text="Blender's online access is off: models are only read from the cache.", icon="INFO")
+
+
+classes = (SceneFitPreferences,)

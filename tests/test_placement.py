@@ -1,0 +1,79 @@
+"""Pick Placement's click handling and the composite camera, as plain maths (no window, no bpy)."""
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenefit.blender_io.placement import (CANCEL, CLICK, PASS, camera_for_placement, classify_event, frame_rect,
+                                           placement_from_click, region_from_placement)
+from scenefit.core.errors import InputError
+
+RECT = frame_rect([(300.0, 500.0), (300.0, 200.0), (100.0, 200.0), (100.0, 500.0)])  # view_frame order
+
+
+def test_events_left_press_places_esc_and_right_press_cancel():
+    assert classify_event("LEFTMOUSE", "PRESS") == CLICK
+    assert classify_event("ESC", "PRESS") == CANCEL and classify_event("RIGHTMOUSE", "PRESS") == CANCEL
+    assert classify_event("LEFTMOUSE", "RELEASE") == PASS and classify_event("MOUSEMOVE", "NOTHING") == PASS
+
+
+def test_click_maps_to_photo_fractions_from_the_top_left():
+    assert RECT == (100.0, 200.0, 300.0, 500.0)
+    assert placement_from_click((100.0, 500.0), RECT) == (0.0, 0.0)        # top-left corner of the photo
+    assert placement_from_click((300.0, 200.0), RECT) == (1.0, 1.0)        # bottom-right
+    assert placement_from_click((150.0, 275.0), RECT) == pytest.approx((0.25, 0.75))
+    assert placement_from_click((99.0, 300.0), RECT) is None               # outside the frame: ignored
+    assert placement_from_click((200.0, 501.0), RECT) is None
+    assert placement_from_click((5.0, 5.0), (10.0, 10.0, 10.0, 20.0)) is None  # a degenerate frame
+
+
+def test_marker_is_drawn_where_the_click_was():
+    rng = np.random.default_rng(0)
+    for u, v in rng.uniform(0, 1, (20, 2)):
+        assert placement_from_click(region_from_placement((u, v), RECT), RECT) == pytest.approx((u, v))
+
+
+def _project(point, camera, fov_deg, elevation_deg, aspect):
+    """Photo fractions (x from left, y from top) of a world point seen by the composite camera."""
+    pitch = math.radians(-elevation_deg)
+    forward = np.array([0.0, math.cos(pitch), math.sin(pitch)])
+    right = np.array([1.0, 0.0, 0.0])
+    up = np.cross(right, forward)
+    rel = np.asarray(point) - camera
+    depth = rel @ forward
+    tan_w = math.tan(math.radians(fov_deg) / 2)
+    return (0.5 + rel @ right / depth / tan_w / 2, 0.5 - rel @ up / depth / (tan_w / aspect) / 2)
+
+
+def test_the_camera_puts_the_asset_base_on_the_placement_at_the_asked_size():
+    base, height = np.array([1.0, 2.0, 0.5]), 2.0
+    camera = camera_for_placement(base, height, (0.3, 0.8), 0.25, 60.0, 10.0, 4 / 3)
+    assert _project(base, camera, 60.0, 10.0, 4 / 3) == pytest.approx((0.3, 0.8))
+    # At the base's depth, the asset's height spans `size` of the frame (the top is nearer the centre).
+    top = base + np.array([0.0, 0.0, height])
+    assert camera[2] > base[2]
+    _, y_top = _project(top, camera, 60.0, 10.0, 4 / 3)
+    assert 0.8 - y_top == pytest.approx(0.25, rel=0.15)
+
+
+def test_a_placement_above_the_horizon_is_refused_with_a_sentence():
+    with pytest.raises(InputError, match="above the horizon"):
+        camera_for_placement(np.zeros(3), 1.0, (0.5, 0.1), 0.3, 60.0, 10.0, 1.5)
+
+
+def test_quality_panel_times_are_the_bench_measurements():
+    import importlib.util
+
+    root = Path(__file__).resolve().parent.parent
+    # Loaded by path: importing the panels package would start Blender.
+    spec = importlib.util.spec_from_file_location("quality", root / "panels" / "quality.py")
+    quality = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(quality)
+    EXPECTED_SECONDS = quality.EXPECTED_SECONDS
+    bench = json.loads((root / "benchmarks/results/bench.json").read_text())
+    measured = {row["preset"]: row["seconds"] for row in bench["conversion"] if row["method"] == "direct"}
+    for preset, seconds in EXPECTED_SECONDS["convert"].items():
+        if seconds is not None:
+            assert seconds == pytest.approx(measured[preset], abs=0.05)
