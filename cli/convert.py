@@ -3,7 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import PRESETS, add_asset_args, load_asset_materials, progress
+from .options import (PRESETS, add_asset_args, add_output_args, load_asset_materials, output, positive_int,
+                      progress)
 
 
 def print_material_report(asset) -> None:
@@ -22,30 +23,34 @@ def run(args) -> int:
     from ..core.convert import convert_preset
     from ..core.pipeline import convert_and_bake, environment_info, write_report
 
-    asset = load_asset_materials(args.asset, args.object)
-    print_material_report(asset)
     overrides = {k: v for k, v in (("method_type", args.method), ("iterations", args.iterations),
-                                   ("resolution", args.resolution), ("seed", args.seed)) if v is not None}
+                                   ("resolution", args.resolution), ("seed", args.seed),
+                                   ("screen_px", args.screen_px)) if v is not None}
     config = convert_preset(args.preset, **overrides)
-    out = Path(args.out)
-    result, report = convert_and_bake(asset, None, out / "maps", config, progress=progress(args))
-    mesh, maps = asset.fitting_view()
-    save_asset_folder(mesh, maps, out / "asset")
-    report["environment"] = environment_info()
-    write_report(out / "report.json", report)
+    with output(args) as out:
+        asset = load_asset_materials(args.asset, args.object)
+        print_material_report(asset)
+        result, report = convert_and_bake(asset, None, out / "maps", config, progress=progress(args),
+                                          keep_constants=True)
+        mesh, maps = asset.fitting_view()
+        save_asset_folder(mesh, maps, out / "asset")
+        report["environment"] = environment_info()
+        write_report(out / "report.json", report)
     per_material = ", ".join(f"'{m['name']}' {m['psnr_db']:.2f} dB" for m in result.decisions["materials"])
     print(f"converted '{mesh.name}': {result.psnr:.2f} dB on covered texels ({per_material}) in "
-          f"{result.seconds:.1f} s ({config.method_type}) -> {out}")
+          f"{result.seconds:.1f} s ({config.method_type}) -> {Path(args.out)}")
     return 0
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("convert", help="fit a neural texture to the asset's own maps and bake it")
     add_asset_args(p)
-    p.add_argument("--out", required=True, help="output folder")
+    add_output_args(p)
     p.add_argument("--preset", choices=PRESETS, default="balanced", help="speed/accuracy trade (default: balanced)")
     p.add_argument("--method", choices=("direct", "inverse"), help="direct texture-space fit (default) or inverse rendering")
-    p.add_argument("--iterations", type=int)
-    p.add_argument("--resolution", type=int, help="texture size (default: the asset's, capped by the preset)")
+    p.add_argument("--iterations", type=positive_int)
+    p.add_argument("--resolution", type=positive_int, help="texture size (default: the asset's, capped by the preset)")
     p.add_argument("--seed", type=int)
+    p.add_argument("--screen-px", type=positive_int,
+                   help="the object's height in the final image, pixels: the texture gets no more texels than it shows")
     p.set_defaults(func=run)
