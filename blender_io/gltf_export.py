@@ -177,7 +177,11 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
                     texture_size: int | None = None, object_name: str | None = None) -> dict:
     """`scenefit bake`: the asset file loaded into a temporary scene, the neural texture baked per
     material at `texture_size`² (default: the fitted size, rounded up to a power of two), written
-    as glTF 2.0. `texture` is a NeuralTexture or the path of a texture.pt. Returns the report."""
+    as glTF 2.0. `texture` is a NeuralTexture or the path of a texture.pt. Returns the report.
+
+    Known bpy 5.0.1 crash: once the exporter has run on the temporary scene and the scene is
+    removed, the next glTF import in the same process segfaults. `scenefit bake` is a process of
+    its own; long-lived callers should run it as a subprocess (or use bake_copy_to_gltf)."""
     from ..core.game_bake import bake_game_maps, default_texture_size
     from ..core.texture.bake import load_neural_texture
     import bpy
@@ -194,7 +198,7 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
         baked = bake_game_maps(texture, mesh, [m.name for m in materials], size,
                                [constant_channels(m) for m in materials])
         report = bake_object_to_gltf(obj, baked, slots, out_file, file_format, whole_scene=True)
-    report.update({"asset": str(asset_path), "object": obj.name, "format": file_format, "texture_size": size})
+        report.update({"asset": str(asset_path), "object": obj.name, "format": file_format, "texture_size": size})
     return report
 
 
