@@ -26,6 +26,8 @@ from .core.photo import PhotoCamera, develop_photo, perspective_view, studioligh
 from .core.pipeline import (contact_sheet, convert_and_bake, environment_info, image_psnr,
                             render_views, tonemap_srgb, write_report)
 from .core.progress import ProgressCallback, emit
+from .core.scene_needs import envmap_height_for
+from .core.texture.uv_raster import rasterize_uv
 
 DEMO_STUDIOLIGHT = "interior"
 DEMO_PHOTO_CAMERA = PhotoCamera(yaw_deg=60.0, pitch_deg=-12.0, fov_deg=60.0, width=768, height=512)
@@ -87,17 +89,23 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     t = time.perf_counter()
     photo_srgb, photo_read = load_photo(inputs / "photo.png")
     placement_px = parse_placement(DEMO_PLACEMENT, photo_srgb.shape[1], photo_srgb.shape[0])
-    light_config = light_preset(preset)
+    # Only what the scene needs: the map is as sharp as the asset's glossiest reflections.
+    normalized, _ = normalize_to_unit_sphere(mesh)
+    covered = rasterize_uv(normalized, max(maps.resolution)).mask
+    envmap_height = envmap_height_for(maps, covered)
+    light_config = light_preset(preset, map_height=envmap_height.value)
     light = estimate_light(photo_srgb, placement_px, light_config, photo_camera=DEMO_PHOTO_CAMERA,
                            photo_info=photo_read, progress=progress)
     light_outputs = write_light_outputs(light, out / "light")
     env = light.hdr.astype(np.float32)
     lighting = light_report(light, light_config, light_outputs)
+    lighting["decisions"]["envmap_height"] = envmap_height.to_dict()
     timings["light"] = time.perf_counter() - t
 
     # Convert the asset's own maps into the neural texture and bake it.
     config = convert_preset(preset)
-    result, convert_report = convert_and_bake(mesh, maps, out / "converted", config, progress=progress)
+    result, convert_report = convert_and_bake(mesh, maps, out / "converted", config, progress=progress,
+                                              keep_constants=True)
     timings["convert"] = result.seconds
 
     # The original maps, next to the converted ones.

@@ -208,6 +208,13 @@ def main() -> int:
                                                      "texture": textures, "conversion": conversions,
                                                      "adapt": adapt["rows"]}, indent=1, default=float))
 
+    # Speed against accuracy per preset, for each stage and end to end (each in its own process).
+    from bench_presets import bench_presets
+
+    presets = bench_presets(example_asset(), quick=args.quick,
+                            demo_presets=("draft",) if args.quick else ("draft", "balanced", "final"))
+    md += ["", "## Presets: speed against accuracy", "", presets["markdown"]]
+
     # Light estimation against ground-truth HDR maps (its own script: writes light.md/json and the curve).
     subprocess.run([sys.executable, str(Path(__file__).with_name("bench_light.py"))] + (["--quick"] if args.quick else []),
                    check=True)

@@ -6,12 +6,14 @@ So the command line (a fresh bpy) and an artist's running Blender use the same l
 """
 from __future__ import annotations
 
+import re
 from contextlib import contextmanager
 from pathlib import Path
 
 from ..core.errors import InputError
 from ..core.maps import PBRMaps
 from ..core.mesh import Mesh
+from ..core.quiet import native_output_captured
 from .material import maps_from_material
 from .mesh import mesh_from_object
 
@@ -54,6 +56,16 @@ def _import_into(bpy, scene, path: Path, suffix: str) -> None:
         getattr(getattr(bpy.ops, module), op)(filepath=str(path))
 
 
+def _blender_reason(error: Exception) -> str:
+    """The last meaningful line of a Blender operator error (they carry the importer's traceback)."""
+    lines = [line for line in str(error).splitlines() if line.strip()]
+    lines = [line.strip() for line in lines if not line.startswith((" ", "\t"))
+             and not line.startswith(("Traceback", "Location:", "Error: Python: Traceback"))]
+    reason = lines[-1].removeprefix("Error:").strip() if lines else ""
+    reason = re.sub(r"^[A-Za-z_][\w.]*(Error|error|Exception): ", "", reason)
+    return reason[:200]
+
+
 def _append_blend(bpy, scene, path: Path, object_name: str | None) -> None:
     with bpy.data.libraries.load(str(path), link=False) as (source, target):
         names = list(source.objects)
@@ -70,17 +82,33 @@ def load_asset_file(path: str | Path, object_name: str | None = None) -> tuple[M
     import bpy
 
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"'{path}' is a folder but not a SceneFit asset folder (it has no mesh.npz); give an "
+                         "asset folder or a .blend/.glb/.gltf/.obj/.fbx file.")
     if not path.is_file():
         raise InputError(f"Asset file '{path}' does not exist.")
     suffix = path.suffix.lower()
     if suffix != ".blend" and suffix not in IMPORTERS:
         known = ", ".join(sorted({".blend", *IMPORTERS}))
         raise InputError(f"SceneFit cannot read '{suffix}' files; use one of {known}, or an asset folder.")
+    if path.stat().st_size == 0:
+        raise InputError(f"Asset file '{path}' is empty; export it again.")
     with _temporary_data(bpy) as scene:
-        if suffix == ".blend":
-            _append_blend(bpy, scene, path, object_name)
-        else:
-            _import_into(bpy, scene, path, suffix)
+        # Blender's importers print to the terminal and raise RuntimeError on a broken file: their
+        # chatter is kept off the user's terminal and serves as the error's reason.
+        with native_output_captured() as chatter:
+            try:
+                if suffix == ".blend":
+                    _append_blend(bpy, scene, path, object_name)
+                else:
+                    _import_into(bpy, scene, path, suffix)
+                failure = None
+            except (RuntimeError, ValueError, OSError, UnicodeDecodeError) as error:
+                failure = error
+        if failure is not None:
+            reason = _blender_reason(failure) or chatter.last_line() or "Blender could not read it"
+            raise InputError(f"Asset file '{path}' cannot be read ({reason}); check that it is a valid "
+                             f"'{suffix}' file, or export it again.") from None
         meshes = [o for o in scene.objects if o.type == "MESH"]
         if object_name is not None:
             obj = next((o for o in meshes if o.name == object_name or o.name.startswith(object_name + ".")), None)

@@ -10,6 +10,7 @@ import argparse
 import sys
 
 from ..core.errors import Cancelled, SceneFitError
+from ..core.output_folder import interrupted_message
 from . import adapt, convert, demo, export, light, prompt, render
 
 # The order `scenefit --help` lists them in.
@@ -26,15 +27,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as stop:  # argparse refused an option (exit 2) or printed --help (exit 0)
+        return stop.code if isinstance(stop.code, int) else 2
     try:
         return args.func(args)
-    except Cancelled as error:
-        print(f"\nscenefit: {error}", file=sys.stderr)
-        return 130
-    except KeyboardInterrupt:
-        print("\nscenefit: interrupted; outputs already written are complete, nothing half-written remains.",
-              file=sys.stderr)
+    except (Cancelled, KeyboardInterrupt):
+        print(f"\nscenefit: {interrupted_message(args.out, getattr(args, 'resumable', False))}"
+              if getattr(args, "out", None) else "\nscenefit: interrupted.", file=sys.stderr)
         return 130
     except SceneFitError as error:
         print(f"scenefit: error: {error}", file=sys.stderr)

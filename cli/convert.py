@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import PRESETS, add_asset_args, load_asset, progress
+from .options import PRESETS, add_asset_args, add_output_args, load_asset, output, positive_int, progress
 
 
 def run(args) -> int:
@@ -11,27 +11,31 @@ def run(args) -> int:
     from ..core.convert import convert_preset
     from ..core.pipeline import convert_and_bake, environment_info, write_report
 
-    mesh, maps = load_asset(args.asset, args.object)
     overrides = {k: v for k, v in (("method_type", args.method), ("iterations", args.iterations),
-                                   ("resolution", args.resolution), ("seed", args.seed)) if v is not None}
+                                   ("resolution", args.resolution), ("seed", args.seed),
+                                   ("screen_px", args.screen_px)) if v is not None}
     config = convert_preset(args.preset, **overrides)
-    out = Path(args.out)
-    result, report = convert_and_bake(mesh, maps, out / "maps", config, progress=progress(args))
-    save_asset_folder(mesh, maps, out / "asset")
-    report["environment"] = environment_info()
-    write_report(out / "report.json", report)
+    with output(args) as out:
+        mesh, maps = load_asset(args.asset, args.object)
+        result, report = convert_and_bake(mesh, maps, out / "maps", config, progress=progress(args),
+                                          keep_constants=True)
+        save_asset_folder(mesh, maps, out / "asset")
+        report["environment"] = environment_info()
+        write_report(out / "report.json", report)
     print(f"converted '{mesh.name}': {result.psnr:.2f} dB on covered texels in {result.seconds:.1f} s "
-          f"({config.method_type}) -> {out}")
+          f"({config.method_type}) -> {Path(args.out)}")
     return 0
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("convert", help="fit a neural texture to the asset's own maps and bake it")
     add_asset_args(p)
-    p.add_argument("--out", required=True, help="output folder")
+    add_output_args(p)
     p.add_argument("--preset", choices=PRESETS, default="balanced", help="speed/accuracy trade (default: balanced)")
     p.add_argument("--method", choices=("direct", "inverse"), help="direct texture-space fit (default) or inverse rendering")
-    p.add_argument("--iterations", type=int)
-    p.add_argument("--resolution", type=int, help="texture size (default: the asset's, capped by the preset)")
+    p.add_argument("--iterations", type=positive_int)
+    p.add_argument("--resolution", type=positive_int, help="texture size (default: the asset's, capped by the preset)")
     p.add_argument("--seed", type=int)
+    p.add_argument("--screen-px", type=positive_int,
+                   help="the object's height in the final image, pixels: the texture gets no more texels than it shows")
     p.set_defaults(func=run)

@@ -1,16 +1,34 @@
 """scenefit demo: SceneFit on the bundled example (what `make demo` runs)."""
 from __future__ import annotations
 
+import json
+import shutil
 from pathlib import Path
 
-from .options import PRESETS, progress
+from .options import PRESETS, add_output_args, output, progress
+
+
+def _previous_demo(out: Path) -> bool:
+    """Whether `out` holds an earlier demo run (which `make demo` may replace without --replace)."""
+    if out.is_dir() and [p.name for p in out.iterdir()] == ["input"]:
+        return True  # only the demo's inputs, put there to be reused
+    try:
+        return json.loads((out / "report.json").read_text()).get("stage") == "demo"
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 def run(args) -> int:
     from ..demo import run_demo
 
-    report = run_demo(Path(args.out), preset=args.preset, progress=progress(args), refresh=args.refresh,
-                      guidance=args.guidance)
+    previous = Path(args.out)
+    args.replace = args.replace or _previous_demo(previous)
+    with output(args) as out:
+        # The example asset and photo of the earlier run are reused (Blender takes a while to make them).
+        if not args.refresh and (previous / "input").is_dir():
+            shutil.copytree(previous / "input", out / "input", dirs_exist_ok=True)
+        report = run_demo(out, preset=args.preset, progress=progress(args), refresh=args.refresh,
+                          guidance=args.guidance)
     print(f"demo done in {report['seconds_total']:.1f} s: conversion {report['convert']['psnr_covered_texels_db']:.2f} dB "
           f"-> {args.out}/report.json")
     return 0
@@ -18,7 +36,7 @@ def run(args) -> int:
 
 def add_parser(sub) -> None:
     p = sub.add_parser("demo", help="run SceneFit on the bundled example (what `make demo` runs)")
-    p.add_argument("--out", default="out/demo")
+    add_output_args(p, default="out/demo", help="output folder (an earlier demo run there is replaced)")
     p.add_argument("--preset", choices=PRESETS, default="balanced")
     p.add_argument("--refresh", action="store_true", help="re-make the example asset and photo")
     p.add_argument("--guidance", choices=("auto", "sd2", "none"), default="auto",

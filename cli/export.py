@@ -1,19 +1,24 @@
 """scenefit export: the asset, maps, camera and light as a Mitsuba scene (XML + PLY + images)."""
 from __future__ import annotations
 
-from .options import add_asset_args, add_lighting_args, environment, load_asset
+from pathlib import Path
+
+from .options import (add_asset_args, add_lighting_args, add_output_args, environment, finite_float, load_asset,
+                      output, positive_int)
 
 
 def run(args) -> int:
     from ..core.camera import Camera
     from ..core.export import export_mitsuba_scene
 
-    mesh, maps = load_asset(args.asset, args.object)
-    env = None
-    if args.envmap or args.studiolight:
-        env, _ = environment(args)
     camera = Camera(azimuth_deg=args.azimuth, elevation_deg=args.elevation, width=args.size, height=args.size)
-    xml = export_mitsuba_scene(mesh, maps, args.out, camera=camera, envmap=env, spp=args.spp)
+    with output(args) as out:
+        mesh, maps = load_asset(args.asset, args.object)
+        env = None
+        if args.envmap or args.studiolight:
+            env, _ = environment(args)
+        xml = export_mitsuba_scene(mesh, maps, out, camera=camera, envmap=env, spp=args.spp)
+    xml = Path(args.out) / xml.name
     print(f"wrote {xml}; render it with: mitsuba {xml}")
     return 0
 
@@ -22,9 +27,9 @@ def add_parser(sub) -> None:
     p = sub.add_parser("export", help="write the asset, maps, camera and light as a Mitsuba scene (XML + PLY + images)")
     add_asset_args(p)
     add_lighting_args(p)
-    p.add_argument("--out", required=True)
-    p.add_argument("--azimuth", type=float, default=30.0)
-    p.add_argument("--elevation", type=float, default=15.0)
-    p.add_argument("--size", type=int, default=512)
-    p.add_argument("--spp", type=int, default=256)
+    add_output_args(p)
+    p.add_argument("--azimuth", type=finite_float, default=30.0)
+    p.add_argument("--elevation", type=finite_float, default=15.0)
+    p.add_argument("--size", type=positive_int, default=512)
+    p.add_argument("--spp", type=positive_int, default=256)
     p.set_defaults(func=run)

@@ -4,10 +4,16 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-from .options import PRESETS, add_model_args, model_config, progress
+from .options import (PRESETS, add_model_args, add_output_args, finite_float, model_config, output, placement_fractions, positive_float,
+                      positive_int, progress)
 
 
 def run(args) -> int:
+    with output(args) as out:
+        return _light(args, out)
+
+
+def _light(args, out: Path) -> int:
     from ..core.guidance import models_available
     from ..core.lighting import estimate_light, light_preset, light_report, load_photo, parse_placement, write_light_outputs
     from ..core.lighting.depth import DEFAULT_DEPTH_MODEL, DepthConfig
@@ -15,7 +21,9 @@ def run(args) -> int:
 
     photo, info = load_photo(args.photo)
     placement = parse_placement(args.at, photo.shape[1], photo.shape[0])
-    depth = DepthConfig(depth_type=args.depth, model=args.depth_model or DEFAULT_DEPTH_MODEL)
+    # --offline and --cache-dir apply to the depth model as to the diffusion models (no network retries).
+    depth = DepthConfig(depth_type=args.depth, model=args.depth_model or DEFAULT_DEPTH_MODEL, cache_dir=args.cache_dir,
+                        local_files_only=True if args.offline else None)
     overrides = {k: v for k, v in (("scene_type", args.scene), ("fov_deg", args.fov), ("tint", args.tint),
                                    ("camera_pitch_deg", -args.elevation if args.elevation is not None else None))
                  if v is not None}
@@ -37,7 +45,6 @@ def run(args) -> int:
                          outpaint=replace(config.outpaint, resolution=args.model_resolution))
     result = estimate_light(photo, placement, config, photo_info=info, progress=progress(args))
     result.decisions["critic"]["choice"] = critic_choice
-    out = Path(args.out)
     outputs = write_light_outputs(result, out)
     report = light_report(result, config, outputs)
     report["photo"] = info
@@ -45,19 +52,20 @@ def run(args) -> int:
     write_report(out / "report.json", report)
     depth_used = result.decisions.get("depth", {}).get("method", "none (outdoor)")
     print(f"light: {result.decisions['scene_type']['chosen']} scene, depth {depth_used}, scales "
-          f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {out}/light.exr")
+          f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {Path(args.out) / 'light.exr'}")
     return 0
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("light", help="estimate an HDR environment map from a photo and the object's placement")
     p.add_argument("--photo", required=True, help="the scene photo (JPEG/PNG/EXR, any size)")
-    p.add_argument("--at", required=True, help="X,Y where the object stands: fractions of width,height (or pixels)")
-    p.add_argument("--out", required=True, help="output folder: light.exr, light_preview.png, report.json")
+    p.add_argument("--at", required=True, type=placement_fractions,
+                   help="X,Y where the object stands: fractions of the photo's width and height")
+    add_output_args(p, help="output folder: light.exr, light_preview.png, report.json")
     p.add_argument("--preset", choices=PRESETS, default="balanced")
     p.add_argument("--scene", choices=("auto", "indoor", "outdoor"), help="scene type (default: auto)")
-    p.add_argument("--fov", type=float, help="horizontal field of view in degrees (default: metadata, else 60)")
-    p.add_argument("--elevation", type=float, help="how far the camera looks down, degrees (default 10)")
+    p.add_argument("--fov", type=positive_float, help="horizontal field of view in degrees (default: metadata, else 60)")
+    p.add_argument("--elevation", type=finite_float, help="how far the camera looks down, degrees (default 10)")
     p.add_argument("--depth", choices=("auto", "model", "geometric"), default="auto",
                    help="auto: the depth model if it is on this machine, else the geometric room")
     p.add_argument("--depth-model", help="hub id or local folder of a transformers depth model")
@@ -65,11 +73,11 @@ def add_parser(sub) -> None:
     p.add_argument("--critic", choices=("auto", "diffusion", "none"), default="auto",
                    help="what refines the light scales: diffusion (VSD with Stable Diffusion 2 base), none (the "
                         "inverse-tone-mapping prior alone), or auto (diffusion when its weights are on this machine)")
-    p.add_argument("--iterations", type=int, help="light-scale optimisation steps (default: the preset's)")
+    p.add_argument("--iterations", type=positive_int, help="light-scale optimisation steps (default: the preset's)")
     p.add_argument("--outpaint", choices=("auto", "sd2", "prior"), default="auto",
                    help="outdoor: complete the unseen map by SD2 inpainting (sd2), the sky/ground prior (prior), or "
                         "auto (sd2 when its weights are on this machine)")
-    p.add_argument("--model-resolution", type=int,
+    p.add_argument("--model-resolution", type=positive_int,
                    help="image size the diffusion critic sees and the outpainting height (default 512)")
     add_model_args(p)
     p.add_argument("--quiet", action="store_true")

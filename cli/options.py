@@ -3,8 +3,78 @@ model options. Declared once so an option means the same thing in every command.
 from __future__ import annotations
 
 import argparse
+import math
 
 PRESETS = ("draft", "balanced", "final")
+
+
+# -- option types: a bad value is refused by argparse (one line, exit 2) before any work ---------------
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def finite_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
+
+
+def nonnegative_float(text: str) -> float:
+    value = finite_float(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be zero or more, got {text!r}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    value = finite_float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be more than zero, got {text!r}")
+    return value
+
+
+def placement_fractions(text: str) -> tuple[float, float]:
+    """--at X,Y: where the object stands, as fractions of the photo's width and height (every command)."""
+    parts = text.split(",")
+    try:
+        x, y = (float(v) for v in parts) if len(parts) == 2 else (None, None)
+    except ValueError:
+        x = y = None
+    if x is None or not (math.isfinite(x) and math.isfinite(y)):
+        raise argparse.ArgumentTypeError(f"takes X,Y as fractions of the photo's width and height, e.g. 0.5,0.7; "
+                                         f"got {text!r}")
+    if not (0.0 <= x <= 1.0 and 0.0 <= y <= 1.0):
+        raise argparse.ArgumentTypeError(f"takes fractions of the photo's width and height between 0 and 1; got "
+                                         f"{text!r}")
+    return x, y
+
+
+def add_output_args(p: argparse.ArgumentParser, default: str | None = None, help: str = "output folder") -> None:
+    """--out and --replace: the run's folder is written whole (see core/output_folder.py)."""
+    if default is None:
+        p.add_argument("--out", required=True, help=help)
+    else:
+        p.add_argument("--out", default=default, help=f"{help} (default {default})")
+    p.add_argument("--replace", action="store_true",
+                   help="replace the output folder when it already holds files (default: refuse)")
+
+
+def output(args, resume: bool = False):
+    """The run's output folder as a context manager yielding the folder to write into."""
+    from ..core.output_folder import output_folder
+
+    args.resumable = resume
+    return output_folder(args.out, replace=args.replace, resume=resume)
 
 
 def load_asset(path: str, object_name: str | None = None):
@@ -46,7 +116,7 @@ def add_asset_args(p: argparse.ArgumentParser) -> None:
 def add_lighting_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--envmap", help="equirectangular HDR map (EXR/HDR) to light the asset")
     p.add_argument("--studiolight", help="one of Blender's bundled HDR maps (studio, interior, city, forest, ...)")
-    p.add_argument("--ambient", type=float, default=1.0, help="constant environment radiance when no map is given")
+    p.add_argument("--ambient", type=nonnegative_float, default=1.0, help="constant environment radiance when no map is given")
 
 
 def add_model_args(p: argparse.ArgumentParser) -> None:

@@ -3,10 +3,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import add_asset_args, add_lighting_args, environment, load_asset, progress
+from .options import (add_asset_args, add_lighting_args, add_output_args, environment, finite_float, load_asset,
+                      positive_float, output, positive_int, progress)
 
 
 def run(args) -> int:
+    with output(args) as out:
+        return _render(args, out)
+
+
+def _render(args, out: Path) -> int:
     import torch
 
     from ..core.camera import orbit_cameras
@@ -31,7 +37,6 @@ def run(args) -> int:
     env, env_label = environment(args)
     cameras = orbit_cameras(args.views, args.elevation, fov_multiplier=1.1, size=args.size)
     images = render_views(normalized, {label: stack}, env, cameras, args.spp, progress=progress(args))[label]
-    out = Path(args.out)
     files = []
     for camera, image in zip(cameras, images):
         path = out / f"view_az{int(round(camera.azimuth_deg)):03d}.png"
@@ -39,7 +44,7 @@ def run(args) -> int:
         files.append(str(path))
     write_report(out / "report.json", {"stage": "render", "source": label, "lighting": env_label,
                                        "views": files, "spp": args.spp, "environment": environment_info()})
-    print(f"rendered {len(files)} views of '{mesh.name}' ({label}, {env_label}) -> {out}")
+    print(f"rendered {len(files)} views of '{mesh.name}' ({label}, {env_label}) -> {args.out}")
     return 0
 
 
@@ -47,11 +52,11 @@ def add_parser(sub) -> None:
     p = sub.add_parser("render", help="render the asset (or its converted neural texture) from orbit views")
     add_asset_args(p)
     add_lighting_args(p)
-    p.add_argument("--out", required=True)
+    add_output_args(p)
     p.add_argument("--texture", help="a texture.pt written by `scenefit convert` (default: the asset's maps)")
-    p.add_argument("--views", type=int, default=4)
-    p.add_argument("--elevation", type=float, default=15.0)
-    p.add_argument("--size", type=int, default=256)
-    p.add_argument("--spp", type=int, default=64)
-    p.add_argument("--exposure", type=float, default=1.0)
+    p.add_argument("--views", type=positive_int, default=4)
+    p.add_argument("--elevation", type=finite_float, default=15.0)
+    p.add_argument("--size", type=positive_int, default=256)
+    p.add_argument("--spp", type=positive_int, default=64)
+    p.add_argument("--exposure", type=positive_float, default=1.0)
     p.set_defaults(func=run)

@@ -44,6 +44,7 @@ from .guidance.weighting import (ANNEAL_TYPES, NORMAL_WEIGHT_TYPES, interpolatio
 from .mesh import Mesh
 from .progress import ProgressCallback, check_cancel, emit
 from .render import AssetRenderer, SceneOptions, equirect_directions
+from .texture.bake import torch_load_reason
 from .texture.neural_texture import NeuralTexture, preset
 from .texture.uv_raster import UVRaster
 
@@ -378,7 +379,8 @@ def _load_checkpoint(path: Path, config: AdaptConfig) -> dict | None:
     try:
         payload = torch.load(path, map_location="cpu", weights_only=False)
     except Exception as error:
-        raise InputError(f"The checkpoint '{path}' cannot be read ({error}); delete it to start over.") from error
+        raise InputError(f"The checkpoint '{path}' cannot be read ({torch_load_reason(error)}); delete it to start "
+                         "over.") from None
     if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
         raise InputError(f"'{path}' is not a SceneFit adapt checkpoint; delete it to start over.")
     if payload["settings"] != _settings_key(config):

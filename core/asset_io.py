@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import json
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -51,17 +52,53 @@ def load_asset_folder(folder: str | Path) -> tuple[Mesh, PBRMaps]:
     folder = Path(folder)
     if not is_asset_folder(folder):
         raise InputError(f"'{folder}' is not a SceneFit asset folder (it has no mesh.npz).")
-    meta_path = folder / "material.json"
-    material = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
-    with np.load(folder / "mesh.npz") as data:
-        mesh = Mesh.from_arrays(data["positions"], data["faces"], data["uvs"],
-                                data["normals"] if "normals" in data else None,
-                                name=material.get("name", folder.name))
+    material = _read_material(folder / "material.json")
+    mesh = _read_mesh(folder / "mesh.npz", str(material.get("name", folder.name)))
     base_path = folder / "base_color.png"
-    if not base_path.is_file():
+    if not base_path.exists():
         raise InputError(f"Asset folder '{folder}' has no base_color.png.")
     channels = {}
     for name, default in (("roughness", 0.5), ("metallic", 0.0)):
         path = folder / f"{name}.png"
-        channels[name] = read_image(path)[..., 0] if path.is_file() else float(material.get(name, default))
+        if path.exists():  # a folder of that name is an error (read_image says so), not "no map"
+            channels[name] = read_image(path)[..., 0]
+            continue
+        value = material.get(name, default)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InputError(f"'{name}' in '{folder / 'material.json'}' must be a number between 0 and 1, "
+                             f"got {value!r}.")
+        channels[name] = float(value)
     return mesh, PBRMaps(base_color=read_color_image(base_path), **channels)
+
+
+def _read_material(path: Path) -> dict:
+    if not path.exists():
+        return {}
+    try:
+        material = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise InputError(f"'{path}' is not valid JSON ({error}); fix it or delete it to use the defaults.") from None
+    if not isinstance(material, dict):
+        raise InputError(f"'{path}' must hold a JSON object such as {{\"roughness\": 0.5}}.")
+    return material
+
+
+def _read_mesh(path: Path, name: str) -> Mesh:
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            missing = [key for key in ("positions", "faces", "uvs") if key not in data.files]
+            if missing:
+                raise InputError(f"'{path}' has no {' or '.join(missing)} array; SceneFit needs positions, "
+                                 "faces and uvs (re-export the asset).")
+            arrays = {key: np.asarray(data[key]) for key in ("positions", "faces", "uvs", "normals")
+                      if key in data.files}
+    except InputError:
+        raise
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
+        raise InputError(f"'{path}' cannot be read ({error or 'truncated or not an .npz file'}); "
+                         "re-export the asset.") from None
+    faces = arrays["faces"]
+    if faces.dtype.kind not in "iu":
+        raise InputError(f"'{path}' stores its faces as {faces.dtype}; face indices must be integers "
+                         "(re-export the asset).")
+    return Mesh.from_arrays(arrays["positions"], faces, arrays["uvs"], arrays.get("normals"), name=name)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -10,6 +11,19 @@ from typing import Any
 
 # mkstemp creates files readable by their owner only; results are ordinary files for others to read.
 FILE_MODE = 0o644
+# Temp files are named ".<name>.<random>.scenefit-tmp<ext>" so a later run can tell a killed write's leftovers.
+TEMP_MARK = ".scenefit-tmp"
+
+
+def temp_affixes(path: Path, keep_suffix: bool = False) -> dict:
+    """mkstemp prefix/suffix for a temp file beside `path` (keep_suffix: end in path's extension, for
+    writers that pick the format from it)."""
+    return {"prefix": f".{path.name}.", "suffix": TEMP_MARK + (path.suffix if keep_suffix else ""),
+            "dir": path.parent}
+
+
+def is_temp_name(name: str) -> bool:
+    return name.startswith(".") and TEMP_MARK in name
 
 
 def replace_atomic(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
@@ -21,7 +35,7 @@ def replace_atomic(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
 def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(**temp_affixes(path))
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
@@ -37,12 +51,22 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
 
 
 def write_json_atomic(path: str | os.PathLike, obj: Any) -> Path:
-    return write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=False, default=_jsonable) + "\n")
+    """Strict JSON (what every parser accepts): NaN and infinities are written as null."""
+    return write_text_atomic(path, json.dumps(strict_json(obj), indent=2, sort_keys=False, allow_nan=False) + "\n")
 
 
-def _jsonable(value: Any) -> Any:
-    if hasattr(value, "tolist"):
-        return value.tolist()
+def strict_json(value: Any) -> Any:
+    """`value` with numpy arrays/scalars and paths made plain, and non-finite floats made None."""
+    if isinstance(value, dict):
+        return {str(k): strict_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict_json(v) for v in value]
     if isinstance(value, Path):
         return str(value)
+    if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):
+        return strict_json(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if value is None or isinstance(value, (str, int, float, bool)):
+        return value
     raise TypeError(f"{type(value).__name__} is not JSON serialisable")

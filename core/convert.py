@@ -35,6 +35,7 @@ class ConvertConfig:
     method_type: str = "direct"
     texture_preset: str = "balanced"
     resolution: int | None = None     # None: the asset's base colour resolution, capped at max_resolution
+    screen_px: int | None = None      # the object's height in the composite, pixels: no more texels than it shows
     max_resolution: int = 1024
     iterations: int = 400
     lr_start: float = 0.02            # paper: 0.02 annealed to 0.001
@@ -49,6 +50,8 @@ class ConvertConfig:
             raise InputError(f"method_type must be one of {METHOD_TYPES}, got {self.method_type!r}.")
         if self.iterations < 1:
             raise InputError(f"iterations must be at least 1, got {self.iterations}.")
+        if self.screen_px is not None and self.screen_px < 1:
+            raise InputError(f"screen_px must be at least 1 pixel, got {self.screen_px}.")
         if self.resolution is not None and not 8 <= self.resolution <= 8192:
             raise InputError(f"resolution must be between 8 and 8192 texels, got {self.resolution}.")
         preset(self.texture_preset)  # validates the name
@@ -96,6 +99,13 @@ def choose_resolution(maps: PBRMaps, config: ConvertConfig) -> tuple[int, str]:
     if config.resolution is not None:
         return config.resolution, "set by the user"
     native = max(maps.resolution)
+    if config.screen_px is not None:
+        from .scene_needs import texture_size_for_screen
+
+        needed = texture_size_for_screen(config.screen_px)
+        if needed < min(native, config.max_resolution):
+            return needed, (f"the object is {config.screen_px} px tall in the composite, so {needed} texels show "
+                            f"every detail it can (the asset has {native})")
     if native <= config.max_resolution:
         return native, f"the asset's own texture size ({native})"
     return config.max_resolution, f"the asset's {native} texels capped at the preset's {config.max_resolution}"

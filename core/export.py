@@ -11,12 +11,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import write_text_atomic
+from .atomic import TEMP_MARK, write_text_atomic
 from .backend import init_mitsuba
 from .camera import Camera
+from .errors import InputError
 from .imageio import linear_to_srgb, write_image
 from .maps import PBRMaps
 from .mesh import Mesh, normalize_to_unit_sphere
+from .pipeline import check_environment
 from .render import ENVMAP_TO_WORLD, _mitsuba_mesh
 
 
@@ -61,6 +63,10 @@ def export_mitsuba_scene(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, camera:
     envmap: linear (H, 2H, 3) radiance in Blender's equirectangular convention; None writes a
     constant white environment.
     """
+    if spp < 1 or max_depth < 1:
+        raise InputError(f"Samples per pixel and path depth must be at least 1, got {spp} and {max_depth}.")
+    if envmap is not None:
+        check_environment(np.asarray(envmap), "The environment map to export")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     init_mitsuba()
@@ -76,7 +82,7 @@ def export_mitsuba_scene(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, camera:
         target = transform.to_object(np.asarray(camera.target, dtype=np.float64))
         up, fov_axis = np.array([0.0, 0.0, 1.0]), "smaller"
     # The PLY holds Mitsuba's own texture convention (v = 0 at the top row), so it is read unflipped.
-    tmp_ply = out_dir / ".mesh.ply.tmp"
+    tmp_ply = out_dir / f".mesh.ply{TEMP_MARK}"
     _mitsuba_mesh(mi, mesh).write_ply(str(tmp_ply))
     tmp_ply.replace(out_dir / "mesh.ply")
     write_image(out_dir / "base_color.png", linear_to_srgb(maps.base_color))

@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import replace_atomic
+from .atomic import replace_atomic, temp_affixes
 from .errors import InputError
+from .quiet import native_output_captured
 
 
 def srgb_to_linear(x: np.ndarray) -> np.ndarray:
@@ -21,26 +22,74 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, x * 12.92, 1.055 * np.power(x, 1.0 / 2.4) - 0.055).astype(np.float32)
 
 
-def read_image(path: str | os.PathLike) -> np.ndarray:
-    """Pixels as float32 (H, W, C) exactly as stored (8-bit files scaled to [0, 1], no colour change)."""
+def read_image(path: str | os.PathLike, max_side: int | None = None) -> np.ndarray:
+    """Pixels as float32 (H, W, C) exactly as stored (8-bit files scaled to [0, 1], no colour change).
+
+    Colour channels of RGBA files are read as stored, not multiplied by alpha (OpenImageIO's
+    default would darken them wherever alpha < 1).
+
+    max_side: an image longer than this is reduced while it is read, band by band, by the whole
+    factor k = ceil(long side / max_side) (each output pixel the mean of k x k stored ones, which keeps
+    an HDR image's energy), so an 8000x6000 photo never sits in memory at full size.
+    """
     import OpenImageIO as oiio
 
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"'{path}' is a folder, not an image; give the image file's path.")
     if not path.is_file():
         raise InputError(f"Image '{path}' does not exist.")
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise InputError(f"Image '{path}' cannot be read: {oiio.geterror()}")
-    try:
-        pixels = inp.read_image("float")
-    finally:
-        inp.close()
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    with native_output_captured() as chatter:
+        inp = oiio.ImageInput.open(str(path), config)
+        pixels = None
+        if inp is not None:
+            try:
+                pixels = _read_reduced(inp, max_side)
+                reason = inp.geterror()
+            finally:
+                inp.close()
+        else:
+            reason = oiio.geterror()
     if pixels is None:
-        raise InputError(f"Image '{path}' cannot be decoded: {oiio.geterror()}")
+        reason = _first_line(reason) or chatter.last_line() or "the file is empty, truncated or not an image"
+        what = "read" if inp is None else "decoded"
+        raise InputError(f"Image '{path}' cannot be {what} ({reason}); re-export it as PNG, JPEG or EXR.")
     pixels = np.asarray(pixels, dtype=np.float32)
     if pixels.ndim == 2:
         pixels = pixels[..., None]
     return pixels
+
+
+def reduction_factor(width: int, height: int, max_side: int | None) -> int:
+    return 1 if not max_side or max(width, height) <= max_side else -(-max(width, height) // max_side)
+
+
+def _read_reduced(inp, max_side: int | None, band_rows: int = 32) -> np.ndarray | None:
+    spec = inp.spec()
+    w, h, c = spec.width, spec.height, spec.nchannels
+    k = reduction_factor(w, h, max_side)
+    if k == 1:
+        return inp.read_image("float")
+    out_w, out_h = -(-w // k), -(-h // k)
+    out = np.empty((out_h, out_w, c), np.float32)
+    for row in range(0, out_h, band_rows):
+        y0, y1 = row * k, min(h, (row + band_rows) * k)
+        band = inp.read_scanlines(0, 0, y0 + spec.y, y1 + spec.y, 0, 0, c, "float")
+        if band is None:
+            return None
+        band = np.asarray(band, np.float32).reshape(y1 - y0, w, c)
+        rows = -(-(y1 - y0) // k)
+        # Pad the last partial block by repeating the edge, then average k x k blocks.
+        band = np.pad(band, ((0, rows * k - (y1 - y0)), (0, out_w * k - w), (0, 0)), mode="edge")
+        out[row:row + rows] = band.reshape(rows, k, out_w, k, c).mean(axis=(1, 3))
+    return out
+
+
+def _first_line(text: str) -> str:
+    lines = [line.strip() for line in (text or "").splitlines() if line.strip()]
+    return lines[0] if lines else ""
 
 
 def read_color_image(path: str | os.PathLike) -> np.ndarray:
@@ -72,7 +121,7 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, dtype: str | None =
     if dtype in ("uint8", "uint16"):
         pixels = np.clip(pixels, 0.0, 1.0)
     h, w, c = pixels.shape
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    fd, tmp = tempfile.mkstemp(**temp_affixes(path, keep_suffix=True))
     os.close(fd)
     try:
         out = oiio.ImageOutput.create(tmp)
@@ -81,6 +130,7 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, dtype: str | None =
         spec = oiio.ImageSpec(w, h, c, dtype)
         if path.suffix.lower() == ".exr":
             spec.attribute("compression", "zip")
+        spec.attribute("oiio:UnassociatedAlpha", 1)  # colour is stored as given, never divided by alpha
         if not out.open(tmp, spec):
             raise InputError(f"Cannot open '{path}' for writing: {out.geterror()}")
         ok = out.write_image(np.ascontiguousarray(pixels))

@@ -41,8 +41,16 @@ class Mesh:
             raise InputError(f"Mesh '{self.name}' has face indices outside its vertex list.")
         if not (np.isfinite(p).all() and np.isfinite(uv).all()):
             raise InputError(f"Mesh '{self.name}' has NaN or infinite coordinates.")
-        if self.normals is not None and self.normals.shape != p.shape:
-            raise InputError(f"Mesh '{self.name}' has {len(self.normals)} normals for {len(p)} vertices.")
+        if self.normals is not None:
+            n = self.normals
+            if n.shape != p.shape:
+                raise InputError(f"Mesh '{self.name}' has {len(n)} normals for {len(p)} vertices.")
+            if not np.isfinite(n).all():
+                raise InputError(f"Mesh '{self.name}' has NaN or infinite normals; recalculate them in Blender "
+                                 "(Mesh > Normals > Reset Vectors) or leave them out.")
+            if not (np.abs(n).sum(axis=1) > 0).any():
+                raise InputError(f"Mesh '{self.name}' has all-zero normals; recalculate them in Blender "
+                                 "(Mesh > Normals > Reset Vectors) or leave them out.")
         # Freeze the arrays too, so nothing downstream edits the user's data in place.
         for a in (p, f, uv, self.normals):
             if a is not None:

@@ -20,6 +20,7 @@ from .maps import PBRMaps
 from .mesh import Mesh
 from .progress import ProgressCallback, check_cancel, emit
 from .render import AssetRenderer, SceneOptions
+from .scene_needs import constant_channels
 from .texture.bake import bake_maps
 from .texture.fit_direct import masked_psnr
 
@@ -38,9 +39,18 @@ def load_environment(path: str | Path, max_height: int = 256) -> np.ndarray:
     h, w = env.shape[:2]
     if w != 2 * h:
         raise InputError(f"Environment map '{path}' is {w}x{h}; a latitude-longitude map is twice as wide as high.")
+    check_environment(env, f"Environment map '{path}'")
     if h > max_height:
         env = cv2.resize(env, (2 * max_height, max_height), interpolation=cv2.INTER_AREA)
-    return np.maximum(env, 0.0).astype(np.float32)
+    return env.astype(np.float32)
+
+
+def check_environment(env: np.ndarray, what: str = "The environment map") -> None:
+    """Radiance is finite and never negative; anything else makes renders (and `mitsuba`) fail later."""
+    if not np.isfinite(env).all():
+        raise InputError(f"{what} holds NaN or infinite pixels; repair or re-export it.")
+    if (env < 0).any():
+        raise InputError(f"{what} holds negative pixels (light cannot be negative); clamp them to 0 and re-export.")
 
 
 def tonemap_srgb(rgb: np.ndarray, exposure: float = 1.0) -> np.ndarray:
@@ -104,13 +114,23 @@ def environment_info() -> dict:
 
 
 def convert_and_bake(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, config: ConvertConfig = ConvertConfig(),
-                     progress: ProgressCallback | None = None,
-                     cancel: threading.Event | None = None) -> tuple[ConvertResult, dict]:
-    """Convert the asset's maps to a neural texture and bake it into `out_dir`; returns the result and report."""
+                     progress: ProgressCallback | None = None, cancel: threading.Event | None = None,
+                     keep_constants: bool = False) -> tuple[ConvertResult, dict]:
+    """Convert the asset's maps to a neural texture and bake it into `out_dir`; returns the result and report.
+
+    keep_constants: a roughness/metallic that holds one value stays that number (reported in
+    decisions > channels, returned in outputs as a float) instead of a baked 16-bit map.
+    """
     out_dir = Path(out_dir)
     result = convert_asset(mesh, maps, config, progress=progress, cancel=cancel)
     check_cancel(cancel)
-    paths = bake_maps(result.texture, result.raster.position, result.raster.border, result.raster.fill_index, out_dir)
+    constants = {}
+    if keep_constants:
+        channels = constant_channels(maps)
+        constants = {name: d.value for name, d in channels.items() if d.value != "map"}
+        result.decisions["channels"] = {name: d.to_dict() for name, d in channels.items()}
+    paths = bake_maps(result.texture, result.raster.position, result.raster.border, result.raster.fill_index, out_dir,
+                      constants=constants)
     report = {
         "stage": "convert",
         "config": asdict(config),
@@ -118,15 +138,33 @@ def convert_and_bake(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, config: Con
         "psnr_covered_texels_db": round(result.psnr, 3),
         "seconds": round(result.seconds, 3),
         "iterations": result.iterations,
-        "outputs": {k: str(v) for k, v in paths.items()},
+        "outputs": {k: v if isinstance(v, float) else str(v) for k, v in paths.items()},
     }
     return result, report
 
 
 def write_report(path: str | Path, report: dict) -> Path:
+    """report.json in strict JSON; paths inside the report's folder are written relative to it, so
+    they stay right when the run's folder is swapped into place or moved."""
+    path = Path(path)
     report = dict(report)
     report.setdefault("written_at", time.strftime("%Y-%m-%dT%H:%M:%S%z"))
-    return write_json_atomic(path, report)
+    return write_json_atomic(path, _relative_paths(report, path.parent.absolute()))
+
+
+def _relative_paths(value, folder: Path):
+    if isinstance(value, dict):
+        return {k: _relative_paths(v, folder) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_relative_paths(v, folder) for v in value]
+    if isinstance(value, (str, Path)) and str(value):
+        candidate = Path(value)
+        if candidate.is_absolute() or isinstance(value, Path):
+            try:
+                return candidate.absolute().relative_to(folder).as_posix()
+            except ValueError:
+                return str(value) if isinstance(value, Path) else value
+    return value
 
 
 def baked_psnr(result: ConvertResult, baked: torch.Tensor) -> float:

@@ -50,6 +50,12 @@ class DepthResult:
     detail: dict
 
 
+def _first_sentence(error: Exception) -> str:
+    """The library's own reason, without its advice to the library's users (URLs, local directories)."""
+    lines = str(error).strip().splitlines()
+    return (lines[0].split(". ")[0] if lines else type(error).__name__)[:200]
+
+
 def offline(local_files_only: bool | None) -> bool:
     if local_files_only is not None:
         return bool(local_files_only)
@@ -87,7 +93,7 @@ class DepthModel:
                 f"{' (offline: downloads are off)' if only_local else ''}. Provide it by downloading it on a "
                 f"connected machine (`huggingface-cli download {model}`) into that cache, or pass a local folder "
                 f"holding config.json, the weights and preprocessor_config.json (--depth-model PATH); or use "
-                f"the geometric fallback (--depth geometric). Cause: {str(error).splitlines()[0][:200]}") from error
+                f"the geometric fallback (--depth geometric). Cause: {_first_sentence(error)}") from error
         self.model.eval().to(device)
         self.device = device
         self.name = model

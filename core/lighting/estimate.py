@@ -34,6 +34,11 @@ from .hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, Critic, Optimi
 from .panorama import Panorama, indoor_panorama, outdoor_panorama, place_on_floor, sky_score
 from .regions import RegionThresholds, bright_regions
 
+# The panorama is built (and its lights found) at least this tall, whatever map size is asked for: a
+# texel of 1.4 deg, so a lamp 16 px wide in a 640 px, 60 deg photo (1.5 deg) still fills a texel of its
+# own. A smaller map is then area-averaged from it, which keeps every light's energy (draft used to
+# point-sample the photo into a 64-row map and lose such lamps).
+MIN_WORKING_HEIGHT = 128
 DEFAULT_FOV_DEG = 60.0   # horizontal; a typical phone/kit-lens view (~28 mm full-frame equivalent)
 SCENE_TYPES = ("auto", "indoor", "outdoor")
 CRITIC_TYPES = ("none", "reference", "diffusion")
@@ -69,7 +74,8 @@ class LightConfig:
         if self.fov_deg is not None and not 1.0 <= self.fov_deg <= 170.0:
             raise InputError(f"The photo's field of view must be between 1 and 170 degrees, got {self.fov_deg}.")
         if not -89.0 <= self.camera_pitch_deg <= 89.0:
-            raise InputError(f"camera_pitch_deg must be within +-89 degrees, got {self.camera_pitch_deg}.")
+            raise InputError(f"The photo camera's elevation must be within +-89 degrees (how far it looks down), "
+                             f"got {-self.camera_pitch_deg:g}.")
         if not 8 <= self.map_height <= 4096:
             raise InputError(f"map_height must be between 8 and 4096, got {self.map_height}.")
         if not self.l_white > 1.0:
@@ -109,8 +115,17 @@ class LightResult:
 
 
 # -- photos ----------------------------------------------------------------------------------------
-def load_photo(path: str | Path) -> tuple[np.ndarray, dict]:
+# Nothing in the light stage looks at a photo more closely than this: the panorama splats at most
+# 768 px on the long side, the depth model sees 518, the critics 512. Larger photos are reduced while
+# they are read (an 8000x6000 photo peaked at 5.1 GB to make a 64x128 map).
+PHOTO_WORKING_SIDE = 1024
+
+
+def load_photo(path: str | Path, max_side: int | None = PHOTO_WORKING_SIDE) -> tuple[np.ndarray, dict]:
     """A photo as sRGB-encoded float32 RGB in [0, 1], and what was decided reading it.
+
+    Photos longer than `max_side` are area-reduced by a whole factor while read (linear radiance
+    for EXR/HDR, so a small bright light keeps its energy); the report gives both sizes.
 
     8/16-bit files are taken as stored (sRGB). Float files (EXR/HDR) hold linear radiance: they are
     exposed as a camera meters (log-average luminance -> 0.18), clipped and sRGB-encoded, so every
@@ -119,7 +134,7 @@ def load_photo(path: str | Path) -> tuple[np.ndarray, dict]:
     import OpenImageIO as oiio
 
     path = Path(path)
-    pixels = read_image(path)
+    pixels = read_image(path, max_side=max_side)
     if pixels.shape[2] == 1:
         pixels = np.repeat(pixels, 3, axis=2)
     elif pixels.shape[2] == 2:
@@ -128,7 +143,10 @@ def load_photo(path: str | Path) -> tuple[np.ndarray, dict]:
     h, w = rgb.shape[:2]
     if min(h, w) < 2:
         raise InputError(f"The photo '{path}' is {w}x{h}; it needs at least 2x2 pixels.")
-    info: dict = {"path": str(path), "size": [w, h]}
+    info: dict = {"path": str(path), "size": _stored_size(path, (w, h))}
+    if info["size"] != [w, h]:
+        info["working_size"] = {"size": [w, h], "why": f"reduced while read: the light stage needs at most "
+                                                      f"{max_side} px on the long side"}
     if path.suffix.lower() in (".exr", ".hdr"):
         rgb = np.nan_to_num(np.maximum(rgb, 0.0), nan=0.0, posinf=0.0)
         exposure = camera_exposure(rgb)
@@ -146,6 +164,18 @@ def load_photo(path: str | Path) -> tuple[np.ndarray, dict]:
         if focal35:
             info["fov_from_metadata_deg"] = round(float(np.degrees(2 * np.arctan(36.0 / (2 * float(focal35))))), 3)
     return rgb, info
+
+
+def _stored_size(path: Path, fallback: tuple[int, int]) -> list[int]:
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return list(fallback)
+    try:
+        return [inp.spec().width, inp.spec().height]
+    finally:
+        inp.close()
 
 
 def parse_placement(text_or_xy, width: int, height: int) -> tuple[float, float]:
@@ -218,13 +248,17 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     emit(progress, "light", 0, max(config.optimise.iterations, 1), f"{scene_type} panorama")
 
     # The LDR panorama.
+    work_height = max(config.map_height, MIN_WORKING_HEIGHT)
+    decisions["map_height"] = {"output": config.map_height, "working": work_height, "why": (
+        "lights are found at the working size and the map is area-averaged to the output size (energy kept)"
+        if work_height > config.map_height else "built at the output size")}
     placement = place_on_floor(photo_camera, placement_px)
     decisions["placement"] = {"pixel": list(placement.pixel), "object_position": np.round(placement.object_position, 4).tolist(),
                               "lifted_below_horizon": placement.clamped}
     if scene_type == "indoor":
         depth = estimate_ray_distance(photo, photo_camera, placement, config.depth)
         decisions["depth"] = {"method": depth.method, **depth.detail}
-        pano = indoor_panorama(photo, depth.ray_distance, photo_camera, placement, config.map_height)
+        pano = indoor_panorama(photo, depth.ray_distance, photo_camera, placement, work_height)
     else:
         outpaint = None
         if want_outpaint:
@@ -232,7 +266,7 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
 
             def outpaint(ldr, seen):
                 return outpaint_panorama(ldr, seen, guidance_models(), config.outpaint)
-        pano = outdoor_panorama(photo, photo_camera, config.map_height, outpaint=outpaint)
+        pano = outdoor_panorama(photo, photo_camera, work_height, outpaint=outpaint)
         decisions["outpainting"] = {"asked": config.outpaint.completion_type, "used": want_outpaint,
                                     "why": outpaint_why, "completion": pano.decisions["completion"]}
     decisions["panorama"] = pano.decisions
@@ -284,9 +318,20 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
                                      "final_loss": optimisation.loss_history[-1] if optimisation.loss_history else None,
                                      "seconds": round(optimisation.seconds, 3)}
     hdr = hdr_from_scales(pano.ldr, regions, scales)
+    ldr = pano.ldr
+    if work_height > config.map_height:
+        hdr, ldr = (_area_resize(m, config.map_height) for m in (hdr, ldr))
+        regions = {name: _area_resize(mask.astype(np.float32), config.map_height) > 0 for name, mask in regions.items()}
     emit(progress, "light", max(config.optimise.iterations, 1), max(config.optimise.iterations, 1), "HDR map ready")
-    return LightResult(pano.ldr, hdr, regions, scales, prior, pano, photo_camera, decisions, optimisation,
+    return LightResult(ldr, hdr, regions, scales, prior, pano, photo_camera, decisions, optimisation,
                        time.perf_counter() - t0)
+
+
+def _area_resize(image: np.ndarray, height: int) -> np.ndarray:
+    """Area-average a latitude-longitude map down to `height` rows (the mean radiance per texel is kept)."""
+    import cv2
+
+    return cv2.resize(np.ascontiguousarray(image, np.float32), (2 * height, height), interpolation=cv2.INTER_AREA)
 
 
 def _fit_map(envmap: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

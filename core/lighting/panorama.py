@@ -93,6 +93,10 @@ def geometric_ray_distance(camera: PhotoCamera, placement: Placement, height: fl
     return np.minimum(t_floor, t_wall).astype(np.float32)
 
 
+HIGHLIGHT_LEVEL = 0.95             # clipped (the far-light threshold tau_f)
+HIGHLIGHT_DEPTH_TOLERANCE = 1.05   # "on the nearest surface": within 5% of its distance
+
+
 def splat(colors: np.ndarray, points: np.ndarray, origin: np.ndarray, height: int) -> tuple[np.ndarray, ...]:
     """Splat 3D points with colours into an (height, 2 height) map seen from `origin`; nearest point wins."""
     width = 2 * height
@@ -105,7 +109,18 @@ def splat(colors: np.ndarray, points: np.ndarray, origin: np.ndarray, height: in
     row_idx = np.clip((uv[:, 1] * height).astype(np.int64), 0, height - 1)
     texel = row_idx * width + col_idx
     order = np.lexsort((dist, texel))           # by texel, then nearest first
-    first = order[np.unique(texel[order], return_index=True)[1]]
+    starts, counts = np.unique(texel[order], return_index=True, return_counts=True)[1:]
+    first = order[starts]
+    # A clipped highlight (a lamp smaller than a texel) on the texel's nearest surface wins the texel,
+    # so small lights are not lost to a neighbouring sample that happens to be nearer.
+    level = cols[order, :3].mean(axis=-1)
+    front = dist[order] <= HIGHLIGHT_DEPTH_TOLERANCE * np.repeat(dist[first], counts)
+    bright = np.flatnonzero(front & (level >= HIGHLIGHT_LEVEL))
+    if bright.size:
+        group = np.repeat(np.arange(len(starts)), counts)[bright]
+        groups, pick = np.unique(group, return_index=True)
+        first = first.copy()
+        first[groups] = order[bright[pick]]
     image = np.zeros((height * width, cols.shape[1]), np.float32)
     distance = np.full(height * width, np.inf, np.float32)
     mask = np.zeros(height * width, bool)
@@ -165,6 +180,30 @@ def fill_panorama(ldr: np.ndarray, seen: np.ndarray, fill_color: np.ndarray,
     return np.clip(out, 0.0, 1.0), kept, holes, unseen
 
 
+def keep_highlights(photo: np.ndarray, reduced: np.ndarray, level: float = 0.95) -> np.ndarray:
+    """A reduced photo in which a clipped highlight smaller than one reduced pixel survives.
+
+    Area-averaging a lamp of a few pixels (or a 1e6 spot in an EXR, clipped at exposure) with its
+    dark surroundings would bring it under the light thresholds, and no light would be found; a
+    reduced pixel whose footprint holds a clipped pixel keeps the brightest colour there instead.
+    """
+    import cv2
+
+    h, w = photo.shape[:2]
+    rh, rw = reduced.shape[:2]
+    peak = photo[..., :3].mean(axis=-1)
+    if peak.max() < level:
+        return reduced
+    ky, kx = int(np.ceil(h / rh)), int(np.ceil(w / rw))
+    brightest = cv2.dilate(photo, np.ones((ky, kx), np.uint8))          # per channel, over each footprint
+    lit = cv2.dilate((peak >= level).astype(np.uint8), np.ones((ky, kx), np.uint8))
+    # Sample both at the reduced pixels' centres.
+    ys = np.minimum(((np.arange(rh) + 0.5) * h / rh).astype(int), h - 1)
+    xs = np.minimum(((np.arange(rw) + 0.5) * w / rw).astype(int), w - 1)
+    lit_r = lit[np.ix_(ys, xs)].astype(bool)
+    return np.where(lit_r[..., None], brightest[np.ix_(ys, xs)], reduced).astype(np.float32)
+
+
 def _resize_for_splat(photo: np.ndarray, distance: np.ndarray, long_side: int) -> tuple[np.ndarray, np.ndarray]:
     import cv2
 
@@ -172,6 +211,8 @@ def _resize_for_splat(photo: np.ndarray, distance: np.ndarray, long_side: int) -
     scale = long_side / max(h, w)
     size = (max(2, round(w * scale)), max(2, round(h * scale)))
     photo_r = cv2.resize(photo, size, interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR)
+    if scale < 1:
+        photo_r = keep_highlights(photo, photo_r)
     # Distances are interpolated in inverse (smooth across depth edges, never invents far points).
     inv = cv2.resize(1.0 / np.maximum(distance, 1e-6), size, interpolation=cv2.INTER_LINEAR)
     return photo_r, (1.0 / np.maximum(inv, 1e-9)).astype(np.float32)

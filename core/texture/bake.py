@@ -32,20 +32,24 @@ def bake_texture(texture: NeuralTexture, position_map, mask, fill_index) -> np.n
         return texture.texture(position_map, mask, fill_index).cpu().numpy().astype(np.float32)
 
 
-def bake_maps(texture: NeuralTexture, position_map, mask, fill_index, out_dir: str | os.PathLike) -> dict[str, Path]:
+def bake_maps(texture: NeuralTexture, position_map, mask, fill_index, out_dir: str | os.PathLike,
+              constants: dict[str, float] | None = None) -> dict[str, Path | float]:
     """Write base_color.png, roughness.png, metallic.png and texture.pt into out_dir (atomically).
 
     Pass a UVRaster's `position`, `border` and `fill_index`. Returns {"base_color", "roughness",
-    "metallic", "weights"} -> path.
+    "metallic", "weights"} -> path. constants: roughness/metallic that stay one value; they are
+    returned as that float and get no map (write_result_material sets the socket's value).
     """
     out_dir = Path(out_dir)
+    constants = constants or {}
     maps = bake_texture(texture, position_map, mask, fill_index)
-    return {
-        "base_color": write_image(out_dir / MAP_FILES["base_color"], linear_to_srgb(maps[..., 0:3]), dtype="uint8"),
-        "roughness": write_image(out_dir / MAP_FILES["roughness"], maps[..., 3], dtype="uint16"),
-        "metallic": write_image(out_dir / MAP_FILES["metallic"], maps[..., 4], dtype="uint16"),
-        "weights": save_neural_texture(texture, out_dir / WEIGHTS_FILE),
-    }
+    out: dict[str, Path | float] = {
+        "base_color": write_image(out_dir / MAP_FILES["base_color"], linear_to_srgb(maps[..., 0:3]), dtype="uint8")}
+    for channel, name in ((3, "roughness"), (4, "metallic")):
+        out[name] = float(constants[name]) if name in constants else \
+            write_image(out_dir / MAP_FILES[name], maps[..., channel], dtype="uint16")
+    out["weights"] = save_neural_texture(texture, out_dir / WEIGHTS_FILE)
+    return out
 
 
 def save_neural_texture(texture: NeuralTexture, path: str | os.PathLike) -> Path:
@@ -58,6 +62,15 @@ def save_neural_texture(texture: NeuralTexture, path: str | os.PathLike) -> Path
     return write_bytes_atomic(path, buffer.getvalue())
 
 
+def torch_load_reason(error: Exception) -> str:
+    """Why torch.load failed, in a few words (its own message advises unsafe loading, which is not for users)."""
+    text = str(error)
+    if "weights_only" in text or "Weights only" in text:
+        return "it holds more than tensors or is not a file SceneFit saved"
+    first = next((line.strip() for line in text.splitlines() if line.strip()), "")
+    return first[:200] or type(error).__name__
+
+
 def load_neural_texture(path: str | os.PathLike, device: str | torch.device = "cpu") -> NeuralTexture:
     """The NeuralTexture saved by bake_maps / save_neural_texture, on `device`."""
     path = Path(path)
@@ -68,7 +81,8 @@ def load_neural_texture(path: str | os.PathLike, device: str | torch.device = "c
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as error:  # torch raises several types for truncated or foreign files
-        raise InputError(f"'{path}' is not a readable neural texture file ({error}).") from error
+        raise InputError(f"'{path}' is not a readable neural texture file ({torch_load_reason(error)}); "
+                         "convert the asset again to make one.") from None
     if not isinstance(payload, dict) or payload.get("format") != WEIGHTS_FORMAT:
         raise InputError(f"'{path}' is not a SceneFit neural texture file.")
     if payload.get("version") != WEIGHTS_VERSION:

@@ -1,0 +1,64 @@
+"""Only what the scene needs (issue 10): each size and representation chosen from the asset and the shot."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from scenefit.core.convert import ConvertConfig, choose_resolution, convert_preset
+from scenefit.core.maps import PBRMaps
+from scenefit.core.pipeline import convert_and_bake, write_report
+from scenefit.core.primitives import uv_sphere
+from scenefit.core.scene_needs import constant_channels, envmap_height_for, texture_size_for_screen
+
+
+def base(size: int = 16) -> np.ndarray:
+    yy, xx = np.mgrid[0:size, 0:size] / size
+    return np.stack([xx, yy, 0.5 + 0 * xx], -1).astype(np.float32)
+
+
+def test_constant_channels_stay_constants_and_the_report_says_why(tmp_path):
+    # metallic: a map holding 0 everywhere (as the example's); roughness varies.
+    rough = (0.2 + 0.6 * base()[..., 0]).astype(np.float32)
+    maps = PBRMaps(base(), rough, np.zeros((16, 16), np.float32))
+    result, report = convert_and_bake(uv_sphere(segments=12, rings=6), maps, tmp_path / "maps",
+                                      convert_preset("draft", iterations=3), keep_constants=True)
+    assert report["outputs"]["metallic"] == 0.0 and not (tmp_path / "maps" / "metallic.png").exists()
+    assert (tmp_path / "maps" / "roughness.png").is_file()
+    channels = report["decisions"]["channels"]
+    assert channels["metallic"]["value"] == 0.0 and "one value" in channels["metallic"]["why"]
+    assert channels["roughness"]["value"] == "map"
+    write_report(tmp_path / "report.json", report)
+    assert json.loads((tmp_path / "report.json").read_text())["decisions"]["channels"]["metallic"]["value"] == 0.0
+
+
+def test_constants_given_as_numbers_stay_numbers():
+    decided = constant_channels(PBRMaps(base(), 0.35, 1.0))
+    assert decided["roughness"].value == 0.35 and decided["metallic"].value == 1.0
+
+
+def test_texture_size_follows_the_objects_size_on_screen():
+    big = PBRMaps(np.zeros((2048, 2048, 3), np.float32))
+    size, why = choose_resolution(big, ConvertConfig(screen_px=100))
+    assert size == texture_size_for_screen(100) == 256 and "100 px" in why
+    # Never more than the asset has or the preset allows, and the user's choice wins.
+    assert choose_resolution(PBRMaps(base(64)), ConvertConfig(screen_px=2000))[0] == 64
+    assert choose_resolution(big, convert_preset("draft", screen_px=2000))[0] == 512
+    assert choose_resolution(big, ConvertConfig(screen_px=100, resolution=1024))[0] == 1024
+
+
+@pytest.mark.parametrize("roughness, height", [(1.0, 32), (0.5, 32), (0.3, 128), (0.2, 256), (0.0, 256)])
+def test_environment_map_size_follows_how_glossy_the_asset_is(roughness, height):
+    decision = envmap_height_for(PBRMaps(base(), roughness, 0.0))
+    assert decision.value == height and f"{roughness:.3g}" in decision.why
+
+
+def test_the_glossiest_part_of_a_map_decides():
+    rough = np.full((16, 16), 0.9, np.float32)
+    rough[:4] = 0.15                                  # a quarter of the surface is glossy
+    assert envmap_height_for(PBRMaps(base(), rough, 0.0)).value == 256
+    # Texels no triangle uses (padding, here glossy) do not count.
+    covered = np.zeros((16, 16), bool)
+    covered[4:] = True
+    assert envmap_height_for(PBRMaps(base(), rough, 0.0), covered).value == 32
