@@ -25,7 +25,7 @@ help:
 setup: $(STAMP)
 
 # Re-run only when the pins or the packaging change; tools/setup.sh is itself idempotent.
-$(STAMP): requirements.txt pyproject.toml tools/setup.sh tools/find_llvm.sh
+$(STAMP): requirements.txt requirements-ray.txt pyproject.toml tools/setup.sh tools/find_llvm.sh
 	tools/setup.sh
 	@touch $@
 

@@ -1,4 +1,4 @@
-"""The bundled example, end to end: what `make demo` runs (later stages join as they land).
+"""The bundled example, end to end: what `make demo` runs (`scenefit run` on it, and a sheet).
 
 Inputs are made here, never downloaded: Suzanne with a procedural material baked by Blender's
 Cycles into image maps, and a photo cut from one of the CC0 HDR maps inside the bpy wheel,
@@ -14,25 +14,22 @@ from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from .core.asset_io import is_asset_folder, load_asset_folder
-from .core.camera import orbit_cameras
-from .core.convert import convert_preset, target_stack
+from .core.compose import ComposeInputs, compose_preset, compose_to_folder, light_camera
 from .core.imageio import read_image, write_image
-from .core.lighting import estimate_light, light_preset, light_report, load_photo, parse_placement, write_light_outputs
+from .core.lighting import load_photo, parse_placement
 from .core.mesh import normalize_to_unit_sphere
 from .core.photo import PhotoCamera, develop_photo, perspective_view, studiolight_path
-from .core.pipeline import (contact_sheet, convert_and_bake, environment_info, image_psnr,
-                            render_views, tonemap_srgb, write_report)
+from .core.pipeline import constant_environment, contact_sheet, environment_info, load_environment, write_report
 from .core.progress import ProgressCallback, emit
-from .core.scene_needs import envmap_height_for
-from .core.texture.uv_raster import rasterize_uv
+from .core.run import RunConfig, run_pipeline
+from .core.texture.bake import load_neural_texture, texture_maps_for_mesh
 
 DEMO_STUDIOLIGHT = "interior"
 DEMO_PHOTO_CAMERA = PhotoCamera(yaw_deg=60.0, pitch_deg=-12.0, fov_deg=60.0, width=768, height=512)
-DEMO_PLACEMENT = (0.5, 0.75)  # where the asset goes, as a fraction of the photo's width and height
-DEMO_VIEWS = 4
+DEMO_PLACEMENT = (0.5, 0.75)  # where the asset stands, as a fraction of the photo's width and height
+DEMO_SIZE = 0.3               # the fraction of the photo's height it spans
 
 
 def make_example(folder: Path) -> str:
@@ -54,113 +51,74 @@ def make_photo(path: Path) -> dict:
 
 def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | None = None,
              refresh: bool = False, guidance: str = "auto") -> dict:
+    """`scenefit run` on the bundled example, plus the same composite under a constant light, and a sheet:
+    photo | composite under a constant light | composite under the estimated light."""
     started = time.perf_counter()
     out = Path(out)
     # Texture adaptation needs Stable Diffusion 2: "sd2" insists (a missing model stops the demo here,
     # before any work), "auto" uses it when its weights are on this machine, "none" skips it.
     from .core.errors import InputError
-    from .core.guidance import ModelConfig, locate_models, models_available
+    from .core.guidance import ModelConfig, locate_models
 
     if guidance not in ("auto", "sd2", "none"):
         raise InputError(f"guidance must be 'auto', 'sd2' or 'none', got {guidance!r}.")
     if guidance == "sd2":
         locate_models(ModelConfig(), need_inpaint=True)
-    found, where = models_available(ModelConfig()) if guidance == "auto" else (guidance == "sd2", "")
-    adapt_info: dict = {"guidance": guidance, "used": bool(found)}
-    if not found:
-        adapt_info["why"] = ("--guidance none: the weight-free path (the converted texture is not adapted)"
-                             if guidance == "none" else "Stable Diffusion 2 weights were not found, so the demo "
-                             "ran the weight-free path (the converted texture is not adapted): " + where)
     inputs = out / "input"
     if refresh and inputs.exists():
         shutil.rmtree(inputs)
-    timings: dict[str, float] = {}
 
     t = time.perf_counter()
     emit(progress, "example", 0, 1, "making the example asset with Blender")
     example_origin = make_example(inputs / "asset")
     photo_info = make_photo(inputs / "photo.png")
     emit(progress, "example", 1, 1, example_origin)
-    timings["inputs"] = time.perf_counter() - t
+    inputs_seconds = time.perf_counter() - t
 
+    # The whole pipeline, resumable: a second `make demo` reuses every stage.
     mesh, maps = load_asset_folder(inputs / "asset")
-    # Light: the photo's HDR environment, estimated from the photo alone (no diffusion critic
-    # without weights, so the inverse-tone-mapping prior sets the light scales; the report says so).
+    config = RunConfig(preset=preset, guidance_type=guidance, photo_camera=DEMO_PHOTO_CAMERA, size=DEMO_SIZE,
+                       prompt="a monkey head sculpture standing in a living room, its painted surface dusty and "
+                              "worn, photo")
+    run = run_pipeline(mesh, maps, inputs / "photo.png", DEMO_PLACEMENT, out, config, progress=progress)
+
+    # The same composite under a constant light of the estimated map's mean radiance: what the
+    # direction of the light adds.
     t = time.perf_counter()
-    photo_srgb, photo_read = load_photo(inputs / "photo.png")
-    placement_px = parse_placement(DEMO_PLACEMENT, photo_srgb.shape[1], photo_srgb.shape[0])
-    # Only what the scene needs: the map is as sharp as the asset's glossiest reflections.
+    estimated = load_environment(out / "light" / "light.exr")
+    constant = constant_environment(estimated.reshape(-1, 3).mean(axis=0))
+    compose_stage = run["stages"]["compose"]["report"]
+    texture_path = Path(compose_stage["inputs"]["texture"])
+    photo, photo_read = load_photo(inputs / "photo.png")
     normalized, _ = normalize_to_unit_sphere(mesh)
-    covered = rasterize_uv(normalized, max(maps.resolution)).mask
-    envmap_height = envmap_height_for(maps, covered)
-    light_config = light_preset(preset, map_height=envmap_height.value)
-    light = estimate_light(photo_srgb, placement_px, light_config, photo_camera=DEMO_PHOTO_CAMERA,
-                           photo_info=photo_read, progress=progress)
-    light_outputs = write_light_outputs(light, out / "light")
-    env = light.hdr.astype(np.float32)
-    lighting = light_report(light, light_config, light_outputs)
-    lighting["decisions"]["envmap_height"] = envmap_height.to_dict()
-    timings["light"] = time.perf_counter() - t
-
-    # Convert the asset's own maps into the neural texture and bake it.
-    config = convert_preset(preset)
-    result, convert_report = convert_and_bake(mesh, maps, out / "converted", config, progress=progress,
-                                              keep_constants=True)
-    timings["convert"] = result.seconds
-
-    # The original maps, next to the converted ones.
-    (out / "original").mkdir(parents=True, exist_ok=True)
-    for name in ("base_color.png", "roughness.png", "metallic.png", "material.json"):
-        if (inputs / "asset" / name).is_file():
-            shutil.copyfile(inputs / "asset" / name, out / "original" / name)
-
-    # Render both under the demo light from orbit views.
-    t = time.perf_counter()
-    normalized, _ = normalize_to_unit_sphere(mesh)
-    with torch.no_grad():
-        converted = result.predicted()
-    original = torch.from_numpy(target_stack(maps, result.raster.resolution[0]))
-    cameras = orbit_cameras(DEMO_VIEWS, elevation_deg=15.0, fov_multiplier=1.1, size=256)
-    images = render_views(normalized, {"original": original, "converted": converted}, env, cameras, spp=64,
-                          progress=progress)
-    display = {name: [tonemap_srgb(im) for im in ims] for name, ims in images.items()}
-    render_files = []
-    for name, ims in display.items():
-        for camera, image in zip(cameras, ims):
-            path = out / "renders" / f"{name}_az{int(round(camera.azimuth_deg)):03d}.png"
-            write_image(path, image)
-            render_files.append(str(path))
-    write_image(out / "renders" / "comparison.png", contact_sheet({"original": display["original"],
-                                                                   "converted": display["converted"]}))
-    render_psnr = float(np.mean([image_psnr(a, b) for a, b in zip(display["original"], display["converted"])]))
-    timings["render"] = time.perf_counter() - t
-
-    if found:  # scene-conditional adaptation of the converted texture (draft-sized for the demo)
-        from .core.adapt import adapt_and_bake, adapt_preset
-        from .core.guidance import Placement
-
-        adapt_config = adapt_preset(preset, "scene", prompt="a monkey head sculpture standing in a living room, "
-                                    "its painted surface dusty and worn, photo")
-        _, adapt_info["report"] = adapt_and_bake(mesh, result.texture, adapt_config, out / "adapted",
-                                                 photo=photo_srgb,
-                                                 placement=Placement(DEMO_PLACEMENT, 0.4), progress=progress)
-        timings["adapt"] = adapt_info["report"]["seconds"]
+    stack = texture_maps_for_mesh(load_neural_texture(texture_path), normalized)
+    camera, _ = light_camera(out / "light" / "light.exr", photo_read, photo.shape[1], photo.shape[0])
+    placement = parse_placement(DEMO_PLACEMENT, photo.shape[1], photo.shape[0])
+    constant_report = compose_to_folder(
+        ComposeInputs(mesh, stack, photo, placement, constant, camera),
+        compose_preset(preset, size=DEMO_SIZE, spp=compose_stage["spp"]), out / "constant",
+        {"light": f"constant, the estimated map's mean radiance {np.round(constant[0, 0], 4).tolist()}"})
+    sheet = contact_sheet({"photo | composite under a constant light | composite under the estimated light": [
+        photo, read_image(out / "constant" / "composite.png")[..., :3],
+        read_image(out / "compose" / "composite.png")[..., :3]]})
+    write_image(out / "sheet.png", sheet)
+    constant_seconds = time.perf_counter() - t
 
     report = {
         "stage": "demo",
         "preset": preset,
         "inputs": {"asset": example_origin, "photo": photo_info, "placement": DEMO_PLACEMENT},
-        "lighting": lighting,
-        "convert": convert_report,
-        "renders": {"files": render_files, "comparison": str(out / "renders" / "comparison.png"),
-                    "psnr_original_vs_converted_db": round(render_psnr, 3), "spp": 64, "views": DEMO_VIEWS},
-        "timings_seconds": {k: round(v, 3) for k, v in timings.items()},
+        "run": {name: {k: v for k, v in stage.items() if k != "report"} for name, stage in run["stages"].items()},
+        "convert": run["stages"]["convert"].get("report"),
+        "lighting": run["stages"]["light"].get("report"),
+        "adapt": run["stages"]["adapt"],
+        "compose": compose_stage,
+        "constant_light_compose": {k: constant_report[k] for k in ("spp", "shadow", "outputs", "timings_seconds")},
+        "sheet": str(out / "sheet.png"),
+        "timings_seconds": {"inputs": round(inputs_seconds, 3), "run": run["seconds_total"],
+                            "constant_light_compose": round(constant_seconds, 3)},
         "environment": environment_info(),
-        "not_yet": ["texture adaptation (diffusion critics)", "composition"],
     }
-    report["adapt"] = adapt_info
-    if found:
-        report["not_yet"] = [item for item in report["not_yet"] if not item.startswith("texture adaptation")]
     report["seconds_total"] = round(time.perf_counter() - started, 3)
     write_report(out / "report.json", report)
     return report

@@ -1,4 +1,4 @@
-"""`make bench`: speed and accuracy of the rendering core and of texture conversion.
+"""`make bench`: speed and accuracy of the rendering core, texture conversion, light and composition.
 
 Writes benchmarks/results/bench.md (the tables the README quotes), bench.json and
 conversion_psnr.png (PSNR against iterations and seconds for both conversion methods).
@@ -204,6 +204,15 @@ def main() -> int:
 
     adapt = bench_adapt(quick=args.quick)
     md += ["", "## Adapt", "", adapt["markdown"]]
+
+    # Batches: jobs per hour in-process and on 1 and 2 local Ray workers; the paper's settings on N GPUs.
+    from bench_batch import bench_batch
+
+    batch = bench_batch(quick=args.quick, adapt_rows=adapt["rows"])
+    md += ["", "## Batches", "", batch["markdown"]]
+    (RESULTS / "batch.md").write_text(batch["markdown"] + "\n")
+    (RESULTS / "batch.json").write_text(json.dumps({"rows": batch["rows"], "estimate": batch["estimate"]},
+                                                   indent=1, default=float))
     (RESULTS / "bench.json").write_text(json.dumps({"machine": machine(), "environment": env, "render": renders,
                                                      "texture": textures, "conversion": conversions,
                                                      "adapt": adapt["rows"]}, indent=1, default=float))
@@ -219,6 +228,11 @@ def main() -> int:
     subprocess.run([sys.executable, str(Path(__file__).with_name("bench_light.py"))] + (["--quick"] if args.quick else []),
                    check=True)
     md += ["", "## Light estimation", "", (RESULTS / "light.md").read_text()]
+
+    # Composition: noise of the final render against a high-sample reference, raw and denoised.
+    subprocess.run([sys.executable, str(Path(__file__).with_name("bench_compose.py"))] + (["--quick"] if args.quick else []),
+                   check=True)
+    md += ["", "## Composition", "", (RESULTS / "compose.md").read_text()]
     (RESULTS / "bench.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))
     return 0

@@ -6,23 +6,7 @@ from pathlib import Path
 
 from .options import (PRESETS, add_asset_args, add_model_args, add_output_args, add_prompt_service_args, environment,
                       finite_float, load_asset, model_config, output, placement_fractions, positive_float, positive_int,
-                      progress, write_prompt_from_args)
-
-
-def scene_conditional_prompt(args, mode: str):
-    """(prompt, instruction, record) for the run: the user's --prompt/--instruction when given, else
-    written from --object-prompt and --scene-prompt (a description; edit mode: an instruction)."""
-    prompt, instruction = args.prompt or "", args.instruction or ""
-    given = prompt or (instruction if mode == "edit" else "")
-    if given or not args.object_prompt or not (args.scene_prompt or (args.photo and mode == "scene")):
-        return prompt, instruction, None
-    result = write_prompt_from_args(args, args.object_prompt, args.scene_prompt, "instruct" if mode == "edit" else "describe",
-                                    args.photo if mode == "scene" else "")
-    source = f"written by '{result.model}'" if result.model_written else f"template ({result.reason})"
-    print(f"prompt ({source}): {result.prompt}")
-    if mode == "edit":
-        return prompt, result.prompt, result
-    return result.prompt, instruction, result
+                      progress, scene_conditional_prompt)
 
 
 def run(args) -> int:

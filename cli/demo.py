@@ -29,8 +29,8 @@ def run(args) -> int:
             shutil.copytree(previous / "input", out / "input", dirs_exist_ok=True)
         report = run_demo(out, preset=args.preset, progress=progress(args), refresh=args.refresh,
                           guidance=args.guidance)
-    print(f"demo done in {report['seconds_total']:.1f} s: conversion {report['convert']['psnr_covered_texels_db']:.2f} dB "
-          f"-> {args.out}/report.json")
+    print(f"demo done in {report['seconds_total']:.1f} s: conversion {report['convert']['psnr_covered_texels_db']:.2f} dB, "
+          f"composite {args.out}/compose/composite.png, sheet {args.out}/sheet.png")
     return 0
 
 

@@ -155,7 +155,7 @@ def add_prompt_service_args(p: argparse.ArgumentParser, prefix: str = "") -> Non
     p.add_argument(f"--{prefix}endpoint", dest="prompt_endpoint", default="", metavar="URL",
                    help="OpenAI-compatible base URL, e.g. http://127.0.0.1:8080/v1 (also: config file, OPENAI_BASE_URL)")
     p.add_argument(f"--{prefix}model", dest="prompt_model", default="", metavar="NAME", help="chat model name at that endpoint")
-    p.add_argument(f"--{prefix}timeout", dest="prompt_timeout", type=float, metavar="S", help="seconds to wait for the answer (default 60)")
+    p.add_argument(f"--{prefix}timeout", dest="prompt_timeout", type=positive_float, metavar="S", help="seconds to wait for the answer (default 60)")
     p.add_argument(f"--{'prompt-' if prefix else ''}vision", dest="prompt_vision", action=argparse.BooleanOptionalAction,
                    help="the model reads images: send the photo (default: guessed from the model name)")
     p.add_argument("--prompt-cache", metavar="DIR", help="folder of cached answers (default ~/.cache/scenefit/prompts)")
@@ -183,3 +183,19 @@ def write_prompt_from_args(args, object_prompt: str, scene_prompt: str, mode_typ
     return write_prompt(request, service, offline=offline,
                         cache_dir=Path(args.prompt_cache) if args.prompt_cache else None,
                         use_cache=not args.no_prompt_cache)
+
+
+def scene_conditional_prompt(args, mode: str):
+    """(prompt, instruction, record) for the run: the user's --prompt/--instruction when given, else
+    written from --object-prompt and --scene-prompt (a description; edit mode: an instruction)."""
+    prompt, instruction, photo = args.prompt or "", getattr(args, "instruction", None) or "", args.photo or ""
+    given = prompt or (instruction if mode == "edit" else "")
+    if given or not args.object_prompt or not (args.scene_prompt or (photo and mode == "scene")):
+        return prompt, instruction, None
+    result = write_prompt_from_args(args, args.object_prompt, args.scene_prompt, "instruct" if mode == "edit" else "describe",
+                                    photo if mode == "scene" else "")
+    source = f"written by '{result.model}'" if result.model_written else f"template ({result.reason})"
+    print(f"prompt ({source}): {result.prompt}")
+    if mode == "edit":
+        return prompt, result.prompt, result
+    return result.prompt, instruction, result

@@ -20,17 +20,12 @@ def _render(args, out: Path) -> int:
     from ..core.imageio import write_image
     from ..core.mesh import normalize_to_unit_sphere
     from ..core.pipeline import environment_info, render_views, tonemap_srgb, write_report
-    from ..core.texture.bake import load_neural_texture
-    from ..core.texture.uv_raster import rasterize_uv
+    from ..core.texture.bake import load_neural_texture, texture_maps_for_mesh
 
     mesh, maps = load_asset(args.asset, args.object)
     normalized, _ = normalize_to_unit_sphere(mesh)
     if args.texture:
-        texture = load_neural_texture(Path(args.texture))
-        resolution = texture.config.resolution
-        raster = rasterize_uv(normalized, resolution)
-        with torch.no_grad():
-            stack = texture.texture(raster.position, raster.border, raster.fill_index)
+        stack = torch.from_numpy(texture_maps_for_mesh(load_neural_texture(Path(args.texture)), normalized))
         label = "neural texture"
     else:
         stack, label = torch.from_numpy(target_stack(maps, max(maps.resolution))), "asset maps"

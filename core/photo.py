@@ -65,6 +65,16 @@ class PhotoCamera:
         d = forward + x[..., None] * right + y[..., None] * up
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
+    def project(self, points: np.ndarray, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """Pixel coordinates (x right, y down, pixel centres at +0.5) of world points seen from
+        `origin`; the inverse of `ray_directions` (points must lie in front of the camera)."""
+        forward, right, up, half_w, half_h = self.basis()
+        rel = np.asarray(points, dtype=np.float64) - np.asarray(origin, dtype=np.float64)
+        depth = rel @ forward
+        x = (rel @ right) / (depth * half_w)
+        y = (rel @ up) / (depth * half_h)
+        return np.stack([(x + 1) / 2 * self.width, (1 - y) / 2 * self.height], axis=-1)
+
 
 def perspective_view(envmap: np.ndarray, camera: PhotoCamera) -> np.ndarray:
     """Linear radiance seen by `camera` in an equirectangular map (bilinear, wrapping in u)."""

@@ -32,6 +32,19 @@ def constant_environment(color, height: int = 32) -> np.ndarray:
     return np.broadcast_to(color, (height, 2 * height, 3)).copy()
 
 
+def sun_environment(direction, sun_radiance: float = 2000.0, sky_radiance: float = 0.3, sun_radius_deg: float = 3.0,
+                    height: int = 64) -> np.ndarray:
+    """A grey sky with one small disc sun towards world `direction` (Blender's lat-long convention):
+    hard-edged shadows with a known direction, for tests and benchmarks."""
+    from .render import equirect_directions
+
+    d = np.asarray(direction, np.float64)
+    d = d / np.linalg.norm(d)
+    env = np.full((height, 2 * height, 3), sky_radiance, np.float32)
+    env[equirect_directions(height, 2 * height) @ d > np.cos(np.radians(sun_radius_deg))] = sun_radiance
+    return env
+
+
 def load_environment(path: str | Path, max_height: int = 256) -> np.ndarray:
     """An equirectangular HDR map (EXR/HDR linear, or an 8-bit image decoded from sRGB), downsized for rendering."""
     import cv2

@@ -400,7 +400,11 @@ class ChatClient:
     SceneFit retries once itself, with the problem stated)."""
 
     def __init__(self, service: ServiceConfig, on_text: Callable[[str], None] | None = None):
-        from openai import OpenAI
+        try:
+            from openai import OpenAI
+        except ImportError as error:
+            raise PromptServiceError("The 'openai' Python package is missing, so no language model can be asked; "
+                                     "install SceneFit's build for your platform (it bundles it) or use --offline.") from error
 
         self.service = service
         self.on_text = on_text

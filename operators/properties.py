@@ -52,7 +52,12 @@ class SceneFitSettings(bpy.types.PropertyGroup):
     mode: EnumProperty(name="Mode", items=MODES, default="scene")
     prompt: StringProperty(name="Prompt", description="How the asset should look, e.g. 'a leather sofa, "
                                                       "soggy and stained with mud'")
-    object_prompt: StringProperty(name="Object", description="Edit mode: what the asset is, e.g. 'a leather sofa'")
+    object_prompt: StringProperty(name="Object", description="What the asset is, e.g. 'a leather sofa' (edit mode, "
+                                                             "and for Write Prompt)")
+    scene_prompt: StringProperty(name="Scene", description="What the scene is, e.g. 'a swamp': Write Prompt turns the "
+                                                           "object and scene into the prompt (a vision model reads the photo)")
+    prompt_source: StringProperty(name="Prompt source", description="Who wrote the prompt: the language model or the "
+                                                                    "offline template")
     instruction: StringProperty(name="Instruction", description="Edit mode: e.g. 'add dust to the sofa'")
     # Quality and output
     preset: EnumProperty(name="Preset", items=PRESETS, default="balanced")

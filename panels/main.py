@@ -96,11 +96,12 @@ class SCENEFIT_PT_style(_Section, bpy.types.Panel):
         settings = context.scene.scenefit
         col = self.layout.column()
         col.prop(settings, "mode", expand=True)
-        if settings.mode == "edit":
-            col.prop(settings, "object_prompt")
-            col.prop(settings, "instruction")
-        else:
-            col.prop(settings, "prompt")
+        col.prop(settings, "object_prompt")
+        col.prop(settings, "scene_prompt")
+        col.operator("scenefit.generate_prompt", icon="FILE_TEXT")
+        col.prop(settings, "instruction" if settings.mode == "edit" else "prompt")
+        if settings.prompt_source:
+            col.label(text=settings.prompt_source, icon="INFO")
 
 
 class SCENEFIT_PT_quality(_Section, bpy.types.Panel):

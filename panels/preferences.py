@@ -28,6 +28,13 @@ class SceneFitPreferences(bpy.types.AddonPreferences):
                           description="Never use the network: models must already be in the cache. Blender's "
                                       "'Allow Online Access' must also be on for any download")
     device: EnumProperty(name="Device", items=DEVICES, default="auto")
+    prompt_endpoint: StringProperty(name="Prompt endpoint", default="",
+                                    description="OpenAI-compatible chat URL that writes prompts, e.g. "
+                                                "http://127.0.0.1:8080/v1 (empty: the config file or OPENAI_BASE_URL; "
+                                                "none: a simple template)")
+    prompt_model: StringProperty(name="Prompt model", default="", description="Chat model name at that endpoint")
+    prompt_api_key: StringProperty(name="API key", default="", subtype="PASSWORD",
+                                   description="Key for the prompt endpoint (empty: OPENAI_API_KEY or the config file)")
 
     def draw(self, context):
         layout = self.layout
@@ -38,6 +45,10 @@ class SceneFitPreferences(bpy.types.AddonPreferences):
         row = layout.row()
         row.prop(self, "offline")
         row.prop(self, "device")
+        col = layout.column(heading="Prompts")
+        col.prop(self, "prompt_endpoint")
+        col.prop(self, "prompt_model")
+        col.prop(self, "prompt_api_key")
         if not bpy.app.online_access:
             layout.label(text="Blender's online access is off: models are only read from the cache.", icon="INFO")
 

@@ -29,9 +29,9 @@ def smooth_maps(size: int = 64) -> PBRMaps:
     return PBRMaps(base.astype(np.float32), (0.3 + 0.5 * xx).astype(np.float32), 0.0)
 
 
-def scenefit(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+def scenefit(*args: str, cwd: Path | None = None, timeout: float = 600) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "scenefit.cli", *args], capture_output=True, text=True,
-                          cwd=cwd, timeout=600)
+                          cwd=cwd, timeout=timeout)
 
 
 @pytest.fixture(scope="module")
@@ -39,38 +39,42 @@ def demo_run(tmp_path_factory, example_asset):
     """`scenefit demo --preset draft`, with the example asset the session already made."""
     out = tmp_path_factory.mktemp("demo")
     shutil.copytree(example_asset, out / "input" / "asset")
-    proc = scenefit("demo", "--out", str(out), "--preset", "draft")
+    # Every stage runs (about 2 minutes on a quiet 2-core machine); room for a machine shared with others.
+    proc = scenefit("demo", "--out", str(out), "--preset", "draft", timeout=1800)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out, json.loads((out / "report.json").read_text())
 
 
-def test_demo_converts_the_bundled_example_above_30_db(demo_run):
+def test_demo_runs_the_pipeline_and_writes_the_sheet(demo_run):
     out, report = demo_run
     assert report["inputs"]["asset"] == "reused"
     assert report["convert"]["psnr_covered_texels_db"] >= 30.0
-    assert report["renders"]["psnr_original_vs_converted_db"] > 25.0
     assert report["environment"]["mitsuba_variant"] in ("llvm_ad_rgb", "cuda_ad_rgb")
     # Lit by the HDR map estimated from the photo; without a critic the prior sets the scales, and says so.
     assert report["lighting"]["stage"] == "light" and report["lighting"]["decisions"]["critic"]["used"] is False
     assert (out / "light" / "light.exr").is_file() and (out / "input" / "photo.png").is_file()
-    assert report["adapt"]["used"] is False and "not found" in report["adapt"]["why"]
+    assert report["adapt"]["status"] == "skipped" and "not on this machine" in report["adapt"]["why"]
     for name in ("base_color.png", "roughness.png"):
-        assert (out / "original" / name).is_file() and (out / "converted" / name).is_file()
-    assert (out / "renders" / "comparison.png").is_file()
-    assert len(report["renders"]["files"]) == 2 * report["renders"]["views"]
+        assert (out / "convert" / "maps" / name).is_file()
+    photo = read_image(out / "input" / "photo.png")
+    composite = read_image(out / "compose" / "composite.png")
+    assert composite.shape == photo.shape and 0 < report["compose"]["changed_pixels"] < photo.shape[0] * photo.shape[1]
+    sheet = read_image(out / "sheet.png")
+    assert sheet.shape[1] == 3 * photo.shape[1]
+    assert report["run"]["bake"]["status"] == "not available yet"
 
 
 def test_baked_maps_read_back_match_the_network_within_one_level(demo_run, example_asset):
     out, _ = demo_run
-    texture = load_neural_texture(out / "converted" / "texture.pt")
+    texture = load_neural_texture(out / "convert" / "maps" / "texture.pt")
     mesh, _ = load_asset_folder(example_asset)
     normalized, _ = normalize_to_unit_sphere(mesh)
     raster = rasterize_uv(normalized, texture.config.resolution)
     with torch.no_grad():
         stack = texture.texture(raster.position, raster.border, raster.fill_index)
     expected = encode_for_metric(stack).numpy()       # sRGB base colour, linear roughness/metallic
-    base = read_image(out / "converted" / "base_color.png")[..., :3]
-    rough = read_image(out / "converted" / "roughness.png")[..., 0]
+    base = read_image(out / "convert" / "maps" / "base_color.png")[..., :3]
+    rough = read_image(out / "convert" / "maps" / "roughness.png")[..., 0]
     covered = raster.border
     assert np.abs(base[covered] - expected[covered][:, :3]).max() <= 1 / 255 + 1e-6
     assert np.abs(rough[covered] - expected[covered][:, 3]).max() <= 1 / 255 + 1e-6

@@ -110,9 +110,13 @@ def test_outdoor_has_no_near_light_scale():
     camera = PhotoCamera(yaw_deg=90.0, pitch_deg=-5.0, fov_deg=60.0, width=40, height=30)
     photo = np.full((30, 40, 3), 0.4, np.float32)
     photo[:10] = [0.6, 0.75, 0.98]
+    paper = estimate_light(photo, (20.0, 25.0), light_preset("draft", scene_type="outdoor", map_height=16,
+                                                             prior_type="inverse_tonemap"), photo_camera=camera)
+    assert set(paper.scales) == {"far"} and "near" not in paper.regions
+    # The cues split off the unseen sky (and clipped texels) but never add a near light outdoors.
     result = estimate_light(photo, (20.0, 25.0), light_preset("draft", scene_type="outdoor", map_height=16),
                             photo_camera=camera)
-    assert set(result.scales) == {"far"} and "near" not in result.regions
+    assert "near" not in result.scales and set(result.scales) <= {"far", "clipped", "unseen"}
     assert result.hdr.shape == (16, 32, 3) and np.isfinite(result.hdr).all()
 
 

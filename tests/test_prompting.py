@@ -141,6 +141,14 @@ def test_follow_up_turn_continues_the_conversation(server, cache):
     assert write_prompt(request, None, cache_dir=cache).warnings == ("the follow-up needs a language model and was not used",)
 
 
+def test_missing_openai_package_is_one_sentence(server, cache, monkeypatch):
+    monkeypatch.setitem(__import__("sys").modules, "openai", None)      # `import openai` now fails
+    with pytest.raises(PromptServiceError, match="'openai' Python package is missing"):
+        write_prompt(SOFA, service(server), cache_dir=cache)
+    assert server.connections == 0
+    assert write_prompt(SOFA, service(server), offline=True, cache_dir=cache).prompt == "a leather sofa in a swamp"
+
+
 def test_time_out_is_one_clear_sentence(server, cache):
     server.replies = [Reply(answer(GOOD), delay_s=5)]
     with pytest.raises(PromptServiceError, match=r"did not answer within 0.5 s") as error:
@@ -282,7 +290,7 @@ def test_adapt_writes_its_prompt_from_object_and_scene(server, tmp_path, capsys)
     """`scenefit adapt --object-prompt --scene-prompt` without --prompt: the model's description is
     the prompt the critics get (edit mode: its instruction), and the report keeps the analysis."""
     from scenefit.cli import build_parser, main
-    from scenefit.cli.adapt import scene_conditional_prompt
+    from scenefit.cli.options import scene_conditional_prompt
     from scenefit.core.asset_io import save_asset_folder
     from scenefit.core.guidance.testing import build_tiny_pair
     from scenefit.core.maps import PBRMaps
@@ -319,3 +327,22 @@ def test_adapt_writes_its_prompt_from_object_and_scene(server, tmp_path, capsys)
     assert report["prompt_writing"]["prompt"] == GOOD_INSTRUCTION and report["prompt_writing"]["analysis"] == ANALYSIS
     # The critics' prompt is the object and the model's instruction combined (adapt's edit mode).
     assert report["decisions"]["prompt"].startswith("a leather sofa, Soak the leather sofa, darken the leather")
+
+
+def test_run_takes_its_prompt_from_object_and_scene(server, tmp_path):
+    """`scenefit run --object-prompt --scene-prompt` without --prompt: the written description is the
+    RunConfig's prompt (adapt's); with --prompt nothing is asked."""
+    from scenefit.cli import build_parser
+    from scenefit.cli.run import run_config
+
+    base = ["run", "asset", "--photo", str(tmp_path / "photo.png"), "--at", "0.5,0.8", "--out", str(tmp_path / "o"),
+            "--prompt-cache", str(tmp_path / "c"), "--config", str(tmp_path / "none.toml"),
+            "--prompt-endpoint", server.url, "--prompt-model", "text-llm"]
+    server.replies = [Reply(answer(GOOD))]
+    config, written = run_config(build_parser().parse_args(base + ["--object-prompt", "a leather sofa",
+                                                                   "--scene-prompt", "a swamp"]))
+    assert config.prompt == GOOD and written.analysis == ANALYSIS and not written.photo_sent
+    assert "[the scene]: a swamp" in user_text(server.requests[0]["body"])
+    config, written = run_config(build_parser().parse_args(base + ["--prompt", "mine", "--object-prompt", "a sofa",
+                                                                   "--scene-prompt", "a bog"]))
+    assert (config.prompt, written, len(server.requests)) == ("mine", None, 1)

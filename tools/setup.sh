@@ -54,6 +54,8 @@ fi
 
 # 4. The pinned rest, then SceneFit itself as an editable package named `scenefit`.
 "${PIP[@]}" install -q -r requirements.txt
+# The optional extra for batches on Ray (`scenefit[ray]`), so the tests run the Ray path too.
+"${PIP[@]}" install -q -r requirements-ray.txt
 "${PIP[@]}" install -q --no-deps -e .
 "$VENV/bin/python" -c 'import scenefit.core.mesh' || die "the editable install of scenefit does not import."
 echo "Set-up done."

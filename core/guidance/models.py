@@ -269,3 +269,31 @@ def load_guidance_models(config: ModelConfig, need_inpaint: bool, paths: dict[st
             module.to(device)
     return GuidanceModels(tokenizer=tokenizer, text_encoder=text_encoder, vae=vae, unet=unet, scheduler=scheduler,
                           inpaint_unet=inpaint_unet, device=device, dtype=dtype, paths=paths, config=config)
+
+
+class ModelCache:
+    """Models loaded once per worker process and handed to job after job (batch workers, Ray actors).
+
+    `get` returns a fresh `GuidanceModels` around the same modules, so a job that releases its
+    text encoder (the adapt stage does) releases it from its own handle only: the next job still
+    embeds its prompts. LoRA adapters and attention processors are reset by each run that sets them.
+    """
+
+    def __init__(self) -> None:
+        self._loaded: dict[tuple, GuidanceModels] = {}
+        self.loads = 0
+
+    def get(self, config: ModelConfig, need_inpaint: bool) -> GuidanceModels:
+        from dataclasses import replace
+
+        key = (config, need_inpaint)
+        if key not in self._loaded:
+            # A model set with the inpainting UNet also serves jobs that do not need it.
+            wider = self._loaded.get((config, True))
+            if wider is None:
+                self._loaded[key] = load_guidance_models(config, need_inpaint)
+                self.loads += 1
+            else:
+                key = (config, True)
+        cached = self._loaded[key]
+        return replace(cached, _embeddings=dict(cached._embeddings))

@@ -8,7 +8,9 @@ texel look alike), sRGB-encoded to [0, 1], resized to the model's resolution and
 drawn uniformly in request.t_range ([750, 990]); the ScoreCritic gives
 ∇z = w_t (ε_φ(z_t, text; CFG 7.5) - ε_ψ(z_t, text, camera)) (VSD, λ = 1), which autograd carries
 back through the VAE and the tone curve to the render's pixels. ε_ψ then takes one LoRA step on the
-detached latents, its learning rate annealed with the scales' (linearly to 0.1 x). Text
+detached latents, its learning rate annealed with the scales' (linearly to 0.1 x). ε_ψ is conditioned
+on the view's camera and the current light (the appendix's c_x, c_y, c_r, c_v, b_v, taken from the
+map the renders were made under: request.light, see hdr.LightVector). Text
 conditioning is the prompt in the request (estimate.py's object prompt / SPHERE_PROMPT with the
 dark-environment suffix and tint).
 """
@@ -22,7 +24,7 @@ import torch.nn.functional as F
 
 from ..errors import InputError
 from ..guidance.critics import CriticConfig, ScoreCritic
-from ..guidance.lora import LoraCritic, camera_condition
+from ..guidance.lora import AMBIENT_LIGHT, LoraCritic, camera_condition
 from ..guidance.models import GuidanceModels
 from ..guidance.views import linear_to_srgb_torch
 from .hdr import DEFAULT_L_WHITE, CriticRequest
@@ -65,14 +67,15 @@ def tonemap_srgb_torch(radiance: torch.Tensor, l_white: float = DEFAULT_L_WHITE)
 
 
 class DiffusionLightCritic:
-    """VSD critic for the light scales; one LoRA ε_ψ shared by every view, told apart by its camera."""
+    """VSD critic for the light scales; one LoRA ε_ψ shared by every view, told apart by its camera and
+    conditioned on the current light."""
 
     def __init__(self, models: GuidanceModels, cameras, prompts: tuple[str, ...],
                  config: DiffusionCriticConfig = DiffusionCriticConfig()) -> None:
         if config.model_resolution // models.vae_scale_factor < 1:
             raise InputError("model_resolution is smaller than one latent texel.")
         self.models, self.config = models, config
-        self.conditions = [camera_condition(c.origin, c.forward) for c in cameras]
+        self.cameras = [(c.origin, c.forward) for c in cameras]
         for p in tuple(prompts) + (config.negative_prompt,):
             models.embed(p)
         self.lora = LoraCritic(models.unet, rank=config.lora_rank, lr=config.lr_lora,
@@ -83,6 +86,11 @@ class DiffusionLightCritic:
         self.rng = np.random.default_rng(config.seed)
         self.generator = torch.Generator().manual_seed(config.seed)
         self.history: list[dict] = []
+
+    def condition(self, view: int, light: tuple[float, ...] | None) -> torch.Tensor:
+        """ε_ψ's class condition: the view's camera-to-world matrix and the light vector (ambient if none)."""
+        origin, forward = self.cameras[view]
+        return camera_condition(origin, forward, AMBIENT_LIGHT if light is None else light)
 
     def _encode(self, image: torch.Tensor) -> torch.Tensor:
         x = (image * 2.0 - 1.0).to(self.models.device, self.models.vae.dtype)
@@ -114,7 +122,7 @@ class DiffusionLightCritic:
                 t = int(self.rng.integers(request.t_range[0], request.t_range[1] + 1))
                 noise = torch.randn(latents.shape, generator=self.generator).to(latents.device)
                 text = self.models.embed(prompt)
-                condition = self.conditions[view]
+                condition = self.condition(view, request.light)
                 out = self.score(latents, t, noise, text, uncond, lam=self.config.lambda_vsd, condition=condition)
                 out.loss.backward()
             grads.append(torch.nan_to_num(leaf.grad, nan=0.0, posinf=0.0, neginf=0.0))
@@ -127,6 +135,6 @@ class DiffusionLightCritic:
             lora_loss = self.lora.train_step(latents.detach().to(unet_dtype), text, condition, t_lora, lora_noise,
                                              float(self.score.alpha_bar[t_lora]), drop, self.score.prediction_type)
             self.lora.step()
-            self.history.append({"iteration": request.iteration, "view": int(view), "t": t,
+            self.history.append({"iteration": request.iteration, "view": int(view), "t": t, "light": request.light,
                                  "grad_norm": out.metrics["grad_norm"], "lora_loss": round(lora_loss, 6)})
         return torch.stack(grads).to(renders.device, renders.dtype)

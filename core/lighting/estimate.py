@@ -26,12 +26,14 @@ from ..photo import PhotoCamera, camera_exposure
 from ..primitives import uv_sphere
 from ..progress import ProgressCallback, check_cancel, emit
 from .depth import DepthConfig, estimate_ray_distance
+from .cues import CueConfig, build_cues
 from .diffusion_critic import DiffusionCriticConfig
 from .outpaint import OutpaintConfig
 from .hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, Critic, OptimiseConfig, OptimiseResult,
                   hdr_from_scales, is_dark_environment, light_prompt, optimise_scales, prior_scales, tonemap_preview,
                   DEFAULT_L_WHITE)
-from .panorama import Panorama, indoor_panorama, outdoor_panorama, place_on_floor, sky_score
+from .panorama import Panorama, indoor_panorama, outdoor_panorama, place_on_floor
+from .scene_type import scene_type_cue
 from .regions import RegionThresholds, bright_regions
 
 # The panorama is built (and its lights found) at least this tall, whatever map size is asked for: a
@@ -42,7 +44,7 @@ MIN_WORKING_HEIGHT = 128
 DEFAULT_FOV_DEG = 60.0   # horizontal; a typical phone/kit-lens view (~28 mm full-frame equivalent)
 SCENE_TYPES = ("auto", "indoor", "outdoor")
 CRITIC_TYPES = ("none", "reference", "diffusion")
-PRIOR_TYPES = ("inverse_tonemap",)
+PRIOR_TYPES = ("cues", "inverse_tonemap")   # cues: cues.py (default); inverse_tonemap: the paper's prior
 
 
 @dataclass(frozen=True)
@@ -53,7 +55,8 @@ class LightConfig:
     map_height: int = 128                     # the map is map_height x 2 map_height
     depth: DepthConfig = DepthConfig()
     thresholds: RegionThresholds = RegionThresholds()
-    prior_type: str = "inverse_tonemap"
+    prior_type: str = "cues"
+    cues: CueConfig = CueConfig()
     l_white: float = DEFAULT_L_WHITE
     critic_type: str = "none"
     apparatus: ApparatusConfig = ApparatusConfig()
@@ -98,6 +101,14 @@ def light_preset(name: str, **overrides) -> LightConfig:
     if name not in LIGHT_PRESETS:
         raise InputError(f"Unknown light preset {name!r}; choose one of {', '.join(LIGHT_PRESETS)}.")
     return replace(LIGHT_PRESETS[name], **overrides)
+
+
+@dataclass(frozen=True)
+class Decision:
+    """A choice the stage made and why (the report's wording); code branches on `choice`, never on `reason`."""
+
+    choice: str
+    reason: str
 
 
 @dataclass
@@ -194,6 +205,15 @@ def parse_placement(text_or_xy, width: int, height: int) -> tuple[float, float]:
     return x, y
 
 
+def default_photo_camera(config: LightConfig, photo_info: dict, width: int, height: int) -> tuple[PhotoCamera, dict]:
+    """The camera the light stage assumes for a photo: looking along +Y (the composition's azimuth 0),
+    pitched by config.camera_pitch_deg, field of view from the config, else the photo's metadata, else 60."""
+    fov = config.fov_deg or photo_info.get("fov_from_metadata_deg") or DEFAULT_FOV_DEG
+    why = {"deg": fov, "from": "config" if config.fov_deg else
+           ("photo metadata" if photo_info.get("fov_from_metadata_deg") else "default (horizontal 60 deg)")}
+    return PhotoCamera(yaw_deg=90.0, pitch_deg=config.camera_pitch_deg, fov_deg=fov, width=width, height=height), why
+
+
 def default_object() -> tuple[Mesh, torch.Tensor]:
     """When no asset is given: a mid-grey, medium-rough sphere of the normalised radius."""
     maps = torch.cat([torch.full((8, 8, 3), 0.5), torch.full((8, 8, 1), 0.5), torch.zeros(8, 8, 1)], dim=-1)
@@ -215,7 +235,8 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     """
     t0 = time.perf_counter()
     # The diffusion models are found before any work (a missing one is a clear error).
-    want_outpaint, outpaint_why = _want_outpaint(config)
+    outpainting = _choose_completion(config)
+    want_outpaint = outpainting.choice == "sd2"
     model_paths = None
     if (config.critic_type == "diffusion" and critic is None) or want_outpaint:
         model_paths = _locate_light_models(config.models, want_outpaint)
@@ -233,18 +254,18 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     info = dict(photo_info or {})
     decisions: dict = {}
     if photo_camera is None:
-        fov = config.fov_deg or info.get("fov_from_metadata_deg") or DEFAULT_FOV_DEG
-        decisions["fov"] = {"deg": fov, "from": "config" if config.fov_deg else
-                            ("photo metadata" if info.get("fov_from_metadata_deg") else "default (horizontal 60 deg)")}
-        photo_camera = PhotoCamera(yaw_deg=90.0, pitch_deg=config.camera_pitch_deg, fov_deg=fov, width=w, height=h)
+        photo_camera, decisions["fov"] = default_photo_camera(config, info, w, h)
     elif (photo_camera.width, photo_camera.height) != (w, h):
         photo_camera = replace(photo_camera, width=w, height=h)
     decisions["photo_camera"] = asdict(photo_camera)
 
     # Indoor or outdoor.
-    cue = sky_score(photo)
+    cue = scene_type_cue(photo)
     scene_type = cue["scene_type"] if config.scene_type == "auto" else config.scene_type
-    decisions["scene_type"] = {"chosen": scene_type, "by": "auto" if config.scene_type == "auto" else "user", **cue}
+    decisions["scene_type"] = {"chosen": scene_type, "by": "auto" if config.scene_type == "auto" else "user", "auto": cue}
+    if config.scene_type == "auto" and cue["unsure"]:
+        decisions["scene_type"]["note"] = (f"unsure (score {cue['score']:.2f}, near 1): chose {scene_type}; "
+                                           "--scene indoor|outdoor decides")
     emit(progress, "light", 0, max(config.optimise.iterations, 1), f"{scene_type} panorama")
 
     # The LDR panorama.
@@ -268,17 +289,23 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
                 return outpaint_panorama(ldr, seen, guidance_models(), config.outpaint)
         pano = outdoor_panorama(photo, photo_camera, work_height, outpaint=outpaint)
         decisions["outpainting"] = {"asked": config.outpaint.completion_type, "used": want_outpaint,
-                                    "why": outpaint_why, "completion": pano.decisions["completion"]}
+                                    "why": outpainting.reason, "completion": pano.decisions["completion"]}
     decisions["panorama"] = pano.decisions
     check_cancel(cancel)
 
     # Bright regions and the prior.
-    regions = bright_regions(pano.ldr, pano.distance, scene_type, config.thresholds)
-    prior = prior_scales(pano.ldr, regions, config.l_white)
+    ldr = pano.ldr
+    regions = bright_regions(ldr, pano.distance, scene_type, config.thresholds)
+    if config.prior_type == "cues":
+        cues = build_cues(photo, ldr, pano.unseen, regions, config.thresholds, config.cues)
+        ldr, regions, prior = cues.ldr, cues.regions, cues.scales
+        decisions["cues"] = cues.report
+    else:
+        prior = prior_scales(ldr, regions, config.l_white)
     decisions["regions"] = {name: round(float(mask.mean()), 5) for name, mask in regions.items()}
     decisions["prior"] = {"type": config.prior_type, "l_white": config.l_white,
                           "scales": {k: round(v, 5) for k, v in prior.items()}}
-    prior_hdr = hdr_from_scales(pano.ldr, regions, prior)
+    prior_hdr = hdr_from_scales(ldr, regions, prior)
     dark, dark_info = is_dark_environment(prior_hdr, regions)
     prompts = tuple(light_prompt(config.object_prompt, dark, config.tint) for _ in config.apparatus.object_azimuths) \
         + (light_prompt(SPHERE_PROMPT, dark, config.tint),)
@@ -287,21 +314,21 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
 
     # Optimise the scales with a critic, when there is one.
     scales, optimisation = dict(prior), None
-    use_critic, why = _pick_critic(config, critic, reference_envmap, regions)
-    decisions["critic"] = {"type": config.critic_type, "used": why.startswith("ok"), "why": why}
-    if config.critic_type in ("reference", "diffusion") and why.startswith("ok"):
+    use_critic, chosen = _choose_critic(config, critic, reference_envmap, regions)
+    decisions["critic"] = {"type": config.critic_type, "used": chosen.choice != "none", "why": chosen.reason}
+    if chosen.choice != "none":
         if mesh is None or maps is None:
             mesh, maps = default_object()
             decisions["object"] = "default grey sphere (no asset given)"
         else:
             mesh, _ = normalize_to_unit_sphere(mesh)
             decisions["object"] = f"the asset '{mesh.name}' with its own maps"
-        scene = ApparatusScene(mesh, maps, pano.ldr.shape[:2], config.apparatus,
+        scene = ApparatusScene(mesh, maps, ldr.shape[:2], config.apparatus,
                                photo_azimuth_deg=photo_camera.yaw_deg - 90.0)
         if config.critic_type == "reference":
             from .reference_critic import ReferenceCritic
 
-            use_critic = ReferenceCritic.from_true_map(scene, _fit_map(reference_envmap, pano.ldr.shape[:2]))
+            use_critic = ReferenceCritic.from_true_map(scene, _fit_map(reference_envmap, ldr.shape[:2]))
         elif use_critic is None:   # diffusion, with the models located above
             from .diffusion_critic import DiffusionLightCritic
 
@@ -311,14 +338,13 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
             decisions["critic"].update({"models": {k: str(v) for k, v in models.paths.items()},
                                         "device": str(models.device), "dtype": str(models.dtype).replace("torch.", ""),
                                         **{k: v for k, v in asdict(config.diffusion).items()}})
-        optimisation = optimise_scales(scene, pano.ldr, regions, prior, use_critic, prompts, config.optimise,
+        optimisation = optimise_scales(scene, ldr, regions, prior, use_critic, prompts, config.optimise,
                                        progress=progress, cancel=cancel, on_iteration=on_iteration)
         scales = {k: math.exp(v) for k, v in optimisation.log_scales.items()}
         decisions["optimisation"] = {"iterations": config.optimise.iterations, "lr": config.optimise.lr,
                                      "final_loss": optimisation.loss_history[-1] if optimisation.loss_history else None,
                                      "seconds": round(optimisation.seconds, 3)}
-    hdr = hdr_from_scales(pano.ldr, regions, scales)
-    ldr = pano.ldr
+    hdr = hdr_from_scales(ldr, regions, scales)
     if work_height > config.map_height:
         hdr, ldr = (_area_resize(m, config.map_height) for m in (hdr, ldr))
         regions = {name: _area_resize(mask.astype(np.float32), config.map_height) > 0 for name, mask in regions.items()}
@@ -343,18 +369,19 @@ def _fit_map(envmap: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     return envmap
 
 
-def _pick_critic(config: LightConfig, critic, reference_envmap, regions) -> tuple[Critic | None, str]:
+def _choose_critic(config: LightConfig, critic, reference_envmap, regions) -> tuple[Critic | None, Decision]:
+    """Which critic optimises the scales: "none", "reference" or "diffusion" (a given critic counts as diffusion)."""
     if not regions:
-        return None, "no bright region, so no scale to optimise"
+        return None, Decision("none", "no bright region, so no scale to optimise")
     if config.critic_type == "none":
-        return None, "critic_type 'none': the inverse-tone-mapping prior sets the scales"
+        return None, Decision("none", f"critic_type 'none': the {config.prior_type} prior sets the scales")
     if config.critic_type == "reference":
         if reference_envmap is None:
             raise InputError("critic_type 'reference' needs the true map (reference_envmap).")
-        return None, "ok: pixel loss against renders under the true map"
+        return None, Decision("reference", "pixel loss against renders under the true map")
     if critic is None:
-        return None, "ok: diffusion critic (VSD with Stable Diffusion 2 base, core/guidance)"
-    return critic, "ok: diffusion critic (given by the caller)"
+        return None, Decision("diffusion", "diffusion critic (VSD with Stable Diffusion 2 base, core/guidance)")
+    return critic, Decision("diffusion", "diffusion critic (given by the caller)")
 
 
 def _locate_light_models(models: ModelConfig, need_inpaint: bool) -> dict:
@@ -368,21 +395,22 @@ def _locate_light_models(models: ModelConfig, need_inpaint: bool) -> dict:
                                 f"`--outpaint prior` completes an outdoor map without the model.") from None
 
 
-def _want_outpaint(config: LightConfig) -> tuple[bool, str]:
-    """Whether an outdoor map is outpainted by SD2 inpainting, decided before any work."""
+def _choose_completion(config: LightConfig) -> Decision:
+    """How an outdoor map's unseen part is completed: "sd2" (inpainting model) or "prior", before any work."""
     kind = config.outpaint.completion_type
     if config.scene_type == "indoor":
-        return False, "indoor scene: no outpainting"
+        return Decision("prior", "indoor scene: no outpainting")
     if kind == "prior":
-        return False, "completion_type 'prior': the sky/ground prior completes the map"
+        return Decision("prior", "completion_type 'prior': the sky/ground prior completes the map")
     if kind == "sd2":
-        return True, "completion_type 'sd2'"
+        return Decision("sd2", "completion_type 'sd2'")
     from ..guidance.models import models_available
 
     found, where = models_available(config.models, need_inpaint=True)
     if found:
-        return True, f"auto: Stable Diffusion 2 inpainting found ({where})"
-    return False, "auto: Stable Diffusion 2 inpainting is not on this machine, so the sky/ground prior completes the map"
+        return Decision("sd2", f"auto: Stable Diffusion 2 inpainting found ({where})")
+    return Decision("prior", "auto: Stable Diffusion 2 inpainting is not on this machine, so the sky/ground prior "
+                             "completes the map")
 
 
 def write_light_outputs(result: LightResult, out_dir: str | Path) -> dict[str, str]:

@@ -50,6 +50,47 @@ def compose_hdr(ldr_linear: torch.Tensor, masks: dict[str, torch.Tensor], log_sc
     return ldr_linear * factor
 
 
+class LightVector:
+    """The current map as the appendix's light vector (c_x, c_y, c_r, c_v, b_v), for conditioning ε_ψ.
+
+    The dominant region is the one holding the most power (scale x radiance x solid angle); (c_x, c_y)
+    is its power-weighted centre in map coordinates (u, v from the top, as the appendix samples
+    lights), c_r its size as 1 - cos of the angular radius of a disc of the same solid angle (the
+    appendix's Gaussian exp((d.mu - 1) / c_r) has that width), c_v its mean radiance and b_v the mean
+    radiance outside every region. Per-region sums are taken once; each call only rescales them.
+    """
+
+    def __init__(self, ldr_linear: torch.Tensor, masks: dict[str, torch.Tensor]) -> None:
+        from ..render import equirect_directions
+
+        h, w = ldr_linear.shape[:2]
+        level = ldr_linear.double().mean(dim=-1)
+        rows = (torch.arange(h, dtype=torch.float64) + 0.5) / h
+        omega = (torch.sin(math.pi * rows) * (math.pi / h) * (2 * math.pi / w))[:, None].expand(h, w)
+        dirs = torch.from_numpy(equirect_directions(h, w))
+        outside = torch.ones(h, w, dtype=torch.bool)
+        self.regions = {}
+        for name, mask in masks.items():
+            m = mask.bool()
+            outside &= ~m
+            power = float((level * omega)[m].sum())
+            area = float(omega[m].sum())
+            centre = (dirs[m] * (level * omega)[m][:, None]).sum(dim=0)
+            self.regions[name] = (power, area, centre / max(float(centre.norm()), 1e-12))
+        self.background = float((level * omega)[outside].sum() / omega[outside].sum()) if bool(outside.any()) else 0.0
+
+    def __call__(self, scales: dict[str, float]) -> tuple[float, float, float, float, float]:
+        if not self.regions:
+            return (0.25, 0.0, 0.0, self.background, self.background)
+        name = max(self.regions, key=lambda k: self.regions[k][0] * scales[k])
+        power, area, centre = self.regions[name]
+        x, y, z = (float(v) for v in centre)
+        c_x = (0.5 - math.atan2(y, x) / (2 * math.pi)) % 1.0
+        c_y = 0.5 - math.asin(max(-1.0, min(1.0, z))) / math.pi
+        c_r = area / (2 * math.pi)
+        return (round(c_x, 5), round(c_y, 5), round(c_r, 5), power * scales[name] / max(area, 1e-12), self.background)
+
+
 def hdr_from_scales(ldr_srgb: np.ndarray, regions: dict[str, np.ndarray], scales: dict[str, float]) -> np.ndarray:
     """The HDR map (float32, linear) for given scales (not logs)."""
     ldr = torch.from_numpy(srgb_to_linear(ldr_srgb))
@@ -128,6 +169,7 @@ class CriticRequest:
     t_range: tuple[int, int] = (750, 990)
     alphas: torch.Tensor | None = None   # (V, h, w, 1) coverage, for critics that composite
     view_indices: tuple[int, ...] = ()   # which of the scene's views these renders are
+    light: tuple[float, ...] | None = None   # the current map as (c_x, c_y, c_r, c_v, b_v), see `light_vector`
 
 
 class Critic(Protocol):
@@ -255,17 +297,20 @@ def optimise_scales(scene: ApparatusScene, ldr_srgb: np.ndarray, regions: dict[s
     n = config.iterations
     schedule = torch.optim.lr_scheduler.LambdaLR(
         optimizer, lambda it: 1.0 - (1.0 - config.lr_final_factor) * min(it, n - 1) / max(n - 1, 1))
+    light_vector = LightVector(ldr, masks)
     for it in range(n):
         check_cancel(cancel)
         optimizer.zero_grad()
         loss = 0.0
+        light = light_vector({k: math.exp(float(v.detach())) for k, v in log_scales.items()})
         for v in range(len(scene.cameras)):
             # Compose the HDR map from the current scales and render one view.
             envmap = compose_hdr(ldr, masks, log_scales)
             render, alpha = scene.render_view(envmap, v, seed=config.seed * 100003 + it)
             # Score it and weight it ({1/6, 1/6, 1/6, 1/2}); backward now, while the sensor is this view's
             # (Mitsuba replays the path from the renderer's current camera on backward).
-            request = CriticRequest((prompts[v],), (scene.view_names[v],), it, n, config.t_range, alpha[None], (v,))
+            request = CriticRequest((prompts[v],), (scene.view_names[v],), it, n, config.t_range, alpha[None], (v,),
+                                    light)
             view_loss = scene.weights[v] * per_view_losses(critic(render[None], request), render[None]).sum()
             view_loss.backward()
             loss += float(view_loss.detach())

@@ -347,18 +347,3 @@ def sky_ground_prior(warped: np.ndarray, inside: np.ndarray) -> np.ndarray:
             rows[r] = ground
     return np.broadcast_to(rows[:, None, :], (height, width, 3)).copy()
 
-
-def sky_score(photo: np.ndarray) -> dict:
-    """A cheap indoor/outdoor cue: how much of the photo's top third looks like sky.
-
-    A pixel looks like sky when it is bright (sRGB mean >= 0.45) and either blue-dominant (b >= r + 0.03)
-    or nearly colourless and very bright (>= 0.8). Score = fraction of such pixels in the top third;
-    outdoor when the score >= 0.3.
-    """
-    top = photo[: max(1, photo.shape[0] // 3)]
-    mean = top.mean(axis=-1)
-    bluish = top[..., 2] >= top[..., 0] + 0.03
-    white = (top.max(-1) - top.min(-1) < 0.08) & (mean >= 0.8)
-    sky = (mean >= 0.45) & (bluish | white)
-    score = float(sky.mean())
-    return {"sky_score": round(score, 4), "threshold": 0.3, "scene_type": "outdoor" if score >= 0.3 else "indoor"}

@@ -32,6 +32,14 @@ def bake_texture(texture: NeuralTexture, position_map, mask, fill_index) -> np.n
         return texture.texture(position_map, mask, fill_index).cpu().numpy().astype(np.float32)
 
 
+def texture_maps_for_mesh(texture: NeuralTexture, normalized_mesh) -> np.ndarray:
+    """(R, R, 5) maps of a neural texture on a (normalised) mesh's UV layout, at the texture's resolution."""
+    from .uv_raster import rasterize_uv
+
+    raster = rasterize_uv(normalized_mesh, texture.config.resolution)
+    return bake_texture(texture, raster.position, raster.border, raster.fill_index)
+
+
 def bake_maps(texture: NeuralTexture, position_map, mask, fill_index, out_dir: str | os.PathLike,
               constants: dict[str, float] | None = None) -> dict[str, Path | float]:
     """Write base_color.png, roughness.png, metallic.png and texture.pt into out_dir (atomically).

@@ -1,0 +1,62 @@
+"""scenefit compose: the asset in the photo, lit by the estimated light, casting its shadow."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .options import PRESETS, add_asset_args, load_asset, progress
+
+
+def run(args) -> int:
+    from ..core.compose import ComposeInputs, compose_preset, compose_to_folder, light_camera
+    from ..core.convert import target_stack
+    from ..core.lighting import load_photo, parse_placement
+    from ..core.mesh import normalize_to_unit_sphere
+    from ..core.pipeline import environment_info, load_environment
+    from ..core.texture.bake import load_neural_texture, texture_maps_for_mesh
+
+    config = compose_preset(args.preset, size=args.size, shadow_type=args.shadow, spp=args.spp,
+                            sampler_type=args.sampler, denoiser_type=args.denoiser, exposure=args.exposure)
+    mesh, maps = load_asset(args.asset, args.object)
+    photo, info = load_photo(args.photo)
+    h, w = photo.shape[:2]
+    placement = parse_placement(args.at, w, h)
+    envmap = load_environment(args.light)
+    camera, camera_source = light_camera(args.light, info, w, h, args.fov,
+                                         -args.elevation if args.elevation is not None else None)
+    if args.texture:
+        normalized, _ = normalize_to_unit_sphere(mesh)
+        stack, source = texture_maps_for_mesh(load_neural_texture(Path(args.texture)), normalized), "neural texture"
+    else:
+        stack, source = target_stack(maps, max(maps.resolution)), "the asset's own maps"
+    report = compose_to_folder(
+        ComposeInputs(mesh, stack, photo, placement, envmap, camera), config, Path(args.out),
+        {"inputs": {"asset": args.asset, "texture": args.texture or source, "photo": info, "light": args.light,
+                    "camera_from": camera_source},
+         "environment": environment_info()},
+        progress=progress(args))
+    shadow = report["shadow"]
+    print(f"composed '{mesh.name}' at {report['placement']['distance_m']} m, {report['spp']} spp, "
+          f"shadow {shadow['type']} ({shadow['pixels']} px) in {report['seconds']:.1f} s -> {args.out}/composite.png")
+    return 0
+
+
+def add_parser(sub) -> None:
+    from ..core.compose import SAMPLER_TYPES, SHADOW_TYPES
+
+    p = sub.add_parser("compose", help="render the asset into the photo under the estimated light, with its shadow")
+    add_asset_args(p)
+    p.add_argument("--texture", help="a texture.pt (convert/adapt output) to render instead of the asset's own maps")
+    p.add_argument("--photo", required=True, help="the scene photo")
+    p.add_argument("--at", required=True, help="X,Y where the asset stands: fractions of width,height (or pixels)")
+    p.add_argument("--light", required=True, help="light.exr from `scenefit light` (its report.json gives the camera)")
+    p.add_argument("--out", required=True, help="output folder: composite.png/.exr, layers/, report.json")
+    p.add_argument("--size", type=float, help="fraction of the photo's height the asset spans (default 0.3)")
+    p.add_argument("--preset", choices=PRESETS, default="balanced", help="noise target and sample cap")
+    p.add_argument("--shadow", choices=SHADOW_TYPES, help="ratio (shadow catcher, default), paper (thresholded), none")
+    p.add_argument("--spp", type=int, help="samples per pixel (default: from the preset's noise target)")
+    p.add_argument("--sampler", choices=SAMPLER_TYPES, help="Mitsuba sampler (default multijitter)")
+    p.add_argument("--denoiser", choices=("oidn", "none"), help="Intel Open Image Denoise (default) or none")
+    p.add_argument("--exposure", type=float, help="multiply the light map (default 1: it is in the photo's exposure)")
+    p.add_argument("--fov", type=float, help="horizontal field of view, degrees (default: the light stage's)")
+    p.add_argument("--elevation", type=float, help="how far the camera looks down, degrees (default: the light stage's)")
+    p.set_defaults(func=run)

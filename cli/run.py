@@ -1,0 +1,56 @@
+"""scenefit run: the whole pipeline (convert -> light -> adapt -> compose -> bake) for one asset and photo."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .options import (PRESETS, add_asset_args, add_model_args, add_prompt_service_args, load_asset, model_config,
+                      progress, scene_conditional_prompt)
+
+
+def run_config(args):
+    """(RunConfig, prompt record or None): the prompt is --prompt, else written from --object-prompt
+    and --scene-prompt (and the photo, for a vision model)."""
+    from ..core.run import RunConfig
+
+    prompt, _, written = scene_conditional_prompt(args, "scene")
+    config = RunConfig(preset=args.preset, prompt=prompt, guidance_type=args.guidance,
+                       size=args.size, shadow_type=args.shadow, compose_spp=args.spp, models=model_config(args))
+    return config, written
+
+
+def run(args) -> int:
+    from ..core.pipeline import write_report
+    from ..core.run import run_pipeline
+
+    config, written = run_config(args)
+    mesh, maps = load_asset(args.asset, args.object)
+    report = run_pipeline(mesh, maps, args.photo, args.at, Path(args.out), config, progress=progress(args))
+    if written is not None:
+        report["prompt_writing"] = written.to_report()
+        write_report(Path(args.out) / "report.json", report)
+    summary = ", ".join(f"{name} {stage['status']}" for name, stage in report["stages"].items())
+    print(f"run done in {report['seconds_total']:.1f} s ({summary}) -> {report['composite']}")
+    return 0
+
+
+def add_parser(sub) -> None:
+    from ..core.compose import SHADOW_TYPES
+
+    p = sub.add_parser("run", help="convert, light, adapt, compose and bake in one go (resumable)")
+    add_asset_args(p)
+    p.add_argument("--photo", required=True, help="the scene photo")
+    p.add_argument("--at", required=True, help="X,Y where the asset stands: fractions of width,height (or pixels)")
+    p.add_argument("--out", required=True, help="output folder; a second run with the same settings reuses stages")
+    p.add_argument("--prompt", help="what the asset should become in this scene (adapt; default from its name)")
+    p.add_argument("--object-prompt", help="the object, e.g. 'a leather sofa': without --prompt, a language model "
+                                           "writes the prompt from it and --scene-prompt (or the photo)")
+    p.add_argument("--scene-prompt", help="the scene, e.g. 'a swamp'")
+    p.add_argument("--preset", choices=PRESETS, default="balanced")
+    p.add_argument("--guidance", choices=("auto", "sd2", "none"), default="auto",
+                   help="adapt with Stable Diffusion 2 (sd2), not at all (none), or when its weights are here (auto)")
+    p.add_argument("--size", type=float, default=0.3, help="fraction of the photo's height the asset spans")
+    p.add_argument("--shadow", choices=SHADOW_TYPES, default="ratio")
+    p.add_argument("--spp", type=int, help="compose: samples per pixel (default: from the preset's noise target)")
+    add_model_args(p)
+    add_prompt_service_args(p, prefix="prompt-")
+    p.set_defaults(func=run)

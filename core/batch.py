@@ -1,0 +1,483 @@
+"""`scenefit batch`: many asset x scene jobs, in this process or as Ray tasks on a cluster.
+
+The driver (this process) owns the output folder. A job travels to a worker as a `JobPayload`
+(the job plus its input files packed as bytes, so a worker on another node needs no shared disk),
+runs there in a temporary folder, and comes back as a `JobResult` (its report and output folder
+packed as bytes). The driver swaps the folder into DIR/<name>/ in one step, so a job's folder is
+always one whole run. Workers (`JobWorker`; on Ray an actor with declared CPUs, GPUs and memory)
+keep their loaded models between jobs. The in-process executor runs the very same `JobWorker`.
+
+Resuming: a job whose DIR/<name>/report.json says "done" is skipped. Failures: a job is tried
+1 + retries times; after that its folder holds a report with status "failed" and the error, the
+summary lists it, and the next run tries it again.
+"""
+from __future__ import annotations
+
+import io
+import json
+import math
+import shutil
+import tarfile
+import tempfile
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+from .atomic import write_json_atomic, write_text_atomic
+from .errors import InputError, SceneFitError
+from .jobs import BatchSettings, Job, JobsFile
+
+REPORT = "report.json"
+SUMMARY_JSON, SUMMARY_MD, CONTACT_SHEET = "summary.json", "summary.md", "contact_sheet.png"
+# What a job's contact-sheet cell shows, the first that exists (the composite once compose runs).
+SHEET_IMAGES = ("composite.png", "compose/composite.png", "light/light_preview.png", "convert/maps/base_color.png")
+
+
+# -- packing files as bytes ------------------------------------------------------------------------
+
+def pack(paths: dict[str, Path]) -> bytes:
+    """A tar (gzip) of files and folders, each stored under its given name."""
+    buffer = io.BytesIO()
+    with tarfile.open(fileobj=buffer, mode="w:gz") as tar:
+        for name, path in paths.items():
+            tar.add(str(path), arcname=name)
+    return buffer.getvalue()
+
+
+def unpack(data: bytes, folder: Path) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    with tarfile.open(fileobj=io.BytesIO(data), mode="r:gz") as tar:
+        tar.extractall(folder, filter="data")   # refuses absolute paths and '..'
+    return folder
+
+
+@dataclass(frozen=True)
+class JobPayload:
+    """A job with its inputs packed: what a worker anywhere needs to run it."""
+
+    job: Job
+    inputs: bytes
+    attempt: int = 1
+
+
+def make_payload(job: Job, attempt: int = 1) -> JobPayload:
+    # Stored as asset/<its name> and photo/<its name>; a .gltf takes its folder (buffers, images).
+    files = {"asset": job.asset.parent} if job.asset.suffix.lower() == ".gltf" else {f"asset/{job.asset.name}": job.asset}
+    if job.photo is not None:
+        files[f"photo/{job.photo.name}"] = job.photo
+    return JobPayload(job, pack(files), attempt)
+
+
+def unpacked_job(payload: JobPayload, folder: Path) -> Job:
+    """The payload's job with its paths pointing at the unpacked copies in `folder`."""
+    unpack(payload.inputs, folder)
+    job = payload.job
+    photo = None if job.photo is None else folder / "photo" / job.photo.name
+    return replace(job, asset=folder / "asset" / job.asset.name, photo=photo)
+
+
+# -- one job on a worker ---------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class JobResult:
+    name: str
+    report: dict
+    outputs: bytes          # the job's folder, packed
+
+
+class JobWorker:
+    """Runs jobs one after another; what it loads (models) stays loaded for its next job.
+
+    On Ray this class is the actor; in-process one instance serves the whole batch. `models` (a
+    ModelCache) is for the pipeline's diffusion models once run_pipeline takes loaded models.
+    """
+
+    def __init__(self, threads: int | None = None) -> None:
+        from .guidance.models import ModelCache
+
+        self.threads_before = set_threads(threads) if threads is not None else None
+        self.cancel_event = threading.Event()
+        self.models = ModelCache()
+        self.jobs_run = 0
+
+    def run(self, payload: JobPayload, progress_sink=None) -> JobResult:
+        """Run one job; progress events go to `progress_sink` (a queue: ray.util.queue.Queue on Ray)."""
+        started = time.perf_counter()
+        self.cancel_event.clear()
+        progress = None if progress_sink is None else SinkProgress(progress_sink, payload.job.name)
+        with tempfile.TemporaryDirectory(prefix="scenefit-job-") as tmp:
+            job = unpacked_job(payload, Path(tmp) / "in")
+            out = Path(tmp) / "out"
+            out.mkdir()
+            stages = run_job_stages(job, out, progress=progress, cancel=self.cancel_event)
+            self.jobs_run += 1
+            report = {"status": "done", "job": payload.job.to_dict(), "attempts": payload.attempt,
+                      "seconds": round(time.perf_counter() - started, 3), "quality": quality_figures(stages),
+                      "stages": stages, "worker": worker_info(self.jobs_run, self.models.loads)}
+            write_json_atomic(out / REPORT, report)
+            return JobResult(payload.job.name, report, pack({".": out}))
+
+    def cancel(self) -> None:
+        """Stop the running job at its next check (a Ray actor takes this call while `run` runs)."""
+        self.cancel_event.set()
+
+    def ping(self) -> str:
+        return "ready"
+
+
+class SinkProgress:
+    """A progress callback that puts plain dicts into a queue, at most every `interval` seconds
+    (always for a stage's last step and for previews); a full queue drops the event rather than wait."""
+
+    def __init__(self, sink, job: str, interval: float = 0.25) -> None:
+        self.sink, self.job, self.interval = sink, job, interval
+        self._last = 0.0
+
+    def __call__(self, event) -> None:
+        now = time.perf_counter()
+        last_step = event.step >= event.total
+        if not last_step and event.preview is None and now - self._last < self.interval:
+            return
+        self._last = now
+        metrics = {k: v for k, v in (event.metrics or {}).items() if isinstance(v, (int, float, str))}
+        try:
+            self.sink.put_nowait({"job": self.job, "stage": event.stage, "step": event.step, "total": event.total,
+                                  "message": event.message, "metrics": metrics, "preview": event.preview})
+        except Exception:   # queue.Full / ray.util.queue.Full: progress is best effort, the job goes on
+            pass
+
+
+def set_threads(threads: int | tuple[int, int]) -> tuple[int, int]:
+    """Use as many threads as the job was given (torch, Mitsuba's LLVM backend); returns the old counts.
+
+    Also what makes a job's outputs the same wherever it runs: sums split over a different number
+    of threads round differently (Mitsuba's gradient atomics even reorder run to run above one).
+    """
+    import drjit
+    import torch
+
+    before = (torch.get_num_threads(), drjit.thread_count())
+    torch_threads, drjit_threads = threads if isinstance(threads, tuple) else (threads, threads)
+    torch.set_num_threads(max(1, torch_threads))
+    drjit.set_thread_count(max(1, drjit_threads))
+    return before
+
+
+def job_threads(settings: BatchSettings) -> int:
+    return max(1, int(settings.num_cpus))
+
+
+def worker_info(jobs_run: int, model_loads: int) -> dict:
+    import os
+    import platform
+
+    import torch
+
+    return {"host": platform.node(), "pid": os.getpid(), "jobs_run_by_this_worker": jobs_run,
+            "model_loads_by_this_worker": model_loads, "torch_threads": torch.get_num_threads()}
+
+
+def run_job_stages(job: Job, out: Path, progress=None, cancel=None) -> dict:
+    """Run the job's stages into `out`; returns each stage's report.
+
+    A job that composes runs `scenefit run`'s pipeline (core/run.py, adapt included when its stages
+    list it); a job of convert and/or light alone runs those stage functions.
+    """
+    if "compose" in job.stages or "bake" in job.stages:
+        try:
+            from .run import run_pipeline  # noqa: F401
+        except ImportError:
+            raise InputError(f"Job '{job.name}': stages compose and bake need `scenefit run`'s pipeline, which "
+                             f"this version lacks; use stages convert and light.") from None
+        return _relative_outputs({"run": run_pipeline_for_job(job, out, progress, cancel)}, out)
+    return _available_stages(job, out, progress, cancel)
+
+
+def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None) -> dict:
+    """The job through core/run.py's run_pipeline: adapt when listed (and its weights are found)."""
+    from .run import RunConfig, run_pipeline
+
+    mesh, maps = _load_asset(job)
+    config = RunConfig(preset=job.preset, prompt=job.prompt,
+                       guidance_type="auto" if "adapt" in job.stages else "none")
+    return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel)
+
+
+def _load_asset(job: Job):
+    from .asset_io import is_asset_folder, load_asset_folder
+
+    if is_asset_folder(job.asset):
+        return load_asset_folder(job.asset)
+    from ..blender_io.asset_file import load_asset_file   # a Blender/glTF file: bpy in this worker
+
+    return load_asset_file(str(job.asset), job.object)
+
+
+def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
+    from .convert import convert_preset
+    from .lighting import estimate_light, light_preset, light_report, load_photo, parse_placement, write_light_outputs
+    from .pipeline import convert_and_bake
+
+    if "adapt" in job.stages:
+        raise InputError(f"Job '{job.name}': stage adapt runs inside the whole pipeline in a batch; "
+                         f"list compose too, or use stages convert and light.")
+    reports: dict = {}
+    if "convert" in job.stages:
+        mesh, maps = _load_asset(job)
+        overrides = {} if job.seed is None else {"seed": job.seed}
+        _, reports["convert"] = convert_and_bake(mesh, maps, out / "convert" / "maps",
+                                                 convert_preset(job.preset, **overrides), progress, cancel)
+    if "light" in job.stages:
+        photo, info = load_photo(job.photo)
+        placement = parse_placement(job.at, photo.shape[1], photo.shape[0])
+        config = light_preset(job.preset, critic_type="none")
+        result = estimate_light(photo, placement, config, photo_info=info, progress=progress, cancel=cancel)
+        reports["light"] = light_report(result, config, write_light_outputs(result, out / "light"))
+    return _relative_outputs(reports, out)
+
+
+def _relative_outputs(value, out: Path):
+    """Output paths relative to the job folder (the folder moves from the worker to DIR/<name>/)."""
+    if isinstance(value, dict):
+        return {k: _relative_outputs(v, out) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_relative_outputs(v, out) for v in value]
+    if isinstance(value, str) and value.startswith(str(out) + "/"):
+        return value[len(str(out)) + 1:]
+    return value
+
+
+def quality_figures(stages: dict) -> dict:
+    """The numbers the summary shows per job, from whichever stages ran."""
+    if "run" in stages:   # the whole pipeline's report: each stage's own report inside
+        run = stages["run"].get("stages", {})
+        stages = {name: s["report"] for name, s in run.items() if isinstance(s, dict) and "report" in s}
+    q: dict = {}
+    convert = stages.get("convert", {})
+    if "psnr_covered_texels_db" in convert:
+        q["convert_psnr_db"] = convert["psnr_covered_texels_db"]
+    light = stages.get("light", {})
+    if light:
+        q["light_scene"] = light.get("decisions", {}).get("scene_type", {}).get("chosen")
+        q["light_hdr_max"] = round(float(light.get("hdr_max", float("nan"))), 3)
+    adapt = stages.get("adapt", {})
+    if adapt:
+        q["adapt_iterations"] = adapt.get("iterations")
+    for name, stage in stages.items():
+        for key, value in stage.get("quality", {}).items() if isinstance(stage, dict) else ():
+            q[f"{name}_{key}"] = value
+    return q
+
+
+# -- the driver's side: folders, resume, retries ----------------------------------------------------
+
+def job_report(out_dir: Path, name: str) -> dict | None:
+    path = Path(out_dir) / name / REPORT
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def is_done(out_dir: Path, name: str) -> bool:
+    report = job_report(out_dir, name)
+    return report is not None and report.get("status") == "done"
+
+
+def install_folder(out_dir: Path, name: str, fill: Callable[[Path], None]) -> Path:
+    """Make DIR/<name>/ by filling a fresh staging folder and swapping it in whole."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{name}.partial-", dir=out_dir))
+    try:
+        fill(staging)
+        staging.chmod(0o755)
+        final = out_dir / name
+        old = None
+        if final.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{name}.old-", dir=out_dir))
+            final.rename(old / name)
+        staging.rename(final)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+        return final
+    finally:
+        if staging.exists():
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+@dataclass
+class JobOutcome:
+    name: str
+    status: str                 # done | failed | skipped (done by an earlier run)
+    attempts: int = 0
+    seconds: float = 0.0
+    quality: dict = field(default_factory=dict)
+    error: str | None = None
+
+
+def _error_text(error: BaseException) -> str:
+    """One line for people: SceneFit's own sentences as they are, anything else with its type."""
+    cause = getattr(error, "cause", None)   # ray.exceptions.RayTaskError wraps the worker's exception
+    if isinstance(cause, BaseException):
+        error = cause
+    if isinstance(error, SceneFitError):
+        return str(error)
+    text = str(error).strip().splitlines()
+    return f"{type(error).__name__}: {text[-1] if text else ''}"
+
+
+EventCallback = Callable[[str, str], None]   # (job name, message)
+
+
+class Dispatcher:
+    """Hands payloads to workers and gives back (payload, JobResult | exception) as they finish."""
+
+    def submit(self, payload: JobPayload) -> None: ...
+    def next_done(self) -> tuple[JobPayload, JobResult | BaseException]: ...
+    def close(self) -> None: ...
+
+
+class InProcessDispatcher(Dispatcher):
+    """One JobWorker in this process, jobs one after another."""
+
+    def __init__(self, settings: BatchSettings = BatchSettings(), worker_class: type[JobWorker] = JobWorker,
+                 progress_sink=None) -> None:
+        self.worker = worker_class(threads=job_threads(settings))
+        self.progress_sink = progress_sink
+        self.queue: list[JobPayload] = []
+        self.workers = 1
+
+    def submit(self, payload: JobPayload) -> None:
+        self.queue.append(payload)
+
+    def next_done(self):
+        payload = self.queue.pop(0)
+        try:
+            return payload, self.worker.run(payload, self.progress_sink)
+        except Exception as error:   # reported and retried by the driver, never lost
+            return payload, error
+
+    def close(self) -> None:
+        if self.worker.threads_before is not None:   # this process goes on after the batch
+            set_threads(self.worker.threads_before)
+
+
+def run_batch(jobs: JobsFile, out_dir: str | Path, dispatcher: Dispatcher | None = None,
+              on_event: EventCallback | None = None) -> list[JobOutcome]:
+    """Run every job not yet done; write the per-job folders, summary.json/.md and the contact sheet."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    say = on_event or (lambda name, message: None)
+    dispatcher = dispatcher or InProcessDispatcher(jobs.settings)
+    outcomes: dict[str, JobOutcome] = {}
+    pending = 0
+    try:
+        for job in jobs.jobs:
+            if is_done(out_dir, job.name):
+                report = job_report(out_dir, job.name) or {}
+                outcomes[job.name] = JobOutcome(job.name, "skipped", report.get("attempts", 0),
+                                                report.get("seconds", 0.0), report.get("quality", {}))
+                say(job.name, "done by an earlier run; skipped")
+                continue
+            dispatcher.submit(make_payload(job))
+            pending += 1
+            say(job.name, "queued")
+        tries = 1 + jobs.settings.retries
+        while pending:
+            payload, result = dispatcher.next_done()
+            pending -= 1
+            job = payload.job
+            if isinstance(result, JobResult):
+                install_folder(out_dir, job.name, lambda folder: unpack(result.outputs, folder))
+                outcomes[job.name] = JobOutcome(job.name, "done", payload.attempt, result.report["seconds"],
+                                                result.report.get("quality", {}))
+                say(job.name, f"done in {result.report['seconds']:.1f} s (attempt {payload.attempt})")
+                continue
+            error = _error_text(result)
+            if payload.attempt < tries:
+                say(job.name, f"attempt {payload.attempt} failed ({error}); retrying")
+                dispatcher.submit(replace(payload, attempt=payload.attempt + 1))
+                pending += 1
+                continue
+            report = {"status": "failed", "job": job.to_dict(), "attempts": payload.attempt, "error": error,
+                      "traceback": "".join(traceback.format_exception(result))[-4000:]}
+            install_folder(out_dir, job.name, lambda folder: write_json_atomic(folder / REPORT, report))
+            outcomes[job.name] = JobOutcome(job.name, "failed", payload.attempt, 0.0, {}, error)
+            say(job.name, f"failed after {payload.attempt} attempt(s): {error}")
+    finally:
+        dispatcher.close()
+    ordered = [outcomes[job.name] for job in jobs.jobs]
+    write_summary(out_dir, ordered, jobs)
+    return ordered
+
+
+# -- summary -----------------------------------------------------------------------------------------
+
+def summary_table(outcomes: list[JobOutcome]) -> str:
+    keys = sorted({k for o in outcomes for k in o.quality})
+    head = "| job | status | attempts | seconds | " + " | ".join(keys) + (" |" if keys else "") + " error |"
+    rule = "|" + "---|" * (5 + len(keys))
+    rows = []
+    for o in outcomes:
+        cells = [o.name, o.status, str(o.attempts), f"{o.seconds:.1f}"]
+        cells += ["" if o.quality.get(k) is None else _cell(o.quality[k]) for k in keys]
+        cells.append((o.error or "").replace("|", "/"))
+        rows.append("| " + " | ".join(cells) + " |")
+    return "\n".join([head, rule, *rows])
+
+
+def _cell(value) -> str:
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else f"{value:.4g}"
+    return str(value)
+
+
+def write_summary(out_dir: Path, outcomes: list[JobOutcome], jobs: JobsFile) -> None:
+    counts = {s: sum(o.status == s for o in outcomes) for s in ("done", "skipped", "failed")}
+    write_json_atomic(out_dir / SUMMARY_JSON, {
+        "jobs_file": str(jobs.path), "counts": counts,
+        "jobs": [{"name": o.name, "status": o.status, "attempts": o.attempts, "seconds": o.seconds,
+                  "quality": o.quality, "error": o.error} for o in outcomes]})
+    text = (f"# Batch {jobs.path.name}\n\n{counts['done']} done, {counts['skipped']} skipped (done before), "
+            f"{counts['failed']} failed.\n\n{summary_table(outcomes)}\n")
+    write_text_atomic(out_dir / SUMMARY_MD, text)
+    sheet = contact_sheet_image(out_dir, [o.name for o in outcomes if o.status in ("done", "skipped")])
+    if sheet is not None:
+        from .imageio import write_image
+
+        write_image(out_dir / CONTACT_SHEET, sheet)
+
+
+def contact_sheet_image(out_dir: Path, names: list[str], cell: int = 192, columns: int = 4):
+    """A grid of each job's composite (or its best preview), labelled with the job's name; sRGB [0, 1]."""
+    import cv2
+    import numpy as np
+
+    from .imageio import read_image
+
+    cells = []
+    for name in names:
+        path = next((out_dir / name / p for p in SHEET_IMAGES if (out_dir / name / p).is_file()), None)
+        if path is None:
+            continue
+        image = read_image(path)[..., :3]
+        if image.shape[2] == 1:
+            image = np.repeat(image, 3, axis=2)
+        h, w = image.shape[:2]
+        scale = cell / max(h, w)
+        image = cv2.resize(image, (max(1, round(w * scale)), max(1, round(h * scale))), interpolation=cv2.INTER_AREA)
+        canvas = np.full((cell + 22, cell, 3), 0.12, np.float32)
+        canvas[22:22 + image.shape[0], :image.shape[1]] = np.clip(image, 0.0, 1.0)
+        cv2.putText(canvas, name[:24], (4, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0.95, 0.95, 0.95), 1, cv2.LINE_AA)
+        cells.append(canvas)
+    if not cells:
+        return None
+    while len(cells) % columns and len(cells) > columns:
+        cells.append(np.full_like(cells[0], 0.12))
+    rows = [np.concatenate(cells[i:i + columns], axis=1) for i in range(0, len(cells), columns)]
+    return np.concatenate(rows, axis=0)
+

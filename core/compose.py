@@ -1,0 +1,586 @@
+"""Composition: the asset rendered into the photo under the estimated light, with its shadow.
+
+    job = build_compose(inputs, config)      # place the asset, build the Mitsuba scenes, pick spp
+    while not job.done: job.step()           # one render pass per step (object, floor with/without it)
+    result = job.finish()                    # denoise, matte, composite, report
+    write_compose_outputs(result, out_dir)
+
+Geometry is the light stage's (core/lighting/panorama.py): the photo camera (`PhotoCamera`) stands
+CAMERA_HEIGHT above the floor z = 0, and the asset stands on the floor where the ray through the
+picked pixel meets it (`place_on_floor`), turned to face the camera and scaled so that it spans
+`size` of the photo's height. The light map is latitude-longitude in Blender's convention and in
+the photo's exposure (what `scenefit light` writes), so the render and the photo share units and
+the composite needs no exposure factor.
+
+The shadow (appendix "Scene Composition" of the paper, and the shadow-catcher default):
+- "ratio" (default): the floor's radiance with the object divided by the floor's radiance without
+  it, per colour channel, clipped to [0, 1], multiplied into the photo in linear light. Both floor
+  passes use the same samples (same sampler, seed and window), so wherever the object changes
+  nothing the two are bit-identical and the ratio is exactly 1. The object is black in the floor
+  pass: it blocks light (shadow, contact shadow) but adds none (no colour bleeding); an albedo AOV
+  tells the samples that met the floor from those that met the object. Darkening under
+  `matte_tolerance` is dropped (the object's faint occlusion of the sky reaches every floor pixel).
+- "paper": the floor with the object only, thresholded at `paper_threshold` x its mean intensity
+  into shadowed and lit regions; shadowed intensities are divided by the lit mean and used as the
+  matte, lit pixels keep the photo (our reading of "scale by norm([1,1,1]) / E(I | lit) and convert
+  to transparency": a floor as bright as the lit mean is fully transparent).
+- "none": no floor pass. Neither runs when the picked point is above the horizon: the asset then
+  floats on the ray through the picked pixel, touches no floor and casts no shadow onto it.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import asdict, dataclass, field, replace
+
+import numpy as np
+
+from .backend import init_mitsuba
+from .denoise import DENOISER_TYPES, denoise, oidn_available
+from .errors import InputError
+from .imageio import linear_to_srgb, srgb_to_linear
+from .lighting.panorama import CAMERA_HEIGHT, pixel_ray, place_on_floor
+from .mesh import Mesh, normalize_to_unit_sphere, vertex_normals
+from .photo import PhotoCamera
+from .progress import ProgressCallback, check_cancel, emit
+from .render import ENVMAP_TO_WORLD, _bitmap_texture, _mitsuba_mesh
+
+SHADOW_TYPES = ("ratio", "paper", "none")
+SAMPLER_TYPES = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
+ASSUMED_CAMERA_HEIGHT_M = 1.5   # to state placements in metres: a hand-held camera at chest height
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
+
+
+@dataclass(frozen=True)
+class ComposeConfig:
+    size: float = 0.3                 # fraction of the photo's height the asset spans
+    shadow_type: str = "ratio"
+    spp: int | None = None            # None: chosen from noise_target by a pilot render
+    noise_target: float = 0.03        # RMS noise of the raw object render, display sRGB units
+    pilot_spp: int = 4
+    min_spp: int = 4
+    max_spp: int = 64
+    sampler_type: str = "multijitter"  # picked by benchmarks/bench_compose.py
+    denoiser_type: str = "oidn"
+    max_depth: int = 6
+    floor_albedo: float = 0.8          # cancels in the ratio; sets only the paper shadow's noise level
+    paper_threshold: float = 0.9       # "shadowed" below this fraction of the floor's mean intensity
+    matte_tolerance: float = 0.01      # darkening below 1% (about one 8-bit level of the photo at most) is
+                                       # dropped: the object's faint occlusion of the sky reaches every floor pixel
+    exposure: float = 1.0              # multiplies the light map (1: the map is in the photo's exposure)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.size <= 2.0:
+            raise InputError(f"--size is the fraction of the photo's height the asset spans, in (0, 2]; got {self.size}.")
+        if self.shadow_type not in SHADOW_TYPES:
+            raise InputError(f"shadow_type must be one of {', '.join(SHADOW_TYPES)}, got {self.shadow_type!r}.")
+        if self.sampler_type not in SAMPLER_TYPES:
+            raise InputError(f"sampler_type must be one of {', '.join(SAMPLER_TYPES)}, got {self.sampler_type!r}.")
+        if self.denoiser_type not in DENOISER_TYPES:
+            raise InputError(f"denoiser_type must be one of {', '.join(DENOISER_TYPES)}, got {self.denoiser_type!r}.")
+        if self.spp is not None and not 1 <= self.spp <= 65536:
+            raise InputError(f"spp must be between 1 and 65536, got {self.spp}.")
+        if not (1 <= self.min_spp <= self.max_spp and self.pilot_spp >= 1):
+            raise InputError(f"Need 1 <= min_spp <= max_spp and pilot_spp >= 1, got {self.min_spp}, {self.max_spp}, "
+                             f"{self.pilot_spp}.")
+        if not self.noise_target > 0:
+            raise InputError(f"noise_target must be positive, got {self.noise_target}.")
+        if not 0.0 <= self.matte_tolerance < 1.0:
+            raise InputError(f"matte_tolerance must be in [0, 1), got {self.matte_tolerance}.")
+        if not 0.0 < self.paper_threshold <= 1.0:
+            raise InputError(f"paper_threshold must be in (0, 1], got {self.paper_threshold}.")
+        if not self.exposure > 0:
+            raise InputError(f"exposure must be positive, got {self.exposure}.")
+
+
+COMPOSE_PRESETS: dict[str, ComposeConfig] = {
+    "draft": ComposeConfig(noise_target=0.06, max_spp=16),
+    "balanced": ComposeConfig(noise_target=0.03, max_spp=64),
+    "final": ComposeConfig(noise_target=0.015, max_spp=256),
+}
+
+
+def compose_preset(name: str, **overrides) -> ComposeConfig:
+    if name not in COMPOSE_PRESETS:
+        raise InputError(f"Unknown compose preset {name!r}; choose one of {', '.join(COMPOSE_PRESETS)}.")
+    return replace(COMPOSE_PRESETS[name], **{k: v for k, v in overrides.items() if v is not None})
+
+
+@dataclass(frozen=True)
+class ComposeInputs:
+    mesh: Mesh                        # any scale; normalised here into the radius-0.5 sphere
+    maps: np.ndarray                  # (H, W, 5) linear base colour, roughness, metallic (rows top first)
+    photo_srgb: np.ndarray            # (h, w, 3) float in [0, 1], sRGB-encoded, as load_photo gives it
+    placement_px: tuple[float, float]
+    envmap: np.ndarray                # (He, 2 He, 3) linear, Blender's lat-long convention
+    camera: PhotoCamera               # the light stage's photo camera (its width/height are replaced by the photo's)
+
+
+@dataclass(frozen=True)
+class ObjectPlacement:
+    """Where the asset stands and how big it is; world units are camera heights (CAMERA_HEIGHT = 1)."""
+
+    pixel: tuple[float, float]
+    base: tuple[float, float, float]    # the point under the asset's centre (on the floor when on_floor)
+    on_floor: bool
+    why: str
+    scale: float                        # normalised mesh (radius 0.5) -> world
+    facing_deg: float                   # rotation about Z that turns the asset's front (-Y) to the camera
+    height: float                       # world height of the placed asset
+    pixel_box: tuple[int, int, int, int]  # x0, y0, x1, y1 of its projection (clipped to the photo)
+
+    def report(self) -> dict:
+        m = ASSUMED_CAMERA_HEIGHT_M / CAMERA_HEIGHT
+        return {"pixel": [round(v, 2) for v in self.pixel], "on_floor": self.on_floor, "why": self.why,
+                "base_camera_heights": [round(v, 4) for v in self.base],
+                "base_m": [round(v * m, 3) for v in self.base],
+                "distance_m": round(float(np.linalg.norm(np.subtract(self.base, (0, 0, CAMERA_HEIGHT)))) * m, 3),
+                "height_m": round(self.height * m, 3), "scale": round(self.scale, 5),
+                "facing_deg": round(self.facing_deg, 2), "pixel_box": list(self.pixel_box),
+                "metres_assume": f"camera {ASSUMED_CAMERA_HEIGHT_M} m above the floor"}
+
+
+def camera_origin() -> np.ndarray:
+    return np.array([0.0, 0.0, CAMERA_HEIGHT])
+
+
+def _rotation_z(deg: float) -> np.ndarray:
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _offset(lo: np.ndarray, hi: np.ndarray, scale: float, anchor, on_floor: bool) -> np.ndarray:
+    """Translation putting the scaled, rotated asset (bounds lo, hi) at `anchor`: its bottom on the floor
+    under the anchor when it stands, its middle on the anchor when it floats."""
+    centre = (lo + hi) / 2
+    z0 = -lo[2] * scale if on_floor else anchor[2] - centre[2] * scale
+    return np.array([anchor[0] - centre[0] * scale, anchor[1] - centre[1] * scale, z0])
+
+
+def place_asset(normalized: Mesh, camera: PhotoCamera, pixel: tuple[float, float], size: float) -> ObjectPlacement:
+    """Stand the normalised asset on the floor under `pixel` (or float it on the pixel's ray when the
+    pixel is above the horizon), facing the camera, scaled so its projection spans `size` x photo height."""
+    floor = place_on_floor(camera, pixel)
+    origin = camera_origin()
+    on_floor = not floor.clamped
+    if on_floor:
+        anchor = floor.object_position
+        why = "the picked point is on the floor: the asset stands there"
+    else:  # as far as the nearest floor point in that direction, on the picked pixel's own ray
+        anchor = origin + pixel_ray(camera, *pixel) * float(np.linalg.norm(floor.object_position - origin))
+        why = "the picked point is above the horizon: the asset floats on its ray and casts no floor shadow"
+    to_camera = origin[:2] - anchor[:2]
+    facing = math.degrees(math.atan2(to_camera[1], to_camera[0])) + 90.0  # front (-Y) -> towards the camera
+    rotation = _rotation_z(facing)
+    rotated = normalized.positions.astype(np.float64) @ rotation.T
+    lo, hi = rotated.min(axis=0), rotated.max(axis=0)
+
+    def placed(scale: float) -> np.ndarray:
+        return rotated * scale + _offset(lo, hi, scale, anchor, on_floor)
+
+    target = size * camera.height
+    distance = float(np.linalg.norm(anchor - origin))
+    _, _, _, _, half_h = camera.basis()
+    scale = size * 2 * half_h * distance / max(hi[2] - lo[2], 1e-6)
+    forward = camera.basis()[0]
+    for _ in range(8):  # the projected height is nearly linear in the scale; a few fixed-point steps
+        world = placed(scale)
+        if ((world - origin) @ forward).min() <= 1e-3:
+            raise InputError(f"At --size {size:g} the asset would reach behind the camera; pick a smaller size "
+                             "or a point further away.")
+        ys = camera.project(world, origin)[:, 1]
+        extent = float(ys.max() - ys.min())
+        scale *= target / max(extent, 1e-6)
+    world = placed(scale)
+    xy = camera.project(world, origin)
+    x0, y0 = np.floor(xy.min(axis=0)).astype(int)
+    x1, y1 = np.ceil(xy.max(axis=0)).astype(int)
+    box = (int(np.clip(x0 - 2, 0, camera.width)), int(np.clip(y0 - 2, 0, camera.height)),
+           int(np.clip(x1 + 2, 0, camera.width)), int(np.clip(y1 + 2, 0, camera.height)))
+    if box[2] <= box[0] or box[3] <= box[1]:
+        raise InputError("The placed asset falls outside the photo; pick a point inside it.")
+    base = (anchor[0], anchor[1], 0.0 if on_floor else anchor[2])
+    return ObjectPlacement(tuple(float(v) for v in pixel), tuple(float(v) for v in base), on_floor, why,
+                           float(scale), float(facing), float((hi[2] - lo[2]) * scale), box)
+
+
+def placed_mesh(normalized: Mesh, placement: ObjectPlacement) -> Mesh:
+    """The normalised mesh moved into the photo's world (the caller's mesh is not touched)."""
+    rotation = _rotation_z(placement.facing_deg)
+    points = normalized.positions.astype(np.float64)
+    rotated = points @ rotation.T
+    offset = _offset(rotated.min(axis=0), rotated.max(axis=0), placement.scale, placement.base, placement.on_floor)
+    normals = normalized.normals if normalized.normals is not None else vertex_normals(normalized.positions,
+                                                                                       normalized.faces)
+    return Mesh.from_arrays(rotated * placement.scale + offset, normalized.faces, normalized.uvs,
+                            np.asarray(normals, np.float64) @ rotation.T, name=normalized.name)
+
+
+def horizon_row(camera: PhotoCamera) -> int:
+    """The first image row with any pixel looking below the horizon (camera.height: none does)."""
+    below = (camera.ray_directions()[..., 2] < 0).any(axis=1)
+    rows = np.flatnonzero(below)
+    return int(rows[0]) if len(rows) else camera.height
+
+
+# -- Mitsuba ------------------------------------------------------------------------------------------
+def _sensor(mi, camera: PhotoCamera, window: tuple[int, int, int, int], sampler_type: str, spp: int):
+    forward, _, up, _, _ = camera.basis()
+    origin = camera_origin()
+    x0, y0, x1, y1 = window
+    return mi.load_dict({
+        "type": "perspective", "fov": float(camera.fov_deg), "fov_axis": "x",
+        "to_world": mi.ScalarTransform4f().look_at(origin=origin.tolist(), target=(origin + forward).tolist(),
+                                                   up=up.tolist()),
+        "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height, "pixel_format": "rgba",
+                 "rfilter": {"type": "box"}, "crop_offset_x": x0, "crop_offset_y": y0,
+                 "crop_width": x1 - x0, "crop_height": y1 - y0},
+        "sampler": {"type": sampler_type, "sample_count": int(spp)},
+    })
+
+
+def _scene(mi, envmap: np.ndarray, mesh: Mesh | None, maps: np.ndarray | None, black: bool, floor_albedo: float | None):
+    scene: dict = {"type": "scene",
+                   "environment": {"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(envmap, np.float32)),
+                                   "to_world": mi.ScalarTransform4f(ENVMAP_TO_WORLD)}}
+    if mesh is not None:
+        shape = _mitsuba_mesh(mi, mesh)
+        if black:
+            shape.set_bsdf(mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}}))
+        else:
+            shape.set_bsdf(mi.load_dict({"type": "principled", "base_color": _bitmap_texture(mi, maps[..., 0:3]),
+                                         "roughness": _bitmap_texture(mi, maps[..., 3:4]),
+                                         "metallic": _bitmap_texture(mi, maps[..., 4:5])}))
+        scene["asset"] = shape
+    if floor_albedo is not None:
+        scene["floor"] = {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale(1000.0 * CAMERA_HEIGHT),
+                          "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": floor_albedo}}}
+    return mi.load_dict(scene)
+
+
+@dataclass
+class ComposeResult:
+    composite_linear: np.ndarray      # (h, w, 3) linear, the photo's exposure
+    composite_srgb: np.ndarray        # (h, w, 3) in [0, 1]; exactly the photo where nothing changed
+    object_rgb: np.ndarray            # (h, w, 3) premultiplied linear radiance of the asset
+    alpha: np.ndarray                 # (h, w) coverage
+    matte: np.ndarray                 # (h, w, 3) shadow multiplier in [0, 1]; 1 = untouched
+    changed: np.ndarray               # (h, w) bool: pixels that differ from the photo
+    placement: ObjectPlacement
+    report: dict = field(default_factory=dict)
+
+
+class ComposeJob:
+    """One composition as a small system: build (place, scenes, spp), step (one render pass), finish."""
+
+    def __init__(self, inputs: ComposeInputs, config: ComposeConfig, progress: ProgressCallback | None = None,
+                 cancel: threading.Event | None = None) -> None:
+        t0 = time.perf_counter()
+        self.config, self.progress, self.cancel = config, progress, cancel
+        photo = np.clip(np.asarray(inputs.photo_srgb, np.float32)[..., :3], 0.0, 1.0)
+        h, w = photo.shape[:2]
+        self.photo = photo
+        self.camera = replace(inputs.camera, width=w, height=h)
+        maps = np.asarray(inputs.maps, np.float32)
+        if maps.ndim != 3 or maps.shape[2] != 5:
+            raise InputError(f"The asset's maps must be (H, W, 5) base colour, roughness, metallic; got {maps.shape}.")
+        envmap = np.asarray(inputs.envmap, np.float32)
+        if envmap.ndim != 3 or envmap.shape[2] != 3 or envmap.shape[1] != 2 * envmap.shape[0]:
+            raise InputError(f"The light map must be RGB with width = 2 x height, got {envmap.shape}.")
+        if not np.isfinite(envmap).all() or envmap.min() < 0:
+            raise InputError("The light map holds negative, NaN or infinite radiance.")
+        self.envmap = envmap * np.float32(config.exposure)
+        if config.denoiser_type == "oidn" and not oidn_available()[0]:
+            raise InputError(f"--denoiser oidn: {oidn_available()[1]}.")
+        self.backend = init_mitsuba()
+        import mitsuba as mi
+
+        self.mi = mi
+        normalized, _ = normalize_to_unit_sphere(inputs.mesh)
+        self.placement = place_asset(normalized, self.camera, inputs.placement_px, config.size)
+        self.mesh = placed_mesh(normalized, self.placement)
+        self.maps = np.clip(maps, 0.0, 1.0)
+        self.timings: dict[str, float] = {}
+        self.decisions: dict = {}
+        floor = config.shadow_type != "none" and self.placement.on_floor
+        self.decisions["floor_pass"] = {
+            "ran": floor,
+            "why": ("the asset stands on the floor" if floor else
+                    "shadow_type none" if config.shadow_type == "none" else self.placement.why)}
+        # The object pass renders the asset's box; the floor passes the floor below the horizon.
+        self.object_window = self.placement.pixel_box
+        self.floor_window = (0, horizon_row(self.camera), w, h)
+        self.object_scene = _scene(mi, self.envmap, self.mesh, self.maps, black=False, floor_albedo=None)
+        self.timings["build"] = time.perf_counter() - t0
+        self.spp, self.decisions["spp"] = self._choose_spp()
+        self.passes = ["object"] + (["floor_with_object"] + (["floor_without_object"] if config.shadow_type == "ratio"
+                                                              else []) if floor else [])
+        self.images: dict[str, np.ndarray] = {}
+
+    # -- build --------------------------------------------------------------------------------------
+    def _object_integrator(self):
+        return self.mi.load_dict({"type": "aov", "aovs": "albedo:albedo,normal:sh_normal",
+                                  "integrator": {"type": "path", "max_depth": self.config.max_depth,
+                                                 "hide_emitters": True}})
+
+    def _render(self, scene, integrator, window, spp: int, seed: int) -> np.ndarray:
+        sensor = _sensor(self.mi, self.camera, window, self.config.sampler_type, spp)
+        image = self.mi.render(scene, sensor=sensor, integrator=integrator, spp=spp, seed=seed)
+        return np.array(image, dtype=np.float32)
+
+    def _sampler_spp(self, spp: int) -> int:
+        """The count the sampler really takes (multijitter and orthogonal round it up), asked quietly."""
+        mi = self.mi
+        logger = mi.logger()
+        level = logger.log_level()
+        logger.set_log_level(mi.LogLevel.Error)
+        try:
+            return int(mi.load_dict({"type": self.config.sampler_type, "sample_count": int(spp)}).sample_count())
+        finally:
+            logger.set_log_level(level)
+
+    def _choose_spp(self) -> tuple[int, dict]:
+        """Fixed, or from the noise target: two pilot renders with different seeds give the per-pixel
+        noise (their difference / sqrt 2); noise falls as 1/sqrt(spp)."""
+        c = self.config
+        if c.spp is not None:
+            spp = self._sampler_spp(c.spp)
+            return spp, {"spp": spp, "from": "given" if spp == c.spp else f"given {c.spp}, rounded by the sampler"}
+        t0 = time.perf_counter()
+        integrator = self._object_integrator()
+        box = self.placement.pixel_box
+        pilot = self._sampler_spp(c.pilot_spp)
+        a = self._render(self.object_scene, integrator, box, pilot, c.seed + 101)
+        b = self._render(self.object_scene, integrator, box, pilot, c.seed + 202)
+        covered = (a[..., 3] > 0.999) & (b[..., 3] > 0.999)
+        self.timings["pilot"] = time.perf_counter() - t0
+        if not covered.any():
+            return c.max_spp, {"spp": c.max_spp, "from": "max_spp (the pilot saw no fully covered pixel)"}
+        da = linear_to_srgb(np.clip(a[..., :3], 0, 1))[covered]
+        db = linear_to_srgb(np.clip(b[..., :3], 0, 1))[covered]
+        noise = float(np.sqrt(np.mean((da - db) ** 2) / 2))
+        wanted = math.ceil(pilot * (noise / c.noise_target) ** 2)
+        spp = self._sampler_spp(int(np.clip(wanted, c.min_spp, c.max_spp)))
+        return spp, {"spp": spp, "from": "noise target", "noise_target": c.noise_target,
+                     "pilot_spp": pilot, "pilot_noise": round(noise, 5), "wanted_spp": wanted,
+                     "predicted_raw_noise": round(noise * math.sqrt(pilot / spp), 5),
+                     "limits": [c.min_spp, c.max_spp]}
+
+    # -- step ---------------------------------------------------------------------------------------
+    @property
+    def done(self) -> bool:
+        return len(self.images) == len(self.passes)
+
+    def step(self) -> dict:
+        """Render the next pass; returns its name and seconds."""
+        check_cancel(self.cancel)
+        name = self.passes[len(self.images)]
+        t0 = time.perf_counter()
+        seed = self.config.seed
+        if name == "object":
+            image = self._render(self.object_scene, self._object_integrator(), self.object_window, self.spp, seed)
+        else:
+            mesh = self.mesh if name == "floor_with_object" else None
+            scene = _scene(self.mi, self.envmap, mesh, None, black=True, floor_albedo=self.config.floor_albedo)
+            # Direct light is exact here: a lone plane under a distant light has no inter-reflection, and
+            # the black object reflects nothing. The albedo AOV says which samples met the floor.
+            integrator = self.mi.load_dict({"type": "aov", "aovs": "albedo:albedo",
+                                            "integrator": {"type": "path", "max_depth": 2, "hide_emitters": True}})
+            image = self._render(scene, integrator, self.floor_window, self.spp, seed)
+        self.images[name] = image
+        seconds = time.perf_counter() - t0
+        self.timings[name] = seconds
+        emit(self.progress, "compose", len(self.images), len(self.passes), f"{name} pass, {self.spp} spp")
+        return {"pass": name, "seconds": seconds}
+
+    # -- finish -------------------------------------------------------------------------------------
+    def _full(self, crop: np.ndarray, window: tuple[int, int, int, int], fill: float) -> np.ndarray:
+        h, w = self.photo.shape[:2]
+        x0, y0, x1, y1 = window
+        out = np.full((h, w) + crop.shape[2:], fill, np.float32)
+        out[y0:y1, x0:x1] = crop
+        return out
+
+    def _object_layers(self) -> tuple[np.ndarray, np.ndarray]:
+        image = self.images["object"]
+        rgb, alpha = image[..., 0:3], image[..., 3]
+        if self.config.denoiser_type == "oidn":
+            t0 = time.perf_counter()
+            rgb = denoise(rgb, image[..., 4:7], image[..., 7:10])
+            rgb = np.where(alpha[..., None] > 0, np.maximum(rgb, 0.0), 0.0)  # no light where there is no object
+            self.timings["denoise_object"] = time.perf_counter() - t0
+        return self._full(rgb, self.object_window, 0.0), self._full(alpha, self.object_window, 0.0)
+
+    def _floor_radiance(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """Mean radiance of the samples that met the floor, and the pixels mostly floor. The albedo AOV
+        averages floor_albedo over floor samples and 0 over the black object and the sky."""
+        image = self.images[name]
+        free = np.clip(image[..., 4] / self.config.floor_albedo, 0.0, 1.0)
+        radiance = np.where(free[..., None] > 1e-3, image[..., :3] / np.maximum(free[..., None], 1e-3), 0.0)
+        return radiance.astype(np.float32), free > 0.5
+
+    def _ratio_matte(self) -> np.ndarray:
+        import cv2
+
+        with_object, _ = self._floor_radiance("floor_with_object")
+        without, _ = self._floor_radiance("floor_without_object")
+        # Where the asset hides the floor entirely its shadow there is unseen (and covered): keep 1.
+        seen = (self.images["floor_with_object"][..., 4:5] > 1e-3 * self.config.floor_albedo)
+        raw = np.where((without > 0) & seen, with_object / np.where(without > 0, without, 1.0), 1.0)
+        # Where the object changed no sample, both passes are identical: keep those pixels exactly 1.
+        same = (self.images["floor_with_object"] == self.images["floor_without_object"]).all(axis=-1)
+        raw = np.clip(np.where(same[..., None], 1.0, raw), 0.0, 1.0).astype(np.float32)
+        touched = (raw < 1.0).any(axis=-1)
+        if self.config.denoiser_type == "oidn" and touched.any():
+            t0 = time.perf_counter()
+            region = cv2.dilate(touched.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
+            ys, xs = np.nonzero(region)
+            sl = (slice(ys.min(), ys.max() + 1), slice(xs.min(), xs.max() + 1))
+            smooth = np.clip(denoise(raw[sl], hdr=False), 0.0, 1.0)
+            out = raw.copy()
+            out[sl] = np.where(region[sl][..., None], smooth, raw[sl])
+            raw = out
+            self.timings["denoise_shadow"] = time.perf_counter() - t0
+        faint = (raw >= 1.0 - self.config.matte_tolerance).all(axis=-1, keepdims=True)
+        self.decisions["shadow_pixels"] = int((~faint[..., 0]).sum())
+        return np.where(faint, 1.0, raw).astype(np.float32)
+
+    def _paper_matte(self) -> np.ndarray:
+        radiance, floor = self._floor_radiance("floor_with_object")
+        if self.config.denoiser_type == "oidn" and floor.any():
+            t0 = time.perf_counter()
+            radiance = denoise(radiance)
+            self.timings["denoise_shadow"] = time.perf_counter() - t0
+        intensity = radiance @ LUMINANCE
+        if not floor.any():
+            return np.ones(radiance.shape, np.float32)
+        threshold = self.config.paper_threshold * float(intensity[floor].mean())
+        shadowed = floor & (intensity < threshold)
+        lit = floor & ~shadowed
+        lit_mean = float(intensity[lit].mean()) if lit.any() else float(intensity[floor].mean())
+        self.decisions["paper"] = {"threshold": threshold, "lit_mean": lit_mean}
+        self.decisions["shadow_pixels"] = int(shadowed.sum())
+        matte = np.where(shadowed, np.clip(intensity / max(lit_mean, 1e-12), 0.0, 1.0), 1.0).astype(np.float32)
+        return np.repeat(matte[..., None], 3, axis=-1)
+
+    def finish(self) -> ComposeResult:
+        if not self.done:
+            raise RuntimeError(f"finish() before every pass ran ({len(self.images)} of {len(self.passes)}).")
+        t0 = time.perf_counter()
+        object_rgb, alpha = self._object_layers()
+        if "floor_with_object" not in self.images:
+            matte = np.ones_like(object_rgb)
+        elif self.config.shadow_type == "ratio":
+            matte = self._full(self._ratio_matte(), self.floor_window, 1.0)
+        else:
+            matte = self._full(self._paper_matte(), self.floor_window, 1.0)
+        photo_linear = srgb_to_linear(self.photo).astype(np.float32)
+        composite = object_rgb + (1.0 - alpha[..., None]) * photo_linear * matte
+        changed = (alpha > 0) | (matte < 1.0).any(axis=-1)
+        composite = np.where(changed[..., None], composite, photo_linear)
+        display = np.where(changed[..., None], linear_to_srgb(np.clip(composite, 0.0, 1.0)), self.photo)
+        self.timings["finish"] = time.perf_counter() - t0
+        report = {
+            "stage": "compose",
+            "config": asdict(self.config),
+            "camera": {**asdict(self.camera), "position_camera_heights": camera_origin().tolist(),
+                       "position_m": [0.0, 0.0, ASSUMED_CAMERA_HEIGHT_M]},
+            "placement": self.placement.report(),
+            "size": {"fraction_of_photo_height": self.config.size, "height_m": round(self.placement.height
+                                                                                      * ASSUMED_CAMERA_HEIGHT_M, 3)},
+            "spp": self.spp, "sampler": self.config.sampler_type,
+            "denoiser": oidn_available()[1] if self.config.denoiser_type == "oidn" else "none",
+            "exposure": {"factor": self.config.exposure,
+                         "why": "the light map is in the photo's exposure (scenefit light), so the render and the "
+                                "photo share units" if self.config.exposure == 1.0 else "given"},
+            "shadow": {"type": self.config.shadow_type if self.placement.on_floor else "none",
+                       "floor_pass": self.decisions["floor_pass"], "pixels": self.decisions.get("shadow_pixels", 0),
+                       **({"paper": self.decisions["paper"]} if "paper" in self.decisions else {})},
+            "decisions": {"spp": self.decisions["spp"]},
+            "changed_pixels": int(changed.sum()),
+            "render_windows": {"object": list(self.object_window),
+                               **({"floor": list(self.floor_window)} if "floor_with_object" in self.images else {})},
+            "mitsuba_variant": self.backend.variant,
+            "timings_seconds": {k: round(v, 3) for k, v in self.timings.items()},
+        }
+        return ComposeResult(composite, display, object_rgb, alpha, matte, changed, self.placement, report)
+
+
+def build_compose(inputs: ComposeInputs, config: ComposeConfig = ComposeConfig(),
+                  progress: ProgressCallback | None = None, cancel: threading.Event | None = None) -> ComposeJob:
+    return ComposeJob(inputs, config, progress, cancel)
+
+
+def compose(inputs: ComposeInputs, config: ComposeConfig = ComposeConfig(), progress: ProgressCallback | None = None,
+            cancel: threading.Event | None = None) -> ComposeResult:
+    t0 = time.perf_counter()
+    job = build_compose(inputs, config, progress, cancel)
+    while not job.done:
+        job.step()
+    result = job.finish()
+    result.report["seconds"] = round(time.perf_counter() - t0, 3)
+    return result
+
+
+def write_compose_outputs(result: ComposeResult, out_dir) -> dict[str, str]:
+    """composite.png (sRGB, the photo's size), composite.exr (linear), layers/object_rgba.png (16-bit,
+    straight alpha), layers/shadow.png (16-bit matte, 1 = untouched)."""
+    from pathlib import Path
+
+    from .imageio import write_image
+
+    out = Path(out_dir)
+    alpha = result.alpha[..., None]
+    straight = np.where(alpha > 0, result.object_rgb / np.maximum(alpha, 1e-8), 0.0)
+    rgba = np.concatenate([linear_to_srgb(np.clip(straight, 0.0, 1.0)), alpha], axis=-1)
+    paths = {
+        "composite_png": write_image(out / "composite.png", result.composite_srgb),
+        "composite_exr": write_image(out / "composite.exr", result.composite_linear, dtype="float"),
+        "object_rgba_png": write_image(out / "layers" / "object_rgba.png", rgba, dtype="uint16"),
+        "shadow_png": write_image(out / "layers" / "shadow.png", result.matte, dtype="uint16"),
+    }
+    return {k: str(v) for k, v in paths.items()}
+
+
+def light_camera(light_path, photo_info: dict, width: int, height: int, fov_deg: float | None = None,
+                 pitch_deg: float | None = None) -> tuple[PhotoCamera, str]:
+    """The photo camera the light map was estimated with: from the light stage's report.json beside the
+    map when there is one, else the light stage's default for this photo; fov/pitch given here win."""
+    import json
+    from pathlib import Path
+
+    from .lighting.estimate import LightConfig, default_photo_camera
+
+    report_path = Path(light_path).with_name("report.json")
+    camera = None
+    if report_path.is_file():
+        try:
+            saved = json.loads(report_path.read_text())["decisions"]["photo_camera"]
+            camera = PhotoCamera(**{k: saved[k] for k in ("yaw_deg", "pitch_deg", "fov_deg", "width", "height")})
+            source = f"the light stage's report ({report_path})"
+        except (KeyError, TypeError, ValueError, json.JSONDecodeError):
+            camera = None
+    if camera is None:
+        camera, fov_why = default_photo_camera(LightConfig(), photo_info, width, height)
+        source = f"the light stage's default (no report.json beside the map); field of view from {fov_why['from']}"
+    overrides = {k: v for k, v in (("fov_deg", fov_deg), ("pitch_deg", pitch_deg)) if v is not None}
+    if overrides:
+        source += f"; overridden: {overrides}"
+    return replace(camera, width=width, height=height, **overrides), source
+
+
+def compose_to_folder(inputs: ComposeInputs, config: ComposeConfig, out_dir, report_extra: dict | None = None,
+                      progress: ProgressCallback | None = None, cancel: threading.Event | None = None) -> dict:
+    """compose() and write its images and report.json into out_dir; returns the report."""
+    from pathlib import Path
+
+    from .atomic import write_json_atomic
+
+    result = compose(inputs, config, progress, cancel)
+    check_cancel(cancel)
+    report = {**result.report, **(report_extra or {})}
+    report["outputs"] = write_compose_outputs(result, out_dir)
+    write_json_atomic(Path(out_dir) / "report.json", report)
+    return report

@@ -1,0 +1,246 @@
+"""The jobs file of `scenefit batch` (and of the headless Blender recipe): a list of asset x scene pairs.
+
+    [batch]                       # optional: how the batch runs
+    retries = 1                   # extra attempts for a job that fails (then it is reported, not dropped)
+    num_gpus = "auto"             # per job: "auto" (1 when the Ray cluster has GPUs, else 0) or a number
+    num_cpus = 1                  # per job
+    memory_gb = 8                 # per job, what Ray reserves (optional)
+    workers = 2                   # Ray workers (actors, each loads its models once); default: what fits
+
+    [defaults]                    # optional: keys every [[job]] gets unless it sets them
+    preset = "draft"
+
+    [[job]]
+    name = "sofa-swamp"           # the output folder DIR/<name>/ (letters, digits, '.', '_', '-')
+    asset = "assets/sofa"         # asset folder, or a file Blender reads (.blend with `object`)
+    object = "Sofa"               # optional: the object inside a .blend / .glb
+    photo = "photos/swamp.jpg"
+    at = [0.5, 0.7]               # where the asset stands: fractions of the photo's width and height
+    preset = "balanced"           # draft | balanced | final
+    stages = ["convert", "light", "adapt", "compose", "bake"]
+    prompt = "a leather sofa, soggy and stained with mud"   # optional prompts
+    seed = 0                      # optional
+
+Relative paths are relative to the jobs file. Everything is checked when the file is read, and a
+problem is one sentence naming the job and the key.
+"""
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from .errors import InputError
+
+STAGE_TYPES = ("convert", "light", "adapt", "compose", "bake")   # pipeline order
+PRESET_TYPES = ("draft", "balanced", "final")
+MODE_TYPES = ("scene", "generate", "edit")
+PROMPT_KEYS = ("prompt", "negative_prompt", "object_prompt", "instruction")
+# Stages that read the photo and the placement.
+PHOTO_STAGES = ("light", "compose")
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
+_ASSET_FOLDER_FILE = "mesh.npz"
+
+
+@dataclass(frozen=True)
+class Job:
+    """One asset x scene pair; paths are absolute (resolved against the jobs file)."""
+
+    name: str
+    asset: Path
+    stages: tuple[str, ...]
+    preset: str = "balanced"
+    photo: Path | None = None
+    at: tuple[float, float] | None = None
+    object: str | None = None
+    mode: str = "scene"
+    prompt: str = ""
+    negative_prompt: str = ""
+    object_prompt: str = ""
+    instruction: str = ""
+    seed: int | None = None
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d.update(asset=str(self.asset), photo=None if self.photo is None else str(self.photo),
+                 stages=list(self.stages), at=None if self.at is None else list(self.at))
+        return d
+
+
+@dataclass(frozen=True)
+class BatchSettings:
+    """The [batch] table: retries and what each job asks the scheduler for."""
+
+    retries: int = 1
+    num_gpus: float | str = "auto"
+    num_cpus: float = 1.0
+    memory_gb: float | None = None
+    workers: int | None = None
+
+
+@dataclass(frozen=True)
+class JobsFile:
+    path: Path
+    jobs: tuple[Job, ...]
+    settings: BatchSettings = field(default_factory=BatchSettings)
+
+
+JOB_KEYS = ("name", "asset", "object", "photo", "at", "preset", "stages", "mode", *PROMPT_KEYS, "seed")
+BATCH_KEYS = tuple(BatchSettings.__dataclass_fields__)
+
+
+def load_jobs(path: str | Path) -> JobsFile:
+    """Read and check a jobs file; raises InputError with one sentence on the first problem."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"The jobs file '{path}' does not exist.") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise InputError(f"The jobs file '{path}' cannot be read ({error}).") from None
+    except tomllib.TOMLDecodeError as error:
+        raise InputError(f"The jobs file '{path}' is not valid TOML: {error}.") from None
+    return parse_jobs(data, path)
+
+
+def parse_jobs(data: dict, path: Path) -> JobsFile:
+    """Check the parsed TOML of the jobs file at `path` (relative paths are taken from its folder)."""
+    path = Path(path).resolve()
+    unknown = sorted(set(data) - {"batch", "defaults", "job"})
+    if unknown:
+        raise InputError(f"{path.name}: unknown table '{unknown[0]}'; a jobs file has [batch], [defaults] and [[job]].")
+    settings = _parse_settings(data.get("batch", {}), path)
+    defaults = data.get("defaults", {})
+    if not isinstance(defaults, dict):
+        raise InputError(f"{path.name}: [defaults] must be a table of job keys.")
+    _check_keys(defaults, JOB_KEYS, f"{path.name} [defaults]")
+    if "name" in defaults:
+        raise InputError(f"{path.name} [defaults]: 'name' cannot have a default; every job names its own folder.")
+    entries = data.get("job", [])
+    if not isinstance(entries, list) or not entries:
+        raise InputError(f"{path.name}: no jobs; add at least one [[job]] table.")
+    jobs, seen = [], set()
+    for i, entry in enumerate(entries):
+        job = _parse_job({**defaults, **entry}, i, path)
+        if job.name in seen:
+            raise InputError(f"{path.name}: two jobs are named '{job.name}'; each job needs its own name (its folder).")
+        seen.add(job.name)
+        jobs.append(job)
+    return JobsFile(path=path, jobs=tuple(jobs), settings=settings)
+
+
+def _check_keys(table: dict, allowed: tuple[str, ...], where: str) -> None:
+    unknown = sorted(set(table) - set(allowed))
+    if unknown:
+        raise InputError(f"{where}: unknown key '{unknown[0]}'; the keys are {', '.join(allowed)}.")
+
+
+def _parse_settings(table: dict, path: Path) -> BatchSettings:
+    if not isinstance(table, dict):
+        raise InputError(f"{path.name}: [batch] must be a table.")
+    where = f"{path.name} [batch]"
+    _check_keys(table, BATCH_KEYS, where)
+    retries = table.get("retries", 1)
+    if not isinstance(retries, int) or isinstance(retries, bool) or not 0 <= retries <= 100:
+        raise InputError(f"{where}: retries must be a whole number from 0 to 100, got {retries!r}.")
+    num_gpus = table.get("num_gpus", "auto")
+    if num_gpus != "auto" and not (_is_number(num_gpus) and num_gpus >= 0):
+        raise InputError(f"{where}: num_gpus must be \"auto\" or a number >= 0, got {num_gpus!r}.")
+    num_cpus = table.get("num_cpus", 1)
+    if not (_is_number(num_cpus) and num_cpus > 0):
+        raise InputError(f"{where}: num_cpus must be a number > 0, got {num_cpus!r}.")
+    memory_gb = table.get("memory_gb")
+    if memory_gb is not None and not (_is_number(memory_gb) and memory_gb > 0):
+        raise InputError(f"{where}: memory_gb must be a number > 0, got {memory_gb!r}.")
+    workers = table.get("workers")
+    if workers is not None and not (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1):
+        raise InputError(f"{where}: workers must be a whole number >= 1, got {workers!r}.")
+    return BatchSettings(retries=retries, num_gpus=num_gpus if num_gpus == "auto" else float(num_gpus),
+                         num_cpus=float(num_cpus), memory_gb=None if memory_gb is None else float(memory_gb),
+                         workers=workers)
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _parse_job(entry: dict, index: int, path: Path) -> Job:
+    if not isinstance(entry, dict):
+        raise InputError(f"{path.name}: job {index + 1} must be a [[job]] table.")
+    name = entry.get("name")
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise InputError(f"{path.name}: job {index + 1} needs a name of letters, digits, '.', '_' or '-' "
+                         f"(it becomes its folder), got {name!r}.")
+    where = f"{path.name} job '{name}'"
+    _check_keys(entry, JOB_KEYS, where)
+
+    def text(key: str) -> str:
+        value = entry.get(key, "")
+        if not isinstance(value, str):
+            raise InputError(f"{where}: {key} must be a string, got {value!r}.")
+        return value
+
+    stages = entry.get("stages", list(STAGE_TYPES))
+    if not isinstance(stages, list) or not stages or not all(isinstance(s, str) for s in stages):
+        raise InputError(f"{where}: stages must be a non-empty list from {', '.join(STAGE_TYPES)}.")
+    bad = [s for s in stages if s not in STAGE_TYPES]
+    if bad:
+        raise InputError(f"{where}: unknown stage '{bad[0]}'; the stages are {', '.join(STAGE_TYPES)}.")
+    if len(set(stages)) != len(stages):
+        raise InputError(f"{where}: stages lists a stage twice.")
+    stages = tuple(s for s in STAGE_TYPES if s in stages)
+
+    preset = entry.get("preset", "balanced")
+    if preset not in PRESET_TYPES:
+        raise InputError(f"{where}: preset must be one of {', '.join(PRESET_TYPES)}, got {preset!r}.")
+    mode = entry.get("mode", "scene")
+    if mode not in MODE_TYPES:
+        raise InputError(f"{where}: mode must be one of {', '.join(MODE_TYPES)}, got {mode!r}.")
+
+    asset_text = text("asset")
+    if not asset_text:
+        raise InputError(f"{where}: asset is missing (an asset folder or a file Blender reads).")
+    asset = _resolve(asset_text, path)
+    if not asset.exists():
+        raise InputError(f"{where}: the asset '{asset}' does not exist.")
+    if asset.is_dir() and not (asset / _ASSET_FOLDER_FILE).is_file():
+        raise InputError(f"{where}: the folder '{asset}' is not a SceneFit asset folder (it has no mesh.npz).")
+    obj = entry.get("object")
+    if obj is not None and (not isinstance(obj, str) or not obj):
+        raise InputError(f"{where}: object must name an object in the asset file, got {obj!r}.")
+    if obj is not None and asset.is_dir():
+        raise InputError(f"{where}: object is for a Blender/glTF file; '{asset.name}' is an asset folder.")
+
+    photo_text = text("photo")
+    photo = _resolve(photo_text, path) if photo_text else None
+    if photo is not None and not photo.is_file():
+        raise InputError(f"{where}: the photo '{photo}' does not exist.")
+    needs_photo = [s for s in stages if s in PHOTO_STAGES] + (["adapt"] if "adapt" in stages and mode == "scene" else [])
+    if photo is None and needs_photo:
+        raise InputError(f"{where}: stage '{needs_photo[0]}' needs a photo; add photo = \"...\".")
+    at = entry.get("at")
+    if at is not None:
+        if not (isinstance(at, list) and len(at) == 2 and all(_is_number(v) for v in at)
+                and all(0.0 <= v <= 1.0 for v in at)):
+            raise InputError(f"{where}: at must be [x, y], fractions of the photo's width and height in [0, 1], "
+                             f"got {at!r}.")
+        at = (float(at[0]), float(at[1]))
+    elif needs_photo:
+        raise InputError(f"{where}: stage '{needs_photo[0]}' needs the placement; add at = [x, y] (fractions).")
+
+    prompts = {k: text(k) for k in PROMPT_KEYS}
+    if "adapt" in stages:
+        if mode == "edit" and not (prompts["prompt"].strip() or (prompts["object_prompt"].strip()
+                                                                 and prompts["instruction"].strip())):
+            raise InputError(f"{where}: stage 'adapt' in mode 'edit' needs prompt, or object_prompt and instruction.")
+    seed = entry.get("seed")
+    if seed is not None and not (isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0):
+        raise InputError(f"{where}: seed must be a whole number >= 0, got {seed!r}.")
+    return Job(name=name, asset=asset, stages=stages, preset=preset, photo=photo, at=at, object=obj, mode=mode,
+               seed=seed, **prompts)
+
+
+def _resolve(text: str, jobs_path: Path) -> Path:
+    p = Path(text).expanduser()
+    return (p if p.is_absolute() else jobs_path.parent / p).resolve()

@@ -1,0 +1,198 @@
+"""Weight-free cues for the light scales and the unseen part of the map (issue 11).
+
+The paper's pipeline stays: LDR panorama -> bright regions -> one scale per region. These cues give
+the scales a physical starting point instead of one global inverse-tone-mapping prior, and give the
+part of the map the photo never saw a level and a direction. Each can be switched off (CueConfig)
+and the report records which were used and each region's share of the map's power.
+
+- exposure (clipped texels): an auto-exposed photo maps its log-average luminance to mid-grey
+  (0.18). The unclipped pixels keep their values, so the clipped ones must hold the rest of the
+  log-average: that fixes their geometric-mean radiance (`exposure_clip_scale`), a lower bound on
+  their mean. Clipped texels become their own region "clipped" with that scale; bright texels that
+  did not clip keep their stored radiance (scale 1). A photo more than 3 stops darker than
+  mid-grey was not metered that way (night, kept dark): its clipped texels then get the power the
+  surfaces call for (below), spread over their solid angle, so a dark scene stays dark.
+- surface energy (unseen upper hemisphere): the photo's surfaces (texels below the near-light
+  threshold, mean linear radiance S in photo exposure units) are lit by something. A camera-facing
+  diffuse surface of albedo rho sees about half unseen light L and half ground (~S), so
+  S = rho (L + S) / 2 and L = S (2 / rho - 1); rho = 0.25 by default, the report gives L for rho in
+  [0.15, 0.5]. The upper hemisphere the photo did not see becomes the region "unseen" at mean L.
+- lobe (direction of the unseen light): a light that is not in the photo is where the photo did
+  not look: the unseen light is a cos^4 lobe (over a floor of 0.25) around the solid-angle
+  centroid of the unseen upper hemisphere, behind the camera and up, rather than spread evenly.
+
+    build_cues(photo, ldr, unseen, regions, thresholds, config) -> Cues (LDR, regions, scales, report)
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError
+from ..imageio import srgb_to_linear
+from ..render import equirect_directions
+from .regions import RegionThresholds, intensity
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
+
+
+@dataclass(frozen=True)
+class CueConfig:
+    albedo: float = 0.25               # mean albedo of the photo's surfaces (energy cue)
+    albedo_range: tuple[float, float] = (0.15, 0.5)   # reported as the bound on the unseen light
+    lobe_sharpness: float = 4.0        # cos^k lobe of the unseen light around its centroid direction
+    lobe_floor: float = 0.25           # the lobe's lowest value (relative), so no unseen texel is black
+    max_scale: float = 1e5
+    use_exposure: bool = True          # the cues can be switched off one by one (the bench's ablation)
+    use_energy: bool = True
+    use_lobe: bool = True
+    clipped_level: float = 0.98        # stored (sRGB) intensity at which a texel counts as clipped
+    key: float = 0.18                  # the photo's metering: log-average luminance -> this (mid-grey)
+
+    def __post_init__(self) -> None:
+        if not 0.01 <= self.albedo <= 1.0:
+            raise InputError(f"albedo must be in [0.01, 1], got {self.albedo}.")
+        if not 0.0 <= self.lobe_floor <= 1.0 or self.lobe_sharpness < 0:
+            raise InputError("lobe_floor must be in [0, 1] and lobe_sharpness >= 0.")
+
+
+@dataclass
+class Cues:
+    ldr: np.ndarray                         # the panorama with the unseen lobe shaded in (sRGB)
+    regions: dict[str, np.ndarray]          # the bright regions plus "unseen" (disjoint)
+    scales: dict[str, float]
+    report: dict = field(default_factory=dict)
+
+
+def solid_angles(height: int, width: int) -> np.ndarray:
+    """(H, 1) steradians per texel of an equirectangular map."""
+    rows = (np.arange(height) + 0.5) / height
+    return (np.sin(np.pi * rows) * (np.pi / height) * (2 * np.pi / width))[:, None].astype(np.float64)
+
+
+def surface_radiance(photo_srgb: np.ndarray, threshold: float) -> tuple[np.ndarray, float]:
+    """Mean linear RGB and level of the photo's texels below the light threshold (its lit surfaces)."""
+    level = intensity(photo_srgb)
+    surfaces = level < threshold
+    linear = srgb_to_linear(np.asarray(photo_srgb, np.float32))
+    pixels = linear[surfaces] if surfaces.mean() > 0.01 else linear.reshape(-1, 3)
+    rgb = pixels.mean(axis=0).astype(np.float64)
+    return rgb, float(rgb.mean())
+
+
+def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regions: dict[str, np.ndarray],
+               thresholds: RegionThresholds = RegionThresholds(), config: CueConfig = CueConfig()) -> Cues:
+    """Scales for the bright regions and an "unseen" region (upper hemisphere the photo did not see)."""
+    h, w = unseen.shape
+    omega = solid_angles(h, w)
+    dirs = equirect_directions(h, w)
+    s_rgb, s_level = surface_radiance(photo_srgb, thresholds.near)
+    report: dict = {"surface_radiance": round(s_level, 5), "albedo": config.albedo}
+
+    # Energy: the light the surfaces call for, and how much of it the map already holds.
+    power = math.pi * s_level / config.albedo
+    report["light_power_needed"] = round(power, 5)
+    out_ldr = np.array(ldr, np.float32, copy=True)
+    upper = dirs[..., 2] > 0.0
+    hidden = unseen & upper & (intensity(ldr) < config.clipped_level)
+    regions = {k: m & ~hidden for k, m in regions.items()}
+    regions = {k: m for k, m in regions.items() if m.any()}
+    scales: dict[str, float] = {}
+    out_regions = dict(regions)
+
+    # Clipped texels: the exposure cue gives their geometric-mean radiance; unclipped texels keep theirs.
+    clip_scale, clip_info = exposure_clip_scale(photo_srgb, config.clipped_level, config.key)
+    report["exposure"] = clip_info
+    stored = intensity(ldr)
+    clipped_all = np.zeros((h, w), bool)
+    for name, mask in regions.items():
+        clipped = mask & (stored >= config.clipped_level)
+        clipped_all |= clipped
+        rest = mask & ~clipped
+        if rest.any():
+            out_regions[name] = rest
+            scales[name] = 1.0
+        else:
+            del out_regions[name]
+    if clipped_all.any() and config.use_exposure:
+        if clip_scale is None:   # not metered: the power the surfaces call for, over the clipped texels
+            level = srgb_to_linear(ldr).mean(axis=-1).astype(np.float64)
+            clip_scale = power / max(float((level * omega)[clipped_all].sum()), 1e-12)
+            report["clipped_from"] = "surface power (the photo is not metered to mid-grey)"
+        else:
+            report["clipped_from"] = "exposure (the photo's metering)"
+        out_regions["clipped"] = clipped_all
+        scales["clipped"] = float(np.clip(clip_scale, 1.0, config.max_scale))
+        report["clipped"] = {"size_sr": round(float((omega * np.ones((1, w)))[clipped_all].sum()), 5),
+                             "scale": round(scales["clipped"], 4)}
+
+    # The unseen light: mean radiance S / rho over the hidden upper hemisphere, as a lobe at its centroid.
+    if hidden.any() and config.use_energy:
+        weights = (omega * np.ones((1, w)))[hidden]
+        centroid = (dirs[hidden] * weights[:, None]).sum(axis=0)
+        centroid /= max(np.linalg.norm(centroid), 1e-12)
+        lobe = np.maximum(dirs @ centroid, 0.0) ** config.lobe_sharpness
+        shade = config.lobe_floor + (1.0 - config.lobe_floor) * lobe if config.use_lobe else np.ones((h, w))
+        linear = srgb_to_linear(out_ldr)
+        linear[hidden] *= shade[hidden, None]
+        from ..imageio import linear_to_srgb
+
+        out_ldr = linear_to_srgb(linear).astype(np.float32)
+        # Camera-facing surfaces see the unseen upper quarter-sphere and the ground (about S) half each.
+        target = s_level * (2.0 / config.albedo - 1.0)
+        held_mean = float(np.average(srgb_to_linear(out_ldr).mean(axis=-1)[hidden], weights=weights))
+        scales["unseen"] = float(np.clip(target / max(held_mean, 1e-12), 1e-3, config.max_scale))
+        out_regions["unseen"] = hidden
+        lo, hi = config.albedo_range
+        report["unseen"] = {"direction": np.round(centroid, 4).tolist(),
+                            "mean_radiance": round(target, 5),
+                            "mean_radiance_range": [round(s_level * (2 / hi - 1), 5), round(s_level * (2 / lo - 1), 5)],
+                            "fraction_of_map": round(float(hidden.mean()), 4)}
+    report["used"] = [name for name, on in (("exposure", config.use_exposure and "clipped" in scales),
+                                            ("energy", "unseen" in scales),
+                                            ("lobe", config.use_lobe and "unseen" in scales)) if on]
+    report["energy_share"] = _energy_shares(out_ldr, out_regions, scales, omega)
+    return Cues(out_ldr, out_regions, scales, report)
+
+
+def _energy_shares(ldr: np.ndarray, regions: dict[str, np.ndarray], scales: dict[str, float],
+                   omega: np.ndarray) -> dict[str, float]:
+    """Each region's share of the map's power (radiance x solid angle), after its scale: what each cue moved."""
+    level = srgb_to_linear(ldr).mean(axis=-1).astype(np.float64) * omega
+    rest = np.ones(level.shape, bool)
+    shares = {}
+    for name, mask in regions.items():
+        shares[name] = float(level[mask].sum()) * scales.get(name, 1.0)
+        rest &= ~mask
+    shares["rest"] = float(level[rest].sum())
+    total = max(sum(shares.values()), 1e-12)
+    return {k: round(v / total, 4) for k, v in shares.items()}
+
+
+def exposure_clip_scale(photo_srgb: np.ndarray, clipped_level: float, key: float = 0.18,
+                        metered_stops: float = 3.0) -> tuple[float | None, dict]:
+    """The geometric-mean radiance of the photo's clipped pixels, from its metering.
+
+    An auto-exposed photo maps its log-average luminance to `key` (mid-grey). The unclipped pixels
+    hold their true values, so the clipped fraction f must make up the rest of the log-average:
+    mean log L_clipped = (log key - (1 - f) mean log L_unclipped) / f. That is a geometric mean, a lower
+    bound on the clipped region's mean (arithmetic >= geometric), so peaked sources stay underestimated.
+    """
+    linear = srgb_to_linear(np.asarray(photo_srgb, np.float32))
+    lum = np.maximum(linear @ LUMINANCE, 1e-6).astype(np.float64)
+    clipped = np.asarray(photo_srgb).max(axis=-1) >= clipped_level
+    f = float(clipped.mean())
+    if f == 0.0 or f == 1.0:
+        return 1.0, {"clipped_fraction": f, "clipped_geometric_mean": None, "metered": None}
+    # A photo kept dark on purpose (night, under-exposed by more than `metered_stops`) was not metered
+    # to mid-grey: the equation would make its clipped pixels absurdly bright, so it is not used.
+    stored_log_average = math.exp(float(np.log(np.minimum(lum, 1.0)).mean()))
+    if stored_log_average < key * 2.0 ** -metered_stops:
+        return None, {"clipped_fraction": round(f, 5), "clipped_geometric_mean": None, "metered": False,
+                      "stored_log_average": round(stored_log_average, 5)}
+    mean_log = (math.log(key) - (1.0 - f) * float(np.log(lum[~clipped]).mean())) / f
+    value = math.exp(min(mean_log, math.log(1e6)))
+    return value, {"clipped_fraction": round(f, 5), "clipped_geometric_mean": round(value, 4), "key": key,
+                   "metered": True}

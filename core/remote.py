@@ -1,0 +1,266 @@
+"""Hand one job to a SceneFit worker environment with GPUs and follow it from here (the Blender side).
+
+The extension bundles CPU torch, so the adapt stage at the paper's settings would take a day on an
+artist's laptop. `RemoteJob` starts the job on a Ray cluster (its address from the add-on's
+preferences; "local" for a cluster on this machine) as a JobWorker actor with the job's CPUs and
+GPUs, and streams its progress events (stage, step, metrics, the occasional preview image) back
+through a Ray queue. The job's inputs travel as bytes and its output folder comes back as bytes, so
+the cluster needs no access to the artist's disk. Nothing here blocks: a modal operator calls
+`events()` and `finished()` from its timer, then `result(folder)` to unpack the outputs, which it
+applies on Blender's main thread. `LocalProcessJob` is the same for a SceneFit install with CUDA
+torch on this machine, without Ray: it runs `scenefit batch --events` with that install's Python.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from .batch import JobResult, JobWorker, install_folder, make_payload, unpack
+from .batch_ray import connect, import_ray, job_resources
+from .errors import Cancelled, SceneFitError
+from .jobs import BatchSettings, Job
+
+
+class RemoteJob:
+    """One job running on a Ray cluster; poll it, cancel it, fetch its outputs."""
+
+    def __init__(self, job: Job, address: str = "auto", settings: BatchSettings = BatchSettings(),
+                 queue_size: int = 256) -> None:
+        ray = import_ray()
+        from ray.util.queue import Queue
+
+        self.ray, self.job = ray, job
+        self.started_ray = connect(address)
+        try:
+            options = job_resources(settings, ray.cluster_resources())
+            # Two calls at once: `run`, and `cancel` while it runs.
+            self.actor = ray.remote(JobWorker).options(max_concurrency=2, **options).remote(
+                threads=max(1, int(settings.num_cpus)))
+            self.queue = Queue(maxsize=queue_size)
+            self.ref = self.actor.run.remote(make_payload(job), self.queue)
+        except BaseException:
+            self.close()
+            raise
+        self._result: JobResult | None = None
+
+    def events(self, limit: int | None = None) -> list[dict]:
+        """Progress events that arrived since the last call, oldest first (never waits)."""
+        out = []
+        while (limit is None or len(out) < limit) and not self.queue.empty():
+            try:
+                out.append(self.queue.get_nowait())
+            except Exception:   # emptied between the check and the get
+                break
+        return out
+
+    def finished(self) -> bool:
+        ready, _ = self.ray.wait([self.ref], timeout=0)
+        return bool(ready)
+
+    def cancel(self) -> None:
+        self.actor.cancel.remote()
+
+    def result(self, out_dir: str | Path, timeout: float | None = None) -> Path:
+        """Wait for the job, unpack its folder into OUT_DIR/<job name>/ (whole), return that folder.
+
+        Raises the job's own SceneFitError (bad input, Cancelled, ...) as it was raised on the worker.
+        """
+        if self._result is None:
+            try:
+                self._result = self.ray.get(self.ref, timeout=timeout)
+            except self.ray.exceptions.RayTaskError as error:
+                cause = getattr(error, "cause", None)
+                if isinstance(cause, (SceneFitError, Cancelled)):
+                    raise cause from None
+                raise
+        outputs = self._result.outputs
+        return install_folder(Path(out_dir), self.job.name, lambda folder: unpack(outputs, folder))
+
+    @property
+    def report(self) -> dict | None:
+        return None if self._result is None else self._result.report
+
+    def close(self) -> None:
+        """Free the worker and the queue (and Ray itself when this job started it)."""
+        for name in ("actor",):
+            handle = getattr(self, name, None)
+            if handle is not None:
+                self.ray.kill(handle)
+        queue = getattr(self, "queue", None)
+        if queue is not None:
+            queue.shutdown()
+        if self.started_ray:
+            self.ray.shutdown()
+
+    def __enter__(self) -> RemoteJob:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def open_worker(job: Job, address: str, settings: BatchSettings = BatchSettings()):
+    """The worker environment the add-on's preference names: a Python interpreter of another SceneFit
+    install (a path to a file) runs the job as a local process; anything else is a Ray address."""
+    if Path(address).expanduser().is_file():
+        return LocalProcessJob(job, str(Path(address).expanduser()), settings)
+    return RemoteJob(job, address, settings)
+
+
+def run_remote(job: Job, out_dir: str | Path, address: str = "auto", settings: BatchSettings = BatchSettings(),
+               progress=None, cancel=None, poll_seconds: float = 0.2) -> tuple[Path, dict]:
+    """Run `job` in the worker environment at `address` (open_worker) and wait: the shape of a
+    background-job work function.
+
+    Streams the worker's events to `progress` as ProgressEvents (previews included), passes a set
+    `cancel` event on to the worker, and returns (OUT_DIR/<job name>, the job's report).
+    """
+    import time
+
+    from .progress import ProgressEvent
+
+    with open_worker(job, address, settings) as remote:
+        asked_to_cancel = False
+        while True:
+            finished = remote.finished()
+            for e in remote.events():
+                if progress is not None:
+                    progress(ProgressEvent(e["stage"], e["step"], e["total"], e["message"], e["metrics"],
+                                           e["preview"]))
+            if finished:
+                break
+            if cancel is not None and cancel.is_set() and not asked_to_cancel:
+                remote.cancel()
+                asked_to_cancel = True
+            time.sleep(poll_seconds)
+        folder = remote.result(out_dir)
+        return folder, remote.report
+
+
+class LocalProcessJob:
+    """One job run by another SceneFit install on this machine (e.g. one with CUDA torch), followed
+    through `scenefit batch --events`: the same interface as RemoteJob, without Ray.
+
+    `python` is that install's interpreter. The job goes in a one-job jobs file beside its inputs
+    (paths made absolute); progress comes back as JSON lines; cancel sends SIGINT, which the
+    command line turns into a clean stop.
+    """
+
+    def __init__(self, job: Job, python: str, settings: BatchSettings = BatchSettings(), env: dict | None = None) -> None:
+        import json
+        import os
+        import queue
+        import subprocess
+        import tempfile
+        import threading
+
+        self.job, self.report = job, None
+        self.tmp = tempfile.TemporaryDirectory(prefix="scenefit-remote-")
+        root = Path(self.tmp.name)
+        entry = {k: v for k, v in job.to_dict().items() if v not in (None, "")}
+        entry["stages"] = list(job.stages)
+        lines = ["[batch]", f"retries = 0", f"num_cpus = {settings.num_cpus:g}", "", "[[job]]"]
+        lines += [f"{k} = {json.dumps(v)}" for k, v in entry.items()]   # JSON strings/lists are TOML too
+        (root / "jobs.toml").write_text("\n".join(lines) + "\n")
+        self.out = root / "out"
+        self.process = subprocess.Popen([python, "-m", "scenefit.cli", "batch", str(root / "jobs.toml"), "--out",
+                                         str(self.out), "--events", "--quiet"], stdout=subprocess.PIPE,
+                                        stderr=subprocess.PIPE, text=True, env={**os.environ, **(env or {})})
+        self._events: queue.Queue = queue.Queue()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        import json
+
+        for line in self.process.stdout:
+            try:
+                event = json.loads(line)
+            except ValueError:
+                continue   # the command's own summary line
+            if isinstance(event, dict) and event.get("event") == "progress":
+                event.pop("event")
+                path = event.pop("preview_png", None)
+                event["preview"] = _read_preview(path) if path else None
+                self._events.put(event)
+
+    def events(self, limit: int | None = None) -> list[dict]:
+        out = []
+        while limit is None or len(out) < limit:
+            try:
+                out.append(self._events.get_nowait())
+            except Exception:
+                break
+        return out
+
+    def finished(self) -> bool:
+        return self.process.poll() is not None
+
+    def cancel(self) -> None:
+        import signal
+
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+
+    def result(self, out_dir: str | Path, timeout: float | None = None) -> Path:
+        import shutil
+
+        code = self.process.wait(timeout=timeout)
+        self._reader.join(timeout=10)
+        error = self.process.stderr.read().strip()
+        if code == 130:
+            raise Cancelled("Cancelled by the user; the worker stopped and nothing came back.")
+        report = json.loads((self.out / self.job.name / "report.json").read_text()) if (
+            self.out / self.job.name / "report.json").is_file() else None
+        self.report = report
+        if code != 0 or report is None or report.get("status") != "done":
+            why = (report or {}).get("error") or (error.splitlines()[-1] if error else f"exit code {code}")
+            raise SceneFitError(f"The SceneFit worker failed job '{self.job.name}': {why}")
+        source = self.out / self.job.name
+        return install_folder(Path(out_dir), self.job.name, lambda folder: shutil.copytree(source, folder,
+                                                                                         dirs_exist_ok=True))
+
+    def close(self) -> None:
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()
+        self.tmp.cleanup()
+
+    def __enter__(self) -> LocalProcessJob:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _read_preview(path: str):
+    import numpy as np
+
+    from .imageio import read_image
+
+    try:
+        return (np.clip(read_image(path)[..., :3], 0.0, 1.0) * 255).round().astype(np.uint8)
+    except Exception:
+        return None
+
+
+def work_remotely(data: dict, progress=None, cancel=None) -> dict:
+    """A background-job work function for the add-on: plain data in (the asset as arrays, the photo,
+    the placement), the job run in the worker environment `data["worker"]`, its folder back in
+    `data["out"]`. Keys: mesh, maps, photo, at, worker, out; optional name, preset, stages, prompt,
+    mode, object_prompt, instruction, negative_prompt, seed.
+    """
+    import tempfile
+
+    from .asset_io import save_asset_folder
+    from .jobs import STAGE_TYPES
+
+    with tempfile.TemporaryDirectory(prefix="scenefit-asset-") as tmp:
+        asset = save_asset_folder(data["mesh"], data["maps"], Path(tmp) / "asset")
+        optional = {k: data[k] for k in ("mode", "prompt", "object_prompt", "instruction", "negative_prompt", "seed")
+                    if data.get(k) is not None}
+        job = Job(name=data.get("name", "scenefit"), asset=asset, stages=tuple(data.get("stages", STAGE_TYPES)),
+                  preset=data.get("preset", "balanced"), photo=Path(data["photo"]) if data.get("photo") else None,
+                  at=tuple(data["at"]) if data.get("at") is not None else None, **optional)
+        folder, report = run_remote(job, data["out"], data["worker"], progress=progress, cancel=cancel)
+    return {"folder": str(folder), "report": report}

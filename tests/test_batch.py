@@ -1,0 +1,276 @@
+"""`scenefit batch`: the jobs file, the in-process runner and the same jobs on a local Ray cluster."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenefit.cli import main
+from scenefit.core.asset_io import save_asset_folder
+from scenefit.core.batch import InProcessDispatcher, JobWorker, run_batch
+from scenefit.core.errors import InputError
+from scenefit.core.imageio import read_image, write_image
+from scenefit.core.jobs import load_jobs
+from scenefit.core.maps import PBRMaps
+from scenefit.core.primitives import uv_sphere
+
+JOBS = """
+[batch]
+retries = {retries}
+[defaults]
+preset = "draft"
+photo = "room.png"
+at = [0.5, 0.7]
+stages = ["light", "convert"]
+[[job]]
+name = "a"
+asset = "ball"
+[[job]]
+name = "b"
+asset = "ball"
+seed = 1
+[[job]]
+name = "c"
+asset = "ball"
+stages = ["light"]
+"""
+
+
+def make_inputs(folder: Path, retries: int = 1) -> Path:
+    """A 16x8-segment ball with 16² maps, a 64x48 photo and a jobs file of three draft jobs."""
+    rng = np.random.default_rng(0)
+    maps = PBRMaps(base_color=rng.uniform(0.1, 0.9, (16, 16, 3)).astype(np.float32), roughness=0.5, metallic=0.0)
+    save_asset_folder(uv_sphere(segments=16, rings=8), maps, folder / "ball")
+    y = np.linspace(0.0, 1.0, 48)[:, None, None]
+    photo = np.concatenate([0.8 - 0.5 * y, 0.7 - 0.4 * y, 0.5 + 0.0 * y], axis=2)
+    write_image(folder / "room.png", np.broadcast_to(photo, (48, 64, 3)).astype(np.float32))
+    (folder / "jobs.toml").write_text(JOBS.format(retries=retries))
+    return folder / "jobs.toml"
+
+
+class FailingOnceWorker(JobWorker):
+    """Job 'b' fails on its first attempt, wherever it runs."""
+
+    def run(self, payload, progress_sink=None):
+        if payload.job.name == "b" and payload.attempt == 1:
+            raise RuntimeError("injected failure of job b's first attempt")
+        return super().run(payload, progress_sink)
+
+
+class AlwaysFailingWorker(JobWorker):
+    def run(self, payload, progress_sink=None):
+        if payload.job.name == "b":
+            raise RuntimeError("injected failure of job b")
+        return super().run(payload, progress_sink)
+
+
+def outputs(folder: Path) -> dict[str, bytes]:
+    """Every file a job wrote, except its report (timings, worker) -> bytes; EXR files by their
+    pixels (OpenImageIO stamps the write time into the header)."""
+    return {str(p.relative_to(folder)): read_image(p).tobytes() if p.suffix == ".exr" else p.read_bytes()
+            for p in sorted(folder.rglob("*")) if p.is_file() and p.name != "report.json"}
+
+
+@pytest.fixture(scope="module")
+def in_process(tmp_path_factory):
+    """The three jobs run once in this process (the reference the Ray run is compared with)."""
+    root = tmp_path_factory.mktemp("batch_in_process")
+    jobs_path = make_inputs(root / "in")
+    outcomes = run_batch(load_jobs(jobs_path), root / "out")
+    return jobs_path, root / "out", outcomes
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    """One small local Ray cluster for this module's Ray tests; the module's functions and classes
+    travel to its workers by value (the workers cannot import the test module)."""
+    ray = pytest.importorskip("ray")
+    from ray import cloudpickle
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    ray.init(num_cpus=2, object_store_memory=80 * 2**20, include_dashboard=False, log_to_driver=False)
+    yield ray
+    ray.shutdown()
+    cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
+
+
+def test_jobs_file_paths_defaults_and_order(tmp_path):
+    jobs = load_jobs(make_inputs(tmp_path))
+    assert [j.name for j in jobs.jobs] == ["a", "b", "c"]
+    a, b, c = jobs.jobs
+    assert a.asset == (tmp_path / "ball").resolve() and a.photo == (tmp_path / "room.png").resolve()
+    assert a.stages == ("convert", "light")          # pipeline order, whatever the file's order
+    assert c.stages == ("light",) and b.seed == 1 and a.preset == "draft" and a.at == (0.5, 0.7)
+    assert jobs.settings.retries == 1 and jobs.settings.num_gpus == "auto"
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda t: t.replace('asset = "ball"\nseed', 'asset = "nothing"\nseed'), "the asset"),
+    (lambda t: t.replace('name = "b"', 'name = "a"'), "two jobs are named 'a'"),
+    (lambda t: t.replace('name = "c"', 'name = "../c"'), "needs a name"),
+    (lambda t: t.replace('stages = ["light"]', 'stages = ["light", "paint"]'), "unknown stage 'paint'"),
+    (lambda t: t.replace("at = [0.5, 0.7]", "at = [0.5, 1.7]"), r"at must be \[x, y\]"),
+    (lambda t: t.replace('preset = "draft"', 'preset = "fast"'), "preset must be one of"),
+    (lambda t: t.replace("seed = 1", "sed = 1"), "unknown key 'sed'"),
+    (lambda t: t.replace("retries = 1", "retries = -1"), "retries must be"),
+    (lambda t: t.replace('photo = "room.png"\n', ''), "needs a photo"),
+    (lambda t: t.replace("[[job]]", "[[jobs]]"), "unknown table 'jobs'"),
+    (lambda t: t + "[[job\n", "not valid TOML"),
+])
+def test_jobs_file_errors_are_one_sentence(tmp_path, change, message):
+    path = make_inputs(tmp_path)
+    path.write_text(change(path.read_text()))
+    with pytest.raises(InputError, match=message) as error:
+        load_jobs(path)
+    assert "\n" not in str(error.value).strip()
+
+
+def test_in_process_batch_writes_folders_summary_and_resumes(in_process, capsys):
+    jobs_path, out, outcomes = in_process
+    assert [(o.name, o.status, o.attempts) for o in outcomes] == [("a", "done", 1), ("b", "done", 1), ("c", "done", 1)]
+    for name in "abc":
+        report = json.loads((out / name / "report.json").read_text())
+        assert report["status"] == "done" and report["job"]["name"] == name
+        assert (out / name / "light" / "light.exr").is_file()
+        # Paths in the report are inside the job's folder, relative to it.
+        assert (out / name / report["stages"]["light"]["outputs"]["hdr_exr"]).is_file()
+    assert (out / "a" / "convert" / "maps" / "base_color.png").is_file() and not (out / "c" / "convert").exists()
+    assert outcomes[0].quality["convert_psnr_db"] > 30.0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["counts"] == {"done": 3, "skipped": 0, "failed": 0}
+    assert "| a | done | 1 |" in (out / "summary.md").read_text()
+    sheet = read_image(out / "contact_sheet.png")
+    assert sheet.shape[0] > 0 and sheet.shape[1] == 3 * 192      # three cells in one row
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no staging folders left
+
+    # A second run does nothing: every job is skipped and no job folder is touched.
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file() and p.parent != out}
+    assert main(["batch", str(jobs_path), "--out", str(out)]) == 0
+    assert "0 done, 3 skipped" in capsys.readouterr().out
+    assert {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file() and p.parent != out} == before
+
+
+def test_failed_job_is_reported_and_retried_by_the_next_run(tmp_path, capsys):
+    jobs = load_jobs(make_inputs(tmp_path / "in", retries=2))
+    outcomes = run_batch(jobs, tmp_path / "out", InProcessDispatcher(jobs.settings, AlwaysFailingWorker))
+    by_name = {o.name: o for o in outcomes}
+    assert by_name["b"].status == "failed" and by_name["b"].attempts == 3
+    assert "injected failure" in by_name["b"].error
+    assert by_name["a"].status == by_name["c"].status == "done"
+    report = json.loads((tmp_path / "out" / "b" / "report.json").read_text())
+    assert report["status"] == "failed" and report["attempts"] == 3 and "injected failure" in report["error"]
+    assert "| b | failed | 3 |" in (tmp_path / "out" / "summary.md").read_text()
+    # The command line says so and exits 1; the next run retries only the failed job.
+    assert main(["batch", str(jobs.path), "--out", str(tmp_path / "out")]) == 0
+    assert "1 done, 2 skipped" in capsys.readouterr().out
+    assert json.loads((tmp_path / "out" / "b" / "report.json").read_text())["status"] == "done"
+
+
+def test_cli_bad_jobs_file_exits_2(tmp_path, capsys):
+    (tmp_path / "jobs.toml").write_text("[[job]]\nname = 'x'\n")
+    assert main(["batch", str(tmp_path / "jobs.toml"), "--out", str(tmp_path / "out")]) == 2
+    assert "asset is missing" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_ray_batch_retries_resumes_and_matches_in_process(in_process, local_ray, tmp_path):
+    from scenefit.core.batch_ray import RayDispatcher
+
+    jobs_path, reference, _ = in_process
+    jobs = load_jobs(jobs_path)
+    dispatcher = RayDispatcher(jobs.settings, len(jobs.jobs), worker_class=FailingOnceWorker)
+    assert dispatcher.workers == 2 and dispatcher.options == {"num_cpus": 1.0, "num_gpus": 0.0}
+    outcomes = run_batch(jobs, tmp_path / "out", dispatcher)
+    assert [(o.name, o.status, o.attempts) for o in outcomes] == [("a", "done", 1), ("b", "done", 2),
+                                                                  ("c", "done", 1)]
+    report = json.loads((tmp_path / "out" / "b" / "report.json").read_text())
+    assert report["attempts"] == 2 and report["worker"]["pid"] != __import__("os").getpid()
+
+    # A second run does nothing.
+    again = run_batch(jobs, tmp_path / "out", RayDispatcher(jobs.settings, len(jobs.jobs)))
+    assert [o.status for o in again] == ["skipped"] * 3
+    # Same outputs as in-process: the same threads per job give the same bytes.
+    for name in "abc":
+        assert outputs(tmp_path / "out" / name) == outputs(reference / name), name
+
+
+def test_model_cache_loads_once_and_survives_a_released_text_encoder(tmp_path):
+    from scenefit.core.guidance import ModelConfig
+    from scenefit.core.guidance.models import ModelCache
+    try:   # the tiny models' builder is moving from core/guidance/testing.py to devtools/
+        from scenefit.devtools.tiny_models import build_tiny_sd
+    except ImportError:
+        from scenefit.core.guidance.testing import build_tiny_sd
+
+    config = ModelConfig(base_model=str(build_tiny_sd(tmp_path / "sd")), local_files_only=True)
+    cache = ModelCache()
+    first = cache.get(config, need_inpaint=False)
+    first.embed("a ball")
+    first.release_text_encoder()                 # as the adapt stage does at its start
+    second = cache.get(config, need_inpaint=False)
+    assert cache.loads == 1 and second.unet is first.unet
+    assert second.embed("a muddy ball").shape[1] == 77
+
+
+def test_remote_job_streams_progress_cancels_and_returns_its_folder(in_process, local_ray, tmp_path):
+    """What the add-on does with a worker environment: hand a job to Ray, follow it, cancel it, fetch it."""
+    import threading
+    from dataclasses import replace
+
+    from scenefit.core.errors import Cancelled
+    from scenefit.core.remote import run_remote
+
+    jobs_path, reference, _ = in_process
+    job = load_jobs(jobs_path).jobs[0]
+    events = []
+    folder, report = run_remote(job, tmp_path / "back", progress=events.append)
+    assert folder == tmp_path / "back" / "a" and report["status"] == "done"
+    stages = [e.stage for e in events]
+    assert "convert" in stages and "light" in stages and stages.index("convert") < stages.index("light")
+    assert all(0 <= e.step <= e.total for e in events) and events[-1].fraction == 1.0
+    assert outputs(folder) == outputs(reference / "a")
+
+    # Cancelled at its first progress event: the worker stops with Cancelled and nothing comes back.
+    cancel = threading.Event()
+    long_job = replace(job, name="long", preset="final", stages=("convert",))
+    with pytest.raises(Cancelled):
+        run_remote(long_job, tmp_path / "back", progress=lambda event: cancel.set(), cancel=cancel)
+    assert not (tmp_path / "back" / "long").exists()
+
+
+def _sum_over_ranks(value_per_rank: float) -> tuple[int, int, float]:
+    """One rank's part: join the group from torchrun's environment (as the adapt stage does) and sum."""
+    import os
+
+    import torch
+    import torch.distributed as dist
+
+    dist.init_process_group("gloo")
+    x = torch.tensor([value_per_rank * (dist.get_rank() + 1)])
+    dist.all_reduce(x)
+    return dist.get_rank(), int(os.environ["WORLD_SIZE"]), float(x)
+
+
+def test_ray_launches_a_torch_distributed_group_on_one_node(local_ray):
+    from scenefit.core.batch_ray import run_on_ranks
+
+    assert run_on_ranks(_sum_over_ranks, (0.5,), world=2) == [(0, 2, 1.5), (1, 2, 1.5)]
+
+
+def test_work_remotely_takes_the_add_ons_plain_data(tmp_path):
+    """The add-on's background job hands arrays and a worker address; the folder comes back."""
+    from scenefit.core.asset_io import load_asset_folder
+    from scenefit.core.remote import work_remotely
+
+    make_inputs(tmp_path / "in")
+    mesh, maps = load_asset_folder(tmp_path / "in" / "ball")
+    events = []
+    result = work_remotely({"mesh": mesh, "maps": maps, "photo": str(tmp_path / "in" / "room.png"), "at": (0.5, 0.7),
+                            "stages": ["light"], "preset": "draft", "name": "blend-job", "worker": sys.executable,
+                            "out": str(tmp_path / "back")}, progress=events.append)
+    assert result["folder"] == str(tmp_path / "back" / "blend-job") and result["report"]["status"] == "done"
+    assert (tmp_path / "back" / "blend-job" / "light" / "light.exr").is_file()
+    assert result["report"]["job"]["stages"] == ["light"] and [e.stage for e in events][-1] == "light"

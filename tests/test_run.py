@@ -1,0 +1,48 @@
+"""`scenefit run`: every stage in one go, one report, and a second run reuses what is done."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+
+from scenefit.core.asset_io import save_asset_folder
+from scenefit.core.imageio import read_image, write_image
+from scenefit.core.maps import PBRMaps
+from scenefit.core.primitives import uv_sphere
+
+
+def scenefit(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "scenefit.cli", *args], capture_output=True, text=True, timeout=900)
+
+
+def test_run_composes_and_a_second_run_reuses_every_stage(tmp_path):
+    yy, xx = np.mgrid[0:16, 0:16] / 16
+    maps = PBRMaps(np.stack([0.3 + 0.5 * xx, 0.4 + 0 * xx, 0.7 - 0.4 * yy], -1).astype(np.float32), 0.5, 0.0)
+    asset = save_asset_folder(uv_sphere(0.5, 16, 8), maps, tmp_path / "asset")
+    rng = np.random.default_rng(0)
+    photo = np.clip(np.linspace(0.9, 0.3, 72)[:, None, None] + rng.normal(0, 0.05, (72, 96, 3)), 0, 1)
+    photo_path = write_image(tmp_path / "photo.png", photo)
+    out = tmp_path / "run"
+    args = (str(asset), "--photo", str(photo_path), "--at", "0.5,0.8", "--out", str(out), "--preset", "draft",
+            "--guidance", "none", "--spp", "4", "--quiet")
+    first = scenefit("run", *args)
+    assert first.returncode == 0, first.stderr
+    report = json.loads((out / "report.json").read_text())
+    status = {name: stage["status"] for name, stage in report["stages"].items()}
+    assert status == {"convert": "ran", "light": "ran", "adapt": "skipped", "compose": "ran",
+                      "bake": "not available yet"}
+    assert read_image(out / "compose" / "composite.png").shape == (72, 96, 3)
+    assert report["stages"]["compose"]["report"]["spp"] == 4
+
+    second = scenefit("run", *args)
+    assert second.returncode == 0, second.stderr
+    again = json.loads((out / "report.json").read_text())
+    assert again["reused"] == ["convert", "light", "compose"]
+
+    # A compose setting changes only the compose stage.
+    third = scenefit("run", *args[:-3], "--spp", "2", "--quiet")
+    assert third.returncode == 0, third.stderr
+    last = json.loads((out / "report.json").read_text())
+    assert last["reused"] == ["convert", "light"] and last["stages"]["compose"]["status"] == "ran"
