@@ -12,10 +12,10 @@ from pathlib import Path
 
 from ..core.errors import InputError
 from ..core.maps import PBRMaps
+from ..core.materials import AssetMaterials
 from ..core.mesh import Mesh
 from ..core.quiet import native_output_captured
-from .material import maps_from_material
-from .mesh import mesh_from_object
+from .material import read_object_materials
 
 IMPORTERS = {
     ".glb": ("import_scene", "gltf"), ".gltf": ("import_scene", "gltf"),
@@ -78,7 +78,23 @@ def _append_blend(bpy, scene, path: Path, object_name: str | None) -> None:
 
 
 def load_asset_file(path: str | Path, object_name: str | None = None) -> tuple[Mesh, PBRMaps]:
-    """The named mesh object (or the one with most faces) and its material's maps."""
+    """The named mesh object (or the one with most faces) and its maps; several materials come as
+    one atlas (see AssetMaterials.fitting_view)."""
+    return load_asset_materials(path, object_name).fitting_view()
+
+
+def load_asset_materials(path: str | Path, object_name: str | None = None) -> AssetMaterials:
+    """The named mesh object (or the one with most faces) with every material its faces use."""
+    import bpy
+
+    with loaded_asset(path, object_name) as (obj, scene):
+        return read_object_materials(obj, bpy.context.evaluated_depsgraph_get())
+
+
+@contextmanager
+def loaded_asset(path: str | Path, object_name: str | None = None):
+    """(object, temporary scene), with the context pointing at that scene, while the block runs;
+    everything the load brought is removed afterwards (see the module's note)."""
     import bpy
 
     path = Path(path)
@@ -120,8 +136,4 @@ def load_asset_file(path: str | Path, object_name: str | None = None) -> tuple[M
         else:
             raise InputError(f"'{path.name}' holds no mesh object.")
         with bpy.context.temp_override(scene=scene, view_layer=scene.view_layers[0]):
-            mesh = mesh_from_object(obj, bpy.context.evaluated_depsgraph_get())
-        if not obj.material_slots or obj.material_slots[0].material is None:
-            raise InputError(f"Object '{obj.name}' has no material; give it a Principled BSDF with image textures.")
-        maps = maps_from_material(obj.material_slots[0].material)
-    return mesh, maps
+            yield obj, scene

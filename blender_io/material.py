@@ -9,13 +9,17 @@ import numpy as np
 from ..core.errors import InputError
 from ..core.imageio import srgb_to_linear
 from ..core.maps import PBRMaps
+from ..core.materials import AssetMaterials, Material
+from ..core.mesh import Mesh
+from .mesh import mesh_from_object
+from .node_values import NotAnImageChain, socket_value, source
+from .procedural_bake import bake_socket
 
 # Size of the base-colour image made when Base Color is a constant but another channel is not.
 CONSTANT_SIZE = 256
 # Colour spaces whose 8-bit pixels are stored as-is (no transfer function to undo).
 _LINEAR_SPACES = {"Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear CIE-XYZ E", "Linear FilmLight E-Gamut",
                   "Linear Rec.2020", "ACEScg", "ACES2065-1"}
-_REC709_LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
 
 
 def principled_bsdf(material):
@@ -37,7 +41,7 @@ def principled_bsdf(material):
     return candidates[0]
 
 
-def image_pixels_linear(image) -> np.ndarray:
+def image_pixels_linear(image, decode_srgb: bool = True) -> np.ndarray:
     """(H, W, 4) float32, rows top to bottom, colour channels decoded to linear.
 
     Blender keeps float images linear; 8-bit images are exposed as stored, so their transfer
@@ -56,61 +60,180 @@ def image_pixels_linear(image) -> np.ndarray:
         pixels = np.concatenate([pixels, np.ones((h, w, 1), np.float32)], axis=2)
     pixels = np.ascontiguousarray(pixels)
     space = image.colorspace_settings.name
-    if not image.is_float and space not in _LINEAR_SPACES:
+    if decode_srgb and not image.is_float and space not in _LINEAR_SPACES:
         pixels[..., :3] = srgb_to_linear(pixels[..., :3])
     return pixels
 
 
-def _linked_image(socket, label: str):
-    """(image node, output socket name) when `socket` is driven by an Image Texture, else None."""
-    if not socket.is_linked:
-        return None
-    link = socket.links[0]
-    node = link.from_node
-    while node.type == "REROUTE" and node.inputs[0].is_linked:
-        link = node.inputs[0].links[0]
-        node = link.from_node
-    if node.type != "TEX_IMAGE":
-        raise InputError(f"{label} is driven by a '{node.name}' node; SceneFit reads an Image Texture or a "
-                         "plain value. Bake the node setup to an image first.")
-    if node.image is None:
-        raise InputError(f"The Image Texture node '{node.name}' for {label} has no image.")
-    return node, link.from_socket.name
+# Principled inputs the neural texture does not model: reported when they change the look.
+_UNMODELLED = (("Coat Weight", 0.0), ("Sheen Weight", 0.0), ("Transmission Weight", 0.0),
+               ("Subsurface Weight", 0.0), ("Anisotropic", 0.0), ("Specular IOR Level", 0.5))
+# Where the glTF importer/exporter keep occlusion: a node group of this name with an Occlusion input.
+_GLTF_SETTINGS_GROUPS = ("glTF Material Output", "glTF Settings")
+# Size of images baked from procedural chains when the material has no image to take the size from.
+PROCEDURAL_BAKE_SIZE = 512
 
 
-def _scalar_map(socket, label: str) -> np.ndarray | float:
-    linked = _linked_image(socket, label)
+def _read_input(bsdf, name: str, kind: str, material, obj, slot: int, read: list[str], bake_size: int):
+    """The input's value through its node chain; a procedural chain is baked with Cycles."""
+    trail: list[str] = []
+    try:
+        value = socket_value(bsdf.inputs[name], kind, trail, image_pixels_linear)
+    except NotAnImageChain as why:
+        pixels = bake_socket(obj, slot, bsdf.inputs[name], bake_size, image_pixels_linear)
+        read.append(f"{name} <- procedural setup ({why}) baked by Cycles to {bake_size}² "
+                    f"(Blender's bake, emission pass)")
+        value = pixels if kind == "color" else pixels[..., 0].copy()
+        return np.clip(value, 0.0, 1.0)
+    if trail:
+        read.append(f"{name} <- " + ", ".join(reversed(trail)))
+    else:
+        shown = ", ".join(f"{x:.4g}" for x in np.ravel(value))
+        read.append(f"{name} <- constant {shown}")
+    return np.clip(value, 0.0, 1.0) if isinstance(value, np.ndarray) else float(np.clip(value, 0.0, 1.0))
+
+
+def _image_size(material) -> int:
+    sizes = [max(n.image.size) for n in material.node_tree.nodes
+             if n.type == "TEX_IMAGE" and n.image is not None and max(n.image.size) > 0]
+    return max(sizes) if sizes else PROCEDURAL_BAKE_SIZE
+
+
+def _normal_map(bsdf, material, kept: list[str], dropped: list[str]) -> np.ndarray | None:
+    """The tangent-space normal map behind Normal, with the node's strength applied, or None."""
+    linked = source(bsdf.inputs["Normal"])
     if linked is None:
-        return float(np.clip(socket.default_value, 0.0, 1.0))
-    node, output = linked
-    pixels = image_pixels_linear(node.image)
-    if output == "Alpha":
-        return pixels[..., 3].copy()
-    rgb = pixels[..., :3]
-    if np.array_equal(rgb[..., 0], rgb[..., 1]) and np.array_equal(rgb[..., 0], rgb[..., 2]):
-        return rgb[..., 0].copy()
-    return (rgb @ _REC709_LUMA).astype(np.float32)  # Blender's colour -> float conversion
+        return None
+    node = linked[0]
+    if node.type != "NORMAL_MAP":
+        dropped.append(f"Normal <- '{node.name}' ({node.bl_idname}): only a Normal Map node with an image is "
+                       "used in renders; the node stays in the material for export")
+        return None
+    color = source(node.inputs["Color"])
+    if color is None:
+        return None  # an unlinked Normal Map node (the FBX importer adds one) leaves the normal as it is
+    if node.space != "TANGENT" or color[0].type != "TEX_IMAGE" or color[0].image is None:
+        dropped.append(f"Normal Map '{node.name}' ({node.space.lower()} space, not an image in tangent space) is "
+                       "not used in renders; it stays in the material for export")
+        return None
+    image = color[0].image
+    encoded = image_pixels_linear(image, decode_srgb=False)[..., :3]
+    if image.colorspace_settings.name not in _LINEAR_SPACES and not image.is_float:
+        dropped.append(f"normal map image '{image.name}' is tagged {image.colorspace_settings.name}; its bytes are "
+                       "read as Non-Color data, as Blender's glTF importer tags normal maps")
+    strength = float(node.inputs["Strength"].default_value)
+    if strength != 1.0:  # Blender blends the perturbed normal with the surface normal by strength
+        n = (encoded * 2.0 - 1.0) * strength + np.array([0.0, 0.0, 1.0 - strength], np.float32)
+        n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-8)
+        encoded = (n * 0.5 + 0.5).astype(np.float32)
+    kept.append(f"normal map <- image '{image.name}' via Normal Map '{node.name}' (tangent space, strength "
+                f"{strength:.3g}): used in renders, kept for export")
+    return np.ascontiguousarray(encoded, dtype=np.float32)
 
 
-def maps_from_material(material) -> PBRMaps:
-    """Base colour, roughness and metallic of the material's Principled BSDF.
+def alpha_mode(material, bsdf) -> str:
+    """glTF's alpha mode as Blender's glTF exporter would write it for this material."""
+    if getattr(material, "surface_render_method", "DITHERED") == "BLENDED":
+        return "BLEND"
+    alpha = bsdf.inputs["Alpha"]
+    linked = source(alpha)
+    if linked is None:
+        return "OPAQUE" if alpha.default_value >= 1.0 else "BLEND"
+    node = linked[0]
+    if node.type == "MATH" and node.operation in ("SUBTRACT", "ROUND", "GREATER_THAN", "LESS_THAN"):
+        return "MASK"
+    return "BLEND"
 
-    An Image Texture linked to an input gives its pixels (linear float, rows top to bottom); an
-    unlinked input gives its value. A constant base colour becomes an image the size of the other
-    maps (or CONSTANT_SIZE square). The material is only read.
+
+def _carried(material, bsdf, kept: list[str], dropped: list[str]) -> str:
+    """Alpha, emission and occlusion: not fitted, carried unchanged into game export. Returns the alpha mode."""
+    name = material.name
+    mode = alpha_mode(material, bsdf)
+    alpha = source(bsdf.inputs["Alpha"])
+    if mode != "OPAQUE":
+        where = f"'{alpha[0].name}' {alpha[1].name}" if alpha else f"constant {bsdf.inputs['Alpha'].default_value:.3g}"
+        kept.append(f"alpha ({mode}) <- {where}: carried unchanged into export; renders are opaque")
+    strength = bsdf.inputs["Emission Strength"]
+    color = bsdf.inputs["Emission Color"]
+    emits = color.is_linked or strength.is_linked or (
+        strength.default_value > 0 and max(color.default_value[:3]) > 0)
+    if emits:
+        what = f"'{source(color)[0].name}'" if color.is_linked else \
+            "colour (" + ", ".join(f"{x:.3g}" for x in color.default_value[:3]) + ")"
+        kept.append(f"emission <- {what} x strength {strength.default_value:.3g}: carried unchanged into export; "
+                    "not added to renders")
+    for node in material.node_tree.nodes:
+        if node.type == "GROUP" and node.node_tree is not None and node.node_tree.name in _GLTF_SETTINGS_GROUPS:
+            occlusion = node.inputs.get("Occlusion")
+            if occlusion is not None and occlusion.is_linked:
+                kept.append(f"occlusion <- '{source(occlusion)[0].name}' (glTF settings group): kept for export")
+    for socket_name, neutral in _UNMODELLED:
+        socket = bsdf.inputs.get(socket_name)
+        if socket is not None and (socket.is_linked or abs(float(socket.default_value) - neutral) > 1e-6):
+            dropped.append(f"{socket_name} of '{name}' is not modelled by the neural texture (base colour, "
+                           "roughness, metallic); it stays in the material for export")
+    return mode
+
+
+def read_material(material, obj=None, slot: int = 0) -> Material:
+    """Everything SceneFit reads from one material, with an account of what it read and dropped.
+
+    Base Color, Roughness and Metallic come from images, constants, one channel of an image
+    (Separate Color, as glTF's packed metallic-roughness image) or factors; any other node chain is
+    baked with Cycles over the faces of `obj`'s slot `slot`. The material is only read.
     """
     bsdf = principled_bsdf(material)
-    roughness = _scalar_map(bsdf.inputs["Roughness"], f"Roughness of '{material.name}'")
-    metallic = _scalar_map(bsdf.inputs["Metallic"], f"Metallic of '{material.name}'")
-    linked = _linked_image(bsdf.inputs["Base Color"], f"Base Color of '{material.name}'")
-    if linked is not None:
-        base_color = image_pixels_linear(linked[0].image)[..., :3].copy()
-    else:
+    read: list[str] = []
+    kept: list[str] = []
+    dropped: list[str] = []
+    size = _image_size(material)
+    roughness = _read_input(bsdf, "Roughness", "float", material, obj, slot, read, size)
+    metallic = _read_input(bsdf, "Metallic", "float", material, obj, slot, read, size)
+    base_color = _read_input(bsdf, "Base Color", "color", material, obj, slot, read, size)
+    if not (isinstance(base_color, np.ndarray) and base_color.ndim == 3):
         sizes = [m.shape for m in (roughness, metallic) if isinstance(m, np.ndarray)]
         h, w = sizes[0] if sizes else (CONSTANT_SIZE, CONSTANT_SIZE)
-        value = np.clip(np.array(bsdf.inputs["Base Color"].default_value[:3], dtype=np.float32), 0.0, 1.0)
-        base_color = np.broadcast_to(value, (h, w, 3)).copy()
-    return PBRMaps(base_color=base_color.astype(np.float32), roughness=roughness, metallic=metallic)
+        base_color = np.broadcast_to(np.asarray(base_color, np.float32), (h, w, 3)).copy()
+    normal = _normal_map(bsdf, material, kept, dropped)
+    mode = _carried(material, bsdf, kept, dropped)
+    maps = PBRMaps(base_color=np.ascontiguousarray(base_color, dtype=np.float32), roughness=roughness,
+                   metallic=metallic, normal=normal)
+    return Material(name=material.name, maps=maps, read=tuple(read), kept=tuple(kept), dropped=tuple(dropped),
+                    alpha_mode=mode)
+
+
+def maps_from_material(material, obj=None, slot: int = 0) -> PBRMaps:
+    """Base colour, roughness, metallic (and the normal map) of the material's Principled BSDF.
+
+    Linear float pixels, rows top to bottom; an unlinked input gives its value. A constant base
+    colour becomes an image the size of the other maps (or CONSTANT_SIZE square). See read_material.
+    """
+    return read_material(material, obj, slot).maps
+
+
+def object_mesh_and_slots(obj, depsgraph) -> tuple[Mesh, list[int]]:
+    """The object's mesh with material_index numbering the slots its faces use (None for one),
+    and those slot numbers in order."""
+    mesh = mesh_from_object(obj, depsgraph)
+    if not obj.material_slots:
+        raise InputError(f"Object '{obj.name}' has no material; give it a Principled BSDF with image textures.")
+    raw = np.zeros(len(mesh.faces), np.int32) if mesh.material_index is None else mesh.material_index
+    used = np.unique(raw)
+    for slot in used:
+        if slot >= len(obj.material_slots) or obj.material_slots[slot].material is None:
+            raise InputError(f"Faces of '{obj.name}' use material slot {slot + 1}, which holds no material.")
+    index = np.searchsorted(used, raw).astype(np.int32) if len(used) > 1 else None
+    mesh = Mesh.from_arrays(mesh.positions, mesh.faces, mesh.uvs, mesh.normals, mesh.name, index)
+    return mesh, [int(s) for s in used]
+
+
+def read_object_materials(obj, depsgraph) -> AssetMaterials:
+    """The object's mesh and every material its faces use (slots no face uses are skipped)."""
+    mesh, slots = object_mesh_and_slots(obj, depsgraph)
+    materials = [read_material(obj.material_slots[slot].material, obj, slot) for slot in slots]
+    unused = [s.material.name for i, s in enumerate(obj.material_slots) if i not in slots and s.material is not None]
+    notes = [f"material slots no face uses were skipped: {', '.join(unused)}"] if unused else []
+    return AssetMaterials(mesh=mesh, materials=tuple(materials), notes=tuple(notes))
 
 
 def _load_image(path: str | os.PathLike, colorspace: str):

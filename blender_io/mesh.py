@@ -48,6 +48,7 @@ def mesh_from_object(obj, depsgraph, space: str = "object") -> Mesh:
         loop_vertex = _get(me.loops, "vertex_index", n_loops, 1, np.int32)
         loop_uv = _get(uv_layer.uv, "vector", n_loops, 2, np.float32)
         loop_normal = _get(me.corner_normals, "vector", n_loops, 3, np.float32)
+        tri_material = _get(me.loop_triangles, "material_index", n_tris, 1, np.int32)
     finally:
         evaluated.to_mesh_clear()
 
@@ -67,4 +68,7 @@ def mesh_from_object(obj, depsgraph, space: str = "object") -> Mesh:
         positions = positions @ m[:3, :3].T + m[:3, 3]
         normals = normals @ np.linalg.inv(m[:3, :3])  # inverse transpose, applied to row vectors
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
-    return Mesh.from_arrays(positions, inverse.reshape(-1, 3), loop_uv[chosen], normals, name=obj.name)
+    # Material slot per triangle, kept when the object has several slots (see read_object_materials).
+    material_index = tri_material if len(obj.material_slots) > 1 else None
+    return Mesh.from_arrays(positions, inverse.reshape(-1, 3), loop_uv[chosen], normals, name=obj.name,
+                            material_index=material_index)

@@ -11,10 +11,10 @@ import sys
 
 from ..core.errors import Cancelled, SceneFitError
 from ..core.output_folder import interrupted_message
-from . import adapt, batch, compose, convert, demo, export, light, prompt, render, run
+from . import adapt, bake, batch, compose, convert, demo, export, light, prompt, render, run
 
 # The order `scenefit --help` lists them in.
-COMMANDS = (convert, render, export, light, prompt, adapt, compose, run, batch, demo)
+COMMANDS = (convert, render, export, bake, light, prompt, adapt, compose, run, batch, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -3,7 +3,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import PRESETS, add_asset_args, add_output_args, load_asset, output, positive_int, progress
+from .options import (PRESETS, add_asset_args, add_output_args, load_asset_materials, output, positive_int,
+                      progress)
+
+
+def print_material_report(asset) -> None:
+    """What was read from each material, what is carried unchanged, and what was dropped and why."""
+    for material in asset.materials:
+        print(f"material '{material.name}':")
+        for kind, lines in (("read", material.read), ("kept", material.kept), ("dropped", material.dropped)):
+            for line in lines:
+                print(f"  {kind:8s}{line}")
+    for note in asset.notes:
+        print(f"  note    {note}")
 
 
 def run(args) -> int:
@@ -16,14 +28,17 @@ def run(args) -> int:
                                    ("screen_px", args.screen_px)) if v is not None}
     config = stage_config("convert", args.preset, **overrides)
     with output(args) as out:
-        mesh, maps = load_asset(args.asset, args.object)
-        result, report = convert_and_bake(mesh, maps, out / "maps", config, progress=progress(args),
+        asset = load_asset_materials(args.asset, args.object)
+        print_material_report(asset)
+        result, report = convert_and_bake(asset, None, out / "maps", config, progress=progress(args),
                                           keep_constants=True)
+        mesh, maps = asset.fitting_view()
         save_asset_folder(mesh, maps, out / "asset")
         report["environment"] = environment_info()
         write_report(out / "report.json", report)
-    print(f"converted '{mesh.name}': {result.psnr:.2f} dB on covered texels in {result.seconds:.1f} s "
-          f"({config.method_type}) -> {Path(args.out)}")
+    per_material = ", ".join(f"'{m['name']}' {m['psnr_db']:.2f} dB" for m in result.decisions["materials"])
+    print(f"converted '{mesh.name}': {result.psnr:.2f} dB on covered texels ({per_material}) in "
+          f"{result.seconds:.1f} s ({config.method_type}) -> {Path(args.out)}")
     return 0
 
 

@@ -31,7 +31,8 @@ def _render(args, out: Path) -> int:
         stack, label = torch.from_numpy(target_stack(maps, max(maps.resolution))), "asset maps"
     env, env_label = environment(args)
     cameras = orbit_cameras(args.views, args.elevation, fov_multiplier=1.1, size=args.size)
-    images = render_views(normalized, {label: stack}, env, cameras, args.spp, progress=progress(args))[label]
+    images = render_views(normalized, {label: stack}, env, cameras, args.spp, progress=progress(args),
+                          normal_map=None if args.no_normal_map else maps.normal)[label]
     files = []
     for camera, image in zip(cameras, images):
         path = out / f"view_az{int(round(camera.azimuth_deg)):03d}.png"
@@ -54,4 +55,5 @@ def add_parser(sub) -> None:
     p.add_argument("--size", type=positive_int, default=256)
     p.add_argument("--spp", type=positive_int, default=64)
     p.add_argument("--exposure", type=positive_float, default=1.0)
+    p.add_argument("--no-normal-map", action="store_true", help="render without the asset's normal map")
     p.set_defaults(func=run)

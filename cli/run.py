@@ -1,6 +1,9 @@
 """scenefit run: the whole pipeline (convert -> light -> adapt -> compose -> bake) for one asset and photo."""
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 from .options import (PRESETS, add_asset_args, add_model_args, add_prompt_service_args, load_asset, model_config,
@@ -18,13 +21,46 @@ def run_config(args):
     return config, written
 
 
+def game_bake(args):
+    """(bake function or None, why not): `scenefit bake` on the asset's own file, in a child process
+    (Blender's glTF exporter leaves bpy unable to import another glTF in the same process)."""
+    from ..core.asset_io import is_asset_folder
+
+    if args.no_bake:
+        return None, "--no-bake was given"
+    if is_asset_folder(args.asset):
+        return None, ("the asset is a SceneFit asset folder; the game bake rewrites an asset's own file "
+                      "(.glb, .gltf, .obj, .fbx, .blend)")
+
+    def bake(texture: Path, folder: Path) -> dict:
+        from ..core.errors import SceneFitError
+
+        folder.mkdir(parents=True, exist_ok=True)
+        glb, report_file = folder / f"{Path(args.asset).stem}.glb", folder / "bake.json"
+        command = [sys.executable, "-m", __package__, "bake", args.asset, "--texture", str(texture),
+                   "--out", str(glb), "--report", str(report_file), "--quiet"]
+        if args.object:
+            command += ["--object", args.object]
+        done = subprocess.run(command, capture_output=True, text=True)
+        if done.returncode != 0:
+            reason = (done.stderr.strip().splitlines() or ["no message"])[-1]
+            raise SceneFitError(f"The game bake of '{args.asset}' failed: {reason}")
+        report = json.loads(report_file.read_text())
+        report["outputs"] = {"glb": str(glb), "report": str(report_file)}
+        return report
+
+    return bake, ""
+
+
 def run(args) -> int:
     from ..core.pipeline import write_report
     from ..core.run import run_pipeline
 
     config, written = run_config(args)
     mesh, maps = load_asset(args.asset, args.object)
-    report = run_pipeline(mesh, maps, args.photo, args.at, Path(args.out), config, progress=progress(args))
+    bake, why_not = game_bake(args)
+    report = run_pipeline(mesh, maps, args.photo, args.at, Path(args.out), config, progress=progress(args),
+                          bake=bake, bake_skipped_why=why_not)
     if written is not None:
         report["prompt_writing"] = written.to_report()
         write_report(Path(args.out) / "report.json", report)
@@ -51,6 +87,7 @@ def add_parser(sub) -> None:
     p.add_argument("--size", type=float, default=0.3, help="fraction of the photo's height the asset spans")
     p.add_argument("--shadow", choices=SHADOW_TYPES, default="ratio")
     p.add_argument("--spp", type=int, help="compose: samples per pixel (default: from the preset's noise target)")
+    p.add_argument("--no-bake", action="store_true", help="skip the game bake (a .glb of the asset with its new texture)")
     add_model_args(p)
     add_prompt_service_args(p, prefix="prompt-")
     p.set_defaults(func=run)

@@ -4,6 +4,7 @@
     base_color.png    sRGB
     roughness.png     linear, optional (else the constant in material.json)
     metallic.png      linear, optional (else the constant in material.json)
+    normal.png        tangent-space normal map, linear, optional
     material.json     {"name": ..., "roughness": float?, "metallic": float?}
 """
 from __future__ import annotations
@@ -32,6 +33,8 @@ def save_asset_folder(mesh: Mesh, maps: PBRMaps, folder: str | Path) -> Path:
     np.savez_compressed(buffer, **arrays)
     write_bytes_atomic(folder / "mesh.npz", buffer.getvalue())
     write_image(folder / "base_color.png", linear_to_srgb(maps.base_color))
+    if maps.normal is not None:
+        write_image(folder / "normal.png", maps.normal, dtype="uint16")
     material: dict = {"name": mesh.name}
     for name in ("roughness", "metallic"):
         value = getattr(maps, name)
@@ -68,7 +71,9 @@ def load_asset_folder(folder: str | Path) -> tuple[Mesh, PBRMaps]:
             raise InputError(f"'{name}' in '{folder / 'material.json'}' must be a number between 0 and 1, "
                              f"got {value!r}.")
         channels[name] = float(value)
-    return mesh, PBRMaps(base_color=read_color_image(base_path), **channels)
+    normal_path = folder / "normal.png"
+    normal = read_image(normal_path)[..., :3] if normal_path.is_file() else None
+    return mesh, PBRMaps(base_color=read_color_image(base_path), normal=normal, **channels)
 
 
 def _read_material(path: Path) -> dict:

@@ -1,4 +1,4 @@
-"""PBR texture maps of an asset: base colour, roughness, metallic."""
+"""PBR texture maps of an asset: base colour, roughness, metallic, and the normal map renders use."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -9,6 +9,29 @@ from .errors import InputError
 
 MapOrConstant = np.ndarray | float
 
+# A tangent-space normal map texel that leaves the surface normal as it is.
+FLAT_NORMAL = (0.5, 0.5, 1.0)
+
+
+def resize_channels(image: np.ndarray, height: int, width: int) -> np.ndarray:
+    """(H, W) or (H, W, C) float32 resized to (height, width), each channel on its own.
+
+    OpenCV resizes at most four channels at once with INTER_AREA, so a five-channel stack (or a
+    2048² RGBA plus maps) is done plane by plane. Area averaging when shrinking, bilinear otherwise.
+    """
+    import cv2
+
+    image = np.asarray(image, dtype=np.float32)
+    if image.shape[:2] == (height, width):
+        return image.copy()
+    shrinking = height * width < image.shape[0] * image.shape[1]
+    interpolation = cv2.INTER_AREA if shrinking else cv2.INTER_LINEAR
+    if image.ndim == 2:
+        return cv2.resize(image, (width, height), interpolation=interpolation)
+    planes = [cv2.resize(np.ascontiguousarray(image[..., c]), (width, height), interpolation=interpolation)
+              for c in range(image.shape[2])]
+    return np.stack(planes, axis=2)
+
 
 @dataclass(frozen=True)
 class PBRMaps:
@@ -16,12 +39,16 @@ class PBRMaps:
 
     base_color: (H, W, 3) float32, *linear* RGB in [0, 1] (sRGB files are decoded on load).
     roughness, metallic: (H, W) float32 linear maps in [0, 1], or a constant float.
+    normal: optional (Hn, Wn, 3) tangent-space normal map as stored (OpenGL convention, [0, 1]
+        encoding, Blender's Normal Map strength already applied). Not fitted: renders use it so
+        the asset looks like itself, and game export keeps the asset's own normal map.
     Rows run top to bottom as in image files; UV v = 0 is the bottom row.
     """
 
     base_color: np.ndarray
     roughness: MapOrConstant = 0.5
     metallic: MapOrConstant = 0.0
+    normal: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         bc = self.base_color
@@ -38,10 +65,20 @@ class PBRMaps:
                 raise InputError(f"The {name} value {value} is outside [0, 1].")
         if not np.isfinite(bc).all():
             raise InputError("The base colour image holds NaN or infinite values.")
+        n = self.normal
+        if n is not None and (n.ndim != 3 or n.shape[2] != 3 or not np.isfinite(n).all()):
+            raise InputError(f"The normal map must be a finite RGB image, got shape {n.shape}.")
 
     @property
     def resolution(self) -> tuple[int, int]:
         return self.base_color.shape[0], self.base_color.shape[1]
+
+    @property
+    def native_size(self) -> int:
+        """The largest side among the fitted maps (base colour, roughness, metallic)."""
+        sizes = [max(self.resolution)] + [max(m.shape) for m in (self.roughness, self.metallic)
+                                          if isinstance(m, np.ndarray)]
+        return max(sizes)
 
     def channel(self, name: str) -> np.ndarray:
         """A map as an (H, W) array at the base colour's resolution (constants broadcast)."""
@@ -53,13 +90,21 @@ class PBRMaps:
 
     def stacked(self) -> np.ndarray:
         """(H, W, 5): base colour RGB, roughness, metallic; maps of other sizes are resampled."""
-        import cv2
+        return self.stacked_at(*self.resolution)
 
-        h, w = self.resolution
-        planes = [self.base_color.astype(np.float32)]
+    def stacked_at(self, height: int, width: int) -> np.ndarray:
+        """(height, width, 5) float32, every map resized on its own (never one many-channel resize)."""
+        planes = [resize_channels(self.base_color, height, width)]
         for name in ("roughness", "metallic"):
-            plane = self.channel(name)
-            if plane.shape != (h, w):
-                plane = cv2.resize(plane, (w, h), interpolation=cv2.INTER_LINEAR)
-            planes.append(plane[..., None])
+            value = getattr(self, name)
+            if isinstance(value, np.ndarray):
+                planes.append(resize_channels(value, height, width)[..., None])
+            else:
+                planes.append(np.full((height, width, 1), float(value), np.float32))
         return np.concatenate(planes, axis=2)
+
+    def normal_at(self, height: int, width: int) -> np.ndarray:
+        """(height, width, 3) normal map; flat where the material has none."""
+        if self.normal is None:
+            return np.broadcast_to(np.array(FLAT_NORMAL, np.float32), (height, width, 3)).copy()
+        return resize_channels(self.normal, height, width)

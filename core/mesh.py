@@ -19,6 +19,8 @@ class Mesh:
     faces:     (F, 3) int32 indices into positions.
     uvs:       (V, 2) float32, OpenGL convention (v = 0 at the bottom of the image).
     normals:   (V, 3) float32 unit vertex normals, or None for flat shading.
+    material_index: (F,) int32 material slot of each face, or None when the mesh has one material.
+        Several materials each own their UV layout (they may overlap in UV space).
     """
 
     positions: np.ndarray
@@ -26,6 +28,7 @@ class Mesh:
     uvs: np.ndarray
     normals: np.ndarray | None = None
     name: str = "asset"
+    material_index: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         p, f, uv = self.positions, self.faces, self.uvs
@@ -51,20 +54,27 @@ class Mesh:
             if not (np.abs(n).sum(axis=1) > 0).any():
                 raise InputError(f"Mesh '{self.name}' has all-zero normals; recalculate them in Blender "
                                  "(Mesh > Normals > Reset Vectors) or leave them out.")
+        if self.material_index is not None and self.material_index.shape != (len(f),):
+            raise InputError(f"Mesh '{self.name}' has {len(self.material_index)} face materials for {len(f)} faces.")
         # Freeze the arrays too, so nothing downstream edits the user's data in place.
-        for a in (p, f, uv, self.normals):
+        for a in (p, f, uv, self.normals, self.material_index):
             if a is not None:
                 a.setflags(write=False)
 
     @staticmethod
-    def from_arrays(positions, faces, uvs, normals=None, name: str = "asset") -> "Mesh":
+    def from_arrays(positions, faces, uvs, normals=None, name: str = "asset", material_index=None) -> "Mesh":
         return Mesh(
             positions=np.ascontiguousarray(positions, dtype=np.float32),
             faces=np.ascontiguousarray(faces, dtype=np.int32),
             uvs=np.ascontiguousarray(uvs, dtype=np.float32),
             normals=None if normals is None else np.ascontiguousarray(normals, dtype=np.float32),
             name=name,
+            material_index=None if material_index is None else np.ascontiguousarray(material_index, dtype=np.int32),
         )
+
+    @property
+    def material_count(self) -> int:
+        return 1 if self.material_index is None else int(self.material_index.max()) + 1
 
 
 @dataclass(frozen=True)
@@ -89,7 +99,8 @@ def normalize_to_unit_sphere(mesh: Mesh, radius: float = NORMALIZED_RADIUS) -> t
     if not np.isfinite(extent) or extent <= 0.0:
         raise InputError(f"Mesh '{mesh.name}' is degenerate: all its vertices are at one point.")
     scale = float(extent / radius)
-    normalized = Mesh.from_arrays(((p - center) / scale), mesh.faces, mesh.uvs, mesh.normals, mesh.name)
+    normalized = Mesh.from_arrays(((p - center) / scale), mesh.faces, mesh.uvs, mesh.normals, mesh.name,
+                                  mesh.material_index)
     return normalized, NormalizeTransform(center=center.astype(np.float32), scale=scale)
 
 

@@ -13,10 +13,11 @@ import torch
 from .atomic import write_json_atomic
 from .backend import init_mitsuba
 from .camera import Camera
-from .convert import ConvertConfig, ConvertResult, convert_asset
+from .convert import ConvertConfig, ConvertResult, convert_asset, convert_materials
 from .errors import InputError
 from .imageio import linear_to_srgb, read_color_image
 from .maps import PBRMaps
+from .materials import AssetMaterials
 from .mesh import Mesh
 from .progress import ProgressCallback, check_cancel, emit
 from .render import AssetRenderer, SceneOptions
@@ -73,12 +74,17 @@ def tonemap_srgb(rgb: np.ndarray, exposure: float = 1.0) -> np.ndarray:
 
 def render_views(normalized_mesh: Mesh, stacks: dict[str, torch.Tensor], envmap: np.ndarray,
                  cameras: list[Camera], spp: int, progress: ProgressCallback | None = None,
-                 cancel: threading.Event | None = None) -> dict[str, list[np.ndarray]]:
-    """Render every (H, W, 5) map stack from every camera with one scene; linear RGB images."""
+                 cancel: threading.Event | None = None,
+                 normal_map: np.ndarray | None = None) -> dict[str, list[np.ndarray]]:
+    """Render every (H, W, 5) map stack from every camera with one scene; linear RGB images.
+
+    normal_map: the asset's tangent-space normal map (PBRMaps.normal), used by every render: it is
+    not fitted, so the original and the neural texture are shown on the same bumps."""
     shapes = {tuple(s.shape[:2]) for s in stacks.values()}
     images: dict[str, list[np.ndarray]] = {name: [] for name in stacks}
     env_t = torch.from_numpy(envmap)
-    renderers = {shape: AssetRenderer(normalized_mesh, shape, envmap, SceneOptions(integrator_type="path"))
+    renderers = {shape: AssetRenderer(normalized_mesh, shape, envmap, SceneOptions(integrator_type="path"),
+                                      normal_map=normal_map)
                  for shape in shapes}
     total, done = len(stacks) * len(cameras), 0
     with torch.no_grad():
@@ -122,20 +128,26 @@ def environment_info() -> dict:
     }
 
 
-def convert_and_bake(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, config: ConvertConfig = ConvertConfig(),
-                     progress: ProgressCallback | None = None, cancel: threading.Event | None = None,
-                     keep_constants: bool = False) -> tuple[ConvertResult, dict]:
+def convert_and_bake(mesh: Mesh | AssetMaterials, maps: PBRMaps | None, out_dir: str | Path,
+                     config: ConvertConfig = ConvertConfig(), progress: ProgressCallback | None = None,
+                     cancel: threading.Event | None = None, keep_constants: bool = False) -> tuple[ConvertResult, dict]:
     """Convert the asset's maps to a neural texture and bake it into `out_dir`; returns the result and report.
 
+    Pass (mesh, maps), or (AssetMaterials, None) for every material of an asset: the maps are then
+    baked as the atlas (core.materials), and `scenefit bake` writes them per material in the asset's
+    own UV layout.
     keep_constants: a roughness/metallic that holds one value stays that number (reported in
     decisions > channels, returned in outputs as a float) instead of a baked 16-bit map.
     """
     out_dir = Path(out_dir)
-    result = convert_asset(mesh, maps, config, progress=progress, cancel=cancel)
+    if isinstance(mesh, AssetMaterials):
+        result = convert_materials(mesh, config, progress=progress, cancel=cancel)
+    else:
+        result = convert_asset(mesh, maps, config, progress=progress, cancel=cancel)
     check_cancel(cancel)
     constants = {}
     if keep_constants:
-        channels = constant_channels(maps)
+        channels = constant_channels(mesh.fitting_view()[1] if isinstance(mesh, AssetMaterials) else maps)
         constants = {name: d.value for name, d in channels.items() if d.value != "map"}
         result.decisions["channels"] = {name: d.to_dict() for name, d in channels.items()}
     paths = bake_maps(result.texture, result.raster.position, result.raster.border, result.raster.fill_index, out_dir,
@@ -149,6 +161,10 @@ def convert_and_bake(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, config: Con
         "iterations": result.iterations,
         "outputs": {k: v if isinstance(v, float) else str(v) for k, v in paths.items()},
     }
+    if isinstance(mesh, AssetMaterials):
+        report["materials"] = [dict(m.report(), psnr_db=d["psnr_db"], uv_coverage=d["uv_coverage"])
+                               for m, d in zip(mesh.materials, result.decisions["materials"])]
+        report["notes"] = list(mesh.notes)
     return result, report
 
 

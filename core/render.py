@@ -39,6 +39,8 @@ BASE_COLOR_KEY = "asset.bsdf.base_color.data"
 ROUGHNESS_KEY = "asset.bsdf.roughness.data"
 METALLIC_KEY = "asset.bsdf.metallic.data"
 ENVMAP_KEY = "environment.data"
+# With a normal map the principled BSDF sits inside Mitsuba's `normalmap` BSDF, one level down.
+NESTED_PREFIX = "asset.bsdf.nested_bsdf."
 
 
 def blender_direction_to_equirect_uv(direction: np.ndarray) -> np.ndarray:
@@ -133,7 +135,11 @@ class AssetRenderer:
     """A Mitsuba scene of one asset under an environment map, built once and updated per render."""
 
     def __init__(self, mesh: Mesh, maps_shape: tuple[int, int], envmap: np.ndarray,
-                 options: SceneOptions = SceneOptions(), variant: str | None = None) -> None:
+                 options: SceneOptions = SceneOptions(), variant: str | None = None,
+                 normal_map: np.ndarray | None = None) -> None:
+        """normal_map: optional (H, W, 3) tangent-space map in [0, 1] (OpenGL convention, as glTF and
+        Blender store it), fixed for the renderer's life. Mitsuba's `normalmap` BSDF perturbs the
+        shading normal in the frame of the UV derivative dp/du, so the mesh's UVs give the tangents."""
         self.backend: Backend = init_mitsuba(variant)
         import mitsuba as mi
 
@@ -154,12 +160,21 @@ class AssetRenderer:
                             "to_world": mi.ScalarTransform4f(ENVMAP_TO_WORLD)},
             "asset": _mitsuba_mesh(mi, mesh),
         }
-        scene["asset"].set_bsdf(mi.load_dict({
+        bsdf = {
             "type": "principled",
             "base_color": _bitmap_texture(mi, np.full((h, w, 3), 0.5, np.float32)),
             "roughness": _bitmap_texture(mi, grey),
             "metallic": _bitmap_texture(mi, np.zeros((h, w), np.float32)),
-        }))
+        }
+        self.keys = {"base_color": BASE_COLOR_KEY, "roughness": ROUGHNESS_KEY, "metallic": METALLIC_KEY}
+        if normal_map is not None:
+            normal_map = np.asarray(normal_map, dtype=np.float32)
+            if normal_map.ndim != 3 or normal_map.shape[2] != 3 or not np.isfinite(normal_map).all():
+                raise InputError(f"The normal map must be a finite RGB image, got shape {normal_map.shape}.")
+            bsdf = {"type": "normalmap", "normalmap": _bitmap_texture(mi, np.clip(normal_map, 0.0, 1.0)),
+                    "bsdf": bsdf}
+            self.keys = {name: NESTED_PREFIX + key.removeprefix("asset.bsdf.") for name, key in self.keys.items()}
+        scene["asset"].set_bsdf(mi.load_dict(bsdf))
         if options.floor:
             z = float(mesh.positions[:, 2].min())
             scene["floor"] = {
@@ -175,10 +190,11 @@ class AssetRenderer:
             }
         self.scene = mi.load_dict(scene)
         self.params = mi.traverse(self.scene)
-        for key in (BASE_COLOR_KEY, ROUGHNESS_KEY, METALLIC_KEY, ENVMAP_KEY):
+        wanted = [*self.keys.values(), ENVMAP_KEY]
+        for key in wanted:
             if key not in self.params:
                 raise RuntimeError(f"Mitsuba scene lacks parameter {key}; got {list(self.params.keys())[:20]}")
-        self.params.keep([BASE_COLOR_KEY, ROUGHNESS_KEY, METALLIC_KEY, ENVMAP_KEY])
+        self.params.keep(wanted)
         self._sensors: dict[tuple[int, int], object] = {}
         self._aov_integrator = None
         self._wrapped = None
@@ -216,9 +232,9 @@ class AssetRenderer:
 
             @dr.wrap(source="torch", target="drjit")
             def render(base_color, roughness, metallic, envmap, sensor_index: int, spp: int, seed: int):
-                self.params[BASE_COLOR_KEY] = base_color
-                self.params[ROUGHNESS_KEY] = roughness
-                self.params[METALLIC_KEY] = metallic
+                self.params[self.keys["base_color"]] = base_color
+                self.params[self.keys["roughness"]] = roughness
+                self.params[self.keys["metallic"]] = metallic
                 self.params[ENVMAP_KEY] = envmap
                 self.params.update()
                 sensor = self._sensor_by_index[sensor_index]

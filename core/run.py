@@ -116,11 +116,18 @@ def _paths(outputs) -> list[str]:
     return [outputs] if isinstance(outputs, str) else []
 
 
+# bake(texture.pt, stage folder) -> the bake's report with "outputs": the game asset written from the
+# asset's own file. It needs Blender, which core/ never imports, so the caller hands it in.
+GameBake = Callable[[Path, Path], dict]
+
+
 def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, out_dir: str | Path,
                  config: RunConfig = RunConfig(), progress: ProgressCallback | None = None,
-                 cancel: threading.Event | None = None) -> dict:
+                 cancel: threading.Event | None = None, bake: GameBake | None = None,
+                 bake_skipped_why: str = "no game bake was asked for") -> dict:
     """Convert the asset, estimate the photo's light, adapt the texture (when the SD2 weights exist),
-    compose the asset into the photo, and bake; returns the run's report (also out_dir/report.json).
+    compose the asset into the photo, and bake (when `bake` is given); returns the run's report (also
+    out_dir/report.json).
 
     placement: (x, y) as fractions of the photo's width and height (both <= 1) or pixels, or "X,Y".
     """
@@ -228,8 +235,12 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
 
     runner.run("compose", compose_key, compose)
 
-    # bake: the GLB export lands with issue 8 (`scenefit bake`)
-    runner.skip("bake", "not available yet", "the GLB bake stage (issue 8, `scenefit bake`) is not on main yet")
+    # bake: the (adapted) texture written into the asset's own file as a game asset (glTF)
+    if bake is None:
+        runner.skip("bake", "skipped", bake_skipped_why)
+    else:
+        bake_texture = texture_path
+        runner.run("bake", _digest("bake", upstream, asset_key), lambda folder: bake(bake_texture, folder))
 
     report = {
         "stage": "run",

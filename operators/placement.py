@@ -18,11 +18,16 @@ from .common import photo_path
 _draw_handle = None
 
 
-def camera_frame_in_region(context):
+def window_region(area):
+    """The viewport's drawing region and its view (the panel's own region has no view)."""
+    region = next((r for r in area.regions if r.type == "WINDOW"), None)
+    return region, (region.data if region is not None else None)
+
+
+def camera_frame_in_region(scene, region, rv3d):
     """(x_min, y_min, x_max, y_max) of the scene camera's frame in the region, or None."""
     from bpy_extras.view3d_utils import location_3d_to_region_2d
 
-    scene, region, rv3d = context.scene, context.region, context.region_data
     cam = scene.camera
     if cam is None or region is None or rv3d is None:
         return None
@@ -41,7 +46,7 @@ def draw_marker() -> None:
     if rv3d is None or rv3d.view_perspective != "CAMERA" or scene.camera is None or \
             scene.camera.name != CAMERA_NAME or not scene.scenefit.photo_path:
         return
-    rect = camera_frame_in_region(context)
+    rect = camera_frame_in_region(scene, context.region, rv3d)
     if rect is None:
         return
     import gpu
@@ -90,7 +95,10 @@ class SCENEFIT_OT_pick_placement(bpy.types.Operator):
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        rv3d = context.region_data
+        _, rv3d = window_region(context.area)
+        if rv3d is None:
+            self.report({"ERROR"}, "This 3D Viewport has no view to click in.")
+            return {"CANCELLED"}
         self._view_before = rv3d.view_perspective
         rv3d.view_perspective = "CAMERA"
         context.area.header_text_set("Click where the asset stands in the photo; Esc or right click cancels")
@@ -100,16 +108,16 @@ class SCENEFIT_OT_pick_placement(bpy.types.Operator):
 
     def modal(self, context, event):
         action = classify_event(event.type, event.value)
+        region, rv3d = window_region(context.area)
         if action == CANCEL:
-            context.region_data.view_perspective = self._view_before
+            rv3d.view_perspective = self._view_before
             self._end(context)
             return {"CANCELLED"}
         if action != CLICK:
             return {"RUNNING_MODAL"} if event.type in ("LEFTMOUSE", "RIGHTMOUSE") else {"PASS_THROUGH"}
-        # The click is in window coordinates: find the viewport region under it.
-        region = next((r for r in context.area.regions if r.type == "WINDOW"), None)
+        # The click is in window coordinates; the frame is in the viewport region's.
         mouse = (event.mouse_x - region.x, event.mouse_y - region.y)
-        rect = camera_frame_in_region(context)
+        rect = camera_frame_in_region(context.scene, region, rv3d)
         placement = placement_from_click(mouse, rect) if rect is not None else None
         if placement is None:
             self.report({"WARNING"}, "Click inside the photo's frame.")

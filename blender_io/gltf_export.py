@@ -1,0 +1,244 @@
+"""Writing the asset with baked maps as glTF 2.0 through Blender's own glTF exporter.
+
+Each material of the object gets the baked maps in the layout Blender's glTF importer builds and
+its exporter reads: an sRGB Image Texture into Base Color, a linear packed image through Separate
+Color into Roughness (G) and Metallic (B), or plain values where a channel is constant. Everything
+else in the material (normal map, occlusion, emission, alpha and its mode) is left as it is, so
+the exporter writes it unchanged; the base colour image carries the original alpha channel
+(resized) when the material uses alpha.
+"""
+from __future__ import annotations
+
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import InputError
+from ..core.game_bake import BakedMaterial
+from ..core.maps import resize_channels
+from .material import image_pixels_linear, principled_bsdf
+from .node_values import source
+
+FORMATS = {"glb": "GLB", "gltf": "GLTF_SEPARATE"}
+
+
+def _alpha_source(bsdf):
+    """(image node, the input its Alpha output feeds) at the start of the Alpha chain, or None."""
+    socket = bsdf.inputs["Alpha"]
+    for _ in range(16):  # follow the first linked input up the chain (factor, clip nodes)
+        linked = source(socket)
+        if linked is None:
+            return None
+        node, output = linked
+        if node.type == "TEX_IMAGE":
+            return (node, socket) if output.name == "Alpha" and node.image is not None else None
+        socket = next((s for s in node.inputs if s.is_linked), None)
+        if socket is None:
+            return None
+    return None
+
+
+def constant_channels(material) -> set[str]:
+    """The channels ("roughness", "metallic") the material gives as plain values."""
+    bsdf = principled_bsdf(material)
+    return {name.lower() for name in ("Roughness", "Metallic") if source(bsdf.inputs[name]) is None}
+
+
+def _load_png(bpy, folder: Path, name: str, pixels: np.ndarray, colorspace: str):
+    """An 8-bit image holding exactly `pixels` (uint8, rows top to bottom), saved as PNG by Blender
+    (straight alpha, as glTF wants) and packed, so the exporter writes these bytes."""
+    h, w, c = pixels.shape
+    rgba = np.concatenate([pixels, np.full((h, w, 4 - c), 255, np.uint8)], axis=2) if c < 4 else pixels
+    image = bpy.data.images.new(name, w, h, alpha=c == 4)
+    image.colorspace_settings.name = colorspace
+    image.pixels.foreach_set((rgba[::-1].astype(np.float32) / 255.0).ravel())
+    image.filepath_raw = str(folder / f"{bpy.path.clean_name(name)}.png")
+    image.file_format = "PNG"
+    image.save()
+    image.pack()  # the exporter reads packed pixels; the temporary folder can go
+    return image
+
+
+def apply_baked_material(material, baked: BakedMaterial, folder: Path) -> list[str]:
+    """Rewire `material` (a fresh import, or a copy) to the baked maps; returns what was done."""
+    import bpy
+
+    bsdf = principled_bsdf(material)
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    notes = []
+    size = baked.base_color.shape[0]
+    rgba = baked.base_color
+    alpha = _alpha_source(bsdf)
+    if alpha is not None:
+        original = image_pixels_linear(alpha[0].image)[..., 3]
+        a = np.round(np.clip(resize_channels(original, size, size), 0.0, 1.0) * 255.0).astype(np.uint8)
+        rgba = np.concatenate([rgba, a[..., None]], axis=2)
+        notes.append(f"alpha of '{alpha[0].image.name}' carried into the base colour image at {size}²")
+    base = nodes.new("ShaderNodeTexImage")
+    base.name = base.label = "SceneFit Base Color"
+    base.image = _load_png(bpy, folder, f"{material.name}_base_color", rgba, "sRGB")
+    base.location = (bsdf.location.x - 700, bsdf.location.y)
+    links.new(base.outputs["Color"], bsdf.inputs["Base Color"])
+    if alpha is not None:
+        links.new(base.outputs["Alpha"], alpha[1])
+
+    textured = {k: v for k, v in (("Roughness", baked.roughness), ("Metallic", baked.metallic))
+                if isinstance(v, np.ndarray)}
+    for socket_name, value in (("Roughness", baked.roughness), ("Metallic", baked.metallic)):
+        if socket_name not in textured:
+            for link in list(bsdf.inputs[socket_name].links):
+                links.remove(link)
+            bsdf.inputs[socket_name].default_value = float(value)
+            notes.append(f"{socket_name}: constant {float(value):.4g} written as a factor")
+    if textured:
+        zeros = np.zeros((size, size), np.uint8)
+        packed = np.stack([zeros, textured.get("Roughness", zeros), textured.get("Metallic", zeros)], axis=2)
+        mr = nodes.new("ShaderNodeTexImage")
+        mr.name = mr.label = "SceneFit Metallic Roughness"
+        mr.image = _load_png(bpy, folder, f"{material.name}_metallic_roughness", packed, "Non-Color")
+        mr.location = (bsdf.location.x - 700, bsdf.location.y - 300)
+        separate = nodes.new("ShaderNodeSeparateColor")
+        separate.location = (bsdf.location.x - 300, bsdf.location.y - 300)
+        links.new(mr.outputs["Color"], separate.inputs["Color"])
+        for socket_name, channel in (("Roughness", "Green"), ("Metallic", "Blue")):
+            if socket_name in textured:
+                links.new(separate.outputs[channel], bsdf.inputs[socket_name])
+        notes.append(f"{' and '.join(textured)}: packed image at {size}² (G roughness, B metallic)")
+    return notes
+
+
+def export_gltf(out_file: str | Path, file_format: str, selection_only: list | None = None) -> list[Path]:
+    """Write the current scene (or only `selection_only` objects) with Blender's glTF exporter.
+
+    The files are written into a temporary folder beside `out_file` and moved into place once the
+    exporter has finished, so a failed export leaves nothing half-written. Returns the written paths.
+    """
+    import addon_utils
+    import bpy
+
+    if file_format not in FORMATS:
+        raise InputError(f"--format must be one of {', '.join(FORMATS)}, got '{file_format}'.")
+    out_file = Path(out_file)
+    if out_file.suffix.lower() != f".{file_format}":
+        raise InputError(f"The output '{out_file.name}' should end in .{file_format} for --format {file_format}.")
+    out_file.parent.mkdir(parents=True, exist_ok=True)
+    addon_utils.enable("io_scene_gltf2", default_set=False)
+    layer = bpy.context.view_layer
+    selected = [o for o in layer.objects if o.select_get()]
+    staging = Path(tempfile.mkdtemp(prefix=".scenefit-gltf-", dir=out_file.parent))
+    try:
+        if selection_only is not None:
+            for obj in layer.objects:
+                obj.select_set(obj in selection_only)
+        bpy.ops.export_scene.gltf(filepath=str(staging / out_file.name), export_format=FORMATS[file_format],
+                                  use_selection=selection_only is not None, use_active_scene=True,
+                                  export_apply=True,
+                                  export_image_format="AUTO", export_materials="EXPORT")
+        written = []
+        for path in sorted(staging.iterdir()):
+            target = out_file.parent / path.name
+            path.replace(target)
+            written.append(target)
+        return written
+    finally:
+        for obj in layer.objects:
+            obj.select_set(obj in selected)
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def bake_object_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_file: str | Path,
+                        file_format: str = "glb", whole_scene: bool = True) -> dict:
+    """Put the baked maps into `obj`'s materials (slot `slots[i]` gets `baked[i]`) and export glTF.
+
+    For an asset loaded into a temporary scene (blender_io.asset_file.loaded_asset): the materials
+    are changed in place and `whole_scene` exports every object of that scene, so the asset keeps
+    its structure. For the user's own object use bake_copy_to_gltf.
+    """
+    if len(baked) != len(slots):
+        raise InputError(f"{len(baked)} baked materials for {len(slots)} material slots.")
+    report = {"materials": []}
+    done = set()
+    with tempfile.TemporaryDirectory(prefix="scenefit-bake-") as folder:
+        for maps, slot in zip(baked, slots):
+            material = obj.material_slots[slot].material
+            if material.name in done:
+                continue
+            done.add(material.name)
+            notes = apply_baked_material(material, maps, Path(folder))
+            report["materials"].append(dict(maps.report(), done=notes))
+        written = export_gltf(out_file, file_format, None if whole_scene else [obj])
+    report["files"] = [str(p) for p in written]
+    return report
+
+
+def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_format: str = "glb",
+                    texture_size: int | None = None, object_name: str | None = None) -> dict:
+    """`scenefit bake`: the asset file loaded into a temporary scene, the neural texture baked per
+    material at `texture_size`² (default: the fitted size, rounded up to a power of two), written
+    as glTF 2.0. `texture` is a NeuralTexture or the path of a texture.pt. Returns the report.
+
+    Known bpy 5.0.1 crash: once the exporter has run on the temporary scene and the scene is
+    removed, the next glTF import in the same process segfaults. `scenefit bake` is a process of
+    its own; long-lived callers should run it as a subprocess (or use bake_copy_to_gltf)."""
+    from ..core.game_bake import bake_game_maps, default_texture_size
+    from ..core.texture.bake import load_neural_texture
+    import bpy
+
+    from .asset_file import loaded_asset
+    from .material import object_mesh_and_slots
+
+    if not hasattr(texture, "texture"):
+        texture = load_neural_texture(texture)
+    with loaded_asset(asset_path, object_name) as (obj, scene):
+        mesh, slots = object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())
+        size = texture_size or default_texture_size(texture, len(slots))
+        materials = [obj.material_slots[s].material for s in slots]
+        baked = bake_game_maps(texture, mesh, [m.name for m in materials], size,
+                               [constant_channels(m) for m in materials])
+        report = bake_object_to_gltf(obj, baked, slots, out_file, file_format, whole_scene=True)
+        report.update({"asset": str(asset_path), "object": obj.name, "format": file_format, "texture_size": size})
+    return report
+
+
+def bake_copy_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_file: str | Path,
+                      file_format: str = "glb") -> dict:
+    """bake_object_to_gltf for an object in the user's session: a copy of the object, its mesh and its
+    materials gets the maps and is exported alone, then removed. The copies carry the originals'
+    names while the exporter runs (the originals are renamed meanwhile and renamed back after), so
+    the file names its materials as the user does. Nothing of the user's is changed."""
+    import bpy
+
+    scene = bpy.context.scene
+    copy = obj.copy()
+    copy.data = obj.data.copy()
+    originals = {slot: obj.material_slots[slot].material for slot in slots}
+    copies = {}
+    renamed = []
+    try:
+        for slot, material in originals.items():
+            if material.name not in copies:
+                copies[material.name] = material.copy()
+            copy.material_slots[slot].link = obj.material_slots[slot].link
+            copy.material_slots[slot].material = copies[material.name]
+        scene.collection.objects.link(copy)
+        for original, duplicate in [(obj, copy), *[(bpy.data.materials[n], c) for n, c in copies.items()]]:
+            name = original.name
+            original.name = f"{name}~scenefit"
+            renamed.append((original, name))
+            duplicate.name = name
+        report = bake_object_to_gltf(copy, baked, slots, out_file, file_format, whole_scene=False)
+    finally:
+        images = {n.image for c in copies.values() for n in c.node_tree.nodes
+                  if n.type == "TEX_IMAGE" and n.name.startswith("SceneFit ") and n.image is not None}
+        mesh = copy.data
+        bpy.data.objects.remove(copy)
+        bpy.data.meshes.remove(mesh)
+        for duplicate in copies.values():
+            bpy.data.materials.remove(duplicate)
+        for image in images:
+            bpy.data.images.remove(image)
+        for original, name in renamed:
+            original.name = name
+    return report

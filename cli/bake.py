@@ -1,0 +1,43 @@
+"""scenefit bake: the asset with its fitted or adapted texture as a glTF 2.0 file for game engines."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .options import add_asset_args
+
+
+def run(args) -> int:
+    import json
+
+    from ..blender_io.gltf_export import bake_asset_file
+    from ..core.asset_io import is_asset_folder
+    from ..core.errors import InputError
+    from ..core.game_bake import check_texture_size
+
+    if is_asset_folder(args.asset):
+        raise InputError(f"'{args.asset}' is a SceneFit asset folder; scenefit bake rewrites the asset's own file "
+                         "(.glb, .gltf, .obj, .fbx, .blend), so give the file it came from.")
+    if args.texture_size is not None:
+        check_texture_size(args.texture_size)
+    report = bake_asset_file(args.asset, Path(args.texture), args.out, args.format, args.texture_size, args.object)
+    for material in report["materials"]:
+        print(f"material '{material['name']}': base colour texture, roughness {material['roughness']}, "
+              f"metallic {material['metallic']} at {material['size']}²")
+        for line in material["done"]:
+            print(f"  {line}")
+    if args.report:
+        Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
+    print(f"wrote {', '.join(report['files'])} (glTF 2.0 by Blender's exporter)")
+    return 0
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("bake", help="write the asset with its fitted/adapted texture as glTF 2.0 (.glb/.gltf)")
+    add_asset_args(p)
+    p.add_argument("--texture", required=True, help="texture.pt from `scenefit convert` or `scenefit adapt`")
+    p.add_argument("--format", choices=("glb", "gltf"), default="glb",
+                   help="glb: one binary file; gltf: .gltf + .bin + PNG files (default: glb)")
+    p.add_argument("--out", required=True, help="output file, ending in .glb or .gltf")
+    p.add_argument("--texture-size", type=int, help="power of two (default: the fitted size, rounded up)")
+    p.add_argument("--report", help="also write what was baked as JSON here")
+    p.set_defaults(func=run)

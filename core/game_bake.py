@@ -1,0 +1,103 @@
+"""Baking a neural texture into game-ready maps, one set per material in the asset's own UV layout.
+
+This is the part of `scenefit bake` that needs no Blender: the network is evaluated on each
+material's faces, rasterised in that material's UVs at a power-of-two size, and quantised to
+the 8 bits glTF stores (base colour sRGB, roughness/metallic linear). A channel that is constant
+over the material's texels becomes a factor instead of an image. blender_io.gltf_export puts
+these maps into the asset's materials and writes glTF 2.0 with Blender's exporter.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+from .imageio import linear_to_srgb
+from .materials import atlas_grid, material_submesh
+from .mesh import Mesh, normalize_to_unit_sphere
+from .texture.bake import bake_texture
+from .texture.neural_texture import NeuralTexture
+from .texture.uv_raster import rasterize_uv
+
+# A channel whose covered texels all lie within this many 8-bit steps of each other is a constant.
+CONSTANT_SPREAD = 1
+# A channel that was a constant in the asset stays a factor while the fitted values scatter less
+# than this (standard deviation; a draft fit of a constant scatters by about 0.015). A texture
+# that adaptation really varied scatters more and is written as an image.
+CONSTANT_SCATTER = 0.04
+
+
+@dataclass(frozen=True)
+class BakedMaterial:
+    """One material's maps as written to glTF.
+
+    base_color: (N, N, 3) uint8 sRGB bytes. roughness, metallic: (N, N) uint8 linear bytes, or a
+    float in [0, 1] when the channel is constant (it becomes glTF's roughnessFactor / metallicFactor).
+    coverage: fraction of texels inside the material's UV triangles.
+    """
+
+    name: str
+    base_color: np.ndarray
+    roughness: np.ndarray | float
+    metallic: np.ndarray | float
+    coverage: float
+
+    def report(self) -> dict:
+        def describe(value):
+            return "texture" if isinstance(value, np.ndarray) else f"factor {value:.4g}"
+
+        return {"name": self.name, "size": int(self.base_color.shape[0]), "uv_coverage": round(self.coverage, 4),
+                "base_color": "texture (sRGB)", "roughness": describe(self.roughness),
+                "metallic": describe(self.metallic)}
+
+
+def check_texture_size(size: int) -> int:
+    if not isinstance(size, (int, np.integer)) or size < 4 or size > 8192 or size & (size - 1):
+        raise InputError(f"--texture-size must be a power of two between 4 and 8192, got {size}.")
+    return int(size)
+
+
+def default_texture_size(texture: NeuralTexture, material_count: int) -> int:
+    """The size each material was fitted at (its atlas cell), rounded up to a power of two."""
+    cell = max(4, texture.config.resolution // atlas_grid(material_count))
+    return min(8192, 1 << (cell - 1).bit_length())
+
+
+def _channel(plane: np.ndarray, mask: np.ndarray, was_constant: bool) -> np.ndarray | float:
+    """8-bit linear bytes, or the mean value when the channel is constant (see CONSTANT_SCATTER)."""
+    plane = np.clip(plane, 0.0, 1.0)
+    data = np.round(plane * 255.0).astype(np.uint8)
+    covered = data[mask]
+    if not covered.size:
+        return data
+    flat = int(covered.max()) - int(covered.min()) <= CONSTANT_SPREAD
+    if flat or (was_constant and float(plane[mask].std()) <= CONSTANT_SCATTER):
+        return round(float(plane[mask].mean()), 4)
+    return data
+
+
+def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: int,
+                   constants: list[set[str]] | None = None) -> list[BakedMaterial]:
+    """Every material's maps at `size`² in its own UV layout.
+
+    `mesh` is the asset as read (with material_index for several materials, in object space); it is
+    normalised here exactly as for fitting, so the network sees the same points. constants[i]
+    names the channels ("roughness", "metallic") that were plain values in material i.
+    """
+    size = check_texture_size(size)
+    if len(names) != mesh.material_count:
+        raise InputError(f"Mesh '{mesh.name}' uses {mesh.material_count} materials, but {len(names)} names "
+                         "were given.")
+    normalized, _ = normalize_to_unit_sphere(mesh)
+    baked = []
+    for index, name in enumerate(names):
+        raster = rasterize_uv(material_submesh(normalized, index), size)
+        maps = bake_texture(texture, raster.position, raster.border, raster.fill_index)
+        base = np.round(linear_to_srgb(maps[..., 0:3]) * 255.0).astype(np.uint8)
+        was = constants[index] if constants else set()
+        baked.append(BakedMaterial(name=name, base_color=base,
+                                   roughness=_channel(maps[..., 3], raster.mask, "roughness" in was),
+                                   metallic=_channel(maps[..., 4], raster.mask, "metallic" in was),
+                                   coverage=raster.coverage))
+    return baked

@@ -1,0 +1,146 @@
+"""An asset's materials as read from Blender, and the atlas that fits several of them at once.
+
+A mesh may carry several materials, each with its own UV layout (they may overlap in UV space).
+The neural texture lives on the surface (3D points), not in UV space, so one network serves all
+of them: for fitting and rendering, each material's UV square is moved into its own cell of a
+square atlas (g x g cells, g = ceil(sqrt(M))). Baking for game export goes the other way and
+writes each material's maps in the asset's own UV layout, so the asset keeps its structure (the
+paper instead re-maps the whole mesh into one new atlas; a game pipeline wants its own layout).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InputError
+from .maps import FLAT_NORMAL, PBRMaps
+from .mesh import Mesh
+
+
+@dataclass(frozen=True)
+class Material:
+    """One material slot of the asset: the maps SceneFit fits, and an account of how they were read.
+
+    read: what was read, node and channel ("Roughness <- image 'mr.png' G via Separate Color").
+    kept: what is not fitted but carried unchanged into renders or game export (normal map, alpha,
+        emission, occlusion).
+    dropped: what SceneFit neither fits nor carries, and why.
+    """
+
+    name: str
+    maps: PBRMaps
+    read: tuple[str, ...] = ()
+    kept: tuple[str, ...] = ()
+    dropped: tuple[str, ...] = ()
+    alpha_mode: str = "OPAQUE"           # glTF's OPAQUE, MASK or BLEND
+
+    def report(self) -> dict:
+        h, w = self.maps.resolution
+        return {"name": self.name, "resolution": [int(h), int(w)], "alpha_mode": self.alpha_mode,
+                "read": list(self.read), "kept": list(self.kept), "dropped": list(self.dropped)}
+
+
+@dataclass(frozen=True)
+class AssetMaterials:
+    """A mesh whose `material_index` (or its single material) refers into `materials`."""
+
+    mesh: Mesh
+    materials: tuple[Material, ...]
+    notes: tuple[str, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        if not self.materials:
+            raise InputError(f"Mesh '{self.mesh.name}' has no material SceneFit can read.")
+        if self.mesh.material_count != len(self.materials):
+            raise InputError(f"Mesh '{self.mesh.name}' uses {self.mesh.material_count} materials but "
+                             f"{len(self.materials)} were read.")
+
+    def fitting_view(self) -> tuple[Mesh, PBRMaps]:
+        """One mesh and one set of maps that every single-texture stage (render, adapt) can use:
+        the asset itself for one material, the atlas for several."""
+        if len(self.materials) == 1:
+            return self.mesh, self.materials[0].maps
+        size = atlas_cell_size([m.maps for m in self.materials])
+        return atlas_mesh(self.mesh), atlas_maps([m.maps for m in self.materials], size)
+
+    def report(self) -> list[dict]:
+        return [m.report() for m in self.materials]
+
+
+def atlas_grid(count: int) -> int:
+    """Cells per side of the square atlas holding `count` materials."""
+    return max(1, math.ceil(math.sqrt(count)))
+
+
+def atlas_cell(index: int, count: int) -> tuple[int, int]:
+    """(row from the top, column) of material `index`'s cell."""
+    g = atlas_grid(count)
+    return index // g, index % g
+
+
+def atlas_cell_size(maps: list[PBRMaps]) -> int:
+    """Texels per cell side: the largest material's own base colour size."""
+    return max(max(m.resolution) for m in maps)
+
+
+def atlas_mesh(mesh: Mesh) -> Mesh:
+    """The mesh with each material's UVs moved into its atlas cell (vertices split between materials)."""
+    if mesh.material_index is None or mesh.material_count == 1:
+        return mesh
+    count, g = mesh.material_count, atlas_grid(mesh.material_count)
+    corner_vertex = mesh.faces.reshape(-1)
+    corner_material = np.repeat(mesh.material_index, 3)
+    key = corner_vertex.astype(np.int64) * count + corner_material
+    unique, inverse = np.unique(key, return_inverse=True)
+    vertex, material = unique // count, unique % count
+    row, col = material // g, material % g
+    uv = mesh.uvs[vertex].astype(np.float64)
+    uv = np.stack([(uv[:, 0] + col) / g, (uv[:, 1] + (g - 1 - row)) / g], axis=1)
+    normals = None if mesh.normals is None else mesh.normals[vertex]
+    return Mesh.from_arrays(mesh.positions[vertex], inverse.reshape(-1, 3), uv, normals, mesh.name,
+                            mesh.material_index)
+
+
+def material_submesh(mesh: Mesh, index: int) -> Mesh:
+    """The faces of material `index` alone, in their own UV layout (positions unchanged)."""
+    if mesh.material_index is None:
+        if index != 0:
+            raise InputError(f"Mesh '{mesh.name}' has one material; there is no material {index}.")
+        return mesh
+    faces = mesh.faces[mesh.material_index == index]
+    if len(faces) == 0:
+        raise InputError(f"No face of mesh '{mesh.name}' uses material {index}.")
+    used, inverse = np.unique(faces.reshape(-1), return_inverse=True)
+    normals = None if mesh.normals is None else mesh.normals[used]
+    return Mesh.from_arrays(mesh.positions[used], inverse.reshape(-1, 3), mesh.uvs[used], normals, mesh.name)
+
+
+def atlas_slices(count: int, cell: int) -> list[tuple[slice, slice]]:
+    """(rows, columns) of each material's cell in an atlas of `cell`-texel cells."""
+    out = []
+    for index in range(count):
+        r, c = atlas_cell(index, count)
+        out.append((slice(r * cell, (r + 1) * cell), slice(c * cell, (c + 1) * cell)))
+    return out
+
+
+def atlas_stack(planes: list[np.ndarray], cell: int, empty=0.0) -> np.ndarray:
+    """Per-material (cell, cell, C) arrays placed into one atlas (empty cells hold `empty`)."""
+    g = atlas_grid(len(planes))
+    out = np.empty((g * cell, g * cell, planes[0].shape[2]), np.float32)
+    out[...] = np.asarray(empty, np.float32)
+    for plane, (rows, cols) in zip(planes, atlas_slices(len(planes), cell)):
+        out[rows, cols] = plane
+    return out
+
+
+def atlas_maps(maps: list[PBRMaps], cell: int) -> PBRMaps:
+    """Every material's maps resized to `cell` and placed in its atlas cell."""
+    stack = atlas_stack([m.stacked_at(cell, cell) for m in maps], cell)
+    normal = None
+    if any(m.normal is not None for m in maps):
+        normal = atlas_stack([m.normal_at(cell, cell) for m in maps], cell, empty=FLAT_NORMAL)
+    return PBRMaps(base_color=stack[..., :3].copy(), roughness=stack[..., 3].copy(),
+                   metallic=stack[..., 4].copy(), normal=normal)
