@@ -81,7 +81,9 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     config = RunConfig(preset=preset, guidance_type=guidance, photo_camera=DEMO_PHOTO_CAMERA, size=DEMO_SIZE,
                        prompt="a monkey head sculpture standing in a living room, its painted surface dusty and "
                               "worn, photo")
-    run = run_pipeline(mesh, maps, inputs / "photo.png", DEMO_PLACEMENT, out, config, progress=progress)
+    run = run_pipeline(mesh, maps, inputs / "photo.png", DEMO_PLACEMENT, out, config, progress=progress,
+                       bake_skipped_why="the bundled example is a SceneFit asset folder; `scenefit run` on a "
+                                        ".glb/.gltf/.obj/.fbx/.blend file bakes a game asset")
 
     # The same composite under a constant light of the estimated map's mean radiance: what the
     # direction of the light adds.
