@@ -90,4 +90,4 @@ def add_parser(sub) -> None:
     p.add_argument("--no-bake", action="store_true", help="skip the game bake (a .glb of the asset with its new texture)")
     add_model_args(p)
     add_prompt_service_args(p, prefix="prompt-")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, by_stage=True)  # an interrupt keeps the finished stages (see the message)
