@@ -61,7 +61,7 @@ def _adapt(args, out: Path) -> int:
     texture = load_neural_texture(args.texture) if args.texture else None
     photo = where = None
     if args.photo:
-        photo = linear_to_srgb(np.clip(read_color_image(args.photo), 0.0, 1.0))
+        photo = linear_to_srgb(np.clip(read_color_image(args.photo, upright=True), 0.0, 1.0))
         where = placement(args, photo.shape[:2])
     env = environment(args)[0] if args.envmap else None
     result, report = adapt_and_bake(mesh, texture, config, out, photo=photo, placement=where,
