@@ -92,7 +92,8 @@ class JobWorker:
     """Runs jobs one after another; what it loads (models) stays loaded for its next job.
 
     On Ray this class is the actor; in-process one instance serves the whole batch. `models` (a
-    ModelCache) is for the pipeline's diffusion models once run_pipeline takes loaded models.
+    ModelCache) holds the diffusion models: the first job that needs them loads them, and every
+    later job of this worker gets the same loaded modules.
     """
 
     def __init__(self, threads: int | None = None) -> None:
@@ -112,7 +113,7 @@ class JobWorker:
             job = unpacked_job(payload, Path(tmp) / "in")
             out = Path(tmp) / "out"
             out.mkdir()
-            stages = run_job_stages(job, out, progress=progress, cancel=self.cancel_event)
+            stages = run_job_stages(job, out, progress=progress, cancel=self.cancel_event, models=self.models)
             self.jobs_run += 1
             report = {"status": "done", "job": payload.job.to_dict(), "attempts": payload.attempt,
                       "seconds": round(time.perf_counter() - started, 3), "quality": quality_figures(stages),
@@ -180,11 +181,12 @@ def worker_info(jobs_run: int, model_loads: int) -> dict:
             "model_loads_by_this_worker": model_loads, "torch_threads": torch.get_num_threads()}
 
 
-def run_job_stages(job: Job, out: Path, progress=None, cancel=None) -> dict:
+def run_job_stages(job: Job, out: Path, progress=None, cancel=None, models=None) -> dict:
     """Run the job's stages into `out`; returns each stage's report.
 
     A job that composes runs `scenefit run`'s pipeline (core/run.py, adapt included when its stages
-    list it); a job of convert and/or light alone runs those stage functions.
+    list it); a job of convert and/or light alone runs those stage functions. `models`: the worker's
+    ModelCache (None: the pipeline loads what it needs for this job alone).
     """
     if "compose" in job.stages or "bake" in job.stages:
         try:
@@ -192,18 +194,26 @@ def run_job_stages(job: Job, out: Path, progress=None, cancel=None) -> dict:
         except ImportError:
             raise InputError(f"Job '{job.name}': stages compose and bake need `scenefit run`'s pipeline, which "
                              f"this version lacks; use stages convert and light.") from None
-        return _relative_outputs({"run": run_pipeline_for_job(job, out, progress, cancel)}, out)
+        return _relative_outputs({"run": run_pipeline_for_job(job, out, progress, cancel, models)}, out)
     return _available_stages(job, out, progress, cancel)
 
 
-def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None) -> dict:
+def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models=None) -> dict:
     """The job through core/run.py's run_pipeline: adapt when listed (and its weights are found)."""
     from .run import RunConfig, run_pipeline
 
     mesh, maps = _load_asset(job)
-    config = RunConfig(preset=job.preset, prompt=job.prompt,
-                       guidance_type="auto" if "adapt" in job.stages else "none")
-    return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel)
+    config = RunConfig(preset=job.preset, prompt=job.prompt, guidance_type="auto" if "adapt" in job.stages else "none",
+                       models=job.models, stage_overrides=_stage_overrides(job))
+    return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel, models=models)
+
+
+def _stage_overrides(job: Job) -> dict:
+    """The job's overrides, its seed going to the convert stage's fit."""
+    overrides = {stage: dict(values) for stage, values in job.overrides.items()}
+    if job.seed is not None:
+        overrides.setdefault("convert", {}).setdefault("seed", job.seed)
+    return overrides
 
 
 def _load_asset(job: Job):
@@ -228,13 +238,13 @@ def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
     reports: dict = {}
     if "convert" in job.stages:
         mesh, maps = _load_asset(job)
-        overrides = {} if job.seed is None else {"seed": job.seed}
         _, reports["convert"] = convert_and_bake(mesh, maps, out / "convert" / "maps",
-                                                 stage_config("convert", job.preset, **overrides), progress, cancel)
+                                                 stage_config("convert", job.preset, **_stage_overrides(job).get(
+                                                     "convert", {})), progress, cancel)
     if "light" in job.stages:
         photo, info = load_photo(job.photo)
         placement = Placement.parse(job.at, (photo.shape[1], photo.shape[0])).pixel(photo.shape[:2])
-        config = stage_config("light", job.preset, critic_type="none")
+        config = stage_config("light", job.preset, **{"critic_type": "none", **job.overrides.get("light", {})})
         result = estimate_light(photo, placement, config, photo_info=info, progress=progress, cancel=cancel)
         reports["light"] = light_report(result, config, write_light_outputs(result, out / "light"))
     return _relative_outputs(reports, out)

@@ -7,6 +7,11 @@
     memory_gb = 8                 # per job, what Ray reserves (optional)
     workers = 2                   # Ray workers (actors, each loads its models once); default: what fits
 
+    [models]                      # optional: the diffusion models (hub ids or folders), as ModelConfig
+    base_model = "models/sd2-base"
+    inpaint_model = "models/sd2-inpainting"
+    local_files_only = true
+
     [defaults]                    # optional: keys every [[job]] gets unless it sets them
     preset = "draft"
 
@@ -20,6 +25,7 @@
     stages = ["convert", "light", "adapt", "compose", "bake"]
     prompt = "a leather sofa, soggy and stained with mud"   # optional prompts
     seed = 0                      # optional
+    overrides = { adapt = { iterations = 50 } }   # optional: stage settings over the preset's
 
 Relative paths are relative to the jobs file. Everything is checked when the file is read, and a
 problem is one sentence naming the job and the key.
@@ -28,10 +34,11 @@ from __future__ import annotations
 
 import re
 import tomllib
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from .errors import InputError
+from .guidance.models import ModelConfig
 
 STAGE_TYPES = ("convert", "light", "adapt", "compose", "bake")   # pipeline order
 PRESET_TYPES = ("draft", "balanced", "final")
@@ -60,6 +67,8 @@ class Job:
     object_prompt: str = ""
     instruction: str = ""
     seed: int | None = None
+    models: ModelConfig = field(default_factory=ModelConfig)   # the file's [models] table
+    overrides: dict = field(default_factory=dict)   # {"convert"|"light"|"adapt": {setting: value}}
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -86,7 +95,10 @@ class JobsFile:
     settings: BatchSettings = field(default_factory=BatchSettings)
 
 
-JOB_KEYS = ("name", "asset", "object", "photo", "at", "preset", "stages", "mode", *PROMPT_KEYS, "seed")
+JOB_KEYS = ("name", "asset", "object", "photo", "at", "preset", "stages", "mode", *PROMPT_KEYS, "seed", "overrides")
+MODEL_KEYS = ("base_model", "inpaint_model", "cache_dir", "local_files_only", "device_type", "dtype_type",
+              "attention_slicing", "vae_slicing", "vae_tiling", "channels_last", "cpu_offload")
+OVERRIDE_STAGES = ("convert", "light", "adapt")
 BATCH_KEYS = tuple(BatchSettings.__dataclass_fields__)
 
 
@@ -107,10 +119,12 @@ def load_jobs(path: str | Path) -> JobsFile:
 def parse_jobs(data: dict, path: Path) -> JobsFile:
     """Check the parsed TOML of the jobs file at `path` (relative paths are taken from its folder)."""
     path = Path(path).resolve()
-    unknown = sorted(set(data) - {"batch", "defaults", "job"})
+    unknown = sorted(set(data) - {"batch", "models", "defaults", "job"})
     if unknown:
-        raise InputError(f"{path.name}: unknown table '{unknown[0]}'; a jobs file has [batch], [defaults] and [[job]].")
+        raise InputError(f"{path.name}: unknown table '{unknown[0]}'; a jobs file has [batch], [models], [defaults] "
+                         f"and [[job]].")
     settings = _parse_settings(data.get("batch", {}), path)
+    models = _parse_models(data.get("models", {}), path)
     defaults = data.get("defaults", {})
     if not isinstance(defaults, dict):
         raise InputError(f"{path.name}: [defaults] must be a table of job keys.")
@@ -122,7 +136,7 @@ def parse_jobs(data: dict, path: Path) -> JobsFile:
         raise InputError(f"{path.name}: no jobs; add at least one [[job]] table.")
     jobs, seen = [], set()
     for i, entry in enumerate(entries):
-        job = _parse_job({**defaults, **entry}, i, path)
+        job = replace(_parse_job({**defaults, **entry}, i, path), models=models)
         if job.name in seen:
             raise InputError(f"{path.name}: two jobs are named '{job.name}'; each job needs its own name (its folder).")
         seen.add(job.name)
@@ -159,6 +173,36 @@ def _parse_settings(table: dict, path: Path) -> BatchSettings:
     return BatchSettings(retries=retries, num_gpus=num_gpus if num_gpus == "auto" else float(num_gpus),
                          num_cpus=float(num_cpus), memory_gb=None if memory_gb is None else float(memory_gb),
                          workers=workers)
+
+
+def _parse_models(table: dict, path: Path) -> ModelConfig:
+    """The [models] table: ModelConfig's fields; a model or cache given as a path ('.', '/', '~') is
+    taken relative to the jobs file, a hub id as it is."""
+    if not isinstance(table, dict):
+        raise InputError(f"{path.name}: [models] must be a table.")
+    where = f"{path.name} [models]"
+    _check_keys(table, MODEL_KEYS, where)
+    values = {}
+    for key, value in table.items():
+        kind = bool if key not in ("base_model", "inpaint_model", "cache_dir", "device_type", "dtype_type") else str
+        if not isinstance(value, kind):
+            raise InputError(f"{where}: {key} must be a {'true/false' if kind is bool else 'string'}, got {value!r}.")
+        if key in ("base_model", "inpaint_model", "cache_dir") and value.startswith((".", "/", "~")):
+            value = str(_resolve(value, path))
+        values[key] = value
+    try:
+        return ModelConfig(**values)
+    except InputError as error:
+        raise InputError(f"{where}: {error}") from None
+
+
+def _parse_overrides(value, where: str) -> dict:
+    if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
+        raise InputError(f"{where}: overrides must be a table of stage tables, e.g. {{ adapt = {{ iterations = 50 }} }}.")
+    unknown = sorted(set(value) - set(OVERRIDE_STAGES))
+    if unknown:
+        raise InputError(f"{where}: overrides names unknown stage '{unknown[0]}'; it takes {', '.join(OVERRIDE_STAGES)}.")
+    return {stage: dict(settings) for stage, settings in value.items()}
 
 
 def _is_number(value) -> bool:
@@ -237,8 +281,9 @@ def _parse_job(entry: dict, index: int, path: Path) -> Job:
     seed = entry.get("seed")
     if seed is not None and not (isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0):
         raise InputError(f"{where}: seed must be a whole number >= 0, got {seed!r}.")
+    overrides = _parse_overrides(entry.get("overrides", {}), where)
     return Job(name=name, asset=asset, stages=stages, preset=preset, photo=photo, at=at, object=obj, mode=mode,
-               seed=seed, **prompts)
+               seed=seed, overrides=overrides, **prompts)
 
 
 def _resolve(text: str, jobs_path: Path) -> Path:

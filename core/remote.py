@@ -157,10 +157,12 @@ class LocalProcessJob:
         self.job, self.report = job, None
         self.tmp = tempfile.TemporaryDirectory(prefix="scenefit-remote-")
         root = Path(self.tmp.name)
-        entry = {k: v for k, v in job.to_dict().items() if v not in (None, "")}
+        entry = {k: v for k, v in job.to_dict().items() if v not in (None, "", {})}
+        models = entry.pop("models", {})
         entry["stages"] = list(job.stages)
-        lines = ["[batch]", f"retries = 0", f"num_cpus = {settings.num_cpus:g}", "", "[[job]]"]
-        lines += [f"{k} = {json.dumps(v)}" for k, v in entry.items()]   # JSON strings/lists are TOML too
+        lines = ["[batch]", "retries = 0", f"num_cpus = {settings.num_cpus:g}", "", "[models]"]
+        lines += [f"{k} = {_toml(v)}" for k, v in models.items() if v is not None]
+        lines += ["", "[[job]]"] + [f"{k} = {_toml(v)}" for k, v in entry.items()]
         (root / "jobs.toml").write_text("\n".join(lines) + "\n")
         self.out = root / "out"
         self.process = subprocess.Popen([python, "-m", "scenefit.cli", "batch", str(root / "jobs.toml"), "--out",
@@ -231,6 +233,15 @@ class LocalProcessJob:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _toml(value) -> str:
+    """A TOML value: JSON's strings, numbers, booleans and lists are TOML too; tables are inline."""
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{json.dumps(str(k))} = {_toml(v)}" for k, v in value.items()) + " }"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
+    return json.dumps(value)
 
 
 def _read_preview(path: str):

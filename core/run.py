@@ -24,7 +24,7 @@ import numpy as np
 
 from .atomic import write_json_atomic
 from .errors import InputError
-from .guidance.models import ModelConfig
+from .guidance.models import GuidanceModels, ModelCache, ModelConfig
 from .maps import PBRMaps
 from .mesh import Mesh
 from .photo import PhotoCamera
@@ -45,12 +45,21 @@ class RunConfig:
     compose_spp: int | None = None
     photo_camera: PhotoCamera | None = None   # None: the light stage's default camera for the photo
     models: ModelConfig = field(default_factory=ModelConfig)
+    # Settings over the preset's, per stage ("convert", "light", "adapt"), as stage_config takes them:
+    # quick looks, tests and benchmarks (e.g. {"adapt": {"iterations": 4}}). Part of each stage's key.
+    stage_overrides: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.preset not in ("draft", "balanced", "final"):
             raise InputError(f"preset must be draft, balanced or final, got {self.preset!r}.")
         if self.guidance_type not in GUIDANCE_TYPES:
             raise InputError(f"guidance_type must be one of {', '.join(GUIDANCE_TYPES)}, got {self.guidance_type!r}.")
+        unknown = sorted(set(self.stage_overrides) - {"convert", "light", "adapt"})
+        if unknown:
+            raise InputError(f"stage_overrides names unknown stage {unknown[0]!r}; it takes convert, light and adapt.")
+
+    def overrides(self, stage: str) -> dict:
+        return dict(self.stage_overrides.get(stage, {}))
 
 
 def _digest(*parts) -> str:
@@ -124,12 +133,14 @@ GameBake = Callable[[Path, Path], dict]
 def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, out_dir: str | Path,
                  config: RunConfig = RunConfig(), progress: ProgressCallback | None = None,
                  cancel: threading.Event | None = None, bake: GameBake | None = None,
-                 bake_skipped_why: str = "no game bake was asked for") -> dict:
+                 bake_skipped_why: str = "no game bake was asked for", models: ModelCache | None = None) -> dict:
     """Convert the asset, estimate the photo's light, adapt the texture (when the SD2 weights exist),
     compose the asset into the photo, and bake (when `bake` is given); returns the run's report (also
     out_dir/report.json).
 
     placement: (x, y) as fractions of the photo's width and height (both <= 1) or pixels, or "X,Y".
+    models: the loaded diffusion models to use (a ModelCache: a batch worker keeps one for its life,
+    so its jobs load them once); default a cache for this run, so light and adapt share one load.
     """
     from dataclasses import replace
 
@@ -160,12 +171,13 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
         found, where = models_available(config.models)
     else:
         found, where = False, "guidance none"
+    cache = models if models is not None else ModelCache()
     asset_key = asset_digest(mesh, maps)
     photo_key = _digest(photo_path.read_bytes())
     runner = StageRunner(out, progress, cancel)
 
     # convert: the asset's maps -> neural texture (baked maps + texture.pt)
-    convert_config = stage_config("convert", config.preset)
+    convert_config = stage_config("convert", config.preset, **config.overrides("convert"))
     convert_key = _digest("convert", asdict(convert_config), asset_key)
 
     def convert(folder: Path) -> dict:
@@ -183,14 +195,16 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
 
     normalized, _ = normalize_to_unit_sphere(mesh)
     envmap_height = envmap_height_for(maps, rasterize_uv(normalized, max(maps.resolution)).mask)
-    light_config = stage_config("light", config.preset, critic_type="diffusion" if found else "none", models=config.models,
-                                map_height=envmap_height.value)
+    light_config = stage_config("light", config.preset, **{
+        "critic_type": "diffusion" if found else "none", "models": config.models, "map_height": envmap_height.value,
+        **config.overrides("light")})
     light_key = _digest("light", asdict(light_config), photo_key, placement_px,
                         asdict(config.photo_camera) if config.photo_camera else None)
 
     def light(folder: Path) -> dict:
         result = estimate_light(photo, placement_px, light_config, photo_camera=config.photo_camera,
-                                photo_info=photo_info, progress=progress, cancel=cancel)
+                                photo_info=photo_info, progress=progress, cancel=cancel,
+                                models=_WithInpaint(cache) if found else cache)
         outputs = write_light_outputs(result, folder)
         report = light_report(result, light_config, outputs)
         report["decisions"]["envmap_height"] = envmap_height.to_dict()
@@ -205,14 +219,16 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
         from .adapt import adapt_and_bake
 
         prompt = config.prompt or f"a {mesh.name} in this scene, photo"
-        adapt_config = stage_config("adapt", config.preset, mode_type="scene", prompt=prompt, models=config.models)
+        adapt_config = stage_config("adapt", config.preset, **{"mode_type": "scene", "prompt": prompt,
+                                                               "models": config.models, **config.overrides("adapt")})
         centre = (placement_px[0] / w, max(0.0, placement_px[1] / h - config.size / 2))
         guidance_placement = Placement(centre, min(1.0, config.size * 1.2))
         adapt_key = _digest("adapt", adapt_config.to_dict(), convert_key, photo_key, asdict(guidance_placement))
 
         def adapt(folder: Path) -> dict:
             _, report = adapt_and_bake(mesh, load_neural_texture(texture_path), adapt_config, folder, photo=photo,
-                                       placement=guidance_placement, progress=progress, cancel=cancel)
+                                       placement=guidance_placement, progress=progress, cancel=cancel,
+                                       models=cache.get(adapt_config.models, True))
             return report
 
         runner.run("adapt", adapt_key, adapt)
@@ -255,6 +271,17 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     }
     write_json_atomic(out / "report.json", report)
     return report
+
+
+class _WithInpaint:
+    """The cache as the light stage sees it when adapt follows: it asks for the inpainting UNet too,
+    so light and adapt share one loaded model set."""
+
+    def __init__(self, cache: ModelCache) -> None:
+        self.cache = cache
+
+    def get(self, config: ModelConfig, need_inpaint: bool) -> GuidanceModels:
+        return self.cache.get(config, True)
 
 
 def _plain(config: RunConfig) -> dict:

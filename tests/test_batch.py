@@ -119,6 +119,9 @@ def test_jobs_file_paths_defaults_and_order(tmp_path):
     (lambda t: t.replace('photo = "room.png"\n', ''), "needs a photo"),
     (lambda t: t.replace("[[job]]", "[[jobs]]"), "unknown table 'jobs'"),
     (lambda t: t + "[[job\n", "not valid TOML"),
+    (lambda t: t + "[models]\nbase = 'x'\n", r"\[models\]: unknown key 'base'"),
+    (lambda t: t + "[models]\ndevice_type = 'tpu'\n", "device_type must be one of"),
+    (lambda t: t.replace("seed = 1", "overrides = { paint = { iterations = 2 } }"), "unknown stage 'paint'"),
 ])
 def test_jobs_file_errors_are_one_sentence(tmp_path, change, message):
     path = make_inputs(tmp_path)
@@ -274,3 +277,59 @@ def test_work_remotely_takes_the_add_ons_plain_data(tmp_path):
     assert result["folder"] == str(tmp_path / "back" / "blend-job") and result["report"]["status"] == "done"
     assert (tmp_path / "back" / "blend-job" / "light" / "light.exr").is_file()
     assert result["report"]["job"]["stages"] == ["light"] and [e.stage for e in events][-1] == "light"
+
+
+TINY_JOBS = """
+[batch]
+retries = 0
+[models]
+base_model = "./tiny/sd2-base"
+inpaint_model = "./tiny/sd2-inpaint"
+local_files_only = true
+[defaults]
+preset = "draft"
+photo = "room.png"
+at = [0.5, 0.7]
+asset = "ball"
+stages = ["convert", "light", "adapt", "compose"]
+prompt = "a mossy ball"
+overrides = { convert = { iterations = 8 }, light = { map_height = 16, optimise = { iterations = 2 }, apparatus = { render_size = 16, spp = 2 }, diffusion = { model_resolution = 32 }, outpaint = { resolution = 32, steps = 1 } }, adapt = { iterations = 2, model_resolution = 32, views_per_step = 1, preview_every = 1, checkpoint_every = 100, stages = [[1.0, 16, 2, [500, 990]]] } }
+[[job]]
+name = "first"
+[[job]]
+name = "second"
+"""
+
+
+def test_a_worker_loads_the_models_once_and_reuses_them_with_the_same_outputs(tmp_path, monkeypatch):
+    """Two jobs with diffusion guidance in one worker: the tiny models load once (counted in the real
+    loader), the second job (reused models) writes the same bytes as the first (fresh models)."""
+    from scenefit.core.guidance import models as model_module
+    from scenefit.devtools.tiny_models import build_tiny_pair
+
+    make_inputs(tmp_path)
+    build_tiny_pair(tmp_path / "tiny")
+    (tmp_path / "jobs.toml").write_text(TINY_JOBS)
+    jobs = load_jobs(tmp_path / "jobs.toml")
+    assert jobs.jobs[0].models.base_model == str(tmp_path / "tiny" / "sd2-base")
+    real_load, loads = model_module.load_guidance_models, []
+
+    def counted_load(config, need_inpaint, paths=None):
+        loads.append(need_inpaint)
+        return real_load(config, need_inpaint, paths)
+
+    monkeypatch.setattr(model_module, "load_guidance_models", counted_load)
+    outcomes = run_batch(jobs, tmp_path / "out")
+    assert [(o.name, o.status) for o in outcomes] == [("first", "done"), ("second", "done")], outcomes
+    assert loads == [True]                     # one model set (with the inpainting UNet) for both jobs
+    reports = [json.loads((tmp_path / "out" / name / "report.json").read_text()) for name in ("first", "second")]
+    run = reports[1]["stages"]["run"]["stages"]
+    assert {name: run[name]["status"] for name in ("convert", "light", "adapt", "compose")} == dict.fromkeys(
+        ("convert", "light", "adapt", "compose"), "ran")
+    assert run["light"]["report"]["decisions"]["critic"]["type"] == "diffusion"   # light used the models too
+    assert [r["worker"]["model_loads_by_this_worker"] for r in reports] == [1, 1]
+    # Every image and texture the same bytes (the JSON records differ in timings and temporary paths).
+    first, second = (outputs(tmp_path / "out" / name) for name in ("first", "second"))
+    assert {k for k in first if not k.endswith(".json")} >= {"adapt/maps/texture.pt", "compose/composite.png"}
+    assert {k: v for k, v in first.items() if not k.endswith(".json")} == {
+        k: v for k, v in second.items() if not k.endswith(".json")}

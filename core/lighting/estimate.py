@@ -187,13 +187,15 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
                    photo_camera: PhotoCamera | None = None, mesh: Mesh | None = None, maps: torch.Tensor | None = None,
                    critic: Critic | None = None, reference_envmap: np.ndarray | None = None,
                    photo_info: dict | None = None, progress: ProgressCallback | None = None,
-                   cancel: threading.Event | None = None, on_iteration=None) -> LightResult:
+                   cancel: threading.Event | None = None, on_iteration=None, models=None) -> LightResult:
     """Estimate an HDR environment map from a photo (sRGB-encoded float RGB) and the object's placement.
 
     photo_camera: the photo's orientation and FOV in the world (default: looking along +Y, the
     composition's azimuth 0, pitched by config.camera_pitch_deg). mesh/maps: the object with its fixed
     appearance ((H, W, 5) base colour, roughness, metallic); default a grey sphere. critic: used when
     config.critic_type == "diffusion"; reference_envmap: the true map (photo exposure units) for "reference".
+    models: where loaded diffusion models come from, `models.get(model_config, need_inpaint)` (a
+    guidance.models.ModelCache, so a worker loads them once for all its jobs); default: loaded here.
     """
     t0 = time.perf_counter()
     # The diffusion models are found before any work (a missing one is a clear error).
@@ -208,7 +210,8 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
         if "models" not in loaded:
             from ..guidance.models import load_guidance_models
 
-            loaded["models"] = load_guidance_models(config.models, need_inpaint=want_outpaint, paths=model_paths)
+            loaded["models"] = (models.get(config.models, want_outpaint) if models is not None else
+                                load_guidance_models(config.models, need_inpaint=want_outpaint, paths=model_paths))
         return loaded["models"]
 
     photo = np.clip(np.asarray(photo_srgb, np.float32)[..., :3], 0.0, 1.0)
