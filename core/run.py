@@ -177,7 +177,10 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     runner = StageRunner(out, progress, cancel)
 
     # convert: the asset's maps -> neural texture (baked maps + texture.pt)
-    convert_config = stage_config("convert", config.preset, **config.overrides("convert"))
+    # Only what the scene needs: no more texels than the composite shows of the asset (the photo's
+    # stored height, not the light stage's working copy, is what the composite is made at).
+    screen_px = max(1, round(config.size * photo_info["size"][1]))
+    convert_config = stage_config("convert", config.preset, **{"screen_px": screen_px, **config.overrides("convert")})
     convert_key = _digest("convert", asdict(convert_config), asset_key)
 
     def convert(folder: Path) -> dict:
