@@ -129,6 +129,22 @@ class JobWorker:
         return "ready"
 
 
+def run_plain(worker: JobWorker, job: dict, inputs: bytes, progress_sink=None) -> dict:
+    """`worker.run` with plain data in and out: the job as `Job.to_dict`, a dict back ({"report",
+    "outputs"} or {"error", "kind"}). What a caller whose copy of SceneFit has another package name
+    (the Blender add-on: bl_ext.<repo>.scenefit) exchanges with a worker, since neither side can
+    unpickle the other's classes."""
+    from .errors import Cancelled
+
+    try:
+        result = worker.run(JobPayload(Job.from_dict(job), inputs), progress_sink)
+    except (SceneFitError, Cancelled) as error:
+        return {"error": str(error), "kind": type(error).__name__}
+    except Exception as error:
+        return {"error": _error_text(error), "kind": "SceneFitError", "traceback": traceback.format_exc()[-4000:]}
+    return {"report": result.report, "outputs": result.outputs}
+
+
 class SinkProgress:
     """A progress callback that puts plain dicts into a queue, at most every `interval` seconds
     (always for a stage's last step and for previews); a full queue drops the event rather than wait."""

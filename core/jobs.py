@@ -76,6 +76,15 @@ class Job:
                  stages=list(self.stages), at=None if self.at is None else list(self.at))
         return d
 
+    @classmethod
+    def from_dict(cls, d: dict) -> "Job":
+        """The job from `to_dict`'s plain form (how it crosses to a worker that names the package otherwise)."""
+        values = dict(d)
+        values.update(asset=Path(d["asset"]), photo=None if d.get("photo") is None else Path(d["photo"]),
+                      stages=tuple(d["stages"]), at=None if d.get("at") is None else tuple(d["at"]),
+                      models=ModelConfig(**d.get("models", {})), overrides=dict(d.get("overrides", {})))
+        return cls(**values)
+
 
 @dataclass(frozen=True)
 class BatchSettings:
@@ -98,7 +107,7 @@ class JobsFile:
 JOB_KEYS = ("name", "asset", "object", "photo", "at", "preset", "stages", "mode", *PROMPT_KEYS, "seed", "overrides")
 MODEL_KEYS = ("base_model", "inpaint_model", "cache_dir", "local_files_only", "device_type", "dtype_type",
               "attention_slicing", "vae_slicing", "vae_tiling", "channels_last", "cpu_offload")
-OVERRIDE_STAGES = ("convert", "light", "adapt")
+OVERRIDE_STAGES = ("convert", "light", "adapt", "compose")
 BATCH_KEYS = tuple(BatchSettings.__dataclass_fields__)
 
 

@@ -9,16 +9,52 @@ the cluster needs no access to the artist's disk. Nothing here blocks: a modal o
 `events()` and `finished()` from its timer, then `result(folder)` to unpack the outputs, which it
 applies on Blender's main thread. `LocalProcessJob` is the same for a SceneFit install with CUDA
 torch on this machine, without Ray: it runs `scenefit batch --events` with that install's Python.
+
+Only plain data crosses to the worker (the job as a dict, its inputs as bytes, progress dicts, a
+result dict): inside Blender this package is `bl_ext.<repo>.scenefit`, on the workers it is the
+installed `scenefit`, so neither side could unpickle the other's classes.
 """
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
-from .batch import JobResult, JobWorker, install_folder, make_payload, unpack
+from . import errors
+from .batch import install_folder, make_payload, unpack
 from .batch_ray import connect, import_ray, job_resources
 from .errors import Cancelled, SceneFitError
 from .jobs import BatchSettings, Job
+
+# What the worker environment imports SceneFit as (a pip install of it).
+WORKER_PACKAGE = "scenefit"
+
+
+def worker_actor_class(package: str = WORKER_PACKAGE):
+    """The Ray actor class that runs jobs in the worker environment. Made in a function so that Ray
+    ships it by value: the cluster needs `package`, never the caller's own module name."""
+
+    class SceneFitWorker:
+        def __init__(self, threads: int) -> None:
+            import importlib
+
+            self.batch = importlib.import_module(package + ".core.batch")
+            self.worker = self.batch.JobWorker(threads=threads)
+
+        def run(self, job: dict, inputs: bytes, progress_sink=None) -> dict:
+            return self.batch.run_plain(self.worker, job, inputs, progress_sink)
+
+        def cancel(self) -> None:
+            self.worker.cancel()
+
+    return SceneFitWorker
+
+
+def raise_worker_error(result: dict) -> None:
+    """A worker's {"error", "kind"} as this side's exception (InputError, Cancelled, ...)."""
+    kind = getattr(errors, result.get("kind", ""), SceneFitError)
+    if not (isinstance(kind, type) and issubclass(kind, SceneFitError)):
+        kind = SceneFitError
+    raise kind(result["error"])
 
 
 class RemoteJob:
@@ -34,14 +70,15 @@ class RemoteJob:
         try:
             options = job_resources(settings, ray.cluster_resources())
             # Two calls at once: `run`, and `cancel` while it runs.
-            self.actor = ray.remote(JobWorker).options(max_concurrency=2, **options).remote(
+            self.actor = ray.remote(worker_actor_class()).options(max_concurrency=2, **options).remote(
                 threads=max(1, int(settings.num_cpus)))
             self.queue = Queue(maxsize=queue_size)
-            self.ref = self.actor.run.remote(make_payload(job), self.queue)
+            payload = make_payload(job)
+            self.ref = self.actor.run.remote(job.to_dict(), payload.inputs, self.queue)
         except BaseException:
             self.close()
             raise
-        self._result: JobResult | None = None
+        self._result: dict | None = None
 
     def events(self, limit: int | None = None) -> list[dict]:
         """Progress events that arrived since the last call, oldest first (never waits)."""
@@ -66,19 +103,15 @@ class RemoteJob:
         Raises the job's own SceneFitError (bad input, Cancelled, ...) as it was raised on the worker.
         """
         if self._result is None:
-            try:
-                self._result = self.ray.get(self.ref, timeout=timeout)
-            except self.ray.exceptions.RayTaskError as error:
-                cause = getattr(error, "cause", None)
-                if isinstance(cause, (SceneFitError, Cancelled)):
-                    raise cause from None
-                raise
-        outputs = self._result.outputs
+            self._result = self.ray.get(self.ref, timeout=timeout)
+        if "error" in self._result:
+            raise_worker_error(self._result)
+        outputs = self._result["outputs"]
         return install_folder(Path(out_dir), self.job.name, lambda folder: unpack(outputs, folder))
 
     @property
     def report(self) -> dict | None:
-        return None if self._result is None else self._result.report
+        return None if self._result is None else self._result.get("report")
 
     def close(self) -> None:
         """Free the worker and the queue (and Ray itself when this job started it)."""
@@ -259,7 +292,8 @@ def work_remotely(data: dict, progress=None, cancel=None) -> dict:
     """A background-job work function for the add-on: plain data in (the asset as arrays, the photo,
     the placement), the job run in the worker environment `data["worker"]`, its folder back in
     `data["out"]`. Keys: mesh, maps, photo, at, worker, out; optional name, preset, stages, prompt,
-    mode, object_prompt, instruction, negative_prompt, seed.
+    mode, object_prompt, instruction, negative_prompt, seed, models (a ModelConfig), overrides
+    (stage settings over the preset's), num_cpus, num_gpus.
     """
     import tempfile
 
@@ -268,10 +302,12 @@ def work_remotely(data: dict, progress=None, cancel=None) -> dict:
 
     with tempfile.TemporaryDirectory(prefix="scenefit-asset-") as tmp:
         asset = save_asset_folder(data["mesh"], data["maps"], Path(tmp) / "asset")
-        optional = {k: data[k] for k in ("mode", "prompt", "object_prompt", "instruction", "negative_prompt", "seed")
-                    if data.get(k) is not None}
+        optional = {k: data[k] for k in ("mode", "prompt", "object_prompt", "instruction", "negative_prompt", "seed",
+                                         "models", "overrides") if data.get(k) is not None}
         job = Job(name=data.get("name", "scenefit"), asset=asset, stages=tuple(data.get("stages", STAGE_TYPES)),
                   preset=data.get("preset", "balanced"), photo=Path(data["photo"]) if data.get("photo") else None,
                   at=tuple(data["at"]) if data.get("at") is not None else None, **optional)
-        folder, report = run_remote(job, data["out"], data["worker"], progress=progress, cancel=cancel)
+        settings = BatchSettings(retries=0, num_cpus=float(data.get("num_cpus", 1.0)),
+                                 num_gpus=data.get("num_gpus", "auto"))
+        folder, report = run_remote(job, data["out"], data["worker"], settings, progress=progress, cancel=cancel)
     return {"folder": str(folder), "report": report}

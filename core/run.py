@@ -45,7 +45,7 @@ class RunConfig:
     compose_spp: int | None = None
     photo_camera: PhotoCamera | None = None   # None: the light stage's default camera for the photo
     models: ModelConfig = field(default_factory=ModelConfig)
-    # Settings over the preset's, per stage ("convert", "light", "adapt"), as stage_config takes them:
+    # Settings over the preset's, per stage ("convert", "light", "adapt", "compose"), as the stage's config takes them:
     # quick looks, tests and benchmarks (e.g. {"adapt": {"iterations": 4}}). Part of each stage's key.
     stage_overrides: dict = field(default_factory=dict)
 
@@ -54,9 +54,10 @@ class RunConfig:
             raise InputError(f"preset must be draft, balanced or final, got {self.preset!r}.")
         if self.guidance_type not in GUIDANCE_TYPES:
             raise InputError(f"guidance_type must be one of {', '.join(GUIDANCE_TYPES)}, got {self.guidance_type!r}.")
-        unknown = sorted(set(self.stage_overrides) - {"convert", "light", "adapt"})
+        unknown = sorted(set(self.stage_overrides) - {"convert", "light", "adapt", "compose"})
         if unknown:
-            raise InputError(f"stage_overrides names unknown stage {unknown[0]!r}; it takes convert, light and adapt.")
+            raise InputError(f"stage_overrides names unknown stage {unknown[0]!r}; it takes convert, light, adapt "
+                             f"and compose.")
 
     def overrides(self, stage: str) -> dict:
         return dict(self.stage_overrides.get(stage, {}))
@@ -160,8 +161,8 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     photo, photo_info = load_photo(photo_path)
     h, w = photo.shape[:2]
     placement_px = Placement.parse(placement, (w, h)).pixel((h, w))
-    compose_config = compose_preset(config.preset, size=config.size, shadow_type=config.shadow_type,
-                                    spp=config.compose_spp)
+    compose_config = compose_preset(config.preset, **{"size": config.size, "shadow_type": config.shadow_type,
+                                                      "spp": config.compose_spp, **config.overrides("compose")})
     if config.guidance_type == "sd2":
         found, where = True, "asked for (--guidance sd2)"
         from .guidance.models import locate_models

@@ -40,6 +40,7 @@ class SCENEFIT_OT_adapt(JobOperator):
     bl_idname = "scenefit.adapt"
     bl_label = "Adapt"
     job_name = "adapt"
+    runs_remotely = True
 
     # For scripts and quick looks; 0 keeps the preset's value.
     iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE"})

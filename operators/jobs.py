@@ -83,6 +83,8 @@ class JobOperator(bpy.types.Operator):
 
     bl_options = {"REGISTER", "UNDO"}
     job_name = "job"
+    # True: when the preferences name a worker environment, the job runs there (operators/remote.py).
+    runs_remotely = False
 
     # -- to override ---------------------------------------------------------------------------------
     def prepare(self, context) -> tuple:
@@ -93,13 +95,32 @@ class JobOperator(bpy.types.Operator):
         """Write the job's result back into Blender (main thread); returns the line to report."""
         raise NotImplementedError
 
+    def job_work(self, context) -> tuple:
+        """(work, data): the operator's own, or the hand-off to the worker environment when one is chosen."""
+        self._remote = False
+        if self.runs_remotely:
+            from .remote import remote_work, worker_address
+
+            address = worker_address(context)
+            if address is not None:
+                self._remote = True
+                return remote_work(self, context, address)
+        return self.prepare(context)
+
+    def apply_result(self, context, result) -> str:
+        if getattr(self, "_remote", False):
+            from .remote import apply_remote
+
+            return apply_remote(self, context, result)
+        return self.apply(context, result)
+
     # -- synchronous: scripts and `blender -b` -------------------------------------------------------
     def execute(self, context):
         try:
             check_dependencies()
-            work, data = self.prepare(context)
+            work, data = self.job_work(context)
             result = background.run_inline(work, data, TerminalProgress())
-            message = self.apply(context, result)
+            message = self.apply_result(context, result)
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
@@ -112,7 +133,7 @@ class JobOperator(bpy.types.Operator):
             return self.execute(context)
         try:
             check_dependencies()
-            work, data = self.prepare(context)
+            work, data = self.job_work(context)
             self._job = background.start_job(background.Job(self.job_name, work, data))
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
@@ -158,7 +179,7 @@ class JobOperator(bpy.types.Operator):
         rt.running = False
         if state.status == background.DONE:
             try:
-                message = self.apply(context, state.result)
+                message = self.apply_result(context, state.result)
             except SceneFitError as error:
                 rt.status = str(error)
                 self.report({"ERROR"}, rt.status)

@@ -22,6 +22,7 @@ class SCENEFIT_OT_run(JobOperator):
     bl_idname = "scenefit.run"
     bl_label = "Run All"
     job_name = "run"
+    runs_remotely = True
 
     # Passed to every stage (quick looks and scripts); 0 / auto keep the presets' values.
     iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE"})

@@ -1,4 +1,4 @@
-"""The add-on preferences: where models come from, the cache, offline, the device."""
+"""The add-on preferences: where models come from, the cache, offline, the device, where jobs run."""
 import bpy
 from bpy.props import BoolProperty, EnumProperty, StringProperty
 
@@ -9,6 +9,13 @@ DEVICES = (
     ("auto", "Auto", "The GPU when torch sees one (CUDA), else the CPU"),
     ("cpu", "CPU", "Always the CPU"),
     ("cuda", "CUDA", "An NVIDIA GPU"),
+)
+
+WORKER_TYPES = (
+    ("LOCAL", "This Blender", "Jobs run inside Blender on its bundled (CPU) torch"),
+    ("RAY", "Ray cluster", "Run All and Adapt go to a Ray cluster with GPUs (Ray must be importable in Blender)"),
+    ("INSTALL", "SceneFit install", "Run All and Adapt go to another SceneFit install on this machine (e.g. one "
+                                    "with CUDA torch), run by its Python"),
 )
 
 
@@ -28,6 +35,14 @@ class SceneFitPreferences(bpy.types.AddonPreferences):
                           description="Never use the network: models must already be in the cache. Blender's "
                                       "'Allow Online Access' must also be on for any download")
     device: EnumProperty(name="Device", items=DEVICES, default="auto")
+    worker_type: EnumProperty(name="Run jobs on", items=WORKER_TYPES, default="LOCAL",
+                              description="Where Run All and Adapt run; progress and previews come back to the panel")
+    ray_address: StringProperty(name="Ray address", default="local",
+                                description="'local' starts a Ray cluster on this machine; else the cluster's "
+                                            "address, e.g. ray://head:10001 (needs Blender's Allow Online Access)")
+    worker_python: StringProperty(name="SceneFit Python", subtype="FILE_PATH", default="",
+                                  description="The Python interpreter of a SceneFit install with CUDA torch "
+                                              "(e.g. ~/scenefit/.venv/bin/python)")
     prompt_endpoint: StringProperty(name="Prompt endpoint", default="",
                                     description="OpenAI-compatible chat URL that writes prompts, e.g. "
                                                 "http://127.0.0.1:8080/v1 (empty: the config file or OPENAI_BASE_URL; "
@@ -45,6 +60,12 @@ class SceneFitPreferences(bpy.types.AddonPreferences):
         row = layout.row()
         row.prop(self, "offline")
         row.prop(self, "device")
+        col = layout.column(heading="Jobs")
+        col.prop(self, "worker_type")
+        if self.worker_type == "RAY":
+            col.prop(self, "ray_address")
+        elif self.worker_type == "INSTALL":
+            col.prop(self, "worker_python")
         col = layout.column(heading="Prompts")
         col.prop(self, "prompt_endpoint")
         col.prop(self, "prompt_model")

@@ -1,0 +1,136 @@
+"""Run All and Adapt handed to the worker environment the preferences name (a Ray cluster, or another
+SceneFit install with CUDA torch), and their results applied when they come back.
+
+The job object is the same background job as a local one (core/background.py): its work function is
+core.remote.work_remotely, which streams the worker's progress events and previews into the job's
+queue, passes a cancel on to the worker and unpacks the job's folder into a new run folder. So the
+panel, the status bar, Esc and the Cancel button work unchanged; only the gathering (`remote_work`)
+and the applying (`apply_remote`, main thread) are this module's.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from urllib.parse import urlparse
+
+import bpy
+
+from ..core.errors import InputError
+from .common import gather_asset, model_settings, photo_path, preferences, relative_if_saved, run_folder
+from .results import apply_result_material, apply_result_world
+
+# What the worker runs for each operator: the whole pipeline (adapt needs convert and the light).
+REMOTE_STAGES = ("convert", "light", "adapt", "compose")
+LOCAL_HOSTS = ("", "localhost", "127.0.0.1", "::1")
+
+
+def worker_address(context) -> str | None:
+    """Where the preferences send jobs: a Ray address, a Python interpreter, or None (this Blender).
+
+    A Ray cluster on another machine is network access: refused unless Blender's online access is on.
+    """
+    prefs = preferences(context)
+    if prefs is None or prefs.worker_type == "LOCAL":
+        return None
+    if prefs.worker_type == "INSTALL":
+        python = Path(bpy.path.abspath(prefs.worker_python)).expanduser() if prefs.worker_python else None
+        if python is None or not python.is_file():
+            raise InputError(f"The SceneFit install's Python '{prefs.worker_python}' does not exist; set it in the "
+                             "add-on preferences (Jobs), or run jobs in this Blender.")
+        return str(python)
+    address = prefs.ray_address.strip() or "local"
+    if not is_local_address(address) and not bpy.app.online_access:
+        raise InputError(f"Blender's online access is off, so SceneFit does not contact the Ray cluster at "
+                         f"'{address}'; allow it in Preferences > System, or use the address 'local'.")
+    return address
+
+
+def is_local_address(address: str) -> bool:
+    """'local' (a cluster started here) or an address on this machine."""
+    if address == "local":
+        return True
+    host = urlparse(address if "://" in address else f"ray://{address}").hostname or ""
+    return host in LOCAL_HOSTS
+
+
+def remote_work(op, context, address: str) -> tuple:
+    """(work function, plain data) that run the whole pipeline for the active object in the worker
+    environment at `address`; the operator's quick-look settings travel as stage overrides."""
+    from ..core.remote import work_remotely
+
+    settings = context.scene.scenefit
+    if settings.mode != "scene":
+        raise InputError(f"A worker environment runs the pipeline that fits the asset into a photo (mode Scene); "
+                         f"mode '{settings.mode}' runs in this Blender.")
+    photo = photo_path(context)
+    obj, mesh, maps = gather_asset(context)
+    op._object_name = obj.name
+    models, _ = model_settings(context)
+    from dataclasses import replace
+
+    # The worker finds the models in its own cache and on its own device.
+    models = replace(models, cache_dir=None, device_type="auto")
+    name = bpy.path.clean_name(obj.name)
+    return work_remotely, {
+        "mesh": mesh, "maps": maps, "photo": str(photo), "at": tuple(settings.placement), "worker": address,
+        "out": str(run_folder(context, op.job_name, obj.name)), "name": name, "preset": settings.preset,
+        "stages": REMOTE_STAGES, "prompt": settings.prompt, "models": models, "overrides": quick_overrides(op)}
+
+
+def quick_overrides(op) -> dict:
+    """The operator's iterations / model_resolution / render_size (0: the preset's) as stage overrides:
+    a quick look. render_size also caps the light's apparatus renders and the composite's samples."""
+    overrides: dict = {}
+    iterations = getattr(op, "iterations", 0)
+    if iterations:
+        overrides = {"convert": {"iterations": iterations}, "light": {"optimise": {"iterations": iterations}},
+                     "adapt": {"iterations": iterations}}
+    size = getattr(op, "model_resolution", 0)
+    if size:
+        overrides.setdefault("adapt", {})["model_resolution"] = size
+        overrides.setdefault("light", {}).update(diffusion={"model_resolution": size},
+                                                 outpaint={"resolution": size})
+    render = getattr(op, "render_size", 0)
+    if render:
+        overrides.setdefault("adapt", {})["stages"] = [[1.0, render, 2, [500, 990]]]
+        overrides.setdefault("light", {}).update(map_height=render, apparatus={"render_size": render, "spp": 2})
+        overrides["compose"] = {"pilot_spp": 1, "min_spp": 1, "max_spp": 2}
+    return overrides
+
+
+def run_result(folder: str | Path, report: dict) -> dict:
+    """What Blender applies from a worker's job folder (the run pipeline's layout): the last texture's
+    maps (adapt's, else convert's), the light, the composite, each stage's status."""
+    folder = Path(folder)
+    stages = report["stages"]["run"]["stages"]
+    last = "adapt" if stages.get("adapt", {}).get("status") in ("ran", "reused") else "convert"
+    outputs = stages[last]["report"]["outputs"]
+
+    def path(value):
+        return str(folder / value) if isinstance(value, str) else value
+
+    light = folder / "light" / "light.exr"
+    composite = folder / "compose" / "composite.png"
+    return {"stage": last, "report": str(folder / "report.json"), "texture": path(outputs["weights"]),
+            "maps": {k: path(outputs[k]) for k in ("base_color", "roughness", "metallic")},
+            "hdr": str(light) if light.is_file() else "", "composite": str(composite) if composite.is_file() else "",
+            "stages": {name: stage["status"] for name, stage in stages.items()},
+            "adapt_skipped": stages.get("adapt", {}).get("why", "")}
+
+
+def apply_remote(op, context, result: dict) -> str:
+    """Main thread: the worker's results as new datablocks (the artist's own are kept)."""
+    shaped = run_result(result["folder"], result["report"])
+    if op.job_name == "adapt" and shaped["stage"] != "adapt":
+        raise InputError(f"The worker did not adapt the texture: {shaped['adapt_skipped'] or 'no reason given'}; "
+                         f"its results are in '{result['folder']}'.")
+    mat = apply_result_material(context, op._object_name, shaped, shaped["stage"])
+    lines = [f"material '{mat.name}'"]
+    if op.job_name == "run":
+        if shaped["hdr"]:
+            lines.append(f"World '{apply_result_world(context, shaped['hdr']).name}'")
+        if shaped["composite"]:
+            context.scene.scenefit.composite_path = relative_if_saved(shaped["composite"])
+            lines.append("composite rendered by the worker")
+        if shaped["stage"] != "adapt":
+            lines.append(f"adapt skipped: {shaped['adapt_skipped']}")
+    return f"Done on the worker ({result['report'].get('seconds', 0):.0f} s): " + "; ".join(lines)

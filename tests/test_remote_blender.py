@@ -1,0 +1,159 @@
+"""From Blender to a worker environment: with the preferences set to a Ray cluster ('local' here), Run
+All / Adapt hand their job to core.remote, the worker's progress and previews reach the panel through
+the same background-job path as a local job, cancel ends it cleanly, and the results are applied as
+new datablocks on the main thread. bpy with the extension installed from its zip, tiny models, a
+local Ray cluster of two CPUs."""
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.blender
+
+ROOT = Path(__file__).resolve().parent.parent
+
+SCRIPT = r"""
+import json, time
+from pathlib import Path
+from types import SimpleNamespace
+import numpy as np
+import bpy, ray
+
+tmp, zip_path, tiny = Path(TMP), ZIP, TINY
+MODULE = "bl_ext.user_default.scenefit"
+from importlib import import_module
+bpy.ops.extensions.package_install_files(repo="user_default", filepath=zip_path, enable_on_install=True)
+prefs = bpy.context.preferences.addons[MODULE].preferences
+prefs.base_model, prefs.inpaint_model, prefs.offline = str(Path(tiny) / "sd2-base"), str(Path(tiny) / "sd2-inpaint"), True
+jobs = import_module(MODULE + ".core.background")
+jobs_ui = import_module(MODULE + ".operators.jobs")
+remote = import_module(MODULE + ".operators.remote")
+imageio = import_module(MODULE + ".core.imageio")
+out = {}
+
+# Preferences: where jobs run; a cluster elsewhere is network access, refused while online access is off.
+prefs.worker_type, prefs.ray_address = "RAY", "ray://gpu-head.example:10001"
+try:
+    remote.worker_address(bpy.context)
+except Exception as error:
+    out["offline_refusal"] = [bpy.app.online_access, str(error)]
+prefs.ray_address = "local"
+out["address"] = remote.worker_address(bpy.context)
+ray.init(num_cpus=2, object_store_memory=80 * 2**20, include_dashboard=False, log_to_driver=False)
+
+bpy.ops.wm.read_homefile(use_empty=True)
+bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)
+obj = bpy.context.active_object
+mat = bpy.data.materials.new("AssetMaterial")
+mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.6, 0.3, 0.2, 1.0)
+obj.data.materials.append(mat)
+imageio.write_image(tmp / "photo.png", np.random.default_rng(1).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32))
+s = bpy.context.scene.scenefit
+s.preset, s.photo_path, s.prompt, s.placement = "draft", str(tmp / "photo.png"), "a mossy ball", (0.5, 0.8)
+bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "scene.blend"))
+
+# 1. The Run operator's job, made by its own job_work and driven as its modal timer drives it (no window).
+Run = bpy.types.SCENEFIT_OT_run
+op = SimpleNamespace(job_name=Run.job_name, runs_remotely=Run.runs_remotely, iterations=2, model_resolution=32,
+                     render_size=16)
+t0 = time.perf_counter()
+work, data = Run.job_work(op, bpy.context)
+out["handed_off"] = [work.__module__, op._remote]
+data["overrides"]["adapt"].update(preview_every=1)   # a preview at every step
+job = jobs.start_job(jobs.Job("run", work, data))
+seen, previews = [], 0
+while not job.poll().finished:
+    state = job.state
+    jobs_ui.update_runtime(bpy.context, state)   # what the modal timer does: WindowManager + preview icon
+    seen.append([state.stage, round(state.fraction, 3)])
+    time.sleep(0.05)
+state = job.state
+jobs.release_job(job)
+jobs_ui.update_runtime(bpy.context, state)
+rt = bpy.context.window_manager.scenefit_runtime
+out["run"] = {"status": state.status, "error": state.error, "stages": sorted({s for s, _ in seen if s}),
+              "fractions": [f for _, f in seen], "has_preview": rt.has_preview, "preview_serial": state.preview_serial,
+              "seconds": round(time.perf_counter() - t0, 1)}
+if state.status == "done":
+    out["run_message"] = Run.apply_result(op, bpy.context, state.result)   # main thread, as _finish does
+    out["run_material"] = [obj.active_material.name, obj.active_material.get("scenefit"),
+                           sorted(n.image.filepath for n in obj.active_material.node_tree.nodes
+                                  if n.type == "TEX_IMAGE" and n.image)]
+    out["run_world"] = [bpy.context.scene.world.name if bpy.context.scene.world else None]
+    out["run_report"] = state.result["report"]
+
+# 2. Cancel: a long job stops at the worker, nothing comes back, Blender's data unchanged.
+materials_before = sorted(m.name for m in bpy.data.materials)
+op_long = SimpleNamespace(job_name="run", iterations=100000, model_resolution=0, render_size=0)
+work, data = remote.remote_work(op_long, bpy.context, out["address"])
+job = jobs.start_job(jobs.Job("run", work, data))
+t0 = time.perf_counter()
+while job.poll().step < 1 and time.perf_counter() - t0 < 120:
+    time.sleep(0.05)
+job.cancel()
+t1 = time.perf_counter()
+state = job.wait(60)
+jobs.release_job(job)
+out["cancel"] = {"status": state.status, "seconds_to_stop": round(time.perf_counter() - t1, 1),
+                 "folder_left": sorted(p.name for p in Path(data["out"]).iterdir()),
+                 "materials_unchanged": sorted(m.name for m in bpy.data.materials) == materials_before}
+out["user_material_kept"] = "AssetMaterial" in bpy.data.materials
+ray.shutdown()
+print("JSON" + json.dumps(out, default=str))
+"""
+
+
+@pytest.fixture(scope="module")
+def handed_off(run_py, tmp_path_factory):
+    pytest.importorskip("ray", reason="Ray is not installed (pip install 'scenefit[ray]'): no cluster to hand jobs to")
+    sys.path.insert(0, str(ROOT / "tools"))
+    import build_extension
+    from scenefit.devtools.tiny_models import build_tiny_pair
+
+    tmp = tmp_path_factory.mktemp("remote_blender")
+    zip_path = build_extension.build_without_wheels(tmp / "scenefit.zip")
+    build_tiny_pair(tmp / "tiny")
+    user = tmp / "blender_user"
+    user.mkdir()
+    code = (SCRIPT.replace("TMP", repr(str(tmp))).replace("ZIP", repr(str(zip_path)))
+            .replace("TINY", repr(str(tmp / "tiny"))))
+    proc = run_py(code, env={"BLENDER_USER_RESOURCES": str(user)}, timeout=600)
+    line = next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))
+    return tmp, json.loads(line[4:])
+
+
+def test_preferences_choose_the_worker_and_respect_online_access(handed_off):
+    _, out = handed_off
+    assert out["address"] == "local"
+    assert out["handed_off"] == ["bl_ext.user_default.scenefit.core.remote", True]   # Run's job_work chose Ray
+    online, message = out["offline_refusal"]
+    assert online is False and "online access is off" in message and "gpu-head.example" in message
+
+
+def test_run_on_ray_streams_progress_and_previews_and_applies_the_results(handed_off):
+    tmp, out = handed_off
+    run = out["run"]
+    print("remote run:", run["seconds"], "s;", out.get("run_message"))
+    assert run["status"] == "done", run["error"]
+    assert {"convert", "light", "adapt"} <= set(run["stages"])          # the worker's stages, in the panel
+    assert run["has_preview"] and run["preview_serial"] >= 1             # adapt's previews reached the icon
+    assert len(run["fractions"]) > 3 and max(run["fractions"]) <= 1.0
+    report = out["run_report"]
+    assert report["status"] == "done" and report["worker"]["pid"] != 0
+    assert report["stages"]["run"]["stages"]["adapt"]["status"] == "ran"
+    name, tag, images = out["run_material"]
+    assert tag == "adapt" and name != "AssetMaterial"
+    assert images and all(p.startswith("//scenefit/") for p in images)   # next to the .blend, relative
+    assert all((tmp / p[2:]).is_file() for p in images)
+    assert out["run_world"][0] == "SceneFit Light" and out["user_material_kept"]
+
+
+def test_cancel_stops_the_worker_and_brings_nothing_back(handed_off):
+    _, out = handed_off
+    cancel = out["cancel"]
+    print("cancel:", cancel)
+    assert cancel["status"] == "cancelled", cancel
+    assert cancel["folder_left"] == [] and cancel["materials_unchanged"]
+
+
