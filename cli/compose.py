@@ -7,7 +7,7 @@ from .options import PRESETS, add_asset_args, load_asset, progress
 
 
 def run(args) -> int:
-    from ..core.compose import ComposeInputs, compose_preset, compose_to_folder, light_camera
+    from ..core.compose import COMPOSE_MAX_SIDE, ComposeInputs, compose_preset, compose_to_folder, light_camera
     from ..core.convert import target_stack
     from ..core.lighting import load_photo
     from ..core.mesh import normalize_to_unit_sphere
@@ -18,9 +18,9 @@ def run(args) -> int:
     config = compose_preset(args.preset, size=args.size, shadow_type=args.shadow, spp=args.spp,
                             sampler_type=args.sampler, denoiser_type=args.denoiser, exposure=args.exposure)
     mesh, maps = load_asset(args.asset, args.object)
-    photo, info = load_photo(args.photo)
+    photo, info = load_photo(args.photo, max_side=COMPOSE_MAX_SIDE)
     h, w = photo.shape[:2]
-    placement = Placement.parse(args.at, (w, h)).pixel((h, w))
+    placement = Placement.parse(args.at, tuple(info["size"])).pixel((h, w))
     envmap = load_environment(args.light)
     camera, camera_source = light_camera(args.light, info, w, h, args.fov,
                                          -args.elevation if args.elevation is not None else None)

@@ -259,7 +259,7 @@ def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
                                                      "convert", {})), progress, cancel)
     if "light" in job.stages:
         photo, info = load_photo(job.photo)
-        placement = Placement.parse(job.at, (photo.shape[1], photo.shape[0])).pixel(photo.shape[:2])
+        placement = Placement.parse(job.at, tuple(info["size"])).pixel(photo.shape[:2])
         config = stage_config("light", job.preset, **{"critic_type": "none", **job.overrides.get("light", {})})
         result = estimate_light(photo, placement, config, photo_info=info, progress=progress, cancel=cancel)
         reports["light"] = light_report(result, config, write_light_outputs(result, out / "light"))

@@ -145,7 +145,7 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     """
     from dataclasses import replace
 
-    from .compose import ComposeInputs, compose_preset, compose_to_folder, light_camera
+    from .compose import COMPOSE_MAX_SIDE, ComposeInputs, compose_preset, compose_to_folder, light_camera
     from .presets import stage_config
     from .guidance.models import models_available
     from .lighting import estimate_light, light_report, load_photo, write_light_outputs
@@ -160,7 +160,8 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     # Everything that can be wrong with the inputs is found before any work.
     photo, photo_info = load_photo(photo_path)
     h, w = photo.shape[:2]
-    placement_px = Placement.parse(placement, (w, h)).pixel((h, w))
+    placement = Placement.parse(placement, tuple(photo_info["size"]))   # pixels of the photo as stored
+    placement_px = placement.pixel((h, w))                               # ... in the light stage's copy
     compose_config = compose_preset(config.preset, **{"size": config.size, "shadow_type": config.shadow_type,
                                                       "spp": config.compose_spp, **config.overrides("compose")})
     if config.guidance_type == "sd2":
@@ -247,8 +248,11 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
 
     def compose(folder: Path) -> dict:
         stack = texture_maps_for_mesh(load_neural_texture(texture_path), normalized)
-        camera, camera_from = light_camera(light_path, photo_info, w, h)
-        return compose_to_folder(ComposeInputs(mesh, stack, photo, placement_px, load_environment(light_path), camera),
+        full, _ = load_photo(photo_path, max_side=COMPOSE_MAX_SIDE)   # the composite is at the photo's size
+        fh, fw = full.shape[:2]
+        camera, camera_from = light_camera(light_path, photo_info, fw, fh)
+        return compose_to_folder(ComposeInputs(mesh, stack, full, placement.pixel((fh, fw)),
+                                               load_environment(light_path), camera),
                                  compose_config, folder, {"inputs": {"texture": str(texture_path), "light": str(light_path),
                                                                      "camera_from": camera_from}},
                                  progress=progress, cancel=cancel)

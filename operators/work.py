@@ -39,7 +39,7 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
 
     photo, info = load_photo(data["photo"])
     h, w = photo.shape[:2]
-    placement = Placement.parse(tuple(data["placement"]), (w, h)).pixel((h, w))
+    placement = Placement.parse(tuple(data["placement"]), tuple(info["size"])).pixel((h, w))
     critic = data.get("critic", "auto")
     if critic == "auto":  # the diffusion critic when its weights are on this machine (never downloads)
         critic = "diffusion" if models_available(data["models"], need_inpaint=False)[0] else "none"
