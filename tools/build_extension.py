@@ -44,9 +44,12 @@ DIST = ROOT / "dist"
 # What the extension needs at run time (not bpy, pytest or matplotlib: development only).
 RUNTIME = [
     "mitsuba", "drjit", "torch", "diffusers", "transformers", "peft", "accelerate",
-    "opencv-contrib-python-headless", "OpenImageIO", "openai",
+    "opencv-contrib-python-headless", "OpenImageIO", "openai", "pyoidn",
 ]
 LEFT_OUT = {"numpy": "Blender ships numpy"}
+# Bundled on every platform the registry has a wheel for, left out (said so) where it has none: the
+# composite is then made without denoising's help (pyoidn 2.5.1.0 has no Linux arm64 wheel).
+WHERE_PUBLISHED = {"pyoidn"}
 
 # Blender platform -> pip platform tags (pip does not expand manylinux_2_x to older glibc tags itself)
 # and the marker environment of that platform.
@@ -64,7 +67,7 @@ PLATFORMS: dict[str, tuple[list[str], dict[str, str]]] = {
         {"sys_platform": "win32", "platform_system": "Windows", "platform_machine": "AMD64", "os_name": "nt"},
     ),
     "macos-arm64": (
-        ["macosx_11_0_arm64"],
+        ["macosx_12_0_arm64", "macosx_11_0_arm64"],   # pyoidn's arm64 wheel is for macOS 12
         {"sys_platform": "darwin", "platform_system": "Darwin", "platform_machine": "arm64", "os_name": "posix"},
     ),
     "macos-x64": (
@@ -158,7 +161,13 @@ def download(platform: str) -> list[Path]:
         else:
             spec = preferred(req)
             print(f"  {platform}: {spec}", flush=True)
-            got[key] = pip_download(spec, platform)
+            try:
+                got[key] = pip_download(spec, platform)
+            except subprocess.CalledProcessError:
+                if key not in WHERE_PUBLISHED:
+                    raise
+                print(f"  {platform}: {spec} has no wheel for this platform; left out", flush=True)
+                continue
         for dep in wheel_requirements(got[key]):
             if applies(dep, platform, extras[key]):
                 todo.append(dep)
