@@ -43,6 +43,7 @@ from .imageio import linear_to_srgb, srgb_to_linear
 from .lighting.panorama import CAMERA_HEIGHT, pixel_ray, place_on_floor
 from .mesh import Mesh, normalize_to_unit_sphere, vertex_normals
 from .photo import PhotoCamera
+from .placement import DEFAULT_OBJECT_SIZE
 from .progress import ProgressCallback, check_cancel, emit
 from .render import ENVMAP_TO_WORLD, _bitmap_texture, _mitsuba_mesh
 
@@ -57,7 +58,7 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
 
 @dataclass(frozen=True)
 class ComposeConfig:
-    size: float = 0.3                 # fraction of the photo's height the asset spans
+    size: float = DEFAULT_OBJECT_SIZE  # fraction of the photo's height the asset spans
     shadow_type: str = "ratio"
     spp: int | None = None            # None: chosen from noise_target by a pilot render
     noise_target: float = 0.03        # RMS noise of the raw object render, display sRGB units
@@ -79,7 +80,8 @@ class ComposeConfig:
 
     def __post_init__(self) -> None:
         if not 0.0 < self.size <= 2.0:
-            raise InputError(f"--size is the fraction of the photo's height the asset spans, in (0, 2]; got {self.size}.")
+            raise InputError(f"--object-size is the fraction of the photo's height the asset spans, in (0, 2]; "
+                             f"got {self.size}.")
         if self.shadow_type not in SHADOW_TYPES:
             raise InputError(f"shadow_type must be one of {', '.join(SHADOW_TYPES)}, got {self.shadow_type!r}.")
         if self.sampler_type not in SAMPLER_TYPES:

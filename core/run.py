@@ -28,6 +28,7 @@ from .guidance.models import GuidanceModels, ModelCache, ModelConfig
 from .maps import PBRMaps
 from .mesh import Mesh
 from .photo import PhotoCamera
+from .placement import DEFAULT_OBJECT_SIZE
 from .progress import ProgressCallback, check_cancel, emit
 
 GUIDANCE_TYPES = ("auto", "sd2", "none")
@@ -40,7 +41,7 @@ class RunConfig:
     preset: str = "balanced"                  # draft | balanced | final, for every stage
     prompt: str = ""                          # adapt: what the asset should become in this scene
     guidance_type: str = "auto"               # adapt (and the light critic): sd2 | none | auto (sd2 when found)
-    size: float = 0.3                         # compose: fraction of the photo's height the asset spans
+    size: float = DEFAULT_OBJECT_SIZE         # compose: fraction of the photo's height the asset spans (--object-size)
     shadow_type: str = "ratio"
     compose_spp: int | None = None
     photo_camera: PhotoCamera | None = None   # None: the light stage's default camera for the photo

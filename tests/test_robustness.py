@@ -223,6 +223,22 @@ def test_bad_options_are_refused_before_any_work(tmp_path, asset, capsys, args):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("command", ["light", "adapt", "compose", "run"])
+def test_at_and_object_size_mean_one_thing_in_every_command(command):
+    from scenefit.cli import build_parser
+    from scenefit.core.placement import Placement
+
+    parser = build_parser()
+    action = {a.dest: a for a in parser._subparsers._group_actions[0].choices[command]._actions}
+    assert action["at"].type("0.5,0.7") == (0.5, 0.7) and action["at"].type("640,480") == (640.0, 480.0)
+    assert ("object_size" in action) == (command != "light")      # light has no use for the object's size
+    assert "size" not in action or command not in ("compose", "run")
+    # Pixels are pixels of the photo as stored: 640,480 in a 1280x960 photo is its centre.
+    assert Placement.parse((640.0, 480.0), (1280, 960)).center == (0.5, 0.5)
+    with pytest.raises(InputError, match="mixes a fraction and a pixel"):
+        Placement.parse("1.5,0.5", (1280, 960))
+
+
 def test_light_takes_fractions_like_adapt(tmp_path, capsys):
     photo = tmp_path / "photo.png"
     write_image(photo, np.full((8, 8, 3), 0.5, np.float32))
