@@ -88,7 +88,7 @@ def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monk
     import scenefit.core.compose as compose
     from scenefit.cli import main
 
-    maps = PBRMaps(np.full((8, 8, 3), 0.5, np.float32), 0.5, 0.0)
+    maps = PBRMaps(np.full((64, 64, 3), 0.5, np.float32), 0.5, 0.0)
     asset = save_asset_folder(uv_sphere(0.5, 12, 6), maps, tmp_path / "asset")
     photo_path = write_image(tmp_path / "photo.png", np.full((48, 64, 3), 0.5))
     out = tmp_path / "run"
@@ -106,4 +106,8 @@ def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monk
     assert not (out / "compose" / "stage.json").exists()
     monkeypatch.undo()
     assert main(args) == 0
-    assert json.loads((out / "report.json").read_text())["reused"] == ["convert", "light"]
+    report = json.loads((out / "report.json").read_text())
+    assert report["reused"] == ["convert", "light"]
+    # Only what the scene needs: the asset spans 0.3 x 48 = 14 px of the composite, so 32 texels, not its 64.
+    decisions = report["stages"]["convert"]["report"]["decisions"]
+    assert decisions["resolution"] == 32 and "14 px tall in the composite" in decisions["resolution_reason"]
