@@ -69,10 +69,11 @@ def remote_work(op, context, address: str) -> tuple:
 
     # The worker finds the models in its own cache and on its own device.
     models = replace(models, cache_dir=None, device_type="auto")
-    name = bpy.path.clean_name(obj.name)
+    # The job's folder comes back whole as this run's new folder (nothing of it while it runs or if cancelled).
+    folder = run_folder(context, op.job_name, obj.name)
     return work_remotely, {
         "mesh": mesh, "maps": maps, "photo": str(photo), "at": tuple(settings.placement), "worker": address,
-        "out": str(run_folder(context, op.job_name, obj.name)), "name": name, "preset": settings.preset,
+        "out": str(folder.parent), "name": folder.name, "preset": settings.preset,
         "stages": REMOTE_STAGES, "prompt": settings.prompt, "models": models, "overrides": quick_overrides(op)}
 
 

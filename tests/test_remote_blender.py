@@ -96,7 +96,7 @@ t1 = time.perf_counter()
 state = job.wait(60)
 jobs.release_job(job)
 out["cancel"] = {"status": state.status, "seconds_to_stop": round(time.perf_counter() - t1, 1),
-                 "folder_left": sorted(p.name for p in Path(data["out"]).iterdir()),
+                 "folder_left": (Path(data["out"]) / data["name"]).exists(),
                  "materials_unchanged": sorted(m.name for m in bpy.data.materials) == materials_before}
 out["user_material_kept"] = "AssetMaterial" in bpy.data.materials
 ray.shutdown()
@@ -144,7 +144,7 @@ def test_run_on_ray_streams_progress_and_previews_and_applies_the_results(handed
     assert report["stages"]["run"]["stages"]["adapt"]["status"] == "ran"
     name, tag, images = out["run_material"]
     assert tag == "adapt" and name != "AssetMaterial"
-    assert images and all(p.startswith("//scenefit/") for p in images)   # next to the .blend, relative
+    assert images and all(p.startswith("//scenefit/Sphere/run-") for p in images)   # next to the .blend, relative
     assert all((tmp / p[2:]).is_file() for p in images)
     assert out["run_world"][0] == "SceneFit Light" and out["user_material_kept"]
 
@@ -154,6 +154,6 @@ def test_cancel_stops_the_worker_and_brings_nothing_back(handed_off):
     cancel = out["cancel"]
     print("cancel:", cancel)
     assert cancel["status"] == "cancelled", cancel
-    assert cancel["folder_left"] == [] and cancel["materials_unchanged"]
+    assert cancel["folder_left"] is False and cancel["materials_unchanged"]
 
 
