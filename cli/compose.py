@@ -3,11 +3,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import PRESETS, add_asset_args, load_asset, progress
+from .options import PRESETS, add_asset_args, add_photo_args, load_asset, progress
 
 
 def run(args) -> int:
-    from ..core.compose import ComposeInputs, compose_preset, compose_to_folder, light_camera
+    from ..core.compose import ComposeInputs, compose_to_folder, light_camera
     from ..core.convert import target_stack
     from ..core.lighting import load_photo
     from ..core.mesh import normalize_to_unit_sphere
@@ -15,7 +15,9 @@ def run(args) -> int:
     from ..core.placement import Placement
     from ..core.texture.bake import load_neural_texture, texture_maps_for_mesh
 
-    config = compose_preset(args.preset, size=args.size, shadow_type=args.shadow, spp=args.spp,
+    from ..core.presets import stage_config
+
+    config = stage_config("compose", args.preset, size=args.size, shadow_type=args.shadow, spp=args.spp,
                             sampler_type=args.sampler, denoiser_type=args.denoiser, exposure=args.exposure)
     mesh, maps = load_asset(args.asset, args.object)
     photo, info = load_photo(args.photo)
@@ -47,10 +49,8 @@ def add_parser(sub) -> None:
     p = sub.add_parser("compose", help="render the asset into the photo under the estimated light, with its shadow")
     add_asset_args(p)
     p.add_argument("--texture", help="a texture.pt (convert/adapt output) to render instead of the asset's own maps")
-    p.add_argument("--photo", required=True, help="the scene photo")
-    p.add_argument("--at", required=True, help="X,Y where the asset stands: fractions of width,height (or pixels)")
+    add_photo_args(p, "output folder: composite.png/.exr, layers/, report.json")
     p.add_argument("--light", required=True, help="light.exr from `scenefit light` (its report.json gives the camera)")
-    p.add_argument("--out", required=True, help="output folder: composite.png/.exr, layers/, report.json")
     p.add_argument("--size", type=float, help="fraction of the photo's height the asset spans (default 0.3)")
     p.add_argument("--preset", choices=PRESETS, default="balanced", help="noise target and sample cap")
     p.add_argument("--shadow", choices=SHADOW_TYPES, help="ratio (shadow catcher, default), paper (thresholded), none")

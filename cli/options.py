@@ -166,6 +166,20 @@ def add_elevation_arg(p: argparse.ArgumentParser, default: float | None = None) 
                         + (f" (default {default:g})" if default is not None else " (default: the stage's)"))
 
 
+def add_orbit_camera_args(p: argparse.ArgumentParser, size: int, spp: int) -> None:
+    """The orbit camera of `render` and `export`: --elevation (default 15), --size (pixels), --spp."""
+    add_elevation_arg(p, default=15.0)
+    p.add_argument("--size", type=positive_int, default=size, help=f"image side in pixels (default {size})")
+    p.add_argument("--spp", type=positive_int, default=spp, help=f"samples per pixel (default {spp})")
+
+
+def add_photo_args(p: argparse.ArgumentParser, out_help: str) -> None:
+    """The scene of `compose` and `run`: --photo, --at (where the asset stands) and --out, all required."""
+    p.add_argument("--photo", required=True, help="the scene photo")
+    p.add_argument("--at", required=True, help="X,Y where the asset stands: fractions of width,height (or pixels)")
+    p.add_argument("--out", required=True, help=out_help)
+
+
 def add_placement_args(p: argparse.ArgumentParser, required: bool = False) -> None:
     """Where the object goes in the photo (core/placement.py): --at and --object-size."""
     from ..core.placement import DEFAULT_AT, DEFAULT_SIZE

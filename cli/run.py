@@ -6,8 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .options import (PRESETS, add_asset_args, add_model_args, add_prompt_service_args, load_asset, model_config,
-                      progress, scene_conditional_prompt)
+from .options import (add_asset_args, add_model_args, add_photo_args, add_preset_args, add_prompt_service_args,
+                      load_asset, model_config, progress, scene_conditional_prompt)
 
 
 def run_config(args):
@@ -74,14 +74,12 @@ def add_parser(sub) -> None:
 
     p = sub.add_parser("run", help="convert, light, adapt, compose and bake in one go (resumable)")
     add_asset_args(p)
-    p.add_argument("--photo", required=True, help="the scene photo")
-    p.add_argument("--at", required=True, help="X,Y where the asset stands: fractions of width,height (or pixels)")
-    p.add_argument("--out", required=True, help="output folder; a second run with the same settings reuses stages")
+    add_photo_args(p, "output folder; a second run with the same settings reuses stages")
     p.add_argument("--prompt", help="what the asset should become in this scene (adapt; default from its name)")
     p.add_argument("--object-prompt", help="the object, e.g. 'a leather sofa': without --prompt, a language model "
                                            "writes the prompt from it and --scene-prompt (or the photo)")
     p.add_argument("--scene-prompt", help="the scene, e.g. 'a swamp'")
-    p.add_argument("--preset", choices=PRESETS, default="balanced")
+    add_preset_args(p)
     p.add_argument("--guidance", choices=("auto", "sd2", "none"), default="auto",
                    help="adapt with Stable Diffusion 2 (sd2), not at all (none), or when its weights are here (auto)")
     p.add_argument("--size", type=float, default=0.3, help="fraction of the photo's height the asset spans")

@@ -2,9 +2,10 @@
 
 `--at X,Y` on every command and the Blender panel's placement mean the object's centre in the
 photo, as fractions of its width and height (values above 1 are read as pixels); `--size` is the
-side of the object's square rendering as a fraction of the photo's height. The light stage casts
-its floor ray through the centre (core/lighting/panorama.py `place_on_floor`); the adapt stage
-composites the object's rendering into that square (core/guidance/views.py `global_view`).
+fraction of the photo's height the asset spans. The light stage casts its floor ray through the
+centre (core/lighting/panorama.py `place_on_floor`); the compose stage stands the asset on the floor
+there (core/compose.py `place_asset`), and the adapt stage's global views are that composite
+(core/adapt/global_views.py). `box` is the square the light stage's critic views are cut around.
 """
 from __future__ import annotations
 

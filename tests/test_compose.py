@@ -155,3 +155,13 @@ def test_photo_camera_projection_inverts_its_pixel_rays():
     for x, y in ((0.5, 0.5), (100.25, 7.0), (64.0, 95.5)):
         point = origin + 3.7 * pixel_ray(CAMERA, x, y)
         np.testing.assert_allclose(CAMERA.project(point[None], origin)[0], [x, y], atol=1e-9)
+
+
+def test_compose_presets_are_the_one_preset_table_and_unset_options_keep_them():
+    from scenefit.core.presets import stage_config
+
+    draft, final = stage_config("compose", "draft"), stage_config("compose", "final", size=0.5, spp=None)
+    assert draft.noise_target > final.noise_target and draft.max_spp < final.max_spp
+    assert final.size == 0.5 and final.spp is None and final.noise_target == 0.015
+    with pytest.raises(InputError, match="preset"):
+        stage_config("compose", "best")
