@@ -221,6 +221,7 @@ while job.poll().step < 2:
 job.cancel()
 out["cancelled"] = job.wait(30).status
 jobs.release_job(job)
+out["cancel_left"] = sorted(p.name for p in tmp.iterdir() if "job_cancel" in p.name)  # written beside: nothing
 job = jobs.start_job(jobs.Job("light", work.estimate_light, {"photo": str(tmp / "missing.png")}))
 state = job.wait(30)
 jobs.release_job(job)
@@ -354,7 +355,7 @@ def test_the_job_path_reports_progress_cancels_fails_cleanly_and_never_touches_b
     assert out["worker_touched_bpy"] == [] and out["control_caught"]
     assert out["job_material"].startswith("Sphere SceneFit convert")
     assert out["runtime"] == [True, 0.5, "convert: fit 3/6", True, [8, 8]]
-    assert out["cancelled"] == "cancelled"
+    assert out["cancelled"] == "cancelled" and out["cancel_left"] == []
     status, error = out["error"]
     assert status == "failed" and "missing.png" in error and "Traceback" not in error
     assert out["after_load"] == ["cancelled", True, False]
