@@ -73,7 +73,7 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
             out_file = Path(f"{bpy.path.clean_name(obj.name)}.{self.file_format}")
         self._object_name, self._slots, self._out_file = obj.name, slots, out_file
         return work.bake_game_maps, {"texture": str(texture), "mesh": mesh, "names": [material.name],
-                                     "size": self.texture_size, "constants": [sorted(constant_channels(material))]}
+                                     "size": self.texture_size, "constants": [constant_channels(material)]}
 
     def apply(self, context, result) -> str:
         obj = bpy.data.objects.get(self._object_name)
