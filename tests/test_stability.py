@@ -169,6 +169,27 @@ def test_a_small_lamp_is_found_at_every_preset(preset):
     assert result.hdr.max() > 10.0 * 0.25
 
 
+def light_work(preset: str) -> dict[str, int]:
+    """What the light stage at `preset` does: panorama texels it builds (counted from a run) and the
+    critic's rendered samples when a critic runs (iterations x views x pixels x spp, from the config)."""
+    photo = np.full((240, 320, 3), 0.3, np.float32)
+    photo[40:60, 150:170] = 1.0
+    config = stage_config("light", preset, depth=GEOMETRIC, scene_type="indoor")
+    built = estimate_light(photo, (160.0, 200.0), config).panorama.ldr.shape
+    views = len(config.apparatus.object_azimuths) + 1
+    return {"panorama texels": built[0] * built[1],
+            "critic samples": config.optimise.iterations * views * config.apparatus.render_size ** 2 * config.apparatus.spp}
+
+
+def test_each_light_preset_does_clearly_less_work_than_the_next():
+    """A preset that costs as much as a better one is a bug: draft light used to build balanced's
+    128-row panorama for its 64-row map (same seconds, same error in the bench)."""
+    work = {preset: light_work(preset) for preset in ("draft", "balanced", "final")}
+    for cheaper, dearer in (("draft", "balanced"), ("balanced", "final")):
+        for measure in ("panorama texels", "critic samples"):
+            assert work[cheaper][measure] * 2 <= work[dearer][measure], (cheaper, dearer, measure, work)
+
+
 def test_a_tiny_1e6_spot_in_an_exr_photo_is_kept(tmp_path):
     radiance = np.full((480, 640, 3), 0.5, np.float32)
     radiance[100:102, 301:303] = 1e6                      # 2x2 px
