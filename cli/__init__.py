@@ -34,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except (Cancelled, KeyboardInterrupt):
-        print(f"\nscenefit: {interrupted_message(args.out, getattr(args, 'resumable', False))}"
+        print(f"\nscenefit: {interrupted_message(args.out, getattr(args, 'resumable', False), getattr(args, 'by_stage', False))}"
               if getattr(args, "out", None) else "\nscenefit: interrupted.", file=sys.stderr)
         return 130
     except SceneFitError as error:

@@ -61,7 +61,7 @@ def _adapt(args, out: Path) -> int:
     texture = load_neural_texture(args.texture) if args.texture else None
     photo = where = None
     if args.photo:
-        photo = linear_to_srgb(np.clip(read_color_image(args.photo), 0.0, 1.0))
+        photo = linear_to_srgb(np.clip(read_color_image(args.photo, upright=True), 0.0, 1.0))
         where = placement(args, photo.shape[:2])
     env = environment(args)[0] if args.envmap else None
     result, report = adapt_and_bake(mesh, texture, config, out, photo=photo, placement=where,
@@ -77,6 +77,8 @@ def _adapt(args, out: Path) -> int:
 
 
 def add_parser(sub) -> None:
+    from ..core.placement import DEFAULT_SIZE
+
     p = sub.add_parser("adapt", help="restyle a converted texture with diffusion guidance (or texture/edit from a "
                                      "prompt); several GPUs: torchrun --nproc_per_node N -m scenefit.cli adapt ...")
     add_asset_args(p, optional=True)
@@ -90,7 +92,7 @@ def add_parser(sub) -> None:
                                           "prompt from the object and scene (edit mode: the instruction)")
     p.add_argument("--instruction", help="edit mode: e.g. 'add dust to the sofa'")
     p.add_argument("--photo", help="scene mode: the photo the object goes into")
-    add_placement_args(p)
+    add_placement_args(p, object_size=DEFAULT_SIZE)
     p.add_argument("--envmap", help="light the object with this HDR map while adapting (e.g. the estimated one)")
     add_preset_args(p)
     p.add_argument("--iterations", type=positive_int)

@@ -3,11 +3,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import PRESETS, add_asset_args, load_asset, progress
+from .options import PRESETS, add_asset_args, add_placement_args, load_asset, progress
 
 
 def run(args) -> int:
-    from ..core.compose import ComposeInputs, compose_preset, compose_to_folder, light_camera
+    from ..core.compose import COMPOSE_MAX_SIDE, ComposeInputs, compose_preset, compose_to_folder, light_camera
     from ..core.convert import target_stack
     from ..core.lighting import load_photo
     from ..core.mesh import normalize_to_unit_sphere
@@ -15,12 +15,12 @@ def run(args) -> int:
     from ..core.placement import Placement
     from ..core.texture.bake import load_neural_texture, texture_maps_for_mesh
 
-    config = compose_preset(args.preset, size=args.size, shadow_type=args.shadow, spp=args.spp,
+    config = compose_preset(args.preset, size=args.object_size, shadow_type=args.shadow, spp=args.spp,
                             sampler_type=args.sampler, denoiser_type=args.denoiser, exposure=args.exposure)
     mesh, maps = load_asset(args.asset, args.object)
-    photo, info = load_photo(args.photo)
+    photo, info = load_photo(args.photo, max_side=COMPOSE_MAX_SIDE)
     h, w = photo.shape[:2]
-    placement = Placement.parse(args.at, (w, h)).pixel((h, w))
+    placement = Placement.parse(args.at, tuple(info["size"])).pixel((h, w))
     envmap = load_environment(args.light)
     camera, camera_source = light_camera(args.light, info, w, h, args.fov,
                                          -args.elevation if args.elevation is not None else None)
@@ -43,15 +43,15 @@ def run(args) -> int:
 
 def add_parser(sub) -> None:
     from ..core.compose import SAMPLER_TYPES, SHADOW_TYPES
+    from ..core.placement import DEFAULT_OBJECT_SIZE
 
     p = sub.add_parser("compose", help="render the asset into the photo under the estimated light, with its shadow")
     add_asset_args(p)
     p.add_argument("--texture", help="a texture.pt (convert/adapt output) to render instead of the asset's own maps")
     p.add_argument("--photo", required=True, help="the scene photo")
-    p.add_argument("--at", required=True, help="X,Y where the asset stands: fractions of width,height (or pixels)")
+    add_placement_args(p, required=True, object_size=DEFAULT_OBJECT_SIZE)
     p.add_argument("--light", required=True, help="light.exr from `scenefit light` (its report.json gives the camera)")
     p.add_argument("--out", required=True, help="output folder: composite.png/.exr, layers/, report.json")
-    p.add_argument("--size", type=float, help="fraction of the photo's height the asset spans (default 0.3)")
     p.add_argument("--preset", choices=PRESETS, default="balanced", help="noise target and sample cap")
     p.add_argument("--shadow", choices=SHADOW_TYPES, help="ratio (shadow catcher, default), paper (thresholded), none")
     p.add_argument("--spp", type=int, help="samples per pixel (default: from the preset's noise target)")

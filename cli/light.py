@@ -62,7 +62,7 @@ def _light(args, out: Path) -> int:
     critic = critic_choice(args, model_config(args))
     config = resolve_config(args, critic.choice)
     photo, info = load_photo(args.photo)
-    where = placement(args, photo.shape[:2])
+    where = placement(args, (info["size"][1], info["size"][0]))   # --at in pixels means the photo as stored
     result = estimate_light(photo, where.pixel(photo.shape[:2]), config, photo_info=info, progress=progress(args))
     result.decisions["critic"]["choice"] = {"asked": args.critic, "chosen": critic.choice, "why": critic.reason}
     outputs = write_light_outputs(result, out)

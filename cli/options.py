@@ -43,20 +43,15 @@ def positive_float(text: str) -> float:
     return value
 
 
-def placement_fractions(text: str) -> tuple[float, float]:
-    """--at X,Y: where the object stands, as fractions of the photo's width and height (every command)."""
-    parts = text.split(",")
+def placement_point(text: str) -> tuple[float, float]:
+    """--at X,Y: where the object stands (every command; core/placement.py parse_point says what is taken)."""
+    from ..core.errors import InputError
+    from ..core.placement import parse_point
+
     try:
-        x, y = (float(v) for v in parts) if len(parts) == 2 else (None, None)
-    except ValueError:
-        x = y = None
-    if x is None or not (math.isfinite(x) and math.isfinite(y)):
-        raise argparse.ArgumentTypeError(f"takes X,Y as fractions of the photo's width and height, e.g. 0.5,0.7; "
-                                         f"got {text!r}")
-    if not (0.0 <= x <= 1.0 and 0.0 <= y <= 1.0):
-        raise argparse.ArgumentTypeError(f"takes fractions of the photo's width and height between 0 and 1; got "
-                                         f"{text!r}")
-    return x, y
+        return parse_point(text)
+    except InputError as error:
+        raise argparse.ArgumentTypeError(str(error).removeprefix("--at ").rstrip(".")) from None
 
 
 def add_output_args(p: argparse.ArgumentParser, default: str | None = None, help: str = "output folder",
@@ -166,22 +161,25 @@ def add_elevation_arg(p: argparse.ArgumentParser, default: float | None = None) 
                         + (f" (default {default:g})" if default is not None else " (default: the stage's)"))
 
 
-def add_placement_args(p: argparse.ArgumentParser, required: bool = False) -> None:
-    """Where the object goes in the photo (core/placement.py): --at and --object-size."""
-    from ..core.placement import DEFAULT_AT, DEFAULT_SIZE
+def add_placement_args(p: argparse.ArgumentParser, required: bool = False, object_size: float | None = None) -> None:
+    """Where the object goes in the photo (core/placement.py): --at, and --object-size unless the
+    command has no use for it (object_size None)."""
+    from ..core.placement import DEFAULT_AT
 
-    p.add_argument("--at", required=required, type=placement_fractions, default=None if required else DEFAULT_AT,
-                   help="X,Y of the object in the photo: fractions of its width and height"
-                        + ("" if required else f" (default {DEFAULT_AT[0]:g},{DEFAULT_AT[1]:g})"))
-    p.add_argument("--object-size", type=positive_float, default=DEFAULT_SIZE,
-                   help=f"the object's size as a fraction of the photo's height (default {DEFAULT_SIZE:g})")
+    p.add_argument("--at", required=required, type=placement_point, default=None if required else DEFAULT_AT,
+                   help="X,Y of the object in the photo: fractions of its width and height (both <= 1), or pixels of "
+                        "the photo as stored" + ("" if required else f" (default {DEFAULT_AT[0]:g},{DEFAULT_AT[1]:g})"))
+    if object_size is not None:
+        p.add_argument("--object-size", type=positive_float, default=object_size,
+                       help=f"the fraction of the photo's height the object spans (default {object_size:g})")
 
 
 def placement(args, photo_hw: tuple[int, int]):
-    """The Placement of --at and --object-size in a photo of photo_hw (one parser, one error message)."""
-    from ..core.placement import Placement
+    """The Placement of --at and --object-size in a photo of photo_hw, as stored (one parser, one error
+    message)."""
+    from ..core.placement import DEFAULT_SIZE, Placement
 
-    return Placement.parse(args.at, (photo_hw[1], photo_hw[0]), args.object_size)
+    return Placement.parse(args.at, (photo_hw[1], photo_hw[0]), getattr(args, "object_size", DEFAULT_SIZE))
 
 
 def add_dry_run_arg(p: argparse.ArgumentParser) -> None:

@@ -6,8 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .options import (PRESETS, add_asset_args, add_model_args, add_prompt_service_args, load_asset, model_config,
-                      progress, scene_conditional_prompt)
+from .options import (PRESETS, add_asset_args, add_model_args, add_placement_args, add_prompt_service_args, load_asset,
+                      model_config, progress, scene_conditional_prompt)
 
 
 def run_config(args):
@@ -17,7 +17,7 @@ def run_config(args):
 
     prompt, _, written = scene_conditional_prompt(args, "scene")
     config = RunConfig(preset=args.preset, prompt=prompt, guidance_type=args.guidance,
-                       size=args.size, shadow_type=args.shadow, compose_spp=args.spp, models=model_config(args))
+                       size=args.object_size, shadow_type=args.shadow, compose_spp=args.spp, models=model_config(args))
     return config, written
 
 
@@ -71,11 +71,12 @@ def run(args) -> int:
 
 def add_parser(sub) -> None:
     from ..core.compose import SHADOW_TYPES
+    from ..core.placement import DEFAULT_OBJECT_SIZE
 
     p = sub.add_parser("run", help="convert, light, adapt, compose and bake in one go (resumable)")
     add_asset_args(p)
     p.add_argument("--photo", required=True, help="the scene photo")
-    p.add_argument("--at", required=True, help="X,Y where the asset stands: fractions of width,height (or pixels)")
+    add_placement_args(p, required=True, object_size=DEFAULT_OBJECT_SIZE)
     p.add_argument("--out", required=True, help="output folder; a second run with the same settings reuses stages")
     p.add_argument("--prompt", help="what the asset should become in this scene (adapt; default from its name)")
     p.add_argument("--object-prompt", help="the object, e.g. 'a leather sofa': without --prompt, a language model "
@@ -84,10 +85,9 @@ def add_parser(sub) -> None:
     p.add_argument("--preset", choices=PRESETS, default="balanced")
     p.add_argument("--guidance", choices=("auto", "sd2", "none"), default="auto",
                    help="adapt with Stable Diffusion 2 (sd2), not at all (none), or when its weights are here (auto)")
-    p.add_argument("--size", type=float, default=0.3, help="fraction of the photo's height the asset spans")
     p.add_argument("--shadow", choices=SHADOW_TYPES, default="ratio")
     p.add_argument("--spp", type=int, help="compose: samples per pixel (default: from the preset's noise target)")
     p.add_argument("--no-bake", action="store_true", help="skip the game bake (a .glb of the asset with its new texture)")
     add_model_args(p)
     add_prompt_service_args(p, prefix="prompt-")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, by_stage=True)  # an interrupt keeps the finished stages (see the message)

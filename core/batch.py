@@ -233,7 +233,7 @@ def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
                                                  stage_config("convert", job.preset, **overrides), progress, cancel)
     if "light" in job.stages:
         photo, info = load_photo(job.photo)
-        placement = Placement.parse(job.at, (photo.shape[1], photo.shape[0])).pixel(photo.shape[:2])
+        placement = Placement.parse(job.at, tuple(info["size"])).pixel(photo.shape[:2])
         config = stage_config("light", job.preset, critic_type="none")
         result = estimate_light(photo, placement, config, photo_info=info, progress=progress, cancel=cancel)
         reports["light"] = light_report(result, config, write_light_outputs(result, out / "light"))

@@ -43,18 +43,22 @@ from .imageio import linear_to_srgb, srgb_to_linear
 from .lighting.panorama import CAMERA_HEIGHT, pixel_ray, place_on_floor
 from .mesh import Mesh, normalize_to_unit_sphere, vertex_normals
 from .photo import PhotoCamera
+from .placement import DEFAULT_OBJECT_SIZE
 from .progress import ProgressCallback, check_cancel, emit
 from .render import ENVMAP_TO_WORLD, _bitmap_texture, _mitsuba_mesh
 
 SHADOW_TYPES = ("ratio", "paper", "none")
 SAMPLER_TYPES = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
+# The composite is made at the photo's own size up to this long side (a 24 MP photo is halved), which
+# keeps the stage's memory near 1.5 GB; the light stage works on a smaller copy.
+COMPOSE_MAX_SIDE = 4096
 ASSUMED_CAMERA_HEIGHT_M = 1.5   # to state placements in metres: a hand-held camera at chest height
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
 
 
 @dataclass(frozen=True)
 class ComposeConfig:
-    size: float = 0.3                 # fraction of the photo's height the asset spans
+    size: float = DEFAULT_OBJECT_SIZE  # fraction of the photo's height the asset spans
     shadow_type: str = "ratio"
     spp: int | None = None            # None: chosen from noise_target by a pilot render
     noise_target: float = 0.03        # RMS noise of the raw object render, display sRGB units
@@ -69,11 +73,15 @@ class ComposeConfig:
     matte_tolerance: float = 0.01      # darkening below 1% (about one 8-bit level of the photo at most) is
                                        # dropped: the object's faint occlusion of the sky reaches every floor pixel
     exposure: float = 1.0              # multiplies the light map (1: the map is in the photo's exposure)
+    shadow_max_side: int = 1024        # the floor passes render at most this many pixels on the long side and
+                                       # the matte is scaled up: shadows are soft, and a 12 MP floor pass would
+                                       # cost ten times the object pass for no visible change
     seed: int = 0
 
     def __post_init__(self) -> None:
         if not 0.0 < self.size <= 2.0:
-            raise InputError(f"--size is the fraction of the photo's height the asset spans, in (0, 2]; got {self.size}.")
+            raise InputError(f"--object-size is the fraction of the photo's height the asset spans, in (0, 2]; "
+                             f"got {self.size}.")
         if self.shadow_type not in SHADOW_TYPES:
             raise InputError(f"shadow_type must be one of {', '.join(SHADOW_TYPES)}, got {self.shadow_type!r}.")
         if self.sampler_type not in SAMPLER_TYPES:
@@ -93,6 +101,8 @@ class ComposeConfig:
             raise InputError(f"paper_threshold must be in (0, 1], got {self.paper_threshold}.")
         if not self.exposure > 0:
             raise InputError(f"exposure must be positive, got {self.exposure}.")
+        if self.shadow_max_side < 16:
+            raise InputError(f"shadow_max_side must be at least 16 pixels, got {self.shadow_max_side}.")
 
 
 COMPOSE_PRESETS: dict[str, ComposeConfig] = {
@@ -309,9 +319,12 @@ class ComposeJob:
             "ran": floor,
             "why": ("the asset stands on the floor" if floor else
                     "shadow_type none" if config.shadow_type == "none" else self.placement.why)}
-        # The object pass renders the asset's box; the floor passes the floor below the horizon.
+        # The object pass renders the asset's box at the photo's size; the floor passes the floor below
+        # the horizon, at most shadow_max_side pixels across.
         self.object_window = self.placement.pixel_box
-        self.floor_window = (0, horizon_row(self.camera), w, h)
+        scale = min(1.0, config.shadow_max_side / max(w, h))
+        self.floor_camera = replace(self.camera, width=max(1, round(w * scale)), height=max(1, round(h * scale)))
+        self.floor_window = (0, horizon_row(self.floor_camera), self.floor_camera.width, self.floor_camera.height)
         self.object_scene = _scene(mi, self.envmap, self.mesh, self.maps, black=False, floor_albedo=None)
         self.timings["build"] = time.perf_counter() - t0
         self.spp, self.decisions["spp"] = self._choose_spp()
@@ -325,8 +338,8 @@ class ComposeJob:
                                   "integrator": {"type": "path", "max_depth": self.config.max_depth,
                                                  "hide_emitters": True}})
 
-    def _render(self, scene, integrator, window, spp: int, seed: int) -> np.ndarray:
-        sensor = _sensor(self.mi, self.camera, window, self.config.sampler_type, spp)
+    def _render(self, scene, integrator, window, spp: int, seed: int, camera: PhotoCamera | None = None) -> np.ndarray:
+        sensor = _sensor(self.mi, camera or self.camera, window, self.config.sampler_type, spp)
         image = self.mi.render(scene, sensor=sensor, integrator=integrator, spp=spp, seed=seed)
         return np.array(image, dtype=np.float32)
 
@@ -388,7 +401,7 @@ class ComposeJob:
             # the black object reflects nothing. The albedo AOV says which samples met the floor.
             integrator = self.mi.load_dict({"type": "aov", "aovs": "albedo:albedo",
                                             "integrator": {"type": "path", "max_depth": 2, "hide_emitters": True}})
-            image = self._render(scene, integrator, self.floor_window, self.spp, seed)
+            image = self._render(scene, integrator, self.floor_window, self.spp, seed, self.floor_camera)
         self.images[name] = image
         seconds = time.perf_counter() - t0
         self.timings[name] = seconds
@@ -396,8 +409,9 @@ class ComposeJob:
         return {"pass": name, "seconds": seconds}
 
     # -- finish -------------------------------------------------------------------------------------
-    def _full(self, crop: np.ndarray, window: tuple[int, int, int, int], fill: float) -> np.ndarray:
-        h, w = self.photo.shape[:2]
+    def _full(self, crop: np.ndarray, window: tuple[int, int, int, int], fill: float,
+              shape: tuple[int, int] | None = None) -> np.ndarray:
+        h, w = shape or self.photo.shape[:2]
         x0, y0, x1, y1 = window
         out = np.full((h, w) + crop.shape[2:], fill, np.float32)
         out[y0:y1, x0:x1] = crop
@@ -465,6 +479,21 @@ class ComposeJob:
         matte = np.where(shadowed, np.clip(intensity / max(lit_mean, 1e-12), 0.0, 1.0), 1.0).astype(np.float32)
         return np.repeat(matte[..., None], 3, axis=-1)
 
+    def _photo_sized(self, matte: np.ndarray) -> np.ndarray:
+        """The floor passes' matte scaled up to the photo (bilinear: shadows are soft), with pixels the
+        shadow does not reach exactly 1 again, so the photo stays untouched there."""
+        import cv2
+
+        h, w = self.photo.shape[:2]
+        if matte.shape[:2] == (h, w):
+            return matte
+        t0 = time.perf_counter()
+        big = cv2.resize(matte, (w, h), interpolation=cv2.INTER_LINEAR)
+        big = np.where(big >= 1.0 - 1e-5, 1.0, np.clip(big, 0.0, 1.0)).astype(np.float32)
+        self.decisions["shadow_pixels"] = int((big < 1.0).any(axis=-1).sum())
+        self.timings["matte_upsample"] = time.perf_counter() - t0
+        return big
+
     def finish(self) -> ComposeResult:
         if not self.done:
             raise RuntimeError(f"finish() before every pass ran ({len(self.images)} of {len(self.passes)}).")
@@ -472,10 +501,10 @@ class ComposeJob:
         object_rgb, alpha = self._object_layers()
         if "floor_with_object" not in self.images:
             matte = np.ones_like(object_rgb)
-        elif self.config.shadow_type == "ratio":
-            matte = self._full(self._ratio_matte(), self.floor_window, 1.0)
         else:
-            matte = self._full(self._paper_matte(), self.floor_window, 1.0)
+            matte = self._ratio_matte() if self.config.shadow_type == "ratio" else self._paper_matte()
+            matte = self._photo_sized(self._full(matte, self.floor_window, 1.0,
+                                                 (self.floor_camera.height, self.floor_camera.width)))
         photo_linear = srgb_to_linear(self.photo).astype(np.float32)
         composite = object_rgb + (1.0 - alpha[..., None]) * photo_linear * matte
         changed = (alpha > 0) | (matte < 1.0).any(axis=-1)
@@ -501,7 +530,9 @@ class ComposeJob:
             "decisions": {"spp": self.decisions["spp"]},
             "changed_pixels": int(changed.sum()),
             "render_windows": {"object": list(self.object_window),
-                               **({"floor": list(self.floor_window)} if "floor_with_object" in self.images else {})},
+                               **({"floor": list(self.floor_window),
+                                   "floor_size": [self.floor_camera.width, self.floor_camera.height]}
+                                  if "floor_with_object" in self.images else {})},
             "mitsuba_variant": self.backend.variant,
             "timings_seconds": {k: round(v, 3) for k, v in self.timings.items()},
         }

@@ -22,8 +22,12 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, x * 12.92, 1.055 * np.power(x, 1.0 / 2.4) - 0.055).astype(np.float32)
 
 
-def read_image(path: str | os.PathLike, max_side: int | None = None) -> np.ndarray:
+def read_image(path: str | os.PathLike, max_side: int | None = None, upright: bool = False) -> np.ndarray:
     """Pixels as float32 (H, W, C) exactly as stored (8-bit files scaled to [0, 1], no colour change).
+
+    upright: turn the pixels as the file's EXIF Orientation says, as a photo viewer shows them (a
+    phone's portrait photo is stored sideways with Orientation 6). For photos only: textures are
+    used as stored, as Blender and glTF viewers do.
 
     Colour channels of RGBA files are read as stored, not multiplied by alpha (OpenImageIO's
     default would darken them wherever alpha < 1).
@@ -48,6 +52,7 @@ def read_image(path: str | os.PathLike, max_side: int | None = None) -> np.ndarr
             try:
                 pixels = _read_reduced(inp, max_side)
                 reason = inp.geterror()
+                orientation = inp.spec().get_int_attribute("Orientation", 1)
             finally:
                 inp.close()
         else:
@@ -59,7 +64,20 @@ def read_image(path: str | os.PathLike, max_side: int | None = None) -> np.ndarr
     pixels = np.asarray(pixels, dtype=np.float32)
     if pixels.ndim == 2:
         pixels = pixels[..., None]
+    if upright and orientation != 1:
+        pixels = _reoriented(pixels, orientation)
     return pixels
+
+
+def _reoriented(pixels: np.ndarray, orientation: int) -> np.ndarray:
+    import OpenImageIO as oiio
+
+    h, w, c = pixels.shape
+    buf = oiio.ImageBuf(oiio.ImageSpec(w, h, c, oiio.FLOAT))
+    buf.set_pixels(oiio.ROI(), np.ascontiguousarray(pixels))
+    buf.specmod().attribute("Orientation", int(orientation))
+    return np.asarray(oiio.ImageBufAlgo.reorient(buf).get_pixels(oiio.FLOAT), np.float32).reshape(
+        (w, h, c) if orientation >= 5 else (h, w, c))   # 5-8 swap width and height
 
 
 def reduction_factor(width: int, height: int, max_side: int | None) -> int:
@@ -92,9 +110,10 @@ def _first_line(text: str) -> str:
     return lines[0] if lines else ""
 
 
-def read_color_image(path: str | os.PathLike) -> np.ndarray:
-    """RGB as linear float32: 8/16-bit files are decoded from sRGB, float files (EXR/HDR) taken as linear."""
-    pixels = read_image(path)
+def read_color_image(path: str | os.PathLike, upright: bool = False) -> np.ndarray:
+    """RGB as linear float32: 8/16-bit files are decoded from sRGB, float files (EXR/HDR) taken as linear.
+    upright: as `read_image` (for photos)."""
+    pixels = read_image(path, upright=upright)
     if pixels.shape[2] == 1:
         pixels = np.repeat(pixels, 3, axis=2)
     rgb = pixels[..., :3]

@@ -171,8 +171,12 @@ def output_folder(out: str | os.PathLike, replace: bool = False, resume: bool = 
         lock.release()
 
 
-def interrupted_message(out: str | os.PathLike, resumable: bool = False) -> str:
-    """What the user is told after Ctrl-C or a cancel inside `output_folder`."""
+def interrupted_message(out: str | os.PathLike, resumable: bool = False, by_stage: bool = False) -> str:
+    """What the user is told after Ctrl-C or a cancel inside `output_folder` (by_stage: `scenefit run`,
+    whose finished stages stay in `out` with their stage.json and are reused by the next run)."""
+    if by_stage:
+        return (f"interrupted; the stages finished so far are kept in '{out}' and the unfinished one is redone: "
+                "run the same command again to resume.")
     if resumable:
         return (f"interrupted; '{out}' is unchanged and the progress so far is kept: run the same command again "
                 "to resume.")

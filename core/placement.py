@@ -8,12 +8,14 @@ composites the object's rendering into that square (core/guidance/views.py `glob
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from .errors import InputError
 
 DEFAULT_AT = (0.5, 0.6)
-DEFAULT_SIZE = 0.4
+DEFAULT_SIZE = 0.4          # adapt: the side of the square the object is rendered into, / photo height
+DEFAULT_OBJECT_SIZE = 0.3   # compose and run: the asset's height in the composite, / photo height
 
 
 @dataclass(frozen=True)
@@ -33,18 +35,12 @@ class Placement:
 
     @classmethod
     def parse(cls, at: str | tuple[float, float], photo_wh: tuple[int, int], size: float = DEFAULT_SIZE) -> "Placement":
-        """From `X,Y` (or a pair): fractions of the width and height when both are <= 1, else pixels."""
-        if isinstance(at, str):
-            try:
-                x, y = (float(v) for v in at.split(","))
-            except ValueError:
-                raise InputError(f"--at takes X,Y (fractions of the photo's width and height, or pixels), "
-                                 f"got {at!r}.") from None
-        else:
-            x, y = (float(v) for v in at)
+        """From `X,Y` (or a pair): fractions of the width and height when both are <= 1, pixels of the
+        photo as stored (photo_wh, upright) when both are > 1."""
+        x, y = parse_point(at)
         width, height = photo_wh
-        if not (0.0 <= x <= 1.0 and 0.0 <= y <= 1.0):
-            if not (0.0 <= x <= width and 0.0 <= y <= height):
+        if x > 1.0:
+            if not (x <= width and y <= height):
                 raise InputError(f"The placement ({x:g}, {y:g}) lies outside the {width}x{height} photo.")
             x, y = x / width, y / height
         return cls((x, y), size)
@@ -59,3 +55,20 @@ class Placement:
         h, w = photo_hw
         side = self.size * h
         return self.center[0] * w - side / 2, self.center[1] * h - side / 2, side
+
+
+def parse_point(at: str | tuple[float, float]) -> tuple[float, float]:
+    """`--at X,Y` checked on its own (the photo's size checks the rest): two finite, non-negative numbers,
+    both fractions (<= 1) or both pixels (> 1). A mix such as 1.5,0.5 is a typo more often than a
+    pixel on the photo's top edge, so it is refused rather than guessed."""
+    try:
+        x, y = (float(v) for v in (at.split(",") if isinstance(at, str) else at))
+    except (TypeError, ValueError):
+        raise InputError(f"--at takes X,Y (fractions of the photo's width and height, e.g. 0.5,0.7, or pixels), "
+                         f"got {at!r}.") from None
+    if not (math.isfinite(x) and math.isfinite(y) and x >= 0.0 and y >= 0.0):
+        raise InputError(f"--at takes two finite, non-negative numbers, got {at!r}.")
+    if (x <= 1.0) != (y <= 1.0):
+        raise InputError(f"--at {x:g},{y:g} mixes a fraction and a pixel position; give both as fractions of the "
+                         f"photo's width and height (0 to 1) or both in pixels.")
+    return x, y

@@ -359,7 +359,7 @@ def encode_photo(path: str, max_side: int = 1024) -> bytes:
 
     from .imageio import linear_to_srgb, read_color_image
 
-    rgb = linear_to_srgb(read_color_image(path))
+    rgb = linear_to_srgb(read_color_image(path, upright=True))
     scale = max_side / max(rgb.shape[:2])
     if scale < 1:
         rgb = cv2.resize(rgb, (round(rgb.shape[1] * scale), round(rgb.shape[0] * scale)), interpolation=cv2.INTER_AREA)

@@ -28,6 +28,7 @@ from .guidance.models import ModelConfig
 from .maps import PBRMaps
 from .mesh import Mesh
 from .photo import PhotoCamera
+from .placement import DEFAULT_OBJECT_SIZE
 from .progress import ProgressCallback, check_cancel, emit
 
 GUIDANCE_TYPES = ("auto", "sd2", "none")
@@ -40,7 +41,7 @@ class RunConfig:
     preset: str = "balanced"                  # draft | balanced | final, for every stage
     prompt: str = ""                          # adapt: what the asset should become in this scene
     guidance_type: str = "auto"               # adapt (and the light critic): sd2 | none | auto (sd2 when found)
-    size: float = 0.3                         # compose: fraction of the photo's height the asset spans
+    size: float = DEFAULT_OBJECT_SIZE         # compose: fraction of the photo's height the asset spans (--object-size)
     shadow_type: str = "ratio"
     compose_spp: int | None = None
     photo_camera: PhotoCamera | None = None   # None: the light stage's default camera for the photo
@@ -133,7 +134,7 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     """
     from dataclasses import replace
 
-    from .compose import ComposeInputs, compose_preset, compose_to_folder, light_camera
+    from .compose import COMPOSE_MAX_SIDE, ComposeInputs, compose_preset, compose_to_folder, light_camera
     from .presets import stage_config
     from .guidance.models import models_available
     from .lighting import estimate_light, light_report, load_photo, write_light_outputs
@@ -148,7 +149,8 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     # Everything that can be wrong with the inputs is found before any work.
     photo, photo_info = load_photo(photo_path)
     h, w = photo.shape[:2]
-    placement_px = Placement.parse(placement, (w, h)).pixel((h, w))
+    placement = Placement.parse(placement, tuple(photo_info["size"]))   # pixels of the photo as stored
+    placement_px = placement.pixel((h, w))                               # ... in the light stage's copy
     compose_config = compose_preset(config.preset, size=config.size, shadow_type=config.shadow_type,
                                     spp=config.compose_spp)
     if config.guidance_type == "sd2":
@@ -165,7 +167,10 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     runner = StageRunner(out, progress, cancel)
 
     # convert: the asset's maps -> neural texture (baked maps + texture.pt)
-    convert_config = stage_config("convert", config.preset)
+    # Only what the scene needs: no more texels than the composite shows of the asset (the photo's
+    # stored height, not the light stage's working copy, is what the composite is made at).
+    screen_px = max(1, round(config.size * photo_info["size"][1]))
+    convert_config = stage_config("convert", config.preset, screen_px=screen_px)
     convert_key = _digest("convert", asdict(convert_config), asset_key)
 
     def convert(folder: Path) -> dict:
@@ -232,8 +237,11 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
 
     def compose(folder: Path) -> dict:
         stack = texture_maps_for_mesh(load_neural_texture(texture_path), normalized)
-        camera, camera_from = light_camera(light_path, photo_info, w, h)
-        return compose_to_folder(ComposeInputs(mesh, stack, photo, placement_px, load_environment(light_path), camera),
+        full, _ = load_photo(photo_path, max_side=COMPOSE_MAX_SIDE)   # the composite is at the photo's size
+        fh, fw = full.shape[:2]
+        camera, camera_from = light_camera(light_path, photo_info, fw, fh)
+        return compose_to_folder(ComposeInputs(mesh, stack, full, placement.pixel((fh, fw)),
+                                               load_environment(light_path), camera),
                                  compose_config, folder, {"inputs": {"texture": str(texture_path), "light": str(light_path),
                                                                      "camera_from": camera_from}},
                                  progress=progress, cancel=cancel)

@@ -39,7 +39,7 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
 
     photo, info = load_photo(data["photo"])
     h, w = photo.shape[:2]
-    placement = Placement.parse(tuple(data["placement"]), (w, h)).pixel((h, w))
+    placement = Placement.parse(tuple(data["placement"]), tuple(info["size"])).pixel((h, w))
     critic = data.get("critic", "auto")
     if critic == "auto":  # the diffusion critic when its weights are on this machine (never downloads)
         critic = "diffusion" if models_available(data["models"], need_inpaint=False)[0] else "none"
@@ -85,7 +85,7 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
     mode = data["mode"]
     photo = placement = None
     if mode == "scene" and data.get("photo"):
-        photo = linear_to_srgb(np.clip(read_color_image(data["photo"]), 0.0, 1.0))
+        photo = linear_to_srgb(np.clip(read_color_image(data["photo"], upright=True), 0.0, 1.0))
         placement = Placement(tuple(data["placement"]), data["size"])
     overrides = {"views_type": "local"} if mode == "scene" and photo is None else {}
     envmap = load_environment(data["envmap"]) if data.get("envmap") else None

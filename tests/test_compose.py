@@ -155,3 +155,38 @@ def test_photo_camera_projection_inverts_its_pixel_rays():
     for x, y in ((0.5, 0.5), (100.25, 7.0), (64.0, 95.5)):
         point = origin + 3.7 * pixel_ray(CAMERA, x, y)
         np.testing.assert_allclose(CAMERA.project(point[None], origin)[0], [x, y], atol=1e-9)
+
+
+def test_a_big_photo_gets_a_composite_at_its_own_size_with_a_scaled_up_shadow():
+    """The floor passes render at most shadow_max_side pixels across; the matte scaled up to the photo
+    matches the one rendered at full size, and the photo stays exact where no shadow falls."""
+    import cv2
+
+    env = sun_environment([1.0, 0.2, 0.8])
+    full = run(env, spp=32)
+    small = run(env, spp=32, shadow_max_side=64)              # the 128-px photo's floor at 64 x 48
+    assert small.report["render_windows"]["floor_size"] == [64, 48]
+    assert small.composite_srgb.shape == full.composite_srgb.shape
+    a, b = full.matte.mean(-1), small.matte.mean(-1)
+    assert (b < 0.5).sum() > 30 and np.corrcoef(a.ravel(), b.ravel())[0, 1] > 0.9
+    touched = (small.alpha > 0) | (small.matte < 1.0).any(axis=-1)
+    far = cv2.dilate(touched.astype(np.uint8), np.ones((3, 3), np.uint8)) == 0
+    assert far.mean() > 0.6
+    np.testing.assert_array_equal(small.composite_srgb[far], textured_photo()[far])
+
+
+def test_cli_compose_keeps_a_photo_larger_than_the_light_stages_copy_at_its_size(tmp_path):
+    """The light stage reads photos at most 1024 px across; the composite is made at the photo's own
+    size, and --at in pixels means pixels of the photo as stored."""
+    maps = PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0)
+    asset = save_asset_folder(uv_sphere(0.5, 16, 8), maps, tmp_path / "asset")
+    rng = np.random.default_rng(3)
+    photo_path = write_image(tmp_path / "photo.png", rng.uniform(0.2, 0.8, (600, 1200, 3)).astype(np.float32))
+    light_path = write_image(tmp_path / "light.exr", sun_environment([1.0, 0.0, 1.0], height=32))
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "scenefit.cli", "compose", str(asset), "--photo", str(photo_path),
+                           "--at", "600,480", "--light", str(light_path), "--out", str(out), "--spp", "2",
+                           "--denoiser", "none", "--quiet"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert read_image(out / "composite.png").shape == (600, 1200, 3)
+    assert json.loads((out / "report.json").read_text())["placement"]["pixel"] == [600.0, 480.0]

@@ -74,6 +74,18 @@ def test_missing_weights_give_a_clear_message(tmp_path, monkeypatch, tiny_folder
         locate_models(ModelConfig(base_model=str(tiny_folders[0]), inpaint_model=str(tmp_path / "nope")), True)
     ok, where = models_available(ModelConfig(base_model=str(tiny_folders[0]), inpaint_model=str(tiny_folders[1])))
     assert ok and str(tiny_folders[0]) in where
+    # A failed download reports the hub's error in one line, not its paragraphs.
+    import huggingface_hub
+
+    def unreachable(*_, local_files_only=False, **__):
+        raise OSError("Got: ConnectError: Name or service not known\nAn error happened while trying to locate "
+                      "the files on the Hub.")
+
+    monkeypatch.delenv("HF_HUB_OFFLINE")
+    monkeypatch.setattr(huggingface_hub, "snapshot_download", unreachable)
+    with pytest.raises(ModelMissingError) as info:
+        locate_models(ModelConfig(cache_dir=str(empty_cache)), need_inpaint=False)
+    assert "\n" not in str(info.value) and "(OSError: Got: ConnectError: Name or service not known)" in str(info.value)
 
 
 def test_sds_gradient_is_w_t_times_eps_phi_minus_eps(models):

@@ -223,6 +223,22 @@ def test_bad_options_are_refused_before_any_work(tmp_path, asset, capsys, args):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("command", ["light", "adapt", "compose", "run"])
+def test_at_and_object_size_mean_one_thing_in_every_command(command):
+    from scenefit.cli import build_parser
+    from scenefit.core.placement import Placement
+
+    parser = build_parser()
+    action = {a.dest: a for a in parser._subparsers._group_actions[0].choices[command]._actions}
+    assert action["at"].type("0.5,0.7") == (0.5, 0.7) and action["at"].type("640,480") == (640.0, 480.0)
+    assert ("object_size" in action) == (command != "light")      # light has no use for the object's size
+    assert "size" not in action or command not in ("compose", "run")
+    # Pixels are pixels of the photo as stored: 640,480 in a 1280x960 photo is its centre.
+    assert Placement.parse((640.0, 480.0), (1280, 960)).center == (0.5, 0.5)
+    with pytest.raises(InputError, match="mixes a fraction and a pixel"):
+        Placement.parse("1.5,0.5", (1280, 960))
+
+
 def test_light_takes_fractions_like_adapt(tmp_path, capsys):
     photo = tmp_path / "photo.png"
     write_image(photo, np.full((8, 8, 3), 0.5, np.float32))
@@ -300,3 +316,28 @@ def test_broken_asset_files_are_one_sentence(tmp_path):
         assert proc.returncode == 2, proc.stderr[-2000:]
         assert len(lines) == 1 and name in lines[0] and "Traceback" not in lines[0], lines
         assert not out.exists()
+
+
+def test_a_phone_photo_stored_sideways_is_read_upright(tmp_path):
+    """EXIF Orientation 6 (stored sideways, shown turned 90 degrees clockwise): the light stage, the
+    placement and the composite all see the photo as viewers show it, and the metadata's field of view
+    is the upright photo's horizontal one."""
+    import OpenImageIO as oiio
+
+    from scenefit.core.lighting import load_photo
+
+    stored = np.full((40, 60, 3), 0.2, np.float32)
+    stored[:8, :8] = 1.0                                # a white block in the stored top-left corner
+    spec = oiio.ImageSpec(60, 40, 3, oiio.UINT8)
+    spec.attribute("Orientation", 6)
+    spec.attribute("Exif:FocalLengthIn35mmFilm", 26)
+    buf = oiio.ImageBuf(spec)
+    buf.set_pixels(oiio.ROI(), stored)
+    path = tmp_path / "portrait.jpg"
+    assert buf.write(str(path))
+
+    photo, info = load_photo(path)
+    assert photo.shape == (60, 40, 3) and info["size"] == [40, 60] and "working_size" not in info
+    assert photo[:8, -8:].mean() > 0.9 and photo[:8, :8].mean() < 0.5     # the block is now top-right
+    # 35 mm equivalent 26 mm: 69.4 degrees across a landscape 3:2 frame, 49.6 across the portrait's width.
+    assert abs(info["fov_from_metadata_deg"] - np.degrees(2 * np.arctan(24.0 / 52.0))) < 0.1

@@ -85,3 +85,32 @@ def test_run_on_an_asset_file_bakes_a_game_asset_and_reuses_it(tmp_path):
     second = scenefit("run", *args)
     assert second.returncode == 0, second.stderr
     assert json.loads((out / "report.json").read_text())["reused"] == ["convert", "light", "compose", "bake"]
+
+
+def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monkeypatch, capsys):
+    import scenefit.core.compose as compose
+    from scenefit.cli import main
+
+    maps = PBRMaps(np.full((64, 64, 3), 0.5, np.float32), 0.5, 0.0)
+    asset = save_asset_folder(uv_sphere(0.5, 12, 6), maps, tmp_path / "asset")
+    photo_path = write_image(tmp_path / "photo.png", np.full((48, 64, 3), 0.5))
+    out = tmp_path / "run"
+    args = ["run", str(asset), "--photo", str(photo_path), "--at", "0.5,0.8", "--out", str(out), "--preset", "draft",
+            "--guidance", "none", "--spp", "2", "--quiet"]
+
+    def interrupted(*_, **__):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(compose, "compose_to_folder", interrupted)   # Ctrl-C during the compose stage
+    assert main(args) == 130
+    message = capsys.readouterr().err
+    assert "stages finished so far are kept" in message and "unchanged" not in message
+    assert (out / "convert" / "stage.json").is_file() and (out / "light" / "stage.json").is_file()
+    assert not (out / "compose" / "stage.json").exists()
+    monkeypatch.undo()
+    assert main(args) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["reused"] == ["convert", "light"]
+    # Only what the scene needs: the asset spans 0.3 x 48 = 14 px of the composite, so 32 texels, not its 64.
+    decisions = report["stages"]["convert"]["report"]["decisions"]
+    assert decisions["resolution"] == 32 and "14 px tall in the composite" in decisions["resolution_reason"]

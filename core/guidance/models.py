@@ -142,7 +142,7 @@ def locate_model(model: str, role: str, parts: dict, config: ModelConfig) -> Pat
         folder = Path(snapshot_download(model, cache_dir=cache, allow_patterns=patterns))
     except Exception as error:
         raise ModelMissingError(f"The {role} model '{model}' is not in the Hugging Face cache at '{cache}' and "
-                                f"could not be downloaded ({type(error).__name__}: {str(error)[:200]}). {how}") from None
+                                f"could not be downloaded ({_first_line(error)}). {how}") from None
     missing = _missing_parts(folder, parts)
     if missing:
         raise ModelMissingError(f"The {role} model '{model}' in '{folder}' lacks {', '.join(missing)}. {how}")
@@ -380,3 +380,9 @@ def load_depth_estimator(model: str, cache_dir: str | None = None, local_files_o
     if key not in _DEPTH_CACHE:
         _DEPTH_CACHE[key] = DepthEstimator(model, cache_dir, local_files_only, device)
     return _DEPTH_CACHE[key]
+
+
+def _first_line(error: Exception) -> str:
+    """The exception's name and first line: hub errors run to several paragraphs."""
+    lines = [line.strip() for line in str(error).splitlines() if line.strip()]
+    return f"{type(error).__name__}: {lines[0][:160]}" if lines else type(error).__name__

@@ -116,12 +116,12 @@ def load_photo(path: str | Path, max_side: int | None = PHOTO_WORKING_SIDE) -> t
 
     8/16-bit files are taken as stored (sRGB). Float files (EXR/HDR) hold linear radiance: they are
     exposed as a camera meters (log-average luminance -> 0.18), clipped and sRGB-encoded, so every
-    photo reaches the panorama as the LDR image a camera would have stored.
+    photo reaches the panorama as the LDR image a camera would have stored. Photos are turned
+    upright as their EXIF Orientation says (a phone's portrait photo is stored sideways), so `--at`
+    and the composite refer to the photo as every viewer shows it.
     """
-    import OpenImageIO as oiio
-
     path = Path(path)
-    pixels = read_image(path, max_side=max_side)
+    pixels = read_image(path, max_side=max_side, upright=True)
     if pixels.shape[2] == 1:
         pixels = np.repeat(pixels, 3, axis=2)
     elif pixels.shape[2] == 2:
@@ -130,7 +130,7 @@ def load_photo(path: str | Path, max_side: int | None = PHOTO_WORKING_SIDE) -> t
     h, w = rgb.shape[:2]
     if min(h, w) < 2:
         raise InputError(f"The photo '{path}' is {w}x{h}; it needs at least 2x2 pixels.")
-    info: dict = {"path": str(path), "size": _stored_size(path, (w, h))}
+    info: dict = {"path": str(path), "size": _metadata(path).get("size", [w, h])}
     if info["size"] != [w, h]:
         info["working_size"] = {"size": [w, h], "why": f"reduced while read: the light stage needs at most "
                                                       f"{max_side} px on the long side"}
@@ -142,25 +142,28 @@ def load_photo(path: str | Path, max_side: int | None = PHOTO_WORKING_SIDE) -> t
     else:
         info["decoded"] = "sRGB as stored"
         rgb = np.clip(rgb, 0.0, 1.0)
-    inp = oiio.ImageInput.open(str(path))
-    if inp is not None:
-        try:
-            focal35 = inp.spec().getattribute("Exif:FocalLengthIn35mmFilm")
-        finally:
-            inp.close()
-        if focal35:
-            info["fov_from_metadata_deg"] = round(float(np.degrees(2 * np.arctan(36.0 / (2 * float(focal35))))), 3)
+    focal35 = _metadata(path).get("focal35")
+    if focal35:
+        # The 35 mm equivalent is defined on the diagonal (43.27 mm); the width's share of it gives the
+        # horizontal view of any aspect ratio, upright portrait photos included.
+        film_width = 43.27 * w / np.hypot(w, h)
+        info["fov_from_metadata_deg"] = round(float(np.degrees(2 * np.arctan(film_width / (2 * float(focal35))))), 3)
     return rgb, info
 
 
-def _stored_size(path: Path, fallback: tuple[int, int]) -> list[int]:
+def _metadata(path: Path) -> dict:
+    """The photo's upright size (EXIF Orientation 5-8 swap width and height) and 35 mm focal length."""
     import OpenImageIO as oiio
 
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
-        return list(fallback)
+        return {}
     try:
-        return [inp.spec().width, inp.spec().height]
+        spec = inp.spec()
+        size = [spec.width, spec.height]
+        if spec.get_int_attribute("Orientation", 1) >= 5:
+            size.reverse()
+        return {"size": size, "focal35": spec.getattribute("Exif:FocalLengthIn35mmFilm")}
     finally:
         inp.close()
 
