@@ -220,7 +220,7 @@ def main() -> int:
                 m = row["metrics"]
                 print(f"{name} yaw {yaw:.0f} pitch {pitch:+.0f} ({row['auto']} {row['auto_score']:.2f}): "
                       + ", ".join(f"{k} RMSE {m[k]['diffuse_rmse']:.3g}" for k in METHODS), flush=True)
-    curves = {} if args.quick else {name: reference_curve(name, config, 30) for name in DEVELOPMENT}
+    curves = {} if args.quick else {name: reference_curve(name, config, 30 if args.views == 6 else 15) for name in DEVELOPMENT}
     seconds = np.median([r["seconds_cues"] for r in runs])
     md = [f"Weight-free light estimation against Blender's CC0 HDR maps: {len(views)} photo(s) per map "
           f"(320x240, 60 deg, yaws {', '.join(f'{y:.0f}' for y, _ in views[:3])}, pitches "
