@@ -167,6 +167,29 @@ def plot_conversions(conversions: list[dict], path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
+def bench_blocks(mesh, maps, normalized) -> tuple[list[dict], list[dict]]:
+    renders = [bench_render(uv_sphere(), (256, 256), "UV sphere"),
+               bench_render(normalized, maps.resolution, "example (Suzanne)")]
+    textures = [bench_texture(rasterize_uv(normalized, r), p) for p in PRESET_NAMES for r in (256, 512)]
+    return renders, textures
+
+
+def block_sections(renders: list[dict], textures: list[dict]) -> list[str]:
+    return ["## Building blocks", "",
+            "Render + backward (gradients to base colour, roughness, metallic), 256², 16 spp, median of 10:", "",
+            table(renders, [("scene", "scene", ""), ("triangles", "triangles", ""), ("texture", "texture", ""),
+                            ("s / iteration", "render_backward_s", ".3f"),
+                            ("first call (compile) s", "first_call_s", ".2f")]),
+            "", "Neural texture forward + backward over the example's texels (median of 5):", "",
+            table(textures, [("preset", "preset", ""), ("resolution", "resolution", ""), ("texels", "texels", ""),
+                             ("s / iteration", "forward_backward_s", ".3f")]), ""]
+
+
+PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "batch", "samplers", "study")
+TITLES = {"convert": "Convert", "light": "Light", "compose": "Compose", "adapt": "Adapt (tiny models)",
+          "run": "End to end: `scenefit run`"}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true",
@@ -176,7 +199,10 @@ def main() -> int:
     parser.add_argument("--light-study", choices=("short", "full", "skip"), default="short",
                         help="the weight-free light study (bench_light.py): short = 3 photos per map (default), "
                              "full = 6 photos per map (about 45 min more here)")
+    parser.add_argument("--parts", default=",".join(PARTS),
+                        help=f"comma-separated subset of {', '.join(PARTS)} (development; bench.md then holds only those)")
     args = parser.parse_args()
+    parts = set(args.parts.split(","))
     results = RESULTS / "quick" if args.quick else RESULTS
     results.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
@@ -190,28 +216,21 @@ def main() -> int:
     # Speed against accuracy per preset, for each stage and end to end (each in its own process).
     from trade import bench_trade
 
-    trade = bench_trade(example_asset(), results, quick=args.quick, log=log)
-    titles = {"convert": "Convert", "light": "Light", "compose": "Compose", "adapt": "Adapt (tiny models)",
-              "run": "End to end: `scenefit run`"}
-    sections += ["## Presets: speed against accuracy", ""]
-    for stage, title in titles.items():
-        sections += [f"### {title}", "", trade[stage], ""]
+    stages = tuple(stage for stage in TITLES if stage in parts)
+    trade = bench_trade(example_asset(), results, quick=args.quick, stages=stages, log=log)
+    if stages:
+        sections += ["## Presets: speed against accuracy", ""]
+    for stage in stages:
+        sections += [f"### {TITLES[stage]}", "", trade[stage], ""]
 
     # The rendering core and the neural texture: cost per iteration.
     mesh, maps = load_asset_folder(example_asset())
     normalized, _ = normalize_to_unit_sphere(mesh)
-    renders = [bench_render(uv_sphere(), (256, 256), "UV sphere"),
-               bench_render(normalized, maps.resolution, "example (Suzanne)")]
-    textures = [bench_texture(rasterize_uv(normalized, r), p) for p in PRESET_NAMES for r in (256, 512)]
-    log("render and texture done")
-    sections += ["## Building blocks", "",
-                 "Render + backward (gradients to base colour, roughness, metallic), 256², 16 spp, median of 10:", "",
-                 table(renders, [("scene", "scene", ""), ("triangles", "triangles", ""), ("texture", "texture", ""),
-                                 ("s / iteration", "render_backward_s", ".3f"),
-                                 ("first call (compile) s", "first_call_s", ".2f")]),
-                 "", "Neural texture forward + backward over the example's texels (median of 5):", "",
-                 table(textures, [("preset", "preset", ""), ("resolution", "resolution", ""), ("texels", "texels", ""),
-                                  ("s / iteration", "forward_backward_s", ".3f")]), ""]
+    renders, textures = [], []
+    if "blocks" in parts:
+        renders, textures = bench_blocks(mesh, maps, normalized)
+        log("render and texture done")
+        sections += block_sections(renders, textures)
     conversions = []
     if args.inverse:
         its = 20 if args.quick else 100
@@ -226,30 +245,34 @@ def main() -> int:
     # The adapt stage's phases (tiny random-weight models on the CPU; an SD2-sized UNet where CUDA exists).
     from bench_adapt import bench_adapt
 
-    adapt = bench_adapt(quick=args.quick)
-    log("adapt phases done")
-    sections += ["## Adapt: seconds per iteration by phase", "", adapt["markdown"], ""]
+    adapt = {"rows": []}
+    if "phases" in parts:
+        adapt = bench_adapt(quick=args.quick)
+        log("adapt phases done")
+        sections += ["## Adapt: seconds per iteration by phase", "", adapt["markdown"], ""]
 
     # Batches: jobs per hour in-process and on 1 and 2 local Ray workers; the paper's settings on N GPUs.
-    from bench_batch import bench_batch
+    if "batch" in parts:
+        from bench_batch import bench_batch
 
-    batch = bench_batch(quick=args.quick, adapt_rows=adapt["rows"])
-    log("batch done")
-    (results / "batch.md").write_text(batch["markdown"] + "\n")
-    (results / "batch.json").write_text(json.dumps({"rows": batch["rows"], "estimate": batch["estimate"]},
-                                                   indent=1, default=float))
-    sections += ["## Batches", "", batch["markdown"], ""]
+        batch = bench_batch(quick=args.quick, adapt_rows=adapt["rows"])
+        log("batch done")
+        (results / "batch.md").write_text(batch["markdown"] + "\n")
+        (results / "batch.json").write_text(json.dumps({"rows": batch["rows"], "estimate": batch["estimate"]},
+                                                       indent=1, default=float))
+        sections += ["## Batches", "", batch["markdown"], ""]
 
     # Composition: noise of the final render against a high-sample reference, raw and denoised.
     out_flag = ["--out", str(results)]
-    subprocess.run([sys.executable, str(Path(__file__).with_name("bench_compose.py"))] + out_flag
-                   + (["--quick"] if args.quick else []), check=True)
-    log("compose sampler sweep done")
-    sections += ["## Compose: samplers and denoising at equal time", "", (results / "compose.md").read_text(),
-                 "![compose noise against time](compose_noise.png)", ""]
+    if "samplers" in parts:
+        subprocess.run([sys.executable, str(Path(__file__).with_name("bench_compose.py"))] + out_flag
+                       + (["--quick"] if args.quick else []), check=True)
+        log("compose sampler sweep done")
+        sections += ["## Compose: samplers and denoising at equal time", "", (results / "compose.md").read_text(),
+                     "![compose noise against time](compose_noise.png)", ""]
 
     # Light estimation without weights against ground-truth HDR maps (writes light.md and its plots).
-    if args.light_study != "skip":
+    if args.light_study != "skip" and "study" in parts:
         study = ["--quick"] if args.quick else (["--views", "6"] if args.light_study == "full" else ["--views", "3"])
         subprocess.run([sys.executable, str(Path(__file__).with_name("bench_light.py"))] + out_flag + study, check=True)
         log("light study done")
@@ -267,7 +290,7 @@ def main() -> int:
     (results / "bench.json").write_text(json.dumps({
         "mode": "quick" if args.quick else "full", "machine": machine(), "environment": env, "seconds": total,
         "render": renders, "texture": textures, "conversion": conversions, "adapt": adapt["rows"],
-        "trade": {stage: json.loads((results / f"trade_{stage}.json").read_text())["rows"] for stage in titles},
+        "trade": {stage: json.loads((results / f"trade_{stage}.json").read_text())["rows"] for stage in stages},
     }, indent=1, default=float))
     print("\n".join(head + sections))
     return 0
