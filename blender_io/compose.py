@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError
+from ..core.imageio import read_image, stored_orientation
 from .placement import camera_for_placement
 
 TAG = "scenefit"
@@ -22,13 +23,38 @@ COMPOSITOR_NAME = "SceneFit Composite"
 
 
 def load_photo_image(path: str | Path):
-    """The photo as a Blender image (reused when already loaded); one sentence when unreadable."""
+    """The photo as a Blender image (reused when already loaded); one sentence when unreadable.
+
+    Blender shows images as stored and ignores EXIF Orientation, while SceneFit reads photos upright
+    (core/imageio.read_image): a phone's sideways-stored photo gets an upright, packed copy, so the
+    camera background, the clicked placement and the pipeline all see the same picture."""
     import bpy
 
     path = Path(path)
+    orientation = stored_orientation(path) if path.is_file() else 1
+    if orientation not in (0, 1):
+        return _upright_copy(path, orientation)
     image = bpy.data.images.load(str(path), check_existing=True)
     if image.size[0] == 0 or image.size[1] == 0:
         raise InputError(f"Blender cannot read the photo '{path}'; save it as PNG or JPEG.")
+    return image
+
+
+def _upright_copy(path: Path, orientation: int):
+    import bpy
+
+    key = f"{path.resolve()}#orientation{orientation}"
+    for image in bpy.data.images:
+        if image.get(TAG) == key:
+            return image
+    pixels = read_image(path, upright=True)[..., :3]
+    h, w = pixels.shape[:2]
+    image = bpy.data.images.new(f"{path.stem} (upright)", w, h, alpha=False)
+    image.colorspace_settings.name = "sRGB"
+    rgba = np.concatenate([pixels, np.ones((h, w, 1), np.float32)], axis=2)
+    image.pixels.foreach_set(np.ascontiguousarray(rgba[::-1]).ravel())   # Blender's rows run bottom-up
+    image.pack()
+    image[TAG] = key
     return image
 
 

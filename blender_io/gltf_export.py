@@ -211,6 +211,7 @@ def bake_copy_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_fil
     import bpy
 
     scene = bpy.context.scene
+    images_before = set(bpy.data.images)  # the maps made below are removed after; nothing else is
     copy = obj.copy()
     copy.data = obj.data.copy()
     originals = {slot: obj.material_slots[slot].material for slot in slots}
@@ -230,8 +231,8 @@ def bake_copy_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_fil
             duplicate.name = name
         report = bake_object_to_gltf(copy, baked, slots, out_file, file_format, whole_scene=False)
     finally:
-        images = {n.image for c in copies.values() for n in c.node_tree.nodes
-                  if n.type == "TEX_IMAGE" and n.name.startswith("SceneFit ") and n.image is not None}
+        # (a SceneFit result material's own image nodes are also named "SceneFit …": keep those)
+        images = set(bpy.data.images) - images_before
         mesh = copy.data
         bpy.data.objects.remove(copy)
         bpy.data.meshes.remove(mesh)

@@ -80,6 +80,19 @@ def _reoriented(pixels: np.ndarray, orientation: int) -> np.ndarray:
         (w, h, c) if orientation >= 5 else (h, w, c))   # 5-8 swap width and height
 
 
+def stored_orientation(path: str | os.PathLike) -> int:
+    """The file's EXIF Orientation (1: stored upright; 0 when it cannot be opened)."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return 0
+    try:
+        return inp.spec().get_int_attribute("Orientation", 1)
+    finally:
+        inp.close()
+
+
 def reduction_factor(width: int, height: int, max_side: int | None) -> int:
     return 1 if not max_side or max(width, height) <= max_side else -(-max(width, height) // max_side)
 

@@ -195,6 +195,8 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
                                 why=f"{envmap_height.why}; capped at the {config.preset} preset's {preset_height} rows")
     light_config = stage_config("light", config.preset, critic_type="diffusion" if found else "none", models=config.models,
                                 map_height=envmap_height.value)
+    if config.guidance_type == "none":  # no diffusion model at all: the sky/ground prior completes an outdoor map
+        light_config = replace(light_config, outpaint=replace(light_config.outpaint, completion_type="prior"))
     light_key = _digest("light", asdict(light_config), photo_key, placement_px,
                         asdict(config.photo_camera) if config.photo_camera else None)
 

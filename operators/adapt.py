@@ -9,7 +9,7 @@ from bpy.props import IntProperty
 from ..blender_io import mesh_from_object
 from ..core.errors import InputError
 from . import work
-from .common import model_settings, photo_path, poll_mesh, run_folder
+from .common import OnMesh, model_settings, photo_path, run_folder
 from .jobs import JobOperator
 from .results import apply_result_material
 
@@ -34,7 +34,7 @@ def gather_adapt(op, context, texture: str) -> dict:
         "render_size": op.render_size, "out": str(run_folder(context, "adapt", obj.name))}
 
 
-class SCENEFIT_OT_adapt(JobOperator):
+class SCENEFIT_OT_adapt(OnMesh, JobOperator):
     """Restyle the asset's converted texture with diffusion guidance so it fits the photo (Esc cancels)"""
 
     bl_idname = "scenefit.adapt"
@@ -45,10 +45,6 @@ class SCENEFIT_OT_adapt(JobOperator):
     iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE"})
     model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE"})
     render_size: IntProperty(name="Render size", default=0, min=0, options={"SKIP_SAVE"})
-
-    @classmethod
-    def poll(cls, context):
-        return poll_mesh(context)
 
     def prepare(self, context):
         settings = context.scene.scenefit

@@ -55,9 +55,23 @@ def gather_asset(context):
     return obj, mesh, maps
 
 
-def poll_mesh(context) -> bool:
-    obj = context.active_object
-    return obj is not None and obj.type == "MESH"
+class OnMesh:
+    """Operator mixin: available when the active object is a mesh (what every stage works on)."""
+
+    @classmethod
+    def poll(cls, context) -> bool:
+        obj = context.active_object
+        return obj is not None and obj.type == "MESH"
+
+
+def needs_setting(name: str) -> classmethod:
+    """An operator poll: available when the scene's SceneFit setting `name` is filled in."""
+
+    def poll(cls, context) -> bool:
+        settings = getattr(context.scene, "scenefit", None)
+        return settings is not None and bool(getattr(settings, name).strip())
+
+    return classmethod(poll)
 
 
 def photo_path(context) -> Path:
@@ -139,7 +153,12 @@ def output_root(context) -> Path:
 
 
 def run_folder(context, stage: str, name: str = "") -> Path:
-    """A NEW folder for one run of `stage` (never an earlier run's): <output>/<name>/<stage>-<time>[-n]."""
+    """A NEW folder for one run of `stage` (never an earlier run's): <output>/<name>/<stage>-<time>[-n].
+
+    Only its path: the run writes beside it and swaps it in whole (core.output_folder), so a
+    cancelled or failed run leaves no folder behind."""
+    from ..core.output_folder import check_output_folder, staging_path
+
     root = output_root(context).resolve()
     for forbidden in _forbidden_roots():
         if root == forbidden or forbidden in root.parents:
@@ -147,18 +166,14 @@ def run_folder(context, stage: str, name: str = "") -> Path:
                              "folder); set the Output folder in the SceneFit panel.")
     parent = root / bpy.path.clean_name(name) if name else root
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-        for n in range(1, 1000):
-            folder = parent / (f"{stage}-{stamp}" if n == 1 else f"{stage}-{stamp}-{n}")
+    for n in range(1, 1000):
+        folder = parent / (f"{stage}-{stamp}" if n == 1 else f"{stage}-{stamp}-{n}")
+        if not folder.exists() and not staging_path(folder).exists():
             try:
-                folder.mkdir()
-                return folder
-            except FileExistsError:
-                continue
-    except OSError as error:
-        raise InputError(f"Cannot write into '{parent}' ({error.strerror or error}); choose another Output "
-                         "folder in the SceneFit panel.") from None
+                return check_output_folder(folder)
+            except InputError:  # the command line's wording names --out; the panel names its field
+                raise InputError(f"Cannot write into '{parent}'; choose another Output folder in the SceneFit "
+                                 "panel.") from None
     raise InputError(f"Too many runs in '{parent}' this second; try again.")
 
 

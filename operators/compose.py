@@ -1,15 +1,19 @@
 """Compose: the asset in the photo, set up in Blender so that F12 in Cycles renders the composite."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import bpy
 from bpy.props import BoolProperty, IntProperty
 
 from ..blender_io.compose import setup_composite
 from ..core.errors import SceneFitError
-from .common import photo_path, poll_mesh, relative_if_saved, run_folder
+from .common import OnMesh, photo_path, run_folder
+from .results import apply_composite_image
+from .work import written_whole
 
 
-class SCENEFIT_OT_compose(bpy.types.Operator):
+class SCENEFIT_OT_compose(OnMesh, bpy.types.Operator):
     """Set up a camera matched to the photo, the photo behind the render and a shadow-catcher floor under
     the asset (lit by the estimated World when there is one); F12 in Cycles then renders the composite"""
 
@@ -22,10 +26,6 @@ class SCENEFIT_OT_compose(bpy.types.Operator):
     samples: IntProperty(name="Samples", default=0, min=0, options={"SKIP_SAVE"},
                          description="Cycles samples for this render (0: the scene's own setting)")
 
-    @classmethod
-    def poll(cls, context):
-        return poll_mesh(context)
-
     def execute(self, context):
         settings = context.scene.scenefit
         obj = context.active_object
@@ -37,7 +37,6 @@ class SCENEFIT_OT_compose(bpy.types.Operator):
             if not self.render:
                 self.report({"INFO"}, f"Composite set up with '{made['camera'].name}': F12 renders it")
                 return {"FINISHED"}
-            out = run_folder(context, "compose", obj.name) / "composite.png"
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
@@ -45,7 +44,20 @@ class SCENEFIT_OT_compose(bpy.types.Operator):
             # In the UI Blender's own render job runs it (progress, Esc); the artist saves it from there.
             bpy.ops.render.render("INVOKE_DEFAULT")
             return {"FINISHED"}
+        try:
+            folder = run_folder(context, "compose", obj.name)
+            out = written_whole(str(folder), lambda staging: {"composite": self._render(context, staging)})["composite"]
+        except SceneFitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        apply_composite_image(context, out, "compose")
+        self.report({"INFO"}, f"Composite rendered: {out}")
+        return {"FINISHED"}
+
+    def _render(self, context, folder: Path) -> str:
+        """F12 with write_still into `folder`, the scene's samples and output path put back after."""
         scene = context.scene
+        out = folder / "composite.png"
         samples_before, path_before = scene.cycles.samples, scene.render.filepath
         try:
             if self.samples:
@@ -55,9 +67,7 @@ class SCENEFIT_OT_compose(bpy.types.Operator):
             bpy.ops.render.render(write_still=True)
         finally:
             scene.cycles.samples, scene.render.filepath = samples_before, path_before
-        settings.composite_path = relative_if_saved(out)
-        self.report({"INFO"}, f"Composite rendered: {out}")
-        return {"FINISHED"}
+        return str(out)
 
 
 classes = (SCENEFIT_OT_compose,)

@@ -5,12 +5,12 @@ import bpy
 from bpy.props import IntProperty
 
 from . import work
-from .common import gather_asset, poll_mesh, run_folder
+from .common import OnMesh, gather_asset, run_folder
 from .jobs import JobOperator
 from .results import apply_result_material
 
 
-class SCENEFIT_OT_convert(JobOperator):
+class SCENEFIT_OT_convert(OnMesh, JobOperator):
     """Fit SceneFit's neural texture to the active object's material maps (Esc cancels)"""
 
     bl_idname = "scenefit.convert"
@@ -19,10 +19,6 @@ class SCENEFIT_OT_convert(JobOperator):
 
     iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE"},
                             description="For scripts and quick looks; 0 keeps the preset's")
-
-    @classmethod
-    def poll(cls, context):
-        return poll_mesh(context)
 
     def prepare(self, context):
         obj, mesh, maps = gather_asset(context)

@@ -10,7 +10,8 @@ import bpy
 from ..blender_io import mesh_from_object
 from ..blender_io.compose import CAMERA_NAME
 from ..core.errors import SceneFitError
-from .common import check_dependencies, gather_asset, poll_mesh, run_folder
+from .common import OnMesh, check_dependencies, gather_asset, run_folder
+from .work import written_whole
 
 
 def photo_look_at(context):
@@ -31,7 +32,7 @@ def photo_look_at(context):
                   fov_deg=math.degrees(cam.data.angle_x), width=render.resolution_x, height=render.resolution_y)
 
 
-class SCENEFIT_OT_export_mitsuba(bpy.types.Operator):
+class SCENEFIT_OT_export_mitsuba(OnMesh, bpy.types.Operator):
     """Write the active object, its material maps, the photo's camera and the estimated light as a Mitsuba 3
     scene (XML, PLY, images)"""
 
@@ -41,10 +42,6 @@ class SCENEFIT_OT_export_mitsuba(bpy.types.Operator):
 
     directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH", default="",
                                         description="Where to write; empty makes a new run folder")
-
-    @classmethod
-    def poll(cls, context):
-        return poll_mesh(context)
 
     def execute(self, context):
         try:
@@ -59,7 +56,6 @@ class SCENEFIT_OT_export_mitsuba(bpy.types.Operator):
         settings = context.scene.scenefit
         try:
             obj, mesh, maps = gather_asset(context)
-            out = bpy.path.abspath(self.directory) if self.directory else run_folder(context, "mitsuba", obj.name)
             camera = photo_look_at(context)
             if camera is not None:  # the photo's camera sees the world: the mesh goes in world space
                 mesh = mesh_from_object(obj, context.evaluated_depsgraph_get(), space="world")
@@ -68,7 +64,11 @@ class SCENEFIT_OT_export_mitsuba(bpy.types.Operator):
                                 height=512)
             light = Path(bpy.path.abspath(settings.light_path)) if settings.light_path else None
             envmap = load_environment(light) if light is not None and light.is_file() else None
-            xml = export_mitsuba_scene(mesh, maps, out, camera=camera, envmap=envmap)
+            if self.directory:
+                xml = export_mitsuba_scene(mesh, maps, bpy.path.abspath(self.directory), camera=camera, envmap=envmap)
+            else:  # a new run folder, written whole
+                xml = written_whole(str(run_folder(context, "mitsuba", obj.name)), lambda folder: {
+                    "xml": str(export_mitsuba_scene(mesh, maps, folder, camera=camera, envmap=envmap))})["xml"]
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}

@@ -13,7 +13,7 @@ import threading
 import bpy
 
 from ..core.errors import SceneFitError
-from .common import preferences
+from .common import needs_setting, preferences
 
 # Adapt's edit mode wants an instruction; the other modes a description.
 PROMPT_MODE = {"edit": "instruct"}
@@ -63,10 +63,7 @@ class SCENEFIT_OT_generate_prompt(bpy.types.Operator):
     bl_label = "Write Prompt"
     bl_options = {"REGISTER"}
 
-    @classmethod
-    def poll(cls, context):
-        settings = getattr(context.scene, "scenefit", None)
-        return settings is not None and bool(settings.object_prompt.strip())
+    poll = needs_setting("object_prompt")
 
     def execute(self, context):
         try:

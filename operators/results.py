@@ -14,7 +14,7 @@ from bpy.props import EnumProperty
 from ..blender_io import write_result_material
 from ..blender_io.world import assign_world, world_from_hdr
 from ..core.errors import InputError
-from .common import keep_image, relative_if_saved
+from .common import keep_image, needs_setting, relative_if_saved
 
 TAG = "scenefit"
 
@@ -67,6 +67,16 @@ def apply_result_world(context, hdr_path: str, stage: str = "light"):
     return world
 
 
+def apply_composite_image(context, path: str, stage: str):
+    """The composite render as an image (tagged, kept like every result image) and the panel's path to it."""
+    image = bpy.data.images.load(str(Path(path).resolve()), check_existing=False)
+    image.name = "SceneFit Composite"
+    image.use_fake_user = True  # no material uses it: without a user, saving would drop it
+    _settle_image(image, stage)
+    context.scene.scenefit.composite_path = relative_if_saved(path)
+    return image
+
+
 class SCENEFIT_OT_use_result(bpy.types.Operator):
     """Switch the asset's material or the scene's World between SceneFit's result and the original"""
 
@@ -101,13 +111,10 @@ class SCENEFIT_OT_use_result(bpy.types.Operator):
 class SCENEFIT_OT_open_composite(bpy.types.Operator):
     """Open the last composite in an Image Editor (or load it as an image)"""
 
+    poll = needs_setting("composite_path")  # there is a composite to open
     bl_idname = "scenefit.open_composite"
     bl_label = "Open Composite"
     bl_options = {"REGISTER"}
-
-    @classmethod
-    def poll(cls, context):
-        return bool(context.scene.scenefit.composite_path)
 
     def execute(self, context):
         path = Path(bpy.path.abspath(context.scene.scenefit.composite_path))

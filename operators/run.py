@@ -1,70 +1,62 @@
-"""Run: every stage in one background job (convert -> light -> adapt), then the composite set up."""
+"""Run: the command line's pipeline (core.run.run_pipeline) as one background job, then its results
+applied in Blender: the new material, the World, the composite set up for Cycles and its image."""
 from __future__ import annotations
 
 import bpy
-from bpy.props import EnumProperty, IntProperty
+from bpy.props import EnumProperty
 
 from ..blender_io.compose import setup_composite
-from ..core.errors import SceneFitError
+from ..core.errors import InputError, SceneFitError
 from . import work
-from .adapt import gather_adapt
-from .common import photo_path, poll_mesh
-from .convert import SCENEFIT_OT_convert
+from .common import OnMesh, gather_asset, model_settings, photo_path, run_folder
 from .jobs import JobOperator
-from .light import SCENEFIT_OT_estimate_light
-from .results import apply_result_material, apply_result_world
+from .results import apply_composite_image, apply_result_material, apply_result_world
+
+GUIDANCE = (("auto", "Auto", "Adapt with Stable Diffusion 2 when its weights are on this machine"),
+            ("sd2", "Stable Diffusion 2", "Adapt; fail when the weights are missing"),
+            ("none", "None", "No adaptation: compose the converted texture"))
 
 
-class SCENEFIT_OT_run(JobOperator):
-    """Run the whole pipeline on the active object: convert, estimate the light (with a photo), adapt (with a
-    prompt and the diffusion models), then set up the composite"""
+class SCENEFIT_OT_run(OnMesh, JobOperator):
+    """Run the whole pipeline on the active object as `scenefit run` does: convert, estimate the photo's light,
+    adapt (when the diffusion models are here and there is a prompt), compose; then apply the results"""
 
     bl_idname = "scenefit.run"
     bl_label = "Run All"
     job_name = "run"
 
-    # Passed to every stage (quick looks and scripts); 0 / auto keep the presets' values.
-    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE"})
-    model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE"})
-    render_size: IntProperty(name="Render size", default=0, min=0, options={"SKIP_SAVE"})
-    critic: SCENEFIT_OT_estimate_light.__annotations__["critic"]
-    outpaint: SCENEFIT_OT_estimate_light.__annotations__["outpaint"]
-
-    @classmethod
-    def poll(cls, context):
-        return poll_mesh(context)
+    guidance: EnumProperty(name="Guidance", items=GUIDANCE, default="auto", options={"SKIP_SAVE"})
 
     def prepare(self, context):
         settings = context.scene.scenefit
-        # The stages' own prepare() gather their inputs and make their run folders (defaults only).
-        _, convert_data = SCENEFIT_OT_convert.prepare(self, context)
-        data = {"convert": convert_data}
-        if settings.photo_path:
-            _, data["light"] = SCENEFIT_OT_estimate_light.prepare(self, context)
-        if settings.prompt or settings.mode == "edit":
-            data["adapt"] = gather_adapt(self, context, texture="")  # the worker passes convert's texture
-        return work.run_all, data
+        if settings.mode != "scene":
+            raise InputError(f"Run All fits the asset into the photo (mode Scene); for mode "
+                             f"'{settings.mode}' use Convert and Adapt.")
+        photo = photo_path(context)
+        obj, mesh, maps = gather_asset(context)
+        self._object_name = obj.name
+        guidance, why_no_adapt = self.guidance, ""
+        if not settings.prompt.strip() and guidance == "auto":
+            guidance, why_no_adapt = "none", "the Style section has no prompt"
+        return work.run, {"mesh": mesh, "maps": maps, "photo": str(photo), "placement": tuple(settings.placement),
+                          "size": settings.size, "preset": settings.preset, "prompt": settings.prompt,
+                          "guidance": guidance, "why_no_adapt": why_no_adapt, "models": model_settings(context)[0],
+                          "out": str(run_folder(context, "run", obj.name))}
 
     def apply(self, context, result) -> str:
-        lines = []
-        mat = apply_result_material(context, self._object_name, result["convert"], "convert")
-        if "adapt" in result:
-            mat = apply_result_material(context, self._object_name, result["adapt"], "adapt")
-        lines.append(f"material '{mat.name}'")
-        if "light" in result:
-            world = apply_result_world(context, result["light"]["hdr"])
-            lines.append(f"World '{world.name}'")
-            obj = bpy.data.objects.get(self._object_name)
-            settings = context.scene.scenefit
-            if obj is not None:
-                try:
-                    setup_composite(context, obj, photo_path(context), tuple(settings.placement), settings.size,
-                                    settings.fov, settings.elevation)
-                    lines.append("composite set up (F12 renders it)")
-                except SceneFitError as error:
-                    lines.append(f"no composite: {error}")
-        if "adapt_skipped" in result:
-            lines.append(result["adapt_skipped"])
+        mat = apply_result_material(context, self._object_name, result, result["stage"])
+        world = apply_result_world(context, result["hdr"], "run")
+        image = apply_composite_image(context, result["composite"], "run")
+        lines = [f"material '{mat.name}'", f"World '{world.name}'", f"composite image '{image.name}'"]
+        settings = context.scene.scenefit
+        try:
+            setup_composite(context, bpy.data.objects[self._object_name], photo_path(context),
+                            tuple(settings.placement), settings.size, settings.fov, settings.elevation)
+            lines.append("Cycles composite set up (F12 renders it)")
+        except SceneFitError as error:
+            lines.append(f"no Cycles composite: {error}")
+        if result["stages"]["adapt"] == "skipped":
+            lines.append(f"adapt skipped: {result['adapt_skipped']}")
         return "Done: " + "; ".join(lines)
 
 

@@ -12,19 +12,47 @@ from pathlib import Path
 from ..core.progress import ProgressCallback
 
 
+def written_whole(out: str, write) -> dict:
+    """Run `write(folder)` into the hidden sibling of `out` and swap it in whole when it returns
+    (core.output_folder: a cancelled or failed run leaves nothing); the paths it returns are moved
+    along to `out`."""
+    from ..core.output_folder import output_folder
+
+    with output_folder(out) as staging:
+        result = write(staging)
+    target = str(Path(out).absolute())
+    return _moved(_moved(result, str(staging.resolve()), target), str(staging), target)
+
+
+def _moved(value, old: str, new: str):
+    if isinstance(value, dict):
+        return {k: _moved(v, old, new) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(_moved(v, old, new) for v in value)
+    if isinstance(value, str) and (value == old or value.startswith(old + "/") or value.startswith(old + "\\")):
+        return new + value[len(old):]
+    return value
+
+
 def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
     """Fit the neural texture to the asset's maps; bake base colour, roughness, metallic into data['out']."""
     from ..core.pipeline import convert_and_bake, write_report
     from ..core.presets import stage_config
 
-    out = Path(data["out"])
     overrides = {"iterations": int(data["iterations"])} if data.get("iterations") else {}
-    _, report = convert_and_bake(data["mesh"], data["maps"], out, stage_config("convert", data["preset"], **overrides),
-                                 progress=progress, cancel=cancel)
-    write_report(out / "report.json", report)
-    return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
-            "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
-            "psnr_db": report["psnr_covered_texels_db"]}
+
+    def write(out: Path) -> dict:
+        # A roughness or metallic that holds one value stays that value (a factor on the socket), as
+        # on the command line, instead of a baked 16-bit map.
+        _, report = convert_and_bake(data["mesh"], data["maps"], out,
+                                     stage_config("convert", data["preset"], **overrides), progress=progress,
+                                     cancel=cancel, keep_constants=True)
+        write_report(out / "report.json", report)
+        return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
+                "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
+                "psnr_db": report["psnr_covered_texels_db"]}
+
+    return written_whole(data["out"], write)
 
 
 def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
@@ -58,15 +86,19 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
         config = replace(config, diffusion=replace(config.diffusion, model_resolution=size),
                          outpaint=replace(config.outpaint, resolution=size))
     result = estimate(photo, placement, config, photo_info=info, progress=progress, cancel=cancel)
-    out = Path(data["out"])
-    outputs = write_light_outputs(result, out)
-    report = light_report(result, config, outputs)
-    report["photo"] = info
-    write_report(out / "report.json", report)
-    camera = result.photo_camera
-    return {"hdr": outputs["hdr_exr"], "preview": outputs["preview_png"], "report": str(out / "report.json"),
-            "scene_type": result.decisions.get("scene_type", {}).get("chosen", ""),
-            "camera": {"yaw_deg": camera.yaw_deg, "pitch_deg": camera.pitch_deg, "fov_deg": camera.fov_deg}}
+
+    def write(out: Path) -> dict:
+        outputs = write_light_outputs(result, out)
+        report = light_report(result, config, outputs)
+        report["photo"] = info
+        write_report(out / "report.json", report)
+        camera = result.photo_camera
+        return {"hdr": str(outputs["hdr_exr"]), "preview": str(outputs["preview_png"]),
+                "report": str(out / "report.json"),
+                "scene_type": result.decisions.get("scene_type", {}).get("chosen", ""),
+                "camera": {"yaw_deg": camera.yaw_deg, "pitch_deg": camera.pitch_deg, "fov_deg": camera.fov_deg}}
+
+    return written_whole(data["out"], write)
 
 
 def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
@@ -102,34 +134,43 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
                        for st in config.stages)
         config = replace(config, stages=stages, model_resolution=data.get("model_resolution") or config.model_resolution)
     texture = load_neural_texture(data["texture"]) if data.get("texture") else None
-    out = Path(data["out"])
-    result, report = adapt_and_bake(data["mesh"], texture, config, out, photo=photo, placement=placement,
-                                    envmap=envmap, progress=progress, cancel=cancel)
-    write_report(out / "report.json", report)
-    return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
-            "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
-            "iterations": result.iterations}
+
+    def write(out: Path) -> dict:
+        result, report = adapt_and_bake(data["mesh"], texture, config, out, photo=photo, placement=placement,
+                                        envmap=envmap, progress=progress, cancel=cancel)
+        write_report(out / "report.json", report)
+        return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
+                "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
+                "iterations": result.iterations}
+
+    return written_whole(data["out"], write)
 
 
-def run_all(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
-    """Convert -> light -> adapt in one job (each into its own run folder); adapt is skipped, with the
-    reason, when it has no prompt or its diffusion weights are not on this machine."""
-    from ..core.guidance import models_available
+def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+    """The command line's pipeline (core.run.run_pipeline: convert -> light -> adapt -> compose; the
+    game bake is Bake Asset's, on the main thread) into data['out']; returns what Blender applies."""
+    from ..core.pipeline import write_report
+    from ..core.run import RunConfig, run_pipeline
 
-    out: dict = {"convert": convert(data["convert"], progress, cancel)}
-    if data.get("light"):
-        out["light"] = estimate_light(data["light"], progress, cancel)
-    adapt_data = data.get("adapt")
-    if adapt_data:
-        found, why = models_available(adapt_data["models"], need_inpaint=bool(adapt_data.get("photo")))
-        if not found:
-            out["adapt_skipped"] = f"Adapt skipped: {why}"
-        elif adapt_data["mode"] != "edit" and not adapt_data["prompt"]:
-            out["adapt_skipped"] = "Adapt skipped: the Style section has no prompt."
-        else:
-            envmap = out["light"]["hdr"] if "light" in out else adapt_data.get("envmap", "")
-            out["adapt"] = adapt(dict(adapt_data, texture=out["convert"]["texture"], envmap=envmap), progress, cancel)
-    return out
+    def write(folder: Path) -> dict:
+        config = RunConfig(preset=data["preset"], prompt=data["prompt"], guidance_type=data["guidance"],
+                           size=data["size"], models=data["models"])
+        report = run_pipeline(data["mesh"], data["maps"], data["photo"], tuple(data["placement"]), folder, config,
+                              progress=progress, cancel=cancel,
+                              bake_skipped_why="in Blender the game file is written by Bake Asset")
+        stages = report["stages"]
+        if stages["adapt"]["status"] == "skipped" and data.get("why_no_adapt"):
+            stages["adapt"]["why"] = data["why_no_adapt"]
+        write_report(folder / "report.json", report)  # paths relative to the run folder, which moves
+        last = "adapt" if stages["adapt"]["status"] != "skipped" else "convert"
+        outputs = stages[last]["report"]["outputs"]
+        return {"stage": last, "report": str(folder / "report.json"), "texture": outputs["weights"],
+                "maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
+                "hdr": str(folder / "light" / "light.exr"), "composite": report["composite"],
+                "stages": {name: stage["status"] for name, stage in stages.items()},
+                "adapt_skipped": stages["adapt"].get("why", "")}
+
+    return written_whole(data["out"], write)
 
 
 def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:

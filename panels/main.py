@@ -17,6 +17,15 @@ class _Section:
     bl_category = "SceneFit"
 
 
+class _Subsection(_Section):
+    bl_parent_id = "SCENEFIT_PT_main"
+
+
+def settings_column(panel, context):
+    """The scene's SceneFit settings and a column to draw them in."""
+    return context.scene.scenefit, panel.layout.column()
+
+
 class SCENEFIT_PT_main(_Section, bpy.types.Panel):
     bl_idname = "SCENEFIT_PT_main"
     bl_label = "SceneFit"
@@ -44,9 +53,8 @@ class SCENEFIT_PT_main(_Section, bpy.types.Panel):
                          icon="INFO")
 
 
-class SCENEFIT_PT_asset(_Section, bpy.types.Panel):
+class SCENEFIT_PT_asset(_Subsection, bpy.types.Panel):
     bl_label = "Asset"
-    bl_parent_id = "SCENEFIT_PT_main"
 
     def draw(self, context):
         from ..blender_io.material import material_summary
@@ -71,13 +79,11 @@ class SCENEFIT_PT_asset(_Section, bpy.types.Panel):
             layout.label(text="No UV map: unwrap it first (UV > Smart UV Project).", icon="ERROR")
 
 
-class SCENEFIT_PT_scene(_Section, bpy.types.Panel):
+class SCENEFIT_PT_scene(_Subsection, bpy.types.Panel):
     bl_label = "Scene"
-    bl_parent_id = "SCENEFIT_PT_main"
 
     def draw(self, context):
-        settings = context.scene.scenefit
-        col = self.layout.column()
+        settings, col = settings_column(self, context)
         col.prop(settings, "photo_path")
         row = col.row(align=True)
         row.prop(settings, "placement", text="")
@@ -88,13 +94,11 @@ class SCENEFIT_PT_scene(_Section, bpy.types.Panel):
         col.prop(settings, "elevation")
 
 
-class SCENEFIT_PT_style(_Section, bpy.types.Panel):
+class SCENEFIT_PT_style(_Subsection, bpy.types.Panel):
     bl_label = "Style"
-    bl_parent_id = "SCENEFIT_PT_main"
 
     def draw(self, context):
-        settings = context.scene.scenefit
-        col = self.layout.column()
+        settings, col = settings_column(self, context)
         col.prop(settings, "mode", expand=True)
         col.prop(settings, "object_prompt")
         col.prop(settings, "scene_prompt")
@@ -104,14 +108,12 @@ class SCENEFIT_PT_style(_Section, bpy.types.Panel):
             col.label(text=settings.prompt_source, icon="INFO")
 
 
-class SCENEFIT_PT_quality(_Section, bpy.types.Panel):
+class SCENEFIT_PT_quality(_Subsection, bpy.types.Panel):
     bl_label = "Quality"
-    bl_parent_id = "SCENEFIT_PT_main"
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
-        settings = context.scene.scenefit
-        col = self.layout.column()
+        settings, col = settings_column(self, context)
         col.prop(settings, "preset", expand=True)
         col.prop(settings, "output_dir")
         sub = col.column(align=True)
@@ -120,9 +122,8 @@ class SCENEFIT_PT_quality(_Section, bpy.types.Panel):
         sub.label(text=f"(the example asset on a {BENCH_MACHINE})")
 
 
-class SCENEFIT_PT_run(_Section, bpy.types.Panel):
+class SCENEFIT_PT_run(_Subsection, bpy.types.Panel):
     bl_label = "Run"
-    bl_parent_id = "SCENEFIT_PT_main"
 
     def draw(self, context):
         layout = self.layout
@@ -135,9 +136,17 @@ class SCENEFIT_PT_run(_Section, bpy.types.Panel):
         layout.operator("scenefit.export_mitsuba", icon="EXPORT")
 
 
-class SCENEFIT_PT_results(_Section, bpy.types.Panel):
+def draw_switch(layout, label: str, target: str) -> None:
+    """Buttons that switch `target` (MATERIAL or WORLD) between SceneFit's result and the artist's original."""
+    row = layout.row(align=True)
+    row.label(text=label)
+    for text, which in (("SceneFit", "RESULT"), ("Original", "ORIGINAL")):
+        op = row.operator("scenefit.use_result", text=text)
+        op.target, op.which = target, which
+
+
+class SCENEFIT_PT_results(_Subsection, bpy.types.Panel):
     bl_label = "Results"
-    bl_parent_id = "SCENEFIT_PT_main"
 
     def draw(self, context):
         from ..blender_io.world import world_controls
@@ -145,20 +154,14 @@ class SCENEFIT_PT_results(_Section, bpy.types.Panel):
         settings = context.scene.scenefit
         layout = self.layout
         layout.operator("scenefit.open_composite", icon="IMAGE")
-        if settings.result_material is not None:
-            row = layout.row(align=True)
-            row.label(text="Material")
-            op = row.operator("scenefit.use_result", text="SceneFit")
-            op.target, op.which = "MATERIAL", "RESULT"
-            op = row.operator("scenefit.use_result", text="Original")
-            op.target, op.which = "MATERIAL", "ORIGINAL"
+        row = layout.row(align=True)
+        for file_format in ("glb", "gltf"):  # greyed out until there is a SceneFit texture to bake
+            row.operator("scenefit.bake_asset", text=f"Bake Asset (.{file_format})", icon="EXPORT").file_format = file_format
+        for label, target, result in (("Material", "MATERIAL", settings.result_material),
+                                      ("World", "WORLD", settings.result_world)):
+            if result is not None:
+                draw_switch(layout, label, target)
         if settings.result_world is not None:
-            row = layout.row(align=True)
-            row.label(text="World")
-            op = row.operator("scenefit.use_result", text="SceneFit")
-            op.target, op.which = "WORLD", "RESULT"
-            op = row.operator("scenefit.use_result", text="Original")
-            op.target, op.which = "WORLD", "ORIGINAL"
             mapping, background = world_controls(settings.result_world)
             if mapping is not None:
                 layout.prop(mapping.inputs["Rotation"], "default_value", index=2, text="Light rotation")

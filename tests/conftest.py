@@ -2,7 +2,9 @@
 process, and its user folder must be chosen before it is imported)."""
 from __future__ import annotations
 
+import json
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -11,6 +13,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
+VALIDATOR_VERSION = "2.0.0-dev.3.10"
 
 
 def run_python(code: str, env: dict | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
@@ -37,3 +40,35 @@ def example_asset(tmp_path_factory) -> Path:
         make_example_asset({str(out)!r})
     """)
     return out
+
+
+def _validator_module() -> Path | None:
+    """The gltf-validator npm package, installed once into a cache folder (needs node and npm)."""
+    if shutil.which("node") is None or shutil.which("npm") is None:
+        return None
+    cache = Path(os.environ.get("SCENEFIT_CACHE", Path.home() / ".cache" / "scenefit")) / "gltf-validator"
+    module = cache / "node_modules" / "gltf-validator"
+    if not (module / "package.json").is_file() or \
+            json.loads((module / "package.json").read_text()).get("version") != VALIDATOR_VERSION:
+        cache.mkdir(parents=True, exist_ok=True)
+        proc = subprocess.run(["npm", "install", "--no-audit", "--no-fund", "--prefix", str(cache),
+                               f"gltf-validator@{VALIDATOR_VERSION}"], capture_output=True, text=True, timeout=300)
+        if proc.returncode != 0:
+            return None
+    return module
+
+
+@pytest.fixture(scope="session")
+def validator():
+    """validate(path) -> the Khronos glTF-Validator's report of a .glb/.gltf (skips without node and npm)."""
+    module = _validator_module()
+    if module is None:
+        pytest.skip("the Khronos glTF-Validator needs node and npm (npm install gltf-validator failed or no npm)")
+
+    def validate(path: str) -> dict:
+        proc = subprocess.run(["node", str(ROOT / "tools" / "gltf_validate.js"), str(module), path],
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        return json.loads(proc.stdout)
+
+    return validate

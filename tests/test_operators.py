@@ -98,6 +98,9 @@ ops["pick"] = bpy.ops.scenefit.pick_placement(x=0.5, y=0.8)
 with timed("convert"):
     ops["convert"] = bpy.ops.scenefit.convert(iterations=30)
 first_convert = bpy.context.scene.scenefit.result_material.name
+bsdf = bpy.data.materials[first_convert].node_tree.nodes["Principled BSDF"]
+out["convert_constants"] = {k: [bsdf.inputs[k].is_linked, round(bsdf.inputs[k].default_value, 3)]
+                            for k in ("Roughness", "Metallic")}
 ops["convert_again"] = bpy.ops.scenefit.convert(iterations=30)
 with timed("light"):
     ops["light"] = bpy.ops.scenefit.estimate_light(critic="none", outpaint="prior")
@@ -107,6 +110,34 @@ with timed("compose"):
     ops["compose"] = bpy.ops.scenefit.compose(samples=2)
 with timed("export"):
     ops["export"] = bpy.ops.scenefit.export_mitsuba()
+# Bake Asset: the object with its (adapted) SceneFit material as glTF; nothing of the session changes.
+def session():
+    kinds = ("objects", "meshes", "materials", "images", "scenes", "collections", "node_groups")
+    mat = obj.active_material
+    return [{k: sorted(x.name for x in getattr(bpy.data, k)) for k in kinds}, mat.name,
+            sorted((n.bl_idname, n.name) for n in mat.node_tree.nodes), len(mat.node_tree.links),
+            [round(v, 4) for v in obj.matrix_world.col[3]], len(bpy.context.scene.objects)]
+before_bake = session()
+with timed("bake_asset"):
+    ops["bake_glb"] = bpy.ops.scenefit.bake_asset()
+ops["bake_gltf"] = bpy.ops.scenefit.bake_asset(filepath=str(tmp / "chosen" / "asset"), file_format="gltf")
+out["bake_unchanged"] = [session() == before_bake, session(), before_bake]
+try:
+    bpy.ops.scenefit.bake_asset(texture_size=100)
+except RuntimeError as error:
+    out["bake_refused"] = str(error)
+# The maps Bake Asset wrote, recomputed from the same texture and mesh (deterministic), for the re-import check.
+gltf_export = import_module(MODULE + ".blender_io.gltf_export")
+game_bake = import_module(MODULE + ".core.game_bake")
+texture = import_module(MODULE + ".core.texture.bake").load_neural_texture(bpy.path.abspath(bpy.context.scene.scenefit.texture_path))
+mesh_b, _ = import_module(MODULE + ".blender_io.material").object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())
+(expected,) = game_bake.bake_game_maps(texture, mesh_b, [obj.active_material.name], game_bake.default_texture_size(texture, 1),
+                                       [gltf_export.constant_channels(obj.active_material)])
+np.savez(tmp / "expected_bake.npz", base_color=expected.base_color, roughness=np.asarray(expected.roughness),
+         metallic=np.asarray(expected.metallic))
+out["bake_material"] = obj.active_material.name
+out["bake_files"] = sorted(str(p) for p in tmp.rglob("*.gl*"))
+out["open_composite_options"] = sorted(bpy.ops.scenefit.open_composite.bl_options)
 ops["revert_material"] = bpy.ops.scenefit.use_result(target="MATERIAL", which="ORIGINAL")
 out["after_revert"] = obj.active_material.name
 ops["apply_material"] = bpy.ops.scenefit.use_result(target="MATERIAL", which="RESULT")
@@ -162,7 +193,7 @@ while not job.poll().finished:
 state = job.state
 jobs.release_job(job)
 out["job"] = {"status": state.status, "stages": sorted({s for s, _ in seen if s}), "steps": max(s for _, s in seen),
-              "result_files": sorted(Path(p).name for p in state.result["maps"].values())}
+              "result_maps": {k: v if isinstance(v, float) else Path(v).name for k, v in state.result["maps"].items()}}
 out["worker_touched_bpy"] = list(touched)
 timings["profiled_job"] = round(time.perf_counter() - t_job, 2)
 mat_from_job = results.apply_result_material(bpy.context, "Sphere", state.result, "convert")  # main thread
@@ -209,8 +240,14 @@ obj, mat, image, world = make_scene()
 before = snapshot()
 bpy.context.scene.scenefit.prompt = ""  # Run All: convert, light, the composite set up; adapt skipped (no prompt)
 with timed("run_all"):
-    ops = [bpy.ops.scenefit.run(iterations=20, critic="none", outpaint="prior")]
+    ops = [bpy.ops.scenefit.run()]
 out["unsaved_ops"] = [sorted(o) for o in ops]
+s = bpy.context.scene.scenefit
+composite = bpy.data.images.get("SceneFit Composite")
+out["run_composite"] = [composite is not None and composite.get("scenefit"), list(composite.size) if composite else None]
+run_dir = Path(bpy.path.abspath(s.composite_path)).parent.parent
+out["run_report"] = json.loads((run_dir / "report.json").read_text())
+out["run_folder_siblings"] = sorted(p.name for p in run_dir.parent.iterdir())
 out["run_all"] = [bpy.context.scene.camera.name if bpy.context.scene.camera else None,
                   bpy.context.scene.world.name, bpy.context.active_object.active_material.name]
 made = [i for i in bpy.data.images if "scenefit" in i]
@@ -250,6 +287,7 @@ def operated(run_py, tmp_path_factory):
             .replace("TINY", repr(str(tmp / "tiny"))))
     proc = run_py(code, env={"BLENDER_USER_RESOURCES": str(user)}, timeout=900)
     line = next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))
+    (tmp / "out.json").write_text(line[4:])  # for a look after a failure
     return tmp, json.loads(line[4:]), user
 
 
@@ -270,7 +308,10 @@ def test_every_operator_finishes_with_exec_default(operated):
     assert out["after_revert"] == "AssetMaterial" and out["world_after_revert"] == "User World"
     assert out["world"] == "SceneFit Light" and out["camera"] == "SceneFit Camera" and out["shadow_catcher"]
     kinds = sorted(Path(f).name.split("-")[0] for f in out["run_folders"])
-    assert kinds == ["adapt", "compose", "convert", "convert", "light", "mitsuba"], out["run_folders"]
+    assert kinds == ["adapt", "bake", "compose", "convert", "convert", "light", "mitsuba"], out["run_folders"]
+    # Constant channels stay constants: the sphere's roughness 0.5 and metallic 0 are socket values, not images.
+    assert out["convert_constants"] == {"Roughness": [False, 0.5], "Metallic": [False, 0.0]}
+    assert out["open_composite_options"] == ["REGISTER"]
     assert all(p.startswith("//scenefit/") for p in out["paths"].values()), out["paths"]
     assert all(path.startswith("//scenefit/") for _, path in out["images"]), out["images"]
 
@@ -309,7 +350,7 @@ def test_the_job_path_reports_progress_cancels_fails_cleanly_and_never_touches_b
     _, out, _ = operated
     job = out["job"]
     assert job["status"] == "done" and "convert" in job["stages"] and job["steps"] >= 1
-    assert job["result_files"] == ["base_color.png", "metallic.png", "roughness.png"]
+    assert job["result_maps"] == {"base_color": "base_color.png", "roughness": 0.5, "metallic": 0.0}
     assert out["worker_touched_bpy"] == [] and out["control_caught"]
     assert out["job_material"].startswith("Sphere SceneFit convert")
     assert out["runtime"] == [True, 0.5, "convert: fit 3/6", True, [8, 8]]
@@ -323,10 +364,56 @@ def test_unsaved_file_results_are_packed_and_survive_saving(operated):
     _, out, _ = operated
     assert out["unsaved_ops"] == [["FINISHED"]]
     assert out["run_all"] == ["SceneFit Camera", "SceneFit Light", "Sphere SceneFit convert"]
-    assert len(out["unsaved_packed"]) == 4 and all(packed for _, packed in out["unsaved_packed"])
+    # base colour (roughness and metallic stay values), the light and the composite
+    assert len(out["unsaved_packed"]) == 3 and all(packed for _, packed in out["unsaved_packed"])
     assert out["unsaved_outside_temp_and_addon"]
-    assert len(out["unsaved_reopened"]) == 4 and all(w > 0 and h > 0 for _, (w, h) in out["unsaved_reopened"])
+    assert len(out["unsaved_reopened"]) == 3 and all(w > 0 and h > 0 for _, (w, h) in out["unsaved_reopened"])
     assert out["unsaved_unchanged"]
+
+
+def test_run_all_is_the_command_lines_pipeline_and_shows_the_composite(operated):
+    _, out, _ = operated
+    assert out["run_composite"] == ["run", [64, 48]]  # loaded as an image, the photo's size
+    stages = out["run_report"]["stages"]
+    assert list(stages) == ["convert", "light", "adapt", "compose", "bake"]
+    assert [stages[k]["status"] for k in ("convert", "light", "compose")] == ["ran"] * 3
+    assert stages["adapt"] == {"status": "skipped", "why": "the Style section has no prompt"}
+    assert stages["bake"]["status"] == "skipped" and "Bake Asset" in stages["bake"]["why"]
+    assert out["run_report"]["composite"] == "compose/composite.png"  # relative: the folder was swapped in
+    # written beside and swapped in whole: nothing but the run's folder is left
+    assert len(out["run_folder_siblings"]) == 1 and out["run_folder_siblings"][0].startswith("run-")
+
+
+def test_bake_asset_writes_valid_gltf_that_reads_back(operated, validator, run_py):
+    tmp, out, _ = operated
+    assert out["ops"]["bake_glb"] == out["ops"]["bake_gltf"] == ["FINISHED"]
+    after, before = out["bake_unchanged"][1:]
+    assert out["bake_unchanged"][0], [(a, b) for a, b in zip(after, before) if a != b]
+    assert "power of two" in out["bake_refused"]
+    glb, gltf = sorted(out["bake_files"], key=lambda p: not p.endswith(".glb"))
+    assert Path(glb).parent.parent.name == "Sphere" and Path(glb).parent.name.startswith("bake-")
+    assert gltf == str(tmp / "chosen" / "asset.gltf")
+    for path in (glb, gltf):
+        report = validator(path)
+        assert report["issues"]["numErrors"] == 0, report["issues"]["messages"]
+    # Re-imported in a process of its own (bpy may crash importing glTF after the exporter ran).
+    proc = run_py(f"""
+        import json
+        import numpy as np
+        from scenefit.blender_io.asset_file import load_asset_materials
+        from scenefit.core.imageio import linear_to_srgb
+        want = np.load({str(tmp / "expected_bake.npz")!r})
+        (material,) = load_asset_materials({glb!r}).materials
+        err = {{"name": material.name,
+                "base_color": float(np.abs(np.round(linear_to_srgb(material.maps.base_color) * 255) - want["base_color"]).max())}}
+        for channel in ("roughness", "metallic"):
+            got, expected = np.asarray(getattr(material.maps, channel)), want[channel]
+            err[channel] = float(np.max(np.abs(np.round(got * 255) - expected) if expected.ndim else np.abs(got - expected) * 255))
+        print("JSON" + json.dumps(err))
+    """)
+    err = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
+    assert err["name"] == out["bake_material"]
+    assert err["base_color"] <= 1.0 and err["roughness"] <= 1.0 and err["metallic"] <= 1.0, err
 
 
 def test_missing_dependencies_are_one_sentence(operated):

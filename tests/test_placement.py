@@ -77,3 +77,41 @@ def test_quality_panel_times_are_the_bench_measurements():
     for preset, seconds in EXPECTED_SECONDS["convert"].items():
         if seconds is not None:
             assert seconds == pytest.approx(measured[preset], abs=0.05)
+
+
+def test_blender_shows_a_sideways_stored_photo_upright_like_the_pipeline(tmp_path, run_py):
+    """Blender ignores EXIF Orientation; the photo it shows behind the camera (where the artist clicks
+    the placement) must be the upright picture the pipeline reads, and must survive save and reopen."""
+    import OpenImageIO as oiio
+
+    stored = np.full((40, 60, 3), 0.2, np.float32)
+    stored[:8, :8] = 1.0
+    spec = oiio.ImageSpec(60, 40, 3, oiio.UINT8)
+    spec.attribute("Orientation", 6)
+    buf = oiio.ImageBuf(spec)
+    buf.set_pixels(oiio.ROI(), stored)
+    photo = tmp_path / "portrait.jpg"
+    assert buf.write(str(photo))
+    proc = run_py(f"""
+        import json
+        import bpy, numpy as np
+        from scenefit.blender_io.compose import ensure_photo_camera, load_photo_image
+        from scenefit.core.lighting import load_photo
+
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        image = load_photo_image({str(photo)!r})
+        assert load_photo_image({str(photo)!r}) == image            # loaded once
+        ensure_photo_camera(bpy.context.scene, image, 1.0, 0.2)
+        bpy.ops.wm.save_as_mainfile(filepath={str(tmp_path / 'scene.blend')!r})
+        bpy.ops.wm.open_mainfile(filepath={str(tmp_path / 'scene.blend')!r})
+        cam = bpy.context.scene.camera.data
+        shown = cam.background_images[0].image
+        w, h = shown.size
+        px = np.array(shown.pixels[:]).reshape(h, w, 4)[::-1, :, :3]
+        ours, _ = load_photo({str(photo)!r})
+        print(json.dumps({{"size": [w, h], "packed": shown.packed_file is not None,
+                          "diff": float(np.abs(px - ours).max())}}))
+    """)
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert result["size"] == [40, 60] and result["packed"]
+    assert result["diff"] < 2 / 255

@@ -142,7 +142,7 @@ def locate_model(model: str, role: str, parts: dict, config: ModelConfig) -> Pat
         folder = Path(snapshot_download(model, cache_dir=cache, allow_patterns=patterns))
     except Exception as error:
         raise ModelMissingError(f"The {role} model '{model}' is not in the Hugging Face cache at '{cache}' and "
-                                f"could not be downloaded ({_first_line(error)}). {how}") from None
+                                f"could not be downloaded ({type(error).__name__}: {_first_sentence(error)}). {how}") from None
     missing = _missing_parts(folder, parts)
     if missing:
         raise ModelMissingError(f"The {role} model '{model}' in '{folder}' lacks {', '.join(missing)}. {how}")
@@ -323,12 +323,19 @@ class DepthEstimator:
         from transformers import AutoImageProcessor, AutoModelForDepthEstimation
 
         only_local = hub_offline(local_files_only)
-        source = str(Path(model).expanduser()) if Path(model).expanduser().exists() else model
+        local = Path(model).expanduser()
         try:
-            self.processor = AutoImageProcessor.from_pretrained(source, cache_dir=cache_dir,
-                                                                local_files_only=only_local)
-            self.model = AutoModelForDepthEstimation.from_pretrained(source, cache_dir=cache_dir,
-                                                                     local_files_only=only_local)
+            if local.exists() or model.startswith((".", "/", "~")):
+                source = str(local)
+            else:
+                from huggingface_hub import snapshot_download
+
+                # One snapshot call fails at once without a network; transformers' own loading retries
+                # each file's request and took 100 s to give up.
+                source = snapshot_download(model, cache_dir=cache_dir, local_files_only=only_local,
+                                           allow_patterns=_WEIGHT_PATTERNS)
+            self.processor = AutoImageProcessor.from_pretrained(source, local_files_only=True)
+            self.model = AutoModelForDepthEstimation.from_pretrained(source, local_files_only=True)
         except (OSError, ValueError) as error:
             raise ModelMissingError(
                 f"The depth model '{model}' was not found in {_where_looked(model, cache_dir)}"
@@ -381,8 +388,3 @@ def load_depth_estimator(model: str, cache_dir: str | None = None, local_files_o
         _DEPTH_CACHE[key] = DepthEstimator(model, cache_dir, local_files_only, device)
     return _DEPTH_CACHE[key]
 
-
-def _first_line(error: Exception) -> str:
-    """The exception's name and first line: hub errors run to several paragraphs."""
-    lines = [line.strip() for line in str(error).splitlines() if line.strip()]
-    return f"{type(error).__name__}: {lines[0][:160]}" if lines else type(error).__name__

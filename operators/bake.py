@@ -1,0 +1,99 @@
+"""Bake Asset: the active object with its SceneFit texture written as a game asset (GLB or glTF).
+
+The maps are baked from the neural texture in the background job (plain arrays, no bpy); a COPY of
+the object and its materials gets them and is exported by Blender's glTF exporter on the main
+thread, then removed: the artist's object, materials and scene stay as they were.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import bpy
+from bpy.props import EnumProperty, IntProperty, StringProperty
+
+from ..blender_io.gltf_export import FORMATS, bake_copy_to_gltf, constant_channels
+from ..blender_io.material import object_mesh_and_slots
+from ..core.errors import InputError
+from ..core.pipeline import write_report
+from . import work
+from .common import OnMesh, run_folder
+from .jobs import JobOperator
+from .properties import PATH
+
+FORMAT_ITEMS = (("glb", "glTF Binary (.glb)", "One file holding the mesh, materials and images"),
+                ("gltf", "glTF Separate (.gltf)", "JSON, a .bin and the images beside it"))
+assert {key for key, *_ in FORMAT_ITEMS} == set(FORMATS)
+
+
+def texture_file(context) -> Path:
+    """The neural texture of the last Convert / Adapt / Run All; one sentence when there is none."""
+    text = context.scene.scenefit.texture_path
+    path = Path(bpy.path.abspath(text)) if text else None
+    if path is None or not path.is_file():
+        raise InputError("There is no SceneFit texture to bake; run Convert (or Adapt, Run All) on this object first.")
+    return path
+
+
+class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
+    """Write the active object with its SceneFit texture baked into its material as a game asset (glTF 2.0);
+    the object, its materials and the scene are left as they are"""
+
+    bl_idname = "scenefit.bake_asset"
+    bl_label = "Bake Asset"
+    job_name = "bake"
+
+    filepath: StringProperty(name="File", subtype="FILE_PATH", options={"SKIP_SAVE"} | PATH, default="",
+                             description="Where to write; empty: a new run folder next to the .blend")
+    file_format: EnumProperty(name="Format", items=FORMAT_ITEMS, default="glb")
+    texture_size: IntProperty(name="Texture size", default=0, min=0, max=8192, options={"SKIP_SAVE"},
+                              description="Pixels per side (a power of two); 0: the size the texture was fitted at")
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and bool(context.scene.scenefit.texture_path)
+
+    def prepare(self, context):
+        size = self.texture_size
+        if size and (size < 4 or size & (size - 1)):
+            raise InputError(f"Texture size must be a power of two from 4 to 8192 (or 0 for the fitted size), got {size}.")
+        obj = context.active_object
+        texture = texture_file(context)
+        mesh, slots = object_mesh_and_slots(obj, context.evaluated_depsgraph_get())
+        if len(slots) != 1:
+            raise InputError(f"'{obj.name}' uses {len(slots)} materials; SceneFit converts one material per object "
+                             "in Blender (`scenefit convert` and `scenefit bake` take assets with several).")
+        material = obj.material_slots[slots[0]].material
+        if self.filepath:
+            out_file = Path(bpy.path.abspath(self.filepath))
+            if out_file.suffix.lower() != f".{self.file_format}":
+                out_file = out_file.with_suffix(f".{self.file_format}")
+            self._folder = None
+        else:
+            self._folder = run_folder(context, "bake", obj.name)
+            out_file = Path(f"{bpy.path.clean_name(obj.name)}.{self.file_format}")
+        self._object_name, self._slots, self._out_file = obj.name, slots, out_file
+        return work.bake_game_maps, {"texture": str(texture), "mesh": mesh, "names": [material.name],
+                                     "size": self.texture_size, "constants": [sorted(constant_channels(material))]}
+
+    def apply(self, context, result) -> str:
+        obj = bpy.data.objects.get(self._object_name)
+        if obj is None:
+            raise InputError(f"The object '{self._object_name}' was deleted while SceneFit baked it.")
+
+        def export(folder: Path | None) -> dict:
+            out_file = self._out_file if folder is None else folder / self._out_file
+            report = bake_copy_to_gltf(obj, result["baked"], self._slots, out_file, self.file_format)
+            report.update({"object": obj.name, "format": self.file_format, "texture_size": result["size"],
+                           "file": str(out_file)})
+            if folder is not None:
+                write_report(folder / "report.json", report)
+            return report
+
+        # A run folder is written whole; a chosen file is moved into place once the exporter has finished.
+        report = export(None) if self._folder is None else work.written_whole(str(self._folder), export)
+        return f"Baked '{obj.name}' at {result['size']}² into {report['file']}"
+
+
+classes = (SCENEFIT_OT_bake_asset,)
+
+register, unregister = bpy.utils.register_classes_factory(classes)
