@@ -282,7 +282,8 @@ def main() -> int:
                      "", "Per view: [light.md](light.md). ![Estimated vs true maps](light_maps.png)", ""]
 
     total = time.perf_counter() - started
-    head = [f"# `make bench` results", "", f"**{mode}.** Machine: {machine()}; Mitsuba variant "
+    load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
+    head = [f"# `make bench` results", "", f"**{mode}.** Machine: {machine()}; load average at the end {load} (1/5/15 min); Mitsuba variant "
             f"{env['mitsuba_variant']}; torch {env['torch']}, {torch.get_num_threads()} threads (benchmark children: "
             f"{os.environ.get('SCENEFIT_BENCH_THREADS', 'the same')}). Total {total / 60:.0f} min. Timing on 2 shared "
             "cores is noisy: compare ratios within one table.", ""]
