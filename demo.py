@@ -16,10 +16,11 @@ from pathlib import Path
 import numpy as np
 
 from .core.asset_io import is_asset_folder, load_asset_folder
-from .core.compose import ComposeInputs, compose_preset, compose_to_folder, light_camera
+from .core.compose import ComposeInputs, compose_to_folder, light_camera
 from .core.imageio import read_image, write_image
 from .core.lighting import load_photo
 from .core.placement import Placement
+from .core.presets import stage_config
 from .core.mesh import normalize_to_unit_sphere
 from .core.photo import PhotoCamera, develop_photo, perspective_view, studiolight_path
 from .core.pipeline import constant_environment, contact_sheet, environment_info, load_environment, write_report
@@ -99,7 +100,7 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     placement = Placement.parse(DEMO_PLACEMENT, (photo.shape[1], photo.shape[0])).pixel(photo.shape[:2])
     constant_report = compose_to_folder(
         ComposeInputs(mesh, stack, photo, placement, constant, camera),
-        compose_preset(preset, size=DEMO_SIZE, spp=compose_stage["spp"]), out / "constant",
+        stage_config("compose", preset, size=DEMO_SIZE, spp=compose_stage["spp"]), out / "constant",
         {"light": f"constant, the estimated map's mean radiance {np.round(constant[0, 0], 4).tolist()}"})
     sheet = contact_sheet({"photo | composite under a constant light | composite under the estimated light": [
         photo, read_image(out / "constant" / "composite.png")[..., :3],

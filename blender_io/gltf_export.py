@@ -40,10 +40,11 @@ def _alpha_source(bsdf):
     return None
 
 
-def constant_channels(material) -> set[str]:
-    """The channels ("roughness", "metallic") the material gives as plain values."""
+def constant_channels(material) -> dict[str, float]:
+    """The channels ("roughness", "metallic") the material gives as plain values, with those values."""
     bsdf = principled_bsdf(material)
-    return {name.lower() for name in ("Roughness", "Metallic") if source(bsdf.inputs[name]) is None}
+    return {name.lower(): float(bsdf.inputs[name].default_value) for name in ("Roughness", "Metallic")
+            if source(bsdf.inputs[name]) is None}
 
 
 def _load_png(bpy, folder: Path, name: str, pixels: np.ndarray, colorspace: str):

@@ -64,8 +64,13 @@ def _adapt(args, out: Path) -> int:
         photo = linear_to_srgb(np.clip(read_color_image(args.photo, upright=True), 0.0, 1.0))
         where = placement(args, photo.shape[:2])
     env = environment(args)[0] if args.envmap else None
+    camera = None
+    if photo is not None and args.envmap:  # the camera the light stage estimated this map with
+        from ..core.compose import light_camera
+
+        camera = light_camera(args.envmap, {}, photo.shape[1], photo.shape[0])[0]
     result, report = adapt_and_bake(mesh, texture, config, out, photo=photo, placement=where,
-                                    envmap=env, progress=progress(args))
+                                    envmap=env, photo_camera=camera, progress=progress(args))
     if not report["outputs"]:   # another rank of a distributed run writes the outputs
         return 0
     report["environment"] = environment_info()

@@ -7,7 +7,7 @@ from .options import PRESETS, add_asset_args, add_placement_args, load_asset, pr
 
 
 def run(args) -> int:
-    from ..core.compose import COMPOSE_MAX_SIDE, ComposeInputs, compose_preset, compose_to_folder, light_camera
+    from ..core.compose import COMPOSE_MAX_SIDE, ComposeInputs, compose_to_folder, light_camera
     from ..core.convert import target_stack
     from ..core.lighting import load_photo
     from ..core.mesh import normalize_to_unit_sphere
@@ -15,7 +15,9 @@ def run(args) -> int:
     from ..core.placement import Placement
     from ..core.texture.bake import load_neural_texture, texture_maps_for_mesh
 
-    config = compose_preset(args.preset, size=args.object_size, shadow_type=args.shadow, spp=args.spp,
+    from ..core.presets import stage_config
+
+    config = stage_config("compose", args.preset, size=args.object_size, shadow_type=args.shadow, spp=args.spp,
                             sampler_type=args.sampler, denoiser_type=args.denoiser, exposure=args.exposure)
     mesh, maps = load_asset(args.asset, args.object)
     photo, info = load_photo(args.photo, max_side=COMPOSE_MAX_SIDE)

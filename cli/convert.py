@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import (PRESETS, add_asset_args, add_output_args, load_asset_materials, output, positive_int,
+from .options import (add_asset_args, add_output_args, add_preset_args, load_asset_materials, output, positive_int,
                       progress)
 
 
@@ -46,7 +46,7 @@ def add_parser(sub) -> None:
     p = sub.add_parser("convert", help="fit a neural texture to the asset's own maps and bake it")
     add_asset_args(p)
     add_output_args(p)
-    p.add_argument("--preset", choices=PRESETS, default="balanced", help="speed/accuracy trade (default: balanced)")
+    add_preset_args(p)
     p.add_argument("--method", choices=("direct", "inverse"), help="direct texture-space fit (default) or inverse rendering")
     p.add_argument("--iterations", type=positive_int)
     p.add_argument("--resolution", type=positive_int, help="texture size (default: the asset's, capped by the preset)")

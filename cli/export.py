@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import (add_asset_args, add_lighting_args, add_output_args, environment, finite_float, load_asset,
-                      output, positive_int)
+from .options import (add_asset_args, add_lighting_args, add_orbit_camera_args, add_output_args, environment,
+                      finite_float, load_asset, output)
 
 
 def run(args) -> int:
@@ -29,7 +29,5 @@ def add_parser(sub) -> None:
     add_lighting_args(p)
     add_output_args(p)
     p.add_argument("--azimuth", type=finite_float, default=30.0)
-    p.add_argument("--elevation", type=finite_float, default=15.0)
-    p.add_argument("--size", type=positive_int, default=512)
-    p.add_argument("--spp", type=positive_int, default=256)
+    add_orbit_camera_args(p, size=512, spp=256)
     p.set_defaults(func=run)

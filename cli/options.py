@@ -161,6 +161,13 @@ def add_elevation_arg(p: argparse.ArgumentParser, default: float | None = None) 
                         + (f" (default {default:g})" if default is not None else " (default: the stage's)"))
 
 
+def add_orbit_camera_args(p: argparse.ArgumentParser, size: int, spp: int) -> None:
+    """The orbit camera of `render` and `export`: --elevation (default 15), --size (pixels), --spp."""
+    add_elevation_arg(p, default=15.0)
+    p.add_argument("--size", type=positive_int, default=size, help=f"image side in pixels (default {size})")
+    p.add_argument("--spp", type=positive_int, default=spp, help=f"samples per pixel (default {spp})")
+
+
 def add_placement_args(p: argparse.ArgumentParser, required: bool = False, object_size: float | None = None) -> None:
     """Where the object goes in the photo (core/placement.py): --at, and --object-size unless the
     command has no use for it (object_size None)."""

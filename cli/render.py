@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import (add_asset_args, add_lighting_args, add_output_args, environment, finite_float, load_asset,
-                      positive_float, output, positive_int, progress)
+from .options import (add_asset_args, add_lighting_args, add_orbit_camera_args, add_output_args, environment,
+                      load_asset, positive_float, output, positive_int, progress)
 
 
 def run(args) -> int:
@@ -51,9 +51,7 @@ def add_parser(sub) -> None:
     add_output_args(p)
     p.add_argument("--texture", help="a texture.pt written by `scenefit convert` (default: the asset's maps)")
     p.add_argument("--views", type=positive_int, default=4)
-    p.add_argument("--elevation", type=finite_float, default=15.0)
-    p.add_argument("--size", type=positive_int, default=256)
-    p.add_argument("--spp", type=positive_int, default=64)
+    add_orbit_camera_args(p, size=256, spp=64)
     p.add_argument("--exposure", type=positive_float, default=1.0)
     p.add_argument("--no-normal-map", action="store_true", help="render without the asset's normal map")
     p.set_defaults(func=run)

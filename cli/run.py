@@ -6,8 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .options import (PRESETS, add_asset_args, add_model_args, add_placement_args, add_prompt_service_args, load_asset,
-                      model_config, progress, scene_conditional_prompt)
+from .options import (add_asset_args, add_model_args, add_placement_args, add_preset_args, add_prompt_service_args,
+                      load_asset, model_config, progress, scene_conditional_prompt)
 
 
 def run_config(args):
@@ -82,7 +82,7 @@ def add_parser(sub) -> None:
     p.add_argument("--object-prompt", help="the object, e.g. 'a leather sofa': without --prompt, a language model "
                                            "writes the prompt from it and --scene-prompt (or the photo)")
     p.add_argument("--scene-prompt", help="the scene, e.g. 'a swamp'")
-    p.add_argument("--preset", choices=PRESETS, default="balanced")
+    add_preset_args(p)
     p.add_argument("--guidance", choices=("auto", "sd2", "none"), default="auto",
                    help="adapt with Stable Diffusion 2 (sd2), not at all (none), or when its weights are here (auto)")
     p.add_argument("--shadow", choices=SHADOW_TYPES, default="ratio")

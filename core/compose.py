@@ -105,19 +105,6 @@ class ComposeConfig:
             raise InputError(f"shadow_max_side must be at least 16 pixels, got {self.shadow_max_side}.")
 
 
-COMPOSE_PRESETS: dict[str, ComposeConfig] = {
-    "draft": ComposeConfig(noise_target=0.06, max_spp=16),
-    "balanced": ComposeConfig(noise_target=0.03, max_spp=64),
-    "final": ComposeConfig(noise_target=0.015, max_spp=256),
-}
-
-
-def compose_preset(name: str, **overrides) -> ComposeConfig:
-    if name not in COMPOSE_PRESETS:
-        raise InputError(f"Unknown compose preset {name!r}; choose one of {', '.join(COMPOSE_PRESETS)}.")
-    return replace(COMPOSE_PRESETS[name], **{k: v for k, v in overrides.items() if v is not None})
-
-
 @dataclass(frozen=True)
 class ComposeInputs:
     mesh: Mesh                        # any scale; normalised here into the radius-0.5 sphere
@@ -126,6 +113,8 @@ class ComposeInputs:
     placement_px: tuple[float, float]
     envmap: np.ndarray                # (He, 2 He, 3) linear, Blender's lat-long convention
     camera: PhotoCamera               # the light stage's photo camera (its width/height are replaced by the photo's)
+    turn_deg: float = 0.0             # extra turn about Z after facing the camera (the adapt stage's global
+                                      # views turn the asset so the photo camera sees the side a view samples)
 
 
 @dataclass(frozen=True)
@@ -169,9 +158,11 @@ def _offset(lo: np.ndarray, hi: np.ndarray, scale: float, anchor, on_floor: bool
     return np.array([anchor[0] - centre[0] * scale, anchor[1] - centre[1] * scale, z0])
 
 
-def place_asset(normalized: Mesh, camera: PhotoCamera, pixel: tuple[float, float], size: float) -> ObjectPlacement:
+def place_asset(normalized: Mesh, camera: PhotoCamera, pixel: tuple[float, float], size: float,
+                turn_deg: float = 0.0) -> ObjectPlacement:
     """Stand the normalised asset on the floor under `pixel` (or float it on the pixel's ray when the
-    pixel is above the horizon), facing the camera, scaled so its projection spans `size` x photo height."""
+    pixel is above the horizon), facing the camera (then turned by `turn_deg` about Z), scaled so its
+    projection spans `size` x photo height."""
     floor = place_on_floor(camera, pixel)
     origin = camera_origin()
     on_floor = not floor.clamped
@@ -182,9 +173,9 @@ def place_asset(normalized: Mesh, camera: PhotoCamera, pixel: tuple[float, float
         anchor = origin + pixel_ray(camera, *pixel) * float(np.linalg.norm(floor.object_position - origin))
         why = "the picked point is above the horizon: the asset floats on its ray and casts no floor shadow"
     to_camera = origin[:2] - anchor[:2]
-    facing = math.degrees(math.atan2(to_camera[1], to_camera[0])) + 90.0  # front (-Y) -> towards the camera
-    rotation = _rotation_z(facing)
-    rotated = normalized.positions.astype(np.float64) @ rotation.T
+    # front (-Y) -> towards the camera, then the requested turn
+    facing = math.degrees(math.atan2(to_camera[1], to_camera[0])) + 90.0 + turn_deg
+    rotated = normalized.positions.astype(np.float64) @ _rotation_z(facing).T
     lo, hi = rotated.min(axis=0), rotated.max(axis=0)
 
     def placed(scale: float) -> np.ndarray:
@@ -216,16 +207,66 @@ def place_asset(normalized: Mesh, camera: PhotoCamera, pixel: tuple[float, float
                            float(scale), float(facing), float((hi[2] - lo[2]) * scale), box)
 
 
+def placement_transform(normalized: Mesh, placement: ObjectPlacement) -> tuple[np.ndarray, float, np.ndarray]:
+    """(rotation R, scale s, offset t) with world = R @ p * s + t for the normalised mesh's points p."""
+    rotation = _rotation_z(placement.facing_deg)
+    rotated = normalized.positions.astype(np.float64) @ rotation.T
+    offset = _offset(rotated.min(axis=0), rotated.max(axis=0), placement.scale, placement.base, placement.on_floor)
+    return rotation, placement.scale, offset
+
+
 def placed_mesh(normalized: Mesh, placement: ObjectPlacement) -> Mesh:
     """The normalised mesh moved into the photo's world (the caller's mesh is not touched)."""
-    rotation = _rotation_z(placement.facing_deg)
-    points = normalized.positions.astype(np.float64)
-    rotated = points @ rotation.T
-    offset = _offset(rotated.min(axis=0), rotated.max(axis=0), placement.scale, placement.base, placement.on_floor)
+    rotation, scale, offset = placement_transform(normalized, placement)
     normals = normalized.normals if normalized.normals is not None else vertex_normals(normalized.positions,
                                                                                        normalized.faces)
-    return Mesh.from_arrays(rotated * placement.scale + offset, normalized.faces, normalized.uvs,
-                            np.asarray(normals, np.float64) @ rotation.T, name=normalized.name)
+    return Mesh.from_arrays(normalized.positions.astype(np.float64) @ rotation.T * scale + offset, normalized.faces,
+                            normalized.uvs, np.asarray(normals, np.float64) @ rotation.T, name=normalized.name)
+
+
+def photo_camera_in_object_frame(camera: PhotoCamera, normalized: Mesh, placement: ObjectPlacement
+                                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The photo camera's (origin, forward, up) in the normalised asset's own frame: rendering the
+    unmoved asset from there shows exactly what the photo camera sees of the placed one (a similarity
+    keeps angles, so the field of view is the same)."""
+    rotation, scale, offset = placement_transform(normalized, placement)
+    forward, _, up, _, _ = camera.basis()
+    origin = rotation.T @ (camera_origin() - offset) / scale
+    return origin, rotation.T @ forward, rotation.T @ up
+
+
+def envmap_in_object_frame(envmap, placement: ObjectPlacement):
+    """The world's light map as the unmoved asset sees it: the asset is turned by facing_deg about Z, so
+    the map turns the other way (a shift of its columns, to the nearest column)."""
+    shift = int(round(placement.facing_deg / 360.0 * envmap.shape[1]))
+    return np.roll(envmap, shift, axis=1) if isinstance(envmap, np.ndarray) else envmap.roll(shift, 1)
+
+
+def paper_shadow_matte(intensity, floor, threshold_fraction: float):
+    """The appendix's shadow ("Scene Composition"): floor pixels darker than threshold_fraction x the
+    floor's mean intensity are shadowed; their intensity divided by the lit pixels' mean is the matte
+    ("scale by norm([1,1,1]) / E(I | lit) and convert to transparency"), lit pixels keep the photo (1).
+
+    intensity: (h, w) torch tensor (differentiable: the light stage's critic views pass gradients
+    through the shadowed pixels); floor: (h, w) bool. Returns (matte, threshold, lit mean, shadowed).
+    """
+    import torch
+
+    if not bool(floor.any()):
+        return torch.ones_like(intensity), 0.0, 0.0, torch.zeros_like(floor)
+    threshold = threshold_fraction * intensity[floor].mean()
+    shadowed = floor & (intensity < threshold)
+    lit = floor & ~shadowed
+    lit_mean = intensity[lit].mean() if bool(lit.any()) else intensity[floor].mean()
+    matte = torch.where(shadowed, (intensity / lit_mean.clamp_min(1e-12)).clamp(0.0, 1.0), torch.ones_like(intensity))
+    return matte, float(threshold.detach()), float(lit_mean.detach()), shadowed
+
+
+def composite_linear(object_rgb, alpha, photo_linear, matte):
+    """The one compositing rule, in linear light: the asset's premultiplied radiance over the photo,
+    which its shadow matte darkens. Arithmetic only, so it serves numpy (compose) and torch (the adapt
+    stage's global views, differentiable in object_rgb and alpha) alike."""
+    return object_rgb + (1.0 - alpha) * photo_linear * matte
 
 
 def horizon_row(camera: PhotoCamera) -> int:
@@ -283,19 +324,25 @@ class ComposeResult:
 
 
 class ComposeJob:
-    """One composition as a small system: build (place, scenes, spp), step (one render pass), finish."""
+    """One composition as a small system: build (place, scenes, spp), step (one render pass), finish.
+
+    With object_pass=False only the floor passes run (config.spp must be given): `matte()` is then the
+    asset's shadow alone, which needs no texture (the object is black in the floor passes).
+    """
 
     def __init__(self, inputs: ComposeInputs, config: ComposeConfig, progress: ProgressCallback | None = None,
-                 cancel: threading.Event | None = None) -> None:
+                 cancel: threading.Event | None = None, object_pass: bool = True) -> None:
         t0 = time.perf_counter()
         self.config, self.progress, self.cancel = config, progress, cancel
         photo = np.clip(np.asarray(inputs.photo_srgb, np.float32)[..., :3], 0.0, 1.0)
         h, w = photo.shape[:2]
         self.photo = photo
         self.camera = replace(inputs.camera, width=w, height=h)
-        maps = np.asarray(inputs.maps, np.float32)
+        maps = np.asarray(inputs.maps, np.float32) if object_pass else np.zeros((1, 1, 5), np.float32)
         if maps.ndim != 3 or maps.shape[2] != 5:
             raise InputError(f"The asset's maps must be (H, W, 5) base colour, roughness, metallic; got {maps.shape}.")
+        if not object_pass and config.spp is None:
+            raise InputError("A shadow-only composition needs a fixed spp (the noise target is set on the object).")
         envmap = np.asarray(inputs.envmap, np.float32)
         if envmap.ndim != 3 or envmap.shape[2] != 3 or envmap.shape[1] != 2 * envmap.shape[0]:
             raise InputError(f"The light map must be RGB with width = 2 x height, got {envmap.shape}.")
@@ -309,7 +356,7 @@ class ComposeJob:
 
         self.mi = mi
         normalized, _ = normalize_to_unit_sphere(inputs.mesh)
-        self.placement = place_asset(normalized, self.camera, inputs.placement_px, config.size)
+        self.placement = place_asset(normalized, self.camera, inputs.placement_px, config.size, inputs.turn_deg)
         self.mesh = placed_mesh(normalized, self.placement)
         self.maps = np.clip(maps, 0.0, 1.0)
         self.timings: dict[str, float] = {}
@@ -325,10 +372,11 @@ class ComposeJob:
         scale = min(1.0, config.shadow_max_side / max(w, h))
         self.floor_camera = replace(self.camera, width=max(1, round(w * scale)), height=max(1, round(h * scale)))
         self.floor_window = (0, horizon_row(self.floor_camera), self.floor_camera.width, self.floor_camera.height)
-        self.object_scene = _scene(mi, self.envmap, self.mesh, self.maps, black=False, floor_albedo=None)
+        self.object_scene = (_scene(mi, self.envmap, self.mesh, self.maps, black=False, floor_albedo=None)
+                             if object_pass else None)
         self.timings["build"] = time.perf_counter() - t0
         self.spp, self.decisions["spp"] = self._choose_spp()
-        self.passes = ["object"] + (["floor_with_object"] + (["floor_without_object"] if config.shadow_type == "ratio"
+        self.passes = ["object"] * object_pass + (["floor_with_object"] + (["floor_without_object"] if config.shadow_type == "ratio"
                                                               else []) if floor else [])
         self.images: dict[str, np.ndarray] = {}
 
@@ -467,17 +515,25 @@ class ComposeJob:
             t0 = time.perf_counter()
             radiance = denoise(radiance)
             self.timings["denoise_shadow"] = time.perf_counter() - t0
-        intensity = radiance @ LUMINANCE
+        import torch
+
         if not floor.any():
             return np.ones(radiance.shape, np.float32)
-        threshold = self.config.paper_threshold * float(intensity[floor].mean())
-        shadowed = floor & (intensity < threshold)
-        lit = floor & ~shadowed
-        lit_mean = float(intensity[lit].mean()) if lit.any() else float(intensity[floor].mean())
+        matte, threshold, lit_mean, shadowed = paper_shadow_matte(torch.from_numpy(radiance @ LUMINANCE),
+                                                                  torch.from_numpy(floor), self.config.paper_threshold)
         self.decisions["paper"] = {"threshold": threshold, "lit_mean": lit_mean}
         self.decisions["shadow_pixels"] = int(shadowed.sum())
-        matte = np.where(shadowed, np.clip(intensity / max(lit_mean, 1e-12), 0.0, 1.0), 1.0).astype(np.float32)
-        return np.repeat(matte[..., None], 3, axis=-1)
+        return np.repeat(matte.numpy().astype(np.float32)[..., None], 3, axis=-1)
+
+    def matte(self) -> np.ndarray:
+        """(h, w, 3) shadow multiplier over the whole photo, 1 where the floor is untouched (or not rendered)."""
+        if not all(name in self.images for name in self.passes if name != "object"):
+            raise RuntimeError("matte() before the floor passes ran.")
+        if "floor_with_object" not in self.images:
+            return np.ones(self.photo.shape[:2] + (3,), np.float32)
+        crop = self._ratio_matte() if self.config.shadow_type == "ratio" else self._paper_matte()
+        return self._photo_sized(self._full(crop, self.floor_window, 1.0,
+                                            (self.floor_camera.height, self.floor_camera.width)))
 
     def _photo_sized(self, matte: np.ndarray) -> np.ndarray:
         """The floor passes' matte scaled up to the photo (bilinear: shadows are soft), with pixels the
@@ -495,18 +551,13 @@ class ComposeJob:
         return big
 
     def finish(self) -> ComposeResult:
-        if not self.done:
+        if not self.done or "object" not in self.images:
             raise RuntimeError(f"finish() before every pass ran ({len(self.images)} of {len(self.passes)}).")
         t0 = time.perf_counter()
         object_rgb, alpha = self._object_layers()
-        if "floor_with_object" not in self.images:
-            matte = np.ones_like(object_rgb)
-        else:
-            matte = self._ratio_matte() if self.config.shadow_type == "ratio" else self._paper_matte()
-            matte = self._photo_sized(self._full(matte, self.floor_window, 1.0,
-                                                 (self.floor_camera.height, self.floor_camera.width)))
+        matte = self.matte()
         photo_linear = srgb_to_linear(self.photo).astype(np.float32)
-        composite = object_rgb + (1.0 - alpha[..., None]) * photo_linear * matte
+        composite = composite_linear(object_rgb, alpha[..., None], photo_linear, matte)
         changed = (alpha > 0) | (matte < 1.0).any(axis=-1)
         composite = np.where(changed[..., None], composite, photo_linear)
         display = np.where(changed[..., None], linear_to_srgb(np.clip(composite, 0.0, 1.0)), self.photo)
@@ -542,6 +593,16 @@ class ComposeJob:
 def build_compose(inputs: ComposeInputs, config: ComposeConfig = ComposeConfig(),
                   progress: ProgressCallback | None = None, cancel: threading.Event | None = None) -> ComposeJob:
     return ComposeJob(inputs, config, progress, cancel)
+
+
+def shadow_matte(inputs: ComposeInputs, config: ComposeConfig,
+                 cancel: threading.Event | None = None) -> tuple[np.ndarray, ObjectPlacement]:
+    """Only the floor passes: the (h, w, 3) shadow matte of the placed asset and the placement. The
+    asset is black in those passes, so inputs.maps are not read."""
+    job = ComposeJob(inputs, config, cancel=cancel, object_pass=False)
+    while not job.done:
+        job.step()
+    return job.matte(), job.placement
 
 
 def compose(inputs: ComposeInputs, config: ComposeConfig = ComposeConfig(), progress: ProgressCallback | None = None,

@@ -64,26 +64,31 @@ def default_texture_size(texture: NeuralTexture, material_count: int) -> int:
     return min(8192, 1 << (cell - 1).bit_length())
 
 
-def _channel(plane: np.ndarray, mask: np.ndarray, was_constant: bool) -> np.ndarray | float:
-    """8-bit linear bytes, or the mean value when the channel is constant (see CONSTANT_SCATTER)."""
+def _channel(plane: np.ndarray, mask: np.ndarray, original: float | None) -> np.ndarray | float:
+    """8-bit linear bytes, or one value when the channel is constant (see CONSTANT_SCATTER).
+
+    original: the value the asset gave this channel when it was a plain number. A fit of a constant
+    scatters around it, so a fitted mean within that scatter is the asset's own value, written exactly
+    (a metallic of 0 stays 0, not the fit's 0.0033); one that moved further (adaptation) is the mean."""
     plane = np.clip(plane, 0.0, 1.0)
     data = np.round(plane * 255.0).astype(np.uint8)
     covered = data[mask]
     if not covered.size:
         return data
+    mean = float(plane[mask].mean())
     flat = int(covered.max()) - int(covered.min()) <= CONSTANT_SPREAD
-    if flat or (was_constant and float(plane[mask].std()) <= CONSTANT_SCATTER):
-        return round(float(plane[mask].mean()), 4)
-    return data
+    if original is not None and (flat or float(plane[mask].std()) <= CONSTANT_SCATTER):
+        return float(original) if abs(mean - float(original)) <= CONSTANT_SCATTER else round(mean, 4)
+    return round(mean, 4) if flat else data
 
 
 def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: int,
-                   constants: list[set[str]] | None = None) -> list[BakedMaterial]:
+                   constants: list[dict[str, float]] | None = None) -> list[BakedMaterial]:
     """Every material's maps at `size`² in its own UV layout.
 
     `mesh` is the asset as read (with material_index for several materials, in object space); it is
     normalised here exactly as for fitting, so the network sees the same points. constants[i]
-    names the channels ("roughness", "metallic") that were plain values in material i.
+    maps the channels ("roughness", "metallic") that were plain values in material i to those values.
     """
     size = check_texture_size(size)
     if len(names) != mesh.material_count:
@@ -95,9 +100,9 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
         raster = rasterize_uv(material_submesh(normalized, index), size)
         maps = bake_texture(texture, raster.position, raster.border, raster.fill_index)
         base = np.round(linear_to_srgb(maps[..., 0:3]) * 255.0).astype(np.uint8)
-        was = constants[index] if constants else set()
+        was = constants[index] if constants else {}
         baked.append(BakedMaterial(name=name, base_color=base,
-                                   roughness=_channel(maps[..., 3], raster.mask, "roughness" in was),
-                                   metallic=_channel(maps[..., 4], raster.mask, "metallic" in was),
+                                   roughness=_channel(maps[..., 3], raster.mask, was.get("roughness")),
+                                   metallic=_channel(maps[..., 4], raster.mask, was.get("metallic")),
                                    coverage=raster.coverage))
     return baked

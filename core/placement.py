@@ -1,10 +1,11 @@
 """Where the object goes in the photo: the one placement every stage reads.
 
 `--at X,Y` on every command and the Blender panel's placement mean the object's centre in the
-photo, as fractions of its width and height (values above 1 are read as pixels); `--size` is the
-side of the object's square rendering as a fraction of the photo's height. The light stage casts
-its floor ray through the centre (core/lighting/panorama.py `place_on_floor`); the adapt stage
-composites the object's rendering into that square (core/guidance/views.py `global_view`).
+photo, as fractions of its width and height (values above 1 are read as pixels); `--object-size` is
+the fraction of the photo's height the asset spans. The light stage casts its floor ray through the
+centre (core/lighting/panorama.py `place_on_floor`); the compose stage stands the asset on the floor
+there (core/compose.py `place_asset`), and the adapt stage's global views are that composite
+(core/adapt/global_views.py). `box` is the square the light stage's critic views are cut around.
 """
 from __future__ import annotations
 
@@ -14,13 +15,13 @@ from dataclasses import dataclass
 from .errors import InputError
 
 DEFAULT_AT = (0.5, 0.6)
-DEFAULT_SIZE = 0.4          # adapt: the side of the square the object is rendered into, / photo height
+DEFAULT_SIZE = 0.4          # adapt: the asset's height in its global views (compose's placement), / photo height
 DEFAULT_OBJECT_SIZE = 0.3   # compose and run: the asset's height in the composite, / photo height
 
 
 @dataclass(frozen=True)
 class Placement:
-    """center: (x, y) fractions of the photo's width and height; size: the square's side / photo height."""
+    """center: (x, y) fractions of the photo's width and height; size: the asset's height / photo height."""
 
     center: tuple[float, float] = DEFAULT_AT
     size: float = DEFAULT_SIZE

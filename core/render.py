@@ -92,6 +92,28 @@ class SceneOptions:
             raise InputError(f"max_depth must be at least 2 (camera -> surface -> light), got {self.max_depth}.")
 
 
+@dataclass(frozen=True)
+class WindowCamera:
+    """A pinhole given by its pose, rendering only the pixels `crop` (x0, y0, width, height) of a
+    `film` (width, height) image; fov_x_deg spans the film's width. The adapt stage's global views use
+    it for the photo camera seen from the asset's own frame (core/compose.py)."""
+
+    origin: tuple[float, float, float]
+    target: tuple[float, float, float]
+    up: tuple[float, float, float]
+    fov_x_deg: float
+    film: tuple[int, int]
+    crop: tuple[int, int, int, int]
+
+    @property
+    def width(self) -> int:
+        return self.crop[2]
+
+    @property
+    def height(self) -> int:
+        return self.crop[3]
+
+
 @dataclass
 class RenderOutput:
     """Torch tensors (h, w, C): radiance is linear HDR; alpha is 1 where the asset (or floor/sphere) is."""
@@ -204,6 +226,8 @@ class AssetRenderer:
     def _sensor(self, camera: Camera):
         import mitsuba as mi
 
+        if isinstance(camera, WindowCamera):
+            return self._window_sensor(camera)
         key = (camera.width, camera.height)
         if key not in self._sensors:
             self._sensors[key] = mi.load_dict({
@@ -221,6 +245,29 @@ class AssetRenderer:
         p["x_fov"] = float(np.degrees(fov_x))
         p["to_world"] = mi.Transform4f().look_at(origin=camera.origin.tolist(), target=list(camera.target),
                                                  up=[0.0, 0.0, 1.0])
+        p.update()
+        return sensor
+
+    def _window_sensor(self, camera: WindowCamera):
+        """One sensor per film and crop; its pose and field of view are updated in place (no recompile)."""
+        import mitsuba as mi
+
+        key = ("window", camera.film, camera.crop)
+        if key not in self._sensors:
+            x0, y0, w, h = camera.crop
+            self._sensors[key] = mi.load_dict({
+                "type": "perspective", "fov": 40.0, "fov_axis": "x",
+                "film": {"type": "hdrfilm", "width": camera.film[0], "height": camera.film[1], "pixel_format": "rgba",
+                         "rfilter": {"type": "box"}, "crop_offset_x": x0, "crop_offset_y": y0,
+                         "crop_width": w, "crop_height": h},
+                "sampler": {"type": "independent"},
+            })
+        sensor = self._sensors[key]
+        p = mi.traverse(sensor)
+        p["x_fov"] = float(camera.fov_x_deg)
+        p["to_world"] = mi.Transform4f().look_at(origin=[float(v) for v in camera.origin],
+                                                 target=[float(v) for v in camera.target],
+                                                 up=[float(v) for v in camera.up])
         p.update()
         return sensor
 
@@ -245,7 +292,7 @@ class AssetRenderer:
             self._wrapped = render
         return self._wrapped
 
-    def render(self, camera: Camera, base_color, roughness, metallic, envmap, spp: int = 16,
+    def render(self, camera: "Camera | WindowCamera", base_color, roughness, metallic, envmap, spp: int = 16,
                seed: int = 0) -> RenderOutput:
         """Render RGBA. Arguments are torch tensors: maps (H, W, 3|1), envmap (He, We, 3), linear.
 

@@ -134,7 +134,7 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     """
     from dataclasses import replace
 
-    from .compose import COMPOSE_MAX_SIDE, ComposeInputs, compose_preset, compose_to_folder, light_camera
+    from .compose import COMPOSE_MAX_SIDE, ComposeInputs, compose_to_folder, light_camera
     from .presets import stage_config
     from .guidance.models import models_available
     from .lighting import estimate_light, light_report, load_photo, write_light_outputs
@@ -151,8 +151,8 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     h, w = photo.shape[:2]
     placement = Placement.parse(placement, tuple(photo_info["size"]))   # pixels of the photo as stored
     placement_px = placement.pixel((h, w))                               # ... in the light stage's copy
-    compose_config = compose_preset(config.preset, size=config.size, shadow_type=config.shadow_type,
-                                    spp=config.compose_spp)
+    compose_config = stage_config("compose", config.preset, size=config.size, shadow_type=config.shadow_type,
+                                  spp=config.compose_spp)
     if config.guidance_type == "sd2":
         found, where = True, "asked for (--guidance sd2)"
         from .guidance.models import locate_models
@@ -218,13 +218,16 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
 
         prompt = config.prompt or f"a {mesh.name} in this scene, photo"
         adapt_config = stage_config("adapt", config.preset, mode_type="scene", prompt=prompt, models=config.models)
-        centre = (placement_px[0] / w, max(0.0, placement_px[1] / h - config.size / 2))
-        guidance_placement = Placement(centre, min(1.0, config.size * 1.2))
-        adapt_key = _digest("adapt", adapt_config.to_dict(), convert_key, photo_key, asdict(guidance_placement))
+        # The global views are the compose stage's composite: same point, size and camera as compose below.
+        guidance_placement = Placement((placement_px[0] / w, placement_px[1] / h), min(1.0, config.size))
+        adapt_key = _digest("adapt", adapt_config.to_dict(), convert_key, photo_key, asdict(guidance_placement),
+                            light_key)
 
         def adapt(folder: Path) -> dict:
+            camera, _ = light_camera(light_path, photo_info, w, h)
             _, report = adapt_and_bake(mesh, load_neural_texture(texture_path), adapt_config, folder, photo=photo,
-                                       placement=guidance_placement, progress=progress, cancel=cancel)
+                                       placement=guidance_placement, photo_camera=camera, progress=progress,
+                                       cancel=cancel)
             return report
 
         runner.run("adapt", adapt_key, adapt)

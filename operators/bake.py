@@ -12,11 +12,10 @@ import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 
 from ..blender_io.gltf_export import FORMATS, bake_copy_to_gltf, constant_channels
-from ..blender_io.material import object_mesh_and_slots
 from ..core.errors import InputError
 from ..core.pipeline import write_report
 from . import work
-from .common import OnMesh, run_folder
+from .common import OnMesh, one_material_object, run_folder
 from .jobs import JobOperator
 from .properties import PATH
 
@@ -56,13 +55,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         size = self.texture_size
         if size and (size < 4 or size & (size - 1)):
             raise InputError(f"Texture size must be a power of two from 4 to 8192 (or 0 for the fitted size), got {size}.")
-        obj = context.active_object
         texture = texture_file(context)
-        mesh, slots = object_mesh_and_slots(obj, context.evaluated_depsgraph_get())
-        if len(slots) != 1:
-            raise InputError(f"'{obj.name}' uses {len(slots)} materials; SceneFit converts one material per object "
-                             "in Blender (`scenefit convert` and `scenefit bake` take assets with several).")
-        material = obj.material_slots[slots[0]].material
+        obj, mesh, slot, material = one_material_object(context)
         if self.filepath:
             out_file = Path(bpy.path.abspath(self.filepath))
             if out_file.suffix.lower() != f".{self.file_format}":
@@ -71,9 +65,9 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         else:
             self._folder = run_folder(context, "bake", obj.name)
             out_file = Path(f"{bpy.path.clean_name(obj.name)}.{self.file_format}")
-        self._object_name, self._slots, self._out_file = obj.name, slots, out_file
+        self._object_name, self._slots, self._out_file = obj.name, [slot], out_file
         return work.bake_game_maps, {"texture": str(texture), "mesh": mesh, "names": [material.name],
-                                     "size": self.texture_size, "constants": [sorted(constant_channels(material))]}
+                                     "size": self.texture_size, "constants": [constant_channels(material)]}
 
     def apply(self, context, result) -> str:
         obj = bpy.data.objects.get(self._object_name)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import bpy
 
-from ..blender_io import maps_from_material, mesh_from_object
+from ..blender_io import maps_from_material
 from ..core.errors import InputError
 
 ADDON_PACKAGE = __package__.rpartition(".")[0]
@@ -47,12 +47,25 @@ def check_dependencies() -> None:
 
 
 # -- inputs ------------------------------------------------------------------------------------------
+def one_material_object(context):
+    """(object, mesh in object space, material slot number, material) of the active object, whose faces must use one material:
+    in Blender a result is one new material on the object (the command line fits several as an atlas
+    and bakes them back per material)."""
+    from ..blender_io.material import object_mesh_and_slots
+
+    obj = context.active_object
+    mesh, slots = object_mesh_and_slots(obj, context.evaluated_depsgraph_get())
+    if len(slots) != 1:
+        raise InputError(f"'{obj.name}' uses {len(slots)} materials; in Blender SceneFit works on objects with one "
+                         f"material, so save the file and run `scenefit run FILE.blend --object \"{obj.name}\"`, "
+                         f"which fits every material and bakes them back into a GLB.")
+    return obj, mesh, slots[0], obj.material_slots[slots[0]].material
+
+
 def gather_asset(context):
     """The active object, its mesh (object space) and material maps, as core data."""
-    obj = context.active_object
-    mesh = mesh_from_object(obj, context.evaluated_depsgraph_get())
-    maps = maps_from_material(obj.active_material)
-    return obj, mesh, maps
+    obj, mesh, _, material = one_material_object(context)
+    return obj, mesh, maps_from_material(material)
 
 
 class OnMesh:

@@ -2,6 +2,8 @@
 applied in Blender: the new material, the World, the composite set up for Cycles and its image."""
 from __future__ import annotations
 
+import math
+
 import bpy
 from bpy.props import EnumProperty
 
@@ -40,6 +42,8 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
             guidance, why_no_adapt = "none", "the Style section has no prompt"
         return work.run, {"mesh": mesh, "maps": maps, "photo": str(photo), "placement": tuple(settings.placement),
                           "size": settings.size, "preset": settings.preset, "prompt": settings.prompt,
+                          # the panel's camera, which the Cycles set-up uses too, so both composites agree
+                          "fov_deg": math.degrees(settings.fov), "pitch_deg": -math.degrees(settings.elevation),
                           "guidance": guidance, "why_no_adapt": why_no_adapt, "models": model_settings(context)[0],
                           "out": str(run_folder(context, "run", obj.name))}
 

@@ -149,12 +149,14 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
 def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
     """The command line's pipeline (core.run.run_pipeline: convert -> light -> adapt -> compose; the
     game bake is Bake Asset's, on the main thread) into data['out']; returns what Blender applies."""
+    from ..core.photo import PhotoCamera
     from ..core.pipeline import write_report
     from ..core.run import RunConfig, run_pipeline
 
     def write(folder: Path) -> dict:
+        camera = PhotoCamera(yaw_deg=90.0, pitch_deg=data["pitch_deg"], fov_deg=data["fov_deg"], width=1, height=1)
         config = RunConfig(preset=data["preset"], prompt=data["prompt"], guidance_type=data["guidance"],
-                           size=data["size"], models=data["models"])
+                           size=data["size"], photo_camera=camera, models=data["models"])
         report = run_pipeline(data["mesh"], data["maps"], data["photo"], tuple(data["placement"]), folder, config,
                               progress=progress, cancel=cancel,
                               bake_skipped_why="in Blender the game file is written by Bake Asset")
@@ -182,6 +184,6 @@ def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Eve
     texture = load_neural_texture(data["texture"])
     size = data["size"] or default_texture_size(texture, len(data["names"]))
     emit(progress, "bake", 0, 1, f"{len(data['names'])} material(s) at {size}²")
-    baked = bake(texture, data["mesh"], list(data["names"]), size, [set(c) for c in data["constants"]])
+    baked = bake(texture, data["mesh"], list(data["names"]), size, [dict(c) for c in data["constants"]])
     emit(progress, "bake", 1, 1, "maps ready")
     return {"baked": baked, "size": size}

@@ -190,3 +190,13 @@ def test_cli_compose_keeps_a_photo_larger_than_the_light_stages_copy_at_its_size
     assert proc.returncode == 0, proc.stderr
     assert read_image(out / "composite.png").shape == (600, 1200, 3)
     assert json.loads((out / "report.json").read_text())["placement"]["pixel"] == [600.0, 480.0]
+
+
+def test_compose_presets_are_the_one_preset_table_and_unset_options_keep_them():
+    from scenefit.core.presets import stage_config
+
+    draft, final = stage_config("compose", "draft"), stage_config("compose", "final", size=0.5, spp=None)
+    assert draft.noise_target > final.noise_target and draft.max_spp < final.max_spp
+    assert final.size == 0.5 and final.spp is None and final.noise_target == 0.015
+    with pytest.raises(InputError, match="preset"):
+        stage_config("compose", "best")

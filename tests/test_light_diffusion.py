@@ -52,10 +52,21 @@ def _bright_spot(shape=(16, 32)):
     return ldr, {"near": mask}
 
 
-def _critic(tiny_base, scene):
+PHOTO = np.random.default_rng(5).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32)
+OBJECT_BOX = (24.0, 18.0, 16.0)   # x0, y0, side: the object stands at (32, 34), 1/3 of the photo tall
+
+
+def _critic(tiny_base, scene, **config):
     models = load_guidance_models(ModelConfig(base_model=str(tiny_base)), need_inpaint=False)
     prompts = ("a 3D object", SPHERE_PROMPT)
-    return DiffusionLightCritic(models, scene.cameras, prompts, DiffusionCriticConfig(model_resolution=32)), prompts
+    return DiffusionLightCritic(models, scene.cameras, prompts, DiffusionCriticConfig(model_resolution=32, **config),
+                                photo=PHOTO, squares=scene.photo_squares(OBJECT_BOX)), prompts
+
+
+def _request(scene, v, prompts, render_alpha, iteration=0, light=None):
+    coverage = scene.object_alpha(v)
+    return CriticRequest((prompts[v],), (scene.view_names[v],), iteration, 4, (750, 990), coverage[None], (v,), light,
+                         (render_alpha - coverage).clamp(0, 1)[None])
 
 
 def test_critic_gives_finite_image_gradients_for_every_view_and_trains_its_lora(tiny_base):
@@ -65,11 +76,11 @@ def test_critic_gives_finite_image_gradients_for_every_view_and_trains_its_lora(
     envmap = torch.full((16, 32, 3), 0.8)
     for v in range(len(scene.cameras)):
         render, alpha = scene.render_view(envmap, v, seed=3)
-        request = CriticRequest((prompts[v],), (scene.view_names[v],), 0, 4, (750, 990), alpha[None], (v,))
-        grad = critic(render[None], request)
+        grad = critic(render[None], _request(scene, v, prompts, alpha))
         assert grad.shape == (1, 32, 32, 3) and grad.dtype == render.dtype
         assert torch.isfinite(grad).all() and float(grad.abs().sum()) > 0
-    assert [h["view"] for h in critic.history] == [0, 1]
+    # The paper's two global views per view: the full scene and an interpolated crop.
+    assert [(h["view"], h["image"]) for h in critic.history] == [(0, "full"), (0, "crop"), (1, "full"), (1, "crop")]
     assert all(750 <= h["t"] <= 990 for h in critic.history)
     # One LoRA step per view: ε_ψ moved.
     changed = [not torch.equal(p, lora_before[n]) for n, p in critic.models.unet.named_parameters() if ADAPTER in n]
@@ -77,7 +88,7 @@ def test_critic_gives_finite_image_gradients_for_every_view_and_trains_its_lora(
     # The LoRA learning rate is annealed with the scales': 1e-4 at the start, 1e-5 at the last iteration.
     assert critic.lora.optimizer.param_groups[0]["lr"] == pytest.approx(1e-4)
     render, alpha = scene.render_view(envmap, 1, seed=4)
-    critic(render[None], CriticRequest((prompts[1],), ("sphere",), 3, 4, (750, 990), alpha[None], (1,)))
+    critic(render[None], _request(scene, 1, prompts, alpha, iteration=3))
     assert critic.lora.optimizer.param_groups[0]["lr"] == pytest.approx(1e-5)
 
 
@@ -110,8 +121,9 @@ def test_diffusion_steps_move_the_scale_toward_the_truth(tiny_base, start):
     masks = {k: torch.from_numpy(v) for k, v in regions.items()}
     true_map = compose_hdr(ldr_lin, masks, {"near": torch.tensor(math.log(truth))}).detach()
     models = load_guidance_models(ModelConfig(base_model=str(tiny_base)), need_inpaint=False)
+    # The known answer is the apparatus render under the true map, so the critic scores the renders.
     critic = DiffusionLightCritic(models, scene.cameras, (SPHERE_PROMPT,),
-                                  DiffusionCriticConfig(model_resolution=32, lambda_vsd=0.0))
+                                  DiffusionCriticConfig(model_resolution=32, lambda_vsd=0.0, views_type="apparatus"))
     with torch.no_grad():
         target, _ = scene.render_view(true_map, 0, spp=64, seed=99)
         image = tonemap_srgb_torch(target, critic.config.l_white).permute(2, 0, 1)[None]
@@ -125,6 +137,46 @@ def test_diffusion_steps_move_the_scale_toward_the_truth(tiny_base, start):
     # ε_ψ saw the light the renders were made under: its c_v followed the scale.
     seen = [h["light"][3] for h in critic.history]
     assert (seen[-1] > seen[0]) == (start < truth)
+
+
+def test_composited_views_hold_the_photo_around_the_apparatus_and_pass_gradients_to_the_light(tiny_base):
+    from scenefit.core.guidance.views import paste_layer, photo_crop
+    from scenefit.core.lighting.hdr import compose_hdr, per_view_losses
+    from scenefit.core.imageio import srgb_to_linear
+
+    scene = _scene()
+    critic, prompts = _critic(tiny_base, scene)
+    squares = scene.photo_squares(OBJECT_BOX)
+    # The object view is centred on the object's square, 1.65 x as wide; the sphere's sits right of it, on the floor.
+    assert squares[0] == pytest.approx((32 - 1.65 * 8, 26 - 1.65 * 8, 1.65 * 16))
+    assert squares[1][0] + squares[1][2] / 2 == pytest.approx(32 + 0.9 * 16) and squares[1][2] == pytest.approx(9.6)
+    # The crop schedule: the full view is the whole photo; the other lies between the view's square and it.
+    sides = []
+    for _ in range(50):
+        full, crop = critic.global_windows(0)
+        assert full == (0.0, -8.0, 64.0)
+        assert all(min(a, b) - 1e-9 <= c <= max(a, b) + 1e-9 for a, b, c in zip(squares[0], full, crop))
+        sides.append(crop[2])
+    assert min(sides) < squares[0][2] + 10 and max(sides) > 64 - 10
+    # A high bright spot: the floor carries a shadow; the views hold the photo wherever the apparatus is not.
+    ldr, regions = _bright_spot()
+    log_scale = torch.tensor(math.log(30.0), requires_grad=True)
+    envmap = compose_hdr(torch.from_numpy(srgb_to_linear(ldr)), {k: torch.from_numpy(v) for k, v in regions.items()},
+                         {"near": log_scale})
+    render, alpha = scene.render_view(envmap, 0, seed=1)
+    request = _request(scene, 0, prompts, alpha)
+    images = critic.views(render.detach(), request, 0, 0)
+    full = critic.global_windows(0)[0]
+    untouched = paste_layer(torch.cat([request.alphas[0], request.floor_alphas[0]], -1), (*squares[0][:2],
+                            squares[0][2], squares[0][2]), full, 32).sum(1)[0] == 0
+    photo = torch.from_numpy(photo_crop(PHOTO, full, 32)).permute(2, 0, 1)
+    difference = (images["full"][0] - photo).abs().amax(0)
+    assert untouched.sum() > 500 and float(difference[untouched].max()) < 1e-5
+    assert float(difference[~untouched].max()) > 0.05          # the object (and its shadow) are in the photo
+    # The critic's image gradient reaches the light map's scale through the render.
+    grad = critic(render[None], request)
+    per_view_losses(grad, render[None]).sum().backward()
+    assert log_scale.grad is not None and torch.isfinite(log_scale.grad) and float(log_scale.grad) != 0
 
 
 def test_the_light_vector_describes_the_map_and_conditions_eps_psi(tiny_base):
@@ -319,9 +371,10 @@ def test_fp16_models_give_finite_float32_gradients_and_outpaint(tiny_base, tiny_
     models = load_guidance_models(ModelConfig(base_model=str(tiny_base), inpaint_model=str(tiny_inpaint),
                                               dtype_type="fp16"), need_inpaint=True)
     scene = _scene()
-    critic = DiffusionLightCritic(models, scene.cameras, ("a", "b"), DiffusionCriticConfig(model_resolution=32))
+    critic = DiffusionLightCritic(models, scene.cameras, ("a", "b"), DiffusionCriticConfig(model_resolution=32),
+                                  photo=PHOTO, squares=scene.photo_squares(OBJECT_BOX))
     render, alpha = scene.render_view(torch.full((16, 32, 3), 2.0), 0)
-    grad = critic(render[None], CriticRequest(("a",), ("v",), 0, 2, (750, 990), alpha[None], (0,)))
+    grad = critic(render[None], _request(scene, 0, ("a", "b"), alpha))
     assert grad.dtype == torch.float32 and torch.isfinite(grad).all() and float(grad.abs().sum()) > 0
     known = np.zeros((32, 64), bool)
     known[10:20, 10:30] = True

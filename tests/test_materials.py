@@ -53,7 +53,7 @@ def test_one_texture_fits_both_materials_and_bakes_back_per_material():
     assert per["Red"] > 30.0 and per["Blue"] > 30.0, per
     assert result.decisions["resolution"] == 32 and result.raster.resolution == (64, 64)
     baked = bake_game_maps(result.texture, asset.mesh, ["Red", "Blue"], 32,
-                           [{"roughness", "metallic"}, {"roughness", "metallic"}])
+                           [{"roughness": 0.3, "metallic": 0.0}, {"roughness": 0.8, "metallic": 0.0}])
     normalized, _ = normalize_to_unit_sphere(asset.mesh)
     for index, (material, color, rough) in enumerate(zip(baked, (RED, BLUE), (0.3, 0.8))):
         mask = rasterize_uv(material_submesh(normalized, index), 32).mask  # the material's own UV layout
@@ -62,5 +62,21 @@ def test_one_texture_fits_both_materials_and_bakes_back_per_material():
         want = np.round(linear_to_srgb(np.array(color, np.float32)) * 255)
         # A 60-step draft fit is within ~15 sRGB steps (32 dB); the two colours are 150+ steps apart.
         assert np.abs(np.median(covered, axis=0) - want).max() <= 20, (material.name, np.median(covered, axis=0), want)
-        assert isinstance(material.roughness, float) and material.roughness == pytest.approx(rough, abs=0.03)
+        # The asset's constants come back exactly (the fit's scatter around them is not a change).
+        assert material.roughness == rough and material.metallic == 0.0
         assert material.report()["roughness"].startswith("factor")
+
+
+def test_a_constant_channel_bakes_to_the_assets_value_unless_adaptation_moved_it():
+    from scenefit.core.game_bake import CONSTANT_SCATTER, _channel
+
+    rng = np.random.default_rng(0)
+    mask = np.ones((16, 16), bool)
+    fitted = (0.0033 + rng.normal(0, 0.005, (16, 16))).clip(0, 1).astype(np.float32)   # a draft fit of metallic 0
+    assert _channel(fitted, mask, 0.0) == 0.0                       # the asset's own value, exactly
+    assert isinstance(_channel(fitted, mask, None), np.ndarray)     # not a constant in the asset: a map
+    assert _channel(np.full((16, 16), 0.5, np.float32), mask, None) == 0.5   # flat anyway: a value
+    moved = np.full((16, 16), 0.7, np.float32)                      # adaptation made a 0.35 roughness 0.7
+    assert _channel(moved, mask, 0.35) == pytest.approx(0.7)
+    varied = rng.uniform(0, 1, (16, 16)).astype(np.float32)         # adaptation painted a pattern: a map
+    assert float(varied.std()) > CONSTANT_SCATTER and isinstance(_channel(varied, mask, 0.5), np.ndarray)

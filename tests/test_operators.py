@@ -19,7 +19,7 @@ pytestmark = pytest.mark.blender
 ROOT = Path(__file__).resolve().parent.parent
 
 SCRIPT = r"""
-import json, sys, threading, time
+import json, math, sys, threading, time
 from pathlib import Path
 import numpy as np
 import bpy, addon_utils
@@ -221,6 +221,7 @@ while job.poll().step < 2:
 job.cancel()
 out["cancelled"] = job.wait(30).status
 jobs.release_job(job)
+out["cancel_left"] = sorted(p.name for p in tmp.iterdir() if "job_cancel" in p.name)  # written beside: nothing
 job = jobs.start_job(jobs.Job("light", work.estimate_light, {"photo": str(tmp / "missing.png")}))
 state = job.wait(30)
 jobs.release_job(job)
@@ -239,6 +240,8 @@ timings["job_section"] = round(time.perf_counter() - t_job, 2)
 obj, mat, image, world = make_scene()
 before = snapshot()
 bpy.context.scene.scenefit.prompt = ""  # Run All: convert, light, the composite set up; adapt skipped (no prompt)
+bpy.context.scene.scenefit.fov = math.radians(50.0)         # the panel's camera reaches the Mitsuba composite
+bpy.context.scene.scenefit.elevation = math.radians(14.0)
 with timed("run_all"):
     ops = [bpy.ops.scenefit.run()]
 out["unsaved_ops"] = [sorted(o) for o in ops]
@@ -354,7 +357,7 @@ def test_the_job_path_reports_progress_cancels_fails_cleanly_and_never_touches_b
     assert out["worker_touched_bpy"] == [] and out["control_caught"]
     assert out["job_material"].startswith("Sphere SceneFit convert")
     assert out["runtime"] == [True, 0.5, "convert: fit 3/6", True, [8, 8]]
-    assert out["cancelled"] == "cancelled"
+    assert out["cancelled"] == "cancelled" and out["cancel_left"] == []
     status, error = out["error"]
     assert status == "failed" and "missing.png" in error and "Traceback" not in error
     assert out["after_load"] == ["cancelled", True, False]
@@ -380,6 +383,10 @@ def test_run_all_is_the_command_lines_pipeline_and_shows_the_composite(operated)
     assert stages["adapt"] == {"status": "skipped", "why": "the Style section has no prompt"}
     assert stages["bake"]["status"] == "skipped" and "Bake Asset" in stages["bake"]["why"]
     assert out["run_report"]["composite"] == "compose/composite.png"  # relative: the folder was swapped in
+    # The panel's camera (50 degrees, 14 above the horizon) is the light stage's and so the composite's.
+    camera = stages["light"]["report"]["decisions"]["photo_camera"]
+    assert camera["fov_deg"] == pytest.approx(50.0) and camera["pitch_deg"] == pytest.approx(-14.0)
+    assert stages["compose"]["report"]["camera"]["fov_deg"] == pytest.approx(50.0)
     # written beside and swapped in whole: nothing but the run's folder is left
     assert len(out["run_folder_siblings"]) == 1 and out["run_folder_siblings"][0].startswith("run-")
 

@@ -2,9 +2,9 @@
 
 Modes (`mode_type`):
 - "scene": the paper's scene-conditional adaptation, complete setup (m): the local view (object on
-  solid colours, vanilla SD with reference feature injection, VSD) and the global views (object
-  composited into the photo at its placement, crops at several scales, SD inpainting), weighed
-  equally. Starts from the converted texture.
+  solid colours, vanilla SD with reference feature injection, VSD) and the global views (the
+  compose stage's composite of the asset and its shadow in the photo, crops at several scales, SD
+  inpainting), weighed equally. Starts from the converted texture.
 - "generate": scene-agnostic texture generation from a prompt (setup (a)): fresh texture, no
   reference, 72-view camera sampling over elevations {20, 30, 45}, λ_FOV in [0.6, 1.21],
   view-dependent prompts, optional random spherical-Gaussian lights, coarse-to-fine stages.
@@ -13,6 +13,7 @@ Modes (`mode_type`):
 
 config.py       AdaptConfig and StageSpec (paper defaults), the modes' settings, the stage schedule
 sampling.py     every random choice of one view of one step
+global_views.py the asset rendered through the photo camera where compose places it, and its shadow
 system.py       AdaptSystem: build / step / finish; adapt_texture and adapt_and_bake
 checkpoint.py   save and resume
 distributed.py  torch.distributed: views spread over ranks, gradients summed

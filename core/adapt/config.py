@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
+from ..compose import SHADOW_TYPES
 from ..errors import InputError
 from ..guidance.critics import CriticConfig
 from ..guidance.models import ModelConfig
@@ -59,6 +60,7 @@ class AdaptConfig:
     views_per_step: views whose gradients are averaged in one step (spread over the ranks of
     torch.distributed when there are several, else rendered in turn on one device).
     global_crops: global views (crops of the photo at several scales) scored per view.
+    shadow_type / shadow_spp: the global views' shadow, made by the compose stage's floor passes.
     """
 
     mode_type: str = "scene"
@@ -83,6 +85,8 @@ class AdaptConfig:
     fov_range: tuple[float, float] = (1.0, 1.21)
     background_random_p: float = 0.5
     global_crops: int = 2
+    shadow_type: str = "ratio"                    # the global views' shadow (core/compose.py SHADOW_TYPES)
+    shadow_spp: int = 32                          # samples per pixel of its floor passes (once per turn)
     light_type: str = "ambient"
     ambient: float = 1.0
     light_random_p: float = 0.0                   # "random": chance of a spherical-Gaussian light
@@ -130,6 +134,8 @@ class AdaptConfig:
         need(0.0 <= self.background_random_p <= 1.0 and 0.0 <= self.light_random_p <= 1.0,
              "probabilities must be in [0, 1].")
         need(self.global_crops >= 1, "global_crops must be at least 1.")
+        need(self.shadow_type in SHADOW_TYPES, f"shadow_type must be one of {SHADOW_TYPES}, got {self.shadow_type!r}.")
+        need(self.shadow_spp >= 1, f"shadow_spp must be at least 1, got {self.shadow_spp}.")
         need(self.ambient > 0, "ambient radiance must be positive.")
         need(self.max_depth >= 2, "max_depth must be at least 2.")
         need(self.preview_every >= 0 and self.checkpoint_every >= 0, "preview/checkpoint intervals must be >= 0.")

@@ -15,7 +15,6 @@ from ..camera import Camera
 from ..guidance.lora import AMBIENT_LIGHT
 from ..guidance.views import background_color, sample_crops
 from ..guidance.weighting import interpolation_lambda, sample_timestep
-from ..placement import Placement
 from ..render import equirect_directions
 from .config import AdaptConfig, StageSpec, stage_at
 
@@ -43,8 +42,9 @@ class ViewSample:
 
 
 def sample_view(config: AdaptConfig, iteration: int, index: int, latent_res: int, envmap: np.ndarray | None,
-                photo_hw: tuple[int, int] | None, placement: Placement | None) -> ViewSample:
-    """The choices for view `index` of step `iteration`."""
+                photo_hw: tuple[int, int] | None, object_box: tuple[float, float, float] | None) -> ViewSample:
+    """The choices for view `index` of step `iteration`; object_box: the square (x0, y0, side) in photo
+    pixels that every global crop must hold (None: no global views)."""
     rng = np.random.default_rng([config.seed, iteration, index])
     generator = torch.Generator().manual_seed(int(rng.integers(2**62)))
     progress = iteration / max(1, config.iterations - 1)
@@ -60,8 +60,8 @@ def sample_view(config: AdaptConfig, iteration: int, index: int, latent_res: int
         prompt = f"{prompt}, {view_suffix(camera.azimuth_deg)}"
     render_seed = int(rng.integers(2**31 - 2**16))
     crops = []
-    if config.views_type == "local+global" and photo_hw is not None and placement is not None:
-        crops = sample_crops(photo_hw, placement, config.global_crops, rng)
+    if config.views_type == "local+global" and photo_hw is not None and object_box is not None:
+        crops = sample_crops(photo_hw, object_box, config.global_crops, rng)
     return ViewSample(index, stage, camera, env, light, background, t, lam, noise, render_seed, prompt, crops,
                       rng, generator)
 

@@ -26,17 +26,20 @@ from ..guidance.injection import ReferenceInjector
 from ..guidance.lora import LoraCritic, camera_condition
 from ..guidance.models import GuidanceModels, load_guidance_models, locate_models
 from ..guidance.views import global_view, latent_mask, local_view, masked_image
+from ..lighting.estimate import LightConfig, default_photo_camera
 from ..guidance.weighting import normal_weight_map
 from ..mesh import Mesh
+from ..photo import PhotoCamera
 from ..placement import Placement
 from ..progress import ProgressCallback, check_cancel, emit
-from ..render import AssetRenderer, RenderOutput, SceneOptions
+from ..render import AssetRenderer, SceneOptions
 from ..presets import stage_config
 from ..texture.neural_texture import NeuralTexture, split_channels
 from ..texture.uv_raster import UVRaster
 from .checkpoint import CHECKPOINT_FILE, load_checkpoint, save_checkpoint
 from .config import AdaptConfig
 from .distributed import join_process_group, rank_world, sum_gradients, views_of_rank
+from .global_views import GlobalRender, GlobalScene
 from .sampling import ViewSample, sample_view
 
 PHASES = ("render", "vae", "unet", "vae_backward", "render_backward", "lora", "step")
@@ -46,7 +49,8 @@ PHASES = ("render", "vae", "unet", "vae_backward", "render_backward", "lora", "s
 class AdaptInputs:
     """What the stage works on. mesh: normalised (radius 0.5); raster: its UV raster at the texture's
     resolution; texture: the converted neural texture (None only for "generate"); photo: sRGB float
-    (H, W, 3) in [0, 1] and placement ("scene"); envmap: (He, 2He, 3) linear ("envmap" light)."""
+    (H, W, 3) in [0, 1] and placement ("scene"); envmap: (He, 2He, 3) linear ("envmap" light);
+    photo_camera: the light stage's camera for the photo (None: the light stage's default for it)."""
 
     mesh: Mesh
     raster: UVRaster
@@ -54,6 +58,7 @@ class AdaptInputs:
     photo: np.ndarray | None = None
     placement: Placement | None = None
     envmap: np.ndarray | None = None
+    photo_camera: PhotoCamera | None = None
 
     def validate(self, config: AdaptConfig) -> None:
         if config.mode_type != "generate" and self.texture is None:
@@ -132,6 +137,9 @@ class AdaptSystem:
                 self.reference_stack = texture.texture_from_plan(self.plan).detach()
         self.base_env = torch.from_numpy(np.ascontiguousarray(renderer_environment(inputs, config)))
         self.photo = None if inputs.photo is None else np.clip(np.asarray(inputs.photo, np.float32), 0.0, 1.0)
+        self.global_scene = None
+        if config.views_type == "local+global":
+            self.global_scene = _global_scene(inputs, config, self.photo, np.asarray(self.base_env))
         self.latent_res = config.model_resolution // models.vae_scale_factor
         self.uncond = models.embed(config.negative_prompt)
         self.optimizer = torch.optim.Adam(texture.parameters(), lr=config.lr_texture)
@@ -205,26 +213,34 @@ class AdaptSystem:
 
     def sample(self, iteration: int, index: int) -> ViewSample:
         hw = None if self.photo is None else self.photo.shape[:2]
-        return sample_view(self.config, iteration, index, self.latent_res, self.inputs.envmap, hw,
-                           self.inputs.placement)
+        box = None if self.global_scene is None else self.global_scene.box
+        return sample_view(self.config, iteration, index, self.latent_res, self.inputs.envmap, hw, box)
 
     def train_view(self, view: ViewSample) -> dict:
         """Render, score and back-propagate one view (its loss weighted 1 / views_per_step); returns its metrics."""
         weight = 1.0 / self.config.views_per_step
         env = self.base_env if view.envmap is None else torch.from_numpy(view.envmap)
         reference_view, weight_map = self._reference_and_weights(view, env)
-        out = self._render_texture(view, env)
-        rendered = torch.cat([out.rgb, out.alpha], dim=-1)
+        maps = split_channels(self.texture.texture_from_plan(self.plan))
+        out = self.renderer.render(view.camera, *maps, env, spp=view.stage.spp, seed=view.render_seed)
+        rendered = [torch.cat([out.rgb, out.alpha], dim=-1)]
+        placed = None
+        if view.crops:
+            placed = self.global_scene.render(*maps, env, view.camera.azimuth_deg, view.stage.render_size,
+                                              view.stage.spp, view.render_seed + 1)
+            rendered.append(torch.cat([placed.rgb, placed.alpha], dim=-1))
         self.timer.lap("render")
-        # Gradients stop at `leaf`, so the two halves of backward can be timed.
-        leaf = rendered.detach().to(self.device).requires_grad_(True)
-        image, latents, reference_latents, global_inputs = self._encode_views(view, leaf, reference_view)
+        # Gradients stop at the leaves, so the two halves of backward can be timed.
+        leaves = [r.detach().to(self.device).requires_grad_(True) for r in rendered]
+        image, latents, reference_latents, global_inputs = self._encode_views(view, leaves, placed, reference_view)
         self.timer.lap("vae")
         loss, metrics = self._score(view, latents, reference_latents, weight_map, global_inputs)
         self.timer.lap("unet")
         (loss * weight).backward()
         self.timer.lap("vae_backward")
-        rendered.backward(torch.nan_to_num(leaf.grad, nan=0.0, posinf=0.0, neginf=0.0).to(rendered.device))
+        grads = [torch.nan_to_num(leaf.grad if leaf.grad is not None else torch.zeros_like(leaf),
+                                  nan=0.0, posinf=0.0, neginf=0.0).to(r.device) for leaf, r in zip(leaves, rendered)]
+        torch.autograd.backward(rendered, grads)  # one pass through the texture for both renders
         self.timer.lap("render_backward")
         if self.critics.lora is not None:
             # ε_ψ learns the current renderings (its LoRA loss on the detached local latents).
@@ -256,15 +272,11 @@ class AdaptSystem:
                                            weight_type=self.config.normal_weight_type).to(self.device)
         return reference_view, weight_map
 
-    def _render_texture(self, view: ViewSample, env: torch.Tensor) -> RenderOutput:
-        stack = self.texture.texture_from_plan(self.plan)
-        return self.renderer.render(view.camera, *split_channels(stack), env, spp=view.stage.spp,
-                                    seed=view.render_seed)
-
-    def _encode_views(self, view: ViewSample, leaf: torch.Tensor, reference_view: torch.Tensor | None):
-        """Local view, reference and global views -> latents (global: with mask and masked-photo latents)."""
-        rgb, alpha = leaf[..., 0:3], leaf[..., 3:4]
-        image = local_view(rgb, alpha, view.background, self.config.model_resolution)
+    def _encode_views(self, view: ViewSample, leaves: list[torch.Tensor], placed: GlobalRender | None,
+                      reference_view: torch.Tensor | None):
+        """Local view, reference and global views -> latents (global: with mask and masked-photo latents).
+        leaves: the local render (h, w, 4) and, with global views, the asset's layer in the photo."""
+        image = local_view(leaves[0][..., 0:3], leaves[0][..., 3:4], view.background, self.config.model_resolution)
         latents = self.models.encode(image)
         reference_latents = None
         if reference_view is not None:
@@ -272,8 +284,8 @@ class AdaptSystem:
                 reference_latents = self.models.encode(reference_view)
         global_inputs = []
         for crop in view.crops:
-            g_image, g_alpha = global_view(rgb, alpha, self.photo, self.inputs.placement, crop,
-                                           self.config.model_resolution)
+            g_image, g_alpha = global_view(leaves[1][..., 0:3], leaves[1][..., 3:4], placed.rect, self.photo,
+                                           placed.matte, crop, self.config.model_resolution)
             with torch.no_grad():
                 masked_latents = self.models.encode(masked_image(g_image, g_alpha))
             global_inputs.append((self.models.encode(g_image), latent_mask(g_alpha, (self.latent_res,) * 2),
@@ -344,6 +356,15 @@ class AdaptSystem:
             "models": Decision({k: str(v) for k, v in self.models.paths.items()}, "where the weights were found"),
             "device": Decision(str(self.device), f"{str(self.models.dtype).replace('torch.', '')} UNet"),
         }
+
+
+def _global_scene(inputs: AdaptInputs, config: AdaptConfig, photo: np.ndarray, envmap: np.ndarray) -> GlobalScene:
+    """The photo, its camera (the light stage's) and the asset placed in it, for the global views."""
+    h, w = photo.shape[:2]
+    camera = inputs.photo_camera or default_photo_camera(LightConfig(), {}, w, h)[0]
+    azimuths = [360.0 * k / config.views for k in range(config.views)]  # sample_camera's choices
+    return GlobalScene(inputs.mesh, inputs.raster.resolution, photo, inputs.placement, camera, envmap, azimuths,
+                       config.max_depth, config.shadow_type, config.shadow_spp, config.seed)
 
 
 def renderer_environment(inputs: AdaptInputs, config: AdaptConfig) -> np.ndarray:
@@ -436,11 +457,12 @@ def adapt_texture(inputs: AdaptInputs, config: AdaptConfig, progress: ProgressCa
 def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfig, out_dir: str | Path,
                    photo: np.ndarray | None = None, placement: Placement | None = None,
                    envmap: np.ndarray | None = None, resolution: int | None = None,
-                   progress: ProgressCallback | None = None, cancel: threading.Event | None = None,
+                   photo_camera: PhotoCamera | None = None, progress: ProgressCallback | None = None, cancel: threading.Event | None = None,
                    models: GuidanceModels | None = None) -> tuple[AdaptResult, dict]:
     """Adapt (or, for "generate", make) the asset's texture and bake it into out_dir/maps.
 
-    mesh is the asset as given (normalised here); checkpoints go to out_dir/checkpoint so that
+    mesh is the asset as given (normalised here); photo_camera: the light stage's camera for the photo
+    (None: its default for the photo); checkpoints go to out_dir/checkpoint so that
     running the same command again resumes. Returns the result and a report dict (on ranks other
     than 0 of a distributed run nothing is written and the report's outputs are empty).
     """
@@ -456,7 +478,7 @@ def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfi
     res = texture.config.resolution if texture is not None else int(resolution or stage_config("texture", config.texture_preset).resolution)
     raster = rasterize_uv(normalized, res)
     inputs = AdaptInputs(mesh=normalized, raster=raster, texture=texture, photo=photo, placement=placement,
-                         envmap=envmap)
+                         envmap=envmap, photo_camera=photo_camera)
     result = adapt_texture(inputs, config, progress=progress, cancel=cancel, checkpoint_dir=out_dir / "checkpoint",
                            models=models)
     check_cancel(cancel)

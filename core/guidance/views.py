@@ -1,5 +1,6 @@
 """What the critics look at: the local view (object on a solid colour) and the global views (object
-composited into the photo at its placement, cropped at several scales), plus the inpainting input.
+composited into the photo by compose's rule with its shadow, cropped at several scales; the asset
+layer comes from core/adapt/global_views.py), plus the inpainting input.
 
 Images are torch (1, 3, H, W) display sRGB in [0, 1]; the object arrives as the renderer's linear,
 premultiplied radiance (background 0, see SceneOptions.hide_emitters) and its alpha.
@@ -11,7 +12,6 @@ import torch
 import torch.nn.functional as F
 
 from ..errors import InputError
-from ..placement import Placement
 
 GREY = (0.5, 0.5, 0.5)
 
@@ -48,9 +48,10 @@ def local_view(rgb: torch.Tensor, alpha: torch.Tensor, color: tuple[float, float
     return image
 
 
-def sample_crops(photo_hw: tuple[int, int], placement: Placement, count: int,
+def sample_crops(photo_hw: tuple[int, int], box: tuple[float, float, float], count: int,
                  rng: np.random.Generator) -> list[tuple[float, float, float]]:
-    """`count` square crops (x0, y0, side) at several scales, each holding the object's whole square.
+    """`count` square crops (x0, y0, side) at several scales, each holding the object's square `box`
+    (x0, y0, side in photo pixels).
 
     The sides are stratified between the object's square and the largest square the photo holds
     around it: crop i's side is drawn in the i-th of `count` equal slices of that range, so every
@@ -58,7 +59,7 @@ def sample_crops(photo_hw: tuple[int, int], placement: Placement, count: int,
     among those that keep the object inside (and the crop inside the photo where it can be).
     """
     h, w = photo_hw
-    ox, oy, oside = placement.box(photo_hw)
+    ox, oy, oside = box
     biggest = max(float(min(h, w)), oside)
     crops = []
     for i in range(count):
@@ -74,7 +75,7 @@ def sample_crops(photo_hw: tuple[int, int], placement: Placement, count: int,
     return crops
 
 
-def _photo_crop(photo: np.ndarray, crop: tuple[float, float, float], size: int) -> np.ndarray:
+def photo_crop(photo: np.ndarray, crop: tuple[float, float, float], size: int) -> np.ndarray:
     """The photo inside `crop` resampled to size x size (edge pixels repeat outside the photo)."""
     import cv2
 
@@ -95,27 +96,40 @@ def _photo_crop(photo: np.ndarray, crop: tuple[float, float, float], size: int) 
                           borderMode=cv2.BORDER_REPLICATE)
 
 
-def global_view(rgb: torch.Tensor, alpha: torch.Tensor, photo: np.ndarray, placement: Placement,
-                crop: tuple[float, float, float], size: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """The object (premultiplied linear (h, w, 3), alpha (h, w, 1)) composited into the sRGB photo,
-    seen through `crop`, at size x size: ((1, 3, S, S) sRGB image, (1, 1, S, S) object alpha).
+def paste_layer(layer: torch.Tensor, rect: tuple[float, float, float, float], crop: tuple[float, float, float],
+                size: int) -> torch.Tensor:
+    """(1, C, S, S): a layer (h, w, C) that covers `rect` (x0, y0, width, height in photo pixels), seen
+    through the square `crop` (x0, y0, side) at size x size, 0 outside it. Differentiable in `layer`."""
+    x0, y0, side = crop
+    scale = size / side
+    rx, ry, rw, rh = rect
+    pw, ph = max(1, int(round(rw * scale))), max(1, int(round(rh * scale)))
+    out = layer.permute(2, 0, 1)[None]
+    if out.shape[-2:] != (ph, pw):
+        out = F.interpolate(out, size=(ph, pw), mode="bilinear", align_corners=False,
+                            antialias=ph < out.shape[-2] or pw < out.shape[-1])
+    left, top = int(round((rx - x0) * scale)), int(round((ry - y0) * scale))
+    # Pad (or crop, with negative padding) the layer to the output canvas.
+    return F.pad(out, (left, size - left - pw, top, size - top - ph))
+
+
+def global_view(rgb: torch.Tensor, alpha: torch.Tensor, rect: tuple[float, float, float, float],
+                photo: np.ndarray, matte: np.ndarray, crop: tuple[float, float, float],
+                size: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The asset's layer (premultiplied linear (h, w, 3), alpha (h, w, 1), covering `rect` = x0, y0,
+    width, height of the photo) composited into the sRGB photo with its shadow `matte` (H, W, 3) by
+    compose's rule, seen through `crop`, at size x size: ((1, 3, S, S) sRGB image, (1, 1, S, S) alpha).
 
     Differentiable with respect to rgb and alpha.
     """
-    ox, oy, oside = placement.box(photo.shape[:2])
-    x0, y0, side = crop
-    scale = size / side
-    # The object's square inside the crop, in output pixels.
-    px, py, ps = (ox - x0) * scale, (oy - y0) * scale, max(1, int(round(oside * scale)))
-    obj = torch.cat([rgb, alpha], dim=-1).permute(2, 0, 1)[None]
-    obj = F.interpolate(obj, size=(ps, ps), mode="bilinear", align_corners=False, antialias=ps < obj.shape[-1])
-    left, top = int(round(px)), int(round(py))
-    # Pad (or crop, with negative padding) the object's square to the output canvas.
-    obj = F.pad(obj, (left, size - left - ps, top, size - top - ps))
+    from ..compose import composite_linear  # here: compose -> lighting -> guidance would import in a circle
+
+    obj = paste_layer(torch.cat([rgb, alpha], dim=-1), rect, crop, size)
     obj_rgb, obj_alpha = obj[:, :3], obj[:, 3:4]
-    bg = torch.from_numpy(_photo_crop(np.asarray(photo, np.float32), crop, size)).to(rgb)
+    bg = torch.from_numpy(photo_crop(np.asarray(photo, np.float32), crop, size)).to(rgb)
     bg_linear = srgb_to_linear_torch(bg.permute(2, 0, 1)[None])
-    image = linear_to_srgb_torch(obj_rgb + (1.0 - obj_alpha) * bg_linear)
+    shadow = torch.from_numpy(photo_crop(np.asarray(matte, np.float32), crop, size)).to(rgb).permute(2, 0, 1)[None]
+    image = linear_to_srgb_torch(composite_linear(obj_rgb, obj_alpha, bg_linear, shadow))
     return image, obj_alpha
 
 

@@ -4,8 +4,13 @@
 
 Per view (appendix "Light Estimation"): the linear render is tone-mapped by the extended Reinhard
 curve (the forward of the prior's inverse tone curve, so a clipped photo texel and the prior's HDR
-texel look alike), sRGB-encoded to [0, 1], resized to the model's resolution and VAE-encoded; t is
-drawn uniformly in request.t_range ([750, 990]); the ScoreCritic gives
+texel look alike) and sRGB-encoded to [0, 1]. views_type "composited" (the paper's): the object and
+sphere (coverage request.alphas) are alpha-blended into the photo at their place with the floor's
+shadow (the paper's thresholded matte, core/compose.py `paper_shadow_matte`, from the floor pixels
+request.floor_alphas), by compose's linear-light rule, and the critic sees two global views: the full
+scene and a crop interpolated between the full scene and the view's own square. views_type
+"apparatus": the render itself, in front of the map. Each image is resized to the model's
+resolution and VAE-encoded; t is drawn uniformly in request.t_range ([750, 990]); the ScoreCritic gives
 ∇z = w_t (ε_φ(z_t, text; CFG 7.5) - ε_ψ(z_t, text, camera)) (VSD, λ = 1), which autograd carries
 back through the VAE and the tone curve to the render's pixels. ε_ψ then takes one LoRA step on the
 detached latents, its learning rate annealed with the scales' (linearly to 0.1 x). ε_ψ is conditioned
@@ -26,8 +31,11 @@ from ..errors import InputError
 from ..guidance.critics import CriticConfig, ScoreCritic
 from ..guidance.lora import AMBIENT_LIGHT, LoraCritic, camera_condition
 from ..guidance.models import GuidanceModels
-from ..guidance.views import linear_to_srgb_torch
+from ..guidance.views import linear_to_srgb_torch, paste_layer, photo_crop, srgb_to_linear_torch
 from .hdr import DEFAULT_L_WHITE, CriticRequest
+
+VIEWS_TYPES = ("composited", "apparatus")
+LUMINANCE = (0.2126, 0.7152, 0.0722)
 
 
 @dataclass(frozen=True)
@@ -43,9 +51,16 @@ class DiffusionCriticConfig:
     model_resolution: int = 512
     l_white: float = DEFAULT_L_WHITE        # the tone curve applied to renders before encoding
     negative_prompt: str = ""
+    views_type: str = "composited"          # the paper's two global views in the photo; "apparatus": the renders
+    object_size: float = 0.3                # composited: the object spans this fraction of the photo's height
+    shadow_threshold: float = 0.9           # composited: the paper's shadow threshold (x the floor's mean)
     seed: int = 0
 
     def __post_init__(self) -> None:
+        if self.views_type not in VIEWS_TYPES:
+            raise InputError(f"views_type must be one of {', '.join(VIEWS_TYPES)}, got {self.views_type!r}.")
+        if not 0.0 < self.object_size <= 2.0 or not 0.0 < self.shadow_threshold <= 1.0:
+            raise InputError("object_size must be in (0, 2] and shadow_threshold in (0, 1].")
         if self.guidance_scale < 0:
             raise InputError(f"guidance_scale must not be negative, got {self.guidance_scale}.")
         if not 0.0 <= self.lambda_vsd <= 1.0:
@@ -71,10 +86,17 @@ class DiffusionLightCritic:
     conditioned on the current light."""
 
     def __init__(self, models: GuidanceModels, cameras, prompts: tuple[str, ...],
-                 config: DiffusionCriticConfig = DiffusionCriticConfig()) -> None:
+                 config: DiffusionCriticConfig = DiffusionCriticConfig(), photo: np.ndarray | None = None,
+                 squares: list[tuple[float, float, float]] | None = None) -> None:
+        """photo (sRGB, (H, W, 3)) and squares (per view, where its square rendering goes in the photo:
+        ApparatusScene.photo_squares) are needed for views_type "composited"."""
         if config.model_resolution // models.vae_scale_factor < 1:
             raise InputError("model_resolution is smaller than one latent texel.")
+        if config.views_type == "composited" and (photo is None or squares is None or len(squares) != len(cameras)):
+            raise InputError("The composited light critic needs the photo and one square per view.")
         self.models, self.config = models, config
+        self.photo = None if photo is None else np.clip(np.asarray(photo, np.float32)[..., :3], 0.0, 1.0)
+        self.squares = squares
         self.cameras = [(c.origin, c.forward) for c in cameras]
         for p in tuple(prompts) + (config.negative_prompt,):
             models.embed(p)
@@ -107,25 +129,65 @@ class DiffusionLightCritic:
         size = self.config.model_resolution
         grads = []
         for i, (prompt, view) in enumerate(zip(request.prompts, indices)):
-            # Tone-map, encode to sRGB [0, 1], resize and VAE-encode; gradients stop at `leaf`.
+            # Gradients stop at `leaf`; each image the model sees carries its share back to it.
             leaf = renders[i].detach().to(self.models.device, torch.float32).requires_grad_(True)
+            text = self.models.embed(prompt)
+            condition = self.condition(view, request.light)
             with torch.enable_grad():
-                image = tonemap_srgb_torch(leaf, self.config.l_white).permute(2, 0, 1)[None]
-                if image.shape[-2:] != (size, size):
-                    image = F.interpolate(image, size=(size, size), mode="bilinear", align_corners=False)
-                latents = self.models.encode(image)
-                # VSD at t ~ U[t_range]: ∇z = w_t (ε_φ (CFG) - ε_ψ).
-                t = int(self.rng.integers(request.t_range[0], request.t_range[1] + 1))
-                noise = torch.randn(latents.shape, generator=self.generator).to(latents.device)
-                text = self.models.embed(prompt)
-                condition = self.condition(view, request.light)
-                out = self.score(latents, t, noise, text, uncond, lam=self.config.lambda_vsd, condition=condition)
-                out.loss.backward()
-            grads.append(torch.nan_to_num(leaf.grad, nan=0.0, posinf=0.0, neginf=0.0))
-            # ε_ψ learns the current renderings (one LoRA step on the detached latents).
-            lora_loss = self.lora.learn(latents, text, condition, self.rng, self.generator, self.score.alpha_bar,
-                                        self.score.prediction_type)
+                images = self.views(leaf, request, i, view)
+            for name, image in images.items():
+                with torch.enable_grad():
+                    if image.shape[-2:] != (size, size):
+                        image = F.interpolate(image, size=(size, size), mode="bilinear", align_corners=False)
+                    latents = self.models.encode(image)
+                    # VSD at t ~ U[t_range]: ∇z = w_t (ε_φ (CFG) - ε_ψ); the view's images share its weight.
+                    t = int(self.rng.integers(request.t_range[0], request.t_range[1] + 1))
+                    noise = torch.randn(latents.shape, generator=self.generator).to(latents.device)
+                    out = self.score(latents, t, noise, text, uncond, lam=self.config.lambda_vsd, condition=condition)
+                    (out.loss / len(images)).backward(retain_graph=name != list(images)[-1])
+                # ε_ψ learns the current renderings (its LoRA loss on the detached latents).
+                lora_loss = self.lora.learn(latents, text, condition, self.rng, self.generator, self.score.alpha_bar,
+                                            self.score.prediction_type, 1.0 / len(images))
+                self.history.append({"iteration": request.iteration, "view": int(view), "image": name, "t": t,
+                                     "light": request.light, "grad_norm": out.metrics["grad_norm"],
+                                     "lora_loss": round(lora_loss, 6)})
             self.lora.step()
-            self.history.append({"iteration": request.iteration, "view": int(view), "t": t, "light": request.light,
-                                 "grad_norm": out.metrics["grad_norm"], "lora_loss": round(lora_loss, 6)})
+            grads.append(torch.nan_to_num(leaf.grad, nan=0.0, posinf=0.0, neginf=0.0))
         return torch.stack(grads).to(renders.device, renders.dtype)
+
+    def global_windows(self, view: int) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """The appendix's two global views as square windows (x0, y0, side) of the photo: one always the
+        full scene (the whole photo, its short side padded by repeating the edge), one interpolated
+        between the view's own square and the full scene (u ~ U[0, 1] from the critic's generator)."""
+        h, w = self.photo.shape[:2]
+        full = ((w - max(h, w)) / 2, (h - max(h, w)) / 2, float(max(h, w)))
+        u = float(self.rng.uniform())
+        return full, tuple(a + u * (b - a) for a, b in zip(self.squares[view], full))
+
+    def views(self, leaf: torch.Tensor, request: CriticRequest, i: int, view: int) -> dict[str, torch.Tensor]:
+        """The (1, 3, h, w) sRGB images the model scores for one render (h, w, 3): the render itself
+        ("apparatus"), or the two global views of it in the photo ("full" and "crop")."""
+        display = tonemap_srgb_torch(leaf, self.config.l_white)
+        if self.config.views_type == "apparatus":
+            return {"apparatus": display.permute(2, 0, 1)[None]}
+        if request.alphas is None or request.floor_alphas is None:
+            raise InputError("The composited light critic needs the object's and the floor's coverage in the request.")
+        from ..compose import composite_linear, paper_shadow_matte
+
+        alpha = request.alphas[i].to(leaf)
+        floor = request.floor_alphas[i].to(leaf)[..., 0] > 0.5
+        # The object and sphere, tone-mapped like the photo they join; the floor gives only its shadow.
+        premultiplied = srgb_to_linear_torch(display) * alpha
+        intensity = leaf @ torch.tensor(LUMINANCE, dtype=leaf.dtype, device=leaf.device)
+        matte, *_ = paper_shadow_matte(intensity, floor, self.config.shadow_threshold)
+        darkening = (1.0 - matte)[..., None].expand(*matte.shape, 3)
+        layer = torch.cat([premultiplied, alpha, darkening], dim=-1)
+        x0, y0, side = self.squares[view]
+        size = self.config.model_resolution
+        images = {}
+        for name, window in zip(("full", "crop"), self.global_windows(view)):
+            pasted = paste_layer(layer, (x0, y0, side, side), window, size)
+            photo = torch.from_numpy(photo_crop(self.photo, window, size)).to(leaf).permute(2, 0, 1)[None]
+            linear = composite_linear(pasted[:, :3], pasted[:, 3:4], srgb_to_linear_torch(photo), 1.0 - pasted[:, 4:7])
+            images[name] = linear_to_srgb_torch(linear)
+        return images

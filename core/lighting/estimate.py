@@ -296,7 +296,11 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
             from .diffusion_critic import DiffusionLightCritic
 
             models = guidance_models()
-            use_critic = DiffusionLightCritic(models, scene.cameras, prompts, config.diffusion)
+            # Where the object stands in the photo: its foot at the placement, `object_size` of the photo tall.
+            side = config.diffusion.object_size * h
+            object_box = (placement_px[0] - side / 2, placement_px[1] - side, side)
+            use_critic = DiffusionLightCritic(models, scene.cameras, prompts, config.diffusion, photo=photo,
+                                              squares=scene.photo_squares(object_box))
             models.release_text_encoder()
             decisions["critic"].update({"models": {k: str(v) for k, v in models.paths.items()},
                                         "device": str(models.device), "dtype": str(models.dtype).replace("torch.", ""),

@@ -168,9 +168,10 @@ class CriticRequest:
     iteration: int
     iterations: int
     t_range: tuple[int, int] = (750, 990)
-    alphas: torch.Tensor | None = None   # (V, h, w, 1) coverage, for critics that composite
+    alphas: torch.Tensor | None = None   # (V, h, w, 1) coverage of the object and sphere, for critics that composite
     view_indices: tuple[int, ...] = ()   # which of the scene's views these renders are
     light: tuple[float, ...] | None = None   # the current map as (c_x, c_y, c_r, c_v, b_v), see `light_vector`
+    floor_alphas: torch.Tensor | None = None  # (V, h, w, 1) coverage of the floor (its shadow goes into the photo)
 
 
 class Critic(Protocol):
@@ -238,6 +239,42 @@ class ApparatusScene:
                                    fov_multiplier=lam, width=size, height=size, target=center))
         self.view_names = tuple(f"object_az{a:+.0f}" for a in config.object_azimuths) + ("sphere",)
         self.weights = torch.tensor(config.view_weights, dtype=torch.float32)
+        self.mesh, self.floor_z = mesh, floor_z
+        self._object_alphas: dict[int, torch.Tensor] = {}
+
+    def object_alpha(self, index: int) -> torch.Tensor:
+        """(h, w, 1) coverage of the object and the sphere alone (the floor left out), for view `index`.
+        Geometry only, so rendered once per view (without the floor, 4x the spp for clean edges)."""
+        if index not in self._object_alphas:
+            if not self.config.floor:
+                with torch.no_grad():
+                    self._object_alphas[index] = self.render_view(torch.full(self.renderer.envmap_shape, 0.5), index)[1]
+            else:
+                if not hasattr(self, "_no_floor"):
+                    self._no_floor = AssetRenderer(self.mesh, self.renderer.maps_shape,
+                                                   np.full(self.renderer.envmap_shape, 0.5, np.float32),
+                                                   SceneOptions(sphere=self.sphere, max_depth=2))
+                with torch.no_grad():
+                    out = self._no_floor.render(self.cameras[index], *self.maps,
+                                                torch.full(self.renderer.envmap_shape, 0.5), spp=4 * self.config.spp)
+                self._object_alphas[index] = out.alpha
+        return self._object_alphas[index]
+
+    def photo_squares(self, object_box: tuple[float, float, float]) -> list[tuple[float, float, float]]:
+        """Where each view's square rendering goes in the photo (x0, y0, side in pixels), as the paper
+        alpha-blends a rendering "according to the user-provided position and size": object_box is the
+        square the normalised object (1 unit across) spans, standing on the floor; a view with FOV
+        multiplier λ spans λ units at its target (core/camera.py), centred on the target's place."""
+        ox, oy, side = object_box
+        unit = side                                   # photo pixels per world unit at the object
+        base_x, floor_y = ox + side / 2, oy + side    # the object's foot on the floor
+        squares = []
+        for camera in self.cameras:
+            tx, _, tz = camera.target
+            cx, cy = base_x + tx * unit, floor_y - (tz - self.floor_z) * unit
+            span = camera.fov_multiplier * unit
+            squares.append((cx - span / 2, cy - span / 2, span))
+        return squares
 
     def render(self, envmap: torch.Tensor, spp: int | None = None, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
         """(V, h, w, 3) radiance and (V, h, w, 1) alpha, one per view. For evaluation (no gradients): the
@@ -310,8 +347,9 @@ def optimise_scales(scene: ApparatusScene, ldr_srgb: np.ndarray, regions: dict[s
             render, alpha = scene.render_view(envmap, v, seed=config.seed * 100003 + it)
             # Score it and weight it ({1/6, 1/6, 1/6, 1/2}); backward now, while the sensor is this view's
             # (Mitsuba replays the path from the renderer's current camera on backward).
-            request = CriticRequest((prompts[v],), (scene.view_names[v],), it, n, config.t_range, alpha[None], (v,),
-                                    light)
+            coverage = scene.object_alpha(v)
+            request = CriticRequest((prompts[v],), (scene.view_names[v],), it, n, config.t_range, coverage[None], (v,),
+                                    light, (alpha - coverage).clamp(0.0, 1.0)[None])
             view_loss = scene.weights[v] * per_view_losses(critic(render[None], request), render[None]).sum()
             view_loss.backward()
             loss += float(view_loss.detach())
