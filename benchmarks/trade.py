@@ -116,14 +116,15 @@ print("RESULT", json.dumps({"seconds": seconds / len(views), "first_call_s": fir
 COMPOSE = PHOTOS + """
 from dataclasses import replace
 from scenefit.core.asset_io import load_asset_folder
-from scenefit.core.compose import ComposeInputs, compose, compose_preset
+from scenefit.core.compose import ComposeInputs, compose
+from scenefit.core.presets import stage_config
 from scenefit.core.convert import target_stack
 from scenefit.core.imageio import linear_to_srgb
 camera, photo, hdr = development_photo("city", 90.0)
 mesh, maps = load_asset_folder(ASSET)
 inputs = ComposeInputs(mesh, target_stack(maps, 512), photo, (160.0, 200.0), resized(hdr, 128), camera)
-config = compose_preset(PRESET, size=0.4) if PRESET != "reference" else \\
-    compose_preset("final", size=0.4, spp=REFERENCE_SPP, denoiser_type="none")
+config = stage_config("compose", PRESET, size=0.4) if PRESET != "reference" else \\
+    stage_config("compose", "final", size=0.4, spp=REFERENCE_SPP, denoiser_type="none")
 t = time.perf_counter()
 if PRESET != "reference":
     compose(inputs, config)                          # first call: Mitsuba compiles the kernels for this spp
@@ -147,7 +148,8 @@ print("RESULT", json.dumps({**row, "peak_mb": peak_mb()}))
 RUN = PHOTOS + """
 from dataclasses import replace
 from scenefit.core.asset_io import load_asset_folder
-from scenefit.core.compose import ComposeInputs, compose, compose_preset
+from scenefit.core.compose import ComposeInputs, compose
+from scenefit.core.presets import stage_config
 from scenefit.core.convert import target_stack
 from scenefit.core.imageio import read_image, write_image
 from scenefit.core.lighting.measure import SphereProbe, compare_maps
@@ -168,7 +170,7 @@ import os
 if not os.path.exists(IDEAL):                        # the same for every preset: made once
     ideal = compose(ComposeInputs(mesh, target_stack(maps, 512), read_image(photo_path)[..., :3],
                                   (160.0, 200.0), resized(hdr, 256), camera),
-                    compose_preset("final", size=0.4, spp=REFERENCE_SPP, denoiser_type="none"))
+                    stage_config("compose", "final", size=0.4, spp=REFERENCE_SPP, denoiser_type="none"))
     np.savez(IDEAL, composite=ideal.composite_srgb, changed=ideal.changed)
 ideal = np.load(IDEAL)
 composite = read_image(OUT + "/run/compose/composite.png")[..., :3]

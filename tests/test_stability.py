@@ -233,7 +233,7 @@ def test_a_tiny_1e6_spot_in_an_exr_photo_is_kept(tmp_path):
 def test_grazing_and_straight_down_photo_cameras_compose_finite(pitch):
     """A photo camera a half degree below the horizon (the object one row under it, seen edge-on on a
     floor that is nearly a line) and one looking straight down both give a finite composite."""
-    from scenefit.core.compose import ComposeInputs, compose, compose_preset, horizon_row
+    from scenefit.core.compose import ComposeInputs, compose, horizon_row
     from scenefit.core.photo import PhotoCamera
 
     camera = PhotoCamera(yaw_deg=90.0, pitch_deg=pitch, fov_deg=60.0, width=32, height=24)
@@ -242,7 +242,7 @@ def test_grazing_and_straight_down_photo_cameras_compose_finite(pitch):
     environment = env(1.0, 16)
     environment[:4] = 20.0
     result = compose(ComposeInputs(uv_sphere(0.5, 16, 8), stack, np.full((24, 32, 3), 0.5, np.float32), (16.0, y),
-                                   environment, camera), compose_preset("draft", spp=1, denoiser_type="none"))
+                                   environment, camera), stage_config("compose", "draft", spp=1, denoiser_type="none"))
     assert np.isfinite(result.composite_linear).all() and result.changed.any()
 
 
