@@ -14,6 +14,7 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..core.imageio import read_image, stored_orientation
+from ..core.photo import PhotoCamera
 from .placement import camera_for_placement
 
 TAG = "scenefit"
@@ -63,6 +64,32 @@ def _tagged(collection, name: str):
     return item if item is not None and TAG in item else None
 
 
+def camera_rotation(forward, up):
+    """The 3x3 rotation (mathutils.Matrix) of a Blender camera looking along `forward` with `up` up:
+    Blender cameras look along local -Z with local +Y up."""
+    import mathutils
+
+    z_axis, y_axis = -np.asarray(forward, np.float64), np.asarray(up, np.float64)
+    return mathutils.Matrix(np.column_stack([np.cross(y_axis, z_axis), y_axis, z_axis]).tolist())
+
+
+def new_plane(name: str, half: float):
+    """A NEW square plane object on z = 0, `half` wide each way (not linked to a scene)."""
+    import bpy
+
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata([(-half, -half, 0.0), (half, -half, 0.0), (half, half, 0.0), (-half, half, 0.0)], [],
+                     [(0, 1, 2, 3)])
+    return bpy.data.objects.new(name, mesh)
+
+
+def transparent_cycles(scene) -> None:
+    """Cycles with a transparent film and the Standard view, so radiance comes out as it was rendered."""
+    scene.render.engine = "CYCLES"
+    scene.render.film_transparent = True
+    scene.view_settings.view_transform = "Standard"
+
+
 def ensure_photo_camera(scene, image, fov: float, elevation: float):
     """SceneFit's camera (made once per file): the photo's aspect and FOV, pitched down by `elevation`,
     the photo as its background. Becomes the scene camera; the artist's camera object is untouched."""
@@ -80,7 +107,9 @@ def ensure_photo_camera(scene, image, fov: float, elevation: float):
     data.sensor_fit = "HORIZONTAL"
     data.angle = fov
     cam.rotation_mode = "XYZ"
-    cam.rotation_euler = (math.pi / 2 - elevation, 0.0, 0.0)  # -Z (a camera's view) turned to +Y, then down
+    # The light stage's photo camera: looking along +Y (yaw 90), pitched down by `elevation`.
+    forward, _, up, _, _ = PhotoCamera(yaw_deg=90.0, pitch_deg=-math.degrees(elevation)).basis()
+    cam.rotation_euler = camera_rotation(forward, up).to_euler("XYZ")
     w, h = image.size
     scene.render.resolution_x, scene.render.resolution_y = int(w), int(h)
     scene.render.resolution_percentage = 100
@@ -115,10 +144,8 @@ def ensure_shadow_catcher(scene, base: np.ndarray, extent: float):
 
     floor = _tagged(bpy.data.objects, FLOOR_NAME)
     if floor is None:
-        mesh = bpy.data.meshes.new(FLOOR_NAME)
-        mesh.from_pydata([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], [], [(0, 1, 2, 3)])
-        mesh[TAG] = "floor"
-        floor = bpy.data.objects.new(FLOOR_NAME, mesh)
+        floor = new_plane(FLOOR_NAME, 1.0)
+        floor.data[TAG] = "floor"
         floor[TAG] = "floor"
     if scene not in floor.users_scene:
         scene.collection.objects.link(floor)
@@ -133,9 +160,7 @@ def photo_behind_render(scene, image) -> None:
     pixels come out as they went in)."""
     import bpy
 
-    scene.render.engine = "CYCLES"
-    scene.render.film_transparent = True
-    scene.view_settings.view_transform = "Standard"
+    transparent_cycles(scene)
     scene.view_settings.look = "None"
     scene.view_settings.exposure, scene.view_settings.gamma = 0.0, 1.0
     if hasattr(scene, "compositing_node_group"):  # Blender 5: a compositor node group per scene

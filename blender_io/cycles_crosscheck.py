@@ -24,6 +24,7 @@ import numpy as np
 from ..core.lighting.panorama import CAMERA_HEIGHT
 from ..core.mesh import Mesh
 from ..core.photo import PhotoCamera
+from .compose import camera_rotation, new_plane, transparent_cycles
 from .material import write_result_material
 from .world import assign_world, world_from_hdr
 
@@ -53,11 +54,7 @@ def photo_camera_object(camera: PhotoCamera, name: str = "SceneFit Photo Camera"
     cam = bpy.data.objects.new(name, bpy.data.cameras.new(name))
     bpy.context.scene.collection.objects.link(cam)
     cam.location = (0.0, 0.0, CAMERA_HEIGHT)
-    # Blender cameras look along local -Z with local +Y up.
-    z_axis, y_axis = -np.asarray(forward), np.asarray(up)
-    x_axis = np.cross(y_axis, z_axis)
-    cam.matrix_world = mathutils.Matrix.Translation(cam.location) @ mathutils.Matrix(
-        np.column_stack([x_axis, y_axis, z_axis]).tolist()).to_4x4()
+    cam.matrix_world = mathutils.Matrix.Translation(cam.location) @ camera_rotation(forward, up).to_4x4()
     cam.data.sensor_fit = "HORIZONTAL"
     cam.data.angle = math.radians(camera.fov_deg)
     scene = bpy.context.scene
@@ -71,10 +68,8 @@ def floor_plane(size: float = 2000.0, name: str = "SceneFit Floor"):
     """A NEW white diffuse plane on z = 0 (its albedo cancels in the shadow ratio)."""
     import bpy
 
-    data = bpy.data.meshes.new(name)
-    h = size / 2
-    data.from_pydata([(-h, -h, 0.0), (h, -h, 0.0), (h, h, 0.0), (-h, h, 0.0)], [], [(0, 1, 2, 3)])
-    obj = bpy.data.objects.new(name, data)
+    obj = new_plane(name, size / 2)
+    data = obj.data
     bpy.context.scene.collection.objects.link(obj)
     mat = bpy.data.materials.new(name)
     if mat.node_tree is None:
@@ -91,11 +86,9 @@ def composite_scene(mesh: Mesh, maps_paths: dict, light_exr: str | Path, camera:
     import bpy
 
     scene = bpy.context.scene
-    scene.render.engine = "CYCLES"
+    transparent_cycles(scene)   # linear radiance out, as Mitsuba's
     scene.cycles.device = "CPU"
     scene.cycles.samples = samples
-    scene.render.film_transparent = True
-    scene.view_settings.view_transform = "Standard"   # linear radiance out, as Mitsuba's
     assign_world(scene, world_from_hdr(light_exr))
     asset = object_from_mesh(mesh)
     write_result_material(asset, maps_paths, name="SceneFit Asset Material")

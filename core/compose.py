@@ -38,7 +38,7 @@ import numpy as np
 
 from .backend import init_mitsuba
 from .denoise import DENOISER_TYPES, denoise, oidn_available
-from .errors import InputError
+from .errors import InputError, check_choice
 from .imageio import linear_to_srgb, srgb_to_linear
 from .lighting.panorama import CAMERA_HEIGHT, pixel_ray, place_on_floor
 from .mesh import Mesh, normalize_to_unit_sphere, vertex_normals
@@ -82,12 +82,9 @@ class ComposeConfig:
         if not 0.0 < self.size <= 2.0:
             raise InputError(f"--object-size is the fraction of the photo's height the asset spans, in (0, 2]; "
                              f"got {self.size}.")
-        if self.shadow_type not in SHADOW_TYPES:
-            raise InputError(f"shadow_type must be one of {', '.join(SHADOW_TYPES)}, got {self.shadow_type!r}.")
-        if self.sampler_type not in SAMPLER_TYPES:
-            raise InputError(f"sampler_type must be one of {', '.join(SAMPLER_TYPES)}, got {self.sampler_type!r}.")
-        if self.denoiser_type not in DENOISER_TYPES:
-            raise InputError(f"denoiser_type must be one of {', '.join(DENOISER_TYPES)}, got {self.denoiser_type!r}.")
+        check_choice("shadow_type", self.shadow_type, SHADOW_TYPES)
+        check_choice("sampler_type", self.sampler_type, SAMPLER_TYPES)
+        check_choice("denoiser_type", self.denoiser_type, DENOISER_TYPES)
         if self.spp is not None and not 1 <= self.spp <= 65536:
             raise InputError(f"spp must be between 1 and 65536, got {self.spp}.")
         if not (1 <= self.min_spp <= self.max_spp and self.pilot_spp >= 1):

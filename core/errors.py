@@ -23,3 +23,9 @@ class Cancelled(SceneFitError):
 
 class PromptServiceError(SceneFitError):
     """The language model that writes prompts timed out, refused, or answered with an error."""
+
+
+def check_choice(name: str, value, choices) -> None:
+    """A `*_type` setting must be one of its choices: one sentence naming them when it is not."""
+    if value not in choices:
+        raise InputError(f"{name} must be one of {', '.join(map(str, choices))}, got {value!r}.")

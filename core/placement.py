@@ -5,7 +5,7 @@ photo, as fractions of its width and height (values above 1 are read as pixels);
 the fraction of the photo's height the asset spans. The light stage casts its floor ray through the
 centre (core/lighting/panorama.py `place_on_floor`); the compose stage stands the asset on the floor
 there (core/compose.py `place_asset`), and the adapt stage's global views are that composite
-(core/adapt/global_views.py). `box` is the square the light stage's critic views are cut around.
+(core/adapt/global_views.py).
 """
 from __future__ import annotations
 
@@ -50,12 +50,6 @@ class Placement:
         """The centre in photo pixels (x right, y down)."""
         h, w = photo_hw
         return self.center[0] * w, self.center[1] * h
-
-    def box(self, photo_hw: tuple[int, int]) -> tuple[float, float, float]:
-        """(x0, y0, side) of the object's square in photo pixels."""
-        h, w = photo_hw
-        side = self.size * h
-        return self.center[0] * w - side / 2, self.center[1] * h - side / 2, side
 
 
 def parse_point(at: str | tuple[float, float]) -> tuple[float, float]:

@@ -183,7 +183,7 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
 
     # light: photo + placement -> light.exr (+ its report, which carries the photo camera)
     # Only what the scene needs: the map is as sharp as the asset's glossiest reflections.
-    from .scene_needs import envmap_height_for
+    from .scene_needs import envmap_height_for, report as needs_report
     from .texture.uv_raster import rasterize_uv
 
     normalized, _ = normalize_to_unit_sphere(mesh)
@@ -194,7 +194,7 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
         envmap_height = replace(envmap_height, value=preset_height,
                                 why=f"{envmap_height.why}; capped at the {config.preset} preset's {preset_height} rows")
     light_config = stage_config("light", config.preset, critic_type="diffusion" if found else "none", models=config.models,
-                                map_height=envmap_height.value)
+                                map_height=envmap_height.choice)
     if config.guidance_type == "none":  # no diffusion model at all: the sky/ground prior completes an outdoor map
         light_config = replace(light_config, outpaint=replace(light_config.outpaint, completion_type="prior"))
     light_key = _digest("light", asdict(light_config), photo_key, placement_px,
@@ -205,7 +205,7 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
                                 photo_info=photo_info, progress=progress, cancel=cancel)
         outputs = write_light_outputs(result, folder)
         report = light_report(result, light_config, outputs)
-        report["decisions"]["envmap_height"] = envmap_height.to_dict()
+        report["decisions"]["envmap_height"] = needs_report(envmap_height)
         write_json_atomic(folder / "report.json", report)
         return report
 

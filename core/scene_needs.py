@@ -8,10 +8,10 @@ with the reason the report gives.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
+from .decision import Decision
 from .maps import PBRMaps
 
 # 16-bit maps: values closer than one level are the same value.
@@ -20,19 +20,13 @@ ENVMAP_HEIGHTS = (32, 256)      # smallest and largest map chosen (rows; 256 is 
 GLOSSIEST_PERCENTILE = 5.0      # the glossiest 5% of the surface decides the map's sharpness
 
 
-@dataclass(frozen=True)
-class Decision:
-    """A choice and why it was made (reported as {"value": ..., "why": ...})."""
-
-    value: object
-    why: str
-
-    def to_dict(self) -> dict:
-        return {"value": self.value, "why": self.why}
+def report(decision: Decision) -> dict:
+    """A decision here as the reports give it: {"value": ..., "why": ...}."""
+    return {"value": decision.choice, "why": decision.reason}
 
 
 def constant_channels(maps: PBRMaps) -> dict[str, Decision]:
-    """For roughness and metallic: Decision(value=float constant, or "map")."""
+    """For roughness and metallic: Decision(choice=float constant, or "map")."""
     out = {}
     for name in ("roughness", "metallic"):
         value = getattr(maps, name)

@@ -1,6 +1,7 @@
 """Adapt: restyle the converted texture to fit the photo (or from a prompt), as a background job."""
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import bpy
@@ -27,8 +28,10 @@ def gather_adapt(op, context, texture: str) -> dict:
     return {
         "mesh": mesh, "texture": texture, "mode": settings.mode, "prompt": settings.prompt,
         "object_prompt": settings.object_prompt, "instruction": settings.instruction, "photo": photo,
-        # The panel's placement is where the asset stands; adapt wants the centre of its square view.
-        "placement": (x, max(0.0, y - settings.size / 2)), "size": settings.size,
+        # Where the asset stands and its height, as the light and compose stages read them; the photo's
+        # camera is the light stage's (beside light.exr), else the panel's.
+        "placement": (x, y), "size": settings.size,
+        "fov_deg": math.degrees(settings.fov), "pitch_deg": -math.degrees(settings.elevation),
         "envmap": light if light and Path(light).is_file() else "", "preset": settings.preset,
         "models": models, "iterations": op.iterations, "model_resolution": op.model_resolution,
         "render_size": op.render_size, "out": str(run_folder(context, "adapt", obj.name))}

@@ -108,6 +108,8 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
     from dataclasses import replace
 
     from ..core.adapt import StageSpec, adapt_and_bake
+    from ..core.compose import light_camera
+    from ..core.photo import PhotoCamera
     from ..core.placement import Placement
     from ..core.presets import stage_config
     from ..core.imageio import linear_to_srgb, read_color_image
@@ -115,10 +117,15 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
     from ..core.texture.bake import load_neural_texture
 
     mode = data["mode"]
-    photo = placement = None
+    photo = placement = camera = None
     if mode == "scene" and data.get("photo"):
         photo = linear_to_srgb(np.clip(read_color_image(data["photo"], upright=True), 0.0, 1.0))
         placement = Placement(tuple(data["placement"]), data["size"])
+        h, w = photo.shape[:2]
+        if data.get("envmap"):   # the camera the light stage estimated this map with
+            camera = light_camera(data["envmap"], {}, w, h)[0]
+        elif "fov_deg" in data:
+            camera = PhotoCamera(yaw_deg=90.0, pitch_deg=data["pitch_deg"], fov_deg=data["fov_deg"], width=w, height=h)
     overrides = {"views_type": "local"} if mode == "scene" and photo is None else {}
     envmap = load_environment(data["envmap"]) if data.get("envmap") else None
     if envmap is not None:
@@ -137,7 +144,7 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
 
     def write(out: Path) -> dict:
         result, report = adapt_and_bake(data["mesh"], texture, config, out, photo=photo, placement=placement,
-                                        envmap=envmap, progress=progress, cancel=cancel)
+                                        envmap=envmap, photo_camera=camera, progress=progress, cancel=cancel)
         write_report(out / "report.json", report)
         return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
                 "texture": report["outputs"]["weights"], "report": str(out / "report.json"),

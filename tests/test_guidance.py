@@ -236,9 +236,8 @@ def test_inpainting_input_has_nine_channels_with_the_mask_on_the_object(models):
     rgb[8:16, 8:16] = 0.7
     rgb.requires_grad_(True)
     photo = np.full((60, 90, 3), 0.3, np.float32)
-    placement = Placement(center=(0.5, 0.5), size=0.5)
-    crops = sample_crops(photo.shape[:2], placement.box(photo.shape[:2]), 3, np.random.default_rng(0))
-    ox, oy, oside = placement.box(photo.shape[:2])
+    ox, oy, oside = 30.0, 15.0, 30.0          # the object's square: half the photo's height, centred
+    crops = sample_crops(photo.shape[:2], (ox, oy, oside), 3, np.random.default_rng(0))
     for x0, y0, side in crops:  # every crop holds the whole object
         assert x0 <= ox + 1e-6 and y0 <= oy + 1e-6 and x0 + side >= ox + oside - 1e-6 and y0 + side >= oy + oside - 1e-6
     # Several scales: crop i's side lies in the i-th third of [object side 30, photo height 60].

@@ -36,7 +36,7 @@ def test_constant_channels_stay_constants_and_the_report_says_why(tmp_path):
 
 def test_constants_given_as_numbers_stay_numbers():
     decided = constant_channels(PBRMaps(base(), 0.35, 1.0))
-    assert decided["roughness"].value == 0.35 and decided["metallic"].value == 1.0
+    assert decided["roughness"].choice == 0.35 and decided["metallic"].choice == 1.0
 
 
 def test_texture_size_follows_the_objects_size_on_screen():
@@ -52,14 +52,14 @@ def test_texture_size_follows_the_objects_size_on_screen():
 @pytest.mark.parametrize("roughness, height", [(1.0, 32), (0.5, 32), (0.3, 128), (0.2, 256), (0.0, 256)])
 def test_environment_map_size_follows_how_glossy_the_asset_is(roughness, height):
     decision = envmap_height_for(PBRMaps(base(), roughness, 0.0))
-    assert decision.value == height and f"{roughness:.3g}" in decision.why
+    assert decision.choice == height and f"{roughness:.3g}" in decision.reason
 
 
 def test_the_glossiest_part_of_a_map_decides():
     rough = np.full((16, 16), 0.9, np.float32)
     rough[:4] = 0.15                                  # a quarter of the surface is glossy
-    assert envmap_height_for(PBRMaps(base(), rough, 0.0)).value == 256
+    assert envmap_height_for(PBRMaps(base(), rough, 0.0)).choice == 256
     # Texels no triangle uses (padding, here glossy) do not count.
     covered = np.zeros((16, 16), bool)
     covered[4:] = True
-    assert envmap_height_for(PBRMaps(base(), rough, 0.0), covered).value == 32
+    assert envmap_height_for(PBRMaps(base(), rough, 0.0), covered).choice == 32

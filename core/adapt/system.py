@@ -3,7 +3,8 @@ optimisation step over `views_per_step` views), finish (the result and its decis
 
 One view of a step (core/adapt/sampling.py draws its camera, light, background, t and noise):
   render the texture (Mitsuba, differentiable) -> local view (object on a solid colour) and global
-  views (object in the photo, crops at several scales) -> VAE encode -> critics (UNet passes;
+  views (the asset rendered through the photo camera where compose places it, with compose's shadow
+  matte and compositing rule, crops at several scales; core/adapt/global_views.py) -> VAE encode -> critics (UNet passes;
   local and global weighed equally) -> backward through the VAE and the renderer into the texture,
   scaled by 1 / views_per_step -> ε_ψ's LoRA loss on the local latents (same weight).
 After the step's views (and the ranks' shares, summed by torch.distributed): one Adam step on the

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ..errors import InputError
+from ..errors import InputError, check_choice
 from .injection import Layout, ReferenceInjector
 from .lora import LoraCritic
 from .weighting import WEIGHTING_TYPES, add_noise, alphas_cumprod, guard_gradient, timestep_weight
@@ -46,12 +46,9 @@ class CriticConfig:
     grad_clip: float | None = None
 
     def __post_init__(self) -> None:
-        if self.critic_type not in CRITIC_TYPES:
-            raise InputError(f"critic_type must be one of {CRITIC_TYPES}, got {self.critic_type!r}.")
-        if self.reference_type not in REFERENCE_TYPES:
-            raise InputError(f"reference_type must be one of {REFERENCE_TYPES}, got {self.reference_type!r}.")
-        if self.weighting_type not in WEIGHTING_TYPES:
-            raise InputError(f"weighting_type must be one of {WEIGHTING_TYPES}, got {self.weighting_type!r}.")
+        check_choice("critic_type", self.critic_type, CRITIC_TYPES)
+        check_choice("reference_type", self.reference_type, REFERENCE_TYPES)
+        check_choice("weighting_type", self.weighting_type, WEIGHTING_TYPES)
         if not 0.0 <= self.lambda_end <= 1.0:
             raise InputError(f"lambda_end must be in [0, 1], got {self.lambda_end}.")
         if not 0.0 <= self.control_scale <= 1.0:

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from ..decision import Decision
-from ..errors import InputError, ModelMissingError
+from ..errors import InputError, ModelMissingError, check_choice
 from ..guidance.models import ModelConfig
 from ..imageio import linear_to_srgb, read_image, write_image
 from ..mesh import Mesh, normalize_to_unit_sphere
@@ -70,12 +70,9 @@ class LightConfig:
     outpaint: OutpaintConfig = OutpaintConfig()   # outdoor completion: SD2 inpainting or the sky/ground prior
 
     def __post_init__(self) -> None:
-        if self.scene_type not in SCENE_TYPES:
-            raise InputError(f"scene_type must be one of {', '.join(SCENE_TYPES)}, got {self.scene_type!r}.")
-        if self.critic_type not in CRITIC_TYPES:
-            raise InputError(f"critic_type must be one of {', '.join(CRITIC_TYPES)}, got {self.critic_type!r}.")
-        if self.prior_type not in PRIOR_TYPES:
-            raise InputError(f"prior_type must be one of {', '.join(PRIOR_TYPES)}, got {self.prior_type!r}.")
+        check_choice("scene_type", self.scene_type, SCENE_TYPES)
+        check_choice("critic_type", self.critic_type, CRITIC_TYPES)
+        check_choice("prior_type", self.prior_type, PRIOR_TYPES)
         if self.fov_deg is not None and not 1.0 <= self.fov_deg <= 170.0:
             raise InputError(f"The photo's field of view must be between 1 and 170 degrees, got {self.fov_deg}.")
         if not -89.0 <= self.camera_pitch_deg <= 89.0:
