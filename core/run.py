@@ -190,9 +190,9 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     envmap_height = envmap_height_for(maps, rasterize_uv(normalized, max(maps.resolution)).mask)
     # The preset's map height is a cap, as its texture resolution is (a glossy asset gets 64 rows in draft).
     preset_height = stage_config("light", config.preset).map_height
-    if envmap_height.value > preset_height:
-        envmap_height = replace(envmap_height, value=preset_height,
-                                why=f"{envmap_height.why}; capped at the {config.preset} preset's {preset_height} rows")
+    if envmap_height.choice > preset_height:
+        envmap_height = replace(envmap_height, choice=preset_height,
+                                reason=f"{envmap_height.reason}; capped at the {config.preset} preset's {preset_height} rows")
     light_config = stage_config("light", config.preset, critic_type="diffusion" if found else "none", models=config.models,
                                 map_height=envmap_height.choice)
     if config.guidance_type == "none":  # no diffusion model at all: the sky/ground prior completes an outdoor map
