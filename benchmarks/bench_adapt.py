@@ -30,7 +30,7 @@ PHASES = (("render", "render"), ("VAE encode", "vae"), ("UNet passes", "unet"), 
 
 
 def _run(base: Path, inpaint: Path, model_resolution: int, stages, iterations: int, views_type: str,
-         dtype_type: str = "auto", views_per_step: int = 1) -> dict:
+         dtype_type: str = "auto", views_per_step: int = 1, warmup: int = 2) -> dict:
     mesh = uv_sphere(segments=32, rings=16)
     raster = rasterize_uv(mesh, 128)
     texture = NeuralTexture(stage_config("texture", "draft", resolution=128), seed=0)
@@ -40,7 +40,7 @@ def _run(base: Path, inpaint: Path, model_resolution: int, stages, iterations: i
                          views_per_step=views_per_step,
                          models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint), dtype_type=dtype_type))
     inputs = AdaptInputs(mesh=mesh, raster=raster, texture=texture, photo=photo, placement=Placement((0.5, 0.6), 0.5))
-    adapt_texture(inputs, AdaptConfig(**{**config.__dict__, "iterations": 2}))  # warm-up: kernels compiled
+    adapt_texture(inputs, AdaptConfig(**{**config.__dict__, "iterations": warmup}))  # warm-up: kernels compiled
     if torch.cuda.is_available():
         torch.cuda.reset_peak_memory_stats()
     t = time.perf_counter()
@@ -50,6 +50,28 @@ def _run(base: Path, inpaint: Path, model_resolution: int, stages, iterations: i
     return {"phases": {k: per.get(k, 0.0) for _, k in PHASES}, "iteration_s": sum(per.values()), "wall_s": wall,
             "peak_memory_mb": result.peak_memory_mb, "device": result.decisions["device"].choice,
             "views_per_step": result.decisions["views_per_step"].choice}
+
+
+def preset_row(preset: str, iterations: int, spp_cut: int = 8) -> dict:
+    """Seconds per iteration at `preset`'s render sizes and views per step with tiny models, the samples
+    per pixel cut by `spp_cut` (the same for every preset: final's 512² at 128 spp and 4 views took
+    minutes per iteration on 2 shared cores). Rendering is linear in samples, so the preset's own cost
+    is projected as render phases x spp_cut + the rest. benchmarks/trade.py runs this in a child process."""
+    from dataclasses import replace
+
+    config = stage_config("adapt", preset, prompt="x")
+    stages = tuple(replace(s, spp=max(1, s.spp // spp_cut)) for s in config.stages)
+    with tempfile.TemporaryDirectory() as tmp:
+        base, inpaint = build_tiny_pair(tmp)
+        row = _run(base, inpaint, 64, stages, iterations, config.views_type,
+                   views_per_step=config.views_per_step, warmup=1)
+    per = row["phases"]
+    render = per["render"] + per["render_backward"]
+    full = render * config.stages[0].spp / stages[0].spp + (row["iteration_s"] - render)
+    return {"render_size": stages[0].render_size, "spp": config.stages[0].spp, "measured_spp": stages[0].spp,
+            "views_per_step": config.views_per_step, "preset_iterations": config.iterations,
+            "iteration_s": row["iteration_s"], "render_s": render, "projected_iteration_s": full,
+            "projected_s": full * config.iterations, "phases": per}
 
 
 def bench_adapt(quick: bool = False) -> dict:

@@ -199,11 +199,15 @@ def plot_curves(curves: dict[str, list], path: Path) -> None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="one view per map, no ablation or curve (smoke run)")
+    parser.add_argument("--views", type=int, choices=(3, 6), default=6,
+                        help="photos per map: 3 (the yaws at pitch -10; `make bench`) or 6 (both pitches)")
+    parser.add_argument("--out", type=Path, default=RESULTS, help="where light.md/json and the plots go")
     args = parser.parse_args()
-    RESULTS.mkdir(parents=True, exist_ok=True)
+    results = args.out
+    results.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
-    config = stage_config("light", "draft", map_height=64, critic_type="none")
-    views = [(YAWS[0], PITCHES[0])] if args.quick else [(y, p) for p in PITCHES for y in YAWS]
+    config = stage_config("light", "balanced", critic_type="none")   # the default preset (128-row map)
+    views = [(YAWS[0], PITCHES[0])] if args.quick else [(y, p) for p in PITCHES[:args.views // 3] for y in YAWS]
     runs, shown = [], []
     for maps, ablate in ((DEVELOPMENT, not args.quick), (HELD_OUT, False)):
         for name, truth_type in maps.items():
@@ -216,7 +220,7 @@ def main() -> int:
                 m = row["metrics"]
                 print(f"{name} yaw {yaw:.0f} pitch {pitch:+.0f} ({row['auto']} {row['auto_score']:.2f}): "
                       + ", ".join(f"{k} RMSE {m[k]['diffuse_rmse']:.3g}" for k in METHODS), flush=True)
-    curves = {} if args.quick else {name: reference_curve(name, config, 30) for name in DEVELOPMENT}
+    curves = {} if args.quick else {name: reference_curve(name, config, 30 if args.views == 6 else 15) for name in DEVELOPMENT}
     seconds = np.median([r["seconds_cues"] for r in runs])
     md = [f"Weight-free light estimation against Blender's CC0 HDR maps: {len(views)} photo(s) per map "
           f"(320x240, 60 deg, yaws {', '.join(f'{y:.0f}' for y, _ in views[:3])}, pitches "
@@ -231,11 +235,11 @@ def main() -> int:
           "Estimated vs true maps: `light_maps.png`." + ("" if args.quick else " Reference critic from the cue prior: "
                                                          "`light_error_curve.png`."), "",
           "## Per view", "", "`?` marks an unsure scene-type call.", "", per_view(runs)]
-    (RESULTS / "light.md").write_text("\n".join(md) + "\n")
-    (RESULTS / "light.json").write_text(json.dumps({"runs": runs, "curves": curves}, indent=1, default=float))
-    plot_maps(shown, RESULTS / "light_maps.png")
+    (results / "light.md").write_text("\n".join(md) + "\n")
+    (results / "light.json").write_text(json.dumps({"runs": runs, "curves": curves}, indent=1, default=float))
+    plot_maps(shown, results / "light_maps.png")
     if curves:
-        plot_curves(curves, RESULTS / "light_error_curve.png")
+        plot_curves(curves, results / "light_error_curve.png")
     print("\n".join(md[:12]))
     return 0
 

@@ -1,7 +1,10 @@
-"""`make bench`: speed and accuracy of the rendering core, texture conversion, light and composition.
+"""`make bench`: speed against accuracy per preset for every stage and end to end, and the building blocks.
 
-Writes benchmarks/results/bench.md (the tables the README quotes), bench.json and
-conversion_psnr.png (PSNR against iterations and seconds for both conversion methods).
+Writes benchmarks/results/bench.md (every table, the README links it), bench.json, and per stage
+trade_<stage>.md/.json/.png (convert, light, compose, adapt, run: seconds and peak memory against the
+stage's quality for draft / balanced / final; benchmarks/trade.py), plus batch.md, compose.md and
+light.md from the detailed benches. About 35 minutes on a quiet 2-core machine; `--quick` is a smoke
+run of a few minutes that writes into benchmarks/results/quick instead (not for the README).
 Run on the machine named in the output; numbers from other machines are not comparable.
 """
 from __future__ import annotations
@@ -133,7 +136,16 @@ def bench_inverse(mesh, maps, preset_name: str, iterations: int, every: int) -> 
             "curve_psnr": curve_psnr, "curve_seconds": curve_s}
 
 
-def plot(conversions: list[dict], path: Path) -> None:
+def table(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
+    head = "| " + " | ".join(title for title, _, _ in columns) + " |"
+    rule = "|" + "|".join("---" for _ in columns) + "|"
+    body = ["| " + " | ".join(format(row[key], fmt) if fmt else str(row[key]) for _, key, fmt in columns) + " |"
+            for row in rows]
+    return "\n".join([head, rule, *body])
+
+
+def plot_conversions(conversions: list[dict], path: Path) -> None:
+    """PSNR against iterations and seconds for the conversion methods (`--inverse`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -145,97 +157,143 @@ def plot(conversions: list[dict], path: Path) -> None:
         axes[0].plot(run["curve_iterations"], run["curve_psnr"], label=label)
         axes[1].plot(run["curve_seconds"], run["curve_psnr"], label=label)
     for ax, xlabel in zip(axes, ("iterations", "seconds")):
-        ax.axhline(30.0, color="grey", linestyle=":", linewidth=1)
         ax.set_xlabel(xlabel)
         ax.set_ylabel("PSNR on covered texels (dB)")
         ax.grid(alpha=0.3)
     axes[1].set_xscale("log")
     axes[0].legend()
-    fig.suptitle("Converting the bundled example's maps into the neural texture")
+    fig.suptitle("Converting the bundled example's maps: direct fit against the paper's inverse rendering")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
 
-def table(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
-    head = "| " + " | ".join(title for title, _, _ in columns) + " |"
-    rule = "|" + "|".join("---" for _ in columns) + "|"
-    body = ["| " + " | ".join(format(row[key], fmt) if fmt else str(row[key]) for _, key, fmt in columns) + " |"
-            for row in rows]
-    return "\n".join([head, rule, *body])
+def bench_blocks(mesh, maps, normalized) -> tuple[list[dict], list[dict]]:
+    renders = [bench_render(uv_sphere(), (256, 256), "UV sphere"),
+               bench_render(normalized, maps.resolution, "example (Suzanne)")]
+    textures = [bench_texture(rasterize_uv(normalized, r), p) for p in PRESET_NAMES for r in (256, 512)]
+    return renders, textures
+
+
+def block_sections(renders: list[dict], textures: list[dict]) -> list[str]:
+    return ["## Building blocks", "",
+            "Render + backward (gradients to base colour, roughness, metallic), 256², 16 spp, median of 10:", "",
+            table(renders, [("scene", "scene", ""), ("triangles", "triangles", ""), ("texture", "texture", ""),
+                            ("s / iteration", "render_backward_s", ".3f"),
+                            ("first call (compile) s", "first_call_s", ".2f")]),
+            "", "Neural texture forward + backward over the example's texels (median of 5):", "",
+            table(textures, [("preset", "preset", ""), ("resolution", "resolution", ""), ("texels", "texels", ""),
+                             ("s / iteration", "forward_backward_s", ".3f")]), ""]
+
+
+PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "batch", "samplers", "study")
+TITLES = {"convert": "Convert", "light": "Light", "compose": "Compose", "adapt": "Adapt (tiny models)",
+          "run": "End to end: `scenefit run`"}
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--quick", action="store_true", help="fewer iterations (a smoke run, not for the README)")
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true",
+                        help="a smoke run for development (minutes; results in benchmarks/results/quick, not for the README)")
+    parser.add_argument("--inverse", action="store_true",
+                        help="also compare the paper's inverse-rendering conversion with the direct fit (+~10 min)")
+    parser.add_argument("--light-study", choices=("short", "full", "skip"), default="short",
+                        help="the weight-free light study (bench_light.py): short = 3 photos per map (default), "
+                             "full = 6 photos per map (about 45 min more here)")
+    parser.add_argument("--parts", default=",".join(PARTS),
+                        help=f"comma-separated subset of {', '.join(PARTS)} (development; bench.md then holds only those)")
     args = parser.parse_args()
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    scale = 0.2 if args.quick else 1.0
+    parts = set(args.parts.split(","))
+    results = RESULTS / "quick" if args.quick else RESULTS
+    results.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
-
-    mesh, maps = load_asset_folder(example_asset())
-    normalized, _ = normalize_to_unit_sphere(mesh)
-    renders = [bench_render(uv_sphere(), (256, 256), "UV sphere"),
-               bench_render(normalized, maps.resolution, "example (Suzanne)")]
-    raster_256 = rasterize_uv(normalized, 256)
-    raster_512 = rasterize_uv(normalized, 512)
-    textures = [bench_texture(r, p) for p in PRESET_NAMES for r in (raster_256, raster_512)]
-    conversions = [bench_direct(mesh, maps, p, max(10, int(stage_config("convert", p).iterations * scale)))
-                   for p in ("draft", "balanced")]
-    conversions.append(bench_inverse(mesh, maps, "balanced", max(10, int(300 * scale)), every=max(5, int(25 * scale))))
-
-    env = environment_info()
-    md = [f"Machine: {machine()}; Mitsuba variant {env['mitsuba_variant']}; torch {env['torch']}, "
-          f"{torch.get_num_threads()} threads. Total bench time {time.perf_counter() - started:.0f} s.", "",
-          "Render + backward (gradients to base colour, roughness, metallic), 256², 16 spp, median of 10:", "",
-          table(renders, [("scene", "scene", ""), ("triangles", "triangles", ""), ("texture", "texture", ""),
-                          ("s / iteration", "render_backward_s", ".3f"), ("first call (compile) s", "first_call_s", ".2f")]),
-          "", "Neural texture forward + backward over the example's texels (median of 5):", "",
-          table(textures, [("preset", "preset", ""), ("resolution", "resolution", ""), ("texels", "texels", ""),
-                           ("s / iteration", "forward_backward_s", ".3f")]),
-          "", "Conversion of the example's 512² maps (PSNR on covered texels; sRGB base colour, linear roughness/metallic):", "",
-          table(conversions, [("method", "method", ""), ("preset", "preset", ""), ("resolution", "resolution", ""),
-                              ("iterations", "iterations", ""), ("seconds", "seconds", ".1f"),
-                              ("PSNR dB", "final_psnr", ".2f")]), "",
-          "PSNR against iterations and seconds: `conversion_psnr.png`."]
-    plot(conversions, RESULTS / "conversion_psnr.png")
-
-    # The adapt stage (tiny random-weight models on the CPU; an SD2-sized UNet where CUDA exists).
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from bench_adapt import bench_adapt
-
-    adapt = bench_adapt(quick=args.quick)
-    md += ["", "## Adapt", "", adapt["markdown"]]
-
-    # Batches: jobs per hour in-process and on 1 and 2 local Ray workers; the paper's settings on N GPUs.
-    from bench_batch import bench_batch
-
-    batch = bench_batch(quick=args.quick, adapt_rows=adapt["rows"])
-    md += ["", "## Batches", "", batch["markdown"]]
-    (RESULTS / "batch.md").write_text(batch["markdown"] + "\n")
-    (RESULTS / "batch.json").write_text(json.dumps({"rows": batch["rows"], "estimate": batch["estimate"]},
-                                                   indent=1, default=float))
-    (RESULTS / "bench.json").write_text(json.dumps({"machine": machine(), "environment": env, "render": renders,
-                                                     "texture": textures, "conversion": conversions,
-                                                     "adapt": adapt["rows"]}, indent=1, default=float))
+    log = lambda message: print(f"[{time.perf_counter() - started:6.0f} s] {message}", flush=True)
+    mode = ("QUICK MODE (a smoke run: cut iterations, photos and samples; not the figures the README quotes)"
+            if args.quick else "Full `make bench`")
+    env = environment_info()
+    sections: list[str] = []
 
     # Speed against accuracy per preset, for each stage and end to end (each in its own process).
-    from bench_presets import bench_presets
+    from trade import bench_trade
 
-    presets = bench_presets(example_asset(), quick=args.quick,
-                            demo_presets=("draft",) if args.quick else ("draft", "balanced", "final"))
-    md += ["", "## Presets: speed against accuracy", "", presets["markdown"]]
+    stages = tuple(stage for stage in TITLES if stage in parts)
+    trade = bench_trade(example_asset(), results, quick=args.quick, stages=stages, log=log)
+    if stages:
+        sections += ["## Presets: speed against accuracy", ""]
+    for stage in stages:
+        sections += [f"### {TITLES[stage]}", "", trade[stage], ""]
 
-    # Light estimation against ground-truth HDR maps (its own script: writes light.md/json and the curve).
-    subprocess.run([sys.executable, str(Path(__file__).with_name("bench_light.py"))] + (["--quick"] if args.quick else []),
-                   check=True)
-    md += ["", "## Light estimation", "", (RESULTS / "light.md").read_text()]
+    # The rendering core and the neural texture: cost per iteration.
+    mesh, maps = load_asset_folder(example_asset())
+    normalized, _ = normalize_to_unit_sphere(mesh)
+    renders, textures = [], []
+    if "blocks" in parts:
+        renders, textures = bench_blocks(mesh, maps, normalized)
+        log("render and texture done")
+        sections += block_sections(renders, textures)
+    conversions = []
+    if args.inverse:
+        its = 20 if args.quick else 100
+        conversions = [bench_direct(mesh, maps, "balanced", its), bench_inverse(mesh, maps, "balanced", its, 5)]
+        plot_conversions(conversions, results / "conversion_psnr.png")
+        sections += [f"Conversion of the example's 512² maps, direct fit against inverse rendering ({its} iterations "
+                     "each, balanced network; PSNR on covered texels):", "",
+                     table(conversions, [("method", "method", ""), ("iterations", "iterations", ""),
+                                         ("seconds", "seconds", ".1f"), ("PSNR dB", "final_psnr", ".2f")]), "",
+                     "![conversion PSNR](conversion_psnr.png)", ""]
+
+    # The adapt stage's phases (tiny random-weight models on the CPU; an SD2-sized UNet where CUDA exists).
+    from bench_adapt import bench_adapt
+
+    adapt = {"rows": []}
+    if "phases" in parts:
+        adapt = bench_adapt(quick=args.quick)
+        log("adapt phases done")
+        sections += ["## Adapt: seconds per iteration by phase", "", adapt["markdown"], ""]
+
+    # Batches: jobs per hour in-process and on 1 and 2 local Ray workers; the paper's settings on N GPUs.
+    if "batch" in parts:
+        from bench_batch import bench_batch
+
+        batch = bench_batch(quick=args.quick, adapt_rows=adapt["rows"])
+        log("batch done")
+        (results / "batch.md").write_text(batch["markdown"] + "\n")
+        (results / "batch.json").write_text(json.dumps({"rows": batch["rows"], "estimate": batch["estimate"]},
+                                                       indent=1, default=float))
+        sections += ["## Batches", "", batch["markdown"], ""]
 
     # Composition: noise of the final render against a high-sample reference, raw and denoised.
-    subprocess.run([sys.executable, str(Path(__file__).with_name("bench_compose.py"))] + (["--quick"] if args.quick else []),
-                   check=True)
-    md += ["", "## Composition", "", (RESULTS / "compose.md").read_text()]
-    (RESULTS / "bench.md").write_text("\n".join(md) + "\n")
-    print("\n".join(md))
+    out_flag = ["--out", str(results)]
+    if "samplers" in parts:
+        subprocess.run([sys.executable, str(Path(__file__).with_name("bench_compose.py"))] + out_flag
+                       + (["--quick"] if args.quick else []), check=True)
+        log("compose sampler sweep done")
+        sections += ["## Compose: samplers and denoising at equal time", "", (results / "compose.md").read_text(),
+                     "![compose noise against time](compose_noise.png)", ""]
+
+    # Light estimation without weights against ground-truth HDR maps (writes light.md and its plots).
+    if args.light_study != "skip" and "study" in parts:
+        study = ["--quick"] if args.quick else (["--views", "6"] if args.light_study == "full" else ["--views", "3"])
+        subprocess.run([sys.executable, str(Path(__file__).with_name("bench_light.py"))] + out_flag + study, check=True)
+        log("light study done")
+        light_md = (results / "light.md").read_text()
+        sections += ["## Light without weights: the cue estimate against the true maps", "",
+                     light_md.split("## Per view")[0].strip(),
+                     "", "Per view: [light.md](light.md). ![Estimated vs true maps](light_maps.png)", ""]
+
+    total = time.perf_counter() - started
+    load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
+    head = [f"# `make bench` results", "", f"**{mode}.** Machine: {machine()}; load average at the end {load} (1/5/15 min); Mitsuba variant "
+            f"{env['mitsuba_variant']}; torch {env['torch']}, {torch.get_num_threads()} threads (benchmark children: "
+            f"{os.environ.get('SCENEFIT_BENCH_THREADS', 'the same')}). Total {total / 60:.0f} min. Timing on 2 shared "
+            "cores is noisy: compare ratios within one table.", ""]
+    (results / "bench.md").write_text("\n".join(head + sections))
+    (results / "bench.json").write_text(json.dumps({
+        "mode": "quick" if args.quick else "full", "machine": machine(), "environment": env, "seconds": total,
+        "render": renders, "texture": textures, "conversion": conversions, "adapt": adapt["rows"],
+        "trade": {stage: json.loads((results / f"trade_{stage}.json").read_text())["rows"] for stage in stages},
+    }, indent=1, default=float))
+    print("\n".join(head + sections))
     return 0
 
 

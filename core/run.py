@@ -201,6 +201,11 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
 
     normalized, _ = normalize_to_unit_sphere(mesh)
     envmap_height = envmap_height_for(maps, rasterize_uv(normalized, max(maps.resolution)).mask)
+    # The preset's map height is a cap, as its texture resolution is (a glossy asset gets 64 rows in draft).
+    preset_height = stage_config("light", config.preset).map_height
+    if envmap_height.choice > preset_height:
+        envmap_height = replace(envmap_height, choice=preset_height,
+                                reason=f"{envmap_height.reason}; capped at the {config.preset} preset's {preset_height} rows")
     light_config = stage_config("light", config.preset, **{
         "critic_type": "diffusion" if found else "none", "models": config.models, "map_height": envmap_height.choice,
         **config.overrides("light")})

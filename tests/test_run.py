@@ -19,7 +19,8 @@ def scenefit(*args: str) -> subprocess.CompletedProcess:
 
 def test_run_composes_and_a_second_run_reuses_every_stage(tmp_path):
     yy, xx = np.mgrid[0:16, 0:16] / 16
-    maps = PBRMaps(np.stack([0.3 + 0.5 * xx, 0.4 + 0 * xx, 0.7 - 0.4 * yy], -1).astype(np.float32), 0.5, 0.0)
+    # Glossy (roughness 0.15 asks for a 256-row map): the draft preset caps the map at its 64 rows.
+    maps = PBRMaps(np.stack([0.3 + 0.5 * xx, 0.4 + 0 * xx, 0.7 - 0.4 * yy], -1).astype(np.float32), 0.15, 0.0)
     asset = save_asset_folder(uv_sphere(0.5, 16, 8), maps, tmp_path / "asset")
     rng = np.random.default_rng(0)
     photo = np.clip(np.linspace(0.9, 0.3, 72)[:, None, None] + rng.normal(0, 0.05, (72, 96, 3)), 0, 1)
@@ -35,6 +36,8 @@ def test_run_composes_and_a_second_run_reuses_every_stage(tmp_path):
     assert "asset folder" in report["stages"]["bake"]["why"]
     assert read_image(out / "compose" / "composite.png").shape == (72, 96, 3)
     assert report["stages"]["compose"]["report"]["spp"] == 4
+    light = report["stages"]["light"]["report"]
+    assert light["map_size"] == [128, 64] and "capped at the draft preset" in light["decisions"]["envmap_height"]["why"]
 
     second = scenefit("run", *args)
     assert second.returncode == 0, second.stderr

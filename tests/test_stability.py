@@ -2,7 +2,9 @@
 
 Covered here: HDR maps 1e-4..1e6, roughness/metallic 0 and 1, degenerate triangles, meshes at 1e-3
 and 1e3 scale through conversion, photos 1e-4..1e6 (EXR), black and white photos, 1x1 and 8000x6000
-photos (memory bounded), small lights at every preset, fp16 LoRA gradients (no loss scaling needed).
+photos (the light stage's peak memory bounded by its working size), small lights at every preset,
+each light preset doing clearly less work than the next, grazing and straight-down photo cameras in
+the compose stage, fp16 LoRA gradients (no loss scaling needed).
 Covered elsewhere: timesteps 0/1/998/999 and fp16 guards (test_guidance.py), grazing cameras and
 meshes at 1e-4/1e4 through the renderer (test_render.py), light scales at 1e-3/1e4 (test_lighting.py).
 """
@@ -136,28 +138,55 @@ def test_a_1x1_photo_is_a_clear_error(tmp_path):
         load_photo(tmp_path / "dot.png")
 
 
-def test_an_8000x6000_photo_is_read_at_the_size_the_light_needs(tmp_path):
-    """Peak memory of reading it stays far below one full-size float copy (576 MB)."""
+LIGHT_PEAK = textwrap.dedent("""
+    import json, resource, sys
+    from scenefit.core.lighting import estimate_light, load_photo
+    from scenefit.core.lighting.depth import DepthConfig
+    from scenefit.core.presets import stage_config
+    config = stage_config("light", "draft", depth=DepthConfig(depth_type="geometric"))
+    estimate_light(load_photo(sys.argv[2])[0], (8.0, 10.0), config)    # imports and caches, on a small photo
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    photo, info = load_photo(sys.argv[1])
+    h, w = photo.shape[:2]
+    result = estimate_light(photo, (0.5 * w, 0.8 * h), config)
+    grew = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    print("JSON" + json.dumps({"shape": list(photo.shape), "grew_mb": grew, "info": info,
+                               "map": list(result.hdr.shape), "finite": bool((result.hdr >= 0).all())}))
+""")
+
+
+def light_stage_peak(photo_path, tmp_path) -> dict:
+    """The light stage (read + estimate, draft) on one photo in a fresh process: how far its peak
+    resident memory grows over a warmed-up process."""
+    small = tmp_path / "warm.png"
+    if not small.exists():
+        write_image(small, np.full((24, 32, 3), 0.5, np.float32))
+    proc = subprocess.run([sys.executable, "-c", LIGHT_PEAK, str(photo_path), str(small)], capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
+
+
+def test_an_8000x6000_photo_costs_the_light_stage_what_its_working_size_costs(tmp_path):
+    """The light stage works at most 1024 px wide (its panorama, depth and critics need no more), so an
+    8000x6000 photo must cost what the same photo at 1024x768 costs, plus at most the band the reader
+    reduces at a time: not one full-size copy (8000x6000x3 float32 = 576 MB; it used to peak at 5.1 GB)."""
     import cv2
+
+    from scenefit.core.lighting.estimate import PHOTO_WORKING_SIDE
 
     big = np.full((6000, 8000, 3), 90, np.uint8)
     big[:400] = 250
     cv2.imwrite(str(tmp_path / "big.jpg"), big)
+    cv2.imwrite(str(tmp_path / "working.jpg"), cv2.resize(big, (1024, 768), interpolation=cv2.INTER_AREA))
     del big
-    code = textwrap.dedent(f"""
-        import json, resource
-        from scenefit.core.lighting import load_photo
-        before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-        photo, info = load_photo({str(tmp_path / 'big.jpg')!r})
-        after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-        print("JSON" + json.dumps({{"shape": list(photo.shape), "grew_mb": (after - before) / 1024, "info": info}}))
-    """)
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    out = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
-    assert max(out["shape"][:2]) <= 1024 and out["info"]["size"] == [8000, 6000]
-    assert out["grew_mb"] < 250, out
-    assert np.isclose(out["shape"][1] / out["shape"][0], 8000 / 6000, rtol=0.01)
+    full, working = light_stage_peak(tmp_path / "big.jpg", tmp_path), light_stage_peak(tmp_path / "working.jpg", tmp_path)
+    assert full["info"]["size"] == [8000, 6000] and max(full["shape"][:2]) <= PHOTO_WORKING_SIDE
+    assert np.isclose(full["shape"][1] / full["shape"][0], 8000 / 6000, rtol=0.01)
+    assert full["finite"] and full["map"] == working["map"]
+    one_full_copy_mb = 8000 * 6000 * 3 * 4 / 2**20
+    # The reader's bands (32 rows x 8000 px) and the decoder's buffers: far below one full-size copy.
+    assert full["grew_mb"] - working["grew_mb"] < one_full_copy_mb / 8, (full, working)
 
 
 @pytest.mark.parametrize("preset", ["draft", "balanced", "final"])
@@ -169,6 +198,27 @@ def test_a_small_lamp_is_found_at_every_preset(preset):
     assert result.hdr.max() > 10.0 * 0.25
 
 
+def light_work(preset: str) -> dict[str, int]:
+    """What the light stage at `preset` does: panorama texels it builds (counted from a run) and the
+    critic's rendered samples when a critic runs (iterations x views x pixels x spp, from the config)."""
+    photo = np.full((240, 320, 3), 0.3, np.float32)
+    photo[40:60, 150:170] = 1.0
+    config = stage_config("light", preset, depth=GEOMETRIC, scene_type="indoor")
+    built = estimate_light(photo, (160.0, 200.0), config).panorama.ldr.shape
+    views = len(config.apparatus.object_azimuths) + 1
+    return {"panorama texels": built[0] * built[1],
+            "critic samples": config.optimise.iterations * views * config.apparatus.render_size ** 2 * config.apparatus.spp}
+
+
+def test_each_light_preset_does_clearly_less_work_than_the_next():
+    """A preset that costs as much as a better one is a bug: draft light used to build balanced's
+    128-row panorama for its 64-row map (same seconds, same error in the bench)."""
+    work = {preset: light_work(preset) for preset in ("draft", "balanced", "final")}
+    for cheaper, dearer in (("draft", "balanced"), ("balanced", "final")):
+        for measure in ("panorama texels", "critic samples"):
+            assert work[cheaper][measure] * 2 <= work[dearer][measure], (cheaper, dearer, measure, work)
+
+
 def test_a_tiny_1e6_spot_in_an_exr_photo_is_kept(tmp_path):
     radiance = np.full((480, 640, 3), 0.5, np.float32)
     radiance[100:102, 301:303] = 1e6                      # 2x2 px
@@ -176,6 +226,24 @@ def test_a_tiny_1e6_spot_in_an_exr_photo_is_kept(tmp_path):
     photo, _ = load_photo(tmp_path / "spot.exr")
     result = estimate_light(photo, (320.0, 400.0), stage_config("light", "draft", depth=GEOMETRIC, scene_type="indoor"))
     assert result.regions and result.hdr.max() > 10.0
+
+
+# -- grazing cameras ------------------------------------------------------------------------------------
+@pytest.mark.parametrize("pitch", [-0.5, -89.0])
+def test_grazing_and_straight_down_photo_cameras_compose_finite(pitch):
+    """A photo camera a half degree below the horizon (the object one row under it, seen edge-on on a
+    floor that is nearly a line) and one looking straight down both give a finite composite."""
+    from scenefit.core.compose import ComposeInputs, compose, horizon_row
+    from scenefit.core.photo import PhotoCamera
+
+    camera = PhotoCamera(yaw_deg=90.0, pitch_deg=pitch, fov_deg=60.0, width=32, height=24)
+    y = min(23.0, horizon_row(camera) + 1.0) if pitch > -45 else 12.0
+    stack = np.concatenate([np.full((8, 8, 3), 0.5), np.full((8, 8, 1), 0.5), np.zeros((8, 8, 1))], -1).astype(np.float32)
+    environment = env(1.0, 16)
+    environment[:4] = 20.0
+    result = compose(ComposeInputs(uv_sphere(0.5, 16, 8), stack, np.full((24, 32, 3), 0.5, np.float32), (16.0, y),
+                                   environment, camera), stage_config("compose", "draft", spp=1, denoiser_type="none"))
+    assert np.isfinite(result.composite_linear).all() and result.changed.any()
 
 
 # -- fp16 ------------------------------------------------------------------------------------------------
