@@ -199,6 +199,9 @@ def main() -> int:
     parser.add_argument("--light-study", choices=("short", "full", "skip"), default="short",
                         help="the weight-free light study (bench_light.py): short = 3 photos per map (default), "
                              "full = 6 photos per map (about 45 min more here)")
+    parser.add_argument("--reuse", default="",
+                        help="comma-separated stages whose trade_<stage>.md from an earlier pass of this code goes into "
+                             "bench.md instead of running them again (a pass stopped part way)")
     parser.add_argument("--parts", default=",".join(PARTS),
                         help=f"comma-separated subset of {', '.join(PARTS)} (development; bench.md then holds only those)")
     args = parser.parse_args()
@@ -216,12 +219,17 @@ def main() -> int:
     # Speed against accuracy per preset, for each stage and end to end (each in its own process).
     from trade import bench_trade
 
-    stages = tuple(stage for stage in TITLES if stage in parts)
+    reused = tuple(stage for stage in TITLES if stage in args.reuse.split(","))
+    stages = tuple(stage for stage in TITLES if stage in parts and stage not in reused)
     trade = bench_trade(example_asset(), results, quick=args.quick, stages=stages, log=log)
-    if stages:
+    trade.update({stage: (results / f"trade_{stage}.md").read_text().strip() for stage in reused})
+    if stages or reused:
         sections += ["## Presets: speed against accuracy", ""]
-    for stage in stages:
-        sections += [f"### {TITLES[stage]}", "", trade[stage], ""]
+    if reused:
+        sections += [f"({', '.join(reused)}: from an earlier pass of the same code, which stopped after them.)", ""]
+    for stage in TITLES:
+        if stage in trade:
+            sections += [f"### {TITLES[stage]}", "", trade[stage], ""]
 
     # The rendering core and the neural texture: cost per iteration.
     mesh, maps = load_asset_folder(example_asset())
@@ -291,7 +299,7 @@ def main() -> int:
     (results / "bench.json").write_text(json.dumps({
         "mode": "quick" if args.quick else "full", "machine": machine(), "environment": env, "seconds": total,
         "render": renders, "texture": textures, "conversion": conversions, "adapt": adapt["rows"],
-        "trade": {stage: json.loads((results / f"trade_{stage}.json").read_text())["rows"] for stage in stages},
+        "trade": {stage: json.loads((results / f"trade_{stage}.json").read_text())["rows"] for stage in stages + reused},
     }, indent=1, default=float))
     print("\n".join(head + sections))
     return 0

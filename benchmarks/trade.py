@@ -327,6 +327,7 @@ def bench_trade(asset: Path, results: Path, quick: bool = False, stages=("conver
         for p in PRESETS:
             rows.append({"preset": p, **child(ADAPT, BENCHMARKS=bench_dir, PRESET=p, ITERATIONS=cut.adapt_iterations)})
             rows[-1]["spp_text"] = f"{rows[-1]['spp']} ({rows[-1]['measured_spp']})"
+            rows[-1]["seconds"] = rows[-1]["projected_iteration_s"]   # the plot's cost: s per iteration
             log(f"adapt {rows[-1]}")
         text = ("Adapt with TINY random-weight models (devtools/tiny_models.py, a few-channel UNet at 64 px, not "
                 "SD2): the preset's render sizes and views per step on a UV sphere, local and global views, so "
@@ -342,7 +343,8 @@ def bench_trade(asset: Path, results: Path, quick: bool = False, stages=("conver
             ("s / iteration at the preset's spp (projected)", "projected_iteration_s", ".1f"),
             ("iterations", "preset_iterations", ""), ("stage s (projected, tiny)", "projected_s", ".0f"),
             ("peak MB", "peak_mb", ".0f")],
-            ("iteration_s", "s / iteration (tiny models)", False), "Adapt (tiny models): cost per iteration")
+            ("render_size", "render size px (what the preset renders)", True),
+            "Adapt (tiny models): s per iteration at the preset's spp (projected) and peak memory")
 
     if "run" in stages:
         rows = []

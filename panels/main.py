@@ -9,7 +9,7 @@ import bpy
 
 from ..core.errors import SceneFitError
 from ..operators.common import dependency_sentence, missing_modules
-from .quality import BENCH_MACHINE, expected_line
+from .quality import BENCH_MACHINE, EXPECTED_SECONDS, expected_line
 
 class _Section:
     bl_space_type = "VIEW_3D"
@@ -117,7 +117,7 @@ class SCENEFIT_PT_quality(_Subsection, bpy.types.Panel):
         col.prop(settings, "preset", expand=True)
         col.prop(settings, "output_dir")
         sub = col.column(align=True)
-        for stage in ("convert", "light", "adapt"):
+        for stage in EXPECTED_SECONDS:
             sub.label(text=expected_line(stage, settings.preset))
         sub.label(text=f"(the example asset on a {BENCH_MACHINE})")
 
