@@ -15,7 +15,7 @@ from urllib.parse import urlparse
 import bpy
 
 from ..core.errors import InputError
-from .common import gather_asset, model_settings, photo_path, preferences, relative_if_saved, run_folder
+from .common import model_settings, preferences, relative_if_saved, run_folder, scene_asset
 from .results import apply_result_material, apply_result_world
 
 # What the worker runs for each operator: the whole pipeline (adapt needs convert and the light).
@@ -58,12 +58,8 @@ def remote_work(op, context, address: str) -> tuple:
     from ..core.remote import work_remotely
 
     settings = context.scene.scenefit
-    if settings.mode != "scene":
-        raise InputError(f"A worker environment runs the pipeline that fits the asset into a photo (mode Scene); "
-                         f"mode '{settings.mode}' runs in this Blender.")
-    photo = photo_path(context)
-    obj, mesh, maps = gather_asset(context)
-    op._object_name = obj.name
+    photo, obj, mesh, maps = scene_asset(op, context, "A worker environment runs the pipeline that fits the asset "
+                                                      "into a photo; other modes run in this Blender")
     models, _ = model_settings(context)
     from dataclasses import replace
 

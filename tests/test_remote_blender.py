@@ -3,15 +3,11 @@ All / Adapt hand their job to core.remote, the worker's progress and previews re
 the same background-job path as a local job, cancel ends it cleanly, and the results are applied as
 new datablocks on the main thread. bpy with the extension installed from its zip, tiny models, a
 local Ray cluster of two CPUs."""
-import json
-import sys
-from pathlib import Path
 
 import pytest
+from conftest import run_installed_extension
 
 pytestmark = pytest.mark.blender
-
-ROOT = Path(__file__).resolve().parent.parent
 
 SCRIPT = r"""
 import json, time
@@ -105,22 +101,11 @@ print("JSON" + json.dumps(out, default=str))
 
 
 @pytest.fixture(scope="module")
-def handed_off(run_py, tmp_path_factory):
+def handed_off(tmp_path_factory):
     pytest.importorskip("ray", reason="Ray is not installed (pip install 'scenefit[ray]'): no cluster to hand jobs to")
-    sys.path.insert(0, str(ROOT / "tools"))
-    import build_extension
-    from scenefit.devtools.tiny_models import build_tiny_pair
-
     tmp = tmp_path_factory.mktemp("remote_blender")
-    zip_path = build_extension.build_without_wheels(tmp / "scenefit.zip")
-    build_tiny_pair(tmp / "tiny")
-    user = tmp / "blender_user"
-    user.mkdir()
-    code = (SCRIPT.replace("TMP", repr(str(tmp))).replace("ZIP", repr(str(zip_path)))
-            .replace("TINY", repr(str(tmp / "tiny"))))
-    proc = run_py(code, env={"BLENDER_USER_RESOURCES": str(user)}, timeout=600)
-    line = next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))
-    return tmp, json.loads(line[4:])
+    out, _ = run_installed_extension(tmp, SCRIPT, timeout=600)
+    return tmp, out
 
 
 def test_preferences_choose_the_worker_and_respect_online_access(handed_off):
