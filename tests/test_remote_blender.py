@@ -53,6 +53,7 @@ bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "scene.blend"))
 Run = bpy.types.SCENEFIT_OT_run
 op = SimpleNamespace(job_name=Run.job_name, runs_remotely=Run.runs_remotely, iterations=2, model_resolution=32,
                      render_size=16)
+op.apply = lambda context, result: Run.apply(op, context, result)
 t0 = time.perf_counter()
 work, data = Run.job_work(op, bpy.context)
 out["handed_off"] = [work.__module__, op._remote]
@@ -77,6 +78,8 @@ if state.status == "done":
                            sorted(n.image.filepath for n in obj.active_material.node_tree.nodes
                                   if n.type == "TEX_IMAGE" and n.image)]
     out["run_world"] = [bpy.context.scene.world.name if bpy.context.scene.world else None]
+    composite = bpy.data.images.get("SceneFit Composite")   # applied as after a local Run All
+    out["run_composite"] = list(composite.size) if composite else None
     out["run_report"] = state.result["report"]
 
 # 2. Cancel: a long job stops at the worker, nothing comes back, Blender's data unchanged.
@@ -132,6 +135,7 @@ def test_run_on_ray_streams_progress_and_previews_and_applies_the_results(handed
     assert images and all(p.startswith("//scenefit/Sphere/run-") for p in images)   # next to the .blend, relative
     assert all((tmp / p[2:]).is_file() for p in images)
     assert out["run_world"][0] == "SceneFit Light" and out["user_material_kept"]
+    assert out["run_composite"] is not None and min(out["run_composite"]) > 0
 
 
 def test_cancel_stops_the_worker_and_brings_nothing_back(handed_off):
