@@ -58,7 +58,8 @@ def add_parser(sub) -> None:
     p.add_argument("--shadow", choices=SHADOW_TYPES, help="ratio (shadow catcher, default), paper (thresholded), none")
     p.add_argument("--spp", type=int, help="samples per pixel (default: from the preset's noise target)")
     p.add_argument("--sampler", choices=SAMPLER_TYPES, help="Mitsuba sampler (default multijitter)")
-    p.add_argument("--denoiser", choices=("oidn", "none"), help="Intel Open Image Denoise (default) or none")
+    p.add_argument("--denoiser", choices=("auto", "oidn", "none"),
+                   help="Intel Open Image Denoise (oidn), none, or auto (default: oidn where pyoidn is installed)")
     p.add_argument("--exposure", type=float, help="multiply the light map (default 1: it is in the photo's exposure)")
     p.add_argument("--fov", type=float, help="horizontal field of view, degrees (default: the light stage's)")
     p.add_argument("--elevation", type=float, help="how far the camera looks down, degrees (default: the light stage's)")

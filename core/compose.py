@@ -66,7 +66,7 @@ class ComposeConfig:
     min_spp: int = 4
     max_spp: int = 64
     sampler_type: str = "multijitter"  # picked by benchmarks/bench_compose.py
-    denoiser_type: str = "oidn"
+    denoiser_type: str = "auto"
     max_depth: int = 6
     floor_albedo: float = 0.8          # cancels in the ratio; sets only the paper shadow's noise level
     paper_threshold: float = 0.9       # "shadowed" below this fraction of the floor's mean intensity
@@ -346,8 +346,13 @@ class ComposeJob:
         if not np.isfinite(envmap).all() or envmap.min() < 0:
             raise InputError("The light map holds negative, NaN or infinite radiance.")
         self.envmap = envmap * np.float32(config.exposure)
-        if config.denoiser_type == "oidn" and not oidn_available()[0]:
-            raise InputError(f"--denoiser oidn: {oidn_available()[1]}.")
+        found, oidn_why = oidn_available()
+        if config.denoiser_type == "oidn" and not found:
+            raise InputError(f"--denoiser oidn: {oidn_why}.")
+        # auto: denoise where OIDN is installed; elsewhere the raw render, with the reason in the report.
+        self.denoiser = "oidn" if config.denoiser_type == "oidn" or (config.denoiser_type == "auto" and found) else "none"
+        self.denoiser_why = oidn_why if self.denoiser == "oidn" else (
+            "none (asked for)" if config.denoiser_type == "none" else f"none: {oidn_why}")
         self.backend = init_mitsuba()
         import mitsuba as mi
 
@@ -465,7 +470,7 @@ class ComposeJob:
     def _object_layers(self) -> tuple[np.ndarray, np.ndarray]:
         image = self.images["object"]
         rgb, alpha = image[..., 0:3], image[..., 3]
-        if self.config.denoiser_type == "oidn":
+        if self.denoiser == "oidn":
             t0 = time.perf_counter()
             rgb = denoise(rgb, image[..., 4:7], image[..., 7:10])
             rgb = np.where(alpha[..., None] > 0, np.maximum(rgb, 0.0), 0.0)  # no light where there is no object
@@ -492,7 +497,7 @@ class ComposeJob:
         same = (self.images["floor_with_object"] == self.images["floor_without_object"]).all(axis=-1)
         raw = np.clip(np.where(same[..., None], 1.0, raw), 0.0, 1.0).astype(np.float32)
         touched = (raw < 1.0).any(axis=-1)
-        if self.config.denoiser_type == "oidn" and touched.any():
+        if self.denoiser == "oidn" and touched.any():
             t0 = time.perf_counter()
             region = cv2.dilate(touched.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
             ys, xs = np.nonzero(region)
@@ -508,7 +513,7 @@ class ComposeJob:
 
     def _paper_matte(self) -> np.ndarray:
         radiance, floor = self._floor_radiance("floor_with_object")
-        if self.config.denoiser_type == "oidn" and floor.any():
+        if self.denoiser == "oidn" and floor.any():
             t0 = time.perf_counter()
             radiance = denoise(radiance)
             self.timings["denoise_shadow"] = time.perf_counter() - t0
@@ -568,7 +573,7 @@ class ComposeJob:
             "size": {"fraction_of_photo_height": self.config.size, "height_m": round(self.placement.height
                                                                                       * ASSUMED_CAMERA_HEIGHT_M, 3)},
             "spp": self.spp, "sampler": self.config.sampler_type,
-            "denoiser": oidn_available()[1] if self.config.denoiser_type == "oidn" else "none",
+            "denoiser": self.denoiser_why,
             "exposure": {"factor": self.config.exposure,
                          "why": "the light map is in the photo's exposure (scenefit light), so the render and the "
                                 "photo share units" if self.config.exposure == 1.0 else "given"},

@@ -11,7 +11,7 @@ import numpy as np
 
 from .errors import RendererUnavailableError
 
-DENOISER_TYPES = ("oidn", "none")
+DENOISER_TYPES = ("auto", "oidn", "none")   # auto: OIDN where pyoidn is installed (no wheel for linux-arm64)
 
 
 def oidn_available() -> tuple[bool, str]:

@@ -100,18 +100,22 @@ class StageRunner:
                 saved = json.loads(record.read_text())
             except json.JSONDecodeError:
                 saved = {}
-            outputs = saved.get("report", {}).get("outputs", {})
-            if saved.get("key") == key and all(Path(p).exists() for p in _paths(outputs)):
+            report = dict(saved.get("report") or {})
+            report["outputs"] = _outputs_in(report.get("outputs", {}), folder)
+            if saved.get("key") == key and all(Path(p).exists() for p in _paths(report["outputs"])):
                 emit(self.progress, "run", index + 1, len(STAGES), f"{name}: reused (same settings and inputs)")
-                self.stages[name] = {"status": "reused", "key": key, "seconds": 0.0, "report": saved["report"]}
-                return saved["report"]
+                self.stages[name] = {"status": "reused", "key": key, "seconds": 0.0, "report": report}
+                return report
         self.fresh = True
         emit(self.progress, "run", index, len(STAGES), f"{name}: running")
         t0 = time.perf_counter()
         record.unlink(missing_ok=True)  # a stage half redone is not a finished stage
         report = work(folder)
         seconds = time.perf_counter() - t0
-        write_json_atomic(record, {"key": key, "report": report})
+        # Outputs are kept relative to the stage's folder: the run's folder may be moved (Blender swaps
+        # it into place, a batch worker sends it home) and a later run must still find them.
+        write_json_atomic(record, {"key": key, "report": dict(report, outputs=_outputs_in(report.get("outputs", {}),
+                                                                                       folder, relative=True))})
         self.stages[name] = {"status": "ran", "key": key, "seconds": round(seconds, 3), "report": report}
         emit(self.progress, "run", index + 1, len(STAGES), f"{name}: done in {seconds:.1f} s")
         return report
@@ -119,6 +123,20 @@ class StageRunner:
     def skip(self, name: str, status: str, why: str) -> None:
         self.stages[name] = {"status": status, "why": why}
         emit(self.progress, "run", STAGES.index(name) + 1, len(STAGES), f"{name}: {status}")
+
+
+def _outputs_in(outputs, folder: Path, relative: bool = False):
+    """The output paths of a stage made relative to its folder, or back to absolute ones."""
+    if isinstance(outputs, dict):
+        return {k: _outputs_in(v, folder, relative) for k, v in outputs.items()}
+    if not isinstance(outputs, str):
+        return outputs
+    if relative:
+        try:
+            return Path(outputs).absolute().relative_to(folder.absolute()).as_posix()
+        except ValueError:
+            return outputs
+    return str(folder / outputs)
 
 
 def _paths(outputs) -> list[str]:

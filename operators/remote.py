@@ -15,8 +15,8 @@ from urllib.parse import urlparse
 import bpy
 
 from ..core.errors import InputError
-from .common import gather_asset, model_settings, photo_path, preferences, relative_if_saved, run_folder
-from .results import apply_result_material, apply_result_world
+from .common import model_settings, preferences, run_folder, scene_asset
+from .results import apply_result_material
 
 # What the worker runs for each operator: the whole pipeline (adapt needs convert and the light).
 REMOTE_STAGES = ("convert", "light", "adapt", "compose")
@@ -58,12 +58,8 @@ def remote_work(op, context, address: str) -> tuple:
     from ..core.remote import work_remotely
 
     settings = context.scene.scenefit
-    if settings.mode != "scene":
-        raise InputError(f"A worker environment runs the pipeline that fits the asset into a photo (mode Scene); "
-                         f"mode '{settings.mode}' runs in this Blender.")
-    photo = photo_path(context)
-    obj, mesh, maps = gather_asset(context)
-    op._object_name = obj.name
+    photo, obj, mesh, maps = scene_asset(op, context, "A worker environment runs the pipeline that fits the asset "
+                                                      "into a photo; other modes run in this Blender")
     models, _ = model_settings(context)
     from dataclasses import replace
 
@@ -119,19 +115,13 @@ def run_result(folder: str | Path, report: dict) -> dict:
 
 
 def apply_remote(op, context, result: dict) -> str:
-    """Main thread: the worker's results as new datablocks (the artist's own are kept)."""
+    """Main thread: the worker's results as new datablocks (the artist's own are kept); a Run's are
+    applied by Run's own apply, as after a local run."""
     shaped = run_result(result["folder"], result["report"])
-    if op.job_name == "adapt" and shaped["stage"] != "adapt":
+    done = f"Done on the worker ({result['report'].get('seconds', 0):.0f} s): "
+    if op.job_name == "run":
+        return done + op.apply(context, shaped).removeprefix("Done: ")
+    if shaped["stage"] != "adapt":
         raise InputError(f"The worker did not adapt the texture: {shaped['adapt_skipped'] or 'no reason given'}; "
                          f"its results are in '{result['folder']}'.")
-    mat = apply_result_material(context, op._object_name, shaped, shaped["stage"])
-    lines = [f"material '{mat.name}'"]
-    if op.job_name == "run":
-        if shaped["hdr"]:
-            lines.append(f"World '{apply_result_world(context, shaped['hdr']).name}'")
-        if shaped["composite"]:
-            context.scene.scenefit.composite_path = relative_if_saved(shaped["composite"])
-            lines.append("composite rendered by the worker")
-        if shaped["stage"] != "adapt":
-            lines.append(f"adapt skipped: {shaped['adapt_skipped']}")
-    return f"Done on the worker ({result['report'].get('seconds', 0):.0f} s): " + "; ".join(lines)
+    return done + f"material '{apply_result_material(context, op._object_name, shaped, 'adapt').name}'"

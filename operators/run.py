@@ -8,9 +8,9 @@ import bpy
 from bpy.props import EnumProperty
 
 from ..blender_io.compose import setup_composite
-from ..core.errors import InputError, SceneFitError
+from ..core.errors import SceneFitError
 from . import work
-from .common import OnMesh, gather_asset, model_settings, photo_path, run_folder
+from .common import OnMesh, model_settings, photo_path, run_folder, scene_asset
 from .jobs import JobOperator
 from .results import apply_composite_image, apply_result_material, apply_result_world
 
@@ -32,12 +32,8 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
 
     def prepare(self, context):
         settings = context.scene.scenefit
-        if settings.mode != "scene":
-            raise InputError(f"Run All fits the asset into the photo (mode Scene); for mode "
-                             f"'{settings.mode}' use Convert and Adapt.")
-        photo = photo_path(context)
-        obj, mesh, maps = gather_asset(context)
-        self._object_name = obj.name
+        photo, obj, mesh, maps = scene_asset(self, context, "Run All fits the asset into the photo; use Convert "
+                                                            "and Adapt for the other modes")
         guidance, why_no_adapt = self.guidance, ""
         if not settings.prompt.strip() and guidance == "auto":
             guidance, why_no_adapt = "none", "the Style section has no prompt"

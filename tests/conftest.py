@@ -72,3 +72,25 @@ def validator():
         return json.loads(proc.stdout)
 
     return validate
+
+
+def run_installed_extension(tmp: Path, script: str, timeout: float = 900) -> tuple[dict, Path]:
+    """Build the extension zip (no wheels) and the tiny model pair into `tmp`, then run `script` in a
+    fresh bpy with its own user folder; TMP, ZIP and TINY in the script name them. Returns the dict
+    the script printed after "JSON", and the user folder the extension was installed into."""
+    import json
+
+    sys.path.insert(0, str(ROOT / "tools"))
+    import build_extension
+    from scenefit.devtools.tiny_models import build_tiny_pair
+
+    zip_path = build_extension.build_without_wheels(tmp / "scenefit.zip")
+    build_tiny_pair(tmp / "tiny")
+    user = tmp / "blender_user"
+    user.mkdir()
+    code = (script.replace("TMP", repr(str(tmp))).replace("ZIP", repr(str(zip_path)))
+            .replace("TINY", repr(str(tmp / "tiny"))))
+    proc = run_python(code, env={"BLENDER_USER_RESOURCES": str(user)}, timeout=timeout)
+    line = next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))
+    (tmp / "out.json").write_text(line[4:])  # for a look after a failure
+    return json.loads(line[4:]), user

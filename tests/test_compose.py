@@ -200,3 +200,15 @@ def test_compose_presets_are_the_one_preset_table_and_unset_options_keep_them():
     assert final.size == 0.5 and final.spp is None and final.noise_target == 0.015
     with pytest.raises(InputError, match="preset"):
         stage_config("compose", "best")
+
+
+def test_without_pyoidn_auto_composes_raw_and_says_why_while_oidn_is_refused(monkeypatch):
+    """linux-arm64 has no pyoidn wheel: the default (auto) composes the raw render and the report says
+    why; asking for oidn there is one sentence."""
+    import scenefit.core.compose as compose_module
+
+    monkeypatch.setattr(compose_module, "oidn_available", lambda: (False, "pyoidn is not installed"))
+    result = run(sun_environment([1.0, 0.2, 0.8]), spp=4)
+    assert result.report["denoiser"] == "none: pyoidn is not installed"
+    with pytest.raises(InputError, match="--denoiser oidn: pyoidn is not installed"):
+        run(sun_environment([1.0, 0.2, 0.8]), spp=4, denoiser_type="oidn")

@@ -6,17 +6,16 @@ from the worker thread), the file-load handler ending a job, save -> reopen with
 present and the artist's material, World and objects unchanged, and an unsaved file's images packed.
 """
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_installed_extension
 
 from scenefit.core.imageio import read_image
 
 pytestmark = pytest.mark.blender
 
-ROOT = Path(__file__).resolve().parent.parent
 
 SCRIPT = r"""
 import json, math, sys, threading, time
@@ -276,22 +275,10 @@ print("JSON" + json.dumps(out))
 
 
 @pytest.fixture(scope="module")
-def operated(run_py, tmp_path_factory):
-    sys.path.insert(0, str(ROOT / "tools"))
-    import build_extension
-    from scenefit.devtools.tiny_models import build_tiny_pair
-
+def operated(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("operators")
-    zip_path = build_extension.build_without_wheels(tmp / "scenefit.zip")
-    build_tiny_pair(tmp / "tiny")
-    user = tmp / "blender_user"
-    user.mkdir()
-    code = (SCRIPT.replace("TMP", repr(str(tmp))).replace("ZIP", repr(str(zip_path)))
-            .replace("TINY", repr(str(tmp / "tiny"))))
-    proc = run_py(code, env={"BLENDER_USER_RESOURCES": str(user)}, timeout=900)
-    line = next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))
-    (tmp / "out.json").write_text(line[4:])  # for a look after a failure
-    return tmp, json.loads(line[4:]), user
+    out, user = run_installed_extension(tmp, SCRIPT)
+    return tmp, out, user
 
 
 def test_every_operator_finishes_with_exec_default(operated):

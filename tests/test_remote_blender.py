@@ -3,15 +3,11 @@ All / Adapt hand their job to core.remote, the worker's progress and previews re
 the same background-job path as a local job, cancel ends it cleanly, and the results are applied as
 new datablocks on the main thread. bpy with the extension installed from its zip, tiny models, a
 local Ray cluster of two CPUs."""
-import json
-import sys
-from pathlib import Path
 
 import pytest
+from conftest import run_installed_extension
 
 pytestmark = pytest.mark.blender
-
-ROOT = Path(__file__).resolve().parent.parent
 
 SCRIPT = r"""
 import json, time
@@ -57,6 +53,7 @@ bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "scene.blend"))
 Run = bpy.types.SCENEFIT_OT_run
 op = SimpleNamespace(job_name=Run.job_name, runs_remotely=Run.runs_remotely, iterations=2, model_resolution=32,
                      render_size=16)
+op.apply = lambda context, result: Run.apply(op, context, result)
 t0 = time.perf_counter()
 work, data = Run.job_work(op, bpy.context)
 out["handed_off"] = [work.__module__, op._remote]
@@ -81,6 +78,8 @@ if state.status == "done":
                            sorted(n.image.filepath for n in obj.active_material.node_tree.nodes
                                   if n.type == "TEX_IMAGE" and n.image)]
     out["run_world"] = [bpy.context.scene.world.name if bpy.context.scene.world else None]
+    composite = bpy.data.images.get("SceneFit Composite")   # applied as after a local Run All
+    out["run_composite"] = list(composite.size) if composite else None
     out["run_report"] = state.result["report"]
 
 # 2. Cancel: a long job stops at the worker, nothing comes back, Blender's data unchanged.
@@ -105,22 +104,11 @@ print("JSON" + json.dumps(out, default=str))
 
 
 @pytest.fixture(scope="module")
-def handed_off(run_py, tmp_path_factory):
+def handed_off(tmp_path_factory):
     pytest.importorskip("ray", reason="Ray is not installed (pip install 'scenefit[ray]'): no cluster to hand jobs to")
-    sys.path.insert(0, str(ROOT / "tools"))
-    import build_extension
-    from scenefit.devtools.tiny_models import build_tiny_pair
-
     tmp = tmp_path_factory.mktemp("remote_blender")
-    zip_path = build_extension.build_without_wheels(tmp / "scenefit.zip")
-    build_tiny_pair(tmp / "tiny")
-    user = tmp / "blender_user"
-    user.mkdir()
-    code = (SCRIPT.replace("TMP", repr(str(tmp))).replace("ZIP", repr(str(zip_path)))
-            .replace("TINY", repr(str(tmp / "tiny"))))
-    proc = run_py(code, env={"BLENDER_USER_RESOURCES": str(user)}, timeout=600)
-    line = next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))
-    return tmp, json.loads(line[4:])
+    out, _ = run_installed_extension(tmp, SCRIPT, timeout=600)
+    return tmp, out
 
 
 def test_preferences_choose_the_worker_and_respect_online_access(handed_off):
@@ -147,6 +135,7 @@ def test_run_on_ray_streams_progress_and_previews_and_applies_the_results(handed
     assert images and all(p.startswith("//scenefit/Sphere/run-") for p in images)   # next to the .blend, relative
     assert all((tmp / p[2:]).is_file() for p in images)
     assert out["run_world"][0] == "SceneFit Light" and out["user_material_kept"]
+    assert out["run_composite"] is not None and min(out["run_composite"]) > 0
 
 
 def test_cancel_stops_the_worker_and_brings_nothing_back(handed_off):

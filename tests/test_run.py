@@ -114,3 +114,9 @@ def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monk
     # Only what the scene needs: the asset spans 0.3 x 48 = 14 px of the composite, so 32 texels, not its 64.
     decisions = report["stages"]["convert"]["report"]["decisions"]
     assert decisions["resolution"] == 32 and "14 px tall in the composite" in decisions["resolution_reason"]
+
+    # A moved run folder (Blender swaps it into place, a batch worker sends it home) is still reused.
+    moved = tmp_path / "moved"
+    out.rename(moved)
+    assert main([str(moved) if a == str(out) else a for a in args]) == 0
+    assert json.loads((moved / "report.json").read_text())["reused"] == ["convert", "light", "compose"]

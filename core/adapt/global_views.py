@@ -20,7 +20,6 @@ import torch
 
 from ..compose import (ComposeConfig, ComposeInputs, ObjectPlacement, envmap_in_object_frame,
                        photo_camera_in_object_frame, place_asset, shadow_matte)
-from ..denoise import oidn_available
 from ..mesh import Mesh, normalize_to_unit_sphere
 from ..photo import PhotoCamera
 from ..placement import Placement
@@ -56,7 +55,7 @@ class GlobalScene:
         self.pixel = placement.pixel((h, w))
         self.envmap = np.asarray(envmap, np.float32)
         self.compose_config = ComposeConfig(size=placement.size, shadow_type=shadow_type, spp=shadow_spp,
-                                            denoiser_type="oidn" if oidn_available()[0] else "none",
+                                            denoiser_type="auto",
                                             max_depth=max_depth, seed=seed)
         self.placements: dict[float, ObjectPlacement] = {
             turn: place_asset(self.mesh, self.camera, self.pixel, placement.size, turn)
