@@ -32,7 +32,12 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as stop:  # argparse refused an option (exit 2) or printed --help (exit 0)
         return stop.code if isinstance(stop.code, int) else 2
     try:
-        return args.func(args)
+        try:
+            return args.func(args)
+        except RuntimeError as error:   # Dr.Jit wraps a Ctrl-C inside a render in its own error
+            if _interrupted(error):
+                raise KeyboardInterrupt from error
+            raise
     except (Cancelled, KeyboardInterrupt):
         print(f"\nscenefit: {interrupted_message(args.out, getattr(args, 'resumable', False), getattr(args, 'by_stage', False))}"
               if getattr(args, "out", None) else "\nscenefit: interrupted.", file=sys.stderr)
@@ -40,3 +45,11 @@ def main(argv: list[str] | None = None) -> int:
     except SceneFitError as error:
         print(f"scenefit: error: {error}", file=sys.stderr)
         return 2
+
+
+def _interrupted(error: BaseException) -> bool:
+    while error is not None:
+        if isinstance(error, KeyboardInterrupt):
+            return True
+        error = error.__cause__ or error.__context__
+    return False

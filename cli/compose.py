@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import PRESETS, add_asset_args, add_placement_args, load_asset, progress
+from .options import PRESETS, add_asset_args, add_output_args, add_placement_args, load_asset, output, progress
 
 
 def run(args) -> int:
@@ -31,12 +31,13 @@ def run(args) -> int:
         stack, source = texture_maps_for_mesh(load_neural_texture(Path(args.texture)), normalized), "neural texture"
     else:
         stack, source = target_stack(maps, max(maps.resolution)), "the asset's own maps"
-    report = compose_to_folder(
-        ComposeInputs(mesh, stack, photo, placement, envmap, camera), config, Path(args.out),
-        {"inputs": {"asset": args.asset, "texture": args.texture or source, "photo": info, "light": args.light,
-                    "camera_from": camera_source},
-         "environment": environment_info()},
-        progress=progress(args))
+    with output(args) as out:
+        report = compose_to_folder(
+            ComposeInputs(mesh, stack, photo, placement, envmap, camera), config, out,
+            {"inputs": {"asset": args.asset, "texture": args.texture or source, "photo": info, "light": args.light,
+                        "camera_from": camera_source},
+             "environment": environment_info()},
+            progress=progress(args))
     shadow = report["shadow"]
     print(f"composed '{mesh.name}' at {report['placement']['distance_m']} m, {report['spp']} spp, "
           f"shadow {shadow['type']} ({shadow['pixels']} px) in {report['seconds']:.1f} s -> {args.out}/composite.png")
@@ -53,7 +54,7 @@ def add_parser(sub) -> None:
     p.add_argument("--photo", required=True, help="the scene photo")
     add_placement_args(p, required=True, object_size=DEFAULT_OBJECT_SIZE)
     p.add_argument("--light", required=True, help="light.exr from `scenefit light` (its report.json gives the camera)")
-    p.add_argument("--out", required=True, help="output folder: composite.png/.exr, layers/, report.json")
+    add_output_args(p, help="output folder: composite.png/.exr, layers/, report.json")
     p.add_argument("--preset", choices=PRESETS, default="balanced", help="noise target and sample cap")
     p.add_argument("--shadow", choices=SHADOW_TYPES, help="ratio (shadow catcher, default), paper (thresholded), none")
     p.add_argument("--spp", type=int, help="samples per pixel (default: from the preset's noise target)")

@@ -142,6 +142,11 @@ def test_cli_compose_writes_every_layer_and_leaves_the_photo_alone(tmp_path):
     assert oiio.ImageInput.open(str(out / "layers" / "object_rgba.png")).spec().format == oiio.UINT16
     assert read_image(out / "layers" / "shadow.png").min() < 0.5
 
+    # The folder holds this run's results: a second compose into it is refused (one unit per run).
+    again = subprocess.run([sys.executable, "-m", "scenefit.cli", "compose", str(asset), "--photo", str(photo_path),
+                            "--at", "0.5,0.7", "--light", str(light_path), "--out", str(out), "--spp", "8", "--quiet"],
+                           capture_output=True, text=True, timeout=600)
+    assert again.returncode == 2 and "--replace" in again.stderr, again.stderr
     bad = subprocess.run([sys.executable, "-m", "scenefit.cli", "compose", str(asset), "--photo", str(photo_path),
                           "--at", "2000,5", "--light", str(light_path), "--out", str(tmp_path / "bad")],
                          capture_output=True, text=True, timeout=600)

@@ -341,3 +341,21 @@ def test_a_phone_photo_stored_sideways_is_read_upright(tmp_path):
     assert photo[:8, -8:].mean() > 0.9 and photo[:8, :8].mean() < 0.5     # the block is now top-right
     # 35 mm equivalent 26 mm: 69.4 degrees across a landscape 3:2 frame, 49.6 across the portrait's width.
     assert abs(info["fov_from_metadata_deg"] - np.degrees(2 * np.arctan(24.0 / 52.0))) < 0.1
+
+
+def test_a_ctrl_c_inside_a_render_is_an_interrupt_not_a_traceback(tmp_path, capsys, monkeypatch):
+    """Dr.Jit wraps a KeyboardInterrupt raised during mi.render in a RuntimeError."""
+    import scenefit.cli.render as render_command
+    from scenefit.cli import main
+
+    def render_interrupted(args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as interrupt:
+            raise RuntimeError("drjit.custom(<_RenderOp>): error while performing a custom operation") from interrupt
+
+    monkeypatch.setattr(render_command, "run", render_interrupted)
+    parser_out = tmp_path / "out"
+    assert main(["render", str(tmp_path), "--out", str(parser_out)]) == 130
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "Traceback" not in err
