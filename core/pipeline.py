@@ -174,14 +174,14 @@ def write_report(path: str | Path, report: dict) -> Path:
     path = Path(path)
     report = dict(report)
     report.setdefault("written_at", time.strftime("%Y-%m-%dT%H:%M:%S%z"))
-    return write_json_atomic(path, _relative_paths(report, path.parent.absolute()))
+    return write_json_atomic(path, relative_paths(report, path.parent.absolute()))
 
 
-def _relative_paths(value, folder: Path):
+def relative_paths(value, folder: Path):
     if isinstance(value, dict):
-        return {k: _relative_paths(v, folder) for k, v in value.items()}
+        return {k: relative_paths(v, folder) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_relative_paths(v, folder) for v in value]
+        return [relative_paths(v, folder) for v in value]
     if isinstance(value, (str, Path)) and str(value):
         candidate = Path(value)
         if candidate.is_absolute() or isinstance(value, Path):

@@ -101,7 +101,7 @@ class StageRunner:
             except json.JSONDecodeError:
                 saved = {}
             report = dict(saved.get("report") or {})
-            report["outputs"] = _outputs_in(report.get("outputs", {}), folder)
+            report["outputs"] = _absolute_outputs(report.get("outputs", {}), folder)
             if saved.get("key") == key and all(Path(p).exists() for p in _paths(report["outputs"])):
                 emit(self.progress, "run", index + 1, len(STAGES), f"{name}: reused (same settings and inputs)")
                 self.stages[name] = {"status": "reused", "key": key, "seconds": 0.0, "report": report}
@@ -114,8 +114,10 @@ class StageRunner:
         seconds = time.perf_counter() - t0
         # Outputs are kept relative to the stage's folder: the run's folder may be moved (Blender swaps
         # it into place, a batch worker sends it home) and a later run must still find them.
-        write_json_atomic(record, {"key": key, "report": dict(report, outputs=_outputs_in(report.get("outputs", {}),
-                                                                                       folder, relative=True))})
+        from .pipeline import relative_paths
+
+        write_json_atomic(record, {"key": key, "report": dict(report, outputs=relative_paths(report.get("outputs", {}),
+                                                                                            folder))})
         self.stages[name] = {"status": "ran", "key": key, "seconds": round(seconds, 3), "report": report}
         emit(self.progress, "run", index + 1, len(STAGES), f"{name}: done in {seconds:.1f} s")
         return report
@@ -125,18 +127,11 @@ class StageRunner:
         emit(self.progress, "run", STAGES.index(name) + 1, len(STAGES), f"{name}: {status}")
 
 
-def _outputs_in(outputs, folder: Path, relative: bool = False):
-    """The output paths of a stage made relative to its folder, or back to absolute ones."""
+def _absolute_outputs(outputs, folder: Path):
+    """A stage.json's outputs (kept relative to the stage's folder) as paths from here."""
     if isinstance(outputs, dict):
-        return {k: _outputs_in(v, folder, relative) for k, v in outputs.items()}
-    if not isinstance(outputs, str):
-        return outputs
-    if relative:
-        try:
-            return Path(outputs).absolute().relative_to(folder.absolute()).as_posix()
-        except ValueError:
-            return outputs
-    return str(folder / outputs)
+        return {k: _absolute_outputs(v, folder) for k, v in outputs.items()}
+    return str(folder / outputs) if isinstance(outputs, str) else outputs
 
 
 def _paths(outputs) -> list[str]:
