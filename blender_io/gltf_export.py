@@ -110,12 +110,16 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path) -> list[s
     return notes
 
 
-def export_gltf(out_file: str | Path, file_format: str, selection_only: list | None = None) -> list[Path]:
+def export_gltf(out_file: str | Path, file_format: str, selection_only: list | None = None,
+                protect: tuple = ()) -> list[Path]:
     """Write the current scene (or only `selection_only` objects) with Blender's glTF exporter.
 
     The files are written into a temporary folder beside `out_file` and moved into place once the
-    exporter has finished, so a failed export leaves nothing half-written. Returns the written paths.
+    exporter has finished, so a failed export leaves nothing half-written; none is moved over a file
+    in `protect` (the asset's own files: a .gltf's buffers and images). Returns the written paths.
     """
+    from ..core.asset_files import refuse_overwriting
+
     import addon_utils
     import bpy
 
@@ -135,8 +139,9 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
                 obj.select_set(obj in selection_only)
         bpy.ops.export_scene.gltf(filepath=str(staging / out_file.name), export_format=FORMATS[file_format],
                                   use_selection=selection_only is not None, use_active_scene=True,
-                                  export_apply=True,
+                                  export_apply=True, export_cameras=True, export_lights=True,
                                   export_image_format="AUTO", export_materials="EXPORT")
+        refuse_overwriting([out_file.parent / p.name for p in staging.iterdir()], list(protect), "the glTF")
         written = []
         for path in sorted(staging.iterdir()):
             target = out_file.parent / path.name
@@ -150,7 +155,7 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
 
 
 def bake_object_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_file: str | Path,
-                        file_format: str = "glb", whole_scene: bool = True) -> dict:
+                        file_format: str = "glb", whole_scene: bool = True, protect: tuple = ()) -> dict:
     """Put the baked maps into `obj`'s materials (slot `slots[i]` gets `baked[i]`) and export glTF.
 
     For an asset loaded into a temporary scene (blender_io.asset_file.loaded_asset): the materials
@@ -169,13 +174,13 @@ def bake_object_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_f
             done.add(material.name)
             notes = apply_baked_material(material, maps, Path(folder))
             report["materials"].append(dict(maps.report(), done=notes))
-        written = export_gltf(out_file, file_format, None if whole_scene else [obj])
+        written = export_gltf(out_file, file_format, None if whole_scene else [obj], protect)
     report["files"] = [str(p) for p in written]
     return report
 
 
 def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_format: str = "glb",
-                    texture_size: int | None = None, object_name: str | None = None) -> dict:
+                    texture_size: int | None = None, object_name: str | None = None, protect: tuple = ()) -> dict:
     """`scenefit bake`: the asset file loaded into a temporary scene, the neural texture baked per
     material at `texture_size`² (default: the fitted size, rounded up to a power of two), written
     as glTF 2.0. `texture` is a NeuralTexture or the path of a texture.pt. Returns the report.
@@ -198,7 +203,7 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
         materials = [obj.material_slots[s].material for s in slots]
         baked = bake_game_maps(texture, mesh, [m.name for m in materials], size,
                                [constant_channels(m) for m in materials])
-        report = bake_object_to_gltf(obj, baked, slots, out_file, file_format, whole_scene=True)
+        report = bake_object_to_gltf(obj, baked, slots, out_file, file_format, whole_scene=True, protect=protect)
         report.update({"asset": str(asset_path), "object": obj.name, "format": file_format, "texture_size": size})
     return report
 

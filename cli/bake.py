@@ -10,6 +10,7 @@ def run(args) -> int:
     import json
 
     from ..blender_io.gltf_export import bake_asset_file
+    from ..core.asset_files import asset_files, refuse_overwriting
     from ..core.asset_io import is_asset_folder
     from ..core.errors import InputError
     from ..core.game_bake import check_texture_size
@@ -19,7 +20,13 @@ def run(args) -> int:
                          "(.glb, .gltf, .obj, .fbx, .blend), so give the file it came from.")
     if args.texture_size is not None:
         check_texture_size(args.texture_size)
-    report = bake_asset_file(args.asset, Path(args.texture), args.out, args.format, args.texture_size, args.object)
+    # The asset's own files (a .gltf's buffers and images too) and the texture are never written over.
+    protect = tuple(asset_files(args.asset)) + tuple(asset_files(args.texture))
+    out = Path(args.out)
+    targets = [out] + ([out.with_suffix(".bin")] if args.format == "gltf" else [])
+    refuse_overwriting(targets + ([Path(args.report)] if args.report else []), list(protect))
+    report = bake_asset_file(args.asset, Path(args.texture), args.out, args.format, args.texture_size, args.object,
+                             protect=protect)
     for material in report["materials"]:
         print(f"material '{material['name']}': base colour texture, roughness {material['roughness']}, "
               f"metallic {material['metallic']} at {material['size']}²")

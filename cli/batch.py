@@ -5,11 +5,12 @@ import sys
 
 
 def run(args) -> int:
-    from ..core.batch import InProcessDispatcher, run_batch
+    from ..core.batch import InProcessDispatcher, check_batch, run_batch
     from ..core.batch_ray import RayDispatcher, connect, ray_available
     from ..core.jobs import load_jobs
 
     jobs = load_jobs(args.jobs)
+    check_batch(jobs, args.out)
 
     def say(name: str, message: str) -> None:
         if not args.quiet:
@@ -29,7 +30,7 @@ def run(args) -> int:
             dispatcher = RayDispatcher(jobs.settings, len(jobs.jobs))
             where = f"on Ray ({dispatcher.workers} worker(s), each {dispatcher.options})"
         say("batch", f"{len(jobs.jobs)} job(s) from {jobs.path} {where}")
-        outcomes = run_batch(jobs, args.out, dispatcher, on_event=say)
+        outcomes = run_batch(jobs, args.out, dispatcher, on_event=say, redo=args.replace)
     finally:
         if started_ray:
             import ray
@@ -80,5 +81,7 @@ def add_parser(sub) -> None:
                         "installed), local (a new local cluster) or a cluster address; absent: in this process")
     p.add_argument("--events", action="store_true",
                    help="in-process: print each progress event as a JSON line on stdout (for a calling program)")
+    p.add_argument("--replace", action="store_true",
+                   help="run the jobs an earlier batch into DIR finished again, replacing their folders (default: skip them)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=run)

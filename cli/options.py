@@ -66,12 +66,21 @@ def add_output_args(p: argparse.ArgumentParser, default: str | None = None, help
                    help="replace the output folder when it already holds files (default: refuse)")
 
 
-def output(args, resume: bool = False):
+# Every option that names a file or folder the command reads: an --out may never be or hold one.
+INPUT_OPTIONS = ("asset", "photo", "texture", "light", "envmap", "jobs", "fspy", "base_model", "inpaint_model",
+                 "depth_model", "cache_dir")
+
+
+def input_paths(args) -> list[str]:
+    return [str(getattr(args, name)) for name in INPUT_OPTIONS if getattr(args, name, None)]
+
+
+def output(args, resume: bool = False, reuse: bool = False):
     """The run's output folder as a context manager yielding the folder to write into."""
     from ..core.output_folder import output_folder
 
     args.resumable = resume
-    return output_folder(args.out, replace=args.replace, resume=resume)
+    return output_folder(args.out, replace=args.replace, resume=resume, inputs=input_paths(args), reuse=reuse)
 
 
 def load_asset(path: str, object_name: str | None = None):

@@ -6,8 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .options import (add_asset_args, add_model_args, add_placement_args, add_preset_args, add_prompt_service_args,
-                      load_asset, model_config, progress, scene_conditional_prompt)
+from .options import (add_asset_args, add_model_args, add_output_args, add_placement_args, add_preset_args,
+                      add_prompt_service_args, load_asset, model_config, output, progress, scene_conditional_prompt)
 
 
 def run_config(args):
@@ -59,13 +59,16 @@ def run(args) -> int:
     config, written = run_config(args)
     mesh, maps = load_asset(args.asset, args.object)
     bake, why_not = game_bake(args)
-    report = run_pipeline(mesh, maps, args.photo, args.at, Path(args.out), config, progress=progress(args),
-                          bake=bake, bake_skipped_why=why_not)
-    if written is not None:
-        report["prompt_writing"] = written.to_report()
-        write_report(Path(args.out) / "report.json", report)
+    # Written beside and swapped in whole, like every command's folder; an earlier run's folder is
+    # taken up (its finished stages reused), never mixed with this run's files.
+    with output(args, reuse=True) as staging:
+        report = run_pipeline(mesh, maps, args.photo, args.at, staging, config, progress=progress(args),
+                              bake=bake, bake_skipped_why=why_not)
+        if written is not None:
+            report["prompt_writing"] = written.to_report()
+            write_report(staging / "report.json", report)
     summary = ", ".join(f"{name} {stage['status']}" for name, stage in report["stages"].items())
-    print(f"run done in {report['seconds_total']:.1f} s ({summary}) -> {report['composite']}")
+    print(f"run done in {report['seconds_total']:.1f} s ({summary}) -> {Path(args.out) / 'compose' / 'composite.png'}")
     return 0
 
 
@@ -77,7 +80,8 @@ def add_parser(sub) -> None:
     add_asset_args(p)
     p.add_argument("--photo", required=True, help="the scene photo")
     add_placement_args(p, required=True, object_size=DEFAULT_OBJECT_SIZE)
-    p.add_argument("--out", required=True, help="output folder; a second run with the same settings reuses stages")
+    add_output_args(p, help="output folder; a second run into it reuses the stages whose settings and inputs are "
+                            "the same (--replace is not needed for that)")
     p.add_argument("--prompt", help="what the asset should become in this scene (adapt; default from its name)")
     p.add_argument("--object-prompt", help="the object, e.g. 'a leather sofa': without --prompt, a language model "
                                            "writes the prompt from it and --scene-prompt (or the photo)")

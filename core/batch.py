@@ -16,7 +16,6 @@ from __future__ import annotations
 import io
 import json
 import math
-import shutil
 import tarfile
 import tempfile
 import threading
@@ -29,9 +28,11 @@ from typing import Callable
 from .atomic import write_json_atomic, write_text_atomic
 from .errors import InputError, SceneFitError
 from .jobs import BatchSettings, Job, JobsFile
+from .output_folder import check_output_folder, check_subfolder, folder_in_place, install_folder
 
 REPORT = "report.json"
 SUMMARY_JSON, SUMMARY_MD, CONTACT_SHEET = "summary.json", "summary.md", "contact_sheet.png"
+RESERVED_NAMES = (SUMMARY_JSON, SUMMARY_MD, CONTACT_SHEET)
 # What a job's contact-sheet cell shows, the first that exists (the composite once compose runs).
 SHEET_IMAGES = ("composite.png", "compose/composite.png", "light/light_preview.png", "convert/maps/base_color.png")
 
@@ -314,28 +315,6 @@ def is_done(out_dir: Path, name: str) -> bool:
     return report is not None and report.get("status") == "done"
 
 
-def install_folder(out_dir: Path, name: str, fill: Callable[[Path], None]) -> Path:
-    """Make DIR/<name>/ by filling a fresh staging folder and swapping it in whole."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{name}.partial-", dir=out_dir))
-    try:
-        fill(staging)
-        staging.chmod(0o755)
-        final = out_dir / name
-        old = None
-        if final.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{name}.old-", dir=out_dir))
-            final.rename(old / name)
-        staging.rename(final)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-        return final
-    finally:
-        if staging.exists():
-            shutil.rmtree(staging, ignore_errors=True)
-
-
 @dataclass
 class JobOutcome:
     name: str
@@ -394,17 +373,40 @@ class InProcessDispatcher(Dispatcher):
 
 
 def run_batch(jobs: JobsFile, out_dir: str | Path, dispatcher: Dispatcher | None = None,
-              on_event: EventCallback | None = None) -> list[JobOutcome]:
-    """Run every job not yet done; write the per-job folders, summary.json/.md and the contact sheet."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+              on_event: EventCallback | None = None, redo: bool = False) -> list[JobOutcome]:
+    """Run every job not yet done; write the per-job folders, summary.json/.md and the contact sheet.
+
+    The folder follows every command's contract (core/output_folder.py): locked while the batch runs,
+    never a folder holding an input or files SceneFit did not write; each job's folder is swapped in
+    whole. redo: run the jobs done by an earlier batch again (`--replace`)."""
+    check_batch(jobs, out_dir)
+    with folder_in_place(out_dir, batch_inputs(jobs)) as out_dir:
+        return _run_jobs(jobs, out_dir, dispatcher or InProcessDispatcher(jobs.settings), on_event, redo)
+
+
+def batch_inputs(jobs: JobsFile) -> list[Path]:
+    return [jobs.path, *(p for job in jobs.jobs for p in (job.asset, job.photo) if p is not None)]
+
+
+def check_batch(jobs: JobsFile, out_dir: str | Path) -> None:
+    """Every refusal of the batch's folder and job names, before any work (and before Ray starts)."""
+    for job in jobs.jobs:
+        if job.name in RESERVED_NAMES or job.name.startswith("."):
+            raise InputError(f"{jobs.path.name}: job '{job.name}' is named like a file the batch writes itself "
+                             f"({', '.join(RESERVED_NAMES)}); give it another name.")
+    out_dir = check_output_folder(out_dir, inputs=batch_inputs(jobs), reuse=True)
+    for job in jobs.jobs:
+        check_subfolder(out_dir, job.name)   # a user's folder of that name is refused, never replaced
+
+
+def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: EventCallback | None,
+              redo: bool) -> list[JobOutcome]:
     say = on_event or (lambda name, message: None)
-    dispatcher = dispatcher or InProcessDispatcher(jobs.settings)
     outcomes: dict[str, JobOutcome] = {}
     pending = 0
     try:
         for job in jobs.jobs:
-            if is_done(out_dir, job.name):
+            if not redo and is_done(out_dir, job.name):
                 report = job_report(out_dir, job.name) or {}
                 outcomes[job.name] = JobOutcome(job.name, "skipped", report.get("attempts", 0),
                                                 report.get("seconds", 0.0), report.get("quality", {}))

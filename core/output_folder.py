@@ -1,63 +1,152 @@
-"""A run's output folder as one unit: written beside, swapped in whole, locked, never mixed.
+"""A run's output folder as one unit: written beside, swapped in whole, locked, never mixed, and
+never anything but SceneFit's own folder replaced.
 
-    with output_folder("out", replace=args.replace) as staging:
+    with output_folder("out", replace=args.replace, inputs=[asset, photo]) as staging:
         ...write everything into `staging`...
     # now "out" holds exactly this run's files
 
-- Before any work: `out` that is a file, or a place that cannot be written, is refused; so is an
-  `out` holding files (an earlier run's results) unless `replace` is given.
+The contract (README "Output folders"):
+- Before any work: an `out` that is a file, a symbolic link, a place that cannot be written, the
+  root, the home folder, the working folder or an ancestor of one of them, or a folder that holds
+  any input of the run, is refused in one sentence.
+- An `out` holding files is refused unless `replace` is given, and `replace` only ever replaces a
+  SceneFit run folder: one holding the marker file `.scenefit-run` that SceneFit writes into every
+  run folder it makes. A folder without it is never deleted, whatever it is called.
 - Files go into the hidden sibling `.out.partial`; only a finished run is renamed to `out` (the old
-  folder moved aside first, then deleted), so a crash or Ctrl-C never leaves old and new files mixed.
+  folder moved aside first, then deleted), so a crash, Ctrl-C or kill never leaves old and new files
+  mixed: until the swap, an earlier finished folder stays whole.
 - A lock file `.out.lock` (an OS lock, released when the process dies) refuses a second run into
   the same folder while one is writing.
 - Leftovers of a killed run (a `.partial` folder, a folder moved aside, dot-temp files) are
-  cleaned up by the next run; a resumable stage (adapt) keeps its `.partial` folder to resume from.
+  recognised by the marker, not by their names, and cleaned up by the next run; a resumable stage
+  (adapt) keeps its `.partial` folder to resume from; `scenefit run` (reuse) starts its staging
+  folder from the earlier finished folder's files, so finished stages are reused, and keeps it when
+  stopped.
 """
 from __future__ import annotations
 
+import errno
+import json
 import os
 import shutil
 import sys
+import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterable, Iterator
 
 from .atomic import is_temp_name
 from .errors import Cancelled, InputError
+
+MARKER = ".scenefit-run"
+MARKER_FORMAT = "scenefit.run-folder"
+LOCK_TEXT = b"scenefit lock\n"
 
 
 def staging_path(out: Path) -> Path:
     return out.parent / f".{out.name}.partial"
 
 
-def _aside_path(out: Path) -> Path:
-    return out.parent / f".{out.name}.old"
+def _aside_prefix(out: Path) -> str:
+    return f".{out.name}.old-"
 
 
 def _lock_path(out: Path) -> Path:
     return out.parent / f".{out.name}.lock"
 
 
-def check_output_folder(out: str | os.PathLike, replace: bool = False) -> Path:
-    """Refuse, before any work, an output that cannot become this run's folder; returns it absolute."""
-    out = Path(out).expanduser().absolute()
+# -- the marker ------------------------------------------------------------------------------------
+
+def write_marker(folder: Path, role: str = "run") -> None:
+    """Mark `folder` as SceneFit's own (role: run, or aside for a folder moved aside in a swap)."""
+    (folder / MARKER).write_text(json.dumps({"format": MARKER_FORMAT, "role": role}) + "\n")
+
+
+def is_run_folder(folder: Path, role: str = "run") -> bool:
+    """Whether `folder` is a real folder (not a link) that SceneFit made: it holds the marker."""
+    marker = folder / MARKER
+    if folder.is_symlink() or not folder.is_dir() or marker.is_symlink() or not marker.is_file():
+        return False
+    try:
+        data = json.loads(marker.read_text()[:1000])
+    except (OSError, ValueError):
+        return False
+    return isinstance(data, dict) and data.get("format") == MARKER_FORMAT and data.get("role") == role
+
+
+# -- refusals before any work ------------------------------------------------------------------------
+
+def _protected_folders() -> list[tuple[Path, str]]:
+    """Folders a run may never be written over (nor any of their ancestors)."""
+    found = [(Path(Path.cwd().anchor).resolve(), "the root of the file system")]
+    for path, what in ((Path.home(), "your home folder"), (Path.cwd(), "the working folder")):
+        try:
+            found.append((path.resolve(), what))
+        except OSError:
+            pass
+    return found
+
+
+def _real_inputs(inputs: Iterable) -> list[Path]:
+    paths = []
+    for item in inputs:
+        if item is None or str(item) == "":
+            continue
+        path = Path(item).expanduser()
+        if path.exists():
+            paths.append(path.resolve())
+    return paths
+
+
+def check_output_folder(out: str | os.PathLike, replace: bool = False, inputs: Iterable = (),
+                        reuse: bool = False) -> Path:
+    """Refuse, before any work, an output that cannot become this run's folder; returns it absolute.
+
+    inputs: the run's input files and folders; `out` may not be one or hold one.
+    reuse: an earlier SceneFit run folder is taken up rather than refused (`scenefit run`).
+    """
+    given = Path(out).expanduser()
+    out = given.absolute()
+    if given.is_symlink():
+        raise InputError(f"The output '{out}' is a symbolic link (to '{os.readlink(given)}'); SceneFit does not "
+                         "write through links: give the real folder's path, or a new one, as --out.")
     if out.exists() and not out.is_dir():
         raise InputError(f"The output '{out}' is a file; give a folder path for --out.")
+    resolved = out.resolve()
+    for folder, what in _protected_folders():
+        if resolved == folder or resolved in folder.parents:
+            raise InputError(f"The output folder '{out}' is {what} or holds it, which SceneFit never replaces; "
+                             f"choose a new folder for --out, such as '{out / 'scenefit-out'}'.")
+    for path in _real_inputs(inputs):
+        if path == resolved or resolved in path.parents:
+            raise InputError(f"The output folder '{out}' holds the input '{path}', and SceneFit never writes over "
+                             "its inputs; choose a new folder for --out.")
     parent = out.parent
     while not parent.exists():
         parent = parent.parent
     if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(f"Cannot write into '{parent}' (no permission); choose another --out folder.")
-    if out.is_dir() and not replace and any(out.iterdir()):
-        raise InputError(f"The output folder '{out}' already holds files (an earlier run's results?); "
-                         "pass --replace to replace them, or choose an empty or new folder.")
+    if out.is_dir() and any(out.iterdir()):
+        ours = is_run_folder(out)
+        if not ours:
+            raise InputError(f"The output folder '{out}' holds files that SceneFit did not write (it has no "
+                             f"{MARKER} marker), so SceneFit will not replace them even with --replace; choose an "
+                             "empty or new folder for --out.")
+        if not replace and not reuse:
+            raise InputError(f"The output folder '{out}' already holds an earlier SceneFit run; pass --replace to "
+                             "replace it, or choose an empty or new folder.")
     if out.is_dir() and not os.access(out, os.W_OK | os.X_OK):
         raise InputError(f"Cannot write into '{out}' (no permission); choose another --out folder.")
     return out
 
 
+# -- the lock ------------------------------------------------------------------------------------------
+
 class _FolderLock:
-    """An exclusive, non-blocking OS lock on `.out.lock`; the OS drops it if the process is killed."""
+    """An exclusive, non-blocking OS lock on `.out.lock`; the OS drops it if the process is killed.
+
+    The file holds LOCK_TEXT; a file of that name with anything else in it is the user's and is
+    neither used nor deleted."""
 
     def __init__(self, path: Path):
         self.path = path
@@ -66,6 +155,9 @@ class _FolderLock:
     def acquire(self, out: Path) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         while True:
+            if self.path.is_symlink() or (self.path.exists() and not self._ours()):
+                raise InputError(f"'{self.path}' is in the way and was not made by SceneFit; move it, or choose "
+                                 "another --out folder.")
             fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
             if not _try_lock(fd):
                 os.close(fd)
@@ -77,9 +169,19 @@ class _FolderLock:
             except FileNotFoundError:
                 same = False
             if same:
+                os.ftruncate(fd, 0)
+                os.write(fd, LOCK_TEXT)
                 self.fd = fd
                 return
             os.close(fd)
+
+    def _ours(self) -> bool:
+        try:
+            with open(self.path, "rb") as f:
+                text = f.read(64)
+        except OSError:
+            return False
+        return text in (b"", LOCK_TEXT)   # empty: created by a holder killed before it wrote
 
     def release(self) -> None:
         if self.fd is None:
@@ -110,73 +212,176 @@ def _try_lock(fd: int) -> bool:
         return False
 
 
+# -- leftovers and the swap ----------------------------------------------------------------------------
+
 def remove_stale_temps(folder: Path) -> list[Path]:
     """Delete dot-temp files a killed write left behind (anywhere under `folder`)."""
     removed = []
     for path in folder.rglob(".*"):
-        if path.is_file() and is_temp_name(path.name):
+        if path.is_file() and not path.is_symlink() and is_temp_name(path.name):
             path.unlink()
             removed.append(path)
     return removed
 
 
+def _asides(out: Path) -> list[Path]:
+    """Folders a swap moved `out` into (each holds `out`'s name inside it), newest last."""
+    found = [p for p in out.parent.glob(_aside_prefix(out) + "*") if is_run_folder(p, role="aside")]
+    return sorted(found, key=lambda p: p.stat().st_mtime)
+
+
 def _recover(out: Path) -> None:
     """Undo what a run killed mid-swap left: put the moved-aside folder back, or delete it."""
-    aside = _aside_path(out)
-    if aside.exists():
-        if out.exists():
-            shutil.rmtree(aside)
-        else:
-            aside.rename(out)
-
-
-def _swap_in(staging: Path, out: Path) -> None:
-    aside = _aside_path(out)
-    if out.exists():
-        out.rename(aside)
-    staging.rename(out)
-    if aside.exists():
+    for aside in reversed(_asides(out)):
+        inside = aside / out.name
+        if not out.exists() and inside.is_dir():
+            inside.rename(out)
         shutil.rmtree(aside)
 
 
+def _swap_in(staging: Path, out: Path) -> None:
+    """Rename `staging` to `out`; an earlier run folder there is moved aside first, then deleted."""
+    aside = None
+    if out.is_dir() and is_run_folder(out):
+        aside = Path(tempfile.mkdtemp(prefix=_aside_prefix(out), dir=out.parent))
+        write_marker(aside, role="aside")
+        out.rename(aside / out.name)
+    elif out.is_dir():
+        try:
+            out.rmdir()   # an empty folder the user made for this run
+        except OSError as error:
+            if error.errno not in (errno.ENOTEMPTY, errno.EEXIST):
+                raise
+            raise InputError(f"Files appeared in '{out}' while SceneFit was writing; this run is kept in "
+                             f"'{staging}' and '{out}' is untouched: move them away and run again.") from None
+    try:
+        staging.rename(out)
+    except OSError:
+        if aside is not None and not out.exists():
+            (aside / out.name).rename(out)   # the earlier folder back in place, whole
+        raise
+    if aside is not None:
+        shutil.rmtree(aside)
+
+
+def _prepare_staging(out: Path, staging: Path, resume: bool, reuse: bool) -> None:
+    if staging.is_symlink() or (staging.exists() and not is_run_folder(staging)):
+        raise InputError(f"'{staging}' is in the way and was not made by SceneFit; move it, or choose another "
+                         "--out folder.")
+    if staging.exists() and not (resume or reuse):
+        shutil.rmtree(staging)
+    if not staging.exists():
+        if reuse and is_run_folder(out):
+            # Hard links: every SceneFit write replaces a file (atomic rename), never writes into one,
+            # so the earlier folder's files stay as they were while the new run reuses them.
+            shutil.copytree(out, staging, symlinks=True, copy_function=_link_or_copy)
+        else:
+            staging.mkdir(parents=True)
+    write_marker(staging)
+    remove_stale_temps(staging)
+
+
+def _link_or_copy(src: str, dst: str) -> None:
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
+
+
+def _worth_keeping(staging: Path) -> bool:
+    """A stopped `run` keeps its staging folder only when a stage finished in it."""
+    return any(staging.glob("*/stage.json"))
+
+
 @contextmanager
-def output_folder(out: str | os.PathLike, replace: bool = False, resume: bool = False) -> Iterator[Path]:
+def output_folder(out: str | os.PathLike, replace: bool = False, resume: bool = False, inputs: Iterable = (),
+                  reuse: bool = False) -> Iterator[Path]:
     """Yield the staging folder to write this run into; on success it becomes `out`, whole.
 
     resume: keep the staging folder of an interrupted run (and keep it again if this one is
     interrupted), for stages that checkpoint into it.
+    reuse: start from an earlier run folder at `out` (without --replace) and keep the staging folder
+    whenever the run stops with a finished stage in it (`scenefit run`, which reuses stages).
+    inputs: the run's inputs, which `out` may not be or hold.
     """
-    out = check_output_folder(out, replace)
+    inputs = list(inputs)
+    out = check_output_folder(out, replace, inputs, reuse)
     lock = _FolderLock(_lock_path(out))
     lock.acquire(out)
     staging = staging_path(out)
     keep_staging = False
     try:
         _recover(out)
-        check_output_folder(out, replace)  # a restored folder counts as an earlier run's results
-        if staging.exists() and not resume:
-            shutil.rmtree(staging)
-        staging.mkdir(parents=True, exist_ok=True)
-        remove_stale_temps(staging)
+        check_output_folder(out, replace, inputs, reuse)  # a restored folder counts as an earlier run's results
+        _prepare_staging(out, staging, resume, reuse)
         try:
             yield staging
         except (KeyboardInterrupt, Cancelled):
-            keep_staging = resume
+            keep_staging = resume or (reuse and _worth_keeping(staging))
+            raise
+        except BaseException:
+            keep_staging = reuse and _worth_keeping(staging)
             raise
         remove_stale_temps(staging)
         _swap_in(staging, out)
     finally:
-        if staging.exists() and not keep_staging:
+        if staging.exists() and not keep_staging and is_run_folder(staging):
             shutil.rmtree(staging, ignore_errors=True)
         lock.release()
 
 
+@contextmanager
+def folder_in_place(out: str | os.PathLike, inputs: Iterable = ()) -> Iterator[Path]:
+    """A folder updated part by part under the lock (`scenefit batch`: DIR/<job>/ swapped in one job at
+    a time by `install_folder`): the same refusals as `output_folder`, then it is marked as SceneFit's."""
+    out = check_output_folder(out, inputs=list(inputs), reuse=True)
+    lock = _FolderLock(_lock_path(out))
+    lock.acquire(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        write_marker(out)
+        yield out
+    finally:
+        lock.release()
+
+
+def check_subfolder(parent: Path, name: str) -> Path:
+    """Refuse, before any work, a parent/name that is not SceneFit's to replace (a user's folder or file)."""
+    final = Path(parent) / name
+    if final.is_symlink() or (final.exists() and not final.is_dir()) or (
+            final.is_dir() and any(final.iterdir()) and not is_run_folder(final)):
+        raise InputError(f"'{final}' already exists and was not made by SceneFit, so it is not replaced; rename "
+                         "the job or move that folder away.")
+    return final
+
+
+def install_folder(parent: str | os.PathLike, name: str, fill: Callable[[Path], object]) -> Path:
+    """Make parent/name by filling a fresh staging folder beside it and swapping it in whole; an earlier
+    folder there is replaced only when SceneFit made it."""
+    parent = Path(parent)
+    parent.mkdir(parents=True, exist_ok=True)
+    final = check_subfolder(parent, name)
+    _recover(final)
+    staging = Path(tempfile.mkdtemp(prefix=f".{name}.partial-", dir=parent))
+    try:
+        write_marker(staging)
+        fill(staging)
+        staging.chmod(0o755)
+        write_marker(staging)   # `fill` may have unpacked a folder from elsewhere over it
+        remove_stale_temps(staging)
+        _swap_in(staging, final)
+        return final
+    finally:
+        if staging.exists():
+            shutil.rmtree(staging, ignore_errors=True)
+
+
 def interrupted_message(out: str | os.PathLike, resumable: bool = False, by_stage: bool = False) -> str:
     """What the user is told after Ctrl-C or a cancel inside `output_folder` (by_stage: `scenefit run`,
-    whose finished stages stay in `out` with their stage.json and are reused by the next run)."""
+    whose finished stages are kept beside `out` and reused by the next run)."""
     if by_stage:
-        return (f"interrupted; the stages finished so far are kept in '{out}' and the unfinished one is redone: "
-                "run the same command again to resume.")
+        return (f"interrupted; '{out}' is unchanged and the stages finished so far are kept beside it: run the same "
+                "command again to resume (the unfinished stage is redone).")
     if resumable:
         return (f"interrupted; '{out}' is unchanged and the progress so far is kept: run the same command again "
                 "to resume.")

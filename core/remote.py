@@ -20,7 +20,8 @@ import json
 from pathlib import Path
 
 from . import errors
-from .batch import install_folder, make_payload, unpack
+from .batch import make_payload, unpack
+from .output_folder import install_folder
 from .batch_ray import connect, import_ray, job_resources
 from .errors import Cancelled, SceneFitError
 from .jobs import BatchSettings, Job

@@ -300,7 +300,9 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
         "environment": environment_info(),
         "seconds_total": round(time.perf_counter() - started, 3),
     }
-    write_json_atomic(out / "report.json", report)
+    from .pipeline import write_report
+
+    write_report(out / "report.json", report)   # paths relative to the run's folder, which is swapped into place
     return report
 
 

@@ -147,7 +147,7 @@ def test_in_process_batch_writes_folders_summary_and_resumes(in_process, capsys)
     assert "| a | done | 1 |" in (out / "summary.md").read_text()
     sheet = read_image(out / "contact_sheet.png")
     assert sheet.shape[0] > 0 and sheet.shape[1] == 3 * 192      # three cells in one row
-    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no staging folders left
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [".scenefit-run"]  # no staging folders left
 
     # A second run does nothing: every job is skipped and no job folder is touched.
     before = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file() and p.parent != out}

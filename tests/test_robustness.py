@@ -17,7 +17,12 @@ from scenefit.core.errors import InputError
 from scenefit.core.imageio import read_image, write_image
 from scenefit.core.maps import PBRMaps
 from scenefit.core.mesh import Mesh
-from scenefit.core.output_folder import _FolderLock, output_folder, staging_path
+from scenefit.core.output_folder import MARKER, _FolderLock, output_folder, staging_path, write_marker
+
+
+def files(folder: Path) -> list[str]:
+    """What a folder holds, without SceneFit's marker."""
+    return sorted(p.name for p in folder.iterdir() if p.name != MARKER)
 from scenefit.core.pipeline import write_report
 from scenefit.core.primitives import uv_sphere
 
@@ -69,12 +74,12 @@ def test_an_interrupted_run_leaves_the_previous_results_whole(tmp_path):
         with output_folder(out, replace=True) as staging:
             (staging / "a.txt").write_text("second")
             raise KeyboardInterrupt
-    assert {p.name: p.read_text() for p in out.iterdir()} == {"a.txt": "first", "b.txt": "first"}
+    assert {p.name: p.read_text() for p in out.iterdir() if p.name != MARKER} == {"a.txt": "first", "b.txt": "first"}
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
     # Replaced: fewer files than before leaves no stale ones (render --views 4 then --views 2).
     with output_folder(out, replace=True) as staging:
         (staging / "a.txt").write_text("third")
-    assert [p.name for p in out.iterdir()] == ["a.txt"]
+    assert files(out) == ["a.txt"]
 
 
 def test_a_resumable_run_keeps_its_progress_when_interrupted(tmp_path):
@@ -93,15 +98,18 @@ def test_leftovers_of_a_killed_run_are_cleaned_up(tmp_path):
     out = tmp_path / "out"
     staging = staging_path(out)
     staging.mkdir(parents=True)
-    (staging / "half.png").write_bytes(b"")                       # a killed run's partial folder
-    aside = tmp_path / ".out.old"                                  # killed between the two renames of a swap
-    aside.mkdir()
-    (aside / "report.json").write_text("{}")
+    write_marker(staging)                                          # a killed run's partial folder
+    (staging / "half.png").write_bytes(b"")
+    aside = tmp_path / ".out.old-x1y2"                             # killed between the two renames of a swap
+    (aside / "out").mkdir(parents=True)
+    write_marker(aside, role="aside")
+    write_marker(aside / "out")
+    (aside / "out" / "report.json").write_text("{}")
     with output_folder(out, replace=True) as fresh:
         (fresh / f".base_color.png.x1y2{TEMP_MARK}.png").write_bytes(b"")  # a killed write's dot-temp file
         (fresh / "base_color.png").write_bytes(b"png")
         assert not (fresh / "half.png").exists()
-    assert sorted(p.name for p in out.iterdir()) == ["base_color.png"]
+    assert files(out) == ["base_color.png"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 

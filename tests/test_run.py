@@ -90,6 +90,7 @@ def test_run_on_an_asset_file_bakes_a_game_asset_and_reuses_it(tmp_path):
 def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monkeypatch, capsys):
     import scenefit.core.compose as compose
     from scenefit.cli import main
+    from scenefit.core.output_folder import staging_path
 
     maps = PBRMaps(np.full((64, 64, 3), 0.5, np.float32), 0.5, 0.0)
     asset = save_asset_folder(uv_sphere(0.5, 12, 6), maps, tmp_path / "asset")
@@ -104,9 +105,12 @@ def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monk
     monkeypatch.setattr(compose, "compose_to_folder", interrupted)   # Ctrl-C during the compose stage
     assert main(args) == 130
     message = capsys.readouterr().err
-    assert "stages finished so far are kept" in message and "unchanged" not in message
-    assert (out / "convert" / "stage.json").is_file() and (out / "light" / "stage.json").is_file()
-    assert not (out / "compose" / "stage.json").exists()
+    assert "stages finished so far are kept beside it" in message
+    # Nothing is swapped in until the run is whole; the finished stages wait beside the folder.
+    staging = staging_path(out)
+    assert not out.exists()
+    assert (staging / "convert" / "stage.json").is_file() and (staging / "light" / "stage.json").is_file()
+    assert not (staging / "compose" / "stage.json").exists()
     monkeypatch.undo()
     assert main(args) == 0
     report = json.loads((out / "report.json").read_text())

@@ -45,7 +45,10 @@ def load_checkpoint(path: Path, config: AdaptConfig) -> dict | None:
     if not path.is_file():
         return None
     try:
-        payload = torch.load(path, map_location="cpu", weights_only=False)
+        # A checkpoint may come from anywhere (a colleague's folder, a batch worker): it is data, so
+        # torch's restricted unpickler reads tensors and plain containers and refuses anything that
+        # would run code.
+        payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as error:
         raise InputError(f"The checkpoint '{path}' cannot be read ({torch_load_reason(error)}); delete it to start "
                          "over.") from None

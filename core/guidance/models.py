@@ -240,14 +240,16 @@ def load_guidance_models(config: ModelConfig, need_inpaint: bool, paths: dict[st
     device, dtype = config.device(), config.dtype()
     base = paths["base"]
     tokenizer = CLIPTokenizer.from_pretrained(base, subfolder="tokenizer")
-    text_encoder = CLIPTextModel.from_pretrained(base, subfolder="text_encoder", torch_dtype=dtype)
-    vae = AutoencoderKL.from_pretrained(base, subfolder="vae", torch_dtype=dtype)
-    unet = UNet2DConditionModel.from_pretrained(base, subfolder="unet", torch_dtype=dtype)
+    text_encoder = CLIPTextModel.from_pretrained(base, subfolder="text_encoder", torch_dtype=dtype,
+                                                 use_safetensors=True)
+    vae = AutoencoderKL.from_pretrained(base, subfolder="vae", torch_dtype=dtype, use_safetensors=True)
+    unet = UNet2DConditionModel.from_pretrained(base, subfolder="unet", torch_dtype=dtype, use_safetensors=True)
     # Only ᾱ_t and the prediction type are used; DDPM reads SD2's PNDM/DDIM configs too.
     scheduler = DDPMScheduler.from_pretrained(base, subfolder="scheduler")
     inpaint_unet = None
     if need_inpaint:
-        inpaint_unet = UNet2DConditionModel.from_pretrained(paths["inpaint"], subfolder="unet", torch_dtype=dtype)
+        inpaint_unet = UNet2DConditionModel.from_pretrained(paths["inpaint"], subfolder="unet", torch_dtype=dtype,
+                                                            use_safetensors=True)
         if inpaint_unet.config.in_channels != 9:
             raise ModelMissingError(f"The inpainting model at '{paths['inpaint']}' has a UNet with "
                                     f"{inpaint_unet.config.in_channels} input channels; an inpainting UNet has 9.")
@@ -335,7 +337,8 @@ class DepthEstimator:
                 source = snapshot_download(model, cache_dir=cache_dir, local_files_only=only_local,
                                            allow_patterns=_WEIGHT_PATTERNS)
             self.processor = AutoImageProcessor.from_pretrained(source, local_files_only=True)
-            self.model = AutoModelForDepthEstimation.from_pretrained(source, local_files_only=True)
+            self.model = AutoModelForDepthEstimation.from_pretrained(source, local_files_only=True,
+                                                                     use_safetensors=True)
         except (OSError, ValueError) as error:
             raise ModelMissingError(
                 f"The depth model '{model}' was not found in {_where_looked(model, cache_dir)}"
