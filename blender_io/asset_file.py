@@ -1,8 +1,11 @@
 """Loading an asset from any file Blender reads (.blend, glTF, OBJ, FBX, PLY, USD).
 
-The open file is never reset or replaced: a .blend's object is appended, an import goes into a
-temporary scene, the mesh and maps are read, and every datablock that arrived is removed again.
-So the command line (a fresh bpy) and an artist's running Blender use the same loader.
+An artist's open file is never reset or replaced: a .blend's object is appended, an import goes
+into a temporary scene, the mesh and maps are read, and every datablock that arrived is removed
+again. A background process that holds nothing but Blender's untouched startup file (the command
+line, a batch worker, a test's fresh bpy) first empties it (factory settings, empty scene): the
+startup Cube, Camera and Light would otherwise collide with the asset's own names ('Material'
+read back as 'Material.001') and stand in the way of importers and bakes that use the context.
 """
 from __future__ import annotations
 
@@ -28,18 +31,58 @@ _ID_COLLECTIONS = ("objects", "meshes", "materials", "images", "textures", "node
                    "cameras", "lights", "actions", "armatures", "curves", "worlds", "scenes", "libraries")
 
 
+# What Blender's factory startup file holds, per kind of datablock (the rest are empty).
+_STARTUP_NAMES = {"objects": {"Camera", "Cube", "Light"}, "meshes": {"Cube"}, "materials": {"Material", "Dots Stroke"},
+                  "cameras": {"Camera"}, "lights": {"Light"}, "collections": {"Collection"}, "worlds": {"World"},
+                  "scenes": {"Scene"}}
+# Datablocks Blender makes by itself, present or not in a startup file.
+_BLENDER_OWN = {"images": {"Render Result", "Viewer Node"}}
+
+
 def _all_ids(bpy) -> set:
     return {id_ for name in _ID_COLLECTIONS for id_ in getattr(bpy.data, name)}
 
 
+def holds_only_startup_file(bpy) -> bool:
+    """True in a background process whose file is Blender's startup file, unsaved, with exactly its
+    datablocks: nothing of anyone's is open, so it may be emptied before a load."""
+    if not bpy.app.background or bpy.data.filepath:
+        return False
+    return all({id_.name for id_ in getattr(bpy.data, name)} - _BLENDER_OWN.get(name, set())
+               == _STARTUP_NAMES.get(name, set()) for name in _ID_COLLECTIONS)
+
+
+def empty_startup_file(bpy) -> None:
+    """Replace Blender's startup file by an empty one where holds_only_startup_file (see the module's note)."""
+    if holds_only_startup_file(bpy):
+        with native_output_captured():
+            bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+def _empty_own_scene(bpy) -> bool:
+    """True where the file is an unsaved, empty one in a background process (as empty_startup_file
+    leaves it): its own scene is the empty scene to load into, and the output keeps its name."""
+    return bool(bpy.app.background and not bpy.data.filepath and not bpy.data.objects and len(bpy.data.scenes) == 1)
+
+
 @contextmanager
 def _temporary_data(bpy):
-    """A temporary scene to load into; on exit every datablock that arrived meanwhile is removed."""
+    """The scene to load into, shown in the window while the block runs (importers and bakes act on
+    the window's scene and its active object); on exit every datablock that arrived is removed.
+
+    An empty background file lends its own scene; any other file gets a temporary scene."""
+    empty_startup_file(bpy)
     before = _all_ids(bpy)
-    scene = bpy.data.scenes.new("SceneFit temporary import")
+    scene = bpy.context.scene if _empty_own_scene(bpy) else bpy.data.scenes.new("SceneFit temporary import")
+    window = bpy.context.window
+    shown = window.scene if window is not None else None
     try:
+        if window is not None:
+            window.scene = scene
         yield scene
     finally:
+        if window is not None and shown is not None:
+            window.scene = shown
         added = [id_ for id_ in _all_ids(bpy) if id_ not in before]
         bpy.data.batch_remove(added)
 
