@@ -120,6 +120,16 @@ def _append_blend(bpy, scene, path: Path, object_name: str | None) -> None:
             scene.collection.objects.link(obj)
 
 
+def _file_mesh_names(bpy, scene, path: Path, suffix: str) -> list[str]:
+    """The names of the file's mesh objects. Only the named object of a .blend was appended, so its
+    others are linked for a look (linked objects keep their names; the cleanup removes them)."""
+    if suffix != ".blend":
+        return [o.name for o in scene.objects if o.type == "MESH"]
+    with bpy.data.libraries.load(str(path), link=True) as (source, target):
+        target.objects = list(source.objects)
+    return sorted(o.name for o in target.objects if o is not None and o.type == "MESH")
+
+
 def load_asset_file(path: str | Path, object_name: str | None = None) -> tuple[Mesh, PBRMaps]:
     """The named mesh object (or the one with most faces) and its maps; several materials come as
     one atlas (see AssetMaterials.fitting_view)."""
@@ -172,8 +182,11 @@ def loaded_asset(path: str | Path, object_name: str | None = None):
         if object_name is not None:
             obj = next((o for o in meshes if o.name == object_name or o.name.startswith(object_name + ".")), None)
             if obj is None:
-                names = ", ".join(o.name for o in meshes) or "none"
-                raise InputError(f"No mesh object '{object_name}' in '{path.name}'; mesh objects: {names}.")
+                named = next((o for o in scene.objects if o.name == object_name), None)
+                what = f"'{object_name}' in '{path.name}' is a {named.type.lower()} object, not a mesh" \
+                    if named is not None else f"No mesh object '{object_name}' in '{path.name}'"
+                names = ", ".join(_file_mesh_names(bpy, scene, path, suffix)) or "none"
+                raise InputError(f"{what}; give one of its mesh objects: {names}.")
         elif meshes:
             obj = max(meshes, key=lambda o: len(o.data.polygons))
         else:

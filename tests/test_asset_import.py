@@ -78,6 +78,7 @@ camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
 camera.location = (0, -4, 0)
 bpy.context.scene.collection.objects.link(camera)
 export(folder / "names.glb", export_cameras=True)
+bpy.ops.wm.save_as_mainfile(filepath=str(folder / "names.blend"))
 """
 
 
@@ -159,3 +160,13 @@ def test_a_skinned_gltf_loads_into_a_temporary_scene_of_an_open_file(assets, run
     proc = run_py(IN_SESSION.replace("BLEND", repr(str(blend))).replace("ASSET", repr(str(assets / "skinned.glb"))))
     out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
     assert out == {"materials": ["Skin"], "same": True, "scene": "Scene", "active": "Cube", "file": str(blend)}
+
+
+@pytest.mark.parametrize("suffix", (".blend", ".glb"))
+def test_object_naming_a_camera_lists_the_mesh_objects_there_are(assets, suffix, tmp_path):
+    """--object naming a non-mesh object says what it is and lists the file's meshes (a .blend, of
+    which only the named object is appended, listed "mesh objects: none")."""
+    proc = scenefit("convert", str(assets / f"names{suffix}"), "--object", "Camera", "--out", str(tmp_path / "out"))
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    assert f"'Camera' in 'names{suffix}' is a camera object, not a mesh; give one of its mesh objects: Cube." \
+        in proc.stderr
