@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError
-from ..core.imageio import read_image, stored_orientation
+from ..core.imageio import CHECK_SIDE, read_image, stored_orientation
 from ..core.photo import PhotoCamera
 from .placement import camera_for_placement
 
@@ -32,11 +32,20 @@ def load_photo_image(path: str | Path):
     import bpy
 
     path = Path(path)
-    orientation = stored_orientation(path) if path.is_file() else 1
+    # Decoded once by OpenImageIO first (band by band, reduced): Blender shows a truncated JPEG with
+    # its missing rows grey and says nothing, and a refusal here leaves no datablock in the file.
+    read_image(path, max_side=CHECK_SIDE)
+    orientation = stored_orientation(path)
     if orientation not in (0, 1):
         return _upright_copy(path, orientation)
-    image = bpy.data.images.load(str(path), check_existing=True)
+    known = {image.as_pointer() for image in bpy.data.images}
+    try:
+        image = bpy.data.images.load(str(path), check_existing=True)
+    except RuntimeError as error:   # unreadable for Blender (permissions, a vanished file)
+        raise InputError(f"Blender cannot read the photo '{path}' ({error}); save it as PNG or JPEG.") from None
     if image.size[0] == 0 or image.size[1] == 0:
+        if image.as_pointer() not in known:   # ours, just made: the refusal leaves the file as it was
+            bpy.data.images.remove(image)
         raise InputError(f"Blender cannot read the photo '{path}'; save it as PNG or JPEG.")
     return image
 

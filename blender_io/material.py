@@ -7,10 +7,11 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError
-from ..core.imageio import srgb_to_linear
+from ..core.imageio import check_decodes, srgb_to_linear
 from ..core.maps import PBRMaps
 from ..core.materials import AssetMaterials, Material
 from ..core.mesh import Mesh
+from ..core.quiet import native_output_captured
 from .mesh import mesh_from_object
 from .node_values import NotAnImageChain, socket_value, source
 from .procedural_bake import bake_socket
@@ -47,9 +48,11 @@ def image_pixels_linear(image, decode_srgb: bool = True) -> np.ndarray:
     Blender keeps float images linear; 8-bit images are exposed as stored, so their transfer
     function is undone here from the image's colour space (sRGB, or none for Non-Color).
     """
-    w, h = image.size  # reading the size loads the file
+    with native_output_captured():   # libjpeg's and libpng's warnings would go straight to the terminal
+        w, h = image.size  # reading the size loads the file
     if w == 0 or h == 0:
         raise InputError(f"Image '{image.name}' cannot be loaded (is '{image.filepath}' missing?).")
+    check_stored_image(image)
     c = image.channels
     pixels = np.empty(w * h * c, dtype=np.float32)
     image.pixels.foreach_get(pixels)
@@ -63,6 +66,21 @@ def image_pixels_linear(image, decode_srgb: bool = True) -> np.ndarray:
     if decode_srgb and not image.is_float and space not in _LINEAR_SPACES:
         pixels[..., :3] = srgb_to_linear(pixels[..., :3])
     return pixels
+
+
+def check_stored_image(image) -> None:
+    """Refuse a JPEG or PNG texture whose file (or the bytes packed into the .blend/.glb) does not
+    decode whole: Blender shows a truncated JPEG with its missing rows grey and says nothing."""
+    import bpy
+
+    if image.source != "FILE":
+        return
+    if image.packed_file is not None:
+        check_decodes(bytes(image.packed_file.data), image.name)   # packed: Blender's name for it
+    elif image.filepath:
+        path = bpy.path.abspath(image.filepath, library=image.library)
+        if os.path.isfile(path):   # a file gone since Blender loaded it: its pixels are what Blender holds
+            check_decodes(path, path)
 
 
 # Principled inputs the neural texture does not model: reported when they change the look.
@@ -94,8 +112,9 @@ def _read_input(bsdf, name: str, kind: str, material, obj, slot: int, read: list
 
 
 def _image_size(material) -> int:
-    sizes = [max(n.image.size) for n in material.node_tree.nodes
-             if n.type == "TEX_IMAGE" and n.image is not None and max(n.image.size) > 0]
+    with native_output_captured():   # the first .size loads the file (see image_pixels_linear)
+        sizes = [max(n.image.size) for n in material.node_tree.nodes
+                 if n.type == "TEX_IMAGE" and n.image is not None and max(n.image.size) > 0]
     return max(sizes) if sizes else PROCEDURAL_BAKE_SIZE
 
 

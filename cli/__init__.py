@@ -10,6 +10,7 @@ import argparse
 import sys
 
 from ..core.errors import Cancelled, SceneFitError
+from ..core.os_errors import os_error_sentence, with_out_paths
 from ..core.output_folder import interrupted_message
 from . import adapt, bake, batch, compose, convert, demo, export, light, prompt, render, run
 
@@ -42,8 +43,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\nscenefit: {interrupted_message(args.out, getattr(args, 'resumable', False), getattr(args, 'by_stage', False))}"
               if getattr(args, "out", None) else "\nscenefit: interrupted.", file=sys.stderr)
         return 130
-    except SceneFitError as error:
-        print(f"scenefit: error: {error}", file=sys.stderr)
+    except SceneFitError as error:   # a file written into the staging folder is named as in --out
+        print(f"scenefit: error: {with_out_paths(str(error), getattr(args, 'out', None))}", file=sys.stderr)
+        return 2
+    except OSError as error:   # a full disk, a read-only folder, a file in the way: a sentence, not a traceback
+        print(f"scenefit: error: {os_error_sentence(error, getattr(args, 'out', None))}", file=sys.stderr)
         return 2
 
 

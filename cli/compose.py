@@ -8,7 +8,7 @@ from .options import PRESETS, add_asset_args, add_output_args, add_placement_arg
 
 def run(args) -> int:
     from ..core.compose import COMPOSE_MAX_SIDE, ComposeInputs, compose_to_folder, light_camera
-    from ..core.convert import target_stack
+    from ..core.convert import asset_stack
     from ..core.lighting import load_photo
     from ..core.mesh import normalize_to_unit_sphere
     from ..core.pipeline import environment_info, load_environment
@@ -30,7 +30,7 @@ def run(args) -> int:
         normalized, _ = normalize_to_unit_sphere(mesh)
         stack, source = texture_maps_for_mesh(load_neural_texture(Path(args.texture)), normalized), "neural texture"
     else:
-        stack, source = target_stack(maps, max(maps.resolution)), "the asset's own maps"
+        stack, source = asset_stack(maps, f"'{args.asset}'"), "the asset's own maps"
     with output(args) as out:
         report = compose_to_folder(
             ComposeInputs(mesh, stack, photo, placement, envmap, camera), config, out,

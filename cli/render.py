@@ -8,27 +8,31 @@ from .options import (add_asset_args, add_lighting_args, add_orbit_camera_args, 
 
 
 def run(args) -> int:
-    with output(args) as out:
-        return _render(args, out)
-
-
-def _render(args, out: Path) -> int:
     import torch
 
-    from ..core.camera import orbit_cameras
-    from ..core.convert import target_stack
-    from ..core.imageio import write_image
+    from ..core.convert import asset_stack
+    from ..core.limits import check_render_size
     from ..core.mesh import normalize_to_unit_sphere
-    from ..core.pipeline import environment_info, render_views, tonemap_srgb, write_report
     from ..core.texture.bake import load_neural_texture, texture_maps_for_mesh
 
+    # Sizes and inputs are refused before the output folder is made or anything is rendered.
+    check_render_size(args.size, args.size)
     mesh, maps = load_asset(args.asset, args.object)
     normalized, _ = normalize_to_unit_sphere(mesh)
     if args.texture:
         stack = torch.from_numpy(texture_maps_for_mesh(load_neural_texture(Path(args.texture)), normalized))
         label = "neural texture"
     else:
-        stack, label = torch.from_numpy(target_stack(maps, max(maps.resolution))), "asset maps"
+        stack, label = torch.from_numpy(asset_stack(maps, f"'{args.asset}'")), "asset maps"
+    with output(args) as out:
+        return _render(args, out, mesh, normalized, maps, stack, label)
+
+
+def _render(args, out: Path, mesh, normalized, maps, stack, label: str) -> int:
+    from ..core.camera import orbit_cameras
+    from ..core.imageio import write_image
+    from ..core.pipeline import environment_info, render_views, tonemap_srgb, write_report
+
     env, env_label = environment(args)
     cameras = orbit_cameras(args.views, args.elevation, fov_multiplier=1.1, size=args.size)
     images = render_views(normalized, {label: stack}, env, cameras, args.spp, progress=progress(args),

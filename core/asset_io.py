@@ -20,7 +20,7 @@ from .atomic import write_bytes_atomic, write_json_atomic
 from .errors import InputError
 from .imageio import linear_to_srgb, read_color_image, read_image, write_image
 from .maps import PBRMaps
-from .mesh import Mesh
+from .mesh import Mesh, check_face_indices
 
 
 def save_asset_folder(mesh: Mesh, maps: PBRMaps, folder: str | Path) -> Path:
@@ -106,4 +106,7 @@ def _read_mesh(path: Path, name: str) -> Mesh:
     if faces.dtype.kind not in "iu":
         raise InputError(f"'{path}' stores its faces as {faces.dtype}; face indices must be integers "
                          "(re-export the asset).")
+    positions = arrays["positions"]
+    if positions.ndim == 2 and faces.ndim == 2:   # shapes are Mesh's to refuse; this names the file
+        check_face_indices(faces, len(positions), f"'{path}'")
     return Mesh.from_arrays(arrays["positions"], faces, arrays["uvs"], arrays.get("normals"), name=name)

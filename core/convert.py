@@ -104,6 +104,18 @@ def target_stack(maps: PBRMaps, resolution: int) -> np.ndarray:
     return np.clip(maps.stacked_at(resolution, resolution), 0.0, 1.0).astype(np.float32)
 
 
+def asset_stack(maps: PBRMaps, what: str = "the asset's maps") -> np.ndarray:
+    """(H, W, 5) float32 maps at their own size, the largest height and width among them, for rendering
+    the asset as it is. Never squared: a 16384x16 base colour squared to 16384² took 21 GB to render
+    16 pixels. Refused in one sentence (`what` names the asset) when it would not fit in memory."""
+    from .limits import check_texture_size
+
+    arrays = [maps.base_color] + [m for m in (maps.roughness, maps.metallic) if isinstance(m, np.ndarray)]
+    height, width = max(a.shape[0] for a in arrays), max(a.shape[1] for a in arrays)
+    check_texture_size(height, width, what)
+    return np.clip(maps.stacked_at(height, width), 0.0, 1.0).astype(np.float32)
+
+
 def convert_asset(mesh: Mesh, maps: PBRMaps, config: ConvertConfig = ConvertConfig(),
                   progress: ProgressCallback | None = None, cancel: threading.Event | None = None) -> ConvertResult:
     """Fit a neural texture to the asset's maps. Nothing given is modified."""

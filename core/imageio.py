@@ -50,15 +50,18 @@ def read_image(path: str | os.PathLike, max_side: int | None = None, upright: bo
         pixels = None
         if inp is not None:
             try:
-                pixels = _read_reduced(inp, max_side)
-                reason = inp.geterror()
+                pixels, reason = _read_reduced(inp, max_side)
                 orientation = inp.spec().get_int_attribute("Orientation", 1)
             finally:
                 inp.close()
         else:
             reason = oiio.geterror()
-    if pixels is None:
-        reason = _first_line(reason) or chatter.last_line() or "the file is empty, truncated or not an image"
+    if pixels is None or reason:
+        # A truncated JPEG still "decodes", its missing rows grey, with only an error left on the
+        # reader ("Premature end of JPEG file"): any error while reading refuses the file.
+        # libjpeg's errors repeat the path the message already names.
+        reason = _first_line(reason).replace(f' ("{path}")', "") or chatter.last_line() or \
+            "the file is empty, truncated or not an image"
         what = "read" if inp is None else "decoded"
         raise InputError(f"Image '{path}' cannot be {what} ({reason}); re-export it as PNG, JPEG or EXR.")
     pixels = np.asarray(pixels, dtype=np.float32)
@@ -67,6 +70,40 @@ def read_image(path: str | os.PathLike, max_side: int | None = None, upright: bo
     if upright and orientation != 1:
         pixels = _reoriented(pixels, orientation)
     return pixels
+
+
+# Formats OpenImageIO and Blender both decode fully, so a file one refuses is damaged, not exotic.
+CHECKED_FORMATS = {".png": b"\x89PNG", ".jpg": b"\xff\xd8", ".jpeg": b"\xff\xd8"}
+# The long side an image is decoded at when only whether it decodes matters.
+CHECK_SIDE = 256
+
+
+def check_decodes(source: str | os.PathLike | bytes, shown: str) -> None:
+    """Refuse (one sentence naming `shown`) a JPEG or PNG, a file or its bytes, that does not decode
+    whole; other formats pass. For images another decoder reads (Blender shows a truncated JPEG with
+    its missing rows grey and says nothing): the pixels are read reduced and dropped."""
+    if isinstance(source, (bytes, bytearray)):
+        kind = next((s for s, magic in CHECKED_FORMATS.items() if bytes(source[:4]).startswith(magic)), None)
+        if kind is None:
+            return
+        fd, tmp = tempfile.mkstemp(suffix=kind)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(source)
+            _check_file(Path(tmp), shown)
+        finally:
+            os.unlink(tmp)
+        return
+    path = Path(source)
+    if path.suffix.lower() in CHECKED_FORMATS:
+        _check_file(path, shown)
+
+
+def _check_file(path: Path, shown: str) -> None:
+    try:
+        read_image(path, max_side=CHECK_SIDE)
+    except InputError as error:
+        raise InputError(str(error).replace(str(path), shown)) from None
 
 
 def _reoriented(pixels: np.ndarray, orientation: int) -> np.ndarray:
@@ -97,25 +134,31 @@ def reduction_factor(width: int, height: int, max_side: int | None) -> int:
     return 1 if not max_side or max(width, height) <= max_side else -(-max(width, height) // max_side)
 
 
-def _read_reduced(inp, max_side: int | None, band_rows: int = 32) -> np.ndarray | None:
+def _read_reduced(inp, max_side: int | None, band_rows: int = 32) -> tuple[np.ndarray | None, str]:
+    """The pixels (None when unreadable) and the reader's error text ("" when it read cleanly).
+
+    The error is collected after every read: geterror() clears it, and a later band may read cleanly
+    after an earlier one was cut short."""
     spec = inp.spec()
     w, h, c = spec.width, spec.height, spec.nchannels
     k = reduction_factor(w, h, max_side)
     if k == 1:
-        return inp.read_image("float")
+        pixels = inp.read_image("float")
+        return pixels, inp.geterror()
     out_w, out_h = -(-w // k), -(-h // k)
     out = np.empty((out_h, out_w, c), np.float32)
     for row in range(0, out_h, band_rows):
         y0, y1 = row * k, min(h, (row + band_rows) * k)
         band = inp.read_scanlines(0, 0, y0 + spec.y, y1 + spec.y, 0, 0, c, "float")
-        if band is None:
-            return None
+        reason = inp.geterror()
+        if band is None or reason:
+            return None, reason
         band = np.asarray(band, np.float32).reshape(y1 - y0, w, c)
         rows = -(-(y1 - y0) // k)
         # Pad the last partial block by repeating the edge, then average k x k blocks.
         band = np.pad(band, ((0, rows * k - (y1 - y0)), (0, out_w * k - w), (0, 0)), mode="edge")
         out[row:row + rows] = band.reshape(rows, k, out_w, k, c).mean(axis=(1, 3))
-    return out
+    return out, ""
 
 
 def _first_line(text: str) -> str:

@@ -32,6 +32,7 @@ problem is one sentence naming the job and the key.
 """
 from __future__ import annotations
 
+import os
 import re
 import tomllib
 from dataclasses import asdict, dataclass, field, replace
@@ -298,3 +299,15 @@ def _parse_job(entry: dict, index: int, path: Path) -> Job:
 def _resolve(text: str, jobs_path: Path) -> Path:
     p = Path(text).expanduser()
     return (p if p.is_absolute() else jobs_path.parent / p).resolve()
+
+
+def with_user_paths(text: str, copy: Job, job: Job) -> str:
+    """`text` (a worker's error about `copy`, the job with its inputs unpacked into a temporary
+    folder) naming the user's files instead: `.../scenefit-job-x/in/photo/broken.png` becomes the
+    photo the jobs file named. Unpacked files keep their names below asset/ and photo/, so each
+    folder maps to the folder of the user's file."""
+    pairs = [(copy.asset, job.asset)] + ([(copy.photo, job.photo)] if copy.photo and job.photo else [])
+    for unpacked, original in pairs:
+        text = text.replace(str(unpacked), str(original))
+        text = text.replace(f"{unpacked.parent}{os.sep}", f"{original.parent}{os.sep}")
+    return text

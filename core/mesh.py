@@ -40,8 +40,7 @@ class Mesh:
             raise InputError(
                 f"Mesh '{self.name}' has no UV map; unwrap it in Blender (UV > Smart UV Project) first."
             )
-        if f.min() < 0 or f.max() >= len(p):
-            raise InputError(f"Mesh '{self.name}' has face indices outside its vertex list.")
+        check_face_indices(f, len(p), f"Mesh '{self.name}'")
         if not (np.isfinite(p).all() and np.isfinite(uv).all()):
             raise InputError(f"Mesh '{self.name}' has NaN or infinite coordinates.")
         if self.normals is not None:
@@ -63,6 +62,15 @@ class Mesh:
 
     @staticmethod
     def from_arrays(positions, faces, uvs, normals=None, name: str = "asset", material_index=None) -> "Mesh":
+        positions, faces = np.asarray(positions), np.asarray(faces)
+        # Checked before the cast to int32: an int64 index of 2^32 + 5 would otherwise wrap to a valid 5.
+        if faces.dtype.kind in "iu" and positions.ndim == 2 and faces.ndim == 2 and faces.shape[-1:] == (3,):
+            check_face_indices(faces, len(positions), f"Mesh '{name}'")
+        if material_index is not None:
+            material_index = np.asarray(material_index)
+            if material_index.size and (material_index.min() < 0 or material_index.max() > np.iinfo(np.int32).max):
+                raise InputError(f"Mesh '{name}' has material slots outside 0..{np.iinfo(np.int32).max} "
+                                 f"({material_index.min()}..{material_index.max()}); re-export the asset.")
         return Mesh(
             positions=np.ascontiguousarray(positions, dtype=np.float32),
             faces=np.ascontiguousarray(faces, dtype=np.int32),
@@ -75,6 +83,13 @@ class Mesh:
     @property
     def material_count(self) -> int:
         return 1 if self.material_index is None else int(self.material_index.max()) + 1
+
+
+def check_face_indices(faces: np.ndarray, vertex_count: int, what: str) -> None:
+    """Every face index must name one of the mesh's vertices; `what` begins the sentence ("Mesh 'x'")."""
+    if faces.size and (faces.min() < 0 or faces.max() >= vertex_count):
+        raise InputError(f"{what} has face indices {faces.min()}..{faces.max()} outside its vertex list "
+                         f"(0..{vertex_count - 1}); re-export the asset.")
 
 
 @dataclass(frozen=True)

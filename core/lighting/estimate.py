@@ -125,9 +125,15 @@ def load_photo(path: str | Path, max_side: int | None = PHOTO_WORKING_SIDE) -> t
         pixels = np.repeat(pixels[..., :1], 3, axis=2)
     rgb = np.ascontiguousarray(pixels[..., :3], np.float32)
     h, w = rgb.shape[:2]
-    if min(h, w) < 2:
-        raise InputError(f"The photo '{path}' is {w}x{h}; it needs at least 2x2 pixels.")
     info: dict = {"path": str(path), "size": _metadata(path).get("size", [w, h])}
+    # Messages give the size as stored (a 1x10000 photo is read as 1x1000; the user never saw that).
+    stored_w, stored_h = info["size"]
+    if min(stored_w, stored_h) < 2:
+        raise InputError(f"The photo '{path}' is {stored_w}x{stored_h}; it needs at least 2x2 pixels.")
+    if min(h, w) < 2:
+        raise InputError(f"The photo '{path}' is {stored_w}x{stored_h}, too thin for the light stage (it reduces "
+                         f"photos to at most {max_side} px on the long side, which leaves {w}x{h}); crop it to a "
+                         f"less extreme shape.")
     if info["size"] != [w, h]:
         info["working_size"] = {"size": [w, h], "why": f"reduced while read: the light stage needs at most "
                                                       f"{max_side} px on the long side"}

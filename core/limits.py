@@ -1,0 +1,54 @@
+"""Resource limits checked before any work: a render or texture too large for memory is one sentence
+up front, not a run that swaps for minutes and is killed (a 16384² map stack took 21 GB)."""
+from __future__ import annotations
+
+import os
+
+from .errors import InputError
+
+# The largest square render side. Mitsuba's symbolic path tracer keeps no per-sample state, so a
+# render's memory is its film and the copies made of it (measured: about 80 bytes per pixel for
+# `scenefit render`), and 8192² is 5 GB already; nothing SceneFit makes needs more.
+MAX_RENDER_SIDE = 8192
+RENDER_BYTES_PER_PIXEL = 80
+# A (H, W, 5) float32 map stack, with the copies alive while it is resampled, clipped and handed to
+# Mitsuba as three bitmaps.
+STACK_BYTES_PER_TEXEL = 5 * 4 * 4
+# The share of the machine's memory one stack or render may take (the models, the mesh and Python
+# need the rest).
+MEMORY_SHARE = 0.5
+
+
+def physical_memory() -> int | None:
+    """This machine's memory in bytes (None where the OS does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def _gb(n: float) -> str:
+    return f"{n / 2**30:.1f} GB" if n >= 2**30 else f"{n / 2**20:.0f} MB"
+
+
+def check_render_size(width: int, height: int, option: str = "--size") -> None:
+    """Refuse a render larger than MAX_RENDER_SIDE or than this machine's memory allows."""
+    if max(width, height) > MAX_RENDER_SIDE:
+        raise InputError(f"{option} {max(width, height)} is larger than {MAX_RENDER_SIDE} px, the most SceneFit "
+                         f"renders (one view of {MAX_RENDER_SIDE}x{MAX_RENDER_SIDE} pixels already takes about "
+                         f"{_gb(MAX_RENDER_SIDE ** 2 * RENDER_BYTES_PER_PIXEL)} of memory); give a smaller {option}.")
+    _check_memory(width * height * RENDER_BYTES_PER_PIXEL, f"Rendering {width}x{height} pixels",
+                  f"give a smaller {option}")
+
+
+def check_texture_size(height: int, width: int, what: str) -> None:
+    """Refuse a map stack of (height, width) texels that would not fit in this machine's memory."""
+    _check_memory(height * width * STACK_BYTES_PER_TEXEL, f"Rendering {what} at {width}x{height} texels",
+                  "reduce the texture (4096 px is plenty for SceneFit) and try again")
+
+
+def _check_memory(needed: int, doing: str, fix: str) -> None:
+    total = physical_memory()
+    if total is not None and needed > MEMORY_SHARE * total:
+        raise InputError(f"{doing} needs about {_gb(needed)} of memory, more than half of this "
+                         f"machine's {_gb(total)}; {fix}.")
