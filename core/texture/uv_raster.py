@@ -16,6 +16,11 @@ from ..mesh import Mesh
 # Texels whose centre lies within this many texels of a triangle (but inside none) still get a
 # position, extrapolated from the nearest triangle, so bilinear lookups at UV seams read real values.
 DEFAULT_BORDER = 2.0
+# How UVs outside [0, 1] read the texture: glTF's REPEAT, MIRRORED_REPEAT and CLAMP_TO_EDGE.
+WRAP_MODES = ("repeat", "mirror", "clamp")
+# (triangle, texel) candidates, or rows of triangles, handled at once: what bounds the memory, however
+# large or repeated the UV triangles are (63k triangles each spanning the square asked for 124 GiB).
+CHUNK = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -49,18 +54,35 @@ class UVRaster:
         return float(self.mask.mean())
 
 
-def rasterize_uv(mesh: Mesh, height: int, width: int | None = None, border_width: float = DEFAULT_BORDER) -> UVRaster:
+def wrap_modes(wrap: str | tuple[str, str]) -> tuple[str, str]:
+    """(u, v) wrap modes from one mode for both axes or a pair; see WRAP_MODES."""
+    modes = (wrap, wrap) if isinstance(wrap, str) else tuple(wrap)
+    if len(modes) != 2 or any(mode not in WRAP_MODES for mode in modes):
+        raise InputError(f"The UV wrap mode must be one of {', '.join(WRAP_MODES)}, or a pair of them for u and v; "
+                         f"got {wrap!r}.")
+    return modes
+
+
+def rasterize_uv(mesh: Mesh, height: int, width: int | None = None, border_width: float = DEFAULT_BORDER,
+                 wrap: str | tuple[str, str] = "repeat") -> UVRaster:
     """Rasterise `mesh` in UV space at (height, width) texels; see UVRaster for what comes back.
 
-    Vectorised: every triangle's (border-grown) bounding box is enumerated in one flat array, the
-    candidates are tested with edge functions, and where several triangles claim a texel the one
-    whose UV triangle is nearest (inside beats border) wins.
+    wrap: how UVs outside [0, 1] read the texture, per axis (u, v) or for both, as glTF's samplers
+    say: "repeat" (the default) and "mirror" tile the image, so such a texel belongs to the first
+    triangle that covers any of its copies; under "clamp" only UVs inside the image cover texels.
+
+    Triangles are taken in face order, a bounded number of (triangle, texel) candidates at a time:
+    the candidates of each row of a triangle lie in the span its edges allow there, less the texels
+    of that row an earlier triangle already holds (they never change hands), and are tested with
+    edge functions; the first triangle whose edges reach a texel's centre holds it. So the memory
+    depends on the texture and the mesh, not on how large or how often repeated its UV triangles are.
     """
     width = height if width is None else width
     if height < 1 or width < 1:
         raise InputError(f"The texture resolution must be at least 1x1, got {height}x{width}.")
     if border_width < 0:
         raise InputError(f"The seam border must be zero or more texels, got {border_width}.")
+    modes = wrap_modes(wrap)
     faces = np.asarray(mesh.faces, dtype=np.int64)
     uv = np.asarray(mesh.uvs, dtype=np.float64)
     # Pixel coordinates with texel centres at integers: x = u W - 1/2, y = (1 - v) H - 1/2.
@@ -76,37 +98,28 @@ def rasterize_uv(mesh: Mesh, height: int, width: int | None = None, border_width
     face_ids = np.flatnonzero(keep)
     tri, area2 = tri[keep], area2[keep]
 
-    # Pass 1, exact coverage. Integer bounding boxes of texel centres, clipped to the image.
-    lo = np.maximum(np.ceil(tri.min(axis=1) - 1e-9).astype(np.int64), 0)
-    hi = np.minimum(np.floor(tri.max(axis=1) + 1e-9).astype(np.int64), np.array([width - 1, height - 1]))
-    bw, bh = hi[:, 0] - lo[:, 0] + 1, hi[:, 1] - lo[:, 1] + 1
-    valid = (bw > 0) & (bh > 0)
-    face_ids, tri, area2, lo, bw, bh = face_ids[valid], tri[valid], area2[valid], lo[valid], bw[valid], bh[valid]
-    counts = bw * bh
-    total = int(counts.sum())
-    if total == 0:
-        raise InputError(
-            f"Mesh '{mesh.name}' covers no texel centre: its UVs lie outside [0, 1] or its UV islands are "
-            f"smaller than one texel at {width}x{height}."
-        )
-    # One candidate per (triangle, bbox texel), flat.
-    owner = np.repeat(np.arange(len(face_ids)), counts)
-    local = np.arange(total, dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)
-    bwo = bw[owner]
-    px = lo[owner, 0] + local % bwo
-    py = lo[owner, 1] + local // bwo
-    bary = _barycentric(tri[owner], area2[owner], px, py)
-    inside = (bary >= -1e-9).all(axis=1)
-    owner, px, py, bary = owner[inside], px[inside], py[inside], bary[inside]
-    # Texels on a shared edge are claimed twice; keep one (the first in face order).
-    flat, first = np.unique(py * width + px, return_index=True)
-    owner, bary = owner[first], bary[first]
+    # Pass 1, exact coverage. Integer bounding boxes of texel centres (in the tiled plane), clipped to
+    # the image along an axis that clamps.
+    lo = np.ceil(tri.min(axis=1) - 1e-9).astype(np.int64)
+    hi = np.floor(tri.max(axis=1) + 1e-9).astype(np.int64)
+    for axis, (mode, size) in enumerate(zip(modes, (width, height))):
+        if mode == "clamp":
+            lo[:, axis], hi[:, axis] = np.maximum(lo[:, axis], 0), np.minimum(hi[:, axis], size - 1)
+    valid = (hi >= lo).all(axis=1)
+    face_ids, tri, area2, lo, hi = face_ids[valid], tri[valid], area2[valid], lo[valid], hi[valid]
+    owner_map, tiles = _cover(tri, area2, lo, hi, height, width, modes)
+    flat = np.flatnonzero(owner_map >= 0)
+    if flat.size == 0:
+        outside = " or lie outside [0, 1] where the texture clamps" if "clamp" in modes else ""
+        raise InputError(f"Mesh '{mesh.name}' covers no texel centre at {width}x{height}: its UV islands are smaller "
+                         f"than one texel{outside}; unwrap it with larger islands or use a larger texture.")
+    owner = owner_map[flat]
+    bary = _barycentric(tri[owner], area2[owner], _unwrapped(flat % width, tiles[0, flat], width, modes[0]),
+                        _unwrapped(flat // width, tiles[1, flat], height, modes[1]))
 
     n_texels = height * width
     mask = np.zeros(n_texels, dtype=bool)
     mask[flat] = True
-    owner_map = np.full(n_texels, -1, dtype=np.int64)
-    owner_map[flat] = owner
 
     # Pass 2, the seam border: texels within border_width of the coverage take the triangle of
     # their nearest covered texel, with barycentrics extrapolated to their centre and clamped onto it.
@@ -114,8 +127,12 @@ def rasterize_uv(mesh: Mesh, height: int, width: int | None = None, border_width
         distance, nearest = _nearest_covered(mask.reshape(height, width))
         ring = np.flatnonzero(~mask & (distance.reshape(-1) <= border_width))
         if ring.size:
-            ring_owner = owner_map[nearest[ring]]
-            ring_bary = _barycentric(tri[ring_owner], area2[ring_owner], ring % width, ring // width)
+            # (in the copy of the image where the nearest covered texel's triangle lies)
+            near = nearest[ring]
+            ring_owner = owner_map[near]
+            ring_bary = _barycentric(tri[ring_owner], area2[ring_owner],
+                                     _unwrapped(ring % width, tiles[0, near], width, modes[0]),
+                                     _unwrapped(ring // width, tiles[1, near], height, modes[1]))
             flat = np.concatenate((flat, ring))
             owner = np.concatenate((owner, ring_owner))
             bary = np.concatenate((bary, ring_bary))
@@ -185,6 +202,136 @@ def _nearest_covered(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     src = np.where(mask, 0, 255).astype(np.uint8)
     distance, labels = cv2.distanceTransformWithLabels(src, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
     return distance, covered[labels.reshape(-1).astype(np.int64) - 1]
+
+
+def _texel(coord: np.ndarray, size: int, mode: str) -> tuple[np.ndarray, np.ndarray]:
+    """(texel index, tile) along one axis of integer texel coordinates in the tiled plane: tile k holds
+    coordinates [k size, (k + 1) size), a copy of the image, mirrored in odd tiles under "mirror"."""
+    if mode == "clamp":  # only coordinates inside the image are ever enumerated
+        return coord, np.zeros_like(coord)
+    tile = coord // size
+    local = coord - tile * size
+    return (np.where(tile % 2 == 1, size - 1 - local, local) if mode == "mirror" else local), tile
+
+
+def _unwrapped(index: np.ndarray, tile: np.ndarray, size: int, mode: str) -> np.ndarray:
+    """The coordinate in the tiled plane of texel `index` in copy `tile` (the inverse of _texel)."""
+    if mode == "clamp":
+        return index
+    local = np.where(tile % 2 == 1, size - 1 - index, index) if mode == "mirror" else index
+    return tile * size + local
+
+
+def _row_spans(tri: np.ndarray, area2: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Integer [first, last] x of each triangle's candidates on its row y: where its three edge
+    functions allow (the test's tolerance plus two texels of margin for rounding), within [lo, hi]."""
+    sign = np.sign(area2)
+    tolerance = 1e-9 * np.abs(area2)
+    first, last = lo.astype(np.float64), hi.astype(np.float64)
+    for i in range(3):  # edge (b, c) opposite corner i: w_i A = k + s x, linear in x along the row
+        (bx, by), (cx, cy) = tri[:, (i + 1) % 3].T, tri[:, (i + 2) % 3].T
+        k, s = (bx * (cy - y) - cx * (by - y)) * sign, (by - cy) * sign
+        with np.errstate(divide="ignore", invalid="ignore"):
+            bound = (-tolerance - k) / s
+        first = np.where(s > 0, np.maximum(first, bound), first)
+        last = np.where(s < 0, np.minimum(last, bound), last)
+    first = np.maximum(np.ceil(np.clip(first, lo - 3, hi + 3)).astype(np.int64) - 2, lo)
+    last = np.minimum(np.floor(np.clip(last, lo - 3, hi + 3)).astype(np.int64) + 2, hi)
+    return first, last
+
+
+class _Free:
+    """For each texel row, the columns [lo, hi] outside which every texel is already held: a span is
+    cut to them before its candidates are made (held texels never change hands)."""
+
+    def __init__(self, owner_map: np.ndarray, height: int, width: int) -> None:
+        self.owner, self.width = owner_map.reshape(height, width), width
+        self.lo, self.hi = np.zeros(height, np.int64), np.full(height, width - 1, np.int64)
+        self.left = height * width
+
+    def update(self, rows: np.ndarray, claimed: int) -> None:
+        self.left -= claimed
+        free = self.owner[rows] < 0
+        some = free.any(axis=1)
+        self.lo[rows] = np.where(some, free.argmax(axis=1), self.width)
+        self.hi[rows] = np.where(some, self.width - 1 - free[:, ::-1].argmax(axis=1), -1)
+
+
+def _cover(tri: np.ndarray, area2: np.ndarray, lo: np.ndarray, hi: np.ndarray, height: int, width: int,
+           modes: tuple[str, str]) -> tuple[np.ndarray, np.ndarray]:
+    """Pass 1 of rasterize_uv: (H*W,) index into `tri` of the triangle holding each texel (-1: none),
+    and (2, H*W) the tiles (u, v) of the image copy in which it holds it.
+
+    Work goes in chunks of CHUNK: rows of triangles (each row weighted by the tiles it may cross),
+    then candidates, so no array grows with the size or repetition of the UV triangles."""
+    owner_map = np.full(height * width, -1, np.int64)
+    tiles = np.zeros((2, height * width), np.int64)
+    free = _Free(owner_map, height, width)
+    rows = hi[:, 1] - lo[:, 1] + 1
+    per_row = (hi[:, 0] - lo[:, 0]) // width + 2 if modes[0] != "clamp" else np.ones(len(tri), np.int64)
+    ends = np.cumsum(rows * per_row)
+    starts = ends - rows * per_row
+    for begin in range(0, int(ends[-1]) if len(ends) else 0, CHUNK):
+        if free.left == 0:
+            break
+        # The rows whose weighted start lies in [begin, begin + CHUNK), in face order then downwards.
+        t = np.arange(np.searchsorted(ends, begin, side="right"), np.searchsorted(starts, begin + CHUNK))
+        first = np.clip(-((starts[t] - begin) // per_row[t]), 0, rows[t])
+        count = np.clip(-((starts[t] - begin - CHUNK) // per_row[t]), 0, rows[t]) - first
+        t, first = np.repeat(t, count), np.repeat(first, count)
+        y = lo[t, 1] + first + np.arange(t.size) - np.repeat(np.cumsum(count) - count, count)
+        a, b = _row_spans(tri[t], area2[t], y, lo[t, 0], hi[t, 0])
+        t, y, a, b = t[a <= b], y[a <= b], a[a <= b], b[a <= b]
+        if modes[0] != "clamp":  # a span crossing copies of the image is cut at their edges
+            tile_a, tile_b = a // width, b // width
+            n = tile_b - tile_a + 1
+            tile = np.repeat(tile_a, n) + np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
+            t, y, a, b = np.repeat(t, n), np.repeat(y, n), np.repeat(a, n), np.repeat(b, n)
+            a, b = np.maximum(a, tile * width), np.minimum(b, tile * width + width - 1)
+        _claim(tri, area2, t, y, a, b, owner_map, tiles, free, height, width, modes)
+    return owner_map, tiles
+
+
+def _claim(tri, area2, t, y, a, b, owner_map, tiles, free: _Free, height: int, width: int,
+           modes: tuple[str, str]) -> None:
+    """Test the candidates of spans [a, b] (each within one copy of the image) on rows y of triangles
+    t, in order and CHUNK at a time, and give each texel not yet held to the first that covers it."""
+    row, tile_v = _texel(y, height, modes[1])
+    col_a, tile_u = _texel(a, width, modes[0])
+    col_b, _ = _texel(b, width, modes[0])
+    # In a mirrored copy x runs right to left through the image's columns.
+    flip = (tile_u % 2 == 1) if modes[0] == "mirror" else np.zeros(t.size, bool)
+    left, right, base = np.minimum(col_a, col_b), np.maximum(col_a, col_b), tile_u * width
+    while t.size and free.left:
+        left, right = np.maximum(left, free.lo[row]), np.minimum(right, free.hi[row])
+        some = left <= right
+        t, row, tile_v, flip, left, right, base = (x[some] for x in (t, row, tile_v, flip, left, right, base))
+        if not t.size:
+            return
+        length = right - left + 1
+        k = max(int(np.searchsorted(np.cumsum(length), CHUNK, side="right")), 1)
+        take = length[:k].copy()
+        take[-1] = min(take[-1], CHUNK)  # a span longer than CHUNK goes in parts
+        offset = np.arange(take.sum()) - np.repeat(np.cumsum(take) - take, take)
+        owner = np.repeat(t[:k], take)
+        px = np.repeat(base[:k] + np.where(flip[:k], width - 1 - right[:k], left[:k]), take) + offset
+        py = np.repeat(_unwrapped(row[:k], tile_v[:k], height, modes[1]), take)
+        bary = _barycentric(tri[owner], area2[owner], px, py)
+        inside = (bary >= -1e-9).all(axis=1)
+        col, copy_u = _texel(px[inside], width, modes[0])
+        texel = np.repeat(row[:k], take)[inside] * width + col
+        texel, first = np.unique(texel, return_index=True)  # the first candidate (in order) of each texel
+        new = owner_map[texel] < 0
+        texel, first = texel[new], first[new]
+        owner_map[texel] = owner[inside][first]
+        tiles[0, texel], tiles[1, texel] = copy_u[first], np.repeat(tile_v[:k], take)[inside][first]
+        free.update(np.unique(texel // width), texel.size)
+        if take[-1] < length[k - 1]:  # the rest of a long span stays for the next round
+            left[k - 1] += np.where(flip[k - 1], 0, take[-1])
+            right[k - 1] -= np.where(flip[k - 1], take[-1], 0)
+            k -= 1
+        t, row, tile_v, flip, left, right, base = (x[k:] for x in (t, row, tile_v, flip, left, right, base))
 
 
 def _barycentric(tri: np.ndarray, area2: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
