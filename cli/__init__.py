@@ -18,8 +18,16 @@ from . import adapt, bake, batch, compose, convert, demo, export, light, prompt,
 COMMANDS = (convert, render, export, bake, light, prompt, adapt, compose, run, batch, demo)
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, but a refused option is one sentence (`scenefit render: error: ...`), not the usage
+    block first: the same shape as every other refusal. `--help` still shows the usage."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="scenefit", description=(
+    parser = OneLineParser(prog="scenefit", description=(
         "Restyle a textured 3D asset to fit a photo: neural PBR textures rendered by Mitsuba 3."))
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for command in COMMANDS:

@@ -82,7 +82,7 @@ def _adapt(args, out: Path) -> int:
 
 
 def add_parser(sub) -> None:
-    from ..core.placement import DEFAULT_SIZE
+    from ..core.placement import DEFAULT_OBJECT_SIZE
 
     p = sub.add_parser("adapt", help="restyle a converted texture with diffusion guidance (or texture/edit from a "
                                      "prompt); several GPUs: torchrun --nproc_per_node N -m scenefit.cli adapt ...")
@@ -97,7 +97,7 @@ def add_parser(sub) -> None:
                                           "prompt from the object and scene (edit mode: the instruction)")
     p.add_argument("--instruction", help="edit mode: e.g. 'add dust to the sofa'")
     p.add_argument("--photo", help="scene mode: the photo the object goes into")
-    add_placement_args(p, object_size=DEFAULT_SIZE)
+    add_placement_args(p, object_size=DEFAULT_OBJECT_SIZE)
     p.add_argument("--envmap", help="light the object with this HDR map while adapting (e.g. the estimated one)")
     add_preset_args(p)
     p.add_argument("--iterations", type=positive_int)

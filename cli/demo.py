@@ -23,6 +23,12 @@ def run(args) -> int:
 
     previous = Path(args.out)
     args.replace = args.replace or _previous_demo(previous)
+    if args.replace and previous.is_dir() and [p.name for p in previous.iterdir()] == ["input"]:
+        # Only the demo's own inputs, put there to be reused: they are copied into the new run below,
+        # so the folder may be replaced like an earlier demo run.
+        from ..core.output_folder import write_marker
+
+        write_marker(previous)
     with output(args) as out:
         # The example asset and photo of the earlier run are reused (Blender takes a while to make them).
         if not args.refresh and (previous / "input").is_dir():

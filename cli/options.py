@@ -19,6 +19,17 @@ def positive_int(text: str) -> int:
     return value
 
 
+def render_side(text: str) -> int:
+    """An image side in pixels, at most what SceneFit renders (core/limits.py says why)."""
+    from ..core.limits import MAX_RENDER_SIDE
+
+    value = positive_int(text)
+    if value > MAX_RENDER_SIDE:
+        raise argparse.ArgumentTypeError(f"--size {value} is larger than {MAX_RENDER_SIDE} px, the most SceneFit "
+                                         "renders (memory grows with its square); give a smaller size")
+    return value
+
+
 def finite_float(text: str) -> float:
     try:
         value = float(text)
@@ -173,7 +184,7 @@ def add_elevation_arg(p: argparse.ArgumentParser, default: float | None = None) 
 def add_orbit_camera_args(p: argparse.ArgumentParser, size: int, spp: int) -> None:
     """The orbit camera of `render` and `export`: --elevation (default 15), --size (pixels), --spp."""
     add_elevation_arg(p, default=15.0)
-    p.add_argument("--size", type=positive_int, default=size, help=f"image side in pixels (default {size})")
+    p.add_argument("--size", type=render_side, default=size, help=f"image side in pixels (default {size})")
     p.add_argument("--spp", type=positive_int, default=spp, help=f"samples per pixel (default {spp})")
 
 
@@ -193,9 +204,9 @@ def add_placement_args(p: argparse.ArgumentParser, required: bool = False, objec
 def placement(args, photo_hw: tuple[int, int]):
     """The Placement of --at and --object-size in a photo of photo_hw, as stored (one parser, one error
     message)."""
-    from ..core.placement import DEFAULT_SIZE, Placement
+    from ..core.placement import DEFAULT_OBJECT_SIZE, Placement
 
-    return Placement.parse(args.at, (photo_hw[1], photo_hw[0]), getattr(args, "object_size", DEFAULT_SIZE))
+    return Placement.parse(args.at, (photo_hw[1], photo_hw[0]), getattr(args, "object_size", DEFAULT_OBJECT_SIZE))
 
 
 def add_dry_run_arg(p: argparse.ArgumentParser) -> None:

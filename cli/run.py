@@ -1,9 +1,6 @@
 """scenefit run: the whole pipeline (convert -> light -> adapt -> compose -> bake) for one asset and photo."""
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
 from pathlib import Path
 
 from .options import (add_asset_args, add_model_args, add_output_args, add_placement_args, add_preset_args,
@@ -22,34 +19,12 @@ def run_config(args):
 
 
 def game_bake(args):
-    """(bake function or None, why not): `scenefit bake` on the asset's own file, in a child process
-    (Blender's glTF exporter leaves bpy unable to import another glTF in the same process)."""
-    from ..core.asset_io import is_asset_folder
+    """(bake function or None, why not) for the last stage (core/bake_process.py)."""
+    from ..core.bake_process import asset_file_bake
 
     if args.no_bake:
         return None, "--no-bake was given"
-    if is_asset_folder(args.asset):
-        return None, ("the asset is a SceneFit asset folder; the game bake rewrites an asset's own file "
-                      "(.glb, .gltf, .obj, .fbx, .blend)")
-
-    def bake(texture: Path, folder: Path) -> dict:
-        from ..core.errors import SceneFitError
-
-        folder.mkdir(parents=True, exist_ok=True)
-        glb, report_file = folder / f"{Path(args.asset).stem}.glb", folder / "bake.json"
-        command = [sys.executable, "-m", __package__, "bake", args.asset, "--texture", str(texture),
-                   "--out", str(glb), "--report", str(report_file), "--quiet"]
-        if args.object:
-            command += ["--object", args.object]
-        done = subprocess.run(command, capture_output=True, text=True)
-        if done.returncode != 0:
-            reason = (done.stderr.strip().splitlines() or ["no message"])[-1]
-            raise SceneFitError(f"The game bake of '{args.asset}' failed: {reason}")
-        report = json.loads(report_file.read_text())
-        report["outputs"] = {"glb": str(glb), "report": str(report_file)}
-        return report
-
-    return bake, ""
+    return asset_file_bake(args.asset, args.object)
 
 
 def run(args) -> int:

@@ -27,7 +27,7 @@ from typing import Callable
 
 from .atomic import write_json_atomic, write_text_atomic
 from .errors import InputError, SceneFitError
-from .jobs import BatchSettings, Job, JobsFile
+from .jobs import BatchSettings, Job, JobsFile, with_user_paths
 from .output_folder import check_output_folder, check_subfolder, folder_in_place, install_folder
 
 REPORT = "report.json"
@@ -114,7 +114,10 @@ class JobWorker:
             job = unpacked_job(payload, Path(tmp) / "in")
             out = Path(tmp) / "out"
             out.mkdir()
-            stages = run_job_stages(job, out, progress=progress, cancel=self.cancel_event, models=self.models)
+            try:
+                stages = run_job_stages(job, out, progress=progress, cancel=self.cancel_event, models=self.models)
+            except SceneFitError as error:   # name the user's files, not the unpacked copies
+                raise type(error)(with_user_paths(str(error), job, payload.job)) from None
             self.jobs_run += 1
             report = {"status": "done", "job": payload.job.to_dict(), "attempts": payload.attempt,
                       "seconds": round(time.perf_counter() - started, 3), "quality": quality_figures(stages),
@@ -219,10 +222,15 @@ def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models
     """The job through core/run.py's run_pipeline: adapt when listed (and its weights are found)."""
     from .run import RunConfig, run_pipeline
 
+    from .bake_process import asset_file_bake
+
     mesh, maps = _load_asset(job)
     config = RunConfig(preset=job.preset, prompt=job.prompt, guidance_type="auto" if "adapt" in job.stages else "none",
                        models=job.models, stage_overrides=_stage_overrides(job))
-    return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel, models=models)
+    bake, why_not = asset_file_bake(job.asset, job.object) if "bake" in job.stages else (None, "the job's stages "
+                                                                                         "do not list bake")
+    return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel, models=models,
+                        bake=bake, bake_skipped_why=why_not)
 
 
 def _stage_overrides(job: Job) -> dict:

@@ -124,7 +124,9 @@ def check_output_folder(out: str | os.PathLike, replace: bool = False, inputs: I
     parent = out.parent
     while not parent.exists():
         parent = parent.parent
-    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+    if not parent.is_dir():
+        raise InputError(f"'{parent}' is a file, so '{out}' cannot be made inside it; choose another --out folder.")
+    if not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(f"Cannot write into '{parent}' (no permission); choose another --out folder.")
     if out.is_dir() and any(out.iterdir()):
         ours = is_run_folder(out)

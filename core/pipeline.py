@@ -130,14 +130,15 @@ def environment_info() -> dict:
 
 def convert_and_bake(mesh: Mesh | AssetMaterials, maps: PBRMaps | None, out_dir: str | Path,
                      config: ConvertConfig = ConvertConfig(), progress: ProgressCallback | None = None,
-                     cancel: threading.Event | None = None, keep_constants: bool = False) -> tuple[ConvertResult, dict]:
+                     cancel: threading.Event | None = None, keep_constants: bool = True) -> tuple[ConvertResult, dict]:
     """Convert the asset's maps to a neural texture and bake it into `out_dir`; returns the result and report.
 
     Pass (mesh, maps), or (AssetMaterials, None) for every material of an asset: the maps are then
     baked as the atlas (core.materials), and `scenefit bake` writes them per material in the asset's
     own UV layout.
     keep_constants: a roughness/metallic that holds one value stays that number (reported in
-    decisions > channels, returned in outputs as a float) instead of a baked 16-bit map.
+    decisions > channels, returned in outputs as a float) instead of a baked 16-bit map. On by
+    default, so no entry point can forget it (batch's convert-only jobs once did).
     """
     out_dir = Path(out_dir)
     if isinstance(mesh, AssetMaterials):

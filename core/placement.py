@@ -14,9 +14,10 @@ from dataclasses import dataclass
 
 from .errors import InputError
 
+# The one default of every entry point (the command line, the Blender panel, batch jobs, adapt's
+# global views): where the asset stands, and its height as a fraction of the photo's height.
 DEFAULT_AT = (0.5, 0.6)
-DEFAULT_SIZE = 0.4          # adapt: the asset's height in its global views (compose's placement), / photo height
-DEFAULT_OBJECT_SIZE = 0.3   # compose and run: the asset's height in the composite, / photo height
+DEFAULT_OBJECT_SIZE = 0.3
 
 
 @dataclass(frozen=True)
@@ -24,7 +25,7 @@ class Placement:
     """center: (x, y) fractions of the photo's width and height; size: the asset's height / photo height."""
 
     center: tuple[float, float] = DEFAULT_AT
-    size: float = DEFAULT_SIZE
+    size: float = DEFAULT_OBJECT_SIZE
 
     def __post_init__(self) -> None:
         x, y = self.center
@@ -35,7 +36,7 @@ class Placement:
         object.__setattr__(self, "center", (float(x), float(y)))
 
     @classmethod
-    def parse(cls, at: str | tuple[float, float], photo_wh: tuple[int, int], size: float = DEFAULT_SIZE) -> "Placement":
+    def parse(cls, at: str | tuple[float, float], photo_wh: tuple[int, int], size: float = DEFAULT_OBJECT_SIZE) -> "Placement":
         """From `X,Y` (or a pair): fractions of the width and height when both are <= 1, pixels of the
         photo as stored (photo_wh, upright) when both are > 1."""
         x, y = parse_point(at)

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+import torch
 
 from .atomic import write_json_atomic
 from .errors import InputError
@@ -141,8 +142,8 @@ def _paths(outputs) -> list[str]:
 
 
 # bake(texture.pt, stage folder) -> the bake's report with "outputs": the game asset written from the
-# asset's own file. It needs Blender, which core/ never imports, so the caller hands it in.
-GameBake = Callable[[Path, Path], dict]
+# asset's own file. It needs Blender, which core/ never imports: core/bake_process.py runs it as a child.
+from .bake_process import GameBake  # noqa: E402
 
 
 def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, out_dir: str | Path,
@@ -200,8 +201,7 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     convert_key = _digest("convert", asdict(convert_config), asset_key)
 
     def convert(folder: Path) -> dict:
-        _, report = convert_and_bake(mesh, maps, folder / "maps", convert_config, progress=progress, cancel=cancel,
-                                     keep_constants=True)
+        _, report = convert_and_bake(mesh, maps, folder / "maps", convert_config, progress=progress, cancel=cancel)
         return report
 
     runner.run("convert", convert_key, convert)
@@ -213,7 +213,9 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     from .texture.uv_raster import rasterize_uv
 
     normalized, _ = normalize_to_unit_sphere(mesh)
-    envmap_height = envmap_height_for(maps, rasterize_uv(normalized, max(maps.resolution)).mask)
+    # (the coverage mask only picks which roughness texels count: 1024² is plenty, never the
+    # texture's long side squared, which for a 16384x16 map is 16384²)
+    envmap_height = envmap_height_for(maps, rasterize_uv(normalized, min(max(maps.resolution), 1024)).mask)
     # The preset's map height is a cap, as its texture resolution is (a glossy asset gets 64 rows in draft).
     preset_height = stage_config("light", config.preset).map_height
     if envmap_height.choice > preset_height:
@@ -224,13 +226,20 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
         **config.overrides("light")})
     if config.guidance_type == "none":  # no diffusion model at all: the sky/ground prior completes an outdoor map
         light_config = replace(light_config, outpaint=replace(light_config.outpaint, completion_type="prior"))
+    # The diffusion critic scores renders of the asset itself (as converted), not a stand-in sphere.
+    critic_sees_asset = light_config.critic_type == "diffusion"
     light_key = _digest("light", asdict(light_config), photo_key, placement_px,
-                        asdict(config.photo_camera) if config.photo_camera else None)
+                        asdict(config.photo_camera) if config.photo_camera else None,
+                        convert_key if critic_sees_asset else None)
 
     def light(folder: Path) -> dict:
+        asset = {}
+        if critic_sees_asset:
+            stack = texture_maps_for_mesh(load_neural_texture(texture_path), normalized)
+            asset = {"mesh": mesh, "maps": torch.as_tensor(stack)}
         result = estimate_light(photo, placement_px, light_config, photo_camera=config.photo_camera,
                                 photo_info=photo_info, progress=progress, cancel=cancel,
-                                models=_WithInpaint(cache) if found else cache)
+                                models=_WithInpaint(cache) if found else cache, **asset)
         outputs = write_light_outputs(result, folder)
         report = light_report(result, light_config, outputs)
         report["decisions"]["envmap_height"] = needs_report(envmap_height)

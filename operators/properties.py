@@ -6,6 +6,7 @@ only the artist's choices and the datablocks SceneFit made are saved with the .b
 import bpy
 from bpy.props import EnumProperty, FloatProperty, FloatVectorProperty, PointerProperty, StringProperty
 
+from ..core.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
 from ..core.presets import PRESET_DESCRIPTIONS, PRESET_NAMES
 
 PRESETS = tuple((name, name.capitalize(), PRESET_DESCRIPTIONS[name]) for name in PRESET_NAMES)
@@ -36,10 +37,10 @@ PATH = _path_options()
 class SceneFitSettings(bpy.types.PropertyGroup):
     # Scene
     photo_path: StringProperty(name="Photo", subtype="FILE_PATH", options=PATH, description="Photo to fit the asset into")
-    placement: FloatVectorProperty(name="Placement", size=2, min=0.0, max=1.0, default=(0.5, 0.75),
+    placement: FloatVectorProperty(name="Placement", size=2, min=0.0, max=1.0, default=DEFAULT_AT,
                                    description="Where the asset stands in the photo: x from the left, y from "
                                                "the top, as fractions (Pick Placement sets it by a click)")
-    size: FloatProperty(name="Size", min=0.02, max=1.0, default=0.4, subtype="FACTOR",
+    size: FloatProperty(name="Size", min=0.02, max=1.0, default=DEFAULT_OBJECT_SIZE, subtype="FACTOR",
                         description="The asset's height as a fraction of the photo's height")
     scene_type: EnumProperty(name="Scene type", items=SCENE_TYPES, default="auto")
     fov: FloatProperty(name="Field of view", subtype="ANGLE", default=1.0471976, min=0.1, max=2.8,

@@ -179,3 +179,18 @@ def build_assets(folder: str | Path) -> dict[str, str]:
             bpy.ops.export_scene.fbx(filepath=str(path), path_mode="COPY", embed_textures=True)
         out[fmt] = str(path)
     return out
+
+
+def write_obj(folder, mesh, texture_rgb) -> str:
+    """An OBJ + MTL + PNG as a modelling tool writes them (nothing here is SceneFit's own format)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    from scenefit.core.imageio import write_image
+
+    write_image(folder / "albedo.png", texture_rgb)
+    (folder / "ball.mtl").write_text("newmtl Ball\nKd 1 1 1\nNs 250\nmap_Kd albedo.png\n")
+    lines = ["mtllib ball.mtl", "o Ball"]
+    lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in mesh.positions]
+    lines += [f"vt {u:.6f} {v:.6f}" for u, v in mesh.uvs]
+    lines += ["usemtl Ball"] + [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in mesh.faces]
+    (folder / "ball.obj").write_text("\n".join(lines) + "\n")
+    return str(folder / "ball.obj")

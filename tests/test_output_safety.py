@@ -321,3 +321,9 @@ def test_batch_folder_is_marked_and_a_job_folder_of_the_users_inside_it_is_refus
     (out / "chair" / "mine.txt").write_text("mine")
     assert "not replaced" in refused(capsys, "batch", str(jobs), "--out", str(out))
     assert (out / "chair" / "mine.txt").read_text() == "mine"
+
+
+def test_an_out_inside_a_file_is_named_as_such(tmp_path, project, capsys):
+    (tmp_path / "afile").write_text("x")
+    err = refused(capsys, "convert", str(project / "asset"), "--out", str(tmp_path / "afile" / "sub"), *CONVERT_FAST)
+    assert "is a file" in err and (tmp_path / "afile").read_text() == "x"

@@ -12,6 +12,8 @@ from scenefit.core.imageio import read_image, write_image
 from scenefit.core.maps import PBRMaps
 from scenefit.core.primitives import uv_sphere
 
+from asset_builder import write_obj
+
 
 def scenefit(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "scenefit.cli", *args], capture_output=True, text=True, timeout=900)
@@ -51,22 +53,9 @@ def test_run_composes_and_a_second_run_reuses_every_stage(tmp_path):
     assert last["reused"] == ["convert", "light"] and last["stages"]["compose"]["status"] == "ran"
 
 
-def _write_obj(folder, mesh, texture_rgb) -> str:
-    """An OBJ + MTL + PNG as a modelling tool writes them (nothing here is SceneFit's own format)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    write_image(folder / "albedo.png", texture_rgb)
-    (folder / "ball.mtl").write_text("newmtl Ball\nKd 1 1 1\nNs 250\nmap_Kd albedo.png\n")
-    lines = ["mtllib ball.mtl", "o Ball"]
-    lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in mesh.positions]
-    lines += [f"vt {u:.6f} {v:.6f}" for u, v in mesh.uvs]
-    lines += ["usemtl Ball"] + [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in mesh.faces]
-    (folder / "ball.obj").write_text("\n".join(lines) + "\n")
-    return str(folder / "ball.obj")
-
-
 def test_run_on_an_asset_file_bakes_a_game_asset_and_reuses_it(tmp_path):
     yy, xx = np.mgrid[0:32, 0:32] / 32
-    obj = _write_obj(tmp_path / "obj", uv_sphere(0.5, 16, 8),
+    obj = write_obj(tmp_path / "obj", uv_sphere(0.5, 16, 8),
                      np.stack([0.2 + 0.6 * xx, 0.5 + 0 * xx, 0.8 - 0.5 * yy], -1).astype(np.float32))
     photo_path = write_image(tmp_path / "photo.png", np.clip(np.linspace(0.9, 0.3, 48)[:, None, None]
                                                                + np.zeros((48, 64, 3)), 0, 1))

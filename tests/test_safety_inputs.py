@@ -333,8 +333,6 @@ def test_an_unpacked_copys_paths_become_the_users(tmp_path):
                                                 f"'{job.asset / 'base_color.png'}' too.")
 
 
-@pytest.mark.xfail(strict=True, reason="core/batch.py JobWorker.run does not yet pass its error through "
-                                       "core.jobs.with_user_paths (the change is described in the session report)")
 def test_a_failed_batch_jobs_error_names_the_users_photo(tmp_path, capsys):
     small_asset(tmp_path / "ball")
     photo = truncated_image(tmp_path / "broken.png")

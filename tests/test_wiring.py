@@ -1,0 +1,131 @@
+"""One pipeline (issue 19): every entry point hands the same inputs to the same pipeline with the same
+settings, so no copy can drift. Each test here pins a bug the copies once had."""
+from __future__ import annotations
+
+import json
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+import scenefit.core.run as run_module
+from scenefit.cli import build_parser, main
+from scenefit.core.asset_io import save_asset_folder
+from scenefit.core.imageio import write_image
+from scenefit.core.jobs import load_jobs
+from scenefit.core.maps import PBRMaps
+from scenefit.core.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
+from scenefit.core.primitives import uv_sphere
+
+from asset_builder import write_obj
+
+
+def _obj_asset(folder: Path) -> Path:
+    """An OBJ + MTL + PNG as a modelling tool writes them."""
+    yy, xx = np.mgrid[0:16, 0:16] / 16
+    return Path(write_obj(folder, uv_sphere(0.5, 12, 6), np.stack([0.2 + 0.6 * xx, 0.5 + 0 * xx, 0.8 - 0.5 * yy], -1)))
+
+
+@pytest.fixture
+def inputs(tmp_path) -> dict:
+    photo = write_image(tmp_path / "room.png", np.broadcast_to(np.linspace(0.9, 0.3, 48)[:, None, None],
+                                                               (48, 64, 3)).astype(np.float32))
+    folder = save_asset_folder(uv_sphere(0.5, 12, 6), PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0),
+                               tmp_path / "ball")
+    return {"root": tmp_path, "photo": photo, "folder": folder, "obj": _obj_asset(tmp_path / "obj")}
+
+
+def _jobs(root: Path, asset: Path, photo: Path, stages: list[str], name: str = "job") -> Path:
+    path = root / f"{name}.toml"
+    path.write_text(f'[[job]]\nname = "{name}"\nasset = "{asset}"\nphoto = "{photo}"\nat = [0.5, 0.6]\n'
+                    f'preset = "draft"\nstages = {json.dumps(stages)}\n')
+    return path
+
+
+class Recorder:
+    """run_pipeline as every entry point calls it: what it was given, and a report it can print."""
+
+    def __init__(self) -> None:
+        self.calls: list[dict] = []
+
+    def __call__(self, mesh, maps, photo_path, placement, out_dir, config, progress=None, cancel=None, bake=None,
+                 bake_skipped_why="", models=None) -> dict:
+        self.calls.append({"config": config, "placement": tuple(placement), "bake": bake is not None,
+                           "mesh_faces": len(mesh.faces)})
+        return {"stages": {}, "seconds_total": 0.0, "composite": str(Path(out_dir) / "compose" / "composite.png")}
+
+
+def test_the_command_line_and_a_batch_job_give_the_pipeline_the_same_settings(inputs, monkeypatch, capsys):
+    """Batch jobs once never baked (only the command line passed a bake) and differed in defaults."""
+    from scenefit.core.batch import run_pipeline_for_job
+
+    recorder = Recorder()
+    monkeypatch.setattr(run_module, "run_pipeline", recorder)
+    assert main(["run", str(inputs["obj"]), "--photo", str(inputs["photo"]), "--at", "0.5,0.6", "--out",
+                 str(inputs["root"] / "cli"), "--preset", "draft", "--guidance", "none", "--quiet"]) == 0
+    job = load_jobs(_jobs(inputs["root"], inputs["obj"], inputs["photo"],
+                          ["convert", "light", "compose", "bake"])).jobs[0]
+    run_pipeline_for_job(job, inputs["root"] / "batch")
+    cli_call, batch_call = recorder.calls
+    assert cli_call == batch_call
+    assert cli_call["bake"] is True            # both bake the asset's own file
+
+
+def test_a_batch_convert_job_keeps_constant_channels_as_numbers(inputs):
+    from scenefit.core.batch import run_job_stages
+
+    job = load_jobs(_jobs(inputs["root"], inputs["folder"], inputs["photo"], ["convert"])).jobs[0]
+    out = inputs["root"] / "out"
+    out.mkdir()
+    stages = run_job_stages(job, out)
+    convert = stages["convert"]
+    assert convert["decisions"]["channels"]["roughness"]["value"] == 0.5
+    assert convert["outputs"]["roughness"] == 0.5 and not (out / "convert" / "maps" / "roughness.png").exists()
+
+
+def test_the_light_critic_scores_the_asset_itself(inputs, monkeypatch):
+    """run_pipeline once gave the light stage no asset: its critic scored the default grey sphere."""
+    import scenefit.core.guidance.models as models
+    import scenefit.core.lighting as lighting
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def estimate(photo, placement, config, **kwargs):
+        seen.update(kwargs, critic_type=config.critic_type)
+        raise Stop
+
+    monkeypatch.setattr(models, "models_available", lambda *a, **k: (True, "pretended for the test"))
+    monkeypatch.setattr(lighting, "estimate_light", estimate)
+    mesh = uv_sphere(0.5, 12, 6)
+    maps = PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0)
+    with pytest.raises(Stop):
+        run_module.run_pipeline(mesh, maps, inputs["photo"], (0.5, 0.6), inputs["root"] / "run",
+                                run_module.RunConfig(preset="draft"), cancel=threading.Event())
+    assert seen["critic_type"] == "diffusion"
+    assert seen["mesh"] is mesh and isinstance(seen["maps"], torch.Tensor) and seen["maps"].shape[-1] == 5
+
+
+def test_the_command_line_and_the_panel_share_one_set_of_defaults():
+    """The panel once placed the asset at (0.5, 0.75) at 0.4 of the photo, the command line at (0.5, 0.6), 0.3."""
+    import ast
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command").choices
+    for command in ("adapt", "light"):
+        assert tuple(sub[command].parse_known_args([])[0].at) == DEFAULT_AT
+    for command in ("adapt", "run", "compose"):
+        defaults = {a.dest: a.default for a in sub[command]._actions}
+        assert defaults["object_size"] == DEFAULT_OBJECT_SIZE
+    # The panel's properties name the same constants (read from the source: registering them needs bpy).
+    source = (Path(run_module.__file__).parents[1] / "operators" / "properties.py").read_text()
+    settings = next(node for node in ast.walk(ast.parse(source))
+                    if isinstance(node, ast.ClassDef) and node.name == "SceneFitSettings")
+    default_of = {node.target.id: next((k.value for k in node.annotation.keywords if k.arg == "default"), None)
+                  for node in settings.body if isinstance(node, ast.AnnAssign) and isinstance(node.annotation, ast.Call)}
+    assert ast.unparse(default_of["placement"]) == "DEFAULT_AT"
+    assert ast.unparse(default_of["size"]) == "DEFAULT_OBJECT_SIZE"
