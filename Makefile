@@ -10,12 +10,14 @@ PLATFORM ?= linux-x64
 # Mitsuba's llvm variant loads this library (found lazily, after `setup` may have installed it).
 export DRJIT_LIBLLVM_PATH ?= $(shell tools/find_llvm.sh 2>/dev/null)
 
-.PHONY: help setup test demo bench extension extension-nowheels check-extension validate clean
+.PHONY: help setup test demo bench corpus extension extension-nowheels check-extension validate clean
 
 help:
 	@echo "make demo       set up on first use, run SceneFit on the bundled example -> out/demo/"
 	@echo "make test       set up on first use, run the tests"
 	@echo "make bench      speed and accuracy table (benchmarks/run.py)"
+	@echo "make corpus     every real asset in ../shared/corpus through convert -> bake -> glTF validator"
+	@echo "                (benchmarks/results/corpus.md; installs npm's gltf-validator into .venv/node)"
 	@echo "make extension PLATFORM=linux-x64|linux-arm64|windows-x64|macos-arm64|macos-x64"
 	@echo "                download runtime wheels, list them in the manifest, build dist/*.zip"
 	@echo "make extension-nowheels   pure-Python zip without wheels (what the install test uses)"
@@ -37,6 +39,9 @@ demo: setup
 
 bench: setup
 	$(PY) benchmarks/run.py
+
+corpus: setup
+	$(PY) benchmarks/corpus.py
 
 validate: setup
 	$(PY) tools/build_extension.py validate

@@ -186,8 +186,8 @@ def place_asset(normalized: Mesh, camera: PhotoCamera, pixel: tuple[float, float
     for _ in range(8):  # the projected height is nearly linear in the scale; a few fixed-point steps
         world = placed(scale)
         if ((world - origin) @ forward).min() <= 1e-3:
-            raise InputError(f"At --size {size:g} the asset would reach behind the camera; pick a smaller size "
-                             "or a point further away.")
+            raise InputError(f"At --object-size {size:g} the asset would reach behind the camera; pick a smaller "
+                             "size or a point further away.")
         ys = camera.project(world, origin)[:, 1]
         extent = float(ys.max() - ys.min())
         scale *= target / max(extent, 1e-6)

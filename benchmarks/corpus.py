@@ -1,0 +1,267 @@
+"""`make corpus`: every asset of the development corpus (../shared/corpus/, real files made outside
+this project) through `scenefit convert --preset draft` -> `scenefit bake --format glb` -> the Khronos
+glTF validator, and `scenefit run --preset draft` on a few of them with photos cut from the corpus's
+real HDR panoramas. Writes benchmarks/results/corpus.md (+ corpus.json, corpus_sheet.png).
+
+Each command runs as a user runs it (a child process of the installed `scenefit`), timed, with its
+peak memory (the child's max RSS). "Kept / lost" compares the input's glTF JSON with the bake's:
+nodes, meshes, materials, skins, animations, UV sets, tangents, extensions, file size.
+The corpus is for development only: nothing of it is copied into the repository.
+
+    python benchmarks/corpus.py [--only NAME ...] [--no-run] [--timeout 600]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+CORPUS = ROOT.parent / "shared" / "corpus"
+RESULTS = ROOT / "benchmarks" / "results"
+NODE_MODULES = ROOT / ".venv" / "node" / "node_modules"
+SUFFIXES = (".gltf", ".glb", ".obj", ".fbx")
+# Assets also run end to end (scenefit run), each with a photo from one HDR panorama.
+RUN_ON = {"polyhaven_painted_wooden_cabinet": "artist_workshop_1k", "khronos_ToyCar": "studio_small_05_1k",
+          "bevy_PalmTree": "noon_grass_1k", "khronos_SheenChair": "vestibule_1k"}
+
+
+def corpus_assets() -> list[Path]:
+    return sorted(p for p in (CORPUS / "assets").glob("*/*") if p.suffix.lower() in SUFFIXES)
+
+
+def timed(command: list[str], timeout: float) -> dict:
+    """Run a command; its exit code, seconds, peak memory (GB) and last stderr line."""
+    started = time.perf_counter()
+    with tempfile.TemporaryFile() as err:
+        process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=err)
+        deadline = started + timeout
+        while True:
+            pid, status, usage = os.wait4(process.pid, os.WNOHANG)
+            if pid:
+                break
+            if time.perf_counter() > deadline:
+                process.kill()
+                pid, status, usage = os.wait4(process.pid, 0)
+                break
+            time.sleep(0.2)
+        err.seek(0)
+        lines = err.read().decode("utf-8", "replace").strip().splitlines()
+    code = os.waitstatus_to_exitcode(status)
+    return {"rc": code, "seconds": round(time.perf_counter() - started, 1), "peak_gb": round(usage.ru_maxrss / 2**20, 2),
+            "message": (lines[-1] if lines else "")[:300], "timed_out": time.perf_counter() > deadline}
+
+
+def validate(path: Path) -> dict:
+    """The Khronos validator's counts and issue codes for one file (needs `make corpus`'s npm install)."""
+    if path.suffix.lower() not in (".gltf", ".glb") or not path.is_file():
+        return {}
+    done = subprocess.run(["node", str(ROOT / "tools" / "validate_gltf.js"), str(path)], capture_output=True,
+                          text=True, env={**os.environ, "NODE_PATH": str(NODE_MODULES)}, timeout=300)
+    try:
+        return json.loads(done.stdout.strip().splitlines()[-1])
+    except (ValueError, IndexError):
+        return {"errors": -1, "fatal": done.stderr.strip()[-200:]}
+
+
+def gltf_json(path: Path) -> dict:
+    import struct
+
+    data = path.read_bytes()
+    if data[:4] == b"glTF":
+        length = struct.unpack_from("<I", data, 12)[0]
+        data = data[20:20 + length]
+    try:
+        return json.loads(data)
+    except ValueError:
+        return {}
+
+
+def structure(document: dict) -> dict:
+    """What a game needs of a glTF, counted."""
+    primitives = [p for m in document.get("meshes", []) for p in m.get("primitives", [])]
+    attributes = [set(p.get("attributes", {})) for p in primitives]
+    return {"nodes": len(document.get("nodes", [])), "meshes": len(document.get("meshes", [])),
+            "materials": len(document.get("materials", [])), "skins": len(document.get("skins", [])),
+            "animations": len(document.get("animations", [])),
+            "uv_sets": max((sum(a.startswith("TEXCOORD_") for a in s) for s in attributes), default=0),
+            "tangents": any("TANGENT" in s for s in attributes),
+            "vertex_colors": any("COLOR_0" in s for s in attributes),
+            "extensions": sorted(document.get("extensionsUsed", [])),
+            "node_names": sorted(n.get("name", "") for n in document.get("nodes", []))}
+
+
+def kept_and_lost(source: Path, baked: Path) -> tuple[list[str], list[str]]:
+    if source.suffix.lower() not in (".gltf", ".glb") or not baked.is_file():
+        return [], []
+    before, after = structure(gltf_json(source)), structure(gltf_json(baked))
+    kept, lost = [], []
+    for key in ("nodes", "meshes", "materials", "skins", "animations", "uv_sets"):
+        (kept if after[key] >= before[key] else lost).append(f"{key} {before[key]}->{after[key]}")
+    for key in ("tangents", "vertex_colors"):
+        if before[key]:
+            (kept if after[key] else lost).append(key)
+    missing = sorted(set(before["extensions"]) - set(after["extensions"]))
+    if missing:
+        lost.append("extensions " + ", ".join(missing))
+    if before["node_names"] != after["node_names"]:
+        lost.append("node names changed")
+    return kept, lost
+
+
+def asset_bytes(path: Path) -> int:
+    """The asset's size on disk: for a .gltf its whole folder's referenced files."""
+    from scenefit.core.asset_files import asset_files
+
+    return sum(p.stat().st_size for p in asset_files(path))
+
+
+def one_asset(path: Path, work: Path, timeout: float) -> dict:
+    cli = [sys.executable, "-m", "scenefit.cli"]
+    name = path.parent.name
+    row: dict = {"asset": name, "file": path.name, "input_validator": validate(path)}
+    row["convert"] = timed(cli + ["convert", str(path), "--out", str(work / "convert"), "--preset", "draft",
+                                  "--quiet"], timeout)
+    texture = work / "convert" / "maps" / "texture.pt"
+    report = work / "convert" / "report.json"
+    if report.is_file():
+        data = json.loads(report.read_text())
+        row["psnr_db"] = data.get("psnr_covered_texels_db")
+    baked = work / "bake" / f"{path.stem}.glb"
+    if row["convert"]["rc"] == 0:
+        row["bake"] = timed(cli + ["bake", str(path), "--texture", str(texture), "--out", str(baked), "--quiet"],
+                            timeout)
+        row["output_validator"] = validate(baked)
+        row["kept"], row["lost"] = kept_and_lost(path, baked)
+        if baked.is_file():
+            row["size_ratio"] = round(baked.stat().st_size / max(1, asset_bytes(path)), 2)
+    row["status"] = status(row)
+    return row
+
+
+def status(row: dict) -> str:
+    if row["convert"]["rc"] != 0:
+        return "convert refused" if row["convert"]["rc"] == 2 else "convert failed"
+    bake = row.get("bake", {})
+    if bake.get("rc") != 0:
+        return "bake refused" if bake.get("rc") == 2 else "bake failed"
+    errors = row.get("output_validator", {}).get("errors", 0)
+    if errors:
+        return f"{errors} validator errors"
+    return "ok" if (row.get("psnr_db") or 0) >= 30 else f"ok, {row.get('psnr_db')} dB"
+
+
+def photo_from(hdri: str, path: Path) -> Path:
+    """A 640x480, 60° view of a real HDR panorama, auto-exposed and 8-bit, as a camera would take it."""
+    from scenefit.core.imageio import read_image, write_image
+    from scenefit.core.photo import PhotoCamera, develop_photo, perspective_view
+
+    hdr = read_image(CORPUS / "hdri" / f"{hdri}.hdr")[..., :3]
+    radiance = perspective_view(hdr, PhotoCamera(yaw_deg=90.0, pitch_deg=-10.0, fov_deg=60.0, width=640, height=480))
+    return write_image(path, develop_photo(radiance).astype(np.float32) / 255.0)
+
+
+def one_run(path: Path, hdri: str, work: Path, timeout: float) -> dict:
+    photo = photo_from(hdri, work / f"{hdri}.png")
+    cli = [sys.executable, "-m", "scenefit.cli"]
+    result = timed(cli + ["run", str(path), "--photo", str(photo), "--at", "0.5,0.75", "--out", str(work / "run"),
+                          "--preset", "draft", "--guidance", "none", "--quiet"], timeout)
+    report = work / "run" / "report.json"
+    stages = {}
+    if report.is_file():
+        data = json.loads(report.read_text())
+        stages = {name: s.get("seconds", 0.0) for name, s in data.get("stages", {}).items()}
+    return {"asset": path.parent.name, "photo": hdri, **result, "stage_seconds": stages,
+            "composite": str(work / "run" / "compose" / "composite.png")}
+
+
+def contact_sheet(runs: list[dict], path: Path) -> None:
+    from scenefit.core.imageio import read_image, write_image
+    from scenefit.core.pipeline import contact_sheet as sheet
+
+    rows = {}
+    for run in runs:
+        if Path(run["composite"]).is_file():
+            import cv2
+
+            image = read_image(run["composite"])[..., :3]
+            rows[f"{run['asset']} in {run['photo']}"] = [cv2.resize(image, (320, 240), interpolation=cv2.INTER_AREA)]
+    if rows:
+        write_image(path, sheet(rows))
+
+
+def markdown(rows: list[dict], runs: list[dict], load: str) -> str:
+    ok = sum(r["status"].startswith("ok") and "dB" not in r["status"] for r in rows)
+    lines = [f"# The corpus: real assets through convert -> bake -> validator\n",
+             f"Made by `make corpus` (benchmarks/corpus.py) on {time.strftime('%Y-%m-%d')}; load average at the "
+             f"start: {load}. {ok} of {len(rows)} assets pass (convert >= 30 dB, bake, 0 validator errors).\n",
+             "| asset | file | status | convert s | convert GB | PSNR dB | bake s | validator errors / warnings "
+             "(input -> output) | size vs input | kept | lost | message |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        vin, vout = r.get("input_validator", {}), r.get("output_validator", {})
+        counts = (f"{vin.get('errors', '-')}/{vin.get('warnings', '-')} -> {vout.get('errors', '-')}/"
+                  f"{vout.get('warnings', '-')}") if vin or vout else "-"
+        message = (r.get("bake", {}).get("message") if r["convert"]["rc"] == 0 else r["convert"]["message"]) or ""
+        lines.append(f"| {r['asset']} | {r['file']} | {r['status']} | {r['convert']['seconds']} | "
+                     f"{r['convert']['peak_gb']} | {r.get('psnr_db', '-')} | {r.get('bake', {}).get('seconds', '-')} | "
+                     f"{counts} | {r.get('size_ratio', '-')} | {'; '.join(r.get('kept', []))} | "
+                     f"{'; '.join(r.get('lost', []))} | {message.replace('|', '/')} |")
+    if runs:
+        lines += ["\n## `scenefit run --preset draft --guidance none` on real photos\n",
+                  "Photos: 640x480, 60° views of the corpus's HDR panoramas, auto-exposed, 8-bit. "
+                  "Composites in [corpus_sheet.png](corpus_sheet.png).\n",
+                  "| asset | photo | exit | seconds | peak GB | per stage (s) | message |", "|---|---|---|---|---|---|---|"]
+        for r in runs:
+            per = ", ".join(f"{k} {v}" for k, v in r["stage_seconds"].items())
+            lines.append(f"| {r['asset']} | {r['photo']} | {r['rc']} | {r['seconds']} | {r['peak_gb']} | {per} | "
+                         f"{r['message'].replace('|', '/')} |")
+    return "\n".join(lines) + "\n"
+
+
+def ensure_validator() -> None:
+    if not (NODE_MODULES / "gltf-validator").is_dir():
+        subprocess.run(["npm", "install", "--silent", "--prefix", str(NODE_MODULES.parent), "gltf-validator"],
+                       check=True)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", nargs="*", help="asset folder names to run (default: all)")
+    parser.add_argument("--no-run", action="store_true", help="skip the scenefit run part")
+    parser.add_argument("--timeout", type=float, default=900, help="seconds per command")
+    args = parser.parse_args()
+    if not CORPUS.is_dir():
+        print(f"corpus: no corpus at {CORPUS}", file=sys.stderr)
+        return 2
+    ensure_validator()
+    load = open("/proc/loadavg").read().split()[:3] if Path("/proc/loadavg").exists() else ["?"]
+    rows, runs = [], []
+    with tempfile.TemporaryDirectory(prefix="scenefit-corpus-") as tmp:
+        for path in corpus_assets():
+            if args.only and path.parent.name not in args.only:
+                continue
+            row = one_asset(path, Path(tmp) / path.parent.name / path.stem, args.timeout)
+            rows.append(row)
+            print(f"{row['asset']}: {row['status']} (convert {row['convert']['seconds']} s)", flush=True)
+            if not args.no_run and path.parent.name in RUN_ON:
+                run = one_run(path, RUN_ON[path.parent.name], Path(tmp) / path.parent.name / "with_photo", args.timeout)
+                runs.append(run)
+                print(f"  run: exit {run['rc']} in {run['seconds']} s", flush=True)
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        contact_sheet(runs, RESULTS / "corpus_sheet.png")
+    (RESULTS / "corpus.json").write_text(json.dumps({"load": load, "assets": rows, "runs": runs}, indent=2) + "\n")
+    (RESULTS / "corpus.md").write_text(markdown(rows, runs, " ".join(load)))
+    print(f"wrote {RESULTS / 'corpus.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
