@@ -157,162 +157,212 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     placement: (x, y) as fractions of the photo's width and height (both <= 1) or pixels, or "X,Y".
     models: the loaded diffusion models to use (a ModelCache: a batch worker keeps one for its life,
     so its jobs load them once); default a cache for this run, so light and adapt share one load.
+    This is the one place the stages are strung together: the command line, batch jobs, remote
+    workers, the Blender operators and the demo all call it.
     """
-    from dataclasses import replace
+    run = PipelineRun(mesh, maps, photo_path, placement, out_dir, config, progress, cancel, models)  # 1. inputs
+    run.convert()                         # 2. the asset's maps -> neural texture
+    run.light()                           # 3. photo + placement -> the HDR map and the photo camera
+    run.adapt()                           # 4. the texture adapted to the scene (only with the SD2 weights)
+    run.compose()                         # 5. the texture in the photo under the estimated light
+    run.bake(bake, bake_skipped_why)      # 6. the texture written into the asset's own file (glTF)
+    return run.finish()                   # 7. report.json
 
-    from .compose import COMPOSE_MAX_SIDE, ComposeInputs, compose_to_folder, light_camera
-    from .presets import stage_config
-    from .guidance.models import models_available
-    from .lighting import estimate_light, light_report, load_photo, write_light_outputs
-    from .mesh import normalize_to_unit_sphere
-    from .pipeline import convert_and_bake, environment_info, load_environment
-    from .placement import Placement
-    from .texture.bake import WEIGHTS_FILE, load_neural_texture, texture_maps_for_mesh
 
-    started = time.perf_counter()
-    out = Path(out_dir).resolve()   # stage.json lists absolute outputs, whatever the working folder
-    photo_path = Path(photo_path)
-    # Everything that can be wrong with the inputs is found before any work.
-    photo, photo_info = load_photo(photo_path)
-    h, w = photo.shape[:2]
-    placement = Placement.parse(placement, tuple(photo_info["size"]))   # pixels of the photo as stored
-    placement_px = placement.pixel((h, w))                               # ... in the light stage's copy
-    compose_config = stage_config("compose", config.preset, **{
-        "size": config.size, "shadow_type": config.shadow_type, "spp": config.compose_spp, **config.overrides("compose")})
+def guidance_found(config: RunConfig) -> tuple[bool, str]:
+    """Whether adapt (and the diffusion light critic) run, and why: the one place `--guidance` is decided."""
+    from .guidance.models import locate_models, models_available
+
     if config.guidance_type == "sd2":
-        found, where = True, "asked for (--guidance sd2)"
-        from .guidance.models import locate_models
+        locate_models(config.models, need_inpaint=True)   # missing weights: a clear error before any work
+        return True, "asked for (--guidance sd2)"
+    if config.guidance_type == "auto":
+        return models_available(config.models)
+    return False, "guidance none"
 
-        locate_models(config.models, need_inpaint=True)
-    elif config.guidance_type == "auto":
-        found, where = models_available(config.models)
-    else:
-        found, where = False, "guidance none"
-    cache = models if models is not None else ModelCache()
-    asset_key = asset_digest(mesh, maps)
-    photo_key = _digest(photo_path.read_bytes())
-    runner = StageRunner(out, progress, cancel)
 
-    # convert: the asset's maps -> neural texture (baked maps + texture.pt)
-    # Only what the scene needs: no more texels than the composite shows of the asset (the photo's
-    # stored height, not the light stage's working copy, is what the composite is made at).
-    screen_px = max(1, round(config.size * photo_info["size"][1]))
-    convert_config = stage_config("convert", config.preset, **{"screen_px": screen_px, **config.overrides("convert")})
-    convert_key = _digest("convert", asdict(convert_config), asset_key)
+class PipelineRun:
+    """One run's shared state: the checked inputs, each stage's key, the runner that reuses stages."""
 
-    def convert(folder: Path) -> dict:
-        _, report = convert_and_bake(mesh, maps, folder / "maps", convert_config, progress=progress, cancel=cancel)
-        return report
+    def __init__(self, mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, out_dir: str | Path,
+                 config: RunConfig, progress: ProgressCallback | None, cancel: threading.Event | None,
+                 models: ModelCache | None) -> None:
+        from .lighting import load_photo
+        from .mesh import normalize_to_unit_sphere
+        from .placement import Placement
 
-    runner.run("convert", convert_key, convert)
-    texture_path = out / "convert" / "maps" / WEIGHTS_FILE
+        self.started = time.perf_counter()
+        self.mesh, self.maps, self.config, self.progress, self.cancel = mesh, maps, config, progress, cancel
+        self.out = Path(out_dir).resolve()   # stage.json lists absolute outputs, whatever the working folder
+        self.photo_path = Path(photo_path)
+        # Everything that can be wrong with the inputs is found before any work.
+        self.photo, self.photo_info = load_photo(self.photo_path)
+        h, w = self.photo.shape[:2]
+        self.placement = Placement.parse(placement, tuple(self.photo_info["size"]))   # pixels of the photo as stored
+        self.placement_px = self.placement.pixel((h, w))                              # ... in the light stage's copy
+        self.found, self.where = guidance_found(config)
+        self.cache = models if models is not None else ModelCache()
+        self.asset_key = asset_digest(mesh, maps)
+        self.photo_key = _digest(self.photo_path.read_bytes())
+        self.normalized, _ = normalize_to_unit_sphere(mesh)
+        self.runner = StageRunner(self.out, progress, cancel)
+        self.texture_path = self.light_path = None
+        self.keys: dict[str, str] = {}
 
-    # light: photo + placement -> light.exr (+ its report, which carries the photo camera)
-    # Only what the scene needs: the map is as sharp as the asset's glossiest reflections.
-    from .scene_needs import envmap_height_for, report as needs_report
-    from .texture.uv_raster import rasterize_uv
+    def stage_config(self, stage: str, **values):
+        """The preset's config for `stage` with `values`, then the run's own overrides for it."""
+        from .presets import stage_config
 
-    normalized, _ = normalize_to_unit_sphere(mesh)
-    # (the coverage mask only picks which roughness texels count: 1024² is plenty, never the
-    # texture's long side squared, which for a 16384x16 map is 16384²)
-    envmap_height = envmap_height_for(maps, rasterize_uv(normalized, min(max(maps.resolution), 1024)).mask)
-    # The preset's map height is a cap, as its texture resolution is (a glossy asset gets 64 rows in draft).
-    preset_height = stage_config("light", config.preset).map_height
-    if envmap_height.choice > preset_height:
-        envmap_height = replace(envmap_height, choice=preset_height,
-                                reason=f"{envmap_height.reason}; capped at the {config.preset} preset's {preset_height} rows")
-    light_config = stage_config("light", config.preset, **{
-        "critic_type": "diffusion" if found else "none", "models": config.models, "map_height": envmap_height.choice,
-        **config.overrides("light")})
-    if config.guidance_type == "none":  # no diffusion model at all: the sky/ground prior completes an outdoor map
-        light_config = replace(light_config, outpaint=replace(light_config.outpaint, completion_type="prior"))
-    # The diffusion critic scores renders of the asset itself (as converted), not a stand-in sphere.
-    critic_sees_asset = light_config.critic_type == "diffusion"
-    light_key = _digest("light", asdict(light_config), photo_key, placement_px,
-                        asdict(config.photo_camera) if config.photo_camera else None,
-                        convert_key if critic_sees_asset else None)
+        return stage_config(stage, self.config.preset, **{**values, **self.config.overrides(stage)})
 
-    def light(folder: Path) -> dict:
-        asset = {}
-        if critic_sees_asset:
-            stack = texture_maps_for_mesh(load_neural_texture(texture_path), normalized)
-            asset = {"mesh": mesh, "maps": torch.as_tensor(stack)}
-        result = estimate_light(photo, placement_px, light_config, photo_camera=config.photo_camera,
-                                photo_info=photo_info, progress=progress, cancel=cancel,
-                                models=_WithInpaint(cache) if found else cache, **asset)
-        outputs = write_light_outputs(result, folder)
-        report = light_report(result, light_config, outputs)
-        report["decisions"]["envmap_height"] = needs_report(envmap_height)
-        write_json_atomic(folder / "report.json", report)
-        return report
+    def convert(self) -> None:
+        from .pipeline import convert_and_bake
+        from .texture.bake import WEIGHTS_FILE
 
-    runner.run("light", light_key, light)
-    light_path = out / "light" / "light.exr"
+        # Only what the scene needs: no more texels than the composite shows of the asset (the photo's
+        # stored height, not the light stage's working copy, is what the composite is made at).
+        screen_px = max(1, round(self.config.size * self.photo_info["size"][1]))
+        config = self.stage_config("convert", screen_px=screen_px)
+        self.keys["convert"] = _digest("convert", asdict(config), self.asset_key)
 
-    # adapt: only with the SD2 weights
-    if found:
-        from .adapt import adapt_and_bake
+        def convert(folder: Path) -> dict:
+            return convert_and_bake(self.mesh, self.maps, folder / "maps", config, progress=self.progress,
+                                    cancel=self.cancel)[1]
 
-        prompt = config.prompt or f"a {mesh.name} in this scene, photo"
-        adapt_config = stage_config("adapt", config.preset, **{"mode_type": "scene", "prompt": prompt,
-                                                               "models": config.models, **config.overrides("adapt")})
-        # The global views are the compose stage's composite: same point, size and camera as compose below.
-        guidance_placement = Placement((placement_px[0] / w, placement_px[1] / h), min(1.0, config.size))
-        adapt_key = _digest("adapt", adapt_config.to_dict(), convert_key, photo_key, asdict(guidance_placement),
-                            light_key)
+        self.runner.run("convert", self.keys["convert"], convert)
+        self.texture_path = self.out / "convert" / "maps" / WEIGHTS_FILE
+        self.upstream = self.keys["convert"]
 
-        def adapt(folder: Path) -> dict:
-            camera, _ = light_camera(light_path, photo_info, w, h)
-            _, report = adapt_and_bake(mesh, load_neural_texture(texture_path), adapt_config, folder, photo=photo,
-                                       placement=guidance_placement, photo_camera=camera, progress=progress,
-                                       cancel=cancel, models=cache.get(adapt_config.models, True))
+    def light_config(self):
+        """The light stage's config: the map as sharp as the asset's glossiest reflections, capped by the preset."""
+        from dataclasses import replace
+
+        from .presets import stage_config
+        from .scene_needs import envmap_height_for
+        from .texture.uv_raster import rasterize_uv
+
+        # (the coverage mask only picks which roughness texels count: 1024² is plenty, never the
+        # texture's long side squared, which for a 16384x16 map is 16384²)
+        raster = rasterize_uv(self.normalized, min(max(self.maps.resolution), 1024))
+        height = envmap_height_for(self.maps, raster.mask)
+        preset_height = stage_config("light", self.config.preset).map_height
+        if height.choice > preset_height:
+            height = replace(height, choice=preset_height,
+                             reason=f"{height.reason}; capped at the {self.config.preset} preset's {preset_height} rows")
+        config = self.stage_config("light", critic_type="diffusion" if self.found else "none",
+                                   models=self.config.models, map_height=height.choice)
+        if self.config.guidance_type == "none":  # no diffusion model at all: the sky/ground prior completes outdoors
+            config = replace(config, outpaint=replace(config.outpaint, completion_type="prior"))
+        return config, height
+
+    def light(self) -> None:
+        from .lighting import estimate_light, light_report, write_light_outputs
+        from .scene_needs import report as needs_report
+        from .texture.bake import load_neural_texture, texture_maps_for_mesh
+
+        config, envmap_height = self.light_config()
+        # The diffusion critic scores renders of the asset itself (as converted), not a stand-in sphere.
+        critic_sees_asset = config.critic_type == "diffusion"
+        camera = self.config.photo_camera
+        self.keys["light"] = _digest("light", asdict(config), self.photo_key, self.placement_px,
+                                     asdict(camera) if camera else None,
+                                     self.keys["convert"] if critic_sees_asset else None)
+
+        def light(folder: Path) -> dict:
+            asset = {}
+            if critic_sees_asset:
+                stack = texture_maps_for_mesh(load_neural_texture(self.texture_path), self.normalized)
+                asset = {"mesh": self.mesh, "maps": torch.as_tensor(stack)}
+            result = estimate_light(self.photo, self.placement_px, config, photo_camera=camera,
+                                    photo_info=self.photo_info, progress=self.progress, cancel=self.cancel,
+                                    models=_WithInpaint(self.cache) if self.found else self.cache, **asset)
+            outputs = write_light_outputs(result, folder)
+            report = light_report(result, config, outputs)
+            report["decisions"]["envmap_height"] = needs_report(envmap_height)
+            write_json_atomic(folder / "report.json", report)
             return report
 
-        runner.run("adapt", adapt_key, adapt)
-        texture_path, upstream = out / "adapt" / "maps" / WEIGHTS_FILE, adapt_key
-    else:
-        runner.skip("adapt", "skipped", f"Stable Diffusion 2 weights are not on this machine, so the converted "
-                    f"texture is composed as it is ({where})" if config.guidance_type == "auto" else where)
-        upstream = convert_key
+        self.runner.run("light", self.keys["light"], light)
+        self.light_path = self.out / "light" / "light.exr"
 
-    # compose: the (adapted) texture in the photo under the estimated light
-    compose_key = _digest("compose", asdict(compose_config), upstream, light_key, photo_key, placement_px)
+    def adapt(self) -> None:
+        from .adapt import adapt_and_bake
+        from .compose import light_camera
+        from .placement import Placement
+        from .texture.bake import WEIGHTS_FILE, load_neural_texture
 
-    def compose(folder: Path) -> dict:
-        stack = texture_maps_for_mesh(load_neural_texture(texture_path), normalized)
-        full, _ = load_photo(photo_path, max_side=COMPOSE_MAX_SIDE)   # the composite is at the photo's size
-        fh, fw = full.shape[:2]
-        camera, camera_from = light_camera(light_path, photo_info, fw, fh)
-        return compose_to_folder(ComposeInputs(mesh, stack, full, placement.pixel((fh, fw)),
-                                               load_environment(light_path), camera),
-                                 compose_config, folder, {"inputs": {"texture": str(texture_path), "light": str(light_path),
-                                                                     "camera_from": camera_from}},
-                                 progress=progress, cancel=cancel)
+        if not self.found:
+            self.runner.skip("adapt", "skipped", f"Stable Diffusion 2 weights are not on this machine, so the "
+                             f"converted texture is composed as it is ({self.where})"
+                             if self.config.guidance_type == "auto" else self.where)
+            return
+        prompt = self.config.prompt or f"a {self.mesh.name} in this scene, photo"
+        config = self.stage_config("adapt", mode_type="scene", prompt=prompt, models=self.config.models)
+        # The global views are the compose stage's composite: same point, size and camera as compose below.
+        h, w = self.photo.shape[:2]
+        placement = Placement((self.placement_px[0] / w, self.placement_px[1] / h), min(1.0, self.config.size))
+        self.keys["adapt"] = _digest("adapt", config.to_dict(), self.keys["convert"], self.photo_key,
+                                     asdict(placement), self.keys["light"])
+        texture_path = self.texture_path
 
-    runner.run("compose", compose_key, compose)
+        def adapt(folder: Path) -> dict:
+            camera, _ = light_camera(self.light_path, self.photo_info, w, h)
+            return adapt_and_bake(self.mesh, load_neural_texture(texture_path), config, folder, photo=self.photo,
+                                  placement=placement, photo_camera=camera, progress=self.progress,
+                                  cancel=self.cancel, models=self.cache.get(config.models, True))[1]
 
-    # bake: the (adapted) texture written into the asset's own file as a game asset (glTF)
-    if bake is None:
-        runner.skip("bake", "skipped", bake_skipped_why)
-    else:
-        bake_texture = texture_path
-        runner.run("bake", _digest("bake", upstream, asset_key), lambda folder: bake(bake_texture, folder))
+        self.runner.run("adapt", self.keys["adapt"], adapt)
+        self.texture_path, self.upstream = self.out / "adapt" / "maps" / WEIGHTS_FILE, self.keys["adapt"]
 
-    report = {
-        "stage": "run",
-        "config": _plain(replace(config, models=config.models)),
-        "inputs": {"asset": mesh.name, "asset_digest": asset_key, "photo": photo_info, "photo_digest": photo_key,
-                   "placement_px": list(placement_px)},
-        "stages": runner.stages,
-        "composite": str(out / "compose" / "composite.png"),
-        "reused": [name for name, s in runner.stages.items() if s["status"] == "reused"],
-        "environment": environment_info(),
-        "seconds_total": round(time.perf_counter() - started, 3),
-    }
-    from .pipeline import write_report
+    def compose(self) -> None:
+        from .compose import COMPOSE_MAX_SIDE, ComposeInputs, compose_to_folder, light_camera
+        from .lighting import load_photo
+        from .pipeline import load_environment
+        from .texture.bake import load_neural_texture, texture_maps_for_mesh
 
-    write_report(out / "report.json", report)   # paths relative to the run's folder, which is swapped into place
-    return report
+        config = self.stage_config("compose", size=self.config.size, shadow_type=self.config.shadow_type,
+                                   spp=self.config.compose_spp)
+        self.keys["compose"] = _digest("compose", asdict(config), self.upstream, self.keys["light"], self.photo_key,
+                                       self.placement_px)
+        texture_path, light_path = self.texture_path, self.light_path
+
+        def compose(folder: Path) -> dict:
+            stack = texture_maps_for_mesh(load_neural_texture(texture_path), self.normalized)
+            full, _ = load_photo(self.photo_path, max_side=COMPOSE_MAX_SIDE)   # the composite is at the photo's size
+            fh, fw = full.shape[:2]
+            camera, camera_from = light_camera(light_path, self.photo_info, fw, fh)
+            inputs = ComposeInputs(self.mesh, stack, full, self.placement.pixel((fh, fw)),
+                                   load_environment(light_path), camera)
+            extra = {"inputs": {"texture": str(texture_path), "light": str(light_path), "camera_from": camera_from}}
+            return compose_to_folder(inputs, config, folder, extra, progress=self.progress, cancel=self.cancel)
+
+        self.runner.run("compose", self.keys["compose"], compose)
+
+    def bake(self, bake: GameBake | None, skipped_why: str) -> None:
+        if bake is None:
+            self.runner.skip("bake", "skipped", skipped_why)
+            return
+        texture = self.texture_path
+        self.runner.run("bake", _digest("bake", self.upstream, self.asset_key), lambda folder: bake(texture, folder))
+
+    def finish(self) -> dict:
+        from dataclasses import replace
+
+        from .pipeline import environment_info, write_report
+
+        report = {
+            "stage": "run",
+            "config": _plain(replace(self.config, models=self.config.models)),
+            "inputs": {"asset": self.mesh.name, "asset_digest": self.asset_key, "photo": self.photo_info,
+                       "photo_digest": self.photo_key, "placement_px": list(self.placement_px)},
+            "stages": self.runner.stages,
+            "composite": str(self.out / "compose" / "composite.png"),
+            "reused": [name for name, s in self.runner.stages.items() if s["status"] == "reused"],
+            "environment": environment_info(),
+            "seconds_total": round(time.perf_counter() - self.started, 3),
+        }
+        write_report(self.out / "report.json", report)   # paths relative to the run's folder, which is swapped in
+        return report
 
 
 class _WithInpaint:
