@@ -12,6 +12,12 @@ and the report records which were used and each region's share of the map's powe
   did not clip keep their stored radiance (scale 1). A photo more than 3 stops darker than
   mid-grey was not metered that way (night, kept dark): its clipped texels then get the power the
   surfaces call for (below), spread over their solid angle, so a dark scene stays dark.
+  The equation multiplies a metering error by 1/f (f: the clipped fraction; 150x at f = 0.6%,
+  and cameras also meter by the median, which says nothing about clipped pixels), so its answer
+  is trusted by `exposure_weight(f)` (log-space shrink towards the stored value 1 when f is small)
+  and bounded by what the photo supports (`bound_scales`): the map's mean radiance stays within
+  `mean_bound` (4x) of the mean the photo's exposure implies: the flat environment that lights its
+  surfaces as they appear (S / albedo), and at least the photo's own mean radiance.
 - surface energy (unseen upper hemisphere): the photo's surfaces (texels below the near-light
   threshold, mean linear radiance S in photo exposure units) are lit by something. A camera-facing
   diffuse surface of albedo rho sees about half unseen light L and half ground (~S), so
@@ -44,7 +50,8 @@ class CueConfig:
     albedo_range: tuple[float, float] = (0.15, 0.5)   # reported as the bound on the unseen light
     lobe_sharpness: float = 4.0        # cos^k lobe of the unseen light around its centroid direction
     lobe_floor: float = 0.25           # the lobe's lowest value (relative), so no unseen texel is black
-    max_scale: float = 1e5
+    mean_bound: float = 4.0            # the map's mean radiance stays within this factor of the photo's mean
+    metering_error: float = 0.01       # log-units error of the metering that `exposure_weight` tolerates
     use_exposure: bool = True          # the cues can be switched off one by one (the bench's ablation)
     use_energy: bool = True
     use_lobe: bool = True
@@ -56,6 +63,9 @@ class CueConfig:
             raise InputError(f"albedo must be in [0.01, 1], got {self.albedo}.")
         if not 0.0 <= self.lobe_floor <= 1.0 or self.lobe_sharpness < 0:
             raise InputError("lobe_floor must be in [0, 1] and lobe_sharpness >= 0.")
+        if not self.mean_bound > 1.0 or not self.metering_error > 0.0:
+            raise InputError(f"mean_bound must be above 1 and metering_error positive, got {self.mean_bound} and "
+                             f"{self.metering_error}; use the defaults (4 and 0.01).")
 
 
 @dataclass
@@ -124,9 +134,12 @@ def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regi
         else:
             report["clipped_from"] = "exposure (the photo's metering)"
         out_regions["clipped"] = clipped_all
-        scales["clipped"] = float(np.clip(clip_scale, 1.0, config.max_scale))
+        weight = exposure_weight(float(clip_info.get("clipped_fraction") or 0.0), config.metering_error)
+        if report["clipped_from"].startswith("surface"):
+            weight = 1.0    # the surface power is bounded by construction
+        scales["clipped"] = float(max(clip_scale, 1.0) ** weight)
         report["clipped"] = {"size_sr": round(float((omega * np.ones((1, w)))[clipped_all].sum()), 5),
-                             "scale": round(scales["clipped"], 4)}
+                             "cue_scale": round(float(clip_scale), 4), "evidence_weight": round(weight, 4)}
 
     # The unseen light: mean radiance S / rho over the hidden upper hemisphere, as a lobe at its centroid.
     if hidden.any() and config.use_energy:
@@ -143,7 +156,7 @@ def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regi
         # Camera-facing surfaces see the unseen upper quarter-sphere and the ground (about S) half each.
         target = s_level * (2.0 / config.albedo - 1.0)
         held_mean = float(np.average(srgb_to_linear(out_ldr).mean(axis=-1)[hidden], weights=weights))
-        scales["unseen"] = float(np.clip(target / max(held_mean, 1e-12), 1e-3, config.max_scale))
+        scales["unseen"] = float(max(target / max(held_mean, 1e-12), 1e-3))
         out_regions["unseen"] = hidden
         lo, hi = config.albedo_range
         report["unseen"] = {"direction": np.round(centroid, 4).tolist(),
@@ -153,8 +166,67 @@ def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regi
     report["used"] = [name for name, on in (("exposure", config.use_exposure and "clipped" in scales),
                                             ("energy", "unseen" in scales),
                                             ("lobe", config.use_lobe and "unseen" in scales)) if on]
+    scales, report["bound"] = bound_scales(out_ldr, out_regions, scales, omega, implied_mean(photo_srgb, s_level, config.albedo), config)
     report["energy_share"] = _energy_shares(out_ldr, out_regions, scales, omega)
+    if "clipped" in scales:
+        report["clipped"]["scale"] = round(scales["clipped"], 4)
+    report["confidence"] = _confidence(report)
     return Cues(out_ldr, out_regions, scales, report)
+
+
+def exposure_weight(fraction: float, metering_error: float) -> float:
+    """How far the exposure cue's clipped scale is trusted (1: fully, 0: the stored value).
+
+    The cue's log-radiance moves by metering_error / f for a metering error of metering_error, so
+    it is trusted while that stays well inside a factor of 2 and falls off steeply after (4th power:
+    a 5% clipped window keeps 99% of it, a 0.6% speck 3%)."""
+    if fraction <= 0.0:
+        return 1.0
+    spread = metering_error / (fraction * math.log(2.0))
+    return float(1.0 / (1.0 + spread ** 4))
+
+
+def implied_mean(photo_srgb: np.ndarray, surface_level: float, albedo: float) -> float:
+    """The mean radiance the photo's exposure implies: a flat environment lighting its surfaces (mean
+    radiance S, albedo rho) as they appear, S / rho, and never below the photo's own mean radiance."""
+    return max(surface_level / albedo, float(srgb_to_linear(np.asarray(photo_srgb, np.float32)).mean()))
+
+
+def bound_scales(ldr: np.ndarray, regions: dict[str, np.ndarray], scales: dict[str, float], omega: np.ndarray,
+                 flat: float, config: CueConfig) -> tuple[dict[str, float], dict]:
+    """Scale the lights down (clipped first, then the unseen light) until the map's mean radiance is
+    within config.mean_bound of `flat` (`implied_mean`): no cue may claim more power than that."""
+    level = srgb_to_linear(ldr).mean(axis=-1).astype(np.float64) * (omega * np.ones((1, ldr.shape[1])))
+    total_omega = float((omega * np.ones((1, ldr.shape[1]))).sum())
+    powers = {k: float(level[m].sum()) for k, m in regions.items()}
+    fixed = float(level.sum()) - sum(powers.values())
+    limit = config.mean_bound * max(flat, 1e-6) * total_omega
+    current = fixed + sum(powers[k] * scales.get(k, 1.0) for k in powers)
+    info = {"implied_mean": round(flat, 5), "mean_before": round(current / total_omega, 5),
+            "limit_mean": round(limit / total_omega, 5), "bound": False}
+    out = dict(scales)
+    for name in ("clipped", "unseen"):
+        if current <= limit or name not in out:
+            continue
+        excess = current - limit
+        held = powers[name] * out[name]
+        lowest = powers[name] * (1.0 if name == "clipped" else 1e-3)
+        new = max(held - excess, lowest)
+        out[name] = new / max(powers[name], 1e-30)
+        current -= held - new
+        info["bound"] = True
+    info["mean_after"] = round(current / total_omega, 5)
+    return out, info
+
+
+def _confidence(report: dict) -> float:
+    """0..1: how much of the estimate rests on evidence (the exposure cue's weight, no bound hit)."""
+    c = 1.0
+    if "clipped" in report:
+        c *= 0.5 + 0.5 * report["clipped"]["evidence_weight"]
+    if report["bound"]["bound"]:
+        c *= 0.5
+    return round(c, 3)
 
 
 def _energy_shares(ldr: np.ndarray, regions: dict[str, np.ndarray], scales: dict[str, float],

@@ -417,6 +417,8 @@ def light_report(result: LightResult, config: LightConfig, outputs: dict[str, st
         "prior_scales": {k: round(v, 6) for k, v in result.prior_scales.items()},
         "map_size": [int(result.hdr.shape[1]), int(result.hdr.shape[0])],
         "hdr_max": float(result.hdr.max()),
+        # 0..1: how much of the map rests on evidence rather than on the flat environment it shrank to.
+        "confidence": result.decisions.get("cues", {}).get("confidence"),
         "seconds": round(result.seconds, 3),
         "outputs": outputs,
         "convention": "latitude-longitude, Blender's equirectangular Environment Texture (top row = +Z, "
