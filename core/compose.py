@@ -645,7 +645,7 @@ def light_camera(light_path, photo_info: dict, width: int, height: int, fov_deg:
     import json
     from pathlib import Path
 
-    from .lighting.estimate import LightConfig, default_photo_camera
+    from .photo import photo_camera_for
 
     report_path = Path(light_path).with_name("report.json")
     camera = None
@@ -657,7 +657,7 @@ def light_camera(light_path, photo_info: dict, width: int, height: int, fov_deg:
         except (KeyError, TypeError, ValueError, json.JSONDecodeError):
             camera = None
     if camera is None:
-        camera, fov_why = default_photo_camera(LightConfig(), photo_info, width, height)
+        camera, fov_why = photo_camera_for(photo_info, width, height)
         source = f"the light stage's default (no report.json beside the map); field of view from {fov_why['from']}"
     overrides = {k: v for k, v in (("fov_deg", fov_deg), ("pitch_deg", pitch_deg)) if v is not None}
     if overrides:

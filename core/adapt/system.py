@@ -27,10 +27,9 @@ from ..guidance.injection import ReferenceInjector
 from ..guidance.lora import LoraCritic, camera_condition
 from ..guidance.models import GuidanceModels, load_guidance_models, locate_models
 from ..guidance.views import global_view, latent_mask, local_view, masked_image
-from ..lighting.estimate import LightConfig, default_photo_camera
 from ..guidance.weighting import normal_weight_map
 from ..mesh import Mesh
-from ..photo import PhotoCamera
+from ..photo import PhotoCamera, photo_camera_for
 from ..placement import Placement
 from ..progress import ProgressCallback, check_cancel, emit
 from ..render import AssetRenderer, SceneOptions
@@ -362,7 +361,7 @@ class AdaptSystem:
 def _global_scene(inputs: AdaptInputs, config: AdaptConfig, photo: np.ndarray, envmap: np.ndarray) -> GlobalScene:
     """The photo, its camera (the light stage's) and the asset placed in it, for the global views."""
     h, w = photo.shape[:2]
-    camera = inputs.photo_camera or default_photo_camera(LightConfig(), {}, w, h)[0]
+    camera = inputs.photo_camera or photo_camera_for({}, w, h)[0]
     azimuths = [360.0 * k / config.views for k in range(config.views)]  # sample_camera's choices
     return GlobalScene(inputs.mesh, inputs.raster.resolution, photo, inputs.placement, camera, envmap, azimuths,
                        config.max_depth, config.shadow_type, config.shadow_spp, config.seed)
