@@ -18,7 +18,7 @@ import numpy as np
 from ..core.errors import InputError
 from ..core.game_bake import BakedMaterial
 from ..core.maps import resize_channels
-from .material import image_pixels_linear, principled_bsdf
+from .material import EXTENSION_OF_WRAP, image_pixels_linear, material_wrap, principled_bsdf
 from .node_values import source
 
 FORMATS = {"glb": "GLB", "gltf": "GLTF_SEPARATE"}
@@ -77,8 +77,11 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path) -> list[s
         a = np.round(np.clip(resize_channels(original, size, size), 0.0, 1.0) * 255.0).astype(np.uint8)
         rgba = np.concatenate([rgba, a[..., None]], axis=2)
         notes.append(f"alpha of '{alpha[0].image.name}' carried into the base colour image at {size}²")
+    # The maps were baked wrapped as the material's sampler says, so the exporter must write that sampler.
+    extension = EXTENSION_OF_WRAP[baked.wrap[0]] if baked.wrap[0] == baked.wrap[1] else "REPEAT"
     base = nodes.new("ShaderNodeTexImage")
     base.name = base.label = "SceneFit Base Color"
+    base.extension = extension
     base.image = _load_png(bpy, folder, f"{material.name}_base_color", rgba, "sRGB")
     base.location = (bsdf.location.x - 700, bsdf.location.y)
     links.new(base.outputs["Color"], bsdf.inputs["Base Color"])
@@ -98,6 +101,7 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path) -> list[s
         packed = np.stack([zeros, textured.get("Roughness", zeros), textured.get("Metallic", zeros)], axis=2)
         mr = nodes.new("ShaderNodeTexImage")
         mr.name = mr.label = "SceneFit Metallic Roughness"
+        mr.extension = extension
         mr.image = _load_png(bpy, folder, f"{material.name}_metallic_roughness", packed, "Non-Color")
         mr.location = (bsdf.location.x - 700, bsdf.location.y - 300)
         separate = nodes.new("ShaderNodeSeparateColor")
@@ -202,7 +206,7 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
         size = texture_size or default_texture_size(texture, len(slots))
         materials = [obj.material_slots[s].material for s in slots]
         baked = bake_game_maps(texture, mesh, [m.name for m in materials], size,
-                               [constant_channels(m) for m in materials])
+                               [constant_channels(m) for m in materials], [material_wrap(m) for m in materials])
         report = bake_object_to_gltf(obj, baked, slots, out_file, file_format, whole_scene=True, protect=protect)
         report.update({"asset": str(asset_path), "object": obj.name, "format": file_format, "texture_size": size})
     return report

@@ -92,13 +92,15 @@ _GLTF_SETTINGS_GROUPS = ("glTF Material Output", "glTF Settings")
 PROCEDURAL_BAKE_SIZE = 512
 
 
-def _read_input(bsdf, name: str, kind: str, material, obj, slot: int, read: list[str], bake_size: int):
-    """The input's value through its node chain; a procedural chain is baked with Cycles."""
+def _read_input(bsdf, name: str, kind: str, material, obj, slot: int, read: list[str], bake_size: int,
+                wrap: tuple[str, str] = ("repeat", "repeat")):
+    """The input's value through its node chain; a procedural chain is baked with Cycles (over UVs
+    outside [0, 1] too, wrapped as `wrap` says)."""
     trail: list[str] = []
     try:
         value = socket_value(bsdf.inputs[name], kind, trail, image_pixels_linear)
     except NotAnImageChain as why:
-        pixels = bake_socket(obj, slot, bsdf.inputs[name], bake_size, image_pixels_linear)
+        pixels = bake_socket(obj, slot, bsdf.inputs[name], bake_size, image_pixels_linear, wrap)
         read.append(f"{name} <- procedural setup ({why}) baked by Cycles to {bake_size}² "
                     f"(Blender's bake, emission pass)")
         value = pixels if kind == "color" else pixels[..., 0].copy()
@@ -109,6 +111,45 @@ def _read_input(bsdf, name: str, kind: str, material, obj, slot: int, read: list
         shown = ", ".join(f"{x:.4g}" for x in np.ravel(value))
         read.append(f"{name} <- constant {shown}")
     return np.clip(value, 0.0, 1.0) if isinstance(value, np.ndarray) else float(np.clip(value, 0.0, 1.0))
+
+
+# Blender's Image Texture extension -> how glTF's exporter writes the sampler (core.texture.uv_raster.WRAP_MODES).
+_WRAP_OF_EXTENSION = {"REPEAT": "repeat", "MIRROR": "mirror", "EXTEND": "clamp", "CLIP": "clamp"}
+EXTENSION_OF_WRAP = {"repeat": "REPEAT", "mirror": "MIRROR", "clamp": "EXTEND"}
+
+
+def _chain_images(socket) -> list:
+    """The Image Texture nodes in the chain behind `socket`, nearest first (their own UV inputs aside)."""
+    found, queue, seen = [], [socket], set()
+    while queue:
+        linked = source(queue.pop(0))
+        if linked is None or linked[0].name in seen:
+            continue
+        node = linked[0]
+        seen.add(node.name)
+        if node.type == "TEX_IMAGE":
+            found.append(node)
+        else:
+            queue.extend(s for s in node.inputs if s.is_linked)
+    return found
+
+
+def material_wrap(material, dropped: list[str] | None = None) -> tuple[str, str]:
+    """How the material's UVs outside [0, 1] read its maps, (u, v): the extension of the image behind
+    Base Color (else Roughness, else Metallic), as Blender's glTF importer sets it from the sampler
+    (REPEAT, MIRRORED_REPEAT, CLAMP_TO_EDGE); repeat without an image. Another image of these
+    inputs that wraps otherwise is noted in `dropped`."""
+    bsdf = principled_bsdf(material)
+    images = [n for name in ("Base Color", "Roughness", "Metallic") for n in _chain_images(bsdf.inputs[name])]
+    if not images:
+        return "repeat", "repeat"
+    mode = _WRAP_OF_EXTENSION.get(images[0].extension, "repeat")
+    others = sorted({n.image.name for n in images if _WRAP_OF_EXTENSION.get(n.extension, "repeat") != mode
+                     and n.image is not None})
+    if others and dropped is not None:
+        dropped.append(f"images {', '.join(others)} wrap otherwise than '{images[0].name}' ({mode}); SceneFit fits "
+                       f"and bakes the material's UVs outside [0, 1] as {mode}")
+    return mode, mode
 
 
 def _image_size(material) -> int:
@@ -206,9 +247,10 @@ def read_material(material, obj=None, slot: int = 0) -> Material:
     kept: list[str] = []
     dropped: list[str] = []
     size = _image_size(material)
-    roughness = _read_input(bsdf, "Roughness", "float", material, obj, slot, read, size)
-    metallic = _read_input(bsdf, "Metallic", "float", material, obj, slot, read, size)
-    base_color = _read_input(bsdf, "Base Color", "color", material, obj, slot, read, size)
+    wrap = material_wrap(material, dropped)
+    roughness = _read_input(bsdf, "Roughness", "float", material, obj, slot, read, size, wrap)
+    metallic = _read_input(bsdf, "Metallic", "float", material, obj, slot, read, size, wrap)
+    base_color = _read_input(bsdf, "Base Color", "color", material, obj, slot, read, size, wrap)
     if not (isinstance(base_color, np.ndarray) and base_color.ndim == 3):
         sizes = [m.shape for m in (roughness, metallic) if isinstance(m, np.ndarray)]
         h, w = sizes[0] if sizes else (CONSTANT_SIZE, CONSTANT_SIZE)
@@ -218,7 +260,7 @@ def read_material(material, obj=None, slot: int = 0) -> Material:
     maps = PBRMaps(base_color=np.ascontiguousarray(base_color, dtype=np.float32), roughness=roughness,
                    metallic=metallic, normal=normal)
     return Material(name=material.name, maps=maps, read=tuple(read), kept=tuple(kept), dropped=tuple(dropped),
-                    alpha_mode=mode)
+                    alpha_mode=mode, wrap=wrap)
 
 
 def maps_from_material(material, obj=None, slot: int = 0) -> PBRMaps:

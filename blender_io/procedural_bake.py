@@ -10,14 +10,22 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.errors import InputError
+from ..core.quiet import native_output_captured
 
 # Samples per texel: the emission of a procedural chain needs no light paths, only anti-aliasing.
 BAKE_SAMPLES = 4
+# Copies of the image (UV tiles) a chain is baked over at most: each is a bake of its own.
+MAX_COPIES = 64
 
 
-def bake_socket(obj, slot: int, socket, size: int, pixels_of) -> np.ndarray:
+def bake_socket(obj, slot: int, socket, size: int, pixels_of,
+                wrap: tuple[str, str] = ("repeat", "repeat")) -> np.ndarray:
     """(size, size, 3) linear values of what drives `socket` (an input of a node in the material of
-    `obj`'s slot `slot`), over that slot's faces in the mesh's active UV layout."""
+    `obj`'s slot `slot`), over that slot's faces in the mesh's active UV layout.
+
+    Blender bakes only UVs inside [0, 1]; faces whose UVs tile past it (wrap "repeat" or "mirror",
+    see core.texture.uv_raster) are baked once per copy of the image they reach, through a second
+    UV map that moves that copy onto [0, 1] while the chain still reads the mesh's own UVs."""
     import bmesh
     import bpy
 
@@ -63,14 +71,71 @@ def bake_socket(obj, slot: int, socket, size: int, pixels_of) -> np.ndarray:
         scene.cycles.device = "CPU"
         scene.cycles.samples = BAKE_SAMPLES
         scene.render.bake.margin_type = "EXTEND"
-        bpy.ops.object.bake(type="EMIT", margin=max(2, size // 64), use_clear=True)
-        return pixels_of(image)[..., :3].copy()
+        copies = _image_copies(mesh, wrap)
+        if len(copies) > MAX_COPIES:
+            raise InputError(f"'{socket.node.name}' drives {socket.name} of '{material.name}' through a procedural "
+                             f"node setup, over UVs that reach {len(copies)} copies of the texture (SceneFit bakes "
+                             f"at most {MAX_COPIES}); bake it to an image in Blender first.")
+        with native_output_captured():  # Blender says "Info: Baking map saved ..." for every bake
+            if copies == [(0, 0)]:
+                bpy.ops.object.bake(type="EMIT", margin=max(2, size // 64), use_clear=True)
+                return pixels_of(image)[..., :3].copy()
+            return _bake_copies(bpy, mesh, image, copies, wrap, pixels_of)
     finally:
         _restore_state(bpy, scene, saved)
         bpy.data.objects.remove(tmp)
         bpy.data.meshes.remove(mesh)
         bpy.data.materials.remove(mat)
         bpy.data.images.remove(image)
+
+
+def _image_copies(mesh, wrap: tuple[str, str]) -> list[tuple[int, int]]:
+    """The copies (u, v) of the image (tiles of the UV plane) that the mesh's faces reach; along an
+    axis that clamps only the image itself."""
+    uv = np.empty(len(mesh.loops) * 2, np.float32)
+    mesh.uv_layers.active.uv.foreach_get("vector", uv)
+    uv = uv.reshape(-1, 2).astype(np.float64)
+    starts = np.empty(len(mesh.polygons), np.int64)
+    mesh.polygons.foreach_get("loop_start", starts)
+    lo, hi = np.minimum.reduceat(uv, starts), np.maximum.reduceat(uv, starts)
+    spans = []
+    for axis, mode in enumerate(wrap):
+        first = np.floor(lo[:, axis]).astype(np.int64)
+        last = np.maximum(np.ceil(hi[:, axis]).astype(np.int64) - 1, first)  # a face ending at 1 stays in copy 0
+        spans.append(np.zeros((len(first), 2), np.int64) if mode == "clamp" else np.stack((first, last), 1))
+    copies = {(int(u), int(v)) for (u0, u1), (v0, v1) in zip(*spans)
+              for u in range(u0, u1 + 1) for v in range(v0, v1 + 1)}
+    return sorted(copies)
+
+
+def _bake_copies(bpy, mesh, image, copies: list[tuple[int, int]], wrap: tuple[str, str], pixels_of) -> np.ndarray:
+    """Bake each copy of the image in turn into `image` (margin 0, so no copy paints over another's
+    texels), then extend the baked texels into the rest as Blender's EXTEND margin would."""
+    from ..core.texture.uv_raster import seam_fill_index
+
+    own = mesh.uv_layers.active.name
+    mesh.uv_layers.new(name="SceneFit bake copy")
+    layers = mesh.uv_layers  # (references to UV maps go stale when one is added)
+    layers[own].active_render = True  # the chain reads the mesh's own UVs ...
+    layers.active = layers["SceneFit bake copy"]  # ... and the bake writes through this one
+    uv = np.empty(len(mesh.loops) * 2, np.float32)
+    layers[own].uv.foreach_get("vector", uv)
+    uv = uv.reshape(-1, 2)
+    image.pixels.foreach_set(np.zeros(len(image.pixels), np.float32))  # alpha 0: not baked yet
+    for copy in copies:
+        moved = uv.copy()
+        for axis, (mode, tile) in enumerate(zip(wrap, copy)):
+            if mode == "mirror" and tile % 2:
+                moved[:, axis] = tile + 1 - uv[:, axis]  # an odd copy reads the image backwards
+            elif mode != "clamp":
+                moved[:, axis] = uv[:, axis] - tile
+        layers["SceneFit bake copy"].uv.foreach_set("vector", moved.ravel())
+        bpy.ops.object.bake(type="EMIT", margin=0, use_clear=False)
+    pixels = pixels_of(image)
+    baked = pixels[..., 3] > 0.5  # the emission bake writes alpha 1 where it wrote
+    if not baked.any():
+        return pixels[..., :3].copy()
+    return pixels[..., :3].reshape(-1, 3)[seam_fill_index(baked)].reshape(pixels.shape[0], pixels.shape[1], 3)
 
 
 def _show_chain_as_emission(mat, socket) -> None:

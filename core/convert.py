@@ -12,13 +12,15 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, field, replace
+from functools import partial
+from typing import Callable
 
 import numpy as np
 import torch
 
 from .errors import InputError
 from .maps import PBRMaps
-from .materials import AssetMaterials, atlas_grid, atlas_maps, atlas_mesh, atlas_slices
+from .materials import AssetMaterials, atlas_grid, atlas_maps, atlas_mesh, atlas_raster, atlas_slices
 from .mesh import Mesh, NormalizeTransform, normalize_to_unit_sphere
 from .progress import ProgressCallback, emit
 from .texture.fit_direct import fit_direct, masked_psnr
@@ -117,13 +119,17 @@ def asset_stack(maps: PBRMaps, what: str = "the asset's maps") -> np.ndarray:
 
 
 def convert_asset(mesh: Mesh, maps: PBRMaps, config: ConvertConfig = ConvertConfig(),
-                  progress: ProgressCallback | None = None, cancel: threading.Event | None = None) -> ConvertResult:
-    """Fit a neural texture to the asset's maps. Nothing given is modified."""
+                  progress: ProgressCallback | None = None, cancel: threading.Event | None = None,
+                  rasterize: Callable[[Mesh, int], UVRaster] = rasterize_uv) -> ConvertResult:
+    """Fit a neural texture to the asset's maps. Nothing given is modified.
+
+    rasterize(normalised mesh, resolution): its UV raster; rasterize_uv (UVs repeating past [0, 1])
+    unless the material's sampler wraps otherwise (see convert_materials)."""
     started = time.perf_counter()
     normalized, transform = normalize_to_unit_sphere(mesh)
     resolution, why = choose_resolution(maps, config)
     emit(progress, "convert", 0, config.iterations, f"rasterising UVs at {resolution}²")
-    raster = rasterize_uv(normalized, resolution)
+    raster = rasterize(normalized, resolution)
     if raster.coverage == 0:
         raise InputError(f"Mesh '{mesh.name}' covers no texel of its UV map at {resolution}².")
     target = torch.from_numpy(target_stack(maps, resolution))
@@ -167,14 +173,17 @@ def convert_materials(asset: AssetMaterials, config: ConvertConfig = ConvertConf
     """
     maps = [m.maps for m in asset.materials]
     if len(maps) == 1:
-        result = convert_asset(asset.mesh, maps[0], config, progress=progress, cancel=cancel)
+        result = convert_asset(asset.mesh, maps[0], config, progress=progress, cancel=cancel,
+                               rasterize=partial(rasterize_uv, wrap=asset.materials[0].wrap))
         cell = result.raster.resolution[0]
     else:
         largest = max(maps, key=lambda m: max(m.resolution))
         cell, why = choose_resolution(largest, config)
         size = atlas_grid(len(maps)) * cell
+        # Each material wraps in its own cell, as `scenefit bake` rasterises it in its own UV square.
         result = convert_asset(atlas_mesh(asset.mesh), atlas_maps(maps, cell), replace(config, resolution=size),
-                               progress=progress, cancel=cancel)
+                               progress=progress, cancel=cancel,
+                               rasterize=lambda normalized, size: atlas_raster(normalized, asset.mesh, size, asset.wraps))
         result.decisions["resolution"] = cell
         result.decisions["resolution_reason"] = f"per material: {why}; {len(maps)} materials in a {size}² atlas"
     predicted = result.predicted()

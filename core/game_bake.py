@@ -35,6 +35,7 @@ class BakedMaterial:
     base_color: (N, N, 3) uint8 sRGB bytes. roughness, metallic: (N, N) uint8 linear bytes, or a
     float in [0, 1] when the channel is constant (it becomes glTF's roughnessFactor / metallicFactor).
     coverage: fraction of texels inside the material's UV triangles.
+    wrap: how its UVs outside [0, 1] read the maps, (u, v): what the exported sampler must say.
     """
 
     name: str
@@ -42,6 +43,7 @@ class BakedMaterial:
     roughness: np.ndarray | float
     metallic: np.ndarray | float
     coverage: float
+    wrap: tuple[str, str] = ("repeat", "repeat")
 
     def report(self) -> dict:
         def describe(value):
@@ -49,7 +51,7 @@ class BakedMaterial:
 
         return {"name": self.name, "size": int(self.base_color.shape[0]), "uv_coverage": round(self.coverage, 4),
                 "base_color": "texture (sRGB)", "roughness": describe(self.roughness),
-                "metallic": describe(self.metallic)}
+                "metallic": describe(self.metallic), "wrap": list(self.wrap)}
 
 
 def check_texture_size(size: int) -> int:
@@ -83,12 +85,15 @@ def _channel(plane: np.ndarray, mask: np.ndarray, original: float | None) -> np.
 
 
 def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: int,
-                   constants: list[dict[str, float]] | None = None) -> list[BakedMaterial]:
+                   constants: list[dict[str, float]] | None = None,
+                   wraps: list[tuple[str, str]] | None = None) -> list[BakedMaterial]:
     """Every material's maps at `size`² in its own UV layout.
 
     `mesh` is the asset as read (with material_index for several materials, in object space); it is
     normalised here exactly as for fitting, so the network sees the same points. constants[i]
     maps the channels ("roughness", "metallic") that were plain values in material i to those values.
+    wraps[i]: how material i's UVs outside [0, 1] read its maps (its sampler; default repeat), as
+    convert fitted them.
     """
     size = check_texture_size(size)
     if len(names) != mesh.material_count:
@@ -97,12 +102,13 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
     normalized, _ = normalize_to_unit_sphere(mesh)
     baked = []
     for index, name in enumerate(names):
-        raster = rasterize_uv(material_submesh(normalized, index), size)
+        wrap = tuple(wraps[index]) if wraps else ("repeat", "repeat")
+        raster = rasterize_uv(material_submesh(normalized, index), size, wrap=wrap)
         maps = bake_texture(texture, raster.position, raster.border, raster.fill_index)
         base = np.round(linear_to_srgb(maps[..., 0:3]) * 255.0).astype(np.uint8)
         was = constants[index] if constants else {}
         baked.append(BakedMaterial(name=name, base_color=base,
                                    roughness=_channel(maps[..., 3], raster.mask, was.get("roughness")),
                                    metallic=_channel(maps[..., 4], raster.mask, was.get("metallic")),
-                                   coverage=raster.coverage))
+                                   coverage=raster.coverage, wrap=wrap))
     return baked

@@ -17,6 +17,7 @@ import numpy as np
 from .errors import InputError
 from .maps import FLAT_NORMAL, PBRMaps
 from .mesh import Mesh
+from .texture.uv_raster import UVRaster, rasterize_uv, seam_fill_index, wrap_modes
 
 
 @dataclass(frozen=True)
@@ -27,6 +28,8 @@ class Material:
     kept: what is not fitted but carried unchanged into renders or game export (normal map, alpha,
         emission, occlusion).
     dropped: what SceneFit neither fits nor carries, and why.
+    wrap: how its UVs outside [0, 1] read the maps, (u, v), as its textures' sampler says (see
+        core.texture.uv_raster.WRAP_MODES): the maps are fitted and baked wrapped the same way.
     """
 
     name: str
@@ -35,11 +38,16 @@ class Material:
     kept: tuple[str, ...] = ()
     dropped: tuple[str, ...] = ()
     alpha_mode: str = "OPAQUE"           # glTF's OPAQUE, MASK or BLEND
+    wrap: tuple[str, str] = ("repeat", "repeat")
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "wrap", wrap_modes(self.wrap))
 
     def report(self) -> dict:
         h, w = self.maps.resolution
         return {"name": self.name, "resolution": [int(h), int(w)], "alpha_mode": self.alpha_mode,
-                "read": list(self.read), "kept": list(self.kept), "dropped": list(self.dropped)}
+                "wrap": list(self.wrap), "read": list(self.read), "kept": list(self.kept),
+                "dropped": list(self.dropped)}
 
 
 @dataclass(frozen=True)
@@ -67,6 +75,10 @@ class AssetMaterials:
 
     def report(self) -> list[dict]:
         return [m.report() for m in self.materials]
+
+    @property
+    def wraps(self) -> list[tuple[str, str]]:
+        return [m.wrap for m in self.materials]
 
 
 def atlas_grid(count: int) -> int:
@@ -101,6 +113,40 @@ def atlas_mesh(mesh: Mesh) -> Mesh:
     normals = None if mesh.normals is None else mesh.normals[vertex]
     return Mesh.from_arrays(mesh.positions[vertex], inverse.reshape(-1, 3), uv, normals, mesh.name,
                             mesh.material_index)
+
+
+def atlas_raster(atlas: Mesh, mesh: Mesh, size: int, wraps: list[tuple[str, str]]) -> UVRaster:
+    """The raster of `atlas` (atlas_mesh(mesh), normalised or not) at size²: each material's faces are
+    rasterised in their own UVs (those of `mesh`), wrapped as that material's sampler says, into its
+    cell. So UVs that tile past [0, 1] stay in their own cell instead of reaching into the next one."""
+    if mesh.material_index is None or mesh.material_count == 1:
+        return rasterize_uv(atlas, size, wrap=wraps[0])
+    count = mesh.material_count
+    cell = size // atlas_grid(count)
+    faces = np.arange(3 * len(mesh.faces)).reshape(-1, 3)
+    # The atlas's corners (its positions, e.g. normalised) with the asset's own UVs, face by face.
+    corners = Mesh.from_arrays(atlas.positions[atlas.faces].reshape(-1, 3), faces, mesh.uvs[mesh.faces].reshape(-1, 2),
+                               None if atlas.normals is None else atlas.normals[atlas.faces].reshape(-1, 3),
+                               mesh.name, mesh.material_index)
+    arrays = {"position": np.zeros((size, size, 3), np.float32), "mask": np.zeros((size, size), bool),
+              "border": np.zeros((size, size), bool), "face": np.full((size, size), -1, np.int32),
+              "barycentric": np.zeros((size, size, 3), np.float32),
+              "normal": None if atlas.normals is None else np.zeros((size, size, 3), np.float32)}
+    refusal = None
+    for index, (rows, cols) in enumerate(atlas_slices(count, cell)):
+        try:
+            raster = rasterize_uv(material_submesh(corners, index), cell, wrap=wraps[index])
+        except InputError as error:  # a material whose UVs cover no texel leaves its cell empty
+            refusal = refusal or error
+            continue
+        for name, plane in arrays.items():
+            if plane is not None:
+                plane[rows, cols] = getattr(raster, name)
+        ids = np.flatnonzero(mesh.material_index == index).astype(np.int32)  # the submesh's faces in mesh's order
+        arrays["face"][rows, cols] = np.where(raster.face >= 0, ids[np.maximum(raster.face, 0)], -1)
+    if not arrays["mask"].any():
+        raise refusal
+    return UVRaster(fill_index=seam_fill_index(arrays["border"]), **arrays)
 
 
 def material_submesh(mesh: Mesh, index: int) -> Mesh:

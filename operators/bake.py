@@ -12,6 +12,7 @@ import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 
 from ..blender_io.gltf_export import FORMATS, bake_copy_to_gltf, constant_channels
+from ..blender_io.material import material_wrap
 from ..core.errors import InputError
 from ..core.pipeline import write_report
 from . import work
@@ -67,7 +68,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
             out_file = Path(f"{bpy.path.clean_name(obj.name)}.{self.file_format}")
         self._object_name, self._slots, self._out_file = obj.name, [slot], out_file
         return work.bake_game_maps, {"texture": str(texture), "mesh": mesh, "names": [material.name],
-                                     "size": self.texture_size, "constants": [constant_channels(material)]}
+                                     "size": self.texture_size, "constants": [constant_channels(material)],
+                                     "wraps": [material_wrap(material)]}
 
     def apply(self, context, result) -> str:
         obj = bpy.data.objects.get(self._object_name)

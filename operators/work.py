@@ -191,6 +191,7 @@ def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Eve
     texture = load_neural_texture(data["texture"])
     size = data["size"] or default_texture_size(texture, len(data["names"]))
     emit(progress, "bake", 0, 1, f"{len(data['names'])} material(s) at {size}²")
-    baked = bake(texture, data["mesh"], list(data["names"]), size, [dict(c) for c in data["constants"]])
+    baked = bake(texture, data["mesh"], list(data["names"]), size, [dict(c) for c in data["constants"]],
+                 [tuple(w) for w in data.get("wraps", ())] or None)
     emit(progress, "bake", 1, 1, "maps ready")
     return {"baked": baked, "size": size}

@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytestmark = pytest.mark.blender
@@ -79,6 +80,24 @@ camera.location = (0, -4, 0)
 bpy.context.scene.collection.objects.link(camera)
 export(folder / "names.glb", export_cameras=True)
 bpy.ops.wm.save_as_mainfile(filepath=str(folder / "names.blend"))
+
+# UVs that tile: one material repeats its image over u, v in [1.2, 4.2], the other mirrors its own
+# over [-1, 1] (glTF samplers REPEAT and MIRRORED_REPEAT; the first lies wholly outside [0, 1]).
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.mesh.primitive_grid_add(x_subdivisions=12, y_subdivisions=12, size=2.0)
+grid = bpy.context.active_object
+grid.name = "Tiled"
+for name, extension in (("Tiles", "REPEAT"), ("Mirror", "MIRROR")):
+    mat = textured(name)
+    next(n for n in mat.node_tree.nodes if n.type == "TEX_IMAGE").extension = extension
+    grid.data.materials.append(mat)
+layer = grid.data.uv_layers.active.data
+for poly in grid.data.polygons:
+    poly.material_index = int(poly.center.x > 0)
+    for loop in poly.loop_indices:
+        u, v = layer[loop].uv
+        layer[loop].uv = (u * 3 + 1.2, v * 3 + 1.2) if poly.material_index == 0 else (u * 2 - 1, v * 2 - 1)
+export(folder / "tiled.glb")
 """
 
 
@@ -109,7 +128,7 @@ def convert_and_bake(asset: Path, work: Path) -> tuple[dict, dict]:
     report = json.loads((work / "convert" / "report.json").read_text())
     baked = work / "baked.glb"
     proc = scenefit("bake", str(asset), "--texture", str(work / "convert/maps/texture.pt"), "--out", str(baked),
-                    "--texture-size", "32")
+                    "--texture-size", "32", "--report", str(work / "bake.json"))
     assert proc.returncode == 0, proc.stderr[-2000:]
     return report, gltf_json(baked)
 
@@ -170,3 +189,63 @@ def test_object_naming_a_camera_lists_the_mesh_objects_there_are(assets, suffix,
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     assert f"'Camera' in 'names{suffix}' is a camera object, not a mesh; give one of its mesh objects: Cube." \
         in proc.stderr
+
+
+def test_tiling_uvs_convert_and_bake_alike_and_keep_their_samplers(assets, tmp_path):
+    """Convert fitted the atlas (UVs past a cell reached into the next one) while bake refused the
+    material whose UVs all lie outside [0, 1] ("covers no texel centre"); now both wrap each
+    material as its sampler says, cover the same texels, and the baked file keeps the samplers."""
+    report, out = convert_and_bake(assets / "tiled.glb", tmp_path)
+    converted = {m["name"]: m for m in report["decisions"]["materials"]}
+    baked = {m["name"]: m for m in json.loads((tmp_path / "bake.json").read_text())["materials"]}
+    for name in ("Tiles", "Mirror"):
+        assert converted[name]["uv_coverage"] == baked[name]["uv_coverage"] == 1.0, (converted, baked)
+    assert {m["name"]: m["wrap"] for m in report["materials"]} == {"Tiles": ["repeat", "repeat"],
+                                                                   "Mirror": ["mirror", "mirror"]}
+    samplers = {}
+    for material in out["materials"]:
+        texture = out["textures"][material["pbrMetallicRoughness"]["baseColorTexture"]["index"]]
+        sampler = out["samplers"][texture["sampler"]] if "sampler" in texture else {}
+        samplers[material["name"]] = (sampler.get("wrapS", 10497), sampler.get("wrapT", 10497))
+    assert samplers == {"Tiles": (10497, 10497), "Mirror": (33648, 33648)}  # REPEAT, MIRRORED_REPEAT
+
+
+PROCEDURAL_TILES = r"""
+import json
+import numpy as np
+import bpy
+from scenefit.blender_io.material import read_material
+
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.mesh.primitive_plane_add(size=2.0)
+plane = bpy.context.active_object
+for loop in plane.data.uv_layers.active.data:
+    loop.uv = (loop.uv[0] + 1.0, loop.uv[1] * 2.0 - 0.5)  # u in [1, 2], v in [-0.5, 1.5]
+mat = bpy.data.materials.new("Procedural")
+nodes, links = mat.node_tree.nodes, mat.node_tree.links
+bsdf = nodes["Principled BSDF"]
+rgb = nodes.new("ShaderNodeRGB")
+rgb.outputs[0].default_value = (0.2, 0.5, 0.8, 1.0)
+links.new(rgb.outputs[0], bsdf.inputs["Base Color"])
+coords, xyz, minus = nodes.new("ShaderNodeTexCoord"), nodes.new("ShaderNodeSeparateXYZ"), nodes.new("ShaderNodeMath")
+minus.operation, minus.inputs[1].default_value = "SUBTRACT", 1.0  # roughness = u - 1, read from the mesh's UVs
+links.new(coords.outputs["UV"], xyz.inputs[0])
+links.new(xyz.outputs["X"], minus.inputs[0])
+links.new(minus.outputs[0], bsdf.inputs["Roughness"])
+plane.data.materials.append(mat)
+material = read_material(mat, plane, 0)
+print("JSON" + json.dumps({"base": material.maps.base_color.tolist(), "rough": np.asarray(material.maps.roughness).tolist(),
+                           "uv_maps": [layer.name for layer in plane.data.uv_layers]}))
+"""
+
+
+def test_procedural_inputs_are_baked_over_uvs_that_tile(run_py):
+    """Blender bakes only UVs inside [0, 1]: a chain over u in [1, 2] came back all black. Each copy of
+    the image the faces reach is baked through a moved UV map, the chain reading the mesh's own UVs."""
+    proc = run_py(PROCEDURAL_TILES)
+    out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    base, rough = np.array(out["base"]), np.array(out["rough"])
+    assert np.abs(base - [0.2, 0.5, 0.8]).max() < 1e-3
+    u = (np.arange(rough.shape[1]) + 0.5) / rough.shape[1]  # texel centres: the chain's u - 1 there
+    assert np.abs(rough - u).max() < 2.0 / rough.shape[1], np.abs(rough - u).max()
+    assert out["uv_maps"] == ["UVMap"]  # the bake's own UV map went with its temporary mesh

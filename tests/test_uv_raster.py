@@ -193,3 +193,23 @@ def test_triangles_each_spanning_the_whole_square_stay_within_a_memory_bound(run
         assert measured["peak_mib"] < 160, (name, measured)
     assert out["half"]["coverage"] == pytest.approx(0.5, abs=0.01) and out["quads"]["coverage"] == 1.0
     assert out["fans"]["coverage"] > 0.9
+
+
+def test_each_material_of_the_atlas_wraps_in_its_own_cell_as_bake_rasterises_it():
+    """convert's atlas raster holds, in each material's cell, exactly what `scenefit bake` rasterises for
+    that material in its own UVs (so the two agree), with face numbers of the whole mesh."""
+    from scenefit.core.materials import atlas_mesh, atlas_raster, atlas_slices, material_submesh
+
+    sphere = tiled_sphere()
+    index = (sphere.positions[sphere.faces].mean(axis=1)[:, 2] > 0).astype(np.int32)  # upper half: material 1
+    mesh = Mesh.from_arrays(sphere.positions, sphere.faces, sphere.uvs, sphere.normals, "two", index)
+    wraps = [("repeat", "repeat"), ("mirror", "clamp")]
+    atlas = atlas_raster(atlas_mesh(mesh), mesh, 2 * 20, wraps)
+    assert atlas.mask.shape == (40, 40) and not atlas.position.flags.writeable
+    for material, (rows, cols) in enumerate(atlas_slices(2, 20)):
+        own = rasterize_uv(material_submesh(mesh, material), 20, wrap=wraps[material])
+        assert own.coverage > 0.3 and np.array_equal(atlas.mask[rows, cols], own.mask)
+        np.testing.assert_array_equal(atlas.position[rows, cols], own.position)
+        faces, ids = atlas.face[rows, cols], np.flatnonzero(index == material)  # the submesh's faces in the mesh
+        assert np.array_equal(faces[own.border], ids[own.face[own.border]]) and (faces[~own.border] == -1).all()
+    assert not atlas.mask[20:].any()  # two materials: the bottom row of the 2x2 atlas is empty

@@ -44,6 +44,12 @@ class UVRaster:
     barycentric: np.ndarray
     fill_index: np.ndarray
 
+    def __post_init__(self) -> None:
+        for array in (self.position, self.normal, self.mask, self.border, self.face, self.barycentric,
+                      self.fill_index):
+            if array is not None:
+                array.setflags(write=False)
+
     @property
     def resolution(self) -> tuple[int, int]:
         return self.mask.shape
@@ -159,7 +165,7 @@ def rasterize_uv(mesh: Mesh, height: int, width: int | None = None, border_width
         normal = normal.reshape(height, width, 3)
 
     border = border.reshape(height, width)
-    result = UVRaster(
+    return UVRaster(
         position=position.reshape(height, width, 3),
         normal=normal,
         mask=mask.reshape(height, width),
@@ -168,11 +174,6 @@ def rasterize_uv(mesh: Mesh, height: int, width: int | None = None, border_width
         barycentric=barycentric.reshape(height, width, 3),
         fill_index=seam_fill_index(border),
     )
-    for array in (result.position, result.normal, result.mask, result.border, result.face,
-                  result.barycentric, result.fill_index):
-        if array is not None:
-            array.setflags(write=False)
-    return result
 
 
 def seam_fill_index(mask: np.ndarray) -> np.ndarray:
