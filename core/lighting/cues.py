@@ -14,7 +14,8 @@ and the report records which were used and each region's share of the map's powe
   surfaces call for (below), spread over their solid angle, so a dark scene stays dark.
   The equation multiplies a metering error by 1/f (f: the clipped fraction; 150x at f = 0.6%,
   and cameras also meter by the median, which says nothing about clipped pixels), so its answer
-  is trusted by `exposure_weight(f)` (log-space shrink towards the stored value 1 when f is small)
+  is trusted by `exposure_weight(f)` (log-space shrink, when f is small, towards the surface prior:
+  the clipped texels carry the power the surfaces call for)
   and bounded by what the photo supports (`bound_scales`): the map's mean radiance stays within
   `mean_bound` (4x) of the mean the photo's exposure implies: the flat environment that lights its
   surfaces as they appear (S / albedo), and at least the photo's own mean radiance.
@@ -24,8 +25,10 @@ and the report records which were used and each region's share of the map's powe
   S = rho (L + S) / 2 and L = S (2 / rho - 1); rho = 0.25 by default, the report gives L for rho in
   [0.15, 0.5]. The upper hemisphere the photo did not see becomes the region "unseen" at mean L.
 - lobe (direction of the unseen light): a light that is not in the photo is where the photo did
-  not look: the unseen light is a cos^4 lobe (over a floor of 0.25) around the solid-angle
-  centroid of the unseen upper hemisphere, behind the camera and up, rather than spread evenly.
+  not look: the unseen light is a cos^4 lobe (over a floor of 0.25) at the azimuth of the unseen
+  upper hemisphere's centroid (behind the camera), turned towards the side of the photo that is
+  brighter (`photo_bright_side`: walls fall off away from a lamp, the sky brightens towards the
+  sun), 35 deg up (real lights sit low), or along the artist's `sun` when given.
 
     build_cues(photo, ldr, unseen, regions, thresholds, config) -> Cues (LDR, regions, scales, report)
 """
@@ -39,6 +42,7 @@ import numpy as np
 from ..errors import InputError
 from ..imageio import srgb_to_linear
 from ..render import equirect_directions
+from ..photo import PhotoCamera
 from .regions import RegionThresholds, intensity
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
@@ -93,8 +97,12 @@ def surface_radiance(photo_srgb: np.ndarray, threshold: float) -> tuple[np.ndarr
 
 
 def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regions: dict[str, np.ndarray],
-               thresholds: RegionThresholds = RegionThresholds(), config: CueConfig = CueConfig()) -> Cues:
-    """Scales for the bright regions and an "unseen" region (upper hemisphere the photo did not see)."""
+               thresholds: RegionThresholds = RegionThresholds(), config: CueConfig = CueConfig(),
+               camera: PhotoCamera | None = None, sun: np.ndarray | None = None) -> Cues:
+    """Scales for the bright regions and an "unseen" region (upper hemisphere the photo did not see).
+
+    camera: the photo's camera (its right/up give the photo's bright side a world direction);
+    sun: a world unit vector given by the artist, the unseen light's direction then."""
     h, w = unseen.shape
     omega = solid_angles(h, w)
     dirs = equirect_directions(h, w)
@@ -127,42 +135,17 @@ def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regi
         else:
             del out_regions[name]
     if clipped_all.any() and config.use_exposure:
-        if clip_scale is None:   # not metered: the power the surfaces call for, over the clipped texels
-            level = srgb_to_linear(ldr).mean(axis=-1).astype(np.float64)
-            clip_scale = power / max(float((level * omega)[clipped_all].sum()), 1e-12)
-            report["clipped_from"] = "surface power (the photo is not metered to mid-grey)"
-        else:
-            report["clipped_from"] = "exposure (the photo's metering)"
         out_regions["clipped"] = clipped_all
-        weight = exposure_weight(float(clip_info.get("clipped_fraction") or 0.0), config.metering_error)
-        if report["clipped_from"].startswith("surface"):
-            weight = 1.0    # the surface power is bounded by construction
-        scales["clipped"] = float(max(clip_scale, 1.0) ** weight)
-        report["clipped"] = {"size_sr": round(float((omega * np.ones((1, w)))[clipped_all].sum()), 5),
-                             "cue_scale": round(float(clip_scale), 4), "evidence_weight": round(weight, 4)}
+        scales["clipped"], report["clipped"] = _clipped_scale(ldr, clipped_all, omega, clip_scale, clip_info,
+                                                              power, config)
+        report["clipped_from"] = report["clipped"]["from"]
 
-    # The unseen light: mean radiance S / rho over the hidden upper hemisphere, as a lobe at its centroid.
+    # The unseen light: mean radiance S / rho over the hidden upper hemisphere, as a lobe.
     if hidden.any() and config.use_energy:
-        weights = (omega * np.ones((1, w)))[hidden]
-        centroid = (dirs[hidden] * weights[:, None]).sum(axis=0)
-        centroid /= max(np.linalg.norm(centroid), 1e-12)
-        lobe = np.maximum(dirs @ centroid, 0.0) ** config.lobe_sharpness
-        shade = config.lobe_floor + (1.0 - config.lobe_floor) * lobe if config.use_lobe else np.ones((h, w))
-        linear = srgb_to_linear(out_ldr)
-        linear[hidden] *= shade[hidden, None]
-        from ..imageio import linear_to_srgb
-
-        out_ldr = linear_to_srgb(linear).astype(np.float32)
-        # Camera-facing surfaces see the unseen upper quarter-sphere and the ground (about S) half each.
-        target = s_level * (2.0 / config.albedo - 1.0)
-        held_mean = float(np.average(srgb_to_linear(out_ldr).mean(axis=-1)[hidden], weights=weights))
-        scales["unseen"] = float(max(target / max(held_mean, 1e-12), 1e-3))
+        direction, report["direction"] = unseen_light_direction(photo_srgb, hidden, omega, dirs, camera, sun)
+        out_ldr, scales["unseen"], report["unseen"] = _unseen_light(out_ldr, hidden, omega, dirs, direction, s_level,
+                                                                    config)
         out_regions["unseen"] = hidden
-        lo, hi = config.albedo_range
-        report["unseen"] = {"direction": np.round(centroid, 4).tolist(),
-                            "mean_radiance": round(target, 5),
-                            "mean_radiance_range": [round(s_level * (2 / hi - 1), 5), round(s_level * (2 / lo - 1), 5)],
-                            "fraction_of_map": round(float(hidden.mean()), 4)}
     report["used"] = [name for name, on in (("exposure", config.use_exposure and "clipped" in scales),
                                             ("energy", "unseen" in scales),
                                             ("lobe", config.use_lobe and "unseen" in scales)) if on]
@@ -174,8 +157,97 @@ def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regi
     return Cues(out_ldr, out_regions, scales, report)
 
 
+def _unseen_light(ldr: np.ndarray, hidden: np.ndarray, omega: np.ndarray, dirs: np.ndarray, direction: np.ndarray,
+                  s_level: float, config: CueConfig) -> tuple[np.ndarray, float, dict]:
+    """The hidden upper hemisphere shaded as a cos^k lobe around `direction`, and the scale that gives it
+    mean radiance S (2 / rho - 1): camera-facing surfaces see it and the ground (about S) half each."""
+    from ..imageio import linear_to_srgb
+
+    h, w = hidden.shape
+    weights = (omega * np.ones((1, w)))[hidden]
+    lobe = np.maximum(dirs @ direction, 0.0) ** config.lobe_sharpness
+    shade = config.lobe_floor + (1.0 - config.lobe_floor) * lobe if config.use_lobe else np.ones((h, w))
+    linear = srgb_to_linear(ldr)
+    linear[hidden] *= shade[hidden, None]
+    out_ldr = linear_to_srgb(linear).astype(np.float32)
+    target = s_level * (2.0 / config.albedo - 1.0)
+    held_mean = float(np.average(srgb_to_linear(out_ldr).mean(axis=-1)[hidden], weights=weights))
+    lo, hi = config.albedo_range
+    return out_ldr, float(max(target / max(held_mean, 1e-12), 1e-3)), {
+        "direction": np.round(direction, 4).tolist(), "mean_radiance": round(target, 5),
+        "mean_radiance_range": [round(s_level * (2 / hi - 1), 5), round(s_level * (2 / lo - 1), 5)],
+        "fraction_of_map": round(float(hidden.mean()), 4)}
+
+
+def photo_bright_side(photo_srgb: np.ndarray) -> tuple[float, float]:
+    """(x, y) in [-1, 1]: how far the photo's light-weighted centre sits right (x) and up (y) of its middle.
+
+    A light out of frame brightens the side of the view nearest it (walls and floor fall off away
+    from a lamp or window, the sky brightens towards the sun), so the weighted centre leans that way."""
+    lum = np.maximum(srgb_to_linear(np.asarray(photo_srgb, np.float32)) @ LUMINANCE, 0.0).astype(np.float64)
+    h, w = lum.shape
+    xs = (np.arange(w) + 0.5) / w * 2 - 1
+    ys = 1 - (np.arange(h) + 0.5) / h * 2
+    total = max(float(lum.sum()), 1e-12)
+    # The centre of a uniform photo is 0; a photo lit only at one edge reaches about +-1 after the x2.
+    return (float(np.clip(2.0 * (lum.sum(axis=0) @ xs) / total, -1, 1)),
+            float(np.clip(2.0 * (lum.sum(axis=1) @ ys) / total, -1, 1)))
+
+
+SIDE_GAIN = 1.5        # how far the lobe turns towards the photo's bright side (1: 45 deg for a one-sided photo)
+LOBE_ELEVATION_DEG = 35.0   # suns, lamps and windows sit low: 6-49 deg (median 28) on the corpus maps;
+                            # the hidden hemisphere's centroid alone put every light at 54-66 deg
+
+
+def unseen_light_direction(photo_srgb: np.ndarray, hidden: np.ndarray, omega: np.ndarray, dirs: np.ndarray,
+                           camera: PhotoCamera | None, sun: np.ndarray | None) -> tuple[np.ndarray, dict]:
+    """The unseen light's direction: the artist's sun when given; else the azimuth of the hidden upper
+    hemisphere's centroid (behind the camera) turned towards the side of the photo that is brighter,
+    at LOBE_ELEVATION_DEG."""
+    if sun is not None:
+        d = np.asarray(sun, np.float64)
+        return d / max(np.linalg.norm(d), 1e-12), {"from": "the artist's --sun", "vector": np.round(d, 4).tolist()}
+    weights = (omega * np.ones((1, hidden.shape[1])))[hidden]
+    centroid = (dirs[hidden] * weights[:, None]).sum(axis=0)
+    horizontal = np.array([centroid[0], centroid[1], 0.0])
+    info: dict = {"from": "azimuth of the unseen upper hemisphere's centroid"}
+    if camera is not None:
+        right = camera.basis()[1]
+        side_x, side_y = photo_bright_side(photo_srgb)
+        horizontal = horizontal / max(np.linalg.norm(horizontal), 1e-12) + SIDE_GAIN * side_x * right
+        info = {"from": "unseen centroid's azimuth turned towards the photo's bright side",
+                "bright_side": [round(side_x, 4), round(side_y, 4)]}
+    norm = np.linalg.norm(horizontal)
+    if norm < 1e-9:   # the hidden part is all overhead: the light is there
+        return np.array([0.0, 0.0, 1.0]), info
+    el = math.radians(LOBE_ELEVATION_DEG)
+    direction = np.array([*(horizontal[:2] / norm * math.cos(el)), math.sin(el)])
+    info["elevation_deg"] = LOBE_ELEVATION_DEG
+    return direction, info
+
+
+def _clipped_scale(ldr: np.ndarray, clipped: np.ndarray, omega: np.ndarray, cue_scale: float | None,
+                   cue_info: dict, power: float, config: CueConfig) -> tuple[float, dict]:
+    """The clipped texels' scale: the exposure cue's, trusted by `exposure_weight`, shrunk in log space
+    towards the surface prior (the clipped lights carry the power the surfaces call for); a photo not
+    metered to mid-grey (kept dark) takes the surface prior alone."""
+    level = srgb_to_linear(ldr).mean(axis=-1).astype(np.float64)
+    stored = max(float((level * omega)[clipped].sum()), 1e-12)
+    surface = max(power / stored, 1.0)
+    if cue_scale is None:
+        weight, source = 0.0, "surface power (the photo is not metered to mid-grey)"
+    else:
+        weight = exposure_weight(float(cue_info.get("clipped_fraction") or 0.0), config.metering_error)
+        source = "exposure (the photo's metering), shrunk towards the surface power by its evidence weight"
+    cue = max(cue_scale or 1.0, 1.0)
+    scale = math.exp(weight * math.log(cue) + (1.0 - weight) * math.log(surface))
+    return scale, {"from": source, "size_sr": round(float((omega * np.ones((1, ldr.shape[1])))[clipped].sum()), 5),
+                   "cue_scale": round(float(cue), 4), "surface_scale": round(surface, 4),
+                   "evidence_weight": round(weight, 4)}
+
+
 def exposure_weight(fraction: float, metering_error: float) -> float:
-    """How far the exposure cue's clipped scale is trusted (1: fully, 0: the stored value).
+    """How far the exposure cue's clipped scale is trusted (1: fully, 0: the surface prior instead).
 
     The cue's log-radiance moves by metering_error / f for a metering error of metering_error, so
     it is trusted while that stays well inside a factor of 2 and falls off steeply after (4th power:
@@ -222,7 +294,7 @@ def bound_scales(ldr: np.ndarray, regions: dict[str, np.ndarray], scales: dict[s
 def _confidence(report: dict) -> float:
     """0..1: how much of the estimate rests on evidence (the exposure cue's weight, no bound hit)."""
     c = 1.0
-    if "clipped" in report:
+    if "clipped" in report and not report["clipped"]["from"].startswith("surface"):
         c *= 0.5 + 0.5 * report["clipped"]["evidence_weight"]
     if report["bound"]["bound"]:
         c *= 0.5

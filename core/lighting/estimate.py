@@ -266,7 +266,7 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     ldr = pano.ldr
     regions = bright_regions(ldr, pano.distance, scene_type, config.thresholds)
     if config.prior_type == "cues":
-        cues = build_cues(photo, ldr, pano.unseen, regions, config.thresholds, config.cues)
+        cues = build_cues(photo, ldr, pano.unseen, regions, config.thresholds, config.cues, camera=photo_camera)
         ldr, regions, prior = cues.ldr, cues.regions, cues.scales
         decisions["cues"] = cues.report
     else:
