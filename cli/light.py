@@ -5,7 +5,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 from .options import (add_dry_run_arg, add_elevation_arg, add_model_args, add_output_args, add_placement_args,
-                      add_preset_args, model_config, output, placement, positive_float, positive_int, print_config,
+                      add_preset_args, model_config, output, placement, positive_float, positive_int,
                       progress, require)
 
 
@@ -44,12 +44,23 @@ def resolve_config(args, critic: str):
     return config
 
 
+def print_strict_json(config: dict) -> int:
+    """--dry-run: the resolved configuration as strict JSON (an infinite distance threshold is null)."""
+    import json
+
+    from ..core.atomic import strict_json
+
+    plain = json.loads(json.dumps(config, default=str))   # objects as their text, as print_config did
+    print(json.dumps(strict_json(plain), indent=2, allow_nan=False))
+    return 0
+
+
 def run(args) -> int:
     if args.dry_run:
         config = resolve_config(args, "diffusion" if args.critic == "auto" else args.critic)
-        return print_config({"stage": "light", "preset": args.preset, "config": asdict(config),
-                             "note": "--critic auto resolves to diffusion when the SD2 weights are found"
-                             if args.critic == "auto" else ""})
+        return print_strict_json({"stage": "light", "preset": args.preset, "config": asdict(config),
+                                  "note": "--critic auto resolves to diffusion when the SD2 weights are found"
+                                  if args.critic == "auto" else ""})
     require(args, "--photo", "--out")
     with output(args) as out:
         return _light(args, out)
@@ -71,8 +82,9 @@ def _light(args, out: Path) -> int:
     report["environment"] = environment_info()
     write_report(out / "report.json", report)
     depth_used = result.decisions.get("depth", {}).get("method", "none (outdoor)")
-    print(f"light: {result.decisions['scene_type']['chosen']} scene, depth {depth_used}, scales "
-          f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {Path(args.out) / 'light.exr'}")
+    if not args.quiet:
+        print(f"light: {result.decisions['scene_type']['chosen']} scene, depth {depth_used}, scales "
+              f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {Path(args.out) / 'light.exr'}")
     return 0
 
 

@@ -14,7 +14,9 @@ naming the model, where it was looked for and how to provide it.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -49,11 +51,42 @@ class DepthResult:
     detail: dict
 
 
+# depth_type "auto" decides once per process that a model is absent (importing transformers to find
+# out cost about 3 s per indoor photo): the ModelMissingError is kept here and raised again.
+_ABSENT: dict[tuple, ModelMissingError] = {}
+
+
+def _hub_cache(cache_dir: str | None) -> Path:
+    return Path(cache_dir).expanduser() if cache_dir else Path(os.environ.get("HF_HUB_CACHE") or os.path.join(
+        os.environ.get("HF_HOME", os.path.expanduser("~/.cache/huggingface")), "hub"))
+
+
+def _hub_snapshot_present(model: str, cache_dir: str | None) -> bool:
+    """Whether a hub id has a snapshot holding config.json in the Hugging Face cache (a file system look)."""
+    snapshots = _hub_cache(cache_dir) / f"models--{model.replace('/', '--')}" / "snapshots"
+    return snapshots.is_dir() and any((s / "config.json").is_file() for s in snapshots.iterdir())
+
+
 def load_depth_model(config: DepthConfig):
     """The configured model through core/guidance/models.py (loaded once per process); depth_type
-    "auto" looks only on this machine."""
+    "auto" looks only on this machine, and a model found absent stays absent for the process."""
     local_only = True if config.depth_type == "auto" else config.local_files_only
-    return load_depth_estimator(config.model, config.cache_dir, local_only, config.device)
+    key = (config.model, config.cache_dir, config.device)
+    if config.depth_type == "auto":
+        if key in _ABSENT:
+            raise _ABSENT[key]
+        is_folder = Path(config.model).expanduser().exists() or config.model.startswith((".", "/", "~"))
+        if not is_folder and not _hub_snapshot_present(config.model, config.cache_dir):
+            _ABSENT[key] = ModelMissingError(
+                f"The depth model '{config.model}' is not in the Hugging Face cache {_hub_cache(config.cache_dir)}; download it "
+                f"(`huggingface-cli download {config.model}`) or pass a local folder (--depth-model PATH).")
+            raise _ABSENT[key]
+    try:
+        return load_depth_estimator(config.model, config.cache_dir, local_only, config.device)
+    except ModelMissingError as error:
+        if config.depth_type == "auto":
+            _ABSENT[key] = error
+        raise
 
 
 def align_to_floor(prediction: np.ndarray, kind: str, camera: PhotoCamera, placement: FloorPoint,

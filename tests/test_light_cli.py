@@ -1,0 +1,69 @@
+"""scenefit light's small promises (issue 21): strict JSON from --dry-run, a silent --quiet, the depth
+model's absence decided once per process, and the artist's --sun."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from scenefit.core.imageio import write_image
+
+
+def _strict(text: str):
+    def refuse(constant):
+        raise ValueError(f"non-strict JSON constant {constant}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_dry_run_prints_strict_json(capsys):
+    from scenefit.cli import main
+
+    assert main(["light", "--dry-run"]) == 0
+    config = _strict(capsys.readouterr().out)["config"]
+    # The distance threshold is +inf (every texel of finite depth is near): null in strict JSON.
+    assert config["thresholds"]["distance"] is None
+
+
+def test_quiet_prints_nothing_on_success(tmp_path, capsys):
+    from scenefit.cli import main
+
+    pixels = np.full((24, 32, 3), 0.4, np.float32)
+    pixels[:6] = 1.0
+    write_image(tmp_path / "photo.png", pixels)
+    code = main(["light", "--photo", str(tmp_path / "photo.png"), "--at", "0.5,0.8", "--out", str(tmp_path / "out"),
+                 "--preset", "draft", "--depth", "geometric", "--critic", "none", "--outpaint", "prior", "--quiet"])
+    captured = capsys.readouterr()
+    assert code == 0 and (tmp_path / "out" / "light.exr").is_file()
+    assert captured.out == "" and captured.err == ""
+
+
+def test_an_absent_depth_model_is_looked_for_once_per_process(tmp_path, monkeypatch):
+    import time
+
+    from scenefit.core.lighting import depth
+    from scenefit.core.lighting.panorama import place_on_floor
+    from scenefit.core.photo import PhotoCamera
+
+    calls = []
+    monkeypatch.setattr(depth, "load_depth_estimator", lambda *a, **k: calls.append(a) or (_ for _ in ()).throw(
+        depth.ModelMissingError("not here")))
+    camera = PhotoCamera(width=32, height=24)
+    placement = place_on_floor(camera, (16.0, 20.0))
+    photo = np.full((24, 32, 3), 0.5, np.float32)
+    config = depth.DepthConfig(model="nobody/no-such-depth-model", cache_dir=str(tmp_path))
+    for _ in range(3):
+        start = time.perf_counter()
+        result = depth.estimate_ray_distance(photo, camera, placement, config)
+        assert result.method == "geometric" and time.perf_counter() - start < 0.1
+    # Not in the cache: decided by a file-system look, the loader (transformers) never asked.
+    assert calls == [] and "no-such-depth-model" in result.detail["why"]
+    # A folder that fails to load is asked once, then remembered.
+    folder = tmp_path / "broken"
+    folder.mkdir()
+    broken = depth.DepthConfig(model=str(folder))
+    for _ in range(3):
+        assert depth.estimate_ray_distance(photo, camera, placement, broken).method == "geometric"
+    assert len(calls) == 1
