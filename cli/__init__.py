@@ -12,10 +12,10 @@ import sys
 from ..core.errors import Cancelled, SceneFitError
 from ..core.os_errors import os_error_sentence, with_out_paths
 from ..core.output_folder import interrupted_message
-from . import adapt, bake, batch, compose, convert, demo, export, light, prompt, render, run
+from . import adapt, bake, camera, batch, compose, convert, demo, export, light, prompt, render, run
 
 # The order `scenefit --help` lists them in.
-COMMANDS = (convert, render, export, bake, light, prompt, adapt, compose, run, batch, demo)
+COMMANDS = (convert, render, export, bake, camera, light, prompt, adapt, compose, run, batch, demo)
 
 
 class OneLineParser(argparse.ArgumentParser):

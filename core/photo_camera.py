@@ -1,0 +1,640 @@
+"""The photo's camera, found rather than guessed: horizontal field of view, pitch, roll and horizon.
+
+    estimate_photo_camera(photo_path, fspy_path=None) -> CameraEstimate
+
+Each field comes from the best source that has it, best first:
+  fspy       an fSpy project (the artist drew the vanishing lines by hand);
+  exif_35mm  the 35 mm equivalent focal length (field of view only; core/lighting's load_photo);
+  exif_sensor  the focal length with the sensor width of a known camera model (field of view only);
+  lines      the photo's own straight lines: segments from OpenCV's line segment detector, grouped by
+             the three orthogonal (Manhattan) directions of a built scene on the Gauss sphere;
+  default    what the light stage assumes without any of these (60 deg, pitch -10 deg, roll 0).
+Where the lines are weak (a forest, a close-up, a smooth sky) the estimate says so in `notes` and the
+field keeps its fallback, so a report never passes a guess off as a measurement.
+
+Camera coordinates inside this module: x right, y up, z forward (the view axis); image points are
+normalised so that the half width is 1 (x_n = (u - W/2) / (W/2), y_n = (H/2 - v) / (W/2)) and the
+ray through (x_n, y_n) is (x_n, y_n, F) with F = 1 / tan(horizontal fov / 2). The principal point is
+the image centre, as in core/photo.PhotoCamera.
+"""
+from __future__ import annotations
+
+import json
+import math
+import struct
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .photo import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG, PHOTO_YAW_DEG, PhotoCamera
+
+SOURCES = ("fspy", "exif_35mm", "exif_sensor", "lines", "default")
+# Sensor width (long side, mm) of common cameras whose JPEGs may lack the 35 mm equivalent, from the
+# makers' specification sheets; matched on the start of the EXIF Model, longest key first.
+SENSOR_WIDTH_MM = {
+    "CANON EOS 5D": 36.0, "CANON EOS 6D": 35.8, "CANON EOS R5": 36.0, "CANON EOS R6": 35.9,
+    "CANON EOS 7D": 22.3, "CANON EOS 80D": 22.5, "CANON EOS 90D": 22.3, "CANON EOS 2000D": 22.3,
+    "CANON EOS REBEL": 22.3, "CANON EOS M50": 22.3,
+    "NIKON D850": 35.9, "NIKON D810": 35.9, "NIKON D750": 35.9, "NIKON D3500": 23.5, "NIKON D5600": 23.5,
+    "NIKON D7500": 23.5, "NIKON Z 6": 35.9, "NIKON Z 7": 35.9,
+    "ILCE-7": 35.8, "ILCE-9": 35.6, "ILCE-6": 23.5,          # Sony A7 / A9 (full frame), A6xxx (APS-C)
+    "X-T3": 23.5, "X-T4": 23.5, "X-T30": 23.5, "X100": 23.6,   # Fujifilm
+    "DC-GH5": 17.3, "DMC-GH4": 17.3, "E-M1": 17.3, "E-M5": 17.3, "E-M10": 17.3,   # Micro Four Thirds
+    "DSC-RX100": 13.2,                                          # Sony 1-inch compacts
+}
+
+
+@dataclass(frozen=True)
+class CameraEstimate:
+    """One photo's camera. Pixel positions (horizon, vanishing points) are in the upright photo at its
+    stored size, x right and y down, pixel centres at +0.5 (as PhotoCamera.project)."""
+
+    fov_deg: float
+    pitch_deg: float
+    roll_deg: float
+    fov_source: str
+    pitch_source: str
+    roll_source: str
+    fov_confidence: float
+    pitch_confidence: float
+    roll_confidence: float
+    width: int
+    height: int
+    horizon: tuple[tuple[float, float], tuple[float, float]]
+    vanishing_points: dict = field(default_factory=dict)
+    lines: dict = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+
+    @property
+    def source(self) -> str:
+        """The fields' sources, best first, joined by '+' ('lines', 'exif_35mm+lines', 'default')."""
+        used = {self.fov_source, self.pitch_source, self.roll_source}
+        return "+".join(s for s in SOURCES if s in used)
+
+    @property
+    def fallback(self) -> bool:
+        return "default" in (self.fov_source, self.pitch_source, self.roll_source)
+
+    def photo_camera(self, yaw_deg: float = PHOTO_YAW_DEG, width: int | None = None,
+                     height: int | None = None) -> PhotoCamera:
+        """The camera as the stages use it (looking along +Y by default, the composition's azimuth 0)."""
+        return PhotoCamera(yaw_deg=yaw_deg, pitch_deg=self.pitch_deg, fov_deg=self.fov_deg,
+                           width=width or self.width, height=height or self.height, roll_deg=self.roll_deg)
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["horizon"] = [list(p) for p in self.horizon]
+        out["notes"] = list(self.notes)
+        return {"source": self.source, "fallback": self.fallback, **out}
+
+    def to_json(self, indent: int | None = None) -> str:
+        """Strict JSON: NaN or infinity anywhere raises instead of writing a non-standard token."""
+        return json.dumps(self.to_dict(), indent=indent, allow_nan=False)
+
+
+def estimate_photo_camera(photo_path: str | Path, fspy_path: str | Path | None = None) -> CameraEstimate:
+    """The photo's camera from the best source there is (module docstring); raises InputError with one
+    sentence for a photo or fSpy file that cannot be read."""
+    from .lighting.estimate import load_photo
+
+    srgb, info = load_photo(photo_path)
+    width, height = (int(v) for v in info["size"])
+    if fspy_path is not None:
+        return _from_fspy(read_fspy(fspy_path), width, height)
+    exif_fov, exif_source, notes = _exif_fov(Path(photo_path), info, srgb.shape[1], srgb.shape[0])
+    fit = fit_lines(srgb, exif_fov)
+    notes += fit.notes
+    fov, fov_src, fov_conf = _pick_fov(fit, exif_fov, exif_source)
+    if fit.usable and fov_src == "default":   # pitch and roll again, at the default field of view
+        fit = refit_at_fov(fit, fov, FOV_UNKNOWN_RANGE_DEG)
+        notes += fit.notes[1:]
+    pitch, pitch_src, pitch_conf = _pick(fit.pitch_deg, fit.pitch_confidence, DEFAULT_PITCH_DEG)
+    roll, roll_src, roll_conf = _pick(fit.roll_deg, fit.roll_confidence, 0.0)
+    notes += _fallback_notes(fov_src, pitch_src, roll_src)
+    return _estimate(fov, pitch, roll, (fov_src, pitch_src, roll_src), (fov_conf, pitch_conf, roll_conf),
+                     width, height, fit, tuple(notes))
+
+
+# -- choosing between sources ----------------------------------------------------------------------
+# The lines' field of view is used when its confidence reaches this, else EXIF's or the default. Their
+# pitch and roll are used whenever the lines show a built scene (LinesFit.usable): even at an assumed
+# field of view the horizon they find beats the default; their confidence says how far to trust it.
+MIN_CONFIDENCE = 0.5
+EXIF_CONFIDENCE = {"exif_35mm": 0.9, "exif_sensor": 0.75}
+
+
+def _pick_fov(fit: "LinesFit", exif_fov: float | None, exif_source: str | None) -> tuple[float, str, float]:
+    if exif_fov is not None:
+        return exif_fov, exif_source, EXIF_CONFIDENCE[exif_source]
+    if fit.fov_deg is not None and fit.fov_confidence >= MIN_CONFIDENCE:
+        return fit.fov_deg, "lines", fit.fov_confidence
+    return DEFAULT_FOV_DEG, "default", 0.0
+
+
+def _pick(value: float | None, confidence: float, default: float) -> tuple[float, str, float]:
+    if value is not None:
+        return value, "lines", confidence
+    return default, "default", 0.0
+
+
+def _fallback_notes(fov_src: str, pitch_src: str, roll_src: str) -> list[str]:
+    notes = []
+    if fov_src == "default":
+        notes.append(f"field of view: the default {DEFAULT_FOV_DEG:g} deg (no EXIF focal length and the lines "
+                     "do not fix it); an fSpy project of the photo would")
+    for name, src, default in (("pitch", pitch_src, DEFAULT_PITCH_DEG), ("roll", roll_src, 0.0)):
+        if src == "default":
+            notes.append(f"{name}: the default {default:g} deg (the lines do not fix it); an fSpy project of the "
+                         "photo would")
+    return notes
+
+
+def _estimate(fov: float, pitch: float, roll: float, sources: tuple[str, str, str],
+              confidences: tuple[float, float, float], width: int, height: int, fit: "LinesFit | None",
+              notes: tuple[str, ...]) -> CameraEstimate:
+    frame = camera_frame(pitch, roll, 0.0)
+    vps = fit.vanishing_points(width, height) if fit is not None and "lines" in sources else {}
+    return CameraEstimate(
+        fov_deg=round(fov, 3), pitch_deg=round(pitch, 3), roll_deg=round(roll, 3),
+        fov_source=sources[0], pitch_source=sources[1], roll_source=sources[2],
+        fov_confidence=round(confidences[0], 3), pitch_confidence=round(confidences[1], 3),
+        roll_confidence=round(confidences[2], 3), width=width, height=height,
+        horizon=horizon_points(frame[0], focal_from_fov(fov), width, height), vanishing_points=vps,
+        lines=fit.counts if fit is not None else {}, notes=notes)
+
+
+# -- fSpy ------------------------------------------------------------------------------------------
+FSPY_MAGIC = b"fspy"
+FSPY_HEADER = struct.Struct("<4sIII")   # magic, version, state JSON bytes, image bytes (little-endian)
+
+
+def read_fspy(path: str | Path) -> dict:
+    """The solved camera of an fSpy project: fov_deg, pitch_deg, roll_deg, image size, principal point.
+
+    fSpy's documented layout: 'fspy', uint32 version (1), uint32 state length, uint32 image length,
+    the state as UTF-8 JSON, then the image. The state's cameraParameters holds horizontalFieldOfView
+    (radians) and cameraTransform.rows, a camera-to-world 4x4 matrix (the camera looks down its -Z with
+    +Y up; world Z is up with fSpy's default axes)."""
+    path = Path(path)
+    data = _fspy_bytes(path)
+    magic, version, state_len, image_len = FSPY_HEADER.unpack_from(data)
+    if magic != FSPY_MAGIC:
+        raise InputError(f"'{path}' is not an fSpy project (it does not start with 'fspy'); give the .fspy file "
+                         "fSpy saved.")
+    if version != 1:
+        raise InputError(f"The fSpy project '{path}' is format version {version}; SceneFit reads version 1, so "
+                         "save it again with fSpy 1.x.")
+    if FSPY_HEADER.size + state_len + image_len > len(data):
+        raise InputError(f"The fSpy project '{path}' is truncated (its header promises {state_len + image_len} "
+                         f"bytes of state and image, the file holds {len(data) - FSPY_HEADER.size}); save it again "
+                         "in fSpy.")
+    try:
+        state = json.loads(data[FSPY_HEADER.size:FSPY_HEADER.size + state_len].decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise InputError(f"The fSpy project '{path}' has a damaged state ({error}); save it again in fSpy.") from None
+    return _fspy_camera(state, path)
+
+
+def _fspy_bytes(path: Path) -> bytes:
+    if not path.is_file():
+        raise InputError(f"The fSpy project '{path}' does not exist; give the .fspy file fSpy saved.")
+    data = path.read_bytes()
+    if len(data) < FSPY_HEADER.size:
+        raise InputError(f"'{path}' is {len(data)} bytes, shorter than an fSpy project's {FSPY_HEADER.size}-byte "
+                         "header; give the .fspy file fSpy saved.")
+    return data
+
+
+def _fspy_camera(state, path: Path) -> dict:
+    params = state.get("cameraParameters") if isinstance(state, dict) else None
+    if not isinstance(params, dict):
+        raise InputError(f"The fSpy project '{path}' holds no solved camera (cameraParameters is empty); adjust its "
+                         "vanishing lines in fSpy until it shows a camera, then save it again.")
+    try:
+        fov = math.degrees(float(params["horizontalFieldOfView"]))
+        matrix = np.asarray(params["cameraTransform"]["rows"], dtype=np.float64)
+        size = (int(params["imageWidth"]), int(params["imageHeight"]))
+        principal = params.get("principalPoint") or {"x": 0.0, "y": 0.0}
+        principal = (float(principal["x"]), float(principal["y"]))
+    except (KeyError, TypeError, ValueError) as error:
+        raise InputError(f"The fSpy project '{path}' has an incomplete camera ({type(error).__name__}: {error}); "
+                         "save it again in fSpy.") from None
+    if matrix.shape != (4, 4) or not np.all(np.isfinite(matrix)) or not 0.0 < fov < 180.0 or min(size) < 1:
+        raise InputError(f"The fSpy project '{path}' has an unusable camera (field of view {fov:.3g} deg, transform "
+                         f"of shape {matrix.shape}); solve it again in fSpy and save.")
+    pitch, roll = pitch_roll_from_camera_to_world(matrix[:3, :3], path)
+    return {"fov_deg": fov, "pitch_deg": pitch, "roll_deg": roll, "image_size": size, "principal_point": principal}
+
+
+def pitch_roll_from_camera_to_world(rotation: np.ndarray, shown: str | Path = "the camera") -> tuple[float, float]:
+    """Pitch and roll (degrees) of a camera-to-world rotation whose columns are the camera's right, up and
+    backward (-view) axes in a Z-up world (fSpy's and Blender's camera convention)."""
+    right, up, back = (rotation[:, i] / max(np.linalg.norm(rotation[:, i]), 1e-12) for i in range(3))
+    forward = -back
+    level_right = np.cross(forward, (0.0, 0.0, 1.0))
+    if np.linalg.norm(level_right) < 1e-9:
+        raise InputError(f"{shown} looks straight up or down, so it has no horizon to take pitch and roll from; "
+                         "solve it again with the camera tilted less.")
+    level_right /= np.linalg.norm(level_right)
+    level_up = np.cross(level_right, forward)
+    pitch = math.degrees(math.asin(float(np.clip(forward[2], -1.0, 1.0))))
+    roll = math.degrees(math.atan2(float(right @ level_up), float(right @ level_right)))
+    return pitch, roll
+
+
+def _from_fspy(camera: dict, width: int, height: int) -> CameraEstimate:
+    notes = ["camera solved by fSpy (vanishing lines drawn by hand); world Z taken as up, fSpy's default axes"]
+    fw, fh = camera["image_size"]
+    if abs(fw / fh - width / height) > 0.01 * width / height:
+        notes.append(f"the fSpy project's image is {fw}x{fh} but the photo is {width}x{height}: the camera was solved "
+                     "for another framing")
+    px, py = camera["principal_point"]
+    if max(abs(px), abs(py)) > 0.01:
+        notes.append(f"fSpy's principal point is off centre ({px:.3f}, {py:.3f}); SceneFit's cameras keep it centred")
+    return _estimate(camera["fov_deg"], camera["pitch_deg"], camera["roll_deg"], ("fspy",) * 3, (1.0, 1.0, 1.0),
+                     width, height, None, tuple(notes))
+
+
+# -- EXIF ------------------------------------------------------------------------------------------
+def fov_from_sensor(focal_mm: float, sensor_width_mm: float, width: int, height: int) -> float:
+    """Horizontal field of view from the real focal length and the sensor's long side (the photo's long
+    side spans it; a portrait photo's width is the sensor's short side)."""
+    film_width = sensor_width_mm * width / max(width, height)
+    return math.degrees(2.0 * math.atan(film_width / (2.0 * float(focal_mm))))
+
+
+def _exif_fov(path: Path, info: dict, width: int, height: int) -> tuple[float | None, str | None, list[str]]:
+    if info.get("fov_from_metadata_deg"):
+        return float(info["fov_from_metadata_deg"]), "exif_35mm", ["field of view from the EXIF 35 mm equivalent "
+                                                                   "focal length"]
+    focal, model = _exif_focal_and_model(path)
+    if not focal:
+        return None, None, []
+    sensor = sensor_width_mm(model)
+    if sensor is None:
+        return None, None, [f"EXIF focal length {focal:g} mm but the camera model '{model}' is not in SceneFit's "
+                            "sensor table, so it gives no field of view"]
+    return fov_from_sensor(focal, sensor, width, height), "exif_sensor", [
+        f"field of view from the EXIF focal length {focal:g} mm and the {sensor:g} mm sensor of the {model}"]
+
+
+def sensor_width_mm(model: str) -> float | None:
+    model = " ".join(model.upper().split())
+    for key in sorted(SENSOR_WIDTH_MM, key=len, reverse=True):
+        if model.startswith(key):
+            return SENSOR_WIDTH_MM[key]
+    return None
+
+
+def _exif_focal_and_model(path: Path) -> tuple[float | None, str]:
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return None, ""
+    try:
+        spec = inp.spec()
+        focal = spec.getattribute("Exif:FocalLength")
+        model = str(spec.getattribute("Model") or "").strip()
+    finally:
+        inp.close()
+    focal = float(focal) if isinstance(focal, (int, float)) and math.isfinite(focal) and focal > 0 else None
+    return focal, model
+
+
+# -- geometry shared by the fit and the report -------------------------------------------------------
+def focal_from_fov(fov_deg: float) -> float:
+    """F, the focal length in half-widths, of a horizontal field of view."""
+    return 1.0 / math.tan(math.radians(fov_deg) / 2.0)
+
+
+def fov_from_focal(focal: float) -> float:
+    return math.degrees(2.0 * math.atan(1.0 / focal))
+
+
+def camera_frame(pitch_deg, roll_deg, theta_deg) -> np.ndarray:
+    """The scene's three orthogonal directions in camera coordinates, (..., 3, 3): world up, then two
+    horizontal directions turned by theta about it. Follows PhotoCamera.basis (roll included)."""
+    p, r, t = (np.radians(np.asarray(a, dtype=np.float64)) for a in (pitch_deg, roll_deg, theta_deg))
+    p, r, t = np.broadcast_arrays(p, r, t)
+    sp, cp, sr, cr = np.sin(p), np.cos(p), np.sin(r), np.cos(r)
+    up = np.stack([sr * cp, cr * cp, sp], axis=-1)
+    across = np.stack([cr, -sr, np.zeros_like(r)], axis=-1)          # world X (the level camera's right)
+    ahead = np.stack([-sr * sp, -cr * sp, cp], axis=-1)              # world Y (the level view direction)
+    ct, st = np.cos(t)[..., None], np.sin(t)[..., None]
+    return np.stack([up, ct * across + st * ahead, ct * ahead - st * across], axis=-2)
+
+
+def horizon_points(up: np.ndarray, focal: float, width: int, height: int) -> tuple[tuple[float, float], ...]:
+    """Where the horizon (rays at right angles to world up) meets the photo's left and right edges."""
+    points = []
+    for x_n in (-1.0, 1.0):
+        y_n = -(up[0] * x_n + up[2] * focal) / up[1]
+        points.append((round((x_n + 1.0) * width / 2.0, 2), round(height / 2.0 - y_n * width / 2.0, 2)))
+    return tuple(points)
+
+
+
+# -- the photo's own lines -------------------------------------------------------------------------
+LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+MIN_SEGMENT = 0.02            # shortest segment kept, as a share of the photo's long side (and >= 12 px)
+MAX_SEGMENTS = 400            # the longest ones; more add time, not accuracy
+COARSE_SEGMENTS = 200
+TOLERANCE_DEG = 1.5           # a segment belongs to a direction when it points at its vanishing point this well
+COARSE_TOLERANCE_DEG = 4.0    # wider on the coarse grid, whose steps are 3 deg
+# The search's range: cameras held roughly upright, lenses from long to wide.
+FOV_RANGE_DEG = (20.0, 120.0)
+PITCH_RANGE_DEG = (-60.0, 50.0)
+ROLL_RANGE_DEG = (-15.0, 15.0)
+# Confidence of pitch and roll: support / (1 + (u / tolerable error)^2), u combining the fit's standard
+# error (times INFLATION: it treats segments as independent, which they are not, a wall's edges share
+# its blur) with how far the value moves over the field of view's own uncertainty. Tolerable errors:
+# the issue's targets for fov, pitch, roll.
+TOLERABLE_DEG = (5.0, 2.0, 1.0)
+INFLATION = 3.0
+# The field of view is fixed by the lines only where a 20% longer or shorter focal length loses whole
+# segments (the profile of the score): a frontal view or a lone vanishing point loses none.
+FOV_PROFILE = 1.2
+FOV_DROP_SEGMENTS = 10.0      # segments lost at +-20% for confidence 1 - 1/e
+FOV_UNKNOWN_RANGE_DEG = (45.0, 80.0)   # what an unknown lens may be, for pitch's spread at the default fov
+# A built scene (set on the bench's views, benchmarks/bench_camera.py): at least this share of the
+# segments' length pointing at the three directions, this many verticals, and horizontals.
+MIN_SEGMENTS = 8
+MIN_INLIER_SHARE = 0.3
+MIN_VERTICAL = 12
+MIN_HORIZONTAL = 10           # both horizontal directions together
+MIN_MAIN_HORIZONTAL = 6       # the better seen one
+
+
+@dataclass(frozen=True)
+class LinesFit:
+    """What the photo's lines say. None where they say nothing; `params` is (fov, pitch, roll, theta)."""
+
+    fov_deg: float | None = None
+    pitch_deg: float | None = None
+    roll_deg: float | None = None
+    fov_confidence: float = 0.0
+    pitch_confidence: float = 0.0
+    roll_confidence: float = 0.0
+    params: tuple[float, float, float, float] | None = None
+    counts: dict = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+    segments: np.ndarray | None = None      # (N, 4) normalised ends, longest first
+    weights: np.ndarray | None = None       # (N,) their length weights
+    families: np.ndarray | None = None      # (N,) 0 vertical, 1 and 2 horizontal, -1 none
+
+    @property
+    def usable(self) -> bool:
+        return self.params is not None
+
+    def vanishing_points(self, width: int, height: int) -> dict:
+        """Each direction's vanishing point in pixels, or None where it lies at infinity."""
+        if self.params is None:
+            return {}
+        fov, pitch, roll, theta = self.params
+        focal = focal_from_fov(fov)
+        out = {}
+        for name, d in zip(("vertical", "horizontal_1", "horizontal_2"), camera_frame(pitch, roll, theta)):
+            out[name] = None if abs(d[2]) < 1e-6 else [
+                round(width / 2 * (1 + focal * d[0] / d[2]), 2), round(height / 2 - width / 2 * focal * d[1] / d[2], 2)]
+        return out
+
+
+def fit_lines(srgb: np.ndarray, fov_deg: float | None = None) -> LinesFit:
+    """Field of view (unless given), pitch and roll from the photo's straight lines (sRGB float RGB)."""
+    h, w = srgb.shape[:2]
+    ends, weights = photo_segments(srgb)
+    counts = {"segments": int(len(ends))}
+    if len(ends) < MIN_SEGMENTS:
+        return LinesFit(counts=counts, notes=(f"lines: only {len(ends)} straight segments in the photo (a smooth or "
+                                              "natural scene), too few to find its vanishing points",))
+    fixed = None if fov_deg is None else float(fov_deg)
+    start = _coarse_search(ends[:COARSE_SEGMENTS], weights[:COARSE_SEGMENTS], fixed)
+    params = max((_refine(ends, weights, s, fixed) for s in start), key=lambda p: _score(ends, weights, p))
+    families = _families(ends, params)
+    return _judge(ends, weights, params, families, fixed, counts)
+
+
+def photo_segments(srgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Straight segments (OpenCV's LSD) as normalised ends (N, 4), longest first, with length weights."""
+    import cv2
+
+    h, w = srgb.shape[:2]
+    gray = np.clip(np.round(srgb[..., :3] @ LUMA * 255.0), 0, 255).astype(np.uint8)
+    found = cv2.createLineSegmentDetector(cv2.LSD_REFINE_STD).detect(gray)[0]
+    if found is None:
+        return np.zeros((0, 4)), np.zeros(0)
+    px = found.reshape(-1, 4).astype(np.float64)
+    length = np.hypot(px[:, 2] - px[:, 0], px[:, 3] - px[:, 1])
+    keep = np.argsort(-length)[:MAX_SEGMENTS]
+    keep = keep[length[keep] >= max(12.0, MIN_SEGMENT * max(w, h))]
+    px, length = px[keep], length[keep]
+    ends = np.empty_like(px)
+    ends[:, 0::2] = (px[:, 0::2] - w / 2) / (w / 2)
+    ends[:, 1::2] = (h / 2 - px[:, 1::2]) / (w / 2)
+    return ends, np.minimum(length, 0.25 * max(w, h)) / max(w, h)
+
+
+def _great_circles(ends: np.ndarray, focal: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each segment's plane through the eye (unit normal n) and its midpoint's ray (unit m)."""
+    f = np.full(len(ends), focal)
+    p1 = np.stack([ends[:, 0], ends[:, 1], f], axis=-1)
+    p2 = np.stack([ends[:, 2], ends[:, 3], f], axis=-1)
+    n = np.cross(p1, p2)
+    n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
+    m = p1 / np.linalg.norm(p1, axis=-1, keepdims=True) + p2 / np.linalg.norm(p2, axis=-1, keepdims=True)
+    return n, m / np.linalg.norm(m, axis=-1, keepdims=True)
+
+
+def _signed_residual_deg(n: np.ndarray, m: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """The angle, at the segment's midpoint, between the segment and the line to direction d's vanishing
+    point (0 when the segment points at it; works for vanishing points at infinity)."""
+    c = np.cross(m, d)
+    c_norm = np.linalg.norm(c, axis=-1)
+    cos = np.sum(n * c, axis=-1)
+    sin = np.sum(np.cross(n, c) * m, axis=-1) * np.sign(cos + 1e-300)
+    angle = np.degrees(np.arctan2(sin, np.abs(cos)))
+    return np.where(c_norm > 1e-9, angle, 90.0)
+
+
+def _kernel(residual_deg: np.ndarray, tolerance: float) -> np.ndarray:
+    return np.maximum(0.0, 1.0 - (residual_deg / tolerance) ** 2)
+
+
+def _score(ends: np.ndarray, weights: np.ndarray, params, tolerance: float = TOLERANCE_DEG) -> float:
+    """Share of the segments' weight the three directions explain (each segment by its best one)."""
+    fov, pitch, roll, theta = params
+    n, m = _great_circles(ends, focal_from_fov(fov))
+    frame = camera_frame(pitch, roll, theta)
+    res = _signed_residual_deg(n[:, None], m[:, None], frame[None])
+    return float(np.sum(weights * _kernel(res, tolerance).max(axis=1)) / np.sum(weights))
+
+
+def _coarse_search(ends: np.ndarray, weights: np.ndarray, fov_deg: float | None) -> list[tuple]:
+    """The best few (fov, pitch, roll, theta) on a grid. Each segment votes for the horizontal direction
+    its great circle meets (theta mod 90 deg pairs the two horizontal families), so theta costs a
+    histogram, not a search; the exact score then refines these."""
+    fovs = [fov_deg] if fov_deg is not None else [fov_from_focal(f) for f in np.geomspace(
+        focal_from_fov(FOV_RANGE_DEG[1]), focal_from_fov(FOV_RANGE_DEG[0]), 14)]
+    pitch, roll = np.meshgrid(np.arange(PITCH_RANGE_DEG[0], PITCH_RANGE_DEG[1] + 0.1, 3.0),
+                              np.arange(ROLL_RANGE_DEG[0], ROLL_RANGE_DEG[1] + 0.1, 2.5), indexing="ij")
+    pitch, roll = pitch.ravel(), roll.ravel()
+    best = []
+    for fov in fovs:
+        scores = _theta_votes(ends, weights, focal_from_fov(fov), pitch, roll)
+        i, t = np.unravel_index(int(np.argmax(scores)), scores.shape)
+        best.append((float(scores[i, t]), (float(fov), float(pitch[i]), float(roll[i]), 2.0 * t)))
+    best.sort(key=lambda b: -b[0])
+    return [b[1] for b in best[:3]]
+
+
+def _theta_votes(ends: np.ndarray, weights: np.ndarray, focal: float, pitch: np.ndarray, roll: np.ndarray,
+                 chunk: int = 96) -> np.ndarray:
+    """Score of every (pitch, roll) x theta (2 deg bins over 90 deg) at one focal length."""
+    n, m = _great_circles(ends, focal)
+    bins = np.arange(0.0, 90.0, 2.0)
+    out = []
+    for lo in range(0, len(pitch), chunk):
+        frame = camera_frame(pitch[lo:lo + chunk], roll[lo:lo + chunk], 0.0)
+        up, across, ahead = frame[:, 0, None], frame[:, 1, None], frame[:, 2, None]
+        vertical = _kernel(_signed_residual_deg(n, m, up), COARSE_TOLERANCE_DEG)
+        meet = np.cross(n, up)                       # the one horizontal direction on each segment's circle
+        meet /= np.maximum(np.linalg.norm(meet, axis=-1, keepdims=True), 1e-12)
+        theta = np.degrees(np.arctan2(np.sum(meet * ahead, -1), np.sum(meet * across, -1))) % 90.0
+        # deg of residual per deg of theta: segments along the horizon fit every theta
+        turned = np.cos(0.02) * meet + np.sin(0.02) * np.cross(up, meet)
+        slope = np.abs(_signed_residual_deg(n, m, turned)) / np.degrees(0.02)
+        off = np.abs((bins - theta[..., None] + 45.0) % 90.0 - 45.0)
+        horizontal = _kernel(slope[..., None] * off, COARSE_TOLERANCE_DEG)
+        out.append(np.einsum("pnb,n->pb", np.maximum(vertical[..., None], horizontal), weights))
+    return np.concatenate(out) / np.sum(weights)
+
+
+REFINE_STEPS = (2.0, 1.0, 0.5, 1.0)   # first steps of (fov, pitch, roll, theta), halved down to 1/64
+
+
+def _refine(ends: np.ndarray, weights: np.ndarray, start, fov_fixed: float | None) -> tuple:
+    """Pattern search on the exact score from a coarse start (no gradient: the score is piecewise)."""
+    x = list(start)
+    free = (1, 2, 3) if fov_fixed is not None else (0, 1, 2, 3)
+    steps = list(REFINE_STEPS)
+    best = _score(ends, weights, x)
+    for _ in range(500):   # a bound, never reached in practice
+        if steps[1] <= REFINE_STEPS[1] / 64:
+            break
+        improved = False
+        for i in free:
+            for sign in (1.0, -1.0):
+                y = list(x)
+                y[i] += sign * steps[i]
+                if i == 0 and not FOV_RANGE_DEG[0] / 2 <= y[0] <= 170.0:
+                    continue
+                score = _score(ends, weights, y)
+                if score > best:
+                    x, best, improved = y, score, True
+        if not improved:
+            steps = [s / 2 for s in steps]
+    return tuple(x)
+
+
+def _families(ends: np.ndarray, params) -> np.ndarray:
+    """Which direction each segment belongs to (0 vertical, 1-2 horizontal), -1 for none."""
+    fov, pitch, roll, theta = params
+    n, m = _great_circles(ends, focal_from_fov(fov))
+    res = np.abs(_signed_residual_deg(n[:, None], m[:, None], camera_frame(pitch, roll, theta)[None]))
+    best = np.argmin(res, axis=1)
+    return np.where(res[np.arange(len(ends)), best] < TOLERANCE_DEG, best, -1)
+
+
+def _standard_errors(ends: np.ndarray, weights: np.ndarray, params, families: np.ndarray,
+                     free: tuple[int, ...]) -> np.ndarray:
+    """Standard errors of the free parameters from the inliers' residuals (Gauss-Newton covariance,
+    central differences); an unconstrained parameter gets a huge one."""
+    inl = families >= 0
+    if int(inl.sum()) <= len(free):
+        return np.full(4, np.inf)
+
+    def residuals(p) -> np.ndarray:
+        fov, pitch, roll, theta = p
+        n, m = _great_circles(ends[inl], focal_from_fov(fov))
+        d = camera_frame(pitch, roll, theta)[families[inl]]
+        return _signed_residual_deg(n, m, d)
+
+    jac = []
+    for i in free:
+        hi, lo = list(params), list(params)
+        hi[i] += 0.05
+        lo[i] -= 0.05
+        jac.append((residuals(hi) - residuals(lo)) / 0.1)
+    jac = np.stack(jac, axis=1)
+    w = weights[inl] / np.mean(weights[inl])
+    r = residuals(params)
+    sigma2 = float(np.sum(w * r ** 2) / max(int(inl.sum()) - len(free), 1))
+    normal = jac.T @ (w[:, None] * jac)
+    cov = sigma2 * np.linalg.inv(normal + 1e-9 * max(np.trace(normal), 1e-12) * np.eye(len(free)))
+    errors = np.full(4, np.inf)
+    errors[list(free)] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    return errors
+
+
+
+def _judge(ends: np.ndarray, weights: np.ndarray, params, families: np.ndarray, fov_fixed: float | None,
+           counts: dict, judged: bool = False) -> LinesFit:
+    """The fit's values and confidences, or none where the segments do not show a built scene (judged:
+    they were found to show one before, at another field of view)."""
+    share = float(np.sum(weights[families >= 0]) / np.sum(weights))
+    per = [int(np.sum(families == k)) for k in range(3)]
+    counts.update(vertical=per[0], horizontal_1=per[1], horizontal_2=per[2], inlier_share=round(share, 3))
+    seen = dict(counts=counts, segments=ends, weights=weights, families=families)
+    if not judged and (share < MIN_INLIER_SHARE or per[0] < MIN_VERTICAL or per[1] + per[2] < MIN_HORIZONTAL
+                       or max(per[1:]) < MIN_MAIN_HORIZONTAL):
+        return LinesFit(**seen, notes=(
+            f"lines: {len(ends)} segments, {per[0]} vertical and {per[1] + per[2]} horizontal ones pointing at "
+            f"orthogonal vanishing points ({share:.0%} of their length): not enough of a built scene's lines to "
+            "fix the camera",))
+    free = (1, 2, 3) if fov_fixed is not None else (0, 1, 2, 3)
+    errors = _standard_errors(ends, weights, params, families, free)
+    support = 1.0 - math.exp(-sum(per) / 8.0)
+    fov_conf, drop = (0.0, None) if fov_fixed is not None else _fov_confidence(ends, weights, params)
+    conf = [support / (1.0 + (INFLATION * float(errors[i]) / TOLERABLE_DEG[i]) ** 2) for i in (1, 2)]
+    fov, pitch, roll, _ = params
+    note = (f"lines: {len(ends)} segments, {sum(per)} pointing at the vanishing points (vertical {per[0]}, "
+            f"horizontal {per[1]} and {per[2]})" + ("" if drop is None else
+            f"; a focal length 20% off loses {drop:.0f} of them"))
+    return LinesFit(fov_deg=None if fov_fixed is not None else float(fov), pitch_deg=float(pitch),
+                    roll_deg=float((roll + 180.0) % 360.0 - 180.0), fov_confidence=support * fov_conf,
+                    pitch_confidence=conf[0], roll_confidence=conf[1], params=tuple(float(v) for v in params),
+                    notes=(note,), **seen)
+
+
+def _fov_confidence(ends: np.ndarray, weights: np.ndarray, params) -> tuple[float, float]:
+    """How firmly the lines fix the focal length: the segments lost (the score's drop in segments of
+    mean weight) at a focal length FOV_PROFILE times longer and shorter, the others refitted."""
+    best = _score(ends, weights, params)
+    drops = []
+    for k in (FOV_PROFILE, 1.0 / FOV_PROFILE):
+        fov = fov_from_focal(focal_from_fov(params[0]) * k)
+        drops.append((best - _score(ends, weights, _refine(ends, weights, (fov,) + tuple(params[1:]), fov)))
+                     * np.sum(weights) / np.mean(weights))
+    drop = max(min(drops), 0.0)
+    return 1.0 - math.exp(-drop / FOV_DROP_SEGMENTS), drop
+
+
+def refit_at_fov(fit: LinesFit, fov_deg: float, fov_range: tuple[float, float] | None = None) -> LinesFit:
+    """The lines' pitch and roll at a field of view they did not fix (EXIF's or the default); with
+    fov_range, their confidence also counts how far they move over that range of lenses."""
+    start = (fov_deg,) + tuple(fit.params[1:])
+    params = _refine(fit.segments, fit.weights, start, fov_deg)
+    out = _judge(fit.segments, fit.weights, params, _families(fit.segments, params), fov_deg,
+                 dict(segments=int(len(fit.segments))), judged=True)
+    if fov_range is None:
+        return out
+    wide, narrow = (_refine(fit.segments, fit.weights, (f,) + tuple(params[1:]), f) for f in fov_range)
+    spread = [abs(wide[i] - narrow[i]) / 2.0 for i in (1, 2)]
+    pitch_conf, roll_conf = (min(c, 1.0 / (1.0 + (u / TOLERABLE_DEG[i + 1]) ** 2))
+                             for i, (c, u) in enumerate(zip((out.pitch_confidence, out.roll_confidence), spread)))
+    note = (f"pitch and roll from the lines at {fov_deg:g} deg; over lenses of {fov_range[0]:g}-{fov_range[1]:g} deg "
+            f"they move +-{spread[0]:.1f} and +-{spread[1]:.1f} deg")
+    return replace(out, pitch_confidence=pitch_conf, roll_confidence=roll_conf, notes=out.notes + (note,))

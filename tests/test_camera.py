@@ -1,0 +1,196 @@
+"""The photo camera estimate (issue 22): fSpy projects, EXIF, the photo's own lines, `scenefit camera`."""
+from __future__ import annotations
+
+import json
+import math
+import struct
+
+import numpy as np
+import pytest
+
+from scenefit.core.camera import look_frame
+from scenefit.core.errors import InputError
+from scenefit.core.imageio import write_image
+from scenefit.core.photo import PhotoCamera
+from scenefit.core.photo_camera import estimate_photo_camera
+
+SIZE = (96, 64)
+
+
+def _photo(path, size=SIZE, seed=0):
+    """A smooth, lineless photo: a vertical gradient with faint noise."""
+    w, h = size
+    rng = np.random.default_rng(seed)
+    ramp = np.linspace(0.2, 0.8, h, dtype=np.float32)[:, None, None] * np.ones((h, w, 3), np.float32)
+    write_image(path, np.clip(ramp + rng.normal(0, 0.01, (h, w, 3)), 0, 1))
+    return path
+
+
+# -- fSpy ------------------------------------------------------------------------------------------
+def _fspy_bytes(camera: PhotoCamera, image: bytes = b"\x89PNG fake", **overrides) -> bytes:
+    """An fSpy project as fSpy documents it: 'fspy', version 1, state length, image length (uint32 LE),
+    the state JSON, the image. The camera-to-world matrix's columns are right, up and -forward."""
+    forward, right, up, _, _ = camera.basis()
+    rotation = np.stack([right, up, -forward], axis=1)
+    rows = np.eye(4)
+    rows[:3, :3] = rotation
+    rows[:3, 3] = (1.0, -4.0, 1.5)
+    params = {"principalPoint": {"x": 0.0, "y": 0.0}, "horizontalFieldOfView": math.radians(camera.fov_deg),
+              "verticalFieldOfView": 1.0, "cameraTransform": {"rows": rows.tolist()},
+              "viewTransform": {"rows": np.linalg.inv(rows).tolist()}, "imageWidth": camera.width,
+              "imageHeight": camera.height, "relativeFocalLength": 1.0}
+    state = json.dumps({"cameraParameters": params, "calibrationSettingsBase": {}, **overrides}).encode()
+    return struct.pack("<4sIII", b"fspy", 1, len(state), len(image)) + state + image
+
+
+@pytest.mark.parametrize("fov, pitch, roll", [(55.0, -12.5, 0.0), (83.2, 7.25, -4.4), (40.0, -31.0, 12.0)])
+def test_fspy_project_round_trips_to_the_same_camera(tmp_path, fov, pitch, roll):
+    camera = PhotoCamera(yaw_deg=37.0, pitch_deg=pitch, fov_deg=fov, width=SIZE[0], height=SIZE[1], roll_deg=roll)
+    (tmp_path / "scene.fspy").write_bytes(_fspy_bytes(camera))
+    est = estimate_photo_camera(_photo(tmp_path / "photo.png"), tmp_path / "scene.fspy")
+    assert (est.fov_deg, est.pitch_deg, est.roll_deg) == pytest.approx((fov, pitch, roll), abs=0.01)
+    assert (est.source, est.fov_source, est.pitch_confidence, est.fallback) == ("fspy", "fspy", 1.0, False)
+    # The reported horizon is where the camera sees far level points (yaw does not matter to it).
+    level = PhotoCamera(yaw_deg=90.0, pitch_deg=pitch, fov_deg=fov, width=SIZE[0], height=SIZE[1], roll_deg=roll)
+    far = level.project(np.array([[x, 1000.0, 0.0] for x in (-200.0, 0.0, 200.0)]))
+    (x0, y0), (x1, y1) = est.horizon
+    assert far[:, 1] == pytest.approx(y0 + (y1 - y0) * far[:, 0] / SIZE[0], abs=0.05)
+
+
+@pytest.mark.parametrize("content, words", [
+    (b"fspy\x01\x00", "shorter than"),
+    (b"PK\x03\x04" + bytes(40), "not an fSpy project"),
+    (struct.pack("<4sIII", b"fspy", 2, 2, 0) + b"{}", "version 2"),
+    (struct.pack("<4sIII", b"fspy", 1, 5000, 10) + b"{}", "truncated"),
+    (struct.pack("<4sIII", b"fspy", 1, 9, 0) + b"{not json", "damaged state"),
+    (struct.pack("<4sIII", b"fspy", 1, 26, 0) + b'{"cameraParameters": null}', "no solved camera"),
+])
+def test_a_damaged_fspy_file_is_one_sentence(tmp_path, content, words, capsys):
+    from scenefit.cli import main
+
+    photo = _photo(tmp_path / "photo.png")
+    (tmp_path / "bad.fspy").write_bytes(content)
+    with pytest.raises(InputError) as error:
+        estimate_photo_camera(photo, tmp_path / "bad.fspy")
+    message = str(error.value)
+    assert words in message and "\n" not in message and message.endswith(".") and "bad.fspy" in message
+    assert main(["camera", "--photo", str(photo), "--fspy", str(tmp_path / "bad.fspy"), "--json"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err == f"scenefit: error: {message}\n"
+
+
+# -- EXIF ------------------------------------------------------------------------------------------
+def _jpeg_with_exif(path, size, **attributes):
+    import OpenImageIO as oiio
+
+    w, h = size
+    spec = oiio.ImageSpec(w, h, 3, oiio.UINT8)
+    for name, value in attributes.items():
+        spec.attribute(name, value)
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), spec)
+    out.write_image(np.full((h, w, 3), 128, np.uint8))
+    out.close()
+    return path
+
+
+@pytest.mark.parametrize("size", [(120, 80), (80, 120)])
+def test_exif_35mm_focal_length_gives_the_field_of_view(tmp_path, size):
+    photo = _jpeg_with_exif(tmp_path / "phone.jpg", size, **{"Exif:FocalLengthIn35mmFilm": 26})
+    est = estimate_photo_camera(photo)
+    # 26 mm on the 43.27 mm diagonal: 3:2 landscape 69.4 deg wide (36 mm of film), upright 49.6 (24 mm).
+    width_mm = 43.27 * size[0] / math.hypot(*size)
+    assert est.fov_deg == pytest.approx(math.degrees(2 * math.atan(width_mm / 52.0)), abs=0.01)
+    assert est.fov_deg == pytest.approx(69.4 if size[0] > size[1] else 49.6, abs=0.05)
+    assert (est.fov_source, est.fov_confidence) == ("exif_35mm", 0.9)
+    assert est.pitch_source == "default" and est.fallback   # a flat grey photo has no lines
+
+
+def test_exif_focal_length_with_a_known_sensor(tmp_path):
+    photo = _jpeg_with_exif(tmp_path / "dslr.jpg", (90, 60), **{"Exif:FocalLength": 35.0, "Model": "NIKON D850"})
+    est = estimate_photo_camera(photo)
+    assert est.fov_source == "exif_sensor"
+    assert est.fov_deg == pytest.approx(math.degrees(2 * math.atan(35.9 / 70.0)), abs=0.01)
+    unknown = _jpeg_with_exif(tmp_path / "odd.jpg", (90, 60), **{"Exif:FocalLength": 35.0, "Model": "Obscura 1"})
+    est = estimate_photo_camera(unknown)
+    assert est.fov_source == "default" and any("Obscura 1" in note for note in est.notes)
+
+
+# -- the photo's lines -----------------------------------------------------------------------------
+def _box_room(camera: PhotoCamera, n: int = 140, seed: int = 0) -> np.ndarray:
+    """Dark straight edges along the world's X, Y and Z axes, drawn where `camera` sees them."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    forward = camera.basis()[0]
+    img = np.full((camera.height, camera.width, 3), 0.8, np.float32)
+    drawn = 0
+    while drawn < n:
+        start = forward * rng.uniform(3, 12) + rng.uniform(-6, 6, 3)
+        end = start.copy()
+        end[rng.integers(3)] += rng.uniform(1, 4)
+        pts = np.stack([start, end])
+        px = camera.project(pts)
+        if np.any(pts @ forward < 0.5) or np.any(np.abs(px - [camera.width / 2, camera.height / 2]) >
+                                                  [camera.width, camera.height]):
+            continue
+        a, b = (tuple(int(v) for v in np.round(p * 16)) for p in px)
+        cv2.line(img, a, b, (0.1, 0.1, 0.1), 2, cv2.LINE_AA, shift=4)
+        drawn += 1
+    return img
+
+
+@pytest.mark.parametrize("fov, pitch, roll, yaw", [(65.0, -14.0, 3.0, 105.0), (48.0, 6.0, -4.0, 70.0)])
+def test_lines_of_a_box_room_give_its_camera(tmp_path, fov, pitch, roll, yaw):
+    camera = PhotoCamera(yaw_deg=yaw, pitch_deg=pitch, fov_deg=fov, width=384, height=288, roll_deg=roll)
+    write_image(tmp_path / "room.png", _box_room(camera))
+    est = estimate_photo_camera(tmp_path / "room.png")
+    # Tolerances: 2 deg of field of view, 0.5 of pitch, 0.3 of roll (measured: within a third of these).
+    assert (est.fov_source, est.pitch_source, est.roll_source) == ("lines",) * 3
+    assert est.fov_deg == pytest.approx(fov, abs=2.0)
+    assert est.pitch_deg == pytest.approx(pitch, abs=0.5)
+    assert est.roll_deg == pytest.approx(roll, abs=0.3)
+    assert min(est.fov_confidence, est.pitch_confidence, est.roll_confidence) >= 0.5 and not est.fallback
+    assert est.vanishing_points["vertical"] is not None and est.lines["vertical"] >= 12
+
+
+def test_a_photo_without_lines_reports_the_fallback(tmp_path):
+    est = estimate_photo_camera(_photo(tmp_path / "sky.png", size=(320, 240)))
+    assert (est.fov_deg, est.pitch_deg, est.roll_deg) == (60.0, -10.0, 0.0)
+    assert (est.fov_source, est.pitch_source, est.roll_source, est.source) == ("default",) * 4
+    assert est.fallback and est.fov_confidence == 0.0
+    assert any(note.startswith("lines:") for note in est.notes) and any("pitch: the default" in n for n in est.notes)
+
+
+def test_camera_json_is_one_strict_object(tmp_path, capsys):
+    from scenefit.cli import main
+
+    camera = PhotoCamera(yaw_deg=100.0, pitch_deg=-8.0, fov_deg=60.0, width=320, height=240, roll_deg=1.5)
+    write_image(tmp_path / "room.png", _box_room(camera, n=100))
+    assert main(["camera", "--photo", str(tmp_path / "room.png"), "--json"]) == 0
+
+    def refuse(token):
+        raise AssertionError(f"non-standard JSON token {token}")
+
+    out = capsys.readouterr().out
+    data = json.loads(out, parse_constant=refuse)
+    assert out.count("\n") == 1 and isinstance(data, dict)
+    assert {"fov_deg", "pitch_deg", "roll_deg", "source", "horizon", "notes"} <= set(data)
+    assert data["roll_deg"] == pytest.approx(1.5, abs=0.3) and data["source"] == "lines"
+    assert main(["camera", "--photo", str(tmp_path / "missing.png")]) == 2
+
+
+# -- the photo camera's roll -----------------------------------------------------------------------
+def test_roll_turns_the_horizon_clockwise_and_zero_roll_changes_nothing():
+    level = PhotoCamera(yaw_deg=90.0, pitch_deg=-10.0, fov_deg=60.0, width=64, height=48)
+    yaw, pitch = np.radians(90.0), np.radians(-10.0)   # the frame as PhotoCamera built it before roll
+    f, right, up = look_frame([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)])
+    basis = level.basis()
+    assert all(np.array_equal(a, b) for a, b in zip(basis[:3], (f, right, up)))   # bit-identical at roll 0
+    assert np.array_equal(PhotoCamera(**{**level.__dict__, "roll_deg": 0.0}).ray_directions(), level.ray_directions())
+    rolled = PhotoCamera(yaw_deg=90.0, pitch_deg=0.0, fov_deg=60.0, width=64, height=48, roll_deg=5.0)
+    left, right_px = rolled.project(np.array([[-100.0, 1000.0, 0.0], [100.0, 1000.0, 0.0]]))
+    # Turned counter-clockwise, the camera sees the horizon fall to the right (y grows downwards).
+    assert right_px[1] > left[1]
+    slope = math.degrees(math.atan2(right_px[1] - left[1], right_px[0] - left[0]))
+    assert slope == pytest.approx(5.0, abs=0.01)
