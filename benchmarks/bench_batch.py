@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from scenefit.core.asset_io import save_asset_folder
-from scenefit.core.batch import InProcessDispatcher, run_batch
+from scenefit.workers.batch import InProcessDispatcher, run_batch
 from scenefit.core.imageio import write_image
-from scenefit.core.jobs import load_jobs
+from scenefit.workers.jobs import load_jobs
 from scenefit.core.maps import PBRMaps
 from scenefit.core.primitives import uv_sphere
 
@@ -63,7 +63,7 @@ def bench_batch(quick: bool = False, adapt_rows: list[dict] | None = None) -> di
         try:
             import ray
 
-            from scenefit.core.batch_ray import RayDispatcher
+            from scenefit.workers.batch_ray import RayDispatcher
         except ImportError:
             ray = None
         if ray is not None:

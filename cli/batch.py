@@ -5,9 +5,9 @@ import sys
 
 
 def run(args) -> int:
-    from ..core.batch import InProcessDispatcher, check_batch, run_batch
-    from ..core.batch_ray import RayDispatcher, connect, ray_available
-    from ..core.jobs import load_jobs
+    from ..workers.batch import InProcessDispatcher, check_batch, run_batch
+    from ..workers.batch_ray import RayDispatcher, connect, ray_available
+    from ..workers.jobs import load_jobs
 
     jobs = load_jobs(args.jobs)
     check_batch(jobs, args.out)

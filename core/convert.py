@@ -25,7 +25,7 @@ from .mesh import Mesh, NormalizeTransform, normalize_to_unit_sphere
 from .progress import ProgressCallback, emit
 from .texture.fit_direct import fit_direct, masked_psnr
 from .texture.fit_inverse import fit_inverse_rendering
-from .presets import PRESET_NAMES, stage_config
+from .preset_tables import PRESET_NAMES, texture_preset
 from .texture.neural_texture import NeuralTexture, NeuralTextureConfig
 from .texture.uv_raster import UVRaster, rasterize_uv
 
@@ -62,7 +62,7 @@ class ConvertConfig:
             raise InputError(f"texture_preset must be one of {', '.join(PRESET_NAMES)}, got {self.texture_preset!r}.")
 
     def texture_config(self, resolution: int) -> NeuralTextureConfig:
-        return stage_config("texture", self.texture_preset, resolution=resolution)
+        return texture_preset(self.texture_preset, resolution=resolution)
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""Blender's side of core/background.py: the modal operator base, runtime state, previews, the status bar.
+"""Blender's side of workers/background.py: the modal operator base, runtime state, previews, the status bar.
 
 An operator subclassing JobOperator says how to gather its inputs (`prepare`, main thread, returns
 the work function and plain data) and how to write results back (`apply`, main thread). Invoked
@@ -15,7 +15,7 @@ import numpy as np
 from bpy.app.handlers import persistent
 from bpy.props import BoolProperty, FloatProperty, PointerProperty, StringProperty
 
-from ..core import background
+from ..workers import background
 from ..core.errors import SceneFitError
 from ..core.progress import TerminalProgress
 from .common import check_dependencies

@@ -1,8 +1,8 @@
 """Run All and Adapt handed to the worker environment the preferences name (a Ray cluster, or another
 SceneFit install with CUDA torch), and their results applied when they come back.
 
-The job object is the same background job as a local one (core/background.py): its work function is
-core.remote.work_remotely, which streams the worker's progress events and previews into the job's
+The job object is the same background job as a local one (workers/background.py): its work function is
+workers.remote.work_remotely, which streams the worker's progress events and previews into the job's
 queue, passes a cancel on to the worker and unpacks the job's folder into a new run folder. So the
 panel, the status bar, Esc and the Cancel button work unchanged; only the gathering (`remote_work`)
 and the applying (`apply_remote`, main thread) are this module's.
@@ -55,7 +55,7 @@ def is_local_address(address: str) -> bool:
 def remote_work(op, context, address: str) -> tuple:
     """(work function, plain data) that run the whole pipeline for the active object in the worker
     environment at `address`; the operator's quick-look settings travel as stage overrides."""
-    from ..core.remote import work_remotely
+    from ..workers.remote import work_remotely
 
     settings = context.scene.scenefit
     photo, obj, mesh, maps = scene_asset(op, context, "A worker environment runs the pipeline that fits the asset "

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from scenefit.core import background as jobs
+from scenefit.workers import background as jobs
 from scenefit.core.errors import InputError
 from scenefit.core.progress import emit
 

@@ -10,10 +10,10 @@ import pytest
 
 from scenefit.cli import main
 from scenefit.core.asset_io import save_asset_folder
-from scenefit.core.batch import InProcessDispatcher, JobWorker, run_batch
+from scenefit.workers.batch import InProcessDispatcher, JobWorker, run_batch
 from scenefit.core.errors import InputError
 from scenefit.core.imageio import read_image, write_image
-from scenefit.core.jobs import load_jobs
+from scenefit.workers.jobs import load_jobs
 from scenefit.core.maps import PBRMaps
 from scenefit.core.primitives import uv_sphere
 
@@ -180,7 +180,7 @@ def test_cli_bad_jobs_file_exits_2(tmp_path, capsys):
 
 
 def test_ray_batch_retries_resumes_and_matches_in_process(in_process, local_ray, tmp_path):
-    from scenefit.core.batch_ray import RayDispatcher
+    from scenefit.workers.batch_ray import RayDispatcher
 
     jobs_path, reference, _ = in_process
     jobs = load_jobs(jobs_path)
@@ -224,7 +224,7 @@ def test_remote_job_streams_progress_cancels_and_returns_its_folder(in_process, 
     from dataclasses import replace
 
     from scenefit.core.errors import Cancelled
-    from scenefit.core.remote import run_remote
+    from scenefit.workers.remote import run_remote
 
     jobs_path, reference, _ = in_process
     job = load_jobs(jobs_path).jobs[0]
@@ -258,7 +258,7 @@ def _sum_over_ranks(value_per_rank: float) -> tuple[int, int, float]:
 
 
 def test_ray_launches_a_torch_distributed_group_on_one_node(local_ray):
-    from scenefit.core.batch_ray import run_on_ranks
+    from scenefit.workers.batch_ray import run_on_ranks
 
     assert run_on_ranks(_sum_over_ranks, (0.5,), world=2) == [(0, 2, 1.5), (1, 2, 1.5)]
 
@@ -266,7 +266,7 @@ def test_ray_launches_a_torch_distributed_group_on_one_node(local_ray):
 def test_work_remotely_takes_the_add_ons_plain_data(tmp_path):
     """The add-on's background job hands arrays and a worker address; the folder comes back."""
     from scenefit.core.asset_io import load_asset_folder
-    from scenefit.core.remote import work_remotely
+    from scenefit.workers.remote import work_remotely
 
     make_inputs(tmp_path / "in")
     mesh, maps = load_asset_folder(tmp_path / "in" / "ball")

@@ -138,7 +138,7 @@ def test_ray_ranks_average_view_gradients_like_one_process(tiny_models, one_proc
     ray = pytest.importorskip("ray")
     from ray import cloudpickle
 
-    from scenefit.core.batch_ray import run_on_ranks
+    from scenefit.workers.batch_ray import run_on_ranks
 
     cloudpickle.register_pickle_by_value(sys.modules[__name__])
     ray.init(num_cpus=2, object_store_memory=80 * 2**20, include_dashboard=False, log_to_driver=False)

@@ -33,7 +33,7 @@ prefs = bpy.context.preferences.addons[MODULE].preferences
 prefs.base_model, prefs.inpaint_model = str(Path(tiny) / "sd2-base"), str(Path(tiny) / "sd2-inpaint")
 prefs.offline = True
 from importlib import import_module
-jobs = import_module(MODULE + ".core.background")
+jobs = import_module(MODULE + ".workers.background")
 work = import_module(MODULE + ".operators.work")
 common = import_module(MODULE + ".operators.common")
 results = import_module(MODULE + ".operators.results")

@@ -1,5 +1,5 @@
 """From Blender to a worker environment: with the preferences set to a Ray cluster ('local' here), Run
-All / Adapt hand their job to core.remote, the worker's progress and previews reach the panel through
+All / Adapt hand their job to workers.remote, the worker's progress and previews reach the panel through
 the same background-job path as a local job, cancel ends it cleanly, and the results are applied as
 new datablocks on the main thread. bpy with the extension installed from its zip, tiny models, a
 local Ray cluster of two CPUs."""
@@ -22,7 +22,7 @@ from importlib import import_module
 bpy.ops.extensions.package_install_files(repo="user_default", filepath=zip_path, enable_on_install=True)
 prefs = bpy.context.preferences.addons[MODULE].preferences
 prefs.base_model, prefs.inpaint_model, prefs.offline = str(Path(tiny) / "sd2-base"), str(Path(tiny) / "sd2-inpaint"), True
-jobs = import_module(MODULE + ".core.background")
+jobs = import_module(MODULE + ".workers.background")
 jobs_ui = import_module(MODULE + ".operators.jobs")
 remote = import_module(MODULE + ".operators.remote")
 imageio = import_module(MODULE + ".core.imageio")
@@ -114,7 +114,7 @@ def handed_off(tmp_path_factory):
 def test_preferences_choose_the_worker_and_respect_online_access(handed_off):
     _, out = handed_off
     assert out["address"] == "local"
-    assert out["handed_off"] == ["bl_ext.user_default.scenefit.core.remote", True]   # Run's job_work chose Ray
+    assert out["handed_off"] == ["bl_ext.user_default.scenefit.workers.remote", True]   # Run's job_work chose Ray
     online, message = out["offline_refusal"]
     assert online is False and "online access is off" in message and "gpu-head.example" in message
 

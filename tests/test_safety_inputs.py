@@ -322,7 +322,7 @@ def test_os_error_sentences_name_the_users_path_and_what_to_do(tmp_path):
 
 # -- a batch job's error names the user's file ----------------------------------------------------------------
 def test_an_unpacked_copys_paths_become_the_users(tmp_path):
-    from scenefit.core.jobs import Job, with_user_paths
+    from scenefit.workers.jobs import Job, with_user_paths
 
     job = Job("j", tmp_path / "assets" / "ball", ("light",), photo=tmp_path / "photos" / "broken.png")
     copy = Job("j", Path("/tmp/scenefit-job-x/in/asset/ball"), ("light",),

@@ -14,7 +14,7 @@ import scenefit.core.run as run_module
 from scenefit.cli import build_parser, main
 from scenefit.core.asset_io import save_asset_folder
 from scenefit.core.imageio import write_image
-from scenefit.core.jobs import load_jobs
+from scenefit.workers.jobs import load_jobs
 from scenefit.core.maps import PBRMaps
 from scenefit.core.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
 from scenefit.core.primitives import uv_sphere
@@ -59,7 +59,7 @@ class Recorder:
 
 def test_the_command_line_and_a_batch_job_give_the_pipeline_the_same_settings(inputs, monkeypatch, capsys):
     """Batch jobs once never baked (only the command line passed a bake) and differed in defaults."""
-    from scenefit.core.batch import run_pipeline_for_job
+    from scenefit.workers.batch import run_pipeline_for_job
 
     recorder = Recorder()
     monkeypatch.setattr(run_module, "run_pipeline", recorder)
@@ -74,7 +74,7 @@ def test_the_command_line_and_a_batch_job_give_the_pipeline_the_same_settings(in
 
 
 def test_a_batch_convert_job_keeps_constant_channels_as_numbers(inputs):
-    from scenefit.core.batch import run_job_stages
+    from scenefit.workers.batch import run_job_stages
 
     job = load_jobs(_jobs(inputs["root"], inputs["folder"], inputs["photo"], ["convert"])).jobs[0]
     out = inputs["root"] / "out"

@@ -30,8 +30,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .errors import Cancelled, InputError, SceneFitError
-from .progress import ProgressEvent, check_cancel
+from ..core.errors import Cancelled, InputError, SceneFitError
+from ..core.progress import ProgressEvent, check_cancel
 
 # work(data, progress, cancel) -> result; progress(ProgressEvent) also raises Cancelled once cancel is set.
 Work = Callable[[Any, Callable[[ProgressEvent], None], threading.Event], Any]

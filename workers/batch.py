@@ -25,10 +25,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
-from .atomic import write_json_atomic, write_text_atomic
-from .errors import InputError, SceneFitError
+from ..core.atomic import write_json_atomic, write_text_atomic
+from ..core.errors import InputError, SceneFitError
 from .jobs import BatchSettings, Job, JobsFile, with_user_paths
-from .output_folder import check_output_folder, check_subfolder, folder_in_place, install_folder
+from ..core.output_folder import check_output_folder, check_subfolder, folder_in_place, install_folder
 
 REPORT = "report.json"
 SUMMARY_JSON, SUMMARY_MD, CONTACT_SHEET = "summary.json", "summary.md", "contact_sheet.png"
@@ -98,7 +98,7 @@ class JobWorker:
     """
 
     def __init__(self, threads: int | None = None) -> None:
-        from .guidance.models import ModelCache
+        from ..core.guidance.models import ModelCache
 
         self.threads_before = set_threads(threads) if threads is not None else None
         self.cancel_event = threading.Event()
@@ -138,7 +138,7 @@ def run_plain(worker: JobWorker, job: dict, inputs: bytes, progress_sink=None) -
     "outputs"} or {"error", "kind"}). What a caller whose copy of SceneFit has another package name
     (the Blender add-on: bl_ext.<repo>.scenefit) exchanges with a worker, since neither side can
     unpickle the other's classes."""
-    from .errors import Cancelled
+    from ..core.errors import Cancelled
 
     try:
         result = worker.run(JobPayload(Job.from_dict(job), inputs), progress_sink)
@@ -210,7 +210,7 @@ def run_job_stages(job: Job, out: Path, progress=None, cancel=None, models=None)
     """
     if "compose" in job.stages or "bake" in job.stages:
         try:
-            from .run import run_pipeline  # noqa: F401
+            from ..core.run import run_pipeline  # noqa: F401
         except ImportError:
             raise InputError(f"Job '{job.name}': stages compose and bake need `scenefit run`'s pipeline, which "
                              f"this version lacks; use stages convert and light.") from None
@@ -220,9 +220,9 @@ def run_job_stages(job: Job, out: Path, progress=None, cancel=None, models=None)
 
 def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models=None) -> dict:
     """The job through core/run.py's run_pipeline: adapt when listed (and its weights are found)."""
-    from .run import RunConfig, run_pipeline
+    from ..core.run import RunConfig, run_pipeline
 
-    from .bake_process import asset_file_bake
+    from ..core.bake_process import asset_file_bake
 
     mesh, maps = _load_asset(job)
     config = RunConfig(preset=job.preset, prompt=job.prompt, guidance_type="auto" if "adapt" in job.stages else "none",
@@ -242,7 +242,7 @@ def _stage_overrides(job: Job) -> dict:
 
 
 def _load_asset(job: Job):
-    from .asset_io import is_asset_folder, load_asset_folder
+    from ..core.asset_io import is_asset_folder, load_asset_folder
 
     if is_asset_folder(job.asset):
         return load_asset_folder(job.asset)
@@ -252,10 +252,10 @@ def _load_asset(job: Job):
 
 
 def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
-    from .presets import stage_config
-    from .lighting import estimate_light, light_report, load_photo, write_light_outputs
-    from .pipeline import convert_and_bake
-    from .placement import Placement
+    from ..core.presets import stage_config
+    from ..core.lighting import estimate_light, light_report, load_photo, write_light_outputs
+    from ..core.pipeline import convert_and_bake
+    from ..core.placement import Placement
 
     if "adapt" in job.stages:
         raise InputError(f"Job '{job.name}': stage adapt runs inside the whole pipeline in a batch; "
@@ -484,7 +484,7 @@ def write_summary(out_dir: Path, outcomes: list[JobOutcome], jobs: JobsFile) -> 
     write_text_atomic(out_dir / SUMMARY_MD, text)
     sheet = contact_sheet_image(out_dir, [o.name for o in outcomes if o.status in ("done", "skipped")])
     if sheet is not None:
-        from .imageio import write_image
+        from ..core.imageio import write_image
 
         write_image(out_dir / CONTACT_SHEET, sheet)
 
@@ -494,7 +494,7 @@ def contact_sheet_image(out_dir: Path, names: list[str], cell: int = 192, column
     import cv2
     import numpy as np
 
-    from .imageio import read_image
+    from ..core.imageio import read_image
 
     cells = []
     for name in names:

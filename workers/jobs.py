@@ -38,8 +38,8 @@ import tomllib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
-from .errors import InputError
-from .guidance.models import ModelConfig
+from ..core.errors import InputError
+from ..core.guidance.models import ModelConfig
 
 STAGE_TYPES = ("convert", "light", "adapt", "compose", "bake")   # pipeline order
 PRESET_TYPES = ("draft", "balanced", "final")

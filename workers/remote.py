@@ -19,11 +19,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from . import errors
+from ..core import errors
 from .batch import make_payload, unpack
-from .output_folder import install_folder
+from ..core.output_folder import install_folder
 from .batch_ray import connect, import_ray, job_resources
-from .errors import Cancelled, SceneFitError
+from ..core.errors import Cancelled, SceneFitError
 from .jobs import BatchSettings, Job
 
 # What the worker environment imports SceneFit as (a pip install of it).
@@ -38,7 +38,7 @@ def worker_actor_class(package: str = WORKER_PACKAGE):
         def __init__(self, threads: int) -> None:
             import importlib
 
-            self.batch = importlib.import_module(package + ".core.batch")
+            self.batch = importlib.import_module(package + ".workers.batch")
             self.worker = self.batch.JobWorker(threads=threads)
 
         def run(self, job: dict, inputs: bytes, progress_sink=None) -> dict:
@@ -151,7 +151,7 @@ def run_remote(job: Job, out_dir: str | Path, address: str = "auto", settings: B
     """
     import time
 
-    from .progress import ProgressEvent
+    from ..core.progress import ProgressEvent
 
     with open_worker(job, address, settings) as remote:
         asked_to_cancel = False
@@ -281,7 +281,7 @@ def _toml(value) -> str:
 def _read_preview(path: str):
     import numpy as np
 
-    from .imageio import read_image
+    from ..core.imageio import read_image
 
     try:
         return (np.clip(read_image(path)[..., :3], 0.0, 1.0) * 255).round().astype(np.uint8)
@@ -298,7 +298,7 @@ def work_remotely(data: dict, progress=None, cancel=None) -> dict:
     """
     import tempfile
 
-    from .asset_io import save_asset_folder
+    from ..core.asset_io import save_asset_folder
     from .jobs import STAGE_TYPES
 
     with tempfile.TemporaryDirectory(prefix="scenefit-asset-") as tmp:

@@ -17,7 +17,7 @@ from ..errors import InputError
 from ..guidance.critics import CriticConfig
 from ..guidance.models import ModelConfig
 from ..guidance.weighting import ANNEAL_TYPES, NORMAL_WEIGHT_TYPES
-from ..presets import PRESET_NAMES
+from ..preset_tables import PRESET_NAMES
 
 MODE_TYPES = ("scene", "generate", "edit")
 VIEWS_TYPES = ("local+global", "local")
