@@ -3,6 +3,7 @@
     estimate_photo_camera(photo_path, fspy_path=None) -> CameraEstimate
 
 Each field comes from the best source that has it, best first:
+  user       given by the user (CameraEstimate.overridden: a stage's --fov / --pitch / --roll);
   fspy       an fSpy project (the artist drew the vanishing lines by hand);
   exif_35mm  the 35 mm equivalent focal length (field of view only; core/lighting's load_photo);
   exif_sensor  the focal length with the sensor width of a known camera model (field of view only);
@@ -30,7 +31,7 @@ import numpy as np
 from .errors import InputError
 from .photo import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG, PHOTO_YAW_DEG, PhotoCamera
 
-SOURCES = ("fspy", "exif_35mm", "exif_sensor", "lines", "default")
+SOURCES = ("user", "fspy", "exif_35mm", "exif_sensor", "lines", "default")
 # Sensor width (long side, mm) of common cameras whose JPEGs may lack the 35 mm equivalent, from the
 # makers' specification sheets; matched on the start of the EXIF Model, longest key first.
 SENSOR_WIDTH_MM = {
@@ -82,6 +83,21 @@ class CameraEstimate:
         """The camera as the stages use it (looking along +Y by default, the composition's azimuth 0)."""
         return PhotoCamera(yaw_deg=yaw_deg, pitch_deg=self.pitch_deg, fov_deg=self.fov_deg,
                            width=width or self.width, height=height or self.height, roll_deg=self.roll_deg)
+
+    def overridden(self, fov_deg: float | None = None, pitch_deg: float | None = None,
+                   roll_deg: float | None = None) -> "CameraEstimate":
+        """This estimate with the fields the user gave (source 'user', confidence 1) and its horizon
+        moved to match; the vanishing points are dropped once the camera is no longer the lines'."""
+        given = {k: v for k, v in (("fov", fov_deg), ("pitch", pitch_deg), ("roll", roll_deg)) if v is not None}
+        if not given:
+            return self
+        changes = {}
+        for name, value in given.items():
+            changes.update({f"{name}_deg": float(value), f"{name}_source": "user", f"{name}_confidence": 1.0})
+        out = replace(self, **changes)
+        up = camera_frame(out.pitch_deg, out.roll_deg, 0.0)[0]
+        return replace(out, horizon=horizon_points(up, focal_from_fov(out.fov_deg), self.width, self.height),
+                       vanishing_points={}, notes=self.notes + (f"given by the user: {', '.join(given)}",))
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -484,8 +500,13 @@ def _coarse_search(ends: np.ndarray, weights: np.ndarray, fov_deg: float | None)
     best = []
     for fov in fovs:
         scores = _theta_votes(ends, weights, focal_from_fov(fov), pitch, roll)
-        i, t = np.unravel_index(int(np.argmax(scores)), scores.shape)
-        best.append((float(scores[i, t]), (float(fov), float(pitch[i]), float(roll[i]), 2.0 * t)))
+        # one start per lens, or (one lens given) the best of each 12 deg band of pitch
+        per_pitch = np.max(scores, axis=1)
+        bands = np.floor(pitch / 12.0) if len(fovs) == 1 else np.zeros_like(pitch)
+        for band in np.unique(bands):
+            i = int(np.flatnonzero(bands == band)[np.argmax(per_pitch[bands == band])])
+            t = int(np.argmax(scores[i]))
+            best.append((float(scores[i, t]), (float(fov), float(pitch[i]), float(roll[i]), 2.0 * t)))
     best.sort(key=lambda b: -b[0])
     return [b[1] for b in best[:3]]
 
@@ -529,7 +550,7 @@ def _refine(ends: np.ndarray, weights: np.ndarray, start, fov_fixed: float | Non
             for sign in (1.0, -1.0):
                 y = list(x)
                 y[i] += sign * steps[i]
-                if i == 0 and not FOV_RANGE_DEG[0] / 2 <= y[0] <= 170.0:
+                if not _in_range(y):
                     continue
                 score = _score(ends, weights, y)
                 if score > best:
@@ -537,6 +558,13 @@ def _refine(ends: np.ndarray, weights: np.ndarray, start, fov_fixed: float | Non
         if not improved:
             steps = [s / 2 for s in steps]
     return tuple(x)
+
+
+def _in_range(params) -> bool:
+    """The search's range (a little wider for the field of view, whose grid ends are not walls)."""
+    fov, pitch, roll, _ = params
+    return FOV_RANGE_DEG[0] / 2 <= fov <= 170.0 and PITCH_RANGE_DEG[0] <= pitch <= PITCH_RANGE_DEG[1] \
+        and ROLL_RANGE_DEG[0] <= roll <= ROLL_RANGE_DEG[1]
 
 
 def _families(ends: np.ndarray, params) -> np.ndarray:
@@ -625,8 +653,11 @@ def _fov_confidence(ends: np.ndarray, weights: np.ndarray, params) -> tuple[floa
 def refit_at_fov(fit: LinesFit, fov_deg: float, fov_range: tuple[float, float] | None = None) -> LinesFit:
     """The lines' pitch and roll at a field of view they did not fix (EXIF's or the default); with
     fov_range, their confidence also counts how far they move over that range of lenses."""
-    start = (fov_deg,) + tuple(fit.params[1:])
-    params = _refine(fit.segments, fit.weights, start, fov_deg)
+    # A fresh coarse search at this fov: the free fit's pitch may belong to a very different lens.
+    starts = _coarse_search(fit.segments[:COARSE_SEGMENTS], fit.weights[:COARSE_SEGMENTS], fov_deg)
+    starts.append((fov_deg,) + tuple(fit.params[1:]))
+    params = max((_refine(fit.segments, fit.weights, s, fov_deg) for s in starts),
+                 key=lambda q: _score(fit.segments, fit.weights, q))
     out = _judge(fit.segments, fit.weights, params, _families(fit.segments, params), fov_deg,
                  dict(segments=int(len(fit.segments))), judged=True)
     if fov_range is None:

@@ -194,3 +194,13 @@ def test_roll_turns_the_horizon_clockwise_and_zero_roll_changes_nothing():
     assert right_px[1] > left[1]
     slope = math.degrees(math.atan2(right_px[1] - left[1], right_px[0] - left[0]))
     assert slope == pytest.approx(5.0, abs=0.01)
+
+
+def test_user_values_override_the_estimate_and_move_the_horizon(tmp_path):
+    est = estimate_photo_camera(_photo(tmp_path / "sky.png", size=(160, 120)))
+    given = est.overridden(pitch_deg=0.0, roll_deg=None)
+    assert (given.pitch_deg, given.pitch_source, given.pitch_confidence) == (0.0, "user", 1.0)
+    assert given.fov_source == "default" and given.source == "user+default"
+    # Level, unrolled: the horizon runs through the middle of the photo.
+    assert given.horizon == ((0.0, 60.0), (160.0, 60.0)) and est.horizon[0][1] < 60.0
+    assert est.overridden() is est
