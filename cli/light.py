@@ -9,6 +9,22 @@ from .options import (add_dry_run_arg, add_elevation_arg, add_model_args, add_ou
                       progress, require)
 
 
+def sun_angles(text: str) -> tuple[float, float]:
+    """--sun AZ,EL: two angles in degrees, the elevation within +-90."""
+    import argparse
+    import math
+
+    try:
+        az, el = (float(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--sun takes two angles in degrees as AZ,EL, got '{text}'; "
+                                         f"give e.g. --sun 30,45.") from None
+    if not (math.isfinite(az) and math.isfinite(el) and -90.0 <= el <= 90.0):
+        raise argparse.ArgumentTypeError(f"--sun's elevation must be within +-90 degrees (and both angles "
+                                         f"finite), got '{text}'; give e.g. --sun 30,45.")
+    return az, el
+
+
 def critic_choice(args, models):
     """--critic auto (as the demo's --guidance and --depth): the diffusion critic when SD2 is on this machine."""
     from ..core.decision import Decision
@@ -32,6 +48,7 @@ def resolve_config(args, critic: str):
     depth = DepthConfig(depth_type=args.depth, model=args.depth_model or DEFAULT_DEPTH_MODEL,
                         cache_dir=models.cache_dir, local_files_only=True if args.offline else None)
     overrides = {k: v for k, v in (("scene_type", args.scene), ("fov_deg", args.fov), ("tint", args.tint),
+                                   ("sun_deg", args.sun),
                                    ("camera_pitch_deg", -args.elevation if args.elevation is not None else None))
                  if v is not None}
     config = stage_config("light", args.preset, depth=depth, critic_type=critic, models=models, **overrides)
@@ -97,6 +114,10 @@ def add_parser(sub) -> None:
     p.add_argument("--scene", choices=("auto", "indoor", "outdoor"), help="scene type (default: auto)")
     p.add_argument("--fov", type=positive_float, help="horizontal field of view in degrees (default: metadata, else 60)")
     add_elevation_arg(p)
+    p.add_argument("--sun", type=sun_angles, metavar="AZ,EL",
+                   help="the dominant light's direction in degrees: azimuth from the photo's view direction, "
+                        "positive to the right (90: from the right, 180: from behind the camera), elevation above "
+                        "the horizon; the unseen light is centred there")
     p.add_argument("--depth", choices=("auto", "model", "geometric"), default="auto",
                    help="auto: the depth model if it is on this machine, else the geometric room")
     p.add_argument("--depth-model", help="hub id or local folder of a transformers depth model")

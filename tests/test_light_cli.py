@@ -67,3 +67,45 @@ def test_an_absent_depth_model_is_looked_for_once_per_process(tmp_path, monkeypa
     for _ in range(3):
         assert depth.estimate_ray_distance(photo, camera, placement, broken).method == "geometric"
     assert len(calls) == 1
+
+
+def _evenly_lit_estimate(sun_deg):
+    from scenefit.core.lighting import estimate_light
+    from scenefit.core.lighting.depth import DepthConfig
+    from scenefit.core.photo import PhotoCamera
+    from scenefit.core.presets import stage_config
+
+    photo = np.full((48, 64, 3), 0.45, np.float32)
+    camera = PhotoCamera(yaw_deg=90.0, pitch_deg=-10.0, fov_deg=60.0, width=64, height=48)   # looks along +Y
+    config = stage_config("light", "draft", scene_type="indoor", critic_type="none", sun_deg=sun_deg,
+                          depth=DepthConfig(depth_type="geometric"))
+    return estimate_light(photo, (32.0, 40.0), config, photo_camera=camera)
+
+
+@pytest.mark.parametrize("sun, expected", [((90.0, 30.0), (1.0, 0.0)), ((-90.0, 30.0), (-1.0, 0.0)),
+                                           ((180.0, 20.0), (0.0, -1.0))])
+def test_the_artists_sun_is_the_dominant_light(sun, expected):
+    from scenefit.core.lighting.measure import dominant_direction
+
+    result = _evenly_lit_estimate(sun)
+    direction = np.array(result.decisions["cues"]["unseen"]["direction"])
+    el = math.radians(sun[1])
+    want = np.array([expected[0] * math.cos(el), expected[1] * math.cos(el), math.sin(el)])
+    assert direction @ want > math.cos(math.radians(1.0)), direction
+    assert result.decisions["sun"]["used"] and "--sun" in result.decisions["cues"]["direction"]["from"]
+    # The map's brightest direction follows (the measure's blur and solid-angle weight move it a little).
+    assert dominant_direction(result.hdr) @ want > math.cos(math.radians(25.0))
+    # With or without the hint the cue prior sets the scales (S (2 / 0.25 - 1) over a lobe-shaded
+    # mean colour: at least 7x), not the inverse tone curve (about 1 for a mid-grey photo).
+    for estimate in (result, _evenly_lit_estimate(None)):
+        assert estimate.scales["unseen"] > 7.0 and "sun" in result.decisions
+
+
+def test_sun_on_the_command_line(capsys):
+    from scenefit.cli import main
+
+    assert main(["light", "--dry-run", "--sun", "45,-10"]) == 0
+    assert _strict(capsys.readouterr().out)["config"]["sun_deg"] == [45.0, -10.0]
+    for bad in ("45", "north,10", "10,95"):
+        assert main(["light", "--dry-run", "--sun", bad]) == 2
+        assert "give e.g. --sun 30,45" in capsys.readouterr().err

@@ -54,6 +54,9 @@ class LightConfig:
     scene_type: str = "auto"
     fov_deg: float | None = None              # horizontal; None: the photo's metadata, else DEFAULT_FOV_DEG
     camera_pitch_deg: float = -10.0           # the photo camera looks this far up (negative: down)
+    # The artist's dominant light (--sun AZ,EL), degrees: azimuth from the photo's view direction,
+    # positive to the camera's right (clockwise seen from above), elevation above the horizon.
+    sun_deg: tuple[float, float] | None = None
     map_height: int = 128                     # the map is map_height x 2 map_height
     depth: DepthConfig = DepthConfig()
     thresholds: RegionThresholds = RegionThresholds()
@@ -78,6 +81,10 @@ class LightConfig:
         if not -89.0 <= self.camera_pitch_deg <= 89.0:
             raise InputError(f"The photo camera's elevation must be within +-89 degrees (how far it looks down), "
                              f"got {-self.camera_pitch_deg:g}.")
+        if self.sun_deg is not None and (len(self.sun_deg) != 2 or not all(map(math.isfinite, self.sun_deg))
+                                         or not -90.0 <= self.sun_deg[1] <= 90.0):
+            raise InputError(f"The sun direction must be two finite angles AZ,EL with the elevation within +-90 "
+                             f"degrees, got {self.sun_deg}; give it as --sun 30,45.")
         if not 8 <= self.map_height <= 4096:
             raise InputError(f"map_height must be between 8 and 4096, got {self.map_height}.")
         if not self.l_white > 1.0:
@@ -180,6 +187,15 @@ def default_photo_camera(config: LightConfig, photo_info: dict, width: int, heig
     return PhotoCamera(yaw_deg=90.0, pitch_deg=config.camera_pitch_deg, fov_deg=fov, width=width, height=height), why
 
 
+def sun_direction(sun_deg: tuple[float, float] | None, camera: PhotoCamera) -> np.ndarray | None:
+    """The world unit vector of LightConfig.sun_deg: azimuth from the camera's view, positive to its right."""
+    if sun_deg is None:
+        return None
+    az, el = (math.radians(a) for a in sun_deg)
+    yaw = math.radians(camera.yaw_deg) - az
+    return np.array([math.cos(el) * math.cos(yaw), math.cos(el) * math.sin(yaw), math.sin(el)])
+
+
 def default_object() -> tuple[Mesh, torch.Tensor]:
     """When no asset is given: a mid-grey, medium-rough sphere of the normalised radius."""
     maps = torch.cat([torch.full((8, 8, 3), 0.5), torch.full((8, 8, 1), 0.5), torch.zeros(8, 8, 1)], dim=-1)
@@ -265,8 +281,12 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     # Bright regions and the prior.
     ldr = pano.ldr
     regions = bright_regions(ldr, pano.distance, scene_type, config.thresholds)
+    if config.sun_deg is not None:
+        decisions["sun"] = {"deg": list(config.sun_deg), "used": config.prior_type == "cues",
+                            "frame": "azimuth from the photo's view, positive to its right; elevation up"}
     if config.prior_type == "cues":
-        cues = build_cues(photo, ldr, pano.unseen, regions, config.thresholds, config.cues, camera=photo_camera)
+        cues = build_cues(photo, ldr, pano.unseen, regions, config.thresholds, config.cues, camera=photo_camera,
+                          sun=sun_direction(config.sun_deg, photo_camera))
         ldr, regions, prior = cues.ldr, cues.regions, cues.scales
         decisions["cues"] = cues.report
     else:
