@@ -11,7 +11,9 @@ Each field comes from the best source that has it, best first:
              the three orthogonal (Manhattan) directions of a built scene on the Gauss sphere;
   default    what the light stage assumes without any of these (60 deg, pitch -10 deg, roll 0).
 Where the lines are weak (a forest, a close-up, a smooth sky) the estimate says so in `notes` and the
-field keeps its fallback, so a report never passes a guess off as a measurement.
+field keeps its fallback, so a report never passes a guess off as a measurement. Where they fix pitch
+and roll but not the focal length (one vanishing point, or far ones), pitch and roll are fitted again
+at EXIF's or the default field of view, their confidence counting how much the lens could move them.
 
 Camera coordinates inside this module: x right, y up, z forward (the view axis); image points are
 normalised so that the half width is 1 (x_n = (u - W/2) / (W/2), y_n = (H/2 - v) / (W/2)) and the
@@ -33,14 +35,16 @@ from .photo import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG, PHOTO_YAW_DEG, PhotoCamer
 
 SOURCES = ("user", "fspy", "exif_35mm", "exif_sensor", "lines", "default")
 # Sensor width (long side, mm) of common cameras whose JPEGs may lack the 35 mm equivalent, from the
-# makers' specification sheets; matched on the start of the EXIF Model, longest key first.
+# makers' specification sheets; matched on the start of the EXIF Model, longest key first, where no
+# digit follows (so "CANON EOS R5" is not the APS-C R50, while "ILCE-7" covers the A7 III's ILCE-7M3).
 SENSOR_WIDTH_MM = {
     "CANON EOS 5D": 36.0, "CANON EOS 6D": 35.8, "CANON EOS R5": 36.0, "CANON EOS R6": 35.9,
     "CANON EOS 7D": 22.3, "CANON EOS 80D": 22.5, "CANON EOS 90D": 22.3, "CANON EOS 2000D": 22.3,
     "CANON EOS REBEL": 22.3, "CANON EOS M50": 22.3,
     "NIKON D850": 35.9, "NIKON D810": 35.9, "NIKON D750": 35.9, "NIKON D3500": 23.5, "NIKON D5600": 23.5,
     "NIKON D7500": 23.5, "NIKON Z 6": 35.9, "NIKON Z 7": 35.9,
-    "ILCE-7": 35.8, "ILCE-9": 35.6, "ILCE-6": 23.5,          # Sony A7 / A9 (full frame), A6xxx (APS-C)
+    "ILCE-7": 35.8, "ILCE-9": 35.6,                           # Sony A7 and A9 families (full frame)
+    "ILCE-6000": 23.5, "ILCE-6100": 23.5, "ILCE-6400": 23.5, "ILCE-6600": 23.5,   # Sony A6xxx (APS-C)
     "X-T3": 23.5, "X-T4": 23.5, "X-T30": 23.5, "X100": 23.6,   # Fujifilm
     "DC-GH5": 17.3, "DMC-GH4": 17.3, "E-M1": 17.3, "E-M5": 17.3, "E-M10": 17.3,   # Micro Four Thirds
     "DSC-RX100": 13.2,                                          # Sony 1-inch compacts
@@ -299,7 +303,7 @@ def _exif_fov(path: Path, info: dict, width: int, height: int) -> tuple[float | 
 def sensor_width_mm(model: str) -> float | None:
     model = " ".join(model.upper().split())
     for key in sorted(SENSOR_WIDTH_MM, key=len, reverse=True):
-        if model.startswith(key):
+        if model.startswith(key) and not model[len(key):len(key) + 1].isdigit():
             return SENSOR_WIDTH_MM[key]
     return None
 
@@ -439,7 +443,7 @@ def photo_segments(srgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     h, w = srgb.shape[:2]
     gray = np.clip(np.round(srgb[..., :3] @ LUMA * 255.0), 0, 255).astype(np.uint8)
-    found = cv2.createLineSegmentDetector(cv2.LSD_REFINE_STD).detect(gray)[0]
+    found = _line_detector().detect(gray)[0]
     if found is None:
         return np.zeros((0, 4)), np.zeros(0)
     px = found.reshape(-1, 4).astype(np.float64)
@@ -451,6 +455,17 @@ def photo_segments(srgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ends[:, 0::2] = (px[:, 0::2] - w / 2) / (w / 2)
     ends[:, 1::2] = (h / 2 - px[:, 1::2]) / (w / 2)
     return ends, np.minimum(length, 0.25 * max(w, h)) / max(w, h)
+
+
+def _line_detector():
+    """OpenCV's LSD (back in 4.5.1+, present in the pinned 4.11); the contrib fast line detector where a
+    build lacks it (4.1-4.5.0 shipped LSD as a stub that raises)."""
+    import cv2
+
+    try:
+        return cv2.createLineSegmentDetector(cv2.LSD_REFINE_STD)
+    except (AttributeError, cv2.error):
+        return cv2.ximgproc.createFastLineDetector()
 
 
 def _great_circles(ends: np.ndarray, focal: float) -> tuple[np.ndarray, np.ndarray]:

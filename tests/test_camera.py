@@ -12,7 +12,7 @@ from scenefit.core.camera import look_frame
 from scenefit.core.errors import InputError
 from scenefit.core.imageio import write_image
 from scenefit.core.photo import PhotoCamera
-from scenefit.core.photo_camera import estimate_photo_camera
+from scenefit.core.photo_camera import estimate_photo_camera, sensor_width_mm
 
 SIZE = (96, 64)
 
@@ -111,6 +111,8 @@ def test_exif_focal_length_with_a_known_sensor(tmp_path):
     est = estimate_photo_camera(photo)
     assert est.fov_source == "exif_sensor"
     assert est.fov_deg == pytest.approx(math.degrees(2 * math.atan(35.9 / 70.0)), abs=0.01)
+    assert (sensor_width_mm("Canon EOS R5"), sensor_width_mm("Canon EOS R50"), sensor_width_mm("ILCE-7M3")) == \
+        (36.0, None, 35.8)
     unknown = _jpeg_with_exif(tmp_path / "odd.jpg", (90, 60), **{"Exif:FocalLength": 35.0, "Model": "Obscura 1"})
     est = estimate_photo_camera(unknown)
     assert est.fov_source == "default" and any("Obscura 1" in note for note in est.notes)
