@@ -83,7 +83,19 @@ def _uses_default_uvs(node) -> bool:
     from_node, output = vector
     if from_node.type == "UVMAP":
         return True  # SceneFit reads the mesh's active UV map; the report names the node
+    if _moves_nothing(from_node):
+        return _uses_default_uvs(from_node)
     return from_node.type == "TEX_COORD" and output.name == "UV"
+
+
+def _moves_nothing(node) -> bool:
+    """A Mapping node that leaves UVs as they are: Blender's glTF importer adds one for a
+    KHR_texture_transform that only names the UV set (UnityGLTF writes it on every texture)."""
+    if node.type != "MAPPING" or node.vector_type not in ("POINT", "TEXTURE", "VECTOR"):
+        return False
+    neutral = {"Location": 0.0, "Rotation": 0.0, "Scale": 1.0}
+    return all(not node.inputs[name].is_linked and np.allclose(node.inputs[name].default_value, value)
+               for name, value in neutral.items() if name in node.inputs)
 
 
 def _node_value(node, output, trail: list[str], pixels_of) -> Value:

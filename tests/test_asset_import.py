@@ -98,6 +98,26 @@ for poly in grid.data.polygons:
         u, v = layer[loop].uv
         layer[loop].uv = (u * 3 + 1.2, v * 3 + 1.2) if poly.material_index == 0 else (u * 2 - 1, v * 2 - 1)
 export(folder / "tiled.glb")
+
+# A palette-textured low-poly prop (as Kenney's and gltf-transform's `palette` write them): every face's
+# UVs collapse to the centre of one texel of a 16x16 palette, a different colour for each face.
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=1)
+gem = bpy.context.active_object
+gem.name = "Gem"
+palette = np.random.default_rng(5).uniform(0.1, 0.9, (16, 16, 3)).astype(np.float32)
+mat = bpy.data.materials.new("Palette")
+tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+tex.image = _image(bpy, folder, "palette", _rgba(palette), "sRGB")
+mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+gem.data.materials.append(mat)
+layer = gem.data.uv_layers.active.data
+for poly in gem.data.polygons:
+    row, col = divmod(3 * poly.index + 1, 16)
+    for loop in poly.loop_indices:
+        layer[loop].uv = ((col + 0.5) / 16, 1 - (row + 0.5) / 16)
+export(folder / "palette.glb")
+np.save(folder / "palette.npy", palette)
 """
 
 
@@ -208,6 +228,66 @@ def test_tiling_uvs_convert_and_bake_alike_and_keep_their_samplers(assets, tmp_p
         sampler = out["samplers"][texture["sampler"]] if "sampler" in texture else {}
         samplers[material["name"]] = (sampler.get("wrapS", 10497), sampler.get("wrapT", 10497))
     assert samplers == {"Tiles": (10497, 10497), "Mirror": (33648, 33648)}  # REPEAT, MIRRORED_REPEAT
+
+
+def glb_image(path: Path, data: dict, texture: int) -> np.ndarray:
+    """(H, W, 3) float sRGB values of texture `texture` of the GLB at `path` (its JSON `data`)."""
+    import cv2
+
+    blob = path.read_bytes()
+    start = 20 + struct.unpack("<I", blob[12:16])[0] + 8  # the BIN chunk's data
+    view = data["bufferViews"][data["images"][data["textures"][texture]["source"]]["bufferView"]]
+    encoded = np.frombuffer(blob[start + view.get("byteOffset", 0):][:view["byteLength"]], np.uint8)
+    return cv2.imdecode(encoded, cv2.IMREAD_COLOR)[..., ::-1] / 255.0
+
+
+def rewrite_glb_json(path: Path, out: Path, edit) -> None:
+    """`path` with its JSON chunk changed by edit(data) in place, written to `out`."""
+    blob = path.read_bytes()
+    length = struct.unpack("<I", blob[12:16])[0]
+    data = json.loads(blob[20:20 + length])
+    edit(data)
+    text = json.dumps(data).encode()
+    text += b" " * (-len(text) % 4)
+    rest = blob[20 + length:]
+    out.write_bytes(b"glTF" + struct.pack("<II", 2, 20 + len(text) + len(rest)) + struct.pack("<I", len(text))
+                    + b"JSON" + text + rest)
+
+
+def _texcoord_only_transform(data: dict) -> None:
+    """A KHR_texture_transform naming only the UV set, as UnityGLTF writes on every texture (Kenney's GLBs)."""
+    data["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = {
+        "KHR_texture_transform": {"texCoord": 0}}
+    data["extensionsUsed"] = sorted(set(data.get("extensionsUsed", [])) | {"KHR_texture_transform"})
+
+
+def test_palette_textures_convert_and_bake_each_face_as_the_texel_it_samples(assets, tmp_path):
+    """UVs collapsed to points were refused ("has no UV area ... Unwrap it again"), which would lose
+    the palette's colours. Each face now samples its texel in convert and bake alike, and the baked
+    palette gives every face the colour it had. The importer's Mapping node for a texture transform
+    that moves nothing is read through (it sent the image to a Cycles bake, which saw no UV area:
+    Kenney's palettes came back black)."""
+    asset = tmp_path / "palette.glb"
+    rewrite_glb_json(assets / "palette.glb", asset, _texcoord_only_transform)
+    proc = scenefit("convert", str(asset), "--out", str(tmp_path / "convert"), "--preset", "draft", "--iterations",
+                    "300", "--resolution", "16", "--quiet")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    report = json.loads((tmp_path / "convert" / "report.json").read_text())
+    assert report["psnr_covered_texels_db"] > 30, report["psnr_covered_texels_db"]
+    assert not any("Cycles" in line for line in report["materials"][0]["read"]), report["materials"][0]["read"]
+    baked = tmp_path / "baked.glb"
+    proc = scenefit("bake", str(asset), "--texture", str(tmp_path / "convert/maps/texture.pt"), "--out", str(baked),
+                    "--texture-size", "16", "--report", str(tmp_path / "bake.json"))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    converted = report["decisions"]["materials"][0]["uv_coverage"]
+    baked_coverage = json.loads((tmp_path / "bake.json").read_text())["materials"][0]["uv_coverage"]
+    assert converted == baked_coverage == round(20 / 256, 4)
+    out = gltf_json(baked)
+    image = glb_image(baked, out, out["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["index"])
+    palette = np.load(assets / "palette.npy")
+    rows, cols = np.divmod(3 * np.arange(20) + 1, 16)
+    error = np.abs(image[rows, cols] - np.round(palette[rows, cols] * 255) / 255)  # the image's sRGB bytes
+    assert error.mean() < 0.03 and error.max() < 0.1, error
 
 
 PROCEDURAL_TILES = r"""

@@ -62,6 +62,14 @@ def brute_force_raster(mesh: Mesh, h: int, w: int, border_width: float = 2.0,
         texel, first = np.unique(texel[hit], return_index=True)
         new = owner[texel] < 0
         owner[texel[new]], at[texel[new]] = f, np.stack((px, py), 1)[hit[first[new]]]
+    point = np.zeros(len(faces), bool)  # a face holding no texel takes the one sampled at its UV centre, if free
+    for f in np.setdiff1d(np.arange(len(faces)), owner[owner >= 0]):
+        x, y = np.floor(tri[f].mean(axis=0) + 0.5).astype(np.int64)
+        if (wrap[0] == "clamp" and not 0 <= x < w) or (wrap[1] == "clamp" and not 0 <= y < h):
+            continue
+        texel = _wrapped(y, h, wrap[1]) * w + _wrapped(x, w, wrap[0])
+        if owner[texel] < 0:
+            owner[texel], at[texel], point[f] = f, (x, y), True
     mask = owner >= 0
     distance, nearest = _nearest_covered(mask.reshape(h, w))
     ring = np.flatnonzero(~mask & (distance.reshape(-1) <= border_width))
@@ -70,7 +78,10 @@ def brute_force_raster(mesh: Mesh, h: int, w: int, border_width: float = 2.0,
     at[ring, 0] = _same_copy(at[near, 0], near % w, ring % w, w, wrap[0])
     at[ring, 1] = _same_copy(at[near, 1], near // w, ring // w, h, wrap[1])
     border = owner >= 0
-    weights = _barycentric(tri[owner[border]], area2[owner[border]], at[border, 0], at[border, 1])
+    held_as_point = point[owner[border]]
+    weights = _barycentric(tri[owner[border]], np.where(held_as_point, 1.0, area2[owner[border]]), at[border, 0],
+                           at[border, 1])
+    weights[held_as_point] = 1.0 / 3.0
     weights = np.clip(weights, 0.0, None)
     weights /= weights.sum(axis=1, keepdims=True)
     corners = faces[owner[border]]

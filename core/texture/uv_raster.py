@@ -95,14 +95,11 @@ def rasterize_uv(mesh: Mesh, height: int, width: int | None = None, border_width
     pix = np.stack((uv[:, 0] * width - 0.5, (1.0 - uv[:, 1]) * height - 0.5), axis=1)
     tri = pix[faces]  # (F, 3, 2)
 
-    # Drop triangles with (numerically) no area in UV space: they texture nothing.
+    # Triangles with (numerically) no UV area are not rasterised as areas; like those too small to hold
+    # a texel centre, they sample one texel (see _claim_points).
     e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     area2 = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    keep = np.abs(area2) > 1e-12
-    if not keep.any():
-        raise InputError(f"Mesh '{mesh.name}' has no UV area: every triangle collapses in its UV map. Unwrap it again.")
-    face_ids = np.flatnonzero(keep)
-    tri, area2 = tri[keep], area2[keep]
+    real = np.abs(area2) > 1e-12
 
     # Pass 1, exact coverage. Integer bounding boxes of texel centres (in the tiled plane), clipped to
     # the image along an axis that clamps.
@@ -111,17 +108,19 @@ def rasterize_uv(mesh: Mesh, height: int, width: int | None = None, border_width
     for axis, (mode, size) in enumerate(zip(modes, (width, height))):
         if mode == "clamp":
             lo[:, axis], hi[:, axis] = np.maximum(lo[:, axis], 0), np.minimum(hi[:, axis], size - 1)
-    valid = (hi >= lo).all(axis=1)
-    face_ids, tri, area2, lo, hi = face_ids[valid], tri[valid], area2[valid], lo[valid], hi[valid]
-    owner_map, tiles = _cover(tri, area2, lo, hi, height, width, modes)
+    areas = np.flatnonzero(real & (hi >= lo).all(axis=1))
+    owner_map, tiles = _cover(tri[areas], area2[areas], lo[areas], hi[areas], height, width, modes)
+    held = owner_map >= 0
+    owner_map[held] = areas[owner_map[held]]  # face numbers from here on
+    point = _claim_points(tri, owner_map, tiles, height, width, modes)
     flat = np.flatnonzero(owner_map >= 0)
     if flat.size == 0:
-        outside = " or lie outside [0, 1] where the texture clamps" if "clamp" in modes else ""
-        raise InputError(f"Mesh '{mesh.name}' covers no texel centre at {width}x{height}: its UV islands are smaller "
-                         f"than one texel{outside}; unwrap it with larger islands or use a larger texture.")
+        # (with repeating UVs every face samples some texel, so only clamped UVs come here)
+        raise InputError(f"Mesh '{mesh.name}' covers no texel centre at {width}x{height}: its UV islands lie "
+                         "outside [0, 1] where the texture clamps; unwrap it inside [0, 1].")
     owner = owner_map[flat]
-    bary = _barycentric(tri[owner], area2[owner], _unwrapped(flat % width, tiles[0, flat], width, modes[0]),
-                        _unwrapped(flat // width, tiles[1, flat], height, modes[1]))
+    bary = _weights(tri, area2, point, owner, _unwrapped(flat % width, tiles[0, flat], width, modes[0]),
+                    _unwrapped(flat // width, tiles[1, flat], height, modes[1]))
 
     n_texels = height * width
     mask = np.zeros(n_texels, dtype=bool)
@@ -136,23 +135,23 @@ def rasterize_uv(mesh: Mesh, height: int, width: int | None = None, border_width
             # (in the copy of the image where the nearest covered texel's triangle lies)
             near = nearest[ring]
             ring_owner = owner_map[near]
-            ring_bary = _barycentric(tri[ring_owner], area2[ring_owner],
-                                     _unwrapped(ring % width, tiles[0, near], width, modes[0]),
-                                     _unwrapped(ring // width, tiles[1, near], height, modes[1]))
+            ring_bary = _weights(tri, area2, point, ring_owner,
+                                 _unwrapped(ring % width, tiles[0, near], width, modes[0]),
+                                 _unwrapped(ring // width, tiles[1, near], height, modes[1]))
             flat = np.concatenate((flat, ring))
             owner = np.concatenate((owner, ring_owner))
             bary = np.concatenate((bary, ring_bary))
     bary = np.clip(bary, 0.0, None)
     bary /= bary.sum(axis=1, keepdims=True)
 
-    verts = np.asarray(mesh.faces, dtype=np.int64)[face_ids[owner]]  # (K, 3)
+    verts = faces[owner]  # (K, 3)
     pos = np.einsum("kc,kcd->kd", bary, np.asarray(mesh.positions, dtype=np.float64)[verts])
     position = np.zeros((n_texels, 3), dtype=np.float32)
     position[flat] = pos
     border = np.zeros(n_texels, dtype=bool)
     border[flat] = True
     face = np.full(n_texels, -1, dtype=np.int32)
-    face[flat] = face_ids[owner]
+    face[flat] = owner
     barycentric = np.zeros((n_texels, 3), dtype=np.float32)
     barycentric[flat] = bary
     normal = None
@@ -333,6 +332,42 @@ def _claim(tri, area2, t, y, a, b, owner_map, tiles, free: _Free, height: int, w
             right[k - 1] -= np.where(flip[k - 1], take[-1], 0)
             k -= 1
         t, row, tile_v, flip, left, right, base = (x[k:] for x in (t, row, tile_v, flip, left, right, base))
+
+
+def _claim_points(tri: np.ndarray, owner_map: np.ndarray, tiles: np.ndarray, height: int, width: int,
+                  modes: tuple[str, str]) -> np.ndarray:
+    """Faces that hold no texel after pass 1 (UVs collapsed to a point, as palette and atlas textures
+    are mapped, or smaller than a texel) take the texel a sampler reads at their UV centre, when no
+    face holds it yet (in face order): a palette face's colour is the texel it samples. Under clamp, a
+    centre outside the image takes nothing. Returns (F,) bool, the faces that took a texel."""
+    held = np.zeros(len(tri), bool)
+    held[owner_map[owner_map >= 0]] = True
+    faces = np.flatnonzero(~held)
+    point = np.zeros(len(tri), bool)
+    if not faces.size:
+        return point
+    coord = np.floor(tri[faces].mean(axis=1) + 0.5).astype(np.int64)  # the texel whose square holds the centre
+    col, tile_u = _texel(coord[:, 0], width, modes[0])
+    row, tile_v = _texel(coord[:, 1], height, modes[1])
+    inside = (col >= 0) & (col < width) & (row >= 0) & (row < height)
+    faces, col, row, tile_u, tile_v = (x[inside] for x in (faces, col, row, tile_u, tile_v))
+    texel, first = np.unique(row * width + col, return_index=True)  # the first face (in order) of each texel
+    new = owner_map[texel] < 0
+    texel, first = texel[new], first[new]
+    owner_map[texel] = faces[first]
+    tiles[0, texel], tiles[1, texel] = tile_u[first], tile_v[first]
+    point[faces[first]] = True
+    return point
+
+
+def _weights(tri: np.ndarray, area2: np.ndarray, point: np.ndarray, owner: np.ndarray, px: np.ndarray,
+             py: np.ndarray) -> np.ndarray:
+    """(K, 3) barycentric weights of points (px, py) in faces `owner`; a face that holds its texel as
+    a point (see _claim_points) is read at its centre."""
+    safe = np.where(point[owner], 1.0, area2[owner])
+    bary = _barycentric(tri[owner], safe, px, py)
+    bary[point[owner]] = 1.0 / 3.0
+    return bary
 
 
 def _barycentric(tri: np.ndarray, area2: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
