@@ -88,6 +88,9 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path) -> list[s
     if alpha is not None:
         links.new(base.outputs["Alpha"], alpha[1])
 
+    if getattr(bsdf, "unlit", False):
+        notes.append("unlit: only the base colour is written (an unlit material has no roughness or metallic)")
+        return notes
     textured = {k: v for k, v in (("Roughness", baked.roughness), ("Metallic", baked.metallic))
                 if isinstance(v, np.ndarray)}
     for socket_name, value in (("Roughness", baked.roughness), ("Metallic", baked.metallic)):

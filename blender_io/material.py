@@ -15,6 +15,7 @@ from ..core.quiet import native_output_captured
 from .mesh import mesh_from_object
 from .node_values import NotAnImageChain, socket_value, source
 from .procedural_bake import bake_socket
+from .unlit import unlit_surface
 
 # Size of the base-colour image made when Base Color is a constant but another channel is not.
 CONSTANT_SIZE = 256
@@ -24,7 +25,8 @@ _LINEAR_SPACES = {"Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear CIE-XY
 
 
 def principled_bsdf(material):
-    """The Principled BSDF that feeds the material output (or the only one there is)."""
+    """The Principled BSDF that feeds the material output (or the only one there is); for an unlit
+    material (KHR_materials_unlit, no Principled BSDF) a stand-in with its colour as Base Color."""
     if material is None:
         raise InputError("The object has no material; give it one with a Principled BSDF.")
     tree = material.node_tree  # Blender 5 materials always have one; 4.x ones may not use nodes
@@ -36,6 +38,8 @@ def principled_bsdf(material):
         if node.type == "BSDF_PRINCIPLED":
             return node
     candidates = [n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"]
+    if not candidates and (unlit := unlit_surface(tree)) is not None:
+        return unlit  # KHR_materials_unlit: Base Color is the emission colour (see blender_io.unlit)
     if not candidates:
         raise InputError(f"Material '{material.name}' has no Principled BSDF node; SceneFit reads its "
                          "Base Color, Roughness and Metallic inputs.")
@@ -257,6 +261,9 @@ def read_material(material, obj=None, slot: int = 0) -> Material:
         base_color = np.broadcast_to(np.asarray(base_color, np.float32), (h, w, 3)).copy()
     normal = _normal_map(bsdf, material, kept, dropped)
     mode = _carried(material, bsdf, kept, dropped)
+    if getattr(bsdf, "unlit", False):
+        kept.append(f"unlit (KHR_materials_unlit) <- '{bsdf.name}': its colour is read as base colour, renders "
+                    "shade it as a rough dielectric (unlit is not modelled); exported unlit again")
     maps = PBRMaps(base_color=np.ascontiguousarray(base_color, dtype=np.float32), roughness=roughness,
                    metallic=metallic, normal=normal)
     return Material(name=material.name, maps=maps, read=tuple(read), kept=tuple(kept), dropped=tuple(dropped),

@@ -290,6 +290,27 @@ def test_palette_textures_convert_and_bake_each_face_as_the_texel_it_samples(ass
     assert error.mean() < 0.03 and error.max() < 0.1, error
 
 
+def _unlit(data: dict) -> None:
+    """The material made KHR_materials_unlit, as Kenney's characters are."""
+    data["materials"][0].setdefault("extensions", {})["KHR_materials_unlit"] = {}
+    data["extensionsUsed"] = sorted(set(data.get("extensionsUsed", [])) | {"KHR_materials_unlit"})
+
+
+def test_an_unlit_material_reads_its_colour_as_base_colour_and_stays_unlit(assets, tmp_path):
+    """KHR_materials_unlit comes in as an Emission shader mixed by Light Path, no Principled BSDF:
+    it was refused ("has no Principled BSDF node"). Its colour is the base colour now, and the
+    baked file is unlit again, with the baked image as its colour."""
+    asset = tmp_path / "unlit.glb"
+    rewrite_glb_json(assets / "palette.glb", asset, lambda data: (_unlit(data), _texcoord_only_transform(data)))
+    report, out = convert_and_bake(asset, tmp_path)
+    material = report["materials"][0]
+    assert any(line.startswith("unlit (KHR_materials_unlit)") for line in material["kept"]), material
+    assert any(line.startswith("Base Color <- image 'palette'") for line in material["read"]), material["read"]
+    assert "KHR_materials_unlit" in out["extensionsUsed"]
+    assert out["materials"][0]["extensions"] == {"KHR_materials_unlit": {}}
+    assert "baseColorTexture" in out["materials"][0]["pbrMetallicRoughness"]
+
+
 PROCEDURAL_TILES = r"""
 import json
 import numpy as np
