@@ -71,6 +71,9 @@ class CameraEstimate:
     vanishing_points: dict = field(default_factory=dict)
     lines: dict = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    # (x1, y1, x2, y2, direction: 0 vertical, 1-2 horizontal) of the segments that point at a vanishing
+    # point, for drawing over the photo; left out of to_dict/--json, which stay short.
+    segments: tuple[tuple[float, float, float, float, int], ...] = field(default=(), repr=False)
 
     @property
     def source(self) -> str:
@@ -105,6 +108,7 @@ class CameraEstimate:
 
     def to_dict(self) -> dict:
         out = asdict(self)
+        del out["segments"]
         out["horizon"] = [list(p) for p in self.horizon]
         out["notes"] = list(self.notes)
         return {"source": self.source, "fallback": self.fallback, **out}
@@ -182,7 +186,8 @@ def _estimate(fov: float, pitch: float, roll: float, sources: tuple[str, str, st
         fov_confidence=round(confidences[0], 3), pitch_confidence=round(confidences[1], 3),
         roll_confidence=round(confidences[2], 3), width=width, height=height,
         horizon=horizon_points(frame[0], focal_from_fov(fov), width, height), vanishing_points=vps,
-        lines=fit.counts if fit is not None else {}, notes=notes)
+        lines=fit.counts if fit is not None else {}, notes=notes,
+        segments=fit.inlier_segments(width, height) if fit is not None and "lines" in sources else ())
 
 
 # -- fSpy ------------------------------------------------------------------------------------------
@@ -420,6 +425,18 @@ class LinesFit:
             out[name] = None if abs(d[2]) < 1e-6 else [
                 round(width / 2 * (1 + focal * d[0] / d[2]), 2), round(height / 2 - width / 2 * focal * d[1] / d[2], 2)]
         return out
+
+
+    def inlier_segments(self, width: int, height: int) -> tuple[tuple[float, float, float, float, int], ...]:
+        """The segments pointing at a vanishing point, in pixels of a width x height photo, each with its
+        direction (0 vertical, 1 and 2 horizontal)."""
+        if self.segments is None or self.families is None:
+            return ()
+        keep = self.families >= 0
+        xs = (self.segments[keep][:, 0::2] + 1.0) * width / 2.0
+        ys = height / 2.0 - self.segments[keep][:, 1::2] * width / 2.0
+        return tuple((round(float(x[0]), 1), round(float(y[0]), 1), round(float(x[1]), 1), round(float(y[1]), 1),
+                      int(f)) for x, y, f in zip(xs, ys, self.families[keep]))
 
 
 def fit_lines(srgb: np.ndarray, fov_deg: float | None = None) -> LinesFit:

@@ -154,6 +154,31 @@ def test_lines_of_a_box_room_give_its_camera(tmp_path, fov, pitch, roll, yaw):
     assert est.roll_deg == pytest.approx(roll, abs=0.3)
     assert min(est.fov_confidence, est.pitch_confidence, est.roll_confidence) >= 0.5 and not est.fallback
     assert est.vanishing_points["vertical"] is not None and est.lines["vertical"] >= 12
+    # The vertical segments handed out for drawing point at the vertical vanishing point.
+    vx, vy = est.vanishing_points["vertical"]
+    vertical = [s for s in est.segments if s[4] == 0]
+    assert len(vertical) == est.lines["vertical"] and "segments" not in est.to_dict()
+    for x1, y1, x2, y2, _ in vertical:
+        along = np.degrees(np.arctan2(y2 - y1, x2 - x1) - np.arctan2(vy - (y1 + y2) / 2, vx - (x1 + x2) / 2))
+        assert abs((along + 90.0) % 180.0 - 90.0) < 2.0
+
+
+def test_exif_field_of_view_with_the_lines_pitch_and_roll(tmp_path):
+    import OpenImageIO as oiio
+
+    camera = PhotoCamera(yaw_deg=80.0, pitch_deg=-17.0, fov_deg=70.0, width=384, height=288, roll_deg=-2.0)
+    pixels = np.round(_box_room(camera) * 255).astype(np.uint8)
+    focal35 = 43.27 * 384 / math.hypot(384, 288) / 2 / math.tan(math.radians(35.0))   # 70 deg wide
+    spec = oiio.ImageSpec(384, 288, 3, oiio.UINT8)
+    spec.attribute("Exif:FocalLengthIn35mmFilm", int(round(focal35)))
+    out = oiio.ImageOutput.create(str(tmp_path / "room.jpg"))
+    assert out.open(str(tmp_path / "room.jpg"), spec) and out.write_image(pixels)
+    out.close()
+    est = estimate_photo_camera(tmp_path / "room.jpg")
+    assert (est.fov_source, est.pitch_source, est.roll_source, est.source) == \
+        ("exif_35mm", "lines", "lines", "exif_35mm+lines")
+    assert est.fov_deg == pytest.approx(70.0, abs=1.0)   # the EXIF value is a whole number of mm
+    assert (est.pitch_deg, est.roll_deg) == (pytest.approx(-17.0, abs=0.7), pytest.approx(-2.0, abs=0.3))
 
 
 def test_a_photo_without_lines_reports_the_fallback(tmp_path):
