@@ -221,6 +221,10 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     # The diffusion models are found before any work (a missing one is a clear error).
     outpainting = _choose_completion(config)
     want_outpaint = outpainting.choice == "sd2"
+    hedged = _hedge_unsure_scene(photo_srgb, placement_px, config, want_outpaint, photo_camera, photo_info, progress,
+                                 cancel)
+    if hedged is not None:
+        return hedged
     model_paths = None
     if (config.critic_type == "diffusion" and critic is None) or want_outpaint:
         model_paths = _locate_light_models(config.models, want_outpaint)
@@ -344,6 +348,35 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     emit(progress, "light", max(config.optimise.iterations, 1), max(config.optimise.iterations, 1), "HDR map ready")
     return LightResult(ldr, hdr, regions, scales, prior, pano, photo_camera, decisions, optimisation,
                        time.perf_counter() - t0)
+
+
+def _hedge_unsure_scene(photo_srgb: np.ndarray, placement_px: tuple[float, float], config: LightConfig,
+                        want_outpaint: bool, photo_camera: PhotoCamera | None, photo_info: dict | None,
+                        progress: ProgressCallback | None, cancel: threading.Event | None) -> LightResult | None:
+    """An unsure automatic indoor/outdoor call is handled as unsure: both maps are built and averaged
+    (on real views a wrong call cost more than the average of both does). Only where both are cheap:
+    no critic and no outpainting model (their scales and completions belong to one scene type)."""
+    if config.scene_type != "auto" or config.critic_type != "none" or want_outpaint:
+        return None
+    cue = scene_type_cue(np.clip(np.asarray(photo_srgb, np.float32)[..., :3], 0.0, 1.0))
+    if not cue["unsure"]:
+        return None
+    t0 = time.perf_counter()
+    both = {kind: estimate_light(photo_srgb, placement_px, replace(config, scene_type=kind), photo_camera=photo_camera,
+                                 photo_info=photo_info, progress=progress, cancel=cancel)
+            for kind in ("indoor", "outdoor")}
+    result = both[cue["scene_type"]]
+    result.hdr = (0.5 * (both["indoor"].hdr + both["outdoor"].hdr)).astype(np.float32)
+    result.decisions.setdefault("depth", both["indoor"].decisions.get("depth"))
+    result.decisions["scene_type"] = {
+        "chosen": cue["scene_type"], "unsure": True, "by": "auto", "auto": cue,
+        "note": f"unsure (score {cue['score']:.2f}): the map is the mean of the indoor and outdoor estimates; "
+                f"--scene indoor|outdoor decides", "scales": {k: r.scales for k, r in both.items()}}
+    if "cues" in result.decisions:
+        # Half the map rests on a scene type that is likely wrong.
+        result.decisions["cues"]["confidence"] = round(0.5 * (result.decisions["cues"].get("confidence") or 1.0), 3)
+    result.seconds = time.perf_counter() - t0
+    return result
 
 
 def _area_resize(image: np.ndarray, height: int) -> np.ndarray:
