@@ -14,6 +14,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..core.errors import InputError
+from ..core.gltf_meshopt import importable
 from ..core.maps import PBRMaps
 from ..core.materials import AssetMaterials
 from ..core.mesh import Mesh
@@ -162,7 +163,7 @@ def loaded_asset(path: str | Path, object_name: str | None = None):
         raise InputError(f"SceneFit cannot read '{suffix}' files; use one of {known}, or an asset folder.")
     if path.stat().st_size == 0:
         raise InputError(f"Asset file '{path}' is empty; export it again.")
-    with _temporary_data(bpy) as scene:
+    with _temporary_data(bpy) as scene, importable(path) as readable:
         # Blender's importers print to the terminal and raise RuntimeError on a broken file: their
         # chatter is kept off the user's terminal and serves as the error's reason.
         with native_output_captured() as chatter:
@@ -170,7 +171,7 @@ def loaded_asset(path: str | Path, object_name: str | None = None):
                 if suffix == ".blend":
                     _append_blend(bpy, scene, path, object_name)
                 else:
-                    _import_into(bpy, scene, path, suffix)
+                    _import_into(bpy, scene, readable, readable.suffix.lower())
                 failure = None
             except (RuntimeError, ValueError, OSError, UnicodeDecodeError) as error:
                 failure = error

@@ -311,6 +311,17 @@ def test_an_unlit_material_reads_its_colour_as_base_colour_and_stays_unlit(asset
     assert "baseColorTexture" in out["materials"][0]["pbrMetallicRoughness"]
 
 
+def test_a_meshopt_compressed_file_converts_and_bakes(assets, tmp_path):
+    """Blender 5.0's importer has no EXT_meshopt_compression decoder: such a file (valid per the
+    validator) was refused "check that it is a valid '.glb' file, or export it again"."""
+    from meshopt_builder import meshopt_encoded
+
+    asset = meshopt_encoded(assets / "palette.glb", tmp_path / "meshopt.glb")
+    report, out = convert_and_bake(asset, tmp_path)
+    assert report["decisions"]["materials"][0]["uv_coverage"] == round(20 / 32 ** 2, 4)  # each face its texel
+    assert [m["name"] for m in out["materials"]] == ["Palette"] and len(out["meshes"]) == 1
+
+
 PROCEDURAL_TILES = r"""
 import json
 import numpy as np
