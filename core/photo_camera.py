@@ -175,6 +175,11 @@ def _fallback_notes(fov_src: str, pitch_src: str, roll_src: str) -> list[str]:
     return notes
 
 
+def _unit(confidence: float) -> float:
+    """A confidence in [0, 1], 0 where a degenerate fit left it undefined (JSON has no NaN)."""
+    return round(min(max(float(confidence), 0.0), 1.0), 3) if math.isfinite(confidence) else 0.0
+
+
 def _estimate(fov: float, pitch: float, roll: float, sources: tuple[str, str, str],
               confidences: tuple[float, float, float], width: int, height: int, fit: "LinesFit | None",
               notes: tuple[str, ...]) -> CameraEstimate:
@@ -183,8 +188,8 @@ def _estimate(fov: float, pitch: float, roll: float, sources: tuple[str, str, st
     return CameraEstimate(
         fov_deg=round(fov, 3), pitch_deg=round(pitch, 3), roll_deg=round(roll, 3),
         fov_source=sources[0], pitch_source=sources[1], roll_source=sources[2],
-        fov_confidence=round(confidences[0], 3), pitch_confidence=round(confidences[1], 3),
-        roll_confidence=round(confidences[2], 3), width=width, height=height,
+        fov_confidence=_unit(confidences[0]), pitch_confidence=_unit(confidences[1]),
+        roll_confidence=_unit(confidences[2]), width=width, height=height,
         horizon=horizon_points(frame[0], focal_from_fov(fov), width, height), vanishing_points=vps,
         lines=fit.counts if fit is not None else {}, notes=notes,
         segments=fit.inlier_segments(width, height) if fit is not None and "lines" in sources else ())
@@ -227,8 +232,8 @@ def _fspy_bytes(path: Path) -> bytes:
         raise InputError(f"The fSpy project '{path}' does not exist; give the .fspy file fSpy saved.")
     data = path.read_bytes()
     if len(data) < FSPY_HEADER.size:
-        raise InputError(f"'{path}' is {len(data)} bytes, shorter than an fSpy project's {FSPY_HEADER.size}-byte "
-                         "header; give the .fspy file fSpy saved.")
+        raise InputError(f"'{path}' is {len(data)} byte{'' if len(data) == 1 else 's'}, shorter than an fSpy "
+                         f"project's {FSPY_HEADER.size}-byte header; give the .fspy file fSpy saved.")
     return data
 
 
@@ -636,7 +641,7 @@ def _standard_errors(ends: np.ndarray, weights: np.ndarray, params, families: np
     cov = sigma2 * np.linalg.inv(normal + 1e-9 * max(np.trace(normal), 1e-12) * np.eye(len(free)))
     errors = np.full(4, np.inf)
     errors[list(free)] = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    return errors
+    return np.nan_to_num(errors, nan=np.inf)
 
 
 
@@ -694,8 +699,8 @@ def refit_at_fov(fit: LinesFit, fov_deg: float, fov_range: tuple[float, float] |
                  dict(segments=int(len(fit.segments))), judged=True)
     if fov_range is None:
         return out
-    wide, narrow = (_refine(fit.segments, fit.weights, (f,) + tuple(params[1:]), f) for f in fov_range)
-    spread = [abs(wide[i] - narrow[i]) / 2.0 for i in (1, 2)]
+    first, last = (_refine(fit.segments, fit.weights, (f,) + tuple(params[1:]), f) for f in fov_range)
+    spread = [abs(first[i] - last[i]) / 2.0 for i in (1, 2)]
     pitch_conf, roll_conf = (min(c, 1.0 / (1.0 + (u / TOLERABLE_DEG[i + 1]) ** 2))
                              for i, (c, u) in enumerate(zip((out.pitch_confidence, out.roll_confidence), spread)))
     note = (f"pitch and roll from the lines at {fov_deg:g} deg; over lenses of {fov_range[0]:g}-{fov_range[1]:g} deg "
