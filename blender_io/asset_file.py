@@ -142,7 +142,9 @@ def load_asset_materials(path: str | Path, object_name: str | None = None) -> As
     import bpy
 
     with loaded_asset(path, object_name) as (obj, scene):
-        return read_object_materials(obj, bpy.context.evaluated_depsgraph_get())
+        # With its node's world transform: a painting stood upright by its node stands upright, a
+        # mirrored node stays mirrored, as the baked file (which keeps the transforms) shows it.
+        return read_object_materials(obj, bpy.context.evaluated_depsgraph_get(), space="world")
 
 
 @contextmanager

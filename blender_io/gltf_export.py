@@ -205,7 +205,7 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
     if not hasattr(texture, "texture"):
         texture = load_neural_texture(texture)
     with loaded_asset(asset_path, object_name) as (obj, scene):
-        mesh, slots = object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())
+        mesh, slots = object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get(), space="world")  # as convert
         size = texture_size or default_texture_size(texture, len(slots))
         materials = [obj.material_slots[s].material for s in slots]
         baked = bake_game_maps(texture, mesh, [m.name for m in materials], size,

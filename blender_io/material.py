@@ -279,10 +279,11 @@ def maps_from_material(material, obj=None, slot: int = 0) -> PBRMaps:
     return read_material(material, obj, slot).maps
 
 
-def object_mesh_and_slots(obj, depsgraph) -> tuple[Mesh, list[int]]:
+def object_mesh_and_slots(obj, depsgraph, space: str = "object") -> tuple[Mesh, list[int]]:
     """The object's mesh with material_index numbering the slots its faces use (None for one),
-    and those slot numbers in order."""
-    mesh = mesh_from_object(obj, depsgraph)
+    and those slot numbers in order. space "world": with the node's transform (rotation, mirroring,
+    scale), as an asset file places it; "object": as the artist's object is, wherever it is moved."""
+    mesh = mesh_from_object(obj, depsgraph, space)
     if not obj.material_slots:
         raise InputError(f"Object '{obj.name}' has no material; give it a Principled BSDF with image textures.")
     raw = np.zeros(len(mesh.faces), np.int32) if mesh.material_index is None else mesh.material_index
@@ -295,9 +296,10 @@ def object_mesh_and_slots(obj, depsgraph) -> tuple[Mesh, list[int]]:
     return mesh, [int(s) for s in used]
 
 
-def read_object_materials(obj, depsgraph) -> AssetMaterials:
-    """The object's mesh and every material its faces use (slots no face uses are skipped)."""
-    mesh, slots = object_mesh_and_slots(obj, depsgraph)
+def read_object_materials(obj, depsgraph, space: str = "object") -> AssetMaterials:
+    """The object's mesh (see object_mesh_and_slots for `space`) and every material its faces use
+    (slots no face uses are skipped)."""
+    mesh, slots = object_mesh_and_slots(obj, depsgraph, space)
     materials = [read_material(obj.material_slots[slot].material, obj, slot) for slot in slots]
     unused = [s.material.name for i, s in enumerate(obj.material_slots) if i not in slots and s.material is not None]
     notes = [f"material slots no face uses were skipped: {', '.join(unused)}"] if unused else []

@@ -63,12 +63,15 @@ def mesh_from_object(obj, depsgraph, space: str = "object") -> Mesh:
     chosen = corners[first]
     positions = co[loop_vertex[chosen]].astype(np.float64)
     normals = loop_normal[chosen].astype(np.float64)
+    faces = inverse.reshape(-1, 3)
     if space == "world":
         m = world_matrix(obj)
         positions = positions @ m[:3, :3].T + m[:3, 3]
         normals = normals @ np.linalg.inv(m[:3, :3])  # inverse transpose, applied to row vectors
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+        if np.linalg.det(m[:3, :3]) < 0:   # a mirroring node turns every triangle inside out: wind it back
+            faces = faces[:, [0, 2, 1]]
     # Material slot per triangle, kept when the object has several slots (see read_object_materials).
     material_index = tri_material if len(obj.material_slots) > 1 else None
-    return Mesh.from_arrays(positions, inverse.reshape(-1, 3), loop_uv[chosen], normals, name=obj.name,
+    return Mesh.from_arrays(positions, faces, loop_uv[chosen], normals, name=obj.name,
                             material_index=material_index)

@@ -57,7 +57,7 @@ for name, path in assets.items():
                     "--report", str(run / "bake.json")], check=True)
     # What bake wrote, recomputed from the same texture and mesh (the bake is deterministic).
     with loaded_asset(path) as (obj, scene):
-        mesh, slots = object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())
+        mesh, slots = object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get(), space="world")
         materials = [obj.material_slots[s].material for s in slots]
         expected = {b.name: b for b in bake_game_maps(load_neural_texture(run / "convert/maps/texture.pt"), mesh,
                                                        [m.name for m in materials], BAKE_SIZE,
