@@ -20,6 +20,7 @@ from ..core.materials import AssetMaterials
 from ..core.mesh import Mesh
 from ..core.quiet import native_output_captured
 from .material import read_object_materials
+from .scene_asset import read_scene_materials
 
 IMPORTERS = {
     ".glb": ("import_scene", "gltf"), ".gltf": ("import_scene", "gltf"),
@@ -142,9 +143,13 @@ def load_asset_materials(path: str | Path, object_name: str | None = None) -> As
     import bpy
 
     with loaded_asset(path, object_name) as (obj, scene):
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        meshes = [o for o in scene.objects if o.type == "MESH"]
+        if object_name is None and len(meshes) > 1:   # the whole scene is the asset (--object takes one)
+            return read_scene_materials(meshes, depsgraph, Path(path).stem)
         # With its node's world transform: a painting stood upright by its node stands upright, a
         # mirrored node stays mirrored, as the baked file (which keeps the transforms) shows it.
-        return read_object_materials(obj, bpy.context.evaluated_depsgraph_get(), space="world")
+        return read_object_materials(obj, depsgraph, space="world")
 
 
 @contextmanager

@@ -171,17 +171,23 @@ def bake_object_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_f
     """
     if len(baked) != len(slots):
         raise InputError(f"{len(baked)} baked materials for {len(slots)} material slots.")
+    materials = [obj.material_slots[slot].material for slot in slots]
+    return bake_materials_to_gltf(materials, baked, out_file, file_format, None if whole_scene else [obj], protect)
+
+
+def bake_materials_to_gltf(materials: list, baked: list[BakedMaterial], out_file: str | Path, file_format: str = "glb",
+                           selection_only: list | None = None, protect: tuple = ()) -> dict:
+    """Put `baked[i]` into `materials[i]` (each material once) and export the scene (or `selection_only`)."""
     report = {"materials": []}
     done = set()
     with tempfile.TemporaryDirectory(prefix="scenefit-bake-") as folder:
-        for maps, slot in zip(baked, slots):
-            material = obj.material_slots[slot].material
+        for maps, material in zip(baked, materials):
             if material.name in done:
                 continue
             done.add(material.name)
             notes = apply_baked_material(material, maps, Path(folder))
             report["materials"].append(dict(maps.report(), done=notes))
-        written = export_gltf(out_file, file_format, None if whole_scene else [obj], protect)
+        written = export_gltf(out_file, file_format, selection_only, protect)
     report["files"] = [str(p) for p in written]
     return report
 
@@ -201,17 +207,25 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
 
     from .asset_file import loaded_asset
     from .material import object_mesh_and_slots
+    from .scene_asset import scene_mesh
 
     if not hasattr(texture, "texture"):
         texture = load_neural_texture(texture)
     with loaded_asset(asset_path, object_name) as (obj, scene):
-        mesh, slots = object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get(), space="world")  # as convert
-        size = texture_size or default_texture_size(texture, len(slots))
-        materials = [obj.material_slots[s].material for s in slots]
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        meshes = [o for o in scene.objects if o.type == "MESH"]
+        if object_name is None and len(meshes) > 1:   # the whole scene is the asset, as convert read it
+            whole = scene_mesh(meshes, depsgraph, Path(asset_path).stem)
+            mesh, materials, taken = whole.mesh, whole.materials, whole.objects
+        else:
+            mesh, slots = object_mesh_and_slots(obj, depsgraph, space="world")  # as convert
+            materials, taken = [obj.material_slots[s].material for s in slots], [obj.name]
+        size = texture_size or default_texture_size(texture, len(materials))
         baked = bake_game_maps(texture, mesh, [m.name for m in materials], size,
                                [constant_channels(m) for m in materials], [material_wrap(m) for m in materials])
-        report = bake_object_to_gltf(obj, baked, slots, out_file, file_format, whole_scene=True, protect=protect)
-        report.update({"asset": str(asset_path), "object": obj.name, "format": file_format, "texture_size": size})
+        report = bake_materials_to_gltf(materials, baked, out_file, file_format, protect=protect)
+        report.update({"asset": str(asset_path), "object": taken[0] if len(taken) == 1 else None, "objects": taken,
+                       "format": file_format, "texture_size": size})
     return report
 
 
