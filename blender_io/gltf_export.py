@@ -11,17 +11,22 @@ from __future__ import annotations
 
 import shutil
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from ..core.errors import InputError
 from ..core.game_bake import BakedMaterial
+from ..core.gltf_meshopt import encoded_glb
+from ..core.gltf_output import GltfOutput, output_like_input
 from ..core.maps import resize_channels
 from .material import EXTENSION_OF_WRAP, image_pixels_linear, material_wrap, principled_bsdf
 from .node_values import source
 
 FORMATS = {"glb": "GLB", "gltf": "GLTF_SEPARATE"}
+# --textures -> the exporter's image format (AUTO keeps the PNGs SceneFit bakes, and each other image's own format).
+_IMAGE_FORMATS = {"png": "AUTO", "jpeg": "JPEG", "webp": "WEBP"}
 
 
 def _alpha_source(bsdf):
@@ -38,6 +43,21 @@ def _alpha_source(bsdf):
         if socket is None:
             return None
     return None
+
+
+def _with_tangents(output: GltfOutput) -> GltfOutput:
+    """`output` with tangents where a loaded material links its normal input (a normal map: the exporter
+    writes it, and engines and the validator want TANGENT with it)."""
+    import bpy
+
+    def normal_mapped(material) -> bool:
+        try:
+            socket = principled_bsdf(material).inputs.get("Normal")
+        except InputError:
+            return False
+        return socket is not None and socket.is_linked
+
+    return replace(output, tangents=output.tangents or any(normal_mapped(m) for m in bpy.data.materials))
 
 
 def constant_channels(material) -> dict[str, float]:
@@ -118,8 +138,10 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path) -> list[s
 
 
 def export_gltf(out_file: str | Path, file_format: str, selection_only: list | None = None,
-                protect: tuple = ()) -> list[Path]:
-    """Write the current scene (or only `selection_only` objects) with Blender's glTF exporter.
+                protect: tuple = (), output: GltfOutput = GltfOutput()) -> list[Path]:
+    """Write the current scene (or only `selection_only` objects) with Blender's glTF exporter, with
+    `output`'s compression (Draco by the exporter, meshopt by meshoptimizer's encoder after it),
+    texture format and tangents.
 
     The files are written into a temporary folder beside `out_file` and moved into place once the
     exporter has finished, so a failed export leaves nothing half-written; none is moved over a file
@@ -135,6 +157,8 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
     out_file = Path(out_file)
     if out_file.suffix.lower() != f".{file_format}":
         raise InputError(f"The output '{out_file.name}' should end in .{file_format} for --format {file_format}.")
+    if output.compress == "meshopt" and file_format != "glb":
+        raise InputError("--compress meshopt writes .glb files only; use --format glb, or --compress none or draco.")
     out_file.parent.mkdir(parents=True, exist_ok=True)
     addon_utils.enable("io_scene_gltf2", default_set=False)
     layer = bpy.context.view_layer
@@ -147,7 +171,12 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
         bpy.ops.export_scene.gltf(filepath=str(staging / out_file.name), export_format=FORMATS[file_format],
                                   use_selection=selection_only is not None, use_active_scene=True,
                                   export_apply=True, export_cameras=True, export_lights=True,
-                                  export_image_format="AUTO", export_materials="EXPORT")
+                                  export_image_format=_IMAGE_FORMATS[output.textures], export_materials="EXPORT",
+                                  export_tangents=output.tangents,
+                                  export_draco_mesh_compression_enable=output.compress == "draco")
+        if output.compress == "meshopt":
+            staged = staging / out_file.name
+            encoded_glb(staged, staged)
         refuse_overwriting([out_file.parent / p.name for p in staging.iterdir()], list(protect), "the glTF")
         written = []
         for path in sorted(staging.iterdir()):
@@ -162,7 +191,8 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
 
 
 def bake_object_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_file: str | Path,
-                        file_format: str = "glb", whole_scene: bool = True, protect: tuple = ()) -> dict:
+                        file_format: str = "glb", whole_scene: bool = True, protect: tuple = (),
+                        output: GltfOutput = GltfOutput()) -> dict:
     """Put the baked maps into `obj`'s materials (slot `slots[i]` gets `baked[i]`) and export glTF.
 
     For an asset loaded into a temporary scene (blender_io.asset_file.loaded_asset): the materials
@@ -172,11 +202,13 @@ def bake_object_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_f
     if len(baked) != len(slots):
         raise InputError(f"{len(baked)} baked materials for {len(slots)} material slots.")
     materials = [obj.material_slots[slot].material for slot in slots]
-    return bake_materials_to_gltf(materials, baked, out_file, file_format, None if whole_scene else [obj], protect)
+    return bake_materials_to_gltf(materials, baked, out_file, file_format, None if whole_scene else [obj], protect,
+                                  output)
 
 
 def bake_materials_to_gltf(materials: list, baked: list[BakedMaterial], out_file: str | Path, file_format: str = "glb",
-                           selection_only: list | None = None, protect: tuple = ()) -> dict:
+                           selection_only: list | None = None, protect: tuple = (),
+                           output: GltfOutput = GltfOutput()) -> dict:
     """Put `baked[i]` into `materials[i]` (each material once) and export the scene (or `selection_only`)."""
     report = {"materials": []}
     done = set()
@@ -187,16 +219,20 @@ def bake_materials_to_gltf(materials: list, baked: list[BakedMaterial], out_file
             done.add(material.name)
             notes = apply_baked_material(material, maps, Path(folder))
             report["materials"].append(dict(maps.report(), done=notes))
-        written = export_gltf(out_file, file_format, selection_only, protect)
+        written = export_gltf(out_file, file_format, selection_only, protect, output)
     report["files"] = [str(p) for p in written]
+    report["output"] = output.report()
     return report
 
 
 def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_format: str = "glb",
-                    texture_size: int | None = None, object_name: str | None = None, protect: tuple = ()) -> dict:
+                    texture_size: int | None = None, object_name: str | None = None, protect: tuple = (),
+                    output: GltfOutput | None = None) -> dict:
     """`scenefit bake`: the asset file loaded into a temporary scene, the neural texture baked per
     material at `texture_size`² (default: the fitted size, rounded up to a power of two), written
     as glTF 2.0. `texture` is a NeuralTexture or the path of a texture.pt. Returns the report.
+    `output`: compression, texture format and size cap (default: as the input, see
+    core.gltf_output.output_like_input); tangents are written where a material has a normal map.
 
     Known bpy 5.0.1 crash: once the exporter has run on the temporary scene and the scene is
     removed, the next glTF import in the same process segfaults. `scenefit bake` is a process of
@@ -220,10 +256,11 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
         else:
             mesh, slots = object_mesh_and_slots(obj, depsgraph, space="world")  # as convert
             materials, taken = [obj.material_slots[s].material for s in slots], [obj.name]
-        size = texture_size or default_texture_size(texture, len(materials))
+        output = _with_tangents(output or output_like_input(asset_path))
+        size = min(texture_size or default_texture_size(texture, len(materials)), output.max_texture)
         baked = bake_game_maps(texture, mesh, [m.name for m in materials], size,
                                [constant_channels(m) for m in materials], [material_wrap(m) for m in materials])
-        report = bake_materials_to_gltf(materials, baked, out_file, file_format, protect=protect)
+        report = bake_materials_to_gltf(materials, baked, out_file, file_format, protect=protect, output=output)
         report.update({"asset": str(asset_path), "object": taken[0] if len(taken) == 1 else None, "objects": taken,
                        "format": file_format, "texture_size": size})
     return report

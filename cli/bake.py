@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..core.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TEXTURE_FORMATS
 from .options import add_asset_args
 
 
@@ -14,6 +15,7 @@ def run(args) -> int:
     from ..core.asset_io import is_asset_folder
     from ..core.errors import InputError
     from ..core.game_bake import check_texture_size
+    from ..core.gltf_output import output_like_input
 
     if is_asset_folder(args.asset):
         raise InputError(f"'{args.asset}' is a SceneFit asset folder; scenefit bake rewrites the asset's own file "
@@ -25,8 +27,9 @@ def run(args) -> int:
     out = Path(args.out)
     targets = [out] + ([out.with_suffix(".bin")] if args.format == "gltf" else [])
     refuse_overwriting(targets + ([Path(args.report)] if args.report else []), list(protect))
+    output = output_like_input(args.asset, args.compress, args.textures, args.max_texture)
     report = bake_asset_file(args.asset, Path(args.texture), args.out, args.format, args.texture_size, args.object,
-                             protect=protect)
+                             protect=protect, output=output)
     for material in report["materials"]:
         print(f"material '{material['name']}': base colour texture, roughness {material['roughness']}, "
               f"metallic {material['metallic']} at {material['size']}²")
@@ -46,5 +49,11 @@ def add_parser(sub) -> None:
                    help="glb: one binary file; gltf: .gltf + .bin + PNG files (default: glb)")
     p.add_argument("--out", required=True, help="output file, ending in .glb or .gltf")
     p.add_argument("--texture-size", type=int, help="power of two (default: the fitted size, rounded up)")
+    p.add_argument("--compress", choices=COMPRESSIONS,
+                   help="mesh compression: none, draco (Blender's exporter) or meshopt (.glb only, meshoptimizer's "
+                        "encoder) (default: as the input)")
+    p.add_argument("--textures", choices=TEXTURE_FORMATS, help="image format of the textures (default: the input's)")
+    p.add_argument("--max-texture", type=int, default=DEFAULT_MAX_TEXTURE,
+                   help=f"largest baked texture side, a power of two (default: {DEFAULT_MAX_TEXTURE})")
     p.add_argument("--report", help="also write what was baked as JSON here")
     p.set_defaults(func=run)

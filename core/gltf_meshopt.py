@@ -146,3 +146,63 @@ def importable(path: Path):
             raise InputError(f"The {EXTENSION} data of '{path.name}' does not decode ({error}); check the file "
                              "with the Khronos glTF validator.") from None
         yield copy
+
+
+_COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+_TYPE_COUNT = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_ELEMENT_ARRAY_BUFFER = 34963
+
+
+def _element_sizes(document: dict) -> dict[int, int]:
+    """bufferView -> the bytes of one element of the accessors reading it (views no accessor reads,
+    images, are left out)."""
+    sizes = {}
+    for accessor in document.get("accessors", []):
+        if "bufferView" in accessor:
+            sizes[accessor["bufferView"]] = _COMPONENT_BYTES[accessor["componentType"]] * \
+                _TYPE_COUNT[accessor["type"]]
+    return sizes
+
+
+def _packed(data: bytes, view: dict, size: int) -> tuple[bytes, dict] | None:
+    """The view's bytes as EXT_meshopt_compression stores them and the extension's fields, or None
+    where the codec cannot take it (a stride not a multiple of 4, a partial row)."""
+    import meshopt
+
+    stride = view.get("byteStride", size)
+    if view.get("target") == _ELEMENT_ARRAY_BUFFER and stride in (2, 4) and len(data) % (3 * stride) == 0:
+        mode, rows = "TRIANGLES", np.frombuffer(data, f"<u{stride}").astype(np.uint32)
+    elif stride % 4 == 0 and stride <= 256 and len(data) % stride == 0 and view.get("target") != _ELEMENT_ARRAY_BUFFER:
+        mode, rows = "ATTRIBUTES", np.frombuffer(data, np.uint8).reshape(-1, stride)
+    else:
+        return None
+    return meshopt.encode_gltf_buffer(rows, mode), {"byteStride": stride, "count": len(data) // stride, "mode": mode}
+
+
+def encoded_glb(source: Path, out: Path) -> Path:
+    """A plain GLB `source` written to `out` with its vertex and index data EXT_meshopt_compression-
+    compressed, in gltfpack's layout: the compressed bytes in the BIN chunk, and a fallback buffer
+    holding nothing (so the extension is required). Images stay as they are."""
+    document, chunk = read_gltf(source)
+    sizes = _element_sizes(document)
+    blob, fallback = bytearray(), 0
+    for index, view in enumerate(document.get("bufferViews", [])):
+        data = chunk[view.get("byteOffset", 0):][:view["byteLength"]]
+        blob.extend(b"\0" * (-len(blob) % 4))
+        packed = _packed(data, view, sizes[index]) if index in sizes else None
+        if packed is None:
+            view.update(buffer=0, byteOffset=len(blob))
+            blob.extend(data)
+            continue
+        view["extensions"] = {**view.get("extensions", {}), EXTENSION: {
+            "buffer": 0, "byteOffset": len(blob), "byteLength": len(packed[0]), **packed[1]}}
+        fallback += -fallback % 4
+        view.update(buffer=1, byteOffset=fallback)
+        fallback += view["byteLength"]
+        blob.extend(packed[0])
+    document["buffers"] = [{"byteLength": len(blob)},
+                           {"byteLength": max(fallback, 1), "extensions": {EXTENSION: {"fallback": True}}}]
+    for key in ("extensionsUsed", "extensionsRequired"):
+        document[key] = sorted(set(document.get(key, [])) | {EXTENSION})
+    write_glb(out, document, bytes(blob))
+    return out

@@ -118,6 +118,23 @@ for poly in gem.data.polygons:
         layer[loop].uv = ((col + 0.5) / 16, 1 - (row + 0.5) / 16)
 export(folder / "palette.glb")
 np.save(folder / "palette.npy", palette)
+
+# A normal-mapped ball written with Draco (Blender's exporter writes no TANGENT unless asked).
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)
+ball = bpy.context.active_object
+ball.name = "Ball"
+mat = textured("Bumpy")
+nodes, links = mat.node_tree.nodes, mat.node_tree.links
+bumps = _pattern(32, 9) * 0.2 + 0.4
+bumps[..., 2] = 1.0
+normal_image = nodes.new("ShaderNodeTexImage")
+normal_image.image = _image(bpy, folder, "bumpy_normal", _rgba(bumps), "Non-Color")
+normal_map = nodes.new("ShaderNodeNormalMap")
+links.new(normal_image.outputs["Color"], normal_map.inputs["Color"])
+links.new(normal_map.outputs["Normal"], nodes["Principled BSDF"].inputs["Normal"])
+ball.data.materials.append(mat)
+export(folder / "draco.glb", export_draco_mesh_compression_enable=True)
 """
 
 
@@ -314,12 +331,47 @@ def test_an_unlit_material_reads_its_colour_as_base_colour_and_stays_unlit(asset
 def test_a_meshopt_compressed_file_converts_and_bakes(assets, tmp_path):
     """Blender 5.0's importer has no EXT_meshopt_compression decoder: such a file (valid per the
     validator) was refused "check that it is a valid '.glb' file, or export it again"."""
-    from meshopt_builder import meshopt_encoded
+    from scenefit.core.gltf_meshopt import encoded_glb
 
-    asset = meshopt_encoded(assets / "palette.glb", tmp_path / "meshopt.glb")
+    asset = encoded_glb(assets / "palette.glb", tmp_path / "meshopt.glb")
     report, out = convert_and_bake(asset, tmp_path)
     assert report["decisions"]["materials"][0]["uv_coverage"] == round(20 / 32 ** 2, 4)  # each face its texel
     assert [m["name"] for m in out["materials"]] == ["Palette"] and len(out["meshes"]) == 1
+
+
+def validator_errors(path: Path) -> int | None:
+    """The Khronos glTF validator's error count for `path` (None where `make corpus` has not installed it)."""
+    modules = ROOT / ".venv" / "node" / "node_modules"
+    if not (modules / "gltf-validator").is_dir():
+        return None
+    done = subprocess.run(["node", str(ROOT / "tools" / "validate_gltf.js"), str(path)], capture_output=True, text=True,
+                          env={"NODE_PATH": str(modules), "PATH": "/usr/bin:/bin:/usr/local/bin"}, timeout=300)
+    return json.loads(done.stdout.strip().splitlines()[-1])["errors"]
+
+
+def test_bake_compresses_like_the_input_keeps_tangents_and_writes_the_chosen_textures(assets, tmp_path):
+    """The bake of a Draco file came back uncompressed and without the TANGENT a normal map needs (a
+    validator warning the input did not have). It is compressed as the input by default, carries
+    tangents, and --compress / --textures / --max-texture choose otherwise."""
+    asset = assets / "draco.glb"
+    _, out = convert_and_bake(asset, tmp_path)
+    assert "KHR_draco_mesh_compression" in out["extensionsUsed"]
+    assert all("TANGENT" in p["attributes"] for mesh in out["meshes"] for p in mesh["primitives"])
+    baked = tmp_path / "meshopt.glb"
+    proc = scenefit("bake", str(asset), "--texture", str(tmp_path / "convert/maps/texture.pt"), "--out", str(baked),
+                    "--texture-size", "32", "--compress", "meshopt", "--textures", "jpeg", "--max-texture", "16",
+                    "--report", str(tmp_path / "meshopt.json"))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out, report = gltf_json(baked), json.loads((tmp_path / "meshopt.json").read_text())
+    assert "EXT_meshopt_compression" in out["extensionsRequired"] and "KHR_draco_mesh_compression" not in \
+        out.get("extensionsUsed", [])
+    base = out["textures"][out["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["index"]]
+    assert out["images"][base["source"]]["mimeType"] == "image/jpeg"
+    assert report["texture_size"] == 16 and report["output"]["compress"] == "meshopt"
+    assert validator_errors(baked) in (0, None)
+    proc = scenefit("bake", str(asset), "--texture", str(tmp_path / "convert/maps/texture.pt"), "--out",
+                    str(tmp_path / "x.glb"), "--max-texture", "100")
+    assert proc.returncode == 2 and "--max-texture must be a power of two between 4 and 8192, got 100." in proc.stderr
 
 
 PROCEDURAL_TILES = r"""

@@ -6,8 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from meshopt_builder import meshopt_encoded
-from scenefit.core.gltf_meshopt import decoded_glb, importable, read_gltf, uses_meshopt, write_glb
+from scenefit.core.gltf_meshopt import decoded_glb, encoded_glb, importable, read_gltf, uses_meshopt, write_glb
 
 
 def plain_glb(path: Path) -> Path:
@@ -46,7 +45,7 @@ def canonical(indices: bytes) -> list[tuple[int, ...]]:
 
 def test_meshopt_views_decode_to_the_bytes_they_were_made_from(tmp_path):
     plain = plain_glb(tmp_path / "plain.glb")
-    packed = meshopt_encoded(plain, tmp_path / "packed.glb")
+    packed = encoded_glb(plain, tmp_path / "packed.glb")
     assert uses_meshopt(packed) and not uses_meshopt(plain)
     decoded = decoded_glb(packed, tmp_path / "decoded.glb")
     got, want = view_bytes(decoded), view_bytes(plain)
@@ -66,7 +65,7 @@ def test_a_plain_file_is_imported_as_it_is(tmp_path):
 def test_meshopt_data_that_does_not_decode_is_one_sentence(tmp_path):
     from scenefit.core.errors import InputError
 
-    packed = meshopt_encoded(plain_glb(tmp_path / "plain.glb"), tmp_path / "packed.glb")
+    packed = encoded_glb(plain_glb(tmp_path / "plain.glb"), tmp_path / "packed.glb")
     document, chunk = read_gltf(packed)
     write_glb(packed, document, bytes(len(chunk)))  # the compressed bytes zeroed
     with pytest.raises(InputError, match=r"^The EXT_meshopt_compression data of 'packed.glb' does not decode .*; "

@@ -1,0 +1,69 @@
+"""How `scenefit bake` writes its glTF: compression, texture format, the cap on texture size and
+tangents. By default the output is compressed as the input is and its textures are in the input's
+format, and it carries tangents where the input has a normal map (engines need them, and the
+validator warns when a normal-mapped primitive lacks them)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import InputError
+
+COMPRESSIONS = ("none", "draco", "meshopt")
+TEXTURE_FORMATS = ("png", "jpeg", "webp")
+DEFAULT_MAX_TEXTURE = 2048
+_COMPRESSION_OF_EXTENSION = {"KHR_draco_mesh_compression": "draco", "EXT_meshopt_compression": "meshopt"}
+_FORMAT_OF_MIME = {"image/png": "png", "image/jpeg": "jpeg", "image/webp": "webp"}
+_FORMAT_OF_SUFFIX = {".png": "png", ".jpg": "jpeg", ".jpeg": "jpeg", ".webp": "webp"}
+
+
+@dataclass(frozen=True)
+class GltfOutput:
+    compress: str = "none"
+    textures: str = "png"
+    max_texture: int = DEFAULT_MAX_TEXTURE
+    tangents: bool = False
+
+    def __post_init__(self) -> None:
+        if self.compress not in COMPRESSIONS:
+            raise InputError(f"--compress must be one of {', '.join(COMPRESSIONS)}, got '{self.compress}'.")
+        if self.textures not in TEXTURE_FORMATS:
+            raise InputError(f"--textures must be one of {', '.join(TEXTURE_FORMATS)}, got '{self.textures}'.")
+        size = self.max_texture
+        if not isinstance(size, int) or size < 4 or size > 8192 or size & (size - 1):
+            raise InputError(f"--max-texture must be a power of two between 4 and 8192, got {size}.")
+
+    def report(self) -> dict:
+        return {"compress": self.compress, "textures": self.textures, "max_texture": self.max_texture,
+                "tangents": self.tangents}
+
+
+def _document(path: Path) -> dict:
+    from .gltf_meshopt import read_gltf
+
+    if path.suffix.lower() not in (".gltf", ".glb"):
+        return {}
+    try:
+        return read_gltf(path)[0]
+    except (OSError, ValueError, UnicodeDecodeError):
+        return {}
+
+
+def _image_format(image: dict) -> str | None:
+    if image.get("mimeType") in _FORMAT_OF_MIME:
+        return _FORMAT_OF_MIME[image["mimeType"]]
+    return _FORMAT_OF_SUFFIX.get(Path(str(image.get("uri", ""))).suffix.lower())
+
+
+def output_like_input(asset: str | Path, compress: str | None = None, textures: str | None = None,
+                      max_texture: int | None = None) -> GltfOutput:
+    """The output settings: each one given, else as the input file has it (a non-glTF input: none,
+    png). Tangents are decided from the loaded materials (blender_io.gltf_export)."""
+    document = _document(Path(asset))
+    used = document.get("extensionsUsed", [])
+    if compress is None:
+        compress = next((c for e, c in _COMPRESSION_OF_EXTENSION.items() if e in used), "none")
+    if textures is None:
+        formats = [_image_format(image) for image in document.get("images", [])]
+        textures = max(set(formats) - {None}, key=formats.count, default="png")
+    return GltfOutput(compress, textures, DEFAULT_MAX_TEXTURE if max_texture is None else max_texture)
