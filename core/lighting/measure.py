@@ -102,3 +102,116 @@ def object_mse(renderer_render, estimate: np.ndarray, truth: np.ndarray) -> floa
         e = renderer_render(torch.from_numpy(np.ascontiguousarray(estimate, np.float32)))
         t = renderer_render(torch.from_numpy(np.ascontiguousarray(truth, np.float32)))
     return float(torch.mean((e - t) ** 2))
+
+
+# -- the field's sphere protocol (DiffusionLight / StyleLight evaluation) ------------------------------
+# Three spheres seen orthographically from the photo's side, rendered by integrating the map directly
+# (no path tracer): noise-free, so estimate and truth differ only by their maps.
+PROBE_MATERIALS = ("mirror", "matte", "diffuse")
+MATTE_ROUGHNESS = 0.33          # matte silver: GGX alpha = roughness^2, silver's F0 about 0.95
+SILVER_F0 = 0.95
+DIFFUSE_ALBEDO = 0.8
+
+
+def sample_envmap(envmap: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """Bilinear radiance of a lat-long map along world directions (..., 3), wrapping in u."""
+    import cv2
+
+    from ..render import blender_direction_to_equirect_uv
+
+    h, w = envmap.shape[:2]
+    flat = dirs.reshape(-1, 1, 3)
+    uv = blender_direction_to_equirect_uv(flat)
+    map_x = (uv[..., 0] * w - 0.5 + 1.0).astype(np.float32)
+    map_y = np.clip(uv[..., 1] * h - 0.5, 0, h - 1).astype(np.float32)
+    padded = np.concatenate([envmap[:, -1:], envmap, envmap[:, :1]], axis=1).astype(np.float32)
+    out = cv2.remap(padded, map_x, map_y, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out.reshape(*dirs.shape[:-1], envmap.shape[2])
+
+
+def probe_geometry(forward: np.ndarray, size: int = 64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(mask (s, s), normals (n, 3), reflected view directions (n, 3)) of a unit sphere seen along `forward`."""
+    from ..camera import look_frame
+
+    f, right, up = look_frame(forward)
+    xs = (np.arange(size) + 0.5) / size * 2 - 1
+    x, y = np.meshgrid(xs, -xs)
+    mask = x ** 2 + y ** 2 < 1.0
+    z = np.sqrt(np.maximum(1.0 - x ** 2 - y ** 2, 0.0))[mask]
+    normals = x[mask, None] * right + y[mask, None] * up - z[:, None] * f
+    reflected = f - 2.0 * (normals @ f)[:, None] * normals
+    return mask, normals, reflected
+
+
+def _lobe_integral(envmap: np.ndarray, axes: np.ndarray, weight) -> np.ndarray:
+    """sum over texels of L * weight(axis . texel) * solid angle, normalised per axis, chunked."""
+    from ..render import equirect_directions
+
+    h, w = envmap.shape[:2]
+    dirs = equirect_directions(h, w).reshape(-1, 3).astype(np.float32)
+    omega = (np.sin(np.pi * (np.arange(h) + 0.5) / h) * (np.pi / h) * (2 * np.pi / w)).astype(np.float32)
+    radiance = (envmap.reshape(h, w, -1) * omega[:, None, None]).reshape(-1, envmap.shape[2]).astype(np.float32)
+    omega_flat = np.repeat(omega, w)
+    out = np.empty((len(axes), envmap.shape[2]), np.float64)
+    for start in range(0, len(axes), 512):
+        k = weight(np.asarray(axes[start:start + 512], np.float32) @ dirs.T)
+        out[start:start + 512] = (k @ radiance) / np.maximum(k @ omega_flat, 1e-30)[:, None]
+    return out
+
+
+def _ggx_weight(cos_r: np.ndarray) -> np.ndarray:
+    """GGX D at the half vector between the reflection axis and a texel, times (axis . texel)+ (split sum)."""
+    a2 = MATTE_ROUGHNESS ** 4
+    c = np.clip(cos_r, -1.0, 1.0)
+    cos_h2 = (1.0 + c) / 2.0                      # cos^2 of the half angle
+    d = a2 / (np.pi * (cos_h2 * (a2 - 1.0) + 1.0) ** 2)
+    return (d * np.maximum(c, 0.0)).astype(np.float32)
+
+
+def render_probe(envmap: np.ndarray, material: str, forward: np.ndarray, size: int = 64) -> np.ndarray:
+    """(size, size, 3) linear radiance of a mirror / matte-silver / diffuse sphere under `envmap`, black outside."""
+    import cv2
+
+    env = np.ascontiguousarray(np.asarray(envmap, np.float32)[..., :3])
+    mask, normals, reflected = probe_geometry(np.asarray(forward, np.float64), size)
+    if material == "mirror":
+        values = sample_envmap(env, reflected)
+    elif material == "matte":
+        small = cv2.resize(env, (128, 64), interpolation=cv2.INTER_AREA) if env.shape[0] > 64 else env
+        values = SILVER_F0 * _lobe_integral(small, reflected, _ggx_weight)
+    elif material == "diffuse":
+        small = cv2.resize(env, (64, 32), interpolation=cv2.INTER_AREA) if env.shape[0] > 32 else env
+        # The normalised cosine lobe is the irradiance / pi: albedo x that is the outgoing radiance.
+        values = DIFFUSE_ALBEDO * _lobe_integral(small, normals, lambda c: np.maximum(c, 0.0))
+    else:
+        raise ValueError(f"unknown probe material {material!r}")
+    image = np.zeros((size, size, 3), np.float32)
+    image[mask] = values
+    return image
+
+
+def stylelight_tonemap(image: np.ndarray, mask: np.ndarray, gamma: float = 2.4, percentile: float = 99.0,
+                       max_mapping: float = 0.99) -> np.ndarray:
+    """StyleLight's TonemapHDR: x^(1/gamma), scaled so the 99th percentile of the sphere maps to 0.99, clipped."""
+    powered = np.maximum(image, 0.0) ** (1.0 / gamma)
+    inside = powered[mask]
+    positive = inside[inside > 0]
+    ratio = max_mapping / max(float(np.percentile(positive, percentile)), 1e-12) if positive.size else 1.0
+    return np.clip(powered * ratio, 0.0, 1.0)
+
+
+def rgb_angular_error_deg(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """Mean per-pixel angle between the RGB vectors (the protocol's 'angular error'), in degrees."""
+    e, t = np.asarray(estimate, np.float64).reshape(-1, 3), np.asarray(truth, np.float64).reshape(-1, 3)
+    cos = (e * t).sum(1) / np.maximum(np.linalg.norm(e, axis=1) * np.linalg.norm(t, axis=1), 1e-12)
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).mean())
+
+
+def probe_scores(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> dict:
+    """RMSE, si-RMSE and angular error over the sphere's pixels, linear and StyleLight-tone-mapped."""
+    out = {}
+    for form, (e, t) in (("linear", (estimate, truth)),
+                         ("tonemapped", (stylelight_tonemap(estimate, mask), stylelight_tonemap(truth, mask)))):
+        out[form] = {"rmse": rmse(e[mask], t[mask]), "si_rmse": si_rmse(e[mask], t[mask]),
+                     "angular_deg": rgb_angular_error_deg(e[mask], t[mask])}
+    return out
