@@ -188,6 +188,17 @@ def add_orbit_camera_args(p: argparse.ArgumentParser, size: int, spp: int) -> No
     p.add_argument("--spp", type=positive_int, default=spp, help=f"samples per pixel (default {spp})")
 
 
+def add_photo_camera_args(p: argparse.ArgumentParser) -> None:
+    """The photo's camera (core/photo_camera.py): estimated from fSpy, EXIF or the photo's lines unless
+    given; each value given wins over the estimate (`scenefit camera` shows what is found)."""
+    p.add_argument("--fspy", help="an fSpy project of the photo: its solved camera is used")
+    p.add_argument("--fov", type=positive_float, help="the photo's horizontal field of view, degrees (default: estimated)")
+    p.add_argument("--pitch", type=finite_float,
+                   help="where the camera looks above the horizon, degrees; negative looks down (default: estimated)")
+    p.add_argument("--roll", type=finite_float, help="how far the camera is turned counter-clockwise about its view "
+                                                     "axis, degrees (default: estimated)")
+
+
 def add_placement_args(p: argparse.ArgumentParser, required: bool = False, object_size: float | None = None) -> None:
     """Where the object goes in the photo (core/placement.py): --at, and --object-size unless the
     command has no use for it (object_size None)."""

@@ -652,7 +652,8 @@ def light_camera(light_path, photo_info: dict, width: int, height: int, fov_deg:
     if report_path.is_file():
         try:
             saved = json.loads(report_path.read_text())["decisions"]["photo_camera"]
-            camera = PhotoCamera(**{k: saved[k] for k in ("yaw_deg", "pitch_deg", "fov_deg", "width", "height")})
+            camera = PhotoCamera(**{k: saved[k] for k in ("yaw_deg", "pitch_deg", "fov_deg", "width", "height")},
+                                 roll_deg=float(saved.get("roll_deg", 0.0)))   # reports before roll have none
             source = f"the light stage's report ({report_path})"
         except (KeyError, TypeError, ValueError, json.JSONDecodeError):
             camera = None

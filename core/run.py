@@ -16,7 +16,7 @@ import hashlib
 import json
 import threading
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -45,7 +45,9 @@ class RunConfig:
     size: float = DEFAULT_OBJECT_SIZE         # compose: fraction of the photo's height the asset spans (--object-size)
     shadow_type: str = "ratio"
     compose_spp: int | None = None
-    photo_camera: PhotoCamera | None = None   # None: the light stage's default camera for the photo
+    photo_camera: PhotoCamera | None = None   # None: the photo's camera as estimated (core/photo_camera.py)
+    fspy: str | None = None                   # an fSpy project of the photo: its solved camera is used
+    camera_overrides: dict = field(default_factory=dict)   # {"fov_deg"|"pitch_deg"|"roll_deg": value} over the estimate
     models: ModelConfig = field(default_factory=ModelConfig)
     # Settings over the preset's, per stage ("convert", "light", "adapt", "compose"), as the stage's config takes them:
     # quick looks, tests and benchmarks (e.g. {"adapt": {"iterations": 4}}). Part of each stage's key.
@@ -56,6 +58,9 @@ class RunConfig:
             raise InputError(f"preset must be draft, balanced or final, got {self.preset!r}.")
         if self.guidance_type not in GUIDANCE_TYPES:
             raise InputError(f"guidance_type must be one of {', '.join(GUIDANCE_TYPES)}, got {self.guidance_type!r}.")
+        wrong = sorted(set(self.camera_overrides) - {"fov_deg", "pitch_deg", "roll_deg"})
+        if wrong:
+            raise InputError(f"camera_overrides takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
         unknown = sorted(set(self.stage_overrides) - {"convert", "light", "adapt", "compose"})
         if unknown:
             raise InputError(f"stage_overrides names unknown stage {unknown[0]!r}; it takes convert, light, adapt "
@@ -200,6 +205,10 @@ class PipelineRun:
         h, w = self.photo.shape[:2]
         self.placement = Placement.parse(placement, tuple(self.photo_info["size"]))   # pixels of the photo as stored
         self.placement_px = self.placement.pixel((h, w))                              # ... in the light stage's copy
+        if config.fspy is not None and config.photo_camera is None:
+            from .photo_camera import read_fspy
+
+            read_fspy(config.fspy)   # a broken fSpy file is one sentence before any work
         self.found, self.where = guidance_found(config)
         self.cache = models if models is not None else ModelCache()
         self.asset_key = asset_digest(mesh, maps)
@@ -263,12 +272,14 @@ class PipelineRun:
         config, envmap_height = self.light_config()
         # The diffusion critic scores renders of the asset itself (as converted), not a stand-in sphere.
         critic_sees_asset = config.critic_type == "diffusion"
-        camera = self.config.photo_camera
-        self.keys["light"] = _digest("light", asdict(config), self.photo_key, self.placement_px,
-                                     asdict(camera) if camera else None,
+        given = self.config.photo_camera
+        camera_key = asdict(given) if given else ["estimated", _digest(Path(self.config.fspy).read_bytes())
+                                                  if self.config.fspy else None, self.config.camera_overrides]
+        self.keys["light"] = _digest("light", asdict(config), self.photo_key, self.placement_px, camera_key,
                                      self.keys["convert"] if critic_sees_asset else None)
 
         def light(folder: Path) -> dict:
+            camera, estimate = self.photo_camera()
             asset = {}
             if critic_sees_asset:
                 stack = texture_maps_for_mesh(load_neural_texture(self.texture_path), self.normalized)
@@ -279,11 +290,24 @@ class PipelineRun:
             outputs = write_light_outputs(result, folder)
             report = light_report(result, config, outputs)
             report["decisions"]["envmap_height"] = needs_report(envmap_height)
+            report["decisions"]["camera"] = estimate
             write_json_atomic(folder / "report.json", report)
             return report
 
         self.runner.run("light", self.keys["light"], light)
         self.light_path = self.out / "light" / "light.exr"
+
+    def photo_camera(self) -> tuple[PhotoCamera, dict]:
+        """The photo's camera for the light stage (whose report hands it to adapt and compose) and
+        where it came from: the caller's, else the estimate (fSpy, EXIF, the photo's lines, or the
+        defaults, each field saying which) with the user's values over it."""
+        h, w = self.photo.shape[:2]
+        if self.config.photo_camera is not None:
+            return replace(self.config.photo_camera, width=w, height=h), {"source": "given by the caller"}
+        from .photo_camera import estimate_photo_camera
+
+        estimate = estimate_photo_camera(self.photo_path, self.config.fspy).overridden(**self.config.camera_overrides)
+        return estimate.photo_camera(width=w, height=h), estimate.to_dict()
 
     def adapt(self) -> None:
         from .adapt import adapt_and_bake

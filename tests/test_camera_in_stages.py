@@ -1,0 +1,70 @@
+"""Every stage sees the photo through one camera (issue 22): `scenefit run` estimates it (fSpy, EXIF,
+the photo's lines, else the defaults), the user's --fov / --pitch / --roll win, and the light
+stage's report hands it to adapt and compose, roll included."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from scenefit.cli import main
+from scenefit.core.asset_io import save_asset_folder
+from scenefit.core.imageio import write_image
+from scenefit.core.maps import PBRMaps
+from scenefit.core.primitives import uv_sphere
+
+
+@pytest.fixture
+def inputs(tmp_path):
+    asset = save_asset_folder(uv_sphere(0.5, 12, 6), PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0),
+                              tmp_path / "asset")
+    photo = write_image(tmp_path / "room.png", np.broadcast_to(np.linspace(0.9, 0.3, 48)[:, None, None],
+                                                               (48, 64, 3)).astype(np.float32))
+    return asset, photo
+
+
+def run(tmp_path, asset, photo, *extra: str) -> dict:
+    out = tmp_path / "run"
+    assert main(["run", str(asset), "--photo", str(photo), "--at", "0.5,0.8", "--out", str(out), "--preset", "draft",
+                 "--guidance", "none", "--spp", "2", "--quiet", *extra]) == 0
+    light = json.loads((out / "light" / "report.json").read_text())
+    compose = json.loads((out / "compose" / "report.json").read_text())
+    return {"light": light["decisions"], "compose": compose}
+
+
+def test_a_photo_without_lines_keeps_the_default_camera_and_says_so(tmp_path, inputs):
+    got = run(tmp_path, *inputs)
+    camera = got["light"]["camera"]
+    assert camera["fallback"] is True and camera["pitch_source"] == "default" and camera["fov_source"] == "default"
+    assert got["light"]["photo_camera"]["pitch_deg"] == -10.0 and got["light"]["photo_camera"]["roll_deg"] == 0.0
+    assert "the light stage's report" in got["compose"]["inputs"]["camera_from"]
+
+
+def test_the_users_pitch_roll_and_fov_win_and_reach_compose(tmp_path, inputs, monkeypatch):
+    import scenefit.core.compose as compose
+
+    seen = {}
+    real = compose.compose_to_folder
+
+    def spy(inputs_, *args, **kwargs):
+        seen["camera"] = inputs_.camera
+        return real(inputs_, *args, **kwargs)
+
+    monkeypatch.setattr(compose, "compose_to_folder", spy)
+    got = run(tmp_path, *inputs, "--pitch", "-20", "--roll", "3", "--fov", "50")
+    camera = got["light"]["camera"]
+    assert (camera["pitch_deg"], camera["roll_deg"], camera["fov_deg"]) == (-20.0, 3.0, 50.0)
+    assert camera["pitch_source"] == camera["roll_source"] == camera["fov_source"] == "user"
+    assert got["light"]["photo_camera"]["roll_deg"] == 3.0
+    assert (seen["camera"].pitch_deg, seen["camera"].roll_deg, seen["camera"].fov_deg) == (-20.0, 3.0, 50.0)
+
+
+def test_a_broken_fspy_file_is_one_sentence_before_any_work(tmp_path, inputs, capsys):
+    broken = tmp_path / "photo.fspy"
+    broken.write_bytes(b"not an fspy file")
+    assert main(["run", str(inputs[0]), "--photo", str(inputs[1]), "--at", "0.5,0.8", "--out", str(tmp_path / "run"),
+                 "--preset", "draft", "--guidance", "none", "--fspy", str(broken), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("scenefit: error:") and "fSpy" in err and "\n" not in err
+    assert not (tmp_path / "run").exists()
