@@ -185,7 +185,7 @@ def block_sections(renders: list[dict], textures: list[dict]) -> list[str]:
                              ("s / iteration", "forward_backward_s", ".3f")]), ""]
 
 
-PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "batch", "samplers", "study")
+PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "batch", "samplers", "study", "camera")
 TITLES = {"convert": "Convert", "light": "Light", "compose": "Compose", "adapt": "Adapt (tiny models)",
           "run": "End to end: `scenefit run`"}
 
@@ -288,6 +288,15 @@ def main() -> int:
         sections += ["## Light without weights: the cue estimate against the true maps", "",
                      light_md.split("## Per view")[0].strip(),
                      "", "Per view: [light.md](light.md). ![Estimated vs true maps](light_maps.png)", ""]
+
+    # The photo camera (scenefit camera) on views of real HDR panoramas with known fov, pitch and roll.
+    if "camera" in parts and not args.quick:
+        subprocess.run([sys.executable, str(Path(__file__).with_name("bench_camera.py"))], check=True)
+        log("camera bench done")
+        sections += ["## The photo's camera: `scenefit camera` on real panoramas", "",
+                     "Median and 90th-percentile errors per field, split by maps with and without architecture: "
+                     "[camera.md](camera.md). The real assets of the corpus: `make corpus` "
+                     "([corpus.md](corpus.md)).", ""]
 
     total = time.perf_counter() - started
     load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
