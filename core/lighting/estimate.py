@@ -248,17 +248,45 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
         photo_camera = replace(photo_camera, width=w, height=h)
     decisions["photo_camera"] = asdict(photo_camera)
 
-    # Indoor or outdoor.
+    scene_type = _scene_type(photo, config, decisions)
+    emit(progress, "light", 0, max(config.optimise.iterations, 1), f"{scene_type} panorama")
+
+    work_height = max(config.map_height, MIN_WORKING_HEIGHT)
+    pano = _panorama(photo, photo_camera, placement_px, scene_type, work_height, config, outpainting,
+                     guidance_models, decisions)
+    check_cancel(cancel)
+
+    ldr, regions, prior, prompts = _prior(photo, pano, scene_type, photo_camera, config, decisions)
+
+    # Optimise the scales with a critic, when there is one.
+    scales, optimisation = _critic_scales(config, critic, reference_envmap, mesh, maps, photo, photo_camera,
+                                          placement_px, ldr, regions, prior, prompts, guidance_models, decisions,
+                                          progress, cancel, on_iteration)
+    hdr = hdr_from_scales(ldr, regions, scales)
+    if work_height > config.map_height:
+        hdr, ldr = (_area_resize(m, config.map_height) for m in (hdr, ldr))
+        regions = {name: _area_resize(mask.astype(np.float32), config.map_height) > 0 for name, mask in regions.items()}
+    emit(progress, "light", max(config.optimise.iterations, 1), max(config.optimise.iterations, 1), "HDR map ready")
+    return LightResult(ldr, hdr, regions, scales, prior, pano, photo_camera, decisions, optimisation,
+                       time.perf_counter() - t0)
+
+
+def _scene_type(photo: np.ndarray, config: LightConfig, decisions: dict) -> str:
+    """Indoor or outdoor: the user's, else the automatic call (an unsure one says so)."""
     cue = scene_type_cue(photo)
     scene_type = cue["scene_type"] if config.scene_type == "auto" else config.scene_type
     decisions["scene_type"] = {"chosen": scene_type, "by": "auto" if config.scene_type == "auto" else "user", "auto": cue}
     if config.scene_type == "auto" and cue["unsure"]:
         decisions["scene_type"]["note"] = (f"unsure (score {cue['score']:.2f}, near 1): chose {scene_type}; "
                                            "--scene indoor|outdoor decides")
-    emit(progress, "light", 0, max(config.optimise.iterations, 1), f"{scene_type} panorama")
+    return scene_type
 
-    # The LDR panorama.
-    work_height = max(config.map_height, MIN_WORKING_HEIGHT)
+
+def _panorama(photo: np.ndarray, photo_camera: PhotoCamera, placement_px: tuple[float, float], scene_type: str,
+              work_height: int, config: LightConfig, outpainting: Decision, guidance_models,
+              decisions: dict) -> Panorama:
+    """The LDR panorama at the working height: the photo unwrapped around the object (indoors, with
+    depth) or warped into the sky and completed (outdoors)."""
     decisions["map_height"] = {"output": config.map_height, "working": work_height, "why": (
         "lights are found at the working size and the map is area-averaged to the output size (energy kept)"
         if work_height > config.map_height else "built at the output size")}
@@ -271,18 +299,21 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
         pano = indoor_panorama(photo, depth.ray_distance, photo_camera, placement, work_height)
     else:
         outpaint = None
-        if want_outpaint:
+        if outpainting.choice == "sd2":
             from .outpaint import outpaint_panorama
 
             def outpaint(ldr, seen):
                 return outpaint_panorama(ldr, seen, guidance_models(), config.outpaint)
         pano = outdoor_panorama(photo, photo_camera, work_height, outpaint=outpaint)
-        decisions["outpainting"] = {"asked": config.outpaint.completion_type, "used": want_outpaint,
+        decisions["outpainting"] = {"asked": config.outpaint.completion_type, "used": outpainting.choice == "sd2",
                                     "why": outpainting.reason, "completion": pano.decisions["completion"]}
     decisions["panorama"] = pano.decisions
-    check_cancel(cancel)
+    return pano
 
-    # Bright regions and the prior.
+
+def _prior(photo: np.ndarray, pano: Panorama, scene_type: str, photo_camera: PhotoCamera, config: LightConfig,
+           decisions: dict) -> tuple[np.ndarray, dict, dict, tuple[str, ...]]:
+    """Bright regions, their prior scales (the cues or the inverse tone curve) and the critic's prompts."""
     ldr = pano.ldr
     regions = bright_regions(ldr, pano.distance, scene_type, config.thresholds)
     if config.sun_deg is not None:
@@ -305,7 +336,14 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     decisions["prompt"] = {"dark_environment": dark_info, "sphere": prompts[-1], "object": prompts[0],
                            "evaluated_on": "the prior's HDR map"}
 
-    # Optimise the scales with a critic, when there is one.
+    return ldr, regions, prior, prompts
+
+
+def _critic_scales(config: LightConfig, critic, reference_envmap, mesh, maps, photo: np.ndarray,
+                   photo_camera: PhotoCamera, placement_px: tuple[float, float], ldr: np.ndarray, regions: dict,
+                   prior: dict, prompts: tuple[str, ...], guidance_models, decisions: dict, progress, cancel,
+                   on_iteration) -> tuple[dict, OptimiseResult | None]:
+    """The scales: the prior's, or optimised by rendering the apparatus for the chosen critic."""
     scales, optimisation = dict(prior), None
     use_critic, chosen = _choose_critic(config, critic, reference_envmap, regions)
     decisions["critic"] = {"type": config.critic_type, "used": chosen.choice != "none", "why": chosen.reason}
@@ -327,7 +365,7 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
 
             models = guidance_models()
             # Where the object stands in the photo: its foot at the placement, `object_size` of the photo tall.
-            side = config.diffusion.object_size * h
+            side = config.diffusion.object_size * photo.shape[0]
             object_box = (placement_px[0] - side / 2, placement_px[1] - side, side)
             use_critic = DiffusionLightCritic(models, scene.cameras, prompts, config.diffusion, photo=photo,
                                               squares=scene.photo_squares(object_box))
@@ -341,13 +379,7 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
         decisions["optimisation"] = {"iterations": config.optimise.iterations, "lr": config.optimise.lr,
                                      "final_loss": optimisation.loss_history[-1] if optimisation.loss_history else None,
                                      "seconds": round(optimisation.seconds, 3)}
-    hdr = hdr_from_scales(ldr, regions, scales)
-    if work_height > config.map_height:
-        hdr, ldr = (_area_resize(m, config.map_height) for m in (hdr, ldr))
-        regions = {name: _area_resize(mask.astype(np.float32), config.map_height) > 0 for name, mask in regions.items()}
-    emit(progress, "light", max(config.optimise.iterations, 1), max(config.optimise.iterations, 1), "HDR map ready")
-    return LightResult(ldr, hdr, regions, scales, prior, pano, photo_camera, decisions, optimisation,
-                       time.perf_counter() - t0)
+    return scales, optimisation
 
 
 def _hedge_unsure_scene(photo_srgb: np.ndarray, placement_px: tuple[float, float], config: LightConfig,
