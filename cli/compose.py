@@ -3,7 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import PRESETS, add_asset_args, add_output_args, add_placement_args, load_asset, output, progress
+from .options import (PRESETS, add_asset_args, add_old_photo_elevation_arg, add_output_args, add_placement_args,
+                      load_asset, output, photo_pitch, progress)
 
 
 def run(args) -> int:
@@ -24,8 +25,7 @@ def run(args) -> int:
     h, w = photo.shape[:2]
     placement = Placement.parse(args.at, tuple(info["size"])).pixel((h, w))
     envmap = load_environment(args.light)
-    camera, camera_source = light_camera(args.light, info, w, h, args.fov,
-                                         -args.elevation if args.elevation is not None else None)
+    camera, camera_source = light_camera(args.light, info, w, h, args.fov, photo_pitch(args))
     if args.texture:
         normalized, _ = normalize_to_unit_sphere(mesh)
         stack, source = texture_maps_for_mesh(load_neural_texture(Path(args.texture)), normalized), "neural texture"
@@ -63,5 +63,7 @@ def add_parser(sub) -> None:
                    help="Intel Open Image Denoise (oidn), none, or auto (default: oidn where pyoidn is installed)")
     p.add_argument("--exposure", type=float, help="multiply the light map (default 1: it is in the photo's exposure)")
     p.add_argument("--fov", type=float, help="horizontal field of view, degrees (default: the light stage's)")
-    p.add_argument("--elevation", type=float, help="how far the camera looks down, degrees (default: the light stage's)")
+    p.add_argument("--pitch", type=float, help="where the photo's camera looks above the horizon, degrees; negative "
+                                               "looks down (default: the light stage's)")
+    add_old_photo_elevation_arg(p)
     p.set_defaults(func=run)

@@ -175,7 +175,8 @@ def add_preset_args(p: argparse.ArgumentParser) -> None:
 
 
 def add_elevation_arg(p: argparse.ArgumentParser, default: float | None = None) -> None:
-    """--elevation: the same angle in every command, the camera's height above the object's horizon."""
+    """--elevation: the orbit camera's angle above the object's horizon (render, export, adapt's views).
+    The photo's camera is another angle with its own name and sign: --pitch (add_photo_camera_args)."""
     p.add_argument("--elevation", type=finite_float, default=default,
                    help="degrees above the horizon from which the camera sees the object"
                         + (f" (default {default:g})" if default is not None else " (default: the stage's)"))
@@ -197,6 +198,20 @@ def add_photo_camera_args(p: argparse.ArgumentParser) -> None:
                    help="where the camera looks above the horizon, degrees; negative looks down (default: estimated)")
     p.add_argument("--roll", type=finite_float, help="how far the camera is turned counter-clockwise about its view "
                                                      "axis, degrees (default: estimated)")
+
+
+def photo_pitch(args) -> float | None:
+    """--pitch, or the old --elevation of light and compose (how far the camera looks down: -pitch)."""
+    if getattr(args, "pitch", None) is not None:
+        return args.pitch
+    old = getattr(args, "photo_elevation", None)
+    return None if old is None else -old
+
+
+def add_old_photo_elevation_arg(p: argparse.ArgumentParser) -> None:
+    """light and compose once called the photo's down-tilt --elevation, which render, export and adapt
+    use for the orbit camera: still read (as -pitch), no longer shown."""
+    p.add_argument("--elevation", dest="photo_elevation", type=finite_float, help=argparse.SUPPRESS)
 
 
 def add_placement_args(p: argparse.ArgumentParser, required: bool = False, object_size: float | None = None) -> None:

@@ -129,3 +129,19 @@ def test_the_command_line_and_the_panel_share_one_set_of_defaults():
                   for node in settings.body if isinstance(node, ast.AnnAssign) and isinstance(node.annotation, ast.Call)}
     assert ast.unparse(default_of["placement"]) == "DEFAULT_AT"
     assert ast.unparse(default_of["size"]) == "DEFAULT_OBJECT_SIZE"
+
+
+def test_elevation_is_the_orbit_angle_and_pitch_the_photo_cameras():
+    """`--elevation` once meant the orbit angle in render/export and the photo's down-tilt in
+    light/compose; the photo's camera now takes --pitch (negative looks down) and the old spelling
+    still reads as its opposite."""
+    from scenefit.cli.options import photo_pitch
+
+    sub = next(a for a in build_parser()._actions if a.dest == "command").choices
+    for command in ("render", "export", "adapt"):
+        assert "elevation" in {a.dest for a in sub[command]._actions}
+    required = ["asset", "--photo", "p.png", "--at", "0.5,0.5", "--light", "l.exr", "--out", "o"]
+    assert photo_pitch(sub["compose"].parse_args(required + ["--pitch", "-12"])) == -12.0
+    assert photo_pitch(sub["compose"].parse_args(required + ["--elevation", "12"])) == -12.0
+    assert photo_pitch(sub["compose"].parse_args(required)) is None
+    assert "--elevation" not in sub["compose"].format_help() and "--pitch" in sub["compose"].format_help()
