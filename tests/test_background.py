@@ -79,6 +79,19 @@ def test_errors_become_one_sentence_and_unexpected_ones_keep_the_traceback():
     assert "1 / 0" in state.details
 
 
+def test_a_full_disk_in_a_blender_job_is_one_sentence_naming_the_file(tmp_path):
+    import errno
+
+    target = tmp_path / "out" / "maps" / "base_color.png"
+
+    def disk_full(data, progress, cancel):
+        raise OSError(errno.ENOSPC, "No space left on device", str(target))
+
+    state = jobs.start_job(jobs.Job("convert", disk_full, {"out": str(tmp_path / "out")})).wait(5)
+    assert state.status == jobs.FAILED and "disk is full" in state.error and str(target) in state.error
+    assert "\n" not in state.error and "OSError" not in state.error
+
+
 def test_one_job_at_a_time_and_the_slot_frees_when_it_ends():
     gate = threading.Event()
     first = jobs.start_job(jobs.Job("convert", lambda d, p, c: gate.wait(5), None))
