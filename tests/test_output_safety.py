@@ -327,3 +327,45 @@ def test_an_out_inside_a_file_is_named_as_such(tmp_path, project, capsys):
     (tmp_path / "afile").write_text("x")
     err = refused(capsys, "convert", str(project / "asset"), "--out", str(tmp_path / "afile" / "sub"), *CONVERT_FAST)
     assert "is a file" in err and (tmp_path / "afile").read_text() == "x"
+
+
+GLTF_WITH_LOOKALIKE = r"""
+from pathlib import Path
+import sys
+import bpy, addon_utils
+sys.path.insert(0, "tests")
+from asset_builder import _image, _pattern, _rgba
+
+folder = Path(FOLDER)
+addon_utils.enable("io_scene_gltf2", default_set=False)
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)
+ball = bpy.context.active_object
+mat = bpy.data.materials.new("Ball")
+tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+# The asset's own texture is named exactly as bake names the baked base colour of material 'Ball'.
+tex.image = _image(bpy, folder, "Ball_base_color", _rgba(_pattern(16, 1)), "sRGB")
+mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+ball.data.materials.append(mat)
+bpy.ops.export_scene.gltf(filepath=str(folder / "ball.gltf"), export_format="GLTF_SEPARATE")
+"""
+
+
+@pytest.mark.blender
+def test_a_gltf_bake_beside_the_asset_never_writes_over_its_own_images(tmp_path, run_py):
+    run_py(GLTF_WITH_LOOKALIKE.replace("FOLDER", repr(str(tmp_path))), timeout=600)
+    asset = tmp_path / "ball.gltf"
+    from scenefit.core.asset_files import asset_files
+
+    assert tmp_path.resolve() / "Ball_base_color.png" in asset_files(asset)
+    scenefit = [sys.executable, "-m", "scenefit.cli"]
+    done = subprocess.run(scenefit + ["convert", str(asset), "--out", str(tmp_path / "conv"), *CONVERT_FAST],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    before = snapshot(tmp_path / "conv") | {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    done = subprocess.run(scenefit + ["bake", str(asset), "--texture", str(tmp_path / "conv" / "maps" / "texture.pt"),
+                                      "--format", "gltf", "--out", str(tmp_path / "baked.gltf"), "--quiet"],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 2 and "one of the inputs" in done.stderr and "Ball_base_color.png" in done.stderr
+    after = snapshot(tmp_path / "conv") | {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    assert after == before and not (tmp_path / "baked.gltf").exists()
