@@ -98,3 +98,20 @@ def test_the_mean_bound_scales_an_overclaiming_light_down():
     same, info = bound_scales(ldr, {"clipped": lamp}, {"clipped": 2.0}, omega, 0.2, CueConfig())
     assert same == {"clipped": 2.0} and not info["bound"]
     assert math.isclose(info["mean_before"], info["mean_after"])
+
+
+def test_weak_evidence_leans_the_map_towards_the_flat_environment():
+    from scenefit.core.lighting.hdr import hdr_from_scales
+
+    photo = _photo(_room())
+    result = _estimate(photo)
+    confidence = result.decisions["cues"]["confidence"]
+    assert 0.0 < confidence < 1.0
+    assert result.decisions["shrink"]["weight"] == pytest.approx(1.0 - confidence, abs=1e-4)
+    flat = srgb_to_linear(photo).reshape(-1, 3).mean(axis=0)
+    unshrunk = hdr_from_scales(result.ldr, result.regions, result.scales)
+    assert np.allclose(result.hdr, confidence * unshrunk + (1.0 - confidence) * flat, rtol=1e-4, atol=1e-6)
+    # Full confidence (nothing clipped, no bound reached): the map is the cues' own.
+    plain = _estimate(np.full((120, 160, 3), 0.4, np.float32))
+    assert plain.decisions["cues"]["confidence"] == 1.0 and "shrink" not in plain.decisions
+    assert np.allclose(plain.hdr, hdr_from_scales(plain.ldr, plain.regions, plain.scales))

@@ -21,7 +21,7 @@ import torch
 from ..decision import Decision
 from ..errors import InputError, ModelMissingError, check_choice
 from ..guidance.models import ModelConfig
-from ..imageio import linear_to_srgb, read_image, write_image
+from ..imageio import linear_to_srgb, read_image, srgb_to_linear, write_image
 from ..mesh import Mesh, normalize_to_unit_sphere
 from ..photo import PhotoCamera, camera_exposure
 from ..primitives import uv_sphere
@@ -262,13 +262,26 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     scales, optimisation = _critic_scales(config, critic, reference_envmap, mesh, maps, photo, photo_camera,
                                           placement_px, ldr, regions, prior, prompts, guidance_models, decisions,
                                           progress, cancel, on_iteration)
-    hdr = hdr_from_scales(ldr, regions, scales)
+    hdr = _shrink_to_flat(hdr_from_scales(ldr, regions, scales), photo, decisions, optimisation is None)
     if work_height > config.map_height:
         hdr, ldr = (_area_resize(m, config.map_height) for m in (hdr, ldr))
         regions = {name: _area_resize(mask.astype(np.float32), config.map_height) > 0 for name, mask in regions.items()}
     emit(progress, "light", max(config.optimise.iterations, 1), max(config.optimise.iterations, 1), "HDR map ready")
     return LightResult(ldr, hdr, regions, scales, prior, pano, photo_camera, decisions, optimisation,
                        time.perf_counter() - t0)
+
+
+def _shrink_to_flat(hdr: np.ndarray, photo: np.ndarray, decisions: dict, prior_only: bool) -> np.ndarray:
+    """Where the evidence is weak the map leans towards the flat environment (the photo's mean linear
+    colour everywhere): hdr c + flat (1 - c), c the cues' confidence. Not after a critic: its scales
+    are evidence of their own. On the corpus's real views this won 1 more of 48 on diffuse si-RMSE."""
+    confidence = decisions.get("cues", {}).get("confidence")
+    if not prior_only or confidence is None or confidence >= 1.0:
+        return hdr
+    flat = srgb_to_linear(photo).reshape(-1, 3).mean(axis=0).astype(np.float32)
+    decisions["shrink"] = {"towards": "the flat environment (the photo's mean linear colour)",
+                           "flat_rgb": np.round(flat, 5).tolist(), "weight": round(1.0 - confidence, 4)}
+    return (confidence * hdr + (1.0 - confidence) * flat).astype(np.float32)
 
 
 def _scene_type(photo: np.ndarray, config: LightConfig, decisions: dict) -> str:
