@@ -67,7 +67,7 @@ from scenefit.core.asset_io import load_asset_folder
 from scenefit.core.convert import convert_asset
 from scenefit.core.presets import stage_config
 mesh, maps = load_asset_folder(ASSET)
-config = stage_config("convert", PRESET, resolution=RESOLUTION,
+config = stage_config("convert", PRESET, init_type="fit", resolution=RESOLUTION,   # the paper's fit, per preset
                       iterations=max(5, round(stage_config("convert", PRESET).iterations * FRACTION)))
 t = time.perf_counter()
 result = convert_asset(mesh, maps, config)

@@ -1,4 +1,4 @@
-"""scenefit convert: fit a neural texture to the asset's own maps and bake it."""
+"""scenefit convert: the asset's own maps as the neural texture's exact start (or a fit to them), baked."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -23,7 +23,9 @@ def run(args) -> int:
     from ..core.presets import stage_config
     from ..core.pipeline import convert_and_bake, environment_info, write_report
 
-    overrides = {k: v for k, v in (("method_type", args.method), ("iterations", args.iterations),
+    # Asking for a fitting method or iterations is asking for the fit; else the asset's maps are the start.
+    init = args.init or ("fit" if args.method or args.iterations else None)
+    overrides = {k: v for k, v in (("init_type", init), ("method_type", args.method), ("iterations", args.iterations),
                                    ("resolution", args.resolution), ("seed", args.seed),
                                    ("screen_px", args.screen_px)) if v is not None}
     config = stage_config("convert", args.preset, **overrides)
@@ -37,8 +39,9 @@ def run(args) -> int:
         report["environment"] = environment_info()
         write_report(out / "report.json", report)
     per_material = ", ".join(f"'{m['name']}' {m['psnr_db']:.2f} dB" for m in result.decisions["materials"])
+    how = "exact start: the asset's own maps" if config.init_type == "exact" else f"{config.method_type} fit"
     print(f"converted '{mesh.name}': {result.psnr:.2f} dB on covered texels ({per_material}) in "
-          f"{result.seconds:.1f} s ({config.method_type}) -> {Path(args.out)}")
+          f"{result.seconds:.1f} s ({how}) -> {Path(args.out)}")
     return 0
 
 
@@ -47,8 +50,12 @@ def add_parser(sub) -> None:
     add_asset_args(p)
     add_output_args(p)
     add_preset_args(p)
-    p.add_argument("--method", choices=("direct", "inverse"), help="direct texture-space fit (default) or inverse rendering")
-    p.add_argument("--iterations", type=positive_int)
+    p.add_argument("--init", choices=("exact", "fit"),
+                   help="exact (default): the texture is the asset's own maps plus a residual that starts at zero, "
+                        "nothing fitted; fit: the paper's neural texture fitted to the maps")
+    p.add_argument("--method", choices=("direct", "inverse"),
+                   help="with --init fit: direct texture-space fit (default) or inverse rendering")
+    p.add_argument("--iterations", type=positive_int, help="with --init fit (implies it): fitting steps")
     p.add_argument("--resolution", type=positive_int, help="texture size (default: the asset's, capped by the preset)")
     p.add_argument("--seed", type=int)
     p.add_argument("--screen-px", type=positive_int,

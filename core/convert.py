@@ -30,12 +30,16 @@ from .texture.neural_texture import NeuralTexture, NeuralTextureConfig
 from .texture.uv_raster import UVRaster, rasterize_uv
 
 METHOD_TYPES = ("direct", "inverse")
+INIT_TYPES = ("exact", "fit")
+# Strict JSON has no infinity: an exact start's PSNR (no error at all) is written as this.
+EXACT_PSNR_DB = 100.0
 
 
 @dataclass(frozen=True)
 class ConvertConfig:
     """How to convert. Defaults are the "balanced" preset (core/presets.py)."""
 
+    init_type: str = "exact"          # exact: the asset's maps + a zero residual; fit: the paper's fitted network
     method_type: str = "direct"
     texture_preset: str = "balanced"
     resolution: int | None = None     # None: the asset's base colour resolution, capped at max_resolution
@@ -50,6 +54,8 @@ class ConvertConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        if self.init_type not in INIT_TYPES:
+            raise InputError(f"init_type must be one of {INIT_TYPES}, got {self.init_type!r}.")
         if self.method_type not in METHOD_TYPES:
             raise InputError(f"method_type must be one of {METHOD_TYPES}, got {self.method_type!r}.")
         if self.iterations < 1:
@@ -62,7 +68,7 @@ class ConvertConfig:
             raise InputError(f"texture_preset must be one of {', '.join(PRESET_NAMES)}, got {self.texture_preset!r}.")
 
     def texture_config(self, resolution: int) -> NeuralTextureConfig:
-        return texture_preset(self.texture_preset, resolution=resolution)
+        return texture_preset(self.texture_preset, resolution=resolution, residual=self.init_type == "exact")
 
 
 @dataclass
@@ -135,7 +141,11 @@ def convert_asset(mesh: Mesh, maps: PBRMaps, config: ConvertConfig = ConvertConf
     target = torch.from_numpy(target_stack(maps, resolution))
     texture = NeuralTexture(config.texture_config(resolution), seed=config.seed)
 
-    if config.method_type == "direct":
+    if config.init_type == "exact":   # the asset's own maps are the texture: nothing to fit
+        texture.set_base(target)
+        history, iterations = [], 0
+        emit(progress, "convert", config.iterations, config.iterations, "exact start: the asset's own maps")
+    elif config.method_type == "direct":
         def report(it: int, loss: float, psnr: float) -> None:
             emit(progress, "convert", it + 1, config.iterations, "direct fit", {"psnr": psnr})
 
@@ -154,10 +164,13 @@ def convert_asset(mesh: Mesh, maps: PBRMaps, config: ConvertConfig = ConvertConf
     result = ConvertResult(texture=texture, raster=raster, mesh=normalized, transform=transform, target=target,
                            psnr=0.0, seconds=0.0, method_type=config.method_type, iterations=iterations,
                            history=history)
-    result.psnr = masked_psnr(result.predicted(), target, raster.mask)
+    result.psnr = min(masked_psnr(result.predicted(), target, raster.mask), EXACT_PSNR_DB)
     result.seconds = time.perf_counter() - started
     result.decisions = {
-        "resolution": resolution, "resolution_reason": why, "method": config.method_type,
+        "start": config.init_type, "start_reason": "the asset's own maps and a zero residual (--init exact)"
+        if config.init_type == "exact" else "the paper's fit of the network to the maps (--init fit)",
+        "resolution": resolution, "resolution_reason": why,
+        "method": config.method_type if config.init_type == "fit" else "none (nothing fitted)",
         "texture_preset": config.texture_preset, "uv_coverage": round(raster.coverage, 4),
     }
     return result
@@ -190,7 +203,8 @@ def convert_materials(asset: AssetMaterials, config: ConvertConfig = ConvertConf
     per_material = []
     for material, (rows, cols) in zip(asset.materials, atlas_slices(len(maps), cell)):
         mask = result.raster.mask[rows, cols]
-        psnr = masked_psnr(predicted[rows, cols], result.target[rows, cols], mask) if mask.any() else float("nan")
+        psnr = min(masked_psnr(predicted[rows, cols], result.target[rows, cols], mask), EXACT_PSNR_DB) \
+            if mask.any() else float("nan")
         per_material.append({"name": material.name, "psnr_db": round(psnr, 3),
                              "uv_coverage": round(float(mask.mean()), 4)})
     result.decisions["materials"] = per_material

@@ -14,7 +14,7 @@ import numpy as np
 
 from .errors import InputError
 from .imageio import linear_to_srgb
-from .materials import atlas_grid, material_submesh
+from .materials import atlas_grid, atlas_slices, material_submesh
 from .mesh import Mesh, normalize_to_unit_sphere
 from .texture.bake import bake_texture
 from .texture.neural_texture import NeuralTexture
@@ -84,6 +84,16 @@ def _channel(plane: np.ndarray, mask: np.ndarray, original: float | None) -> np.
     return round(mean, 4) if flat else data
 
 
+def material_base(texture: NeuralTexture, index: int, count: int, size: int):
+    """A residual texture's base for material `index`'s own UV square at size²: its atlas cell (the
+    whole texture for one material) resampled; None for a texture without a base."""
+    if not texture.config.residual:
+        return None
+    cell = texture.config.resolution // atlas_grid(count)
+    rows, cols = atlas_slices(count, cell)[index]
+    return texture.base_logit_at(rows, cols, size)
+
+
 def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: int,
                    constants: list[dict[str, float]] | None = None,
                    wraps: list[tuple[str, str]] | None = None) -> list[BakedMaterial]:
@@ -104,7 +114,8 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
     for index, name in enumerate(names):
         wrap = tuple(wraps[index]) if wraps else ("repeat", "repeat")
         raster = rasterize_uv(material_submesh(normalized, index), size, wrap=wrap)
-        maps = bake_texture(texture, raster.position, raster.border, raster.fill_index)
+        maps = bake_texture(texture, raster.position, raster.border, raster.fill_index,
+                            material_base(texture, index, len(names), size))
         base = np.round(linear_to_srgb(maps[..., 0:3]) * 255.0).astype(np.uint8)
         was = constants[index] if constants else {}
         baked.append(BakedMaterial(name=name, base_color=base,

@@ -83,10 +83,11 @@ def test_baked_maps_read_back_match_the_network_within_one_level(demo_run, examp
 
 def test_direct_and_inverse_fits_both_learn_the_maps():
     maps = smooth_maps()
-    direct = convert_asset(uv_sphere(), maps, stage_config("convert", "draft", iterations=60))
-    inverse = convert_asset(uv_sphere(), maps, stage_config("convert", "draft", method_type="inverse", iterations=40,
+    direct = convert_asset(uv_sphere(), maps, stage_config("convert", "draft", init_type="fit", iterations=60))
+    inverse = convert_asset(uv_sphere(), maps, stage_config("convert", "draft", init_type="fit", method_type="inverse", iterations=40,
                                                                 render_size=96, spp=4))
-    untrained = convert_asset(uv_sphere(), maps, stage_config("convert", "draft", iterations=1, lr_start=1e-9, lr_end=1e-9))
+    untrained = convert_asset(uv_sphere(), maps, stage_config("convert", "draft", init_type="fit", iterations=1, lr_start=1e-9,
+                                                                  lr_end=1e-9))
     assert direct.psnr > 30.0
     # Inverse rendering learns far more slowly per iteration (bench: conversion_psnr.png), but it learns.
     assert inverse.psnr > untrained.psnr + 1.5

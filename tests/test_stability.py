@@ -97,7 +97,7 @@ def test_meshes_at_1e_3_and_1e3_scale_convert_alike(scale):
     sphere = uv_sphere(segments=12, rings=6)
     yy, xx = np.mgrid[0:16, 0:16] / 16
     asset_maps = PBRMaps(np.stack([xx, yy, 0.5 + 0 * xx], -1).astype(np.float32), 0.5, 0.0)
-    config = stage_config("convert", "draft", iterations=20, resolution=16)
+    config = stage_config("convert", "draft", init_type="fit", iterations=20, resolution=16)
     unit = convert_asset(sphere, asset_maps, config)
     scaled = convert_asset(Mesh.from_arrays(sphere.positions * scale, sphere.faces, sphere.uvs, sphere.normals),
                            asset_maps, config)

@@ -26,10 +26,11 @@ MAP_FILES = {"base_color": "base_color.png", "roughness": "roughness.png", "meta
 WEIGHTS_FILE = "texture.pt"
 
 
-def bake_texture(texture: NeuralTexture, position_map, mask, fill_index) -> np.ndarray:
-    """(H, W, 5) float32 linear maps evaluated on `mask` texels and dilated past seams."""
+def bake_texture(texture: NeuralTexture, position_map, mask, fill_index, base_logit=None) -> np.ndarray:
+    """(H, W, 5) float32 linear maps evaluated on `mask` texels and dilated past seams (base_logit: a
+    residual texture's base for this raster, when it is not the texture's own)."""
     with torch.no_grad():
-        return texture.texture(position_map, mask, fill_index).cpu().numpy().astype(np.float32)
+        return texture.texture(position_map, mask, fill_index, base_logit).cpu().numpy().astype(np.float32)
 
 
 def texture_maps_for_mesh(texture: NeuralTexture, normalized_mesh) -> np.ndarray:

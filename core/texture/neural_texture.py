@@ -3,6 +3,11 @@
 A texel's 3D position (from the UV-space position map C) goes through a multi-resolution hash
 encoding and a 2-layer MLP without bias; a sigmoid and a per-channel remap to [min, max] give the
 five channels base colour RGB (linear), roughness and metallic.
+
+The exact start (issue 23): with `residual` the texture is the asset's own maps plus what the
+network learns, in logit space per channel: value = min + (max - min) * sigmoid(logit(base) + MLP(h(p))).
+The MLP's last layer starts at zero, so before any step the texture *is* the asset's maps
+(`base`, stored in texture.pt in the raster's UV layout), and adaptation starts from it exactly.
 """
 from __future__ import annotations
 
@@ -44,6 +49,7 @@ class NeuralTextureConfig:
     roughness_range: tuple[float, float] = (0.03, 1.0)
     metallic_range: tuple[float, float] = (0.0, 1.0)
     bound: float = NORMALIZED_RADIUS
+    residual: bool = False            # the exact start: the asset's maps (a stored base) + a learned residual
 
     def __post_init__(self) -> None:
         def need(ok: bool, message: str) -> None:
@@ -132,7 +138,39 @@ class NeuralTexture(torch.nn.Module):
                 torch.nn.init.kaiming_uniform_(layer.weight, a=5**0.5, generator=generator)
         self.register_buffer("_lo", torch.tensor(config.channel_min, dtype=torch.float32), persistent=False)
         self.register_buffer("_hi", torch.tensor(config.channel_max, dtype=torch.float32), persistent=False)
+        if config.residual:
+            with torch.no_grad():
+                self.mlp[2].weight.zero_()   # the residual is exactly zero at the start
+            self.register_buffer("base_logit", torch.zeros(config.resolution, config.resolution, len(CHANNELS)))
         self._plan_cache: tuple | None = None
+
+    # -- the exact start ---------------------------------------------------------------------------
+
+    def set_base(self, stack) -> None:
+        """The asset's own maps (R, R, 5), in the channels' units, as the texture's base."""
+        if not self.config.residual:
+            raise InputError("Only a residual neural texture has a base; make it with residual=True.")
+        stack = _tensor(stack).to(self.base_logit.device, torch.float32)
+        if tuple(stack.shape) != tuple(self.base_logit.shape):
+            raise InputError(f"The base maps are {tuple(stack.shape)} but the texture is {tuple(self.base_logit.shape)}.")
+        with torch.no_grad():
+            self.base_logit.copy_(to_logit(stack, self._lo, self._hi))
+
+    def residual_is_zero(self) -> bool:
+        """True while the texture is its base exactly (nothing learned yet): no network pass needed."""
+        return self.config.residual and not bool(self.mlp[2].weight.detach().any())
+
+    def base_values(self, base_logit: torch.Tensor | None = None) -> torch.Tensor:
+        """The base maps (H, W, 5) in the channels' units (the stored base, or one resampled from it)."""
+        logits = self.base_logit if base_logit is None else base_logit
+        return self._lo + (self._hi - self._lo) * torch.sigmoid(logits)
+
+    def base_logit_at(self, rows: slice, cols: slice, size: int) -> torch.Tensor:
+        """The stored base's window [rows, cols] (an atlas cell) resampled to size x size, as logits."""
+        window = self.base_logit[rows, cols].permute(2, 0, 1)[None]
+        mode = "area" if size < window.shape[-1] else "bilinear"
+        kwargs = {} if mode == "area" else {"align_corners": False}
+        return torch.nn.functional.interpolate(window, size=(size, size), mode=mode, **kwargs)[0].permute(1, 2, 0)
 
     # -- evaluation -------------------------------------------------------------------------------
 
@@ -177,23 +215,44 @@ class NeuralTexture(torch.nn.Module):
                          gather=torch.arange(rows.numel(), device=rows.device),
                          encoding=self.encoding.plan(points), config=self.config)
 
-    def texture_from_plan(self, plan: TexelPlan) -> torch.Tensor:
-        """(H, W, 5) texture on the plan's texels, dilated past seams. Differentiable."""
+    def texture_from_plan(self, plan: TexelPlan, base_logit: torch.Tensor | None = None) -> torch.Tensor:
+        """(H, W, 5) texture on the plan's texels, dilated past seams. Differentiable.
+        base_logit: a residual texture's base for this plan's raster (default: the stored one)."""
         if plan.config != self.config:
             raise InputError("This texel plan was made for a neural texture with another config.")
-        values = self.values_from_plan(plan)
+        values = self.values_from_plan(plan, base_logit)
         return values[plan.gather].view(*plan.shape, len(CHANNELS))
 
-    def values_from_plan(self, plan: TexelPlan) -> torch.Tensor:
+    def values_from_plan(self, plan: TexelPlan, base_logit: torch.Tensor | None = None) -> torch.Tensor:
         """(K, 5) values at the plan's texels only (in plan.texels order)."""
-        return self._head(self.encoding.forward_planned(plan.encoding))
+        features = self.mlp(self.encoding.forward_planned(plan.encoding))
+        if self.config.residual:
+            features = features + self._base_rows(plan.texels, base_logit)
+        return self._lo + (self._hi - self._lo) * torch.sigmoid(features)
 
-    def texture(self, position_map, mask, fill_index) -> torch.Tensor:
+    def _base_rows(self, texels: torch.Tensor, base_logit: torch.Tensor | None) -> torch.Tensor:
+        base = self.base_logit if base_logit is None else base_logit.to(self.base_logit.device)
+        return base.reshape(-1, len(CHANNELS))[texels]
+
+    def texture(self, position_map, mask, fill_index, base_logit: torch.Tensor | None = None) -> torch.Tensor:
         """(H, W, 5) texture: the network on `mask` texels, copied outward past seams via fill_index.
 
         The plan is cached while the same read-only numpy arrays (e.g. a UVRaster's) or unchanged
         tensors are passed again, so calling this every iteration costs one forward pass.
+        base_logit: a residual texture's base for this raster when it is not the stored one's (the
+        game bake's per-material raster); a residual still zero is its base, with no network pass.
         """
+        if self.config.residual:
+            base = self.base_logit if base_logit is None else base_logit
+            h, w = np.shape(position_map)[:2]
+            if tuple(base.shape[:2]) != (h, w):
+                raise InputError(f"This texture's base is {tuple(base.shape[:2])} but the raster is {h}x{w}; give "
+                                 "the base for this raster (base_logit_at).")
+            if self.residual_is_zero():
+                fill = _tensor(fill_index).to(base.device, torch.int64).reshape(-1)
+                return self.base_values(base).reshape(-1, len(CHANNELS))[fill].view(h, w, len(CHANNELS))
+        if base_logit is not None:
+            return self.texture_from_plan(self.plan(position_map, mask, fill_index), base_logit)
         key = _cache_key((position_map, mask, fill_index))
         if key is not None and self._plan_cache is not None and self._plan_cache[0] == key[0] \
                 and all(ref() is obj for ref, obj in zip(self._plan_cache[1], (position_map, mask, fill_index))):
@@ -213,11 +272,24 @@ class NeuralTexture(torch.nn.Module):
         return points.to(self._lo.device, torch.float32) / (2.0 * self.config.bound) + 0.5
 
     def _head(self, features: torch.Tensor) -> torch.Tensor:
+        if self.config.residual:
+            raise InputError("A residual neural texture is evaluated on texels (texture / texture_from_plan), "
+                             "where its base is known, not at free points.")
         return self._lo + (self._hi - self._lo) * torch.sigmoid(self.mlp(features))
 
     def _apply(self, fn, recurse=True):  # .to(device) invalidates cached plans
         self._plan_cache = None
         return super()._apply(fn, recurse)
+
+
+# Values this close to a channel's ends are the ends: logit(0) is -inf, and 1e-6 is below one 16-bit level.
+LOGIT_EPS = 1e-6
+
+
+def to_logit(stack: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
+    """Channel values -> the logits the texture's sigmoid maps back to them (clamped to the range)."""
+    unit = ((stack - lo) / (hi - lo)).clamp(LOGIT_EPS, 1.0 - LOGIT_EPS)
+    return torch.log(unit) - torch.log1p(-unit)
 
 
 def split_channels(stack: torch.Tensor | np.ndarray):

@@ -1,0 +1,90 @@
+"""The asset itself as the exact start (issue 23): the texture is the asset's own maps plus a residual
+that is exactly zero at the start, in logit space per channel; nothing is fitted, and adaptation
+starts from the asset exactly."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from scenefit.core.convert import EXACT_PSNR_DB, ConvertConfig, convert_asset
+from scenefit.core.errors import InputError
+from scenefit.core.game_bake import bake_game_maps
+from scenefit.core.imageio import linear_to_srgb
+from scenefit.core.maps import PBRMaps
+from scenefit.core.primitives import uv_sphere
+from scenefit.core.texture.bake import bake_maps, load_neural_texture, texture_maps_for_mesh
+
+
+def asset_maps(size: int = 32) -> PBRMaps:
+    rng = np.random.default_rng(3)
+    base = rng.uniform(0.02, 0.98, (size, size, 3)).astype(np.float32)
+    rough = rng.uniform(0.05, 1.0, (size, size)).astype(np.float32)
+    metal = (rng.uniform(size=(size, size)) > 0.5).astype(np.float32)   # the extremes 0 and 1
+    return PBRMaps(base, rough, metal)
+
+
+def exact(mesh, maps, **kw):
+    return convert_asset(mesh, maps, ConvertConfig(init_type="exact", texture_preset="draft", resolution=32, **kw))
+
+
+def test_the_exact_start_is_the_asset_and_fits_nothing():
+    mesh, maps = uv_sphere(0.5, 16, 8), asset_maps()
+    result = exact(mesh, maps)
+    assert result.iterations == 0 and result.history == [] and result.texture.residual_is_zero()
+    got, want = result.predicted(), result.target
+    covered = torch.from_numpy(result.raster.mask.copy())
+    assert torch.allclose(got[covered], want[covered], atol=2e-6)   # metallic 0 and 1 included
+    assert result.psnr == EXACT_PSNR_DB and result.decisions["start"] == "exact"
+
+
+def test_the_residual_learns_on_top_of_the_base_and_the_base_stays():
+    mesh, maps = uv_sphere(0.5, 16, 8), asset_maps()
+    result = exact(mesh, maps)
+    texture, raster = result.texture, result.raster
+    plan = texture.plan(raster.position, raster.border, raster.fill_index)
+    before = texture.base_logit.clone()
+    optimizer = torch.optim.Adam(texture.parameters(), lr=0.05)
+    for _ in range(5):   # push the base colour up everywhere
+        optimizer.zero_grad()
+        (-texture.texture_from_plan(plan)[..., 0:3].mean()).backward()
+        optimizer.step()
+    assert not texture.residual_is_zero()
+    assert torch.equal(texture.base_logit, before)                 # a buffer, never optimised
+    covered = torch.from_numpy(raster.mask.copy())
+    with torch.no_grad():
+        moved = texture.texture_from_plan(plan)[covered][:, 0:3] - result.target[covered][:, 0:3]
+    assert float(moved.mean()) > 0.01
+
+
+def test_an_exact_start_saves_loads_and_bakes_back_to_the_asset(tmp_path):
+    mesh, maps = uv_sphere(0.5, 16, 8), asset_maps()
+    result = exact(mesh, maps)
+    outputs = bake_maps(result.texture, result.raster.position, result.raster.border, result.raster.fill_index,
+                        tmp_path)
+    again = load_neural_texture(outputs["weights"])
+    assert again.config.residual and torch.equal(again.base_logit, result.texture.base_logit)
+    np.testing.assert_allclose(texture_maps_for_mesh(again, result.mesh), result.predicted().numpy(), atol=1e-6)
+    # The game bake at the texture's own size writes the asset's own base colour back (8-bit sRGB).
+    (baked,) = bake_game_maps(again, mesh, ["Ball"], 32)
+    want = np.round(linear_to_srgb(result.target[..., 0:3].numpy()) * 255)
+    covered = result.raster.mask
+    assert np.abs(baked.base_color[covered].astype(float) - want[covered]).max() <= 1.0
+
+
+def test_a_residual_texture_is_only_evaluated_where_its_base_is_known():
+    result = exact(uv_sphere(0.5, 16, 8), asset_maps())
+    with pytest.raises(InputError, match="evaluated on texels"):
+        result.texture(torch.zeros(4, 3))
+    raster = result.raster
+    with pytest.raises(InputError, match="base is"):   # a raster of another size needs its own base
+        result.texture.texture(raster.position[:16, :16], raster.border[:16, :16], np.zeros(256, np.int64))
+
+
+def test_roughness_below_the_renderers_floor_is_held_at_the_floor():
+    """The one place the start is not the asset: roughness under 0.03 (a perfect mirror the GGX lobe
+    cannot render) is held at 0.03, as every neural texture's range says."""
+    maps = PBRMaps(np.full((32, 32, 3), 0.5, np.float32), np.zeros((32, 32), np.float32), 0.0)
+    result = exact(uv_sphere(0.5, 16, 8), maps)
+    covered = torch.from_numpy(result.raster.mask.copy())
+    assert torch.allclose(result.predicted()[covered][:, 3], torch.tensor(0.03), atol=1e-6)
