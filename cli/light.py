@@ -4,9 +4,9 @@ from __future__ import annotations
 from dataclasses import asdict, replace
 from pathlib import Path
 
-from .options import (add_dry_run_arg, add_elevation_arg, add_model_args, add_output_args, add_placement_args,
-                      add_preset_args, model_config, output, placement, positive_float, positive_int,
-                      progress, require)
+from .options import (add_dry_run_arg, add_model_args, add_old_photo_elevation_arg, add_output_args,
+                      add_photo_camera_args, add_placement_args, add_preset_args, model_config, output, photo_pitch,
+                      placement, positive_int, progress, require)
 
 
 def sun_angles(text: str) -> tuple[float, float]:
@@ -49,7 +49,7 @@ def resolve_config(args, critic: str):
                         cache_dir=models.cache_dir, local_files_only=True if args.offline else None)
     overrides = {k: v for k, v in (("scene_type", args.scene), ("fov_deg", args.fov), ("tint", args.tint),
                                    ("sun_deg", args.sun),
-                                   ("camera_pitch_deg", -args.elevation if args.elevation is not None else None))
+                                   ("camera_pitch_deg", photo_pitch(args)))
                  if v is not None}
     config = stage_config("light", args.preset, depth=depth, critic_type=critic, models=models, **overrides)
     if args.iterations is not None:
@@ -91,8 +91,11 @@ def _light(args, out: Path) -> int:
     config = resolve_config(args, critic.choice)
     photo, info = load_photo(args.photo)
     where = placement(args, (info["size"][1], info["size"][0]))   # --at in pixels means the photo as stored
-    result = estimate_light(photo, where.pixel(photo.shape[:2]), config, photo_info=info, progress=progress(args))
+    camera, estimate = photo_camera(args, photo.shape[:2])
+    result = estimate_light(photo, where.pixel(photo.shape[:2]), config, photo_camera=camera, photo_info=info,
+                            progress=progress(args))
     result.decisions["critic"]["choice"] = {"asked": args.critic, "chosen": critic.choice, "why": critic.reason}
+    result.decisions["camera"] = estimate
     outputs = write_light_outputs(result, out)
     report = light_report(result, config, outputs)
     report["photo"] = info
@@ -105,6 +108,16 @@ def _light(args, out: Path) -> int:
     return 0
 
 
+def photo_camera(args, hw: tuple[int, int]):
+    """(PhotoCamera, its record): the photo's camera as `scenefit camera` finds it (fSpy, EXIF, its lines,
+    else the defaults), with --fov / --pitch / --roll over it; the report says where each came from."""
+    from ..core.photo_camera import estimate_photo_camera
+
+    estimate = estimate_photo_camera(args.photo, args.fspy).overridden(fov_deg=args.fov, pitch_deg=photo_pitch(args),
+                                                                       roll_deg=args.roll)
+    return estimate.photo_camera(width=hw[1], height=hw[0]), estimate.to_dict()
+
+
 def add_parser(sub) -> None:
     p = sub.add_parser("light", help="estimate an HDR environment map from a photo and the object's placement")
     p.add_argument("--photo", help="the scene photo (JPEG/PNG/EXR, any size)")
@@ -112,8 +125,8 @@ def add_parser(sub) -> None:
     add_output_args(p, help="output folder: light.exr, light_preview.png, report.json", required=False)
     add_preset_args(p)
     p.add_argument("--scene", choices=("auto", "indoor", "outdoor"), help="scene type (default: auto)")
-    p.add_argument("--fov", type=positive_float, help="horizontal field of view in degrees (default: metadata, else 60)")
-    add_elevation_arg(p)
+    add_photo_camera_args(p)
+    add_old_photo_elevation_arg(p)
     p.add_argument("--sun", type=sun_angles, metavar="AZ,EL",
                    help="the dominant light's direction in degrees: azimuth from the photo's view direction, "
                         "positive to the right (90: from the right, 180: from behind the camera), elevation above "

@@ -68,3 +68,13 @@ def test_a_broken_fspy_file_is_one_sentence_before_any_work(tmp_path, inputs, ca
     err = capsys.readouterr().err.strip()
     assert err.startswith("scenefit: error:") and "fSpy" in err and "\n" not in err
     assert not (tmp_path / "run").exists()
+
+
+def test_scenefit_light_uses_the_estimate_and_the_users_values(tmp_path, inputs):
+    _, photo = inputs
+    out = tmp_path / "light"
+    assert main(["light", "--photo", str(photo), "--at", "0.5,0.8", "--out", str(out), "--preset", "draft",
+                 "--roll", "2", "--pitch", "-15", "--quiet"]) == 0
+    decisions = json.loads((out / "report.json").read_text())["decisions"]
+    assert decisions["camera"]["roll_source"] == "user" and decisions["camera"]["fov_source"] == "default"
+    assert (decisions["photo_camera"]["roll_deg"], decisions["photo_camera"]["pitch_deg"]) == (2.0, -15.0)

@@ -263,7 +263,7 @@ def test_light_messages_name_options_not_fields_and_offline_never_touches_the_ne
     assert cli("light", "--photo", str(photo), "--at", "0.5,0.8", "--elevation", "100", "--out",
                str(tmp_path / "a"), "--quiet") == 2
     err = capsys.readouterr().err
-    assert "elevation" in err and "camera_pitch_deg" not in err
+    assert "pitch" in err and "-100" in err and "camera_pitch_deg" not in err   # the old --elevation is -pitch
     # --depth model --offline: a missing model is reported at once, without one connection attempt
     # (it used to retry the network for 98 s).
     attempts = []

@@ -79,8 +79,8 @@ class LightConfig:
         if self.fov_deg is not None and not 1.0 <= self.fov_deg <= 170.0:
             raise InputError(f"The photo's field of view must be between 1 and 170 degrees, got {self.fov_deg}.")
         if not -89.0 <= self.camera_pitch_deg <= 89.0:
-            raise InputError(f"The photo camera's elevation must be within +-89 degrees (how far it looks down), "
-                             f"got {-self.camera_pitch_deg:g}.")
+            raise InputError(f"The photo camera's pitch must be within +-89 degrees (where it looks above the "
+                             f"horizon; negative looks down), got {self.camera_pitch_deg:g}; give another --pitch.")
         if self.sun_deg is not None and (len(self.sun_deg) != 2 or not all(map(math.isfinite, self.sun_deg))
                                          or not -90.0 <= self.sun_deg[1] <= 90.0):
             raise InputError(f"The sun direction must be two finite angles AZ,EL with the elevation within +-90 "
