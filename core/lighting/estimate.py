@@ -23,7 +23,7 @@ from ..errors import InputError, ModelMissingError, check_choice
 from ..guidance.models import ModelConfig
 from ..imageio import linear_to_srgb, read_image, srgb_to_linear, write_image
 from ..mesh import Mesh, normalize_to_unit_sphere
-from ..photo import PhotoCamera, camera_exposure
+from ..photo import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG, PhotoCamera, camera_exposure  # defaults defined once
 from ..primitives import uv_sphere
 from ..progress import ProgressCallback, check_cancel, emit
 from .depth import DepthConfig, estimate_ray_distance
@@ -43,7 +43,6 @@ from .regions import RegionThresholds, bright_regions
 # draft's 64 rows are built at 64: at 128 it did balanced's work for a coarser map (benchmarks: same
 # seconds, same error). tests/test_stability.py finds a 1.5 deg lamp and a 2 px 1e6 spot at every preset.
 MIN_WORKING_HEIGHT = 64
-DEFAULT_FOV_DEG = 60.0   # horizontal; a typical phone/kit-lens view (~28 mm full-frame equivalent)
 SCENE_TYPES = ("auto", "indoor", "outdoor")
 CRITIC_TYPES = ("none", "reference", "diffusion")
 PRIOR_TYPES = ("cues", "inverse_tonemap")   # cues: cues.py (default); inverse_tonemap: the paper's prior
@@ -53,7 +52,7 @@ PRIOR_TYPES = ("cues", "inverse_tonemap")   # cues: cues.py (default); inverse_t
 class LightConfig:
     scene_type: str = "auto"
     fov_deg: float | None = None              # horizontal; None: the photo's metadata, else DEFAULT_FOV_DEG
-    camera_pitch_deg: float = -10.0           # the photo camera looks this far up (negative: down)
+    camera_pitch_deg: float = DEFAULT_PITCH_DEG   # the photo camera looks this far up (negative: down)
     # The artist's dominant light (--sun AZ,EL), degrees: azimuth from the photo's view direction,
     # positive to the camera's right (clockwise seen from above), elevation above the horizon.
     sun_deg: tuple[float, float] | None = None
@@ -179,12 +178,11 @@ def _metadata(path: Path) -> dict:
 
 
 def default_photo_camera(config: LightConfig, photo_info: dict, width: int, height: int) -> tuple[PhotoCamera, dict]:
-    """The camera the light stage assumes for a photo: looking along +Y (the composition's azimuth 0),
-    pitched by config.camera_pitch_deg, field of view from the config, else the photo's metadata, else 60."""
-    fov = config.fov_deg or photo_info.get("fov_from_metadata_deg") or DEFAULT_FOV_DEG
-    why = {"deg": fov, "from": "config" if config.fov_deg else
-           ("photo metadata" if photo_info.get("fov_from_metadata_deg") else "default (horizontal 60 deg)")}
-    return PhotoCamera(yaw_deg=90.0, pitch_deg=config.camera_pitch_deg, fov_deg=fov, width=width, height=height), why
+    """The camera the light stage assumes for a photo when none is given: core/photo.py's, with the
+    config's field of view and pitch (the one definition of the frame and the defaults)."""
+    from ..photo import photo_camera_for
+
+    return photo_camera_for(photo_info, width, height, config.fov_deg, config.camera_pitch_deg)
 
 
 def sun_direction(sun_deg: tuple[float, float] | None, camera: PhotoCamera) -> np.ndarray | None:
