@@ -117,7 +117,7 @@ def ensure_photo_camera(scene, image, fov: float, elevation: float):
     data.angle = fov
     cam.rotation_mode = "XYZ"
     # The light stage's photo camera: looking along +Y (yaw 90), pitched down by `elevation`.
-    forward, _, up, _, _ = PhotoCamera(yaw_deg=90.0, pitch_deg=-math.degrees(elevation)).basis()
+    forward, _, up, _, _ = PhotoCamera(pitch_deg=-math.degrees(elevation)).basis()
     cam.rotation_euler = camera_rotation(forward, up).to_euler("XYZ")
     w, h = image.size
     scene.render.resolution_x, scene.render.resolution_y = int(w), int(h)

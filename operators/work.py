@@ -125,7 +125,7 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
         if data.get("envmap"):   # the camera the light stage estimated this map with
             camera = light_camera(data["envmap"], {}, w, h)[0]
         elif "fov_deg" in data:
-            camera = PhotoCamera(yaw_deg=90.0, pitch_deg=data["pitch_deg"], fov_deg=data["fov_deg"], width=w, height=h)
+            camera = PhotoCamera(pitch_deg=data["pitch_deg"], fov_deg=data["fov_deg"], width=w, height=h)
     overrides = {"views_type": "local"} if mode == "scene" and photo is None else {}
     envmap = load_environment(data["envmap"]) if data.get("envmap") else None
     if envmap is not None:
@@ -161,7 +161,7 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
     from ..core.run import RunConfig, run_pipeline
 
     def write(folder: Path) -> dict:
-        camera = PhotoCamera(yaw_deg=90.0, pitch_deg=data["pitch_deg"], fov_deg=data["fov_deg"], width=1, height=1)
+        camera = PhotoCamera(pitch_deg=data["pitch_deg"], fov_deg=data["fov_deg"], width=1, height=1)
         config = RunConfig(preset=data["preset"], prompt=data["prompt"], guidance_type=data["guidance"],
                            size=data["size"], photo_camera=camera, models=data["models"])
         report = run_pipeline(data["mesh"], data["maps"], data["photo"], tuple(data["placement"]), folder, config,
