@@ -173,6 +173,9 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
                                   export_apply=True, export_cameras=True, export_lights=True,
                                   export_image_format=_IMAGE_FORMATS[output.textures], export_materials="EXPORT",
                                   export_tangents=output.tangents,
+                                  # glTF multiplies COLOR_0 into the base colour, and the baked base colour
+                                  # already holds the vertex colours it read: no COLOR_n no material uses
+                                  export_all_vertex_colors=False,
                                   export_draco_mesh_compression_enable=output.compress == "draco")
         if output.compress == "meshopt":
             staged = staging / out_file.name

@@ -58,7 +58,8 @@ def _image_format(image: dict) -> str | None:
 def output_like_input(asset: str | Path, compress: str | None = None, textures: str | None = None,
                       max_texture: int | None = None) -> GltfOutput:
     """The output settings: each one given, else as the input file has it (a non-glTF input: none,
-    png). Tangents are decided from the loaded materials (blender_io.gltf_export)."""
+    png). Tangents where the input has them (and, decided from the loaded materials in
+    blender_io.gltf_export, where a material has a normal map)."""
     document = _document(Path(asset))
     used = document.get("extensionsUsed", [])
     if compress is None:
@@ -66,4 +67,6 @@ def output_like_input(asset: str | Path, compress: str | None = None, textures: 
     if textures is None:
         formats = [_image_format(image) for image in document.get("images", [])]
         textures = max(set(formats) - {None}, key=formats.count, default="png")
-    return GltfOutput(compress, textures, DEFAULT_MAX_TEXTURE if max_texture is None else max_texture)
+    tangents = any("TANGENT" in primitive.get("attributes", {}) for mesh in document.get("meshes", [])
+                   for primitive in mesh.get("primitives", []))
+    return GltfOutput(compress, textures, DEFAULT_MAX_TEXTURE if max_texture is None else max_texture, tangents)

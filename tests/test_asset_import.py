@@ -135,6 +135,21 @@ links.new(normal_image.outputs["Color"], normal_map.inputs["Color"])
 links.new(normal_map.outputs["Normal"], nodes["Principled BSDF"].inputs["Normal"])
 ball.data.materials.append(mat)
 export(folder / "draco.glb", export_draco_mesh_compression_enable=True)
+
+# Vertex colours as the base colour: a grid whose linear colours run with x (red) and y (green).
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.mesh.primitive_grid_add(x_subdivisions=8, y_subdivisions=8, size=2.0)
+painted = bpy.context.active_object
+painted.name = "Painted"
+colours = painted.data.color_attributes.new("Col", "FLOAT_COLOR", "POINT")
+for i, vertex in enumerate(painted.data.vertices):
+    colours.data[i].color = (0.2 + 0.3 * (vertex.co.x + 1), 0.1 + 0.4 * (vertex.co.y + 1), 0.5, 1.0)
+mat = bpy.data.materials.new("Painted")
+attribute = mat.node_tree.nodes.new("ShaderNodeVertexColor")
+attribute.layer_name = "Col"
+mat.node_tree.links.new(attribute.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+painted.data.materials.append(mat)
+export(folder / "painted.glb")
 """
 
 
@@ -372,6 +387,25 @@ def test_bake_compresses_like_the_input_keeps_tangents_and_writes_the_chosen_tex
     proc = scenefit("bake", str(asset), "--texture", str(tmp_path / "convert/maps/texture.pt"), "--out",
                     str(tmp_path / "x.glb"), "--max-texture", "100")
     assert proc.returncode == 2 and "--max-texture must be a power of two between 4 and 8192, got 100." in proc.stderr
+
+
+def test_vertex_colours_are_baked_into_the_base_colour_and_not_multiplied_in_again(assets, tmp_path):
+    """Vertex colours are read as base colour (Blender's bake of the Color Attribute chain); the
+    exporter then still wrote COLOR_0 (and a second, made-up COLOR_1), which glTF multiplies into
+    the baked base colour that already holds them: the colours came out squared."""
+    asset = assets / "painted.glb"
+    assert any("COLOR_0" in p["attributes"] for m in gltf_json(asset)["meshes"] for p in m["primitives"])
+    report, out = convert_and_bake(asset, tmp_path)
+    assert any("Color Attribute" in line for line in report["materials"][0]["read"]), report["materials"][0]["read"]
+    assert not any(name.startswith("COLOR_") for m in out["meshes"] for p in m["primitives"] for name in p["attributes"])
+    image = glb_image(tmp_path / "baked.glb", out, out["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]
+                      ["index"])
+    size = image.shape[0]
+    u, v = np.meshgrid((np.arange(size) + 0.5) / size, 1 - (np.arange(size) + 0.5) / size)
+    linear = np.stack([0.2 + 0.6 * u, 0.1 + 0.8 * v, np.full_like(u, 0.5)], axis=-1)  # the grid's UVs: u = (x + 1) / 2
+    srgb = np.where(linear <= 0.0031308, linear * 12.92, 1.055 * linear ** (1 / 2.4) - 0.055)
+    # (20 draft iterations fit the gradients loosely: the colours on average)
+    assert np.abs(image.mean(axis=(0, 1)) - srgb.mean(axis=(0, 1))).max() < 0.05, (image.mean((0, 1)), srgb.mean((0, 1)))
 
 
 PROCEDURAL_TILES = r"""

@@ -1,0 +1,25 @@
+"""How `scenefit bake` writes its glTF by default: like the input (core.gltf_output)."""
+from __future__ import annotations
+
+import pytest
+
+from scenefit.core.errors import InputError
+from scenefit.core.gltf_meshopt import write_glb
+from scenefit.core.gltf_output import GltfOutput, output_like_input
+
+
+def test_the_output_is_compressed_textured_and_given_tangents_as_the_input(tmp_path):
+    path = tmp_path / "in.glb"
+    write_glb(path, {"asset": {"version": "2.0"}, "extensionsUsed": ["KHR_draco_mesh_compression"],
+                     "images": [{"mimeType": "image/jpeg"}, {"uri": "a.jpg"}, {"uri": "n.png"}],
+                     "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TANGENT": 1}}]}]}, b"")
+    assert output_like_input(path) == GltfOutput("draco", "jpeg", 2048, tangents=True)
+    assert output_like_input(path, "meshopt", "webp", 512) == GltfOutput("meshopt", "webp", 512, tangents=True)
+    assert output_like_input(tmp_path / "asset.obj") == GltfOutput()
+
+
+def test_bad_output_settings_are_one_sentence():
+    with pytest.raises(InputError, match=r"^--max-texture must be a power of two between 4 and 8192, got 3000\.$"):
+        GltfOutput(max_texture=3000)
+    with pytest.raises(InputError, match=r"^--compress must be one of none, draco, meshopt, got 'zip'\.$"):
+        GltfOutput(compress="zip")
