@@ -184,6 +184,11 @@ def loaded_asset(path: str | Path, object_name: str | None = None):
                 failure = error
         if failure is not None:
             reason = _blender_reason(failure) or chatter.last_line() or "Blender could not read it"
+            missing = re.search(r"Extension (\S+) is not available", reason)
+            if missing:  # a valid file: Blender's importer lacks what it requires
+                raise InputError(f"Asset file '{path}' requires the glTF extension {missing.group(1)}, which "
+                                 "Blender's importer does not read; write it without that extension (gltf-transform "
+                                 "or gltfpack can) and give that file.") from None
             raise InputError(f"Asset file '{path}' cannot be read ({reason}); check that it is a valid "
                              f"'{suffix}' file, or export it again.") from None
         meshes = [o for o in scene.objects if o.type == "MESH"]

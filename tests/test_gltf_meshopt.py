@@ -72,3 +72,21 @@ def test_meshopt_data_that_does_not_decode_is_one_sentence(tmp_path):
                                          r"check the file with the Khronos glTF validator\.$"):
         with importable(packed):
             pass
+
+
+@pytest.mark.blender
+def test_a_required_extension_blender_lacks_is_named_and_never_called_a_broken_file(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    plain = plain_glb(tmp_path / "plain.glb")
+    document, chunk = read_gltf(plain)
+    document["extensionsUsed"] = document["extensionsRequired"] = ["EXT_made_up"]
+    write_glb(plain, document, chunk)
+    proc = subprocess.run([sys.executable, "-m", "scenefit.cli", "convert", str(plain), "--out", str(tmp_path / "c"),
+                           "--quiet"], capture_output=True, text=True, timeout=300,
+                          cwd=Path(__file__).resolve().parent.parent)
+    assert proc.returncode == 2, proc.stderr[-1500:]
+    assert "requires the glTF extension EXT_made_up, which Blender's importer does not read" in proc.stderr
+    assert "export it again" not in proc.stderr, json.dumps(proc.stderr)
