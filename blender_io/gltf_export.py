@@ -45,17 +45,19 @@ def _alpha_source(bsdf):
     return None
 
 
+def normal_mapped(material) -> bool:
+    """Whether the material links its normal input (a normal map: the exporter writes it, and it needs TANGENT)."""
+    try:
+        socket = principled_bsdf(material).inputs.get("Normal")
+    except InputError:
+        return False
+    return socket is not None and socket.is_linked
+
+
 def _with_tangents(output: GltfOutput) -> GltfOutput:
     """`output` with tangents where a loaded material links its normal input (a normal map: the exporter
     writes it, and engines and the validator want TANGENT with it)."""
     import bpy
-
-    def normal_mapped(material) -> bool:
-        try:
-            socket = principled_bsdf(material).inputs.get("Normal")
-        except InputError:
-            return False
-        return socket is not None and socket.is_linked
 
     return replace(output, tangents=output.tangents or any(normal_mapped(m) for m in bpy.data.materials))
 
@@ -270,7 +272,7 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
 
 
 def bake_copy_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_file: str | Path,
-                      file_format: str = "glb") -> dict:
+                      file_format: str = "glb", output: GltfOutput = GltfOutput()) -> dict:
     """bake_object_to_gltf for an object in the user's session: a copy of the object, its mesh and its
     materials gets the maps and is exported alone, then removed. The copies carry the originals'
     names while the exporter runs (the originals are renamed meanwhile and renamed back after), so
@@ -296,7 +298,7 @@ def bake_copy_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_fil
             original.name = f"{name}~scenefit"
             renamed.append((original, name))
             duplicate.name = name
-        report = bake_object_to_gltf(copy, baked, slots, out_file, file_format, whole_scene=False)
+        report = bake_object_to_gltf(copy, baked, slots, out_file, file_format, whole_scene=False, output=output)
     finally:
         # (a SceneFit result material's own image nodes are also named "SceneFit …": keep those)
         images = set(bpy.data.images) - images_before

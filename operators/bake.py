@@ -11,9 +11,10 @@ from pathlib import Path
 import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 
-from ..blender_io.gltf_export import FORMATS, bake_copy_to_gltf, constant_channels
+from ..blender_io.gltf_export import FORMATS, bake_copy_to_gltf, constant_channels, normal_mapped
 from ..blender_io.material import material_wrap
 from ..core.errors import InputError
+from ..core.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TEXTURE_FORMATS, GltfOutput
 from ..core.pipeline import write_report
 from . import work
 from .common import OnMesh, one_material_object, run_folder
@@ -23,6 +24,12 @@ from .properties import PATH
 FORMAT_ITEMS = (("glb", "glTF Binary (.glb)", "One file holding the mesh, materials and images"),
                 ("gltf", "glTF Separate (.gltf)", "JSON, a .bin and the images beside it"))
 assert {key for key, *_ in FORMAT_ITEMS} == set(FORMATS)
+COMPRESS_ITEMS = (("none", "None", "Plain mesh data"),
+                  ("draco", "Draco", "KHR_draco_mesh_compression, by Blender's exporter"),
+                  ("meshopt", "meshopt", "EXT_meshopt_compression, by meshoptimizer's encoder (.glb only)"))
+TEXTURE_ITEMS = (("png", "PNG", "Lossless"), ("jpeg", "JPEG", "Smaller, lossy (images with alpha stay PNG)"),
+                 ("webp", "WebP", "Smaller; needs an engine that reads EXT_texture_webp"))
+assert [k for k, *_ in COMPRESS_ITEMS] == list(COMPRESSIONS) and [k for k, *_ in TEXTURE_ITEMS] == list(TEXTURE_FORMATS)
 
 
 def texture_file(context) -> Path:
@@ -47,6 +54,10 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
     file_format: EnumProperty(name="Format", items=FORMAT_ITEMS, default="glb")
     texture_size: IntProperty(name="Texture size", default=0, min=0, max=8192, options={"SKIP_SAVE"},
                               description="Pixels per side (a power of two); 0: the size the texture was fitted at")
+    compress: EnumProperty(name="Compression", items=COMPRESS_ITEMS, default="none")
+    textures: EnumProperty(name="Textures", items=TEXTURE_ITEMS, default="png")
+    max_texture: IntProperty(name="Max texture", default=DEFAULT_MAX_TEXTURE, min=4, max=8192,
+                             description="Largest baked texture side, a power of two")
 
     @classmethod
     def poll(cls, context):
@@ -56,8 +67,10 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         size = self.texture_size
         if size and (size < 4 or size & (size - 1)):
             raise InputError(f"Texture size must be a power of two from 4 to 8192 (or 0 for the fitted size), got {size}.")
+        GltfOutput(self.compress, self.textures, self.max_texture)  # a bad setting is one sentence before any work
         texture = texture_file(context)
         obj, mesh, slot, material = one_material_object(context)
+        self._output = GltfOutput(self.compress, self.textures, self.max_texture, tangents=normal_mapped(material))
         if self.filepath:
             out_file = Path(bpy.path.abspath(self.filepath))
             if out_file.suffix.lower() != f".{self.file_format}":
@@ -68,7 +81,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
             out_file = Path(f"{bpy.path.clean_name(obj.name)}.{self.file_format}")
         self._object_name, self._slots, self._out_file = obj.name, [slot], out_file
         return work.bake_game_maps, {"texture": str(texture), "mesh": mesh, "names": [material.name],
-                                     "size": self.texture_size, "constants": [constant_channels(material)],
+                                     "size": self.texture_size, "max_size": self.max_texture,
+                                     "constants": [constant_channels(material)],
                                      "wraps": [material_wrap(material)]}
 
     def apply(self, context, result) -> str:
@@ -78,7 +92,7 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
 
         def export(folder: Path | None) -> dict:
             out_file = self._out_file if folder is None else folder / self._out_file
-            report = bake_copy_to_gltf(obj, result["baked"], self._slots, out_file, self.file_format)
+            report = bake_copy_to_gltf(obj, result["baked"], self._slots, out_file, self.file_format, self._output)
             report.update({"object": obj.name, "format": self.file_format, "texture_size": result["size"],
                            "file": str(out_file)})
             if folder is not None:

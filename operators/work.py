@@ -189,7 +189,7 @@ def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Eve
     from ..core.texture.bake import load_neural_texture
 
     texture = load_neural_texture(data["texture"])
-    size = data["size"] or default_texture_size(texture, len(data["names"]))
+    size = min(data["size"] or default_texture_size(texture, len(data["names"])), data.get("max_size", 8192))
     emit(progress, "bake", 0, 1, f"{len(data['names'])} material(s) at {size}²")
     baked = bake(texture, data["mesh"], list(data["names"]), size, [dict(c) for c in data["constants"]],
                  [tuple(w) for w in data.get("wraps", ())] or None)

@@ -119,7 +119,8 @@ def session():
 before_bake = session()
 with timed("bake_asset"):
     ops["bake_glb"] = bpy.ops.scenefit.bake_asset()
-ops["bake_gltf"] = bpy.ops.scenefit.bake_asset(filepath=str(tmp / "chosen" / "asset"), file_format="gltf")
+ops["bake_gltf"] = bpy.ops.scenefit.bake_asset(filepath=str(tmp / "chosen" / "asset"), file_format="gltf",
+                                               compress="draco", textures="jpeg")
 out["bake_unchanged"] = [session() == before_bake, session(), before_bake]
 try:
     bpy.ops.scenefit.bake_asset(texture_size=100)
@@ -387,6 +388,10 @@ def test_bake_asset_writes_valid_gltf_that_reads_back(operated, validator, run_p
     glb, gltf = sorted(out["bake_files"], key=lambda p: not p.endswith(".glb"))
     assert Path(glb).parent.parent.name == "Sphere" and Path(glb).parent.name.startswith("bake-")
     assert gltf == str(tmp / "chosen" / "asset.gltf")
+    chosen = json.loads(Path(gltf).read_text())  # Compression Draco, Textures JPEG
+    assert "KHR_draco_mesh_compression" in chosen["extensionsUsed"]
+    assert {image.get("mimeType", Path(image.get("uri", "")).suffix) for image in chosen["images"]} <= \
+        {"image/jpeg", ".jpg"}, chosen["images"]
     for path in (glb, gltf):
         report = validator(path)
         assert report["issues"]["numErrors"] == 0, report["issues"]["messages"]
