@@ -114,10 +114,14 @@ def test_seam_fill_index_points_at_nearest_covered_texel():
         seam_fill_index(np.zeros((4, 4), dtype=bool))
 
 
-def test_rasterizer_rejects_meshes_without_uv_area():
+def test_a_triangle_collapsed_in_uv_holds_the_texel_it_samples():
+    """A palette face (UVs collapsed to a point) was refused "no UV area"; it samples one texel,
+    the one under its UV point, at its centre."""
     flat = Mesh.from_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], [[0.5, 0.5]] * 3)
-    with pytest.raises(InputError, match="UV"):
-        rasterize_uv(flat, 32)
+    raster = rasterize_uv(flat, 32)
+    assert np.array_equal(np.argwhere(raster.mask), [[16, 16]]) and raster.face[16, 16] == 0
+    np.testing.assert_allclose(raster.position[16, 16], [1 / 3, 1 / 3, 0], atol=1e-6)
+    assert raster.border.sum() > 1  # the seam border around it reads the same face (bilinear lookups)
 
 
 # -- hash grid and network ------------------------------------------------------------------------
