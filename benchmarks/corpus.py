@@ -257,8 +257,10 @@ def main() -> int:
                 print(f"  run: exit {run['rc']} in {run['seconds']} s", flush=True)
         RESULTS.mkdir(parents=True, exist_ok=True)
         contact_sheet(runs, RESULTS / "corpus_sheet.png")
-    (RESULTS / "corpus.json").write_text(json.dumps({"load": load, "assets": rows, "runs": runs}, indent=2) + "\n")
-    (RESULTS / "corpus.md").write_text(markdown(rows, runs, " ".join(load)))
+    end = open("/proc/loadavg").read().split()[:3] if Path("/proc/loadavg").exists() else ["?"]
+    (RESULTS / "corpus.json").write_text(json.dumps({"load": load, "load_at_end": end, "assets": rows, "runs": runs},
+                                                    indent=2) + "\n")
+    (RESULTS / "corpus.md").write_text(markdown(rows, runs, f"{' '.join(load)} (at the end {' '.join(end)})"))
     print(f"wrote {RESULTS / 'corpus.md'}")
     return 0
 
