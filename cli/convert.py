@@ -23,9 +23,8 @@ def run(args) -> int:
     from ..core.presets import stage_config
     from ..core.pipeline import convert_and_bake, environment_info, write_report
 
-    # Asking for a fitting method or iterations is asking for the fit; else the asset's maps are the start.
-    init = args.init or ("fit" if args.method or args.iterations else None)
-    overrides = {k: v for k, v in (("init_type", init), ("method_type", args.method), ("iterations", args.iterations),
+    # (a fitting method or iterations imply --init fit: core/presets.py stage_config)
+    overrides = {k: v for k, v in (("init_type", args.init), ("method_type", args.method), ("iterations", args.iterations),
                                    ("resolution", args.resolution), ("seed", args.seed),
                                    ("screen_px", args.screen_px)) if v is not None}
     config = stage_config("convert", args.preset, **overrides)

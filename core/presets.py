@@ -31,6 +31,9 @@ def stage_config(stage: str, name: str, **overrides):
     if stage == "convert":
         from .convert import ConvertConfig
 
+        # Fitting settings ask for the fit: without them the asset's own maps are the exact start.
+        if "init_type" not in overrides and {"iterations", "method_type"} & set(overrides):
+            overrides["init_type"] = "fit"
         return ConvertConfig(**{**table, **overrides})
     if stage == "light":
         from .lighting.estimate import LightConfig

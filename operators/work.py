@@ -39,8 +39,8 @@ def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> 
     from ..core.pipeline import convert_and_bake, write_report
     from ..core.presets import stage_config
 
-    # As on the command line: asking for iterations is asking for the fit; else the asset's maps are the start.
-    overrides = {"iterations": int(data["iterations"]), "init_type": "fit"} if data.get("iterations") else {}
+    # An iteration count asks for the fit (core/presets.py); else the asset's maps are the exact start.
+    overrides = {"iterations": int(data["iterations"])} if data.get("iterations") else {}
 
     def write(out: Path) -> dict:
         # A roughness or metallic that holds one value stays that value (a factor on the socket), as

@@ -88,3 +88,14 @@ def test_roughness_below_the_renderers_floor_is_held_at_the_floor():
     result = exact(uv_sphere(0.5, 16, 8), maps)
     covered = torch.from_numpy(result.raster.mask.copy())
     assert torch.allclose(result.predicted()[covered][:, 3], torch.tensor(0.03), atol=1e-6)
+
+
+def test_asking_for_fitting_settings_asks_for_the_fit():
+    """Every entry point (command line, operator, remote, batch overrides) reads `iterations` or a
+    method as the paper's fit, and nothing of that kind as the exact start."""
+    from scenefit.core.presets import stage_config
+
+    assert stage_config("convert", "draft").init_type == "exact"
+    assert stage_config("convert", "draft", iterations=5).init_type == "fit"
+    assert stage_config("convert", "draft", method_type="inverse").init_type == "fit"
+    assert stage_config("convert", "draft", iterations=5, init_type="exact").init_type == "exact"
