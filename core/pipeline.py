@@ -21,7 +21,7 @@ from .materials import AssetMaterials
 from .mesh import Mesh
 from .progress import ProgressCallback, check_cancel, emit
 from .render import AssetRenderer, SceneOptions
-from .scene_needs import constant_channels, report as needs_report
+from .scene_needs import constant_channels, material_constant_channels, report as needs_report
 from .texture.bake import bake_maps
 from .texture.neural_texture import split_channels
 
@@ -148,7 +148,8 @@ def convert_and_bake(mesh: Mesh | AssetMaterials, maps: PBRMaps | None, out_dir:
     check_cancel(cancel)
     constants = {}
     if keep_constants:
-        channels = constant_channels(mesh.fitting_view()[1] if isinstance(mesh, AssetMaterials) else maps)
+        channels = (material_constant_channels([m.maps for m in mesh.materials], [m.name for m in mesh.materials])
+                    if isinstance(mesh, AssetMaterials) else constant_channels(maps))
         constants = {name: d.choice for name, d in channels.items() if d.choice != "map"}
         result.decisions["channels"] = {name: needs_report(d) for name, d in channels.items()}
     paths = bake_maps(result.texture, result.raster.position, result.raster.border, result.raster.fill_index, out_dir,

@@ -43,6 +43,24 @@ def constant_channels(maps: PBRMaps) -> dict[str, Decision]:
     return out
 
 
+def material_constant_channels(maps: list[PBRMaps], names: list[str]) -> dict[str, Decision]:
+    """constant_channels for several materials, each judged on its own texels (an atlas's empty
+    background once made every material's roughness 1 read as 'varies 0 to 1'): one value only when
+    every material holds that same value."""
+    if len(maps) == 1:
+        return constant_channels(maps[0])
+    per = [constant_channels(m) for m in maps]
+    out = {}
+    for name in ("roughness", "metallic"):
+        values = [d[name].choice for d in per]
+        if all(v != "map" for v in values) and max(values) - min(values) <= CONSTANT_TOLERANCE:
+            out[name] = Decision(values[0], f"every material's {name} is the constant {values[0]:g}")
+        else:
+            kinds = ", ".join(f"'{n}' {'a map' if v == 'map' else f'{v:g}'}" for n, v in zip(names, values))
+            out[name] = Decision("map", f"the materials' {name} differ ({kinds}): baked as a map")
+    return out
+
+
 def texture_size_for_screen(screen_px: int) -> int:
     """Texels across the texture for an object `screen_px` pixels tall in the composite.
 

@@ -63,3 +63,18 @@ def test_the_glossiest_part_of_a_map_decides():
     covered = np.zeros((16, 16), bool)
     covered[4:] = True
     assert envmap_height_for(PBRMaps(base(), rough, 0.0), covered).choice == 32
+
+
+def test_constants_of_several_materials_are_judged_on_each_materials_own_texels():
+    """Every material's roughness exactly 1 is the constant 1, not 'varies 0 to 1' (the atlas's empty
+    background once counted); differing values are a map and the reason names each."""
+    from scenefit.core.scene_needs import material_constant_channels
+
+    a = PBRMaps(np.full((8, 8, 3), 0.5, np.float32), 1.0, 0.0)
+    b = PBRMaps(np.full((16, 16, 3), 0.2, np.float32), np.ones((16, 16), np.float32), 0.0)
+    same = material_constant_channels([a, b], ["Paint", "Rubber"])
+    assert same["roughness"].choice == 1.0 and same["metallic"].choice == 0.0
+    c = PBRMaps(np.full((8, 8, 3), 0.5, np.float32), 0.4, 1.0)
+    differ = material_constant_channels([a, c], ["Paint", "Chrome"])
+    assert differ["roughness"].choice == "map" and "'Paint' 1" in differ["roughness"].reason
+    assert differ["metallic"].choice == "map" and "'Chrome' 1" in differ["metallic"].reason
