@@ -63,12 +63,17 @@ def validate(path: Path) -> dict:
     """The Khronos validator's counts and issue codes for one file (needs `make corpus`'s npm install)."""
     if path.suffix.lower() not in (".gltf", ".glb") or not path.is_file():
         return {}
-    done = subprocess.run(["node", str(ROOT / "tools" / "validate_gltf.js"), str(path)], capture_output=True,
-                          text=True, env={**os.environ, "NODE_PATH": str(NODE_MODULES)}, timeout=300)
+    done = subprocess.run(["node", str(ROOT / "tools" / "gltf_validate.js"), str(NODE_MODULES / "gltf-validator"),
+                           str(path)], capture_output=True, text=True, timeout=300)
     try:
-        return json.loads(done.stdout.strip().splitlines()[-1])
-    except (ValueError, IndexError):
+        report = json.loads(done.stdout)
+    except ValueError:
         return {"errors": -1, "fatal": done.stderr.strip()[-200:]}
+    issues = report.get("issues", {})
+    return {"errors": issues.get("numErrors", -1), "warnings": issues.get("numWarnings", 0),
+            "infos": issues.get("numInfos", 0),
+            "messages": [{k: m.get(k) for k in ("code", "severity", "pointer")} for m in issues.get("messages", [])],
+            "extensions": report.get("info", {}).get("extensionsUsed", [])}
 
 
 def gltf_json(path: Path) -> dict:
