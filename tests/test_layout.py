@@ -72,3 +72,23 @@ def test_no_import_circle_anywhere():
 
     circles = sorted(name for name in graph if reaches(name, name))
     assert circles == []
+
+
+# Issue 19's bound on a function in core/: longer ones are split into named steps.
+MAX_FUNCTION_LINES = 80
+
+
+def long_functions(path: Path, limit: int) -> list[str]:
+    return [f"{path.relative_to(ROOT)}:{node.name} ({node.end_lineno - node.lineno + 1} lines)"
+            for node in ast.walk(ast.parse(path.read_text()))
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+            and node.end_lineno - node.lineno + 1 > limit]
+
+
+def test_no_function_in_core_is_over_80_lines():
+    assert [f for path in sorted((ROOT / "core").rglob("*.py")) for f in long_functions(path, MAX_FUNCTION_LINES)] == []
+
+
+def test_the_length_check_sees_a_long_function():
+    # run_pipeline is well over ten lines, so a limit of ten must flag it.
+    assert any("run_pipeline" in f for f in long_functions(ROOT / "core" / "run.py", 10))

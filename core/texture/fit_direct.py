@@ -106,39 +106,13 @@ def fit_direct(
     step and raises Cancelled (the texture keeps what it learnt). stop_at_psnr ends early once the
     measured PSNR reaches it.
     """
-    if iterations < 1:
-        raise InputError(f"Direct fitting needs at least one iteration, got {iterations}.")
-    if not (lr_start > 0 and lr_end > 0):
-        raise InputError(f"Learning rates must be positive, got {lr_start} -> {lr_end}.")
-    if schedule not in SCHEDULES:
-        raise InputError(f"Unknown learning-rate schedule '{schedule}'; choose one of {', '.join(SCHEDULES)}.")
-    if batch_texels is not None and batch_texels < 1:
-        raise InputError(f"batch_texels must be a positive number of texels or None, got {batch_texels}.")
+    _check_settings(iterations, lr_start, lr_end, batch_texels, schedule)
     started = time.perf_counter()
-    device = next(texture.parameters()).device
-    target_t = _as_tensor(target).to(device)
-    mask_np = np.asarray(mask.cpu() if torch.is_tensor(mask) else mask, dtype=bool)
-    if target_t.ndim != 3 or target_t.shape[2] != 5 or tuple(target_t.shape[:2]) != mask_np.shape:
-        raise InputError(f"The target maps are {tuple(target_t.shape)}; they must be (H, W, 5) at the "
-                         f"position map's resolution {mask_np.shape}. Rasterise the UVs at the texture's size.")
-    if not bool(torch.isfinite(target_t).all()):
-        raise InputError("The target maps hold NaN or infinite values.")
-
-    # Fixed for the whole fit: the covered texels, their encoding plans and their targets.
-    plan = texture.plan(position_map, mask_np, seam_fill_index(mask_np))
-    wanted = encode_for_metric(target_t.reshape(-1, 5)[plan.texels])
-    if batch_texels is None or batch_texels >= plan.texels.numel():
-        batches = [(plan, wanted)]
-    else:
-        generator = torch.Generator().manual_seed(int(seed))
-        order = torch.randperm(plan.texels.numel(), generator=generator).to(device)
-        batches = []
-        for chunk in torch.split(order, int(batch_texels)):
-            batches.append((texture.subset_plan(plan, chunk), wanted[chunk]))
+    plan, wanted, batches = _fit_batches(texture, position_map, mask, target, batch_texels, seed)
     setup_seconds = time.perf_counter() - started
 
     optimizer = torch.optim.Adam(texture.parameters(), lr=lr_start, betas=(0.9, 0.99), eps=1e-15,
-                                 **_fast_adam_options(device))
+                                 **_fast_adam_options(next(texture.parameters()).device))
     result = FitResult(iterations=0, seconds=0.0, setup_seconds=setup_seconds, final_psnr=float("nan"),
                        schedule=schedule)
     texture.train()
@@ -174,6 +148,39 @@ def fit_direct(
         result.final_psnr = _psnr(float((predicted - wanted).square().mean()))
     result.seconds = time.perf_counter() - started
     return result
+
+
+def _check_settings(iterations: int, lr_start: float, lr_end: float, batch_texels: int | None,
+                    schedule: str) -> None:
+    if iterations < 1:
+        raise InputError(f"Direct fitting needs at least one iteration, got {iterations}.")
+    if not (lr_start > 0 and lr_end > 0):
+        raise InputError(f"Learning rates must be positive, got {lr_start} -> {lr_end}.")
+    if schedule not in SCHEDULES:
+        raise InputError(f"Unknown learning-rate schedule '{schedule}'; choose one of {', '.join(SCHEDULES)}.")
+    if batch_texels is not None and batch_texels < 1:
+        raise InputError(f"batch_texels must be a positive number of texels or None, got {batch_texels}.")
+
+
+def _fit_batches(texture: NeuralTexture, position_map, mask, target, batch_texels: int | None, seed: int):
+    """What stays fixed for the whole fit: the covered texels' encoding plan, their targets in the
+    metric's space, and the (plan, target) batches visited in turn."""
+    device = next(texture.parameters()).device
+    target_t = _as_tensor(target).to(device)
+    mask_np = np.asarray(mask.cpu() if torch.is_tensor(mask) else mask, dtype=bool)
+    if target_t.ndim != 3 or target_t.shape[2] != 5 or tuple(target_t.shape[:2]) != mask_np.shape:
+        raise InputError(f"The target maps are {tuple(target_t.shape)}; they must be (H, W, 5) at the "
+                         f"position map's resolution {mask_np.shape}. Rasterise the UVs at the texture's size.")
+    if not bool(torch.isfinite(target_t).all()):
+        raise InputError("The target maps hold NaN or infinite values.")
+    plan = texture.plan(position_map, mask_np, seam_fill_index(mask_np))
+    wanted = encode_for_metric(target_t.reshape(-1, 5)[plan.texels])
+    if batch_texels is None or batch_texels >= plan.texels.numel():
+        return plan, wanted, [(plan, wanted)]
+    generator = torch.Generator().manual_seed(int(seed))
+    order = torch.randperm(plan.texels.numel(), generator=generator).to(device)
+    batches = [(texture.subset_plan(plan, chunk), wanted[chunk]) for chunk in torch.split(order, int(batch_texels))]
+    return plan, wanted, batches
 
 
 def _fast_adam_options(device: torch.device) -> dict:

@@ -93,16 +93,48 @@ def rasterize_uv(mesh: Mesh, height: int, width: int | None = None, border_width
     uv = np.asarray(mesh.uvs, dtype=np.float64)
     # Pixel coordinates with texel centres at integers: x = u W - 1/2, y = (1 - v) H - 1/2.
     pix = np.stack((uv[:, 0] * width - 0.5, (1.0 - uv[:, 1]) * height - 0.5), axis=1)
-    tri = pix[faces]  # (F, 3, 2)
+    texels = _Texels(tri=pix[faces], height=height, width=width, modes=modes)
+    flat, owner, bary = _covered_texels(texels, mesh.name)
+    mask = np.zeros(height * width, dtype=bool)
+    mask[flat] = True
+    if border_width > 0 and len(flat) < height * width:
+        flat, owner, bary = _add_border(texels, mask, border_width, flat, owner, bary)
+    bary = np.clip(bary, 0.0, None)
+    bary /= bary.sum(axis=1, keepdims=True)
+    return _raster(mesh, faces[owner], flat, owner, bary, mask, height, width)
 
+
+@dataclass
+class _Texels:
+    """What both passes of rasterize_uv share: the faces' corners in pixel coordinates (F, 3, 2) and
+    the image; `area2`, `owner_map`, `tiles` and `point` are filled in by pass 1."""
+
+    tri: np.ndarray
+    height: int
+    width: int
+    modes: tuple[str, str]
+    area2: np.ndarray | None = None
+    owner_map: np.ndarray | None = None
+    tiles: np.ndarray | None = None
+    point: np.ndarray | None = None
+
+    def weights(self, owner: np.ndarray, flat: np.ndarray, near: np.ndarray) -> np.ndarray:
+        """Barycentrics of texels `flat` in faces `owner`, in the image copy where texels `near` are held."""
+        return _weights(self.tri, self.area2, self.point, owner,
+                        _unwrapped(flat % self.width, self.tiles[0, near], self.width, self.modes[0]),
+                        _unwrapped(flat // self.width, self.tiles[1, near], self.height, self.modes[1]))
+
+
+def _covered_texels(texels: _Texels, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pass 1, exact coverage: (flat texel index, face, barycentrics) of every texel a face holds."""
+    tri, height, width, modes = texels.tri, texels.height, texels.width, texels.modes
     # Triangles with (numerically) no UV area are not rasterised as areas; like those too small to hold
     # a texel centre, they sample one texel (see _claim_points).
     e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     area2 = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
     real = np.abs(area2) > 1e-12
-
-    # Pass 1, exact coverage. Integer bounding boxes of texel centres (in the tiled plane), clipped to
-    # the image along an axis that clamps.
+    # Integer bounding boxes of texel centres (in the tiled plane), clipped to the image along an axis
+    # that clamps.
     lo = np.ceil(tri.min(axis=1) - 1e-9).astype(np.int64)
     hi = np.floor(tri.max(axis=1) + 1e-9).astype(np.int64)
     for axis, (mode, size) in enumerate(zip(modes, (width, height))):
@@ -113,64 +145,55 @@ def rasterize_uv(mesh: Mesh, height: int, width: int | None = None, border_width
     held = owner_map >= 0
     owner_map[held] = areas[owner_map[held]]  # face numbers from here on
     point = _claim_points(tri, owner_map, tiles, height, width, modes)
+    texels.area2, texels.owner_map, texels.tiles, texels.point = area2, owner_map, tiles, point
     flat = np.flatnonzero(owner_map >= 0)
     if flat.size == 0:
         # (with repeating UVs every face samples some texel, so only clamped UVs come here)
-        raise InputError(f"Mesh '{mesh.name}' covers no texel centre at {width}x{height}: its UV islands lie "
+        raise InputError(f"Mesh '{name}' covers no texel centre at {width}x{height}: its UV islands lie "
                          "outside [0, 1] where the texture clamps; unwrap it inside [0, 1].")
     owner = owner_map[flat]
-    bary = _weights(tri, area2, point, owner, _unwrapped(flat % width, tiles[0, flat], width, modes[0]),
-                    _unwrapped(flat // width, tiles[1, flat], height, modes[1]))
+    return flat, owner, texels.weights(owner, flat, flat)
 
+
+def _add_border(texels: _Texels, mask: np.ndarray, border_width: float, flat: np.ndarray, owner: np.ndarray,
+                bary: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pass 2, the seam border: texels within border_width of the coverage take the triangle of their
+    nearest covered texel, with barycentrics extrapolated to their centre (clamped onto it later)."""
+    distance, nearest = _nearest_covered(mask.reshape(texels.height, texels.width))
+    ring = np.flatnonzero(~mask & (distance.reshape(-1) <= border_width))
+    if not ring.size:
+        return flat, owner, bary
+    # (in the copy of the image where the nearest covered texel's triangle lies)
+    near = nearest[ring]
+    ring_owner = texels.owner_map[near]
+    ring_bary = texels.weights(ring_owner, ring, near)
+    return np.concatenate((flat, ring)), np.concatenate((owner, ring_owner)), np.concatenate((bary, ring_bary))
+
+
+def _raster(mesh: Mesh, verts: np.ndarray, flat: np.ndarray, owner: np.ndarray, bary: np.ndarray,
+            mask: np.ndarray, height: int, width: int) -> UVRaster:
+    """The UVRaster of texels `flat` held by faces `owner` (corners `verts`) with weights `bary`."""
     n_texels = height * width
-    mask = np.zeros(n_texels, dtype=bool)
-    mask[flat] = True
 
-    # Pass 2, the seam border: texels within border_width of the coverage take the triangle of
-    # their nearest covered texel, with barycentrics extrapolated to their centre and clamped onto it.
-    if border_width > 0 and len(flat) < n_texels:
-        distance, nearest = _nearest_covered(mask.reshape(height, width))
-        ring = np.flatnonzero(~mask & (distance.reshape(-1) <= border_width))
-        if ring.size:
-            # (in the copy of the image where the nearest covered texel's triangle lies)
-            near = nearest[ring]
-            ring_owner = owner_map[near]
-            ring_bary = _weights(tri, area2, point, ring_owner,
-                                 _unwrapped(ring % width, tiles[0, near], width, modes[0]),
-                                 _unwrapped(ring // width, tiles[1, near], height, modes[1]))
-            flat = np.concatenate((flat, ring))
-            owner = np.concatenate((owner, ring_owner))
-            bary = np.concatenate((bary, ring_bary))
-    bary = np.clip(bary, 0.0, None)
-    bary /= bary.sum(axis=1, keepdims=True)
+    def image(values: np.ndarray, fill, dtype) -> np.ndarray:
+        out = np.full((n_texels,) + values.shape[1:], fill, dtype=dtype)
+        out[flat] = values
+        return out.reshape((height, width) + values.shape[1:])
 
-    verts = faces[owner]  # (K, 3)
     pos = np.einsum("kc,kcd->kd", bary, np.asarray(mesh.positions, dtype=np.float64)[verts])
-    position = np.zeros((n_texels, 3), dtype=np.float32)
-    position[flat] = pos
-    border = np.zeros(n_texels, dtype=bool)
-    border[flat] = True
-    face = np.full(n_texels, -1, dtype=np.int32)
-    face[flat] = owner
-    barycentric = np.zeros((n_texels, 3), dtype=np.float32)
-    barycentric[flat] = bary
     normal = None
     if mesh.normals is not None:
         nrm = np.einsum("kc,kcd->kd", bary, np.asarray(mesh.normals, dtype=np.float64)[verts])
         length = np.linalg.norm(nrm, axis=1, keepdims=True)
-        nrm = np.where(length > 1e-12, nrm / np.maximum(length, 1e-12), 0.0)
-        normal = np.zeros((n_texels, 3), dtype=np.float32)
-        normal[flat] = nrm
-        normal = normal.reshape(height, width, 3)
-
-    border = border.reshape(height, width)
+        normal = image(np.where(length > 1e-12, nrm / np.maximum(length, 1e-12), 0.0), 0.0, np.float32)
+    border = image(np.ones(flat.size, bool), False, bool)
     return UVRaster(
-        position=position.reshape(height, width, 3),
+        position=image(pos, 0.0, np.float32),
         normal=normal,
         mask=mask.reshape(height, width),
         border=border,
-        face=face.reshape(height, width),
-        barycentric=barycentric.reshape(height, width, 3),
+        face=image(owner, -1, np.int32),
+        barycentric=image(bary, 0.0, np.float32),
         fill_index=seam_fill_index(border),
     )
 
