@@ -14,8 +14,9 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..core.imageio import CHECK_SIDE, read_image, stored_orientation
-from ..core.photo import PhotoCamera
-from .placement import camera_for_placement
+from ..core.photo import PHOTO_YAW_DEG, PhotoCamera
+from .placement import camera_for_placement, camera_pose
+from .world import world_controls
 
 TAG = "scenefit"
 CAMERA_NAME = "SceneFit Camera"
@@ -99,9 +100,10 @@ def transparent_cycles(scene) -> None:
     scene.view_settings.view_transform = "Standard"
 
 
-def ensure_photo_camera(scene, image, fov: float, elevation: float):
-    """SceneFit's camera (made once per file): the photo's aspect and FOV, pitched down by `elevation`,
-    the photo as its background. Becomes the scene camera; the artist's camera object is untouched."""
+def ensure_photo_camera(scene, image, fov_deg: float, pitch_deg: float, roll_deg: float = 0.0):
+    """SceneFit's camera (made once per file): the photo's aspect and field of view (horizontal), at
+    pitch_deg above the horizon and turned by roll_deg as core's PhotoCamera, the photo as its
+    background. Becomes the scene camera; the artist's camera object is untouched."""
     import bpy
 
     cam = _tagged(bpy.data.objects, CAMERA_NAME)
@@ -114,15 +116,26 @@ def ensure_photo_camera(scene, image, fov: float, elevation: float):
         scene.collection.objects.link(cam)
     data = cam.data
     data.sensor_fit = "HORIZONTAL"
-    data.angle = fov
+    data.angle = math.radians(fov_deg)
     cam.rotation_mode = "XYZ"
-    # The light stage's photo camera: looking along +Y (yaw 90), pitched down by `elevation`.
-    forward, _, up, _, _ = PhotoCamera(pitch_deg=-math.degrees(elevation)).basis()
+    # The light stage's photo camera: looking along +Y (yaw 90) at the photo's pitch and roll.
+    forward, _, up, _, _ = PhotoCamera(pitch_deg=pitch_deg, roll_deg=roll_deg).basis()
     cam.rotation_euler = camera_rotation(forward, up).to_euler("XYZ")
+    set_photo_resolution(scene, image)
+    show_photo(data, image)
+    scene.camera = cam
+    return cam
+
+
+def set_photo_resolution(scene, image) -> None:
     w, h = image.size
     scene.render.resolution_x, scene.render.resolution_y = int(w), int(h)
     scene.render.resolution_percentage = 100
     scene.render.pixel_aspect_x = scene.render.pixel_aspect_y = 1.0
+
+
+def show_photo(data, image) -> None:
+    """The photo as the camera's (data's) shown background, behind the scene."""
     data.show_background_images = True
     backgrounds = [bg for bg in data.background_images if bg.image == image]
     for bg in data.background_images:
@@ -130,8 +143,6 @@ def ensure_photo_camera(scene, image, fov: float, elevation: float):
     if not backgrounds:
         bg = data.background_images.new()
         bg.image, bg.alpha, bg.display_depth, bg.frame_method = image, 1.0, "BACK", "FIT"
-    scene.camera = cam
-    return cam
 
 
 def object_base(obj) -> tuple[np.ndarray, float]:
@@ -201,17 +212,39 @@ def photo_behind_render(scene, image) -> None:
 
 
 def setup_composite(context, obj, photo_path: str | Path, placement: tuple[float, float], size: float,
-                    fov: float, elevation: float) -> dict:
-    """Camera, photo background, shadow catcher and compositing for `obj` in the photo; returns them."""
+                    camera: PhotoCamera, scene_camera=None) -> dict:
+    """Camera, photo background, shadow catcher and compositing for `obj` in the photo; returns them.
+
+    scene_camera: the artist's camera that shows the photo (blender_io/scene_camera.py), used as it is;
+    else SceneFit's camera, with `camera`'s field of view, pitch and roll, is placed around the asset
+    for `placement` and `size`. The World SceneFit made is turned to the camera's heading, since the
+    light map's azimuth 0 is the photo camera's view."""
     scene = context.scene
     image = load_photo_image(photo_path)
     w, h = image.size
     base, height = object_base(obj)
-    position = camera_for_placement(base, height, placement, size, math.degrees(fov), math.degrees(elevation),
-                                    w / h)
-    cam = ensure_photo_camera(scene, image, fov, elevation)
-    cam.location = tuple(float(v) for v in position)
+    if scene_camera is None:
+        position = camera_for_placement(base, height, placement, size, camera.fov_deg, camera.pitch_deg, w / h,
+                                        camera.roll_deg)
+        cam = ensure_photo_camera(scene, image, camera.fov_deg, camera.pitch_deg, camera.roll_deg)
+        cam.location = tuple(float(v) for v in position)
+        yaw = PHOTO_YAW_DEG
+    else:
+        cam = scene.camera = scene_camera
+        set_photo_resolution(scene, image)
+        position = np.array(cam.matrix_world.translation, np.float64)
+        yaw = camera_pose(np.array(cam.matrix_world, np.float64))[0]
+    turn_world_to(scene.world, yaw)
     reach = float(np.linalg.norm(position - base))
     floor = ensure_shadow_catcher(scene, base, extent=4.0 * reach)
     photo_behind_render(scene, image)
     return {"camera": cam, "floor": floor, "photo": image}
+
+
+def turn_world_to(world, yaw_deg: float) -> None:
+    """Turn a World SceneFit made (blender_io/world.py) so its map's azimuth 0 lies along a camera heading
+    yaw_deg (90: +Y, SceneFit's own camera, no turn); the artist's own Worlds are left alone."""
+    mapping, _ = world_controls(world)
+    if mapping is None or TAG not in world:
+        return
+    mapping.inputs["Rotation"].default_value[2] = math.radians(PHOTO_YAW_DEG - yaw_deg)

@@ -6,6 +6,8 @@ def run(args) -> int:
     from ..core.photo_camera import estimate_photo_camera
 
     estimate = estimate_photo_camera(args.photo, args.fspy)
+    if args.overlay:
+        write_overlay(args.photo, estimate, args.overlay)
     if args.json:
         print(estimate.to_json())
         return 0
@@ -21,10 +23,31 @@ def run(args) -> int:
     return 0
 
 
+def write_overlay(photo: str, estimate, path: str) -> None:
+    """The photo with the estimate's lines and horizon drawn over it (core/camera_overlay.py), as a new file."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from ..core.camera_overlay import camera_overlay
+    from ..core.errors import InputError
+    from ..core.imageio import linear_to_srgb, read_color_image, write_image
+
+    out = Path(path)
+    if out.exists() or out.is_symlink():
+        raise InputError(f"'{out}' exists; give --overlay a new file name (SceneFit never writes over a file).")
+    srgb = linear_to_srgb(np.clip(read_color_image(photo, upright=True)[..., :3], 0.0, 1.0))
+    lines = camera_overlay(estimate)   # at the photo's upright size, as the estimate's pixels are
+    alpha = lines[..., 3:]
+    write_image(out, srgb * (1.0 - alpha) + lines[..., :3] * alpha)
+
+
 def add_parser(sub) -> None:
     p = sub.add_parser("camera", help="the photo's camera: field of view, pitch, roll and horizon (fSpy, EXIF or "
                                       "its own lines)")
     p.add_argument("--photo", required=True, help="the photo (PNG, JPEG, EXR, ...)")
     p.add_argument("--fspy", help="an fSpy project (.fspy) of the photo: its solved camera is used as is")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of lines")
+    p.add_argument("--overlay", metavar="FILE.png", help="also write the photo with the lines found (coloured by the "
+                                                          "direction they vanish in) and the horizon drawn over it")
     p.set_defaults(func=run)

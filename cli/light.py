@@ -111,10 +111,10 @@ def _light(args, out: Path) -> int:
 def photo_camera(args, hw: tuple[int, int]):
     """(PhotoCamera, its record): the photo's camera as `scenefit camera` finds it (fSpy, EXIF, its lines,
     else the defaults), with --fov / --pitch / --roll over it; the report says where each came from."""
-    from ..core.photo_camera import estimate_photo_camera
+    from ..core.photo_camera import photo_camera_estimate
 
-    estimate = estimate_photo_camera(args.photo, args.fspy).overridden(fov_deg=args.fov, pitch_deg=photo_pitch(args),
-                                                                       roll_deg=args.roll)
+    estimate = photo_camera_estimate(args.photo, args.fspy, {"fov_deg": args.fov, "pitch_deg": photo_pitch(args),
+                                                             "roll_deg": args.roll})
     return estimate.photo_camera(width=hw[1], height=hw[0]), estimate.to_dict()
 
 

@@ -130,6 +130,22 @@ def stored_orientation(path: str | os.PathLike) -> int:
         inp.close()
 
 
+def upright_size(path: str | os.PathLike) -> tuple[int, int] | None:
+    """(width, height) of the image as SceneFit reads it (EXIF Orientation 5-8 swap them), from its
+    header alone; None when it cannot be opened."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return None
+    try:
+        spec = inp.spec()
+        size = (int(spec.width), int(spec.height))
+        return size[::-1] if spec.get_int_attribute("Orientation", 1) >= 5 else size
+    finally:
+        inp.close()
+
+
 def reduction_factor(width: int, height: int, max_side: int | None) -> int:
     return 1 if not max_side or max(width, height) <= max_side else -(-max(width, height) // max_side)
 

@@ -4,6 +4,7 @@
 
 Each field comes from the best source that has it, best first:
   user       given by the user (CameraEstimate.overridden: a stage's --fov / --pitch / --roll);
+  blender    the Blender scene's camera that shows the photo (matched by the fSpy importer or by eye);
   fspy       an fSpy project (the artist drew the vanishing lines by hand);
   exif_35mm  the 35 mm equivalent focal length (field of view only; core/lighting's load_photo);
   exif_sensor  the focal length with the sensor width of a known camera model (field of view only);
@@ -33,7 +34,7 @@ import numpy as np
 from .errors import InputError
 from .photo import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG, PHOTO_YAW_DEG, PhotoCamera
 
-SOURCES = ("user", "fspy", "exif_35mm", "exif_sensor", "lines", "default")
+SOURCES = ("user", "blender", "fspy", "exif_35mm", "exif_sensor", "lines", "default")
 # Sensor width (long side, mm) of common cameras whose JPEGs may lack the 35 mm equivalent, from the
 # makers' specification sheets; matched on the start of the EXIF Model, longest key first, where no
 # digit follows (so "CANON EOS R5" is not the APS-C R50, while "ILCE-7" covers the A7 III's ILCE-7M3).
@@ -92,19 +93,22 @@ class CameraEstimate:
                            width=width or self.width, height=height or self.height, roll_deg=self.roll_deg)
 
     def overridden(self, fov_deg: float | None = None, pitch_deg: float | None = None,
-                   roll_deg: float | None = None) -> "CameraEstimate":
-        """This estimate with the fields the user gave (source 'user', confidence 1) and its horizon
-        moved to match; the vanishing points are dropped once the camera is no longer the lines'."""
+                   roll_deg: float | None = None, source: str = "user", why: str = "given by the user"
+                   ) -> "CameraEstimate":
+        """This estimate with the fields given (`source`, confidence 1) and its horizon moved to match;
+        the vanishing points are dropped once the camera is no longer the lines'."""
+        if source not in SOURCES:
+            raise InputError(f"A camera's source is one of {', '.join(SOURCES)}, not {source!r}.")
         given = {k: v for k, v in (("fov", fov_deg), ("pitch", pitch_deg), ("roll", roll_deg)) if v is not None}
         if not given:
             return self
         changes = {}
         for name, value in given.items():
-            changes.update({f"{name}_deg": float(value), f"{name}_source": "user", f"{name}_confidence": 1.0})
+            changes.update({f"{name}_deg": float(value), f"{name}_source": source, f"{name}_confidence": 1.0})
         out = replace(self, **changes)
         up = camera_frame(out.pitch_deg, out.roll_deg, 0.0)[0]
         return replace(out, horizon=horizon_points(up, focal_from_fov(out.fov_deg), self.width, self.height),
-                       vanishing_points={}, notes=self.notes + (f"given by the user: {', '.join(given)}",))
+                       vanishing_points={}, notes=self.notes + (f"{why}: {', '.join(given)}",))
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -116,6 +120,25 @@ class CameraEstimate:
     def to_json(self, indent: int | None = None) -> str:
         """Strict JSON: NaN or infinity anywhere raises instead of writing a non-standard token."""
         return json.dumps(self.to_dict(), indent=indent, allow_nan=False)
+
+
+def photo_camera_estimate(photo_path: str | Path, fspy_path: str | Path | None = None,
+                          overrides: dict | None = None, source: str = "user",
+                          why: str = "given by the user") -> CameraEstimate:
+    """The camera every stage uses for a photo: `overrides` ({"fov_deg", "pitch_deg", "roll_deg"}, each
+    from `source`) over the estimate. With all three given the photo's lines are not looked at."""
+    overrides = {k: float(v) for k, v in (overrides or {}).items() if v is not None}
+    wrong = sorted(set(overrides) - {"fov_deg", "pitch_deg", "roll_deg"})
+    if wrong:
+        raise InputError(f"A photo camera takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
+    if len(overrides) == 3 and fspy_path is None:
+        from .lighting.estimate import load_photo
+
+        width, height = (int(v) for v in load_photo(photo_path)[1]["size"])
+        base = _estimate(overrides["fov_deg"], overrides["pitch_deg"], overrides["roll_deg"], (source,) * 3,
+                         (1.0, 1.0, 1.0), width, height, None, ())
+        return base.overridden(**overrides, source=source, why=why)
+    return estimate_photo_camera(photo_path, fspy_path).overridden(**overrides, source=source, why=why)
 
 
 def estimate_photo_camera(photo_path: str | Path, fspy_path: str | Path | None = None) -> CameraEstimate:

@@ -24,6 +24,9 @@ import numpy as np
 import torch
 
 from .atomic import write_json_atomic
+# GameBake: bake(texture.pt, stage folder) -> the bake's report with "outputs", the game asset written
+# from the asset's own file. It needs Blender, which core/ never imports: bake_process runs it as a child.
+from .bake_process import GameBake
 from .errors import InputError
 from .guidance.models import GuidanceModels, ModelCache, ModelConfig
 from .maps import PBRMaps
@@ -48,6 +51,9 @@ class RunConfig:
     photo_camera: PhotoCamera | None = None   # None: the photo's camera as estimated (core/photo_camera.py)
     fspy: str | None = None                   # an fSpy project of the photo: its solved camera is used
     camera_overrides: dict = field(default_factory=dict)   # {"fov_deg"|"pitch_deg"|"roll_deg": value} over the estimate
+    camera_source: str = "user"               # where camera_overrides come from: "user", or "blender" (the scene camera)
+    camera_why: str = "given by the user"     # ... said in the report's camera notes
+    turn_deg: float = 0.0                     # compose: the asset turned about Z after facing the camera
     models: ModelConfig = field(default_factory=ModelConfig)
     # Settings over the preset's, per stage ("convert", "light", "adapt", "compose"), as the stage's config takes them:
     # quick looks, tests and benchmarks (e.g. {"adapt": {"iterations": 4}}). Part of each stage's key.
@@ -144,11 +150,6 @@ def _paths(outputs) -> list[str]:
     if isinstance(outputs, dict):
         return [p for v in outputs.values() for p in _paths(v)]
     return [outputs] if isinstance(outputs, str) else []
-
-
-# bake(texture.pt, stage folder) -> the bake's report with "outputs": the game asset written from the
-# asset's own file. It needs Blender, which core/ never imports: core/bake_process.py runs it as a child.
-from .bake_process import GameBake  # noqa: E402
 
 
 def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, out_dir: str | Path,
@@ -274,7 +275,8 @@ class PipelineRun:
         critic_sees_asset = config.critic_type == "diffusion"
         given = self.config.photo_camera
         camera_key = asdict(given) if given else ["estimated", _digest(Path(self.config.fspy).read_bytes())
-                                                  if self.config.fspy else None, self.config.camera_overrides]
+                                                  if self.config.fspy else None, self.config.camera_overrides,
+                                                  self.config.camera_source]
         self.keys["light"] = _digest("light", asdict(config), self.photo_key, self.placement_px, camera_key,
                                      self.keys["convert"] if critic_sees_asset else None)
 
@@ -304,9 +306,10 @@ class PipelineRun:
         h, w = self.photo.shape[:2]
         if self.config.photo_camera is not None:
             return replace(self.config.photo_camera, width=w, height=h), {"source": "given by the caller"}
-        from .photo_camera import estimate_photo_camera
+        from .photo_camera import photo_camera_estimate
 
-        estimate = estimate_photo_camera(self.photo_path, self.config.fspy).overridden(**self.config.camera_overrides)
+        estimate = photo_camera_estimate(self.photo_path, self.config.fspy, self.config.camera_overrides,
+                                         self.config.camera_source, self.config.camera_why)
         return estimate.photo_camera(width=w, height=h), estimate.to_dict()
 
     def adapt(self) -> None:
@@ -347,7 +350,7 @@ class PipelineRun:
         config = self.stage_config("compose", size=self.config.size, shadow_type=self.config.shadow_type,
                                    spp=self.config.compose_spp)
         self.keys["compose"] = _digest("compose", asdict(config), self.upstream, self.keys["light"], self.photo_key,
-                                       self.placement_px)
+                                       self.placement_px, self.config.turn_deg)
         texture_path, light_path = self.texture_path, self.light_path
 
         def compose(folder: Path) -> dict:
@@ -356,7 +359,7 @@ class PipelineRun:
             fh, fw = full.shape[:2]
             camera, camera_from = light_camera(light_path, self.photo_info, fw, fh)
             inputs = ComposeInputs(self.mesh, stack, full, self.placement.pixel((fh, fw)),
-                                   load_environment(light_path), camera)
+                                   load_environment(light_path), camera, turn_deg=self.config.turn_deg)
             extra = {"inputs": {"texture": str(texture_path), "light": str(light_path), "camera_from": camera_from}}
             return compose_to_folder(inputs, config, folder, extra, progress=self.progress, cancel=self.cancel)
 

@@ -1,7 +1,6 @@
 """Adapt: restyle the converted texture to fit the photo (or from a prompt), as a background job."""
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import bpy
@@ -10,7 +9,7 @@ from bpy.props import IntProperty
 from ..blender_io import mesh_from_object
 from ..core.errors import InputError
 from . import work
-from .common import OnMesh, model_settings, photo_path, run_folder
+from .common import OnMesh, model_settings, photo_path, photo_view, run_folder
 from .jobs import JobOperator
 from .results import apply_result_material
 
@@ -23,15 +22,16 @@ def gather_adapt(op, context, texture: str) -> dict:
     photo = str(photo_path(context)) if settings.mode == "scene" and settings.photo_path else ""
     light = bpy.path.abspath(settings.light_path) if settings.light_path else ""
     x, y = settings.placement
+    view = photo_view(context, Path(photo), obj) if photo else None
     models, _ = model_settings(context)
     op._object_name = obj.name
     return {
         "mesh": mesh, "texture": texture, "mode": settings.mode, "prompt": settings.prompt,
         "object_prompt": settings.object_prompt, "instruction": settings.instruction, "photo": photo,
         # Where the asset stands and its height, as the light and compose stages read them; the photo's
-        # camera is the light stage's (beside light.exr), else the panel's.
-        "placement": (x, y), "size": settings.size,
-        "fov_deg": math.degrees(settings.fov), "pitch_deg": -math.degrees(settings.elevation),
+        # camera is the light stage's (beside light.exr), else the scene's, the panel's or the estimate.
+        "placement": view["placement"] if view else (x, y), "size": view["size"] if view else settings.size,
+        "view": view,
         "envmap": light if light and Path(light).is_file() else "", "preset": settings.preset,
         "models": models, "iterations": op.iterations, "model_resolution": op.model_resolution,
         "render_size": op.render_size, "out": str(run_folder(context, "adapt", obj.name))}

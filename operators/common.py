@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import importlib.util
+import math
 import os
 import tempfile
 import time
@@ -108,6 +109,68 @@ def photo_path(context) -> Path:
     if not path.is_file():
         raise InputError(f"The photo '{path}' does not exist; choose another in the Scene section.")
     return path
+
+
+# -- the photo's camera ------------------------------------------------------------------------------
+def artist_camera(context, photo: Path):
+    """(camera object, why) when the scene's active camera is the artist's and shows the photo (matched
+    with the fSpy importer or by eye): SceneFit then composes through it. (None, "") otherwise."""
+    from ..blender_io.scene_camera import matched_scene_camera
+    from ..core.imageio import upright_size
+
+    size = upright_size(photo)
+    return matched_scene_camera(context.scene, photo, size) if size else (None, "")
+
+
+def photo_view(context, photo: Path, obj=None) -> dict:
+    """How a job sees the photo, decided once for every operator:
+
+    camera: {"fov_deg", "pitch_deg", "roll_deg"} to use, or None to estimate it from the photo in the job;
+    camera_source: "blender" (the artist's camera shows the photo), "user" (the panel's values), or
+    "estimate"; scene_camera: that camera's name; placement, size, turn_deg: where the asset stands (from
+    the arrangement through the artist's camera, else the panel's); notes: what is not modelled."""
+    settings = context.scene.scenefit
+    view = {"camera": None, "camera_source": "estimate", "scene_camera": "", "placement": tuple(settings.placement),
+            "size": float(settings.size), "turn_deg": 0.0, "notes": []}
+    camera, why = artist_camera(context, photo)
+    if camera is not None:
+        from ..blender_io.scene_camera import horizontal_fov_deg, scene_view
+        from ..core.imageio import upright_size
+
+        size = upright_size(photo)
+        if obj is not None:
+            seen, notes = scene_view(camera, obj, size, context.evaluated_depsgraph_get())
+            fov, pitch, roll = seen.fov_deg, seen.pitch_deg, seen.roll_deg
+            view.update(placement=seen.placement, size=min(1.0, seen.size), turn_deg=seen.turn_deg, notes=notes)
+        else:
+            import numpy as np
+
+            from ..blender_io.placement import camera_pose
+
+            _, pitch, roll = camera_pose(np.array(camera.matrix_world), f"The scene camera '{camera.name}'")
+            fov = horizontal_fov_deg(camera, *size)
+        view.update(camera={"fov_deg": fov, "pitch_deg": pitch, "roll_deg": roll}, camera_source="blender",
+                    scene_camera=camera.name)
+        view["notes"].insert(0, f"the scene camera '{camera.name}' is used as it is: {why}")
+    elif settings.camera_from == "panel":
+        view.update(camera={"fov_deg": math.degrees(settings.fov), "pitch_deg": math.degrees(settings.pitch),
+                            "roll_deg": math.degrees(settings.roll)}, camera_source="user")
+    return view
+
+
+def composite_camera(context, photo: Path, view: dict):
+    """The PhotoCamera the Cycles set-up uses when no job hands one back: the view's, else the camera the
+    World's light map was estimated with (its report.json), else the estimate from the photo."""
+    from ..core.compose import light_camera
+    from ..core.photo import PhotoCamera
+    from ..core.photo_camera import photo_camera_estimate
+
+    if view["camera"] is not None:
+        return PhotoCamera(**view["camera"])
+    light = context.scene.scenefit.light_path
+    if light and (Path(bpy.path.abspath(light)).parent / "report.json").is_file():
+        return light_camera(bpy.path.abspath(light), {}, 1, 1)[0]
+    return photo_camera_estimate(photo).photo_camera()
 
 
 # -- preferences -------------------------------------------------------------------------------------

@@ -8,7 +8,7 @@ from bpy.props import BoolProperty, IntProperty
 
 from ..blender_io.compose import setup_composite
 from ..core.errors import SceneFitError
-from .common import OnMesh, photo_path, run_folder
+from .common import OnMesh, composite_camera, photo_path, photo_view, run_folder
 from .results import apply_composite_image
 from .work import written_whole
 
@@ -30,8 +30,11 @@ class SCENEFIT_OT_compose(OnMesh, bpy.types.Operator):
         settings = context.scene.scenefit
         obj = context.active_object
         try:
-            made = setup_composite(context, obj, photo_path(context), tuple(settings.placement), settings.size,
-                                   settings.fov, settings.elevation)
+            photo = photo_path(context)
+            view = photo_view(context, photo, obj)
+            scene_camera = bpy.data.objects.get(view["scene_camera"]) if view["scene_camera"] else None
+            made = setup_composite(context, obj, photo, tuple(settings.placement), settings.size,
+                                   composite_camera(context, photo, view), scene_camera=scene_camera)
             if settings.result_world is not None:
                 context.scene.world = settings.result_world
             if not self.render:

@@ -10,18 +10,26 @@ import bpy
 from ..blender_io import mesh_from_object
 from ..blender_io.compose import CAMERA_NAME
 from ..core.errors import SceneFitError
-from .common import OnMesh, check_dependencies, gather_asset, run_folder
+from .common import OnMesh, artist_camera, check_dependencies, gather_asset, photo_path, run_folder
 from .work import written_whole
 
 
 def photo_look_at(context):
-    """SceneFit's photo camera as a LookAt in world space, or None when it has not been set up."""
+    """The photo's camera as a LookAt in world space: SceneFit's, else the artist's camera that shows the
+    photo; None when neither is set up."""
     from mathutils import Vector
 
     from ..core.export import LookAt
 
     cam = bpy.data.objects.get(CAMERA_NAME)
     if cam is None or cam.type != "CAMERA" or "scenefit" not in cam:
+        cam = None
+        if context.scene.scenefit.photo_path:
+            try:
+                cam = artist_camera(context, photo_path(context))[0]
+            except SceneFitError:
+                cam = None
+    if cam is None:
         return None
     m = cam.matrix_world
     origin = m.translation
@@ -60,7 +68,7 @@ class SCENEFIT_OT_export_mitsuba(OnMesh, bpy.types.Operator):
             if camera is not None:  # the photo's camera sees the world: the mesh goes in world space
                 mesh = mesh_from_object(obj, context.evaluated_depsgraph_get(), space="world")
             else:
-                camera = Camera(azimuth_deg=30.0, elevation_deg=math.degrees(settings.elevation), width=512,
+                camera = Camera(azimuth_deg=30.0, elevation_deg=-math.degrees(settings.pitch), width=512,
                                 height=512)
             light = Path(bpy.path.abspath(settings.light_path)) if settings.light_path else None
             envmap = load_environment(light) if light is not None and light.is_file() else None

@@ -1,13 +1,12 @@
 """Estimate Light: an HDR World from the photo and the placement, as a background job."""
 from __future__ import annotations
 
-import math
 
 import bpy
 from bpy.props import EnumProperty, IntProperty
 
 from . import work
-from .common import model_settings, photo_path, run_folder
+from .common import model_settings, photo_path, photo_view, run_folder
 from .jobs import JobOperator
 from .results import apply_result_world
 
@@ -38,8 +37,7 @@ class SCENEFIT_OT_estimate_light(JobOperator):
         out = run_folder(context, "light", photo.stem)
         return work.estimate_light, {
             "photo": str(photo), "placement": tuple(settings.placement), "scene_type": settings.scene_type,
-            "preset": settings.preset, "fov_deg": math.degrees(settings.fov),
-            "camera_pitch_deg": -math.degrees(settings.elevation), "models": models, "depth": depth,
+            "preset": settings.preset, "view": photo_view(context, photo), "models": models, "depth": depth,
             "critic": self.critic, "outpaint": self.outpaint, "iterations": self.iterations, "model_resolution": self.model_resolution, "out": str(out)}
 
     def apply(self, context, result) -> str:

@@ -12,8 +12,8 @@ from bpy.props import FloatProperty
 from ..blender_io.compose import CAMERA_NAME, ensure_photo_camera, load_photo_image
 from ..blender_io.placement import CANCEL, CLICK, classify_event, frame_rect, placement_from_click, \
     region_from_placement
-from ..core.errors import SceneFitError
-from .common import photo_path
+from ..core.errors import InputError, SceneFitError
+from .common import artist_camera, composite_camera, photo_path, photo_view
 
 _draw_handle = None
 
@@ -73,9 +73,14 @@ class SCENEFIT_OT_pick_placement(bpy.types.Operator):
     y: FloatProperty(name="Y", min=0.0, max=1.0, default=0.75, description="From the top, fraction of the height")
 
     def _camera(self, context):
-        settings = context.scene.scenefit
-        image = load_photo_image(photo_path(context))
-        return ensure_photo_camera(context.scene, image, settings.fov, settings.elevation)
+        photo = photo_path(context)
+        artist, _ = artist_camera(context, photo)
+        if artist is not None:
+            raise InputError(f"The scene camera '{artist.name}' shows the photo, so SceneFit composes the asset where "
+                             "it stands in that camera's view; move the asset instead of picking a point.")
+        camera = composite_camera(context, photo, photo_view(context, photo))
+        return ensure_photo_camera(context.scene, load_photo_image(photo), camera.fov_deg, camera.pitch_deg,
+                                   camera.roll_deg)
 
     def execute(self, context):
         try:

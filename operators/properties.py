@@ -3,9 +3,12 @@
 Runtime state (progress, the running job) is on the WindowManager (operators/jobs.py), not here:
 only the artist's choices and the datablocks SceneFit made are saved with the .blend.
 """
+import math
+
 import bpy
 from bpy.props import EnumProperty, FloatProperty, FloatVectorProperty, PointerProperty, StringProperty
 
+from ..core.photo import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG
 from ..core.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
 from ..core.presets import PRESET_DESCRIPTIONS, PRESET_NAMES
 
@@ -14,6 +17,10 @@ SCENE_TYPES = (
     ("auto", "Auto", "Decide from the photo (sky at the top: outdoor)"),
     ("indoor", "Indoor", "A room: the unseen walls are completed from depth"),
     ("outdoor", "Outdoor", "Open sky: the unseen map is completed by outpainting or the sky/ground prior"),
+)
+CAMERA_SOURCES = (
+    ("estimate", "From the photo", "Estimated from the photo's lines and EXIF (Match Camera shows what was found)"),
+    ("panel", "As set here", "The field of view, pitch and roll below"),
 )
 MODES = (
     ("scene", "Scene", "Restyle the asset so it fits the photo (the prompt describes how it should look there)"),
@@ -43,10 +50,16 @@ class SceneFitSettings(bpy.types.PropertyGroup):
     size: FloatProperty(name="Size", min=0.02, max=1.0, default=DEFAULT_OBJECT_SIZE, subtype="FACTOR",
                         description="The asset's height as a fraction of the photo's height")
     scene_type: EnumProperty(name="Scene type", items=SCENE_TYPES, default="auto")
-    fov: FloatProperty(name="Field of view", subtype="ANGLE", default=1.0471976, min=0.1, max=2.8,
-                       description="The photo's horizontal field of view (60° unless the camera says otherwise)")
-    elevation: FloatProperty(name="Elevation", subtype="ANGLE", default=0.17453, min=-1.2, max=1.2,
-                             description="How far the photo's camera looks down")
+    camera_from: EnumProperty(name="Camera", items=CAMERA_SOURCES, default="estimate",
+                              description="Where the photo's camera comes from when the scene's camera does not "
+                                          "show the photo")
+    fov: FloatProperty(name="Field of view", subtype="ANGLE", default=math.radians(DEFAULT_FOV_DEG), min=0.1,
+                       max=2.8, description="The photo's horizontal field of view")
+    pitch: FloatProperty(name="Pitch", subtype="ANGLE", default=math.radians(DEFAULT_PITCH_DEG), min=-1.5, max=1.5,
+                         description="Where the photo's camera looks above the horizon (negative: down)")
+    roll: FloatProperty(name="Roll", subtype="ANGLE", default=0.0, min=-0.8, max=0.8,
+                        description="How far the photo's camera is turned counter-clockwise about its view (the "
+                                    "horizon then appears turned clockwise)")
     # Style
     mode: EnumProperty(name="Mode", items=MODES, default="scene")
     prompt: StringProperty(name="Prompt", description="How the asset should look, e.g. 'a leather sofa, "

@@ -2,15 +2,14 @@
 applied in Blender: the new material, the World, the composite set up for Cycles and its image."""
 from __future__ import annotations
 
-import math
-
 import bpy
 from bpy.props import EnumProperty
 
 from ..blender_io.compose import setup_composite
 from ..core.errors import SceneFitError
+from ..core.photo import PhotoCamera
 from . import work
-from .common import OnMesh, model_settings, photo_path, run_folder, scene_asset
+from .common import OnMesh, model_settings, photo_path, photo_view, run_folder, scene_asset
 from .jobs import JobOperator
 from .results import apply_composite_image, apply_result_material, apply_result_world
 
@@ -37,11 +36,12 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         guidance, why_no_adapt = self.guidance, ""
         if not settings.prompt.strip() and guidance == "auto":
             guidance, why_no_adapt = "none", "the Style section has no prompt"
-        return work.run, {"mesh": mesh, "maps": maps, "photo": str(photo), "placement": tuple(settings.placement),
-                          "size": settings.size, "preset": settings.preset, "prompt": settings.prompt,
-                          # the panel's camera, which the Cycles set-up uses too, so both composites agree
-                          "fov_deg": math.degrees(settings.fov), "pitch_deg": -math.degrees(settings.elevation),
-                          "guidance": guidance, "why_no_adapt": why_no_adapt, "models": model_settings(context)[0],
+        # The artist's camera when it shows the photo, else the panel's or the estimate; the Cycles set-up
+        # takes the camera the run used, so both composites agree.
+        view = photo_view(context, photo, obj)
+        self._scene_camera = view["scene_camera"]
+        return work.run, {"mesh": mesh, "maps": maps, "photo": str(photo), "view": view,
+                          "preset": settings.preset, "prompt": settings.prompt, "guidance": guidance, "why_no_adapt": why_no_adapt, "models": model_settings(context)[0],
                           "out": str(run_folder(context, "run", obj.name))}
 
     def apply(self, context, result) -> str:
@@ -51,9 +51,11 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         lines = [f"material '{mat.name}'", f"World '{world.name}'", f"composite image '{image.name}'"]
         settings = context.scene.scenefit
         try:
-            setup_composite(context, bpy.data.objects[self._object_name], photo_path(context),
-                            tuple(settings.placement), settings.size, settings.fov, settings.elevation)
-            lines.append("Cycles composite set up (F12 renders it)")
+            scene_camera = bpy.data.objects.get(self._scene_camera) if self._scene_camera else None
+            made = setup_composite(context, bpy.data.objects[self._object_name], photo_path(context),
+                                   tuple(settings.placement), settings.size, PhotoCamera(**result["camera"]),
+                                   scene_camera=scene_camera)
+            lines.append(f"Cycles composite set up through '{made['camera'].name}' (F12 renders it)")
         except SceneFitError as error:
             lines.append(f"no Cycles composite: {error}")
         if result["stages"]["adapt"] == "skipped":

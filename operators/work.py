@@ -56,6 +56,27 @@ def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> 
     return written_whole(data["out"], write)
 
 
+def view_camera(photo: str, view: dict, width: int, height: int):
+    """(PhotoCamera, its record) for the photo as operators/common.photo_view decided: the artist's
+    camera or the panel's values, else the estimate from the photo (core/photo_camera.py)."""
+    from ..core.photo_camera import photo_camera_estimate
+
+    estimate = photo_camera_estimate(photo, None, view["camera"], *camera_source(view))
+    return estimate.photo_camera(width=width, height=height), estimate.to_dict()
+
+
+def camera_source(view: dict) -> tuple[str, str]:
+    """(source, why) of a view's camera values for the camera's record (core/photo_camera.py)."""
+    if view["camera_source"] == "blender":
+        return "blender", "; ".join(view["notes"])
+    return "user", "given by the user"   # the panel's values, as the command line's --fov/--pitch/--roll
+
+
+def camera_values(camera) -> dict:
+    """What the Cycles set-up takes from the camera a job used."""
+    return {"fov_deg": camera.fov_deg, "pitch_deg": camera.pitch_deg, "roll_deg": camera.roll_deg}
+
+
 def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
     """Photo + placement -> light.exr (Blender's equirectangular convention) in data['out']."""
     from dataclasses import replace
@@ -74,10 +95,6 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
         critic = "diffusion" if models_available(data["models"], need_inpaint=False)[0] else "none"
     overrides = {"scene_type": data["scene_type"], "critic_type": critic, "models": data["models"],
                  "depth": data["depth"]}
-    if data.get("fov_deg"):
-        overrides["fov_deg"] = float(data["fov_deg"])
-    if data.get("camera_pitch_deg") is not None:
-        overrides["camera_pitch_deg"] = float(data["camera_pitch_deg"])
     config = stage_config("light", data["preset"], **overrides)
     config = replace(config, outpaint=replace(config.outpaint, completion_type=data.get("outpaint", "auto")))
     if data.get("iterations"):  # quick looks and tests
@@ -86,18 +103,20 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
         size = int(data["model_resolution"])
         config = replace(config, diffusion=replace(config.diffusion, model_resolution=size),
                          outpaint=replace(config.outpaint, resolution=size))
-    result = estimate(photo, placement, config, photo_info=info, progress=progress, cancel=cancel)
+    camera, record = view_camera(data["photo"], data["view"], w, h)
+    result = estimate(photo, placement, config, photo_camera=camera, photo_info=info, progress=progress,
+                      cancel=cancel)
+    result.decisions["camera"] = record
 
     def write(out: Path) -> dict:
         outputs = write_light_outputs(result, out)
         report = light_report(result, config, outputs)
         report["photo"] = info
         write_report(out / "report.json", report)
-        camera = result.photo_camera
         return {"hdr": str(outputs["hdr_exr"]), "preview": str(outputs["preview_png"]),
                 "report": str(out / "report.json"),
                 "scene_type": result.decisions.get("scene_type", {}).get("chosen", ""),
-                "camera": {"yaw_deg": camera.yaw_deg, "pitch_deg": camera.pitch_deg, "fov_deg": camera.fov_deg}}
+                "camera": camera_values(result.photo_camera)}
 
     return written_whole(data["out"], write)
 
@@ -110,7 +129,6 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
 
     from ..core.adapt import StageSpec, adapt_and_bake
     from ..core.compose import light_camera
-    from ..core.photo import PhotoCamera
     from ..core.placement import Placement
     from ..core.presets import stage_config
     from ..core.imageio import linear_to_srgb, read_color_image
@@ -125,8 +143,8 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
         h, w = photo.shape[:2]
         if data.get("envmap"):   # the camera the light stage estimated this map with
             camera = light_camera(data["envmap"], {}, w, h)[0]
-        elif "fov_deg" in data:
-            camera = PhotoCamera(pitch_deg=data["pitch_deg"], fov_deg=data["fov_deg"], width=w, height=h)
+        else:
+            camera = view_camera(data["photo"], data["view"], w, h)[0]
     overrides = {"views_type": "local"} if mode == "scene" and photo is None else {}
     envmap = load_environment(data["envmap"]) if data.get("envmap") else None
     if envmap is not None:
@@ -154,19 +172,27 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
     return written_whole(data["out"], write)
 
 
+def run_config(data: dict):
+    """Run All's RunConfig from the operator's data: the panel's settings and the photo's view."""
+    from ..core.run import RunConfig
+
+    view = data["view"]
+    return RunConfig(preset=data["preset"], prompt=data["prompt"], guidance_type=data["guidance"],
+                     size=view["size"], camera_overrides=dict(view["camera"] or {}),
+                     camera_source=camera_source(view)[0], camera_why=camera_source(view)[1],
+                     turn_deg=view["turn_deg"], models=data["models"])
+
+
 def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
     """The command line's pipeline (core.run.run_pipeline: convert -> light -> adapt -> compose; the
     game bake is Bake Asset's, on the main thread) into data['out']; returns what Blender applies."""
-    from ..core.photo import PhotoCamera
     from ..core.pipeline import write_report
-    from ..core.run import RunConfig, run_pipeline
+    from ..core.run import run_pipeline
 
     def write(folder: Path) -> dict:
-        camera = PhotoCamera(pitch_deg=data["pitch_deg"], fov_deg=data["fov_deg"], width=1, height=1)
-        config = RunConfig(preset=data["preset"], prompt=data["prompt"], guidance_type=data["guidance"],
-                           size=data["size"], photo_camera=camera, models=data["models"])
-        report = run_pipeline(data["mesh"], data["maps"], data["photo"], tuple(data["placement"]), folder, config,
-                              progress=progress, cancel=cancel,
+        config = run_config(data)
+        report = run_pipeline(data["mesh"], data["maps"], data["photo"], tuple(data["view"]["placement"]), folder,
+                              config, progress=progress, cancel=cancel,
                               bake_skipped_why="in Blender the game file is written by Bake Asset")
         stages = report["stages"]
         if stages["adapt"]["status"] == "skipped" and data.get("why_no_adapt"):
@@ -177,6 +203,8 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
         return {"stage": last, "report": str(folder / "report.json"), "texture": outputs["weights"],
                 "maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
                 "hdr": str(folder / "light" / "light.exr"), "composite": report["composite"],
+                "camera": {k: stages["light"]["report"]["decisions"]["photo_camera"][k]
+                           for k in ("fov_deg", "pitch_deg", "roll_deg")},
                 "stages": {name: stage["status"] for name, stage in stages.items()},
                 "adapt_skipped": stages["adapt"].get("why", "")}
 

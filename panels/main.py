@@ -5,10 +5,12 @@ asks importlib where modules are (once), and runtime state comes from the Window
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import bpy
 
 from ..core.errors import SceneFitError
-from ..operators.common import dependency_sentence, missing_modules
+from ..operators.common import artist_camera, dependency_sentence, missing_modules
 from .quality import BENCH_MACHINE, EXPECTED_SECONDS, expected_line
 
 class _Section:
@@ -90,8 +92,28 @@ class SCENEFIT_PT_scene(_Subsection, bpy.types.Panel):
         row.operator("scenefit.pick_placement", text="", icon="RESTRICT_SELECT_OFF")
         col.prop(settings, "size")
         col.prop(settings, "scene_type")
+        draw_camera(settings, context, self.layout.column(align=True))
+
+
+def draw_camera(settings, context, col) -> None:
+    """The photo's camera: the artist's when the scene camera shows the photo, else estimated or set here."""
+    camera = None
+    if settings.photo_path:
+        try:
+            camera = artist_camera(context, Path(bpy.path.abspath(settings.photo_path)))[0]
+        except SceneFitError:
+            camera = None
+    if camera is not None:
+        col.label(text=f"Camera: '{camera.name}' (it shows the photo)", icon="CAMERA_DATA")
+        col.label(text="The asset is composed where it stands in its view.")
+        return
+    row = col.row(align=True)
+    row.prop(settings, "camera_from", text="Camera")
+    row.operator("scenefit.match_camera", text="", icon="VIEW_CAMERA")
+    if settings.camera_from == "panel":
         col.prop(settings, "fov")
-        col.prop(settings, "elevation")
+        col.prop(settings, "pitch")
+        col.prop(settings, "roll")
 
 
 class SCENEFIT_PT_style(_Subsection, bpy.types.Panel):

@@ -6,9 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenefit.blender_io.placement import (CANCEL, CLICK, PASS, camera_for_placement, classify_event, frame_rect,
-                                           placement_from_click, region_from_placement)
+from scenefit.blender_io.placement import (CANCEL, CLICK, PASS, asset_in_view, camera_for_placement, classify_event,
+                                           frame_rect, placement_from_click, region_from_placement)
 from scenefit.core.errors import InputError
+from scenefit.core.photo import PhotoCamera
 
 RECT = frame_rect([(300.0, 500.0), (300.0, 200.0), (100.0, 200.0), (100.0, 500.0)])  # view_frame order
 
@@ -49,7 +50,7 @@ def _project(point, camera, fov_deg, elevation_deg, aspect):
 
 def test_the_camera_puts_the_asset_base_on_the_placement_at_the_asked_size():
     base, height = np.array([1.0, 2.0, 0.5]), 2.0
-    camera = camera_for_placement(base, height, (0.3, 0.8), 0.25, 60.0, 10.0, 4 / 3)
+    camera = camera_for_placement(base, height, (0.3, 0.8), 0.25, 60.0, -10.0, 4 / 3)
     assert _project(base, camera, 60.0, 10.0, 4 / 3) == pytest.approx((0.3, 0.8))
     # At the base's depth, the asset's height spans `size` of the frame (the top is nearer the centre).
     top = base + np.array([0.0, 0.0, height])
@@ -60,7 +61,59 @@ def test_the_camera_puts_the_asset_base_on_the_placement_at_the_asked_size():
 
 def test_a_placement_above_the_horizon_is_refused_with_a_sentence():
     with pytest.raises(InputError, match="above the horizon"):
-        camera_for_placement(np.zeros(3), 1.0, (0.5, 0.1), 0.3, 60.0, 10.0, 1.5)
+        camera_for_placement(np.zeros(3), 1.0, (0.5, 0.1), 0.3, 60.0, -10.0, 1.5)
+
+
+def _blender_camera(yaw: float, pitch: float, roll: float, location) -> np.ndarray:
+    """A Blender camera's world matrix (looks down local -Z, +Y up) from core's PhotoCamera basis."""
+    forward, right, up, _, _ = PhotoCamera(yaw_deg=yaw, pitch_deg=pitch, roll_deg=roll).basis()
+    matrix = np.eye(4)
+    matrix[:3, :3] = np.column_stack([right, up, -forward])
+    matrix[:3, 3] = location
+    return matrix
+
+
+def _turn(deg: float) -> np.ndarray:
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+@pytest.mark.parametrize("yaw, pitch, roll, object_yaw", [(90.0, -10.0, 0.0, 0.0), (30.0, -18.0, 4.0, 25.0),
+                                                          (-140.0, -6.0, -3.0, 200.0)])
+def test_the_pipeline_composes_the_asset_as_the_artists_camera_shows_it(yaw, pitch, roll, object_yaw):
+    """asset_in_view turns an artist's arrangement (their camera, the asset where they put it) into the
+    placement, size and turn core's place_asset takes: every vertex lands on the same photo pixel."""
+    from scenefit.core.compose import camera_origin, place_asset, placed_mesh
+    from scenefit.core.mesh import Mesh
+    from scenefit.core.primitives import uv_sphere
+    from scenefit.core.mesh import normalize_to_unit_sphere
+
+    width, height, fov = 640, 480, 55.0
+    sphere = uv_sphere(0.5, 12, 6)
+    asset = Mesh.from_arrays(sphere.positions * np.array([1.2, 0.5, 2.0]) + np.array([0.3, 0.0, 1.0]),
+                             sphere.faces, sphere.uvs, name="box")
+    camera_at = np.array([2.0, -1.0, 1.7])
+    forward = PhotoCamera(yaw_deg=yaw, pitch_deg=pitch).basis()[0]
+    floor_point = camera_at + forward * (1.7 / -forward[2])           # where the view meets the floor z = 0
+    world = asset.positions @ _turn(object_yaw).T * 0.6 + floor_point + np.array([0.1, 0.2, 0.0])
+    view = asset_in_view(_blender_camera(yaw, pitch, roll, camera_at), fov, width, height, world, object_yaw)
+    assert (view.pitch_deg, view.roll_deg) == pytest.approx((pitch, roll), abs=1e-9)
+    assert view.yaw_deg == pytest.approx(yaw, abs=1e-9)
+
+    seen = PhotoCamera(yaw_deg=yaw, pitch_deg=pitch, fov_deg=fov, width=width, height=height,
+                       roll_deg=roll).project(world, camera_at)
+    core_camera = PhotoCamera(pitch_deg=pitch, fov_deg=fov, width=width, height=height, roll_deg=roll)
+    normalized, _ = normalize_to_unit_sphere(asset)
+    placement = place_asset(normalized, core_camera, (view.placement[0] * width, view.placement[1] * height),
+                            view.size, view.turn_deg)
+    composed = core_camera.project(placed_mesh(normalized, placement).positions, camera_origin())
+    assert np.abs(composed - seen).max() < 0.02    # pixels (the fixed-point sizing converges to ~1e-6)
+
+
+def test_an_asset_behind_the_scene_camera_is_refused_in_one_sentence():
+    points = np.array([[0.0, -1.0, 0.0], [0.0, 3.0, 0.0], [0.0, 3.0, 1.0]])
+    with pytest.raises(InputError, match="behind the scene camera"):
+        asset_in_view(_blender_camera(90.0, -10.0, 0.0, (0.0, 0.0, 1.0)), 60.0, 64, 48, points, 0.0)
 
 
 def test_quality_panel_times_are_the_bench_measurements():
@@ -105,7 +158,7 @@ def test_blender_shows_a_sideways_stored_photo_upright_like_the_pipeline(tmp_pat
         bpy.ops.wm.read_factory_settings(use_empty=True)
         image = load_photo_image({str(photo)!r})
         assert load_photo_image({str(photo)!r}) == image            # loaded once
-        ensure_photo_camera(bpy.context.scene, image, 1.0, 0.2)
+        ensure_photo_camera(bpy.context.scene, image, 57.3, -11.5)
         bpy.ops.wm.save_as_mainfile(filepath={str(tmp_path / 'scene.blend')!r})
         bpy.ops.wm.open_mainfile(filepath={str(tmp_path / 'scene.blend')!r})
         cam = bpy.context.scene.camera.data

@@ -2,7 +2,9 @@
 settings, so no copy can drift. Each test here pins a bug the copies once had."""
 from __future__ import annotations
 
+import dataclasses
 import json
+import shutil
 import threading
 from pathlib import Path
 
@@ -145,3 +147,54 @@ def test_elevation_is_the_orbit_angle_and_pitch_the_photo_cameras():
     assert photo_pitch(sub["compose"].parse_args(required + ["--elevation", "12"])) == -12.0
     assert photo_pitch(sub["compose"].parse_args(required)) is None
     assert "--elevation" not in sub["compose"].format_help() and "--pitch" in sub["compose"].format_help()
+
+
+def _panel_view(camera: dict | None = None) -> dict:
+    """operators/common.photo_view's answer for a panel at its defaults (the camera estimated in the job)."""
+    return {"camera": camera, "camera_source": "user" if camera else "estimate", "scene_camera": "",
+            "placement": DEFAULT_AT, "size": DEFAULT_OBJECT_SIZE, "turn_deg": 0.0, "notes": []}
+
+
+def test_run_all_in_blender_and_the_command_line_give_the_pipeline_the_same_settings(inputs, monkeypatch):
+    """Run All once sent a placeholder camera (60 deg, 1x1 pixels) where the command line estimated it."""
+    from scenefit.core.guidance import ModelConfig
+    from scenefit.operators.work import run_config
+
+    recorder = Recorder()
+    monkeypatch.setattr(run_module, "run_pipeline", recorder)
+    for camera in ([], ["--fov", "50", "--pitch", "-14", "--roll", "2"]):
+        assert main(["run", str(inputs["obj"]), "--photo", str(inputs["photo"]), "--at", "{},{}".format(*DEFAULT_AT),
+                     "--out", str(inputs["root"] / f"cli{len(camera)}"), "--preset", "draft", "--guidance", "none",
+                     "--quiet", *camera]) == 0
+    estimated, given = (call["config"] for call in recorder.calls)
+    data = {"preset": "draft", "prompt": "", "guidance": "none", "models": ModelConfig()}
+    assert run_config({**data, "view": _panel_view()}) == estimated
+    assert run_config({**data, "view": _panel_view({"fov_deg": 50.0, "pitch_deg": -14.0, "roll_deg": 2.0})}) == given
+    assert recorder.calls[0]["placement"] == DEFAULT_AT
+
+
+def test_a_remote_job_from_blender_runs_the_pipeline_as_a_batch_job_does(inputs, monkeypatch):
+    """workers/remote.work_remotely packs the add-on's data into a Job; its worker runs the batch's path."""
+    from scenefit.core.asset_io import load_asset_folder
+    from scenefit.workers import remote
+    from scenefit.workers.batch import run_pipeline_for_job
+
+    jobs = []
+
+    def run_remote(job, *args, **kwargs):   # what the worker receives: the job, its asset packed along
+        kept = shutil.copytree(job.asset, inputs["root"] / "sent")
+        jobs.append(dataclasses.replace(job, asset=kept))
+        return inputs["root"], {}
+
+    monkeypatch.setattr(remote, "run_remote", run_remote)
+    mesh, maps = load_asset_folder(inputs["folder"])
+    remote.work_remotely({"mesh": mesh, "maps": maps, "photo": str(inputs["photo"]), "at": (0.5, 0.6),
+                          "worker": "auto", "out": str(inputs["root"] / "remote"), "preset": "draft",
+                          "stages": ["convert", "light", "compose"]})
+    recorder = Recorder()
+    monkeypatch.setattr(run_module, "run_pipeline", recorder)
+    local = load_jobs(_jobs(inputs["root"], inputs["folder"], inputs["photo"], ["convert", "light", "compose"])).jobs[0]
+    run_pipeline_for_job(jobs[0], inputs["root"] / "from-blender")
+    run_pipeline_for_job(local, inputs["root"] / "from-jobs-file")
+    from_blender, from_file = recorder.calls
+    assert from_blender == from_file

@@ -1,0 +1,95 @@
+"""The artist's own camera. When the scene's active camera shows the photo as its background (as the
+fSpy importer and matching by eye leave it), SceneFit composes through that camera as it is: its field
+of view, pitch, roll and position, with the asset where the artist put it (blender_io/placement.py's
+asset_in_view turns that arrangement into the pipeline's placement, size and turn). Nothing of the
+artist's is changed: the camera is read, never moved.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import InputError
+from .placement import SceneView, asset_in_view
+
+TAG = "scenefit"   # SceneFit's own objects carry it (blender_io/compose.py); its camera is SceneFit's to move
+
+
+def photo_background(camera, photo_path: str | Path, photo_size: tuple[int, int]) -> str | None:
+    """Why `camera` (an object) shows the photo, or None: a shown background image of the photo's file, or,
+    for a packed image (the fSpy importer packs the one its project holds), of the photo's pixel size."""
+    import bpy
+
+    data = camera.data
+    if camera.type != "CAMERA" or not data.show_background_images:
+        return None
+    photo = Path(photo_path).resolve()
+    for background in data.background_images:
+        image = background.image
+        if not background.show_background_image or image is None:
+            continue
+        if image.filepath and not image.packed_file:
+            try:
+                if Path(bpy.path.abspath(image.filepath)).resolve() == photo:
+                    return f"its background image '{image.name}' is the photo's file"
+            except OSError:
+                continue
+        elif image.packed_file and tuple(image.size) == tuple(photo_size):
+            return f"its background image '{image.name}' is packed and of the photo's size {photo_size[0]}x{photo_size[1]}"
+    return None
+
+
+def matched_scene_camera(scene, photo_path: str | Path, photo_size: tuple[int, int]):
+    """(camera object, why) when the scene's active camera is the artist's and shows the photo, else (None, "")."""
+    camera = scene.camera
+    if camera is None or TAG in camera:
+        return None, ""
+    why = photo_background(camera, photo_path, photo_size)
+    return (camera, why) if why else (None, "")
+
+
+def horizontal_fov_deg(camera, width: int, height: int) -> float:
+    """The horizontal field of view of a perspective camera on a width x height frame, from its lens and
+    sensor as Blender fits the sensor (AUTO: along the longer side)."""
+    data = camera.data
+    if data.type != "PERSP":
+        raise InputError(f"The scene camera '{camera.name}' is {data.type.lower()}; SceneFit composes through "
+                         "perspective cameras, so set its type to Perspective.")
+    fit = data.sensor_fit
+    if fit == "AUTO":
+        fit, sensor = ("HORIZONTAL" if width >= height else "VERTICAL"), data.sensor_width
+    else:
+        sensor = data.sensor_width if fit == "HORIZONTAL" else data.sensor_height
+    half = sensor / (2.0 * data.lens)
+    if fit == "VERTICAL":
+        half *= width / height
+    return math.degrees(2.0 * math.atan(half))
+
+
+def scene_view(camera, obj, photo_size: tuple[int, int], depsgraph) -> tuple[SceneView, list[str]]:
+    """The arrangement of `obj` seen through the artist's `camera` (blender_io/placement.SceneView) and
+    notes on what SceneFit does not model (lens shift, a tilted or unevenly scaled asset)."""
+    width, height = photo_size
+    notes = []
+    if abs(camera.data.shift_x) > 1e-4 or abs(camera.data.shift_y) > 1e-4:
+        notes.append(f"the camera's lens shift ({camera.data.shift_x:.3f}, {camera.data.shift_y:.3f}) is not "
+                     "modelled: the composite keeps the principal point at the photo's centre")
+    evaluated = obj.evaluated_get(depsgraph)
+    mesh = evaluated.to_mesh()
+    try:
+        points = np.empty(len(mesh.vertices) * 3, np.float64)
+        mesh.vertices.foreach_get("co", points)
+    finally:
+        evaluated.to_mesh_clear()
+    matrix = np.array(obj.matrix_world, np.float64)
+    points = points.reshape(-1, 3) @ matrix[:3, :3].T + matrix[:3, 3]
+    axes = matrix[:3, :3] / np.linalg.norm(matrix[:3, :3], axis=0)
+    if abs(axes[2, 2]) < 0.9999:
+        notes.append(f"'{obj.name}' is tilted off the vertical; SceneFit stands it upright on the floor")
+    yaw = math.degrees(math.atan2(axes[1, 0], axes[0, 0]))
+    camera_matrix = np.array(camera.matrix_world, np.float64)
+    seen = asset_in_view(camera_matrix, horizontal_fov_deg(camera, width, height), width, height, points, yaw,
+                         f"The scene camera '{camera.name}'")
+    return seen, notes
