@@ -74,12 +74,8 @@ def validator():
     return validate
 
 
-def run_installed_extension(tmp: Path, script: str, timeout: float = 900) -> tuple[dict, Path]:
-    """Build the extension zip (no wheels) and the tiny model pair into `tmp`, then run `script` in a
-    fresh bpy with its own user folder; TMP, ZIP and TINY in the script name them. Returns the dict
-    the script printed after "JSON", and the user folder the extension was installed into."""
-    import json
-
+def extension_and_models(tmp: Path) -> tuple[Path, Path, Path]:
+    """The extension zip (no wheels), the tiny model pair and an empty Blender user folder, in `tmp`."""
     sys.path.insert(0, str(ROOT / "tools"))
     import build_extension
     from scenefit.devtools.tiny_models import build_tiny_pair
@@ -88,9 +84,104 @@ def run_installed_extension(tmp: Path, script: str, timeout: float = 900) -> tup
     build_tiny_pair(tmp / "tiny")
     user = tmp / "blender_user"
     user.mkdir()
-    code = (script.replace("TMP", repr(str(tmp))).replace("ZIP", repr(str(zip_path)))
-            .replace("TINY", repr(str(tmp / "tiny"))))
-    proc = run_python(code, env={"BLENDER_USER_RESOURCES": str(user)}, timeout=timeout)
+    return zip_path, tmp / "tiny", user
+
+
+def fill_in(script: str, tmp: Path, zip_path: Path, tiny: Path) -> str:
+    """TMP, ZIP and TINY in `script` replaced by those paths."""
+    return (script.replace("TMP", repr(str(tmp))).replace("ZIP", repr(str(zip_path)))
+            .replace("TINY", repr(str(tiny))))
+
+
+def run_installed_extension(tmp: Path, script: str, timeout: float = 900) -> tuple[dict, Path]:
+    """Build the extension zip (no wheels) and the tiny model pair into `tmp`, then run `script` in a
+    fresh bpy with its own user folder; TMP, ZIP and TINY in the script name them. Returns the dict
+    the script printed after "JSON", and the user folder the extension was installed into."""
+    zip_path, tiny, user = extension_and_models(tmp)
+    proc = run_python(fill_in(script, tmp, zip_path, tiny), env={"BLENDER_USER_RESOURCES": str(user)},
+                      timeout=timeout)
     line = next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))
     (tmp / "out.json").write_text(line[4:])  # for a look after a failure
     return json.loads(line[4:]), user
+
+
+_MARK = "@@scenefit-session@@"
+_SESSION_LOOP = r"""
+import json, sys, traceback
+MARK = "@@scenefit-session@@"
+_reply = sys.stdout
+namespace = {"__name__": "__session__"}
+for _line in sys.stdin:
+    namespace["out"] = {}
+    try:
+        exec(compile(json.loads(_line), "<session step>", "exec"), namespace)
+        _message = {"out": namespace["out"]}
+    except BaseException:
+        _message = {"error": traceback.format_exc()}
+    _reply.write("\n" + MARK + json.dumps(_message, default=str) + "\n")
+    _reply.flush()
+"""
+
+
+class PythonSession:
+    """One interpreter of this environment kept open for a group of tests (bpy starts once per process
+    and costs seconds): run(code) executes `code` in the session's one namespace, so later steps see
+    what earlier ones defined, and returns the dict `out` the code filled. An exception in a step
+    fails only the test that ran it, with the session's traceback; the session carries on."""
+
+    def __init__(self, env: dict | None = None):
+        import queue
+        import tempfile
+        import threading
+
+        self._stderr = tempfile.TemporaryFile(mode="w+")
+        self.proc = subprocess.Popen([sys.executable, "-u", "-c", _SESSION_LOOP], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, stderr=self._stderr, text=True, cwd=ROOT,
+                                     env=dict(os.environ, **(env or {})))
+        self._lines: queue.Queue = queue.Queue()
+        self.output: list[str] = []   # everything the session printed besides its replies
+
+        def read():
+            for line in self.proc.stdout:
+                self._lines.put(line)
+            self._lines.put(None)
+
+        threading.Thread(target=read, daemon=True).start()
+
+    def _tail(self) -> str:
+        self._stderr.seek(0)
+        return "".join(self.output)[-4000:] + "\n" + self._stderr.read()[-4000:]
+
+    def run(self, code: str, timeout: float = 600) -> dict:
+        import queue
+        import time
+
+        if self.proc.poll() is not None:
+            pytest.fail(f"the session had already ended ({self.proc.returncode}):\n{self._tail()}")
+        self.proc.stdin.write(json.dumps(textwrap.dedent(code)) + "\n")
+        self.proc.stdin.flush()
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                line = self._lines.get(timeout=max(deadline - time.monotonic(), 0.01))
+            except queue.Empty:
+                self.close()
+                pytest.fail(f"a session step ran over {timeout} s:\n{self._tail()}")
+            if line is None:
+                pytest.fail(f"the session ended ({self.proc.wait()}) during a step:\n{self._tail()}")
+            if line.startswith(_MARK):
+                reply = json.loads(line[len(_MARK):])
+                if "error" in reply:
+                    pytest.fail(f"the session step raised:\n{reply['error']}", pytrace=False)
+                return reply["out"]
+            self.output.append(line)
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.stdin.close()
+            try:
+                self.proc.wait(30)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._stderr.close()

@@ -1,38 +1,42 @@
-"""The operators in bpy with the extension installed from its zip, on a scene made here.
+"""The operators in bpy with the extension installed from its zip, on scenes made here.
 
-One Blender process does it all (each bpy start costs seconds): every operator through EXEC_DEFAULT,
-the background-job path through its job object (progress, preview, cancel, error, no bpy access
-from the worker thread), the file-load handler ending a job, save -> reopen with every SceneFit image
-present and the artist's material, World and objects unchanged, and an unsaved file's images packed.
+One Blender session is kept open for the module (each bpy start costs seconds; see
+conftest.PythonSession) and every test runs its own step in it, so a step that fails fails its own
+tests and the others still run: every operator through EXEC_DEFAULT, Bake Asset on the result, save
+-> reopen with every SceneFit image present and the artist's material, World and objects unchanged,
+the background-job path through its job object (progress, preview, cancel, error, no bpy access from
+the worker thread, the file-load handler ending a job), Run All in an unsaved file with its images
+packed, and a zip without its wheels (last: it disables the add-on).
 """
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import run_installed_extension
+from conftest import PythonSession, extension_and_models, fill_in
 
 from scenefit.core.imageio import read_image
 
 pytestmark = pytest.mark.blender
 
 
-SCRIPT = r"""
+# Installs the zip and defines what the steps share: the add-on's modules, make_scene, snapshot, timed.
+INSTALL = r"""
 import json, math, sys, threading, time
+from importlib import import_module
 from pathlib import Path
 import numpy as np
 import bpy, addon_utils
 
 tmp, zip_path, tiny = Path(TMP), ZIP, TINY
 MODULE = "bl_ext.user_default.scenefit"
-out = {}
 bpy.ops.extensions.package_install_files(repo="user_default", filepath=zip_path, enable_on_install=True)
 sf = sys.modules[MODULE]
 out["module_file"] = sf.__file__
 prefs = bpy.context.preferences.addons[MODULE].preferences
 prefs.base_model, prefs.inpaint_model = str(Path(tiny) / "sd2-base"), str(Path(tiny) / "sd2-inpaint")
 prefs.offline = True
-from importlib import import_module
 jobs = import_module(MODULE + ".workers.background")
 work = import_module(MODULE + ".operators.work")
 common = import_module(MODULE + ".operators.common")
@@ -69,10 +73,18 @@ def snapshot(obj_name="Sphere"):
             "location": list(obj.location), "vertices": len(obj.data.vertices),
             "user_objects": sorted(o.name for o in bpy.data.objects if "scenefit" not in o)}
 
+timings = {}
+class timed:  # seconds per operator, printed by the tests for the README
+    def __init__(self, name): self.name = name
+    def __enter__(self): self.t = time.perf_counter()
+    def __exit__(self, *exc): timings[self.name] = round(time.perf_counter() - self.t, 2)
+
 photo = np.random.default_rng(1).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32)
 imageio.write_image(tmp / "photo.png", photo)
+"""
 
-# --- 1. every operator through EXEC_DEFAULT, in a saved file -----------------------------------------
+# Every operator through EXEC_DEFAULT, in a saved file.
+OPERATORS = r"""
 obj, mat, image, world = make_scene()
 bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "scene.blend"))
 before = snapshot()
@@ -88,11 +100,6 @@ out["panel_sections"] = sorted(c for c in dir(bpy.types) if c.startswith("SCENEF
 found, dropped = import_module(MODULE + ".blender_io.material").material_summary(mat)
 out["summary"] = [found, dropped]
 ops = {}
-timings = out["timings"] = {}
-class timed:  # seconds per operator, printed by the test for the README
-    def __init__(self, name): self.name = name
-    def __enter__(self): self.t = time.perf_counter()
-    def __exit__(self, *exc): timings[self.name] = round(time.perf_counter() - self.t, 2)
 ops["pick"] = bpy.ops.scenefit.pick_placement(x=0.5, y=0.8)
 with timed("convert"):
     ops["convert"] = bpy.ops.scenefit.convert(iterations=30)
@@ -109,7 +116,29 @@ with timed("compose"):
     ops["compose"] = bpy.ops.scenefit.compose(samples=2)
 with timed("export"):
     ops["export"] = bpy.ops.scenefit.export_mitsuba()
+out["open_composite_options"] = sorted(bpy.ops.scenefit.open_composite.bl_options)
+ops["revert_material"] = bpy.ops.scenefit.use_result(target="MATERIAL", which="ORIGINAL")
+out["after_revert"] = obj.active_material.name
+ops["apply_material"] = bpy.ops.scenefit.use_result(target="MATERIAL", which="RESULT")
+ops["revert_world"] = bpy.ops.scenefit.use_result(target="WORLD", which="ORIGINAL")
+out["world_after_revert"] = bpy.context.scene.world.name
+ops["apply_world"] = bpy.ops.scenefit.use_result(target="WORLD", which="RESULT")
+out["ops"] = {k: sorted(v) for k, v in ops.items()}
+s = bpy.context.scene.scenefit
+out["placement"] = list(s.placement)
+out["materials"] = [first_convert, s.result_material.name, obj.active_material.name]
+out["world"] = bpy.context.scene.world.name
+out["camera"] = bpy.context.scene.camera.name
+out["shadow_catcher"] = bpy.data.objects["SceneFit Shadow Catcher"].is_shadow_catcher
+out["paths"] = {"composite": s.composite_path, "texture": s.texture_path, "light": s.light_path}
+out["run_folders"] = sorted(str(p.relative_to(tmp)) for p in (tmp / "scenefit").glob("*/*"))
+out["images"] = sorted((i.name, i.filepath) for i in bpy.data.images if "scenefit" in i)
+out["timings"] = dict(timings)
+"""
+
 # Bake Asset: the object with its (adapted) SceneFit material as glTF; nothing of the session changes.
+BAKE = r"""
+obj = bpy.data.objects["Sphere"]
 def session():
     kinds = ("objects", "meshes", "materials", "images", "scenes", "collections", "node_groups")
     mat = obj.active_material
@@ -117,10 +146,13 @@ def session():
             sorted((n.bl_idname, n.name) for n in mat.node_tree.nodes), len(mat.node_tree.links),
             [round(v, 4) for v in obj.matrix_world.col[3]], len(bpy.context.scene.objects)]
 before_bake = session()
+bake_folders = set((tmp / "scenefit").glob("*/bake-*"))
+ops = {}
 with timed("bake_asset"):
     ops["bake_glb"] = bpy.ops.scenefit.bake_asset()
 ops["bake_gltf"] = bpy.ops.scenefit.bake_asset(filepath=str(tmp / "chosen" / "asset"), file_format="gltf",
                                                compress="draco", textures="jpeg")
+out["ops"] = {k: sorted(v) for k, v in ops.items()}
 out["bake_unchanged"] = [session() == before_bake, session(), before_bake]
 try:
     bpy.ops.scenefit.bake_asset(texture_size=100)
@@ -136,23 +168,13 @@ mesh_b, _ = import_module(MODULE + ".blender_io.material").object_mesh_and_slots
 np.savez(tmp / "expected_bake.npz", base_color=expected.base_color, roughness=np.asarray(expected.roughness),
          metallic=np.asarray(expected.metallic))
 out["bake_material"] = obj.active_material.name
+out["bake_folders"] = sorted(str(p.relative_to(tmp)) for p in set((tmp / "scenefit").glob("*/bake-*")) - bake_folders)
 out["bake_files"] = sorted(str(p) for p in tmp.rglob("*.gl*"))
-out["open_composite_options"] = sorted(bpy.ops.scenefit.open_composite.bl_options)
-ops["revert_material"] = bpy.ops.scenefit.use_result(target="MATERIAL", which="ORIGINAL")
-out["after_revert"] = obj.active_material.name
-ops["apply_material"] = bpy.ops.scenefit.use_result(target="MATERIAL", which="RESULT")
-ops["revert_world"] = bpy.ops.scenefit.use_result(target="WORLD", which="ORIGINAL")
-out["world_after_revert"] = bpy.context.scene.world.name
-bpy.ops.scenefit.use_result(target="WORLD", which="RESULT")
-out["ops"] = {k: sorted(v) for k, v in ops.items()}
-s = bpy.context.scene.scenefit
-out["placement"] = list(s.placement)
-out["materials"] = [first_convert, s.result_material.name, obj.active_material.name]
-out["world"] = bpy.context.scene.world.name
-out["camera"] = bpy.context.scene.camera.name
-out["shadow_catcher"] = bpy.data.objects["SceneFit Shadow Catcher"].is_shadow_catcher
-out["paths"] = {"composite": s.composite_path, "texture": s.texture_path, "light": s.light_path}
-out["run_folders"] = sorted(str(p.relative_to(tmp)) for p in (tmp / "scenefit").glob("*/*"))
+out["timings"] = dict(timings)
+"""
+
+# Save -> reopen: every SceneFit image comes back, the artist's data is as it was.
+REOPEN = r"""
 out["images"] = sorted((i.name, i.filepath) for i in bpy.data.images if "scenefit" in i)
 out["unchanged_before_save"] = snapshot() == before
 bpy.ops.wm.save_mainfile()
@@ -161,11 +183,11 @@ out["reopened_images"] = sorted((i.name, list(i.size), i.has_data or bool(i.pixe
                                 for i in bpy.data.images if "scenefit" in i)
 out["unchanged_after_reopen"] = snapshot() == before
 out["snapshot"] = [snapshot(), before]
+"""
 
-# --- 2. the job path without a window: progress, preview, cancel, error; no bpy in the worker -------
-obj = bpy.data.objects["Sphere"]
-bpy.context.view_layer.objects.active = obj
-obj.active_material = bpy.data.materials["AssetMaterial"]
+# The job path without a window: progress, preview, cancel, error; no bpy in the worker.
+JOBS = r"""
+obj, mat, image, world = make_scene()
 _, mesh, maps = common.gather_asset(bpy.context)
 touched = []
 
@@ -184,35 +206,37 @@ def profile(frame, event, arg):  # every Python call and C call in threads start
 
 t_job = time.perf_counter()
 threading.setprofile(profile)
-data = {"mesh": mesh, "maps": maps, "preset": "draft", "iterations": 12, "out": str(tmp / "job_convert")}
-job = jobs.start_job(jobs.Job("convert", work.convert, data))
-seen = []
-while not job.poll().finished:
-    seen.append((job.state.stage, job.state.step))
-    time.sleep(0.02)
-state = job.state
-jobs.release_job(job)
-out["job"] = {"status": state.status, "stages": sorted({s for s, _ in seen if s}), "steps": max(s for _, s in seen),
-              "result_maps": {k: v if isinstance(v, float) else Path(v).name for k, v in state.result["maps"].items()}}
-out["worker_touched_bpy"] = list(touched)
-timings["profiled_job"] = round(time.perf_counter() - t_job, 2)
-mat_from_job = results.apply_result_material(bpy.context, "Sphere", state.result, "convert")  # main thread
-# What the modal timer does with a state: runtime on the WindowManager, the preview as an icon.
-jobs_ui = import_module(MODULE + ".operators.jobs")
-jobs_ui.update_runtime(bpy.context, jobs.JobState("convert", stage="fit", step=3, total=6, fraction=0.5,
-                                                  preview=np.zeros((8, 8, 3), np.uint8), preview_serial=1))
-rt = bpy.context.window_manager.scenefit_runtime
-# (no icon ids without a UI: check the preview's pixels instead)
-out["runtime"] = [rt.running, rt.progress, rt.status, rt.has_preview, list(jobs_ui._previews["live"].image_size)]
-out["job_material"] = mat_from_job.name
+try:
+    data = {"mesh": mesh, "maps": maps, "preset": "draft", "iterations": 12, "out": str(tmp / "job_convert")}
+    job = jobs.start_job(jobs.Job("convert", work.convert, data))
+    seen = []
+    while not job.poll().finished:
+        seen.append((job.state.stage, job.state.step))
+        time.sleep(0.02)
+    state = job.state
+    jobs.release_job(job)
+    out["job"] = {"status": state.status, "stages": sorted({s for s, _ in seen if s}), "steps": max(s for _, s in seen),
+                  "result_maps": {k: v if isinstance(v, float) else Path(v).name for k, v in state.result["maps"].items()}}
+    out["worker_touched_bpy"] = list(touched)
+    timings["profiled_job"] = round(time.perf_counter() - t_job, 2)
+    mat_from_job = results.apply_result_material(bpy.context, "Sphere", state.result, "convert")  # main thread
+    # What the modal timer does with a state: runtime on the WindowManager, the preview as an icon.
+    jobs_ui = import_module(MODULE + ".operators.jobs")
+    jobs_ui.update_runtime(bpy.context, jobs.JobState("convert", stage="fit", step=3, total=6, fraction=0.5,
+                                                      preview=np.zeros((8, 8, 3), np.uint8), preview_serial=1))
+    rt = bpy.context.window_manager.scenefit_runtime
+    # (no icon ids without a UI: check the preview's pixels instead)
+    out["runtime"] = [rt.running, rt.progress, rt.status, rt.has_preview, list(jobs_ui._previews["live"].image_size)]
+    out["job_material"] = mat_from_job.name
 
-# The hook would see it: a worker that does touch bpy is caught (so the check can fail).
-touched.clear()
-bad = jobs.start_job(jobs.Job("bad", lambda d, p, c: bpy.path.abspath("//x"), None))
-bad.wait(10)
-jobs.release_job(bad)
-out["control_caught"] = len(touched) > 0
-threading.setprofile(None)
+    # The hook would see it: a worker that does touch bpy is caught (so the check can fail).
+    touched.clear()
+    bad = jobs.start_job(jobs.Job("bad", lambda d, p, c: bpy.path.abspath("//x"), None))
+    bad.wait(10)
+    jobs.release_job(bad)
+    out["control_caught"] = len(touched) > 0
+finally:
+    threading.setprofile(None)
 
 data = dict(data, iterations=100000, out=str(tmp / "job_cancel"))
 job = jobs.start_job(jobs.Job("convert", work.convert, data))
@@ -233,10 +257,12 @@ while job.poll().step < 1:
     time.sleep(0.02)
 bpy.ops.wm.read_homefile(use_empty=True)
 out["after_load"] = [job.poll().status, jobs.active_job() is None, job.alive]
-
 timings["job_section"] = round(time.perf_counter() - t_job, 2)
+out["timings"] = dict(timings)
+"""
 
-# --- 3. an unsaved file (Run All): results packed, not in Blender's temp dir or the add-on's folder --
+# An unsaved file (Run All): results packed, not in Blender's temp dir or the add-on's folder.
+UNSAVED = r"""
 obj, mat, image, world = make_scene()
 before = snapshot()
 bpy.context.scene.scenefit.prompt = ""  # Run All: convert, light, the composite set up; adapt skipped (no prompt)
@@ -263,7 +289,11 @@ bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "was_unsaved.blend"))
 bpy.ops.wm.open_mainfile(filepath=str(tmp / "was_unsaved.blend"))
 out["unsaved_reopened"] = sorted((i.name, list(i.size)) for i in bpy.data.images if "scenefit" in i)
 out["unsaved_unchanged"] = snapshot() == before
-# A zip without its wheels: one sentence, no traceback, nothing run.
+out["timings"] = dict(timings)
+"""
+
+# A zip without its wheels: one sentence, no traceback, nothing run (last: it disables the add-on).
+MISSING = r"""
 common.REQUIRED_MODULES["scenefit_no_such_module"] = "NoSuchModule"
 common._missing = None
 try:
@@ -271,21 +301,45 @@ try:
 except RuntimeError as error:  # bpy.ops raises what the operator reported as an error
     out["missing"] = [str(error), common.dependency_sentence()]
 addon_utils.disable(MODULE, default_set=True)
-print("JSON" + json.dumps(out))
 """
 
 
 @pytest.fixture(scope="module")
-def operated(tmp_path_factory):
+def blender(tmp_path_factory):
+    """The Blender session with the extension installed from its zip into its own user folder."""
     tmp = tmp_path_factory.mktemp("operators")
-    out, user = run_installed_extension(tmp, SCRIPT)
-    return tmp, out, user
+    zip_path, tiny, user = extension_and_models(tmp)
+    session = PythonSession(env={"BLENDER_USER_RESOURCES": str(user)})
+    try:
+        installed = session.run(fill_in(INSTALL, tmp, zip_path, tiny))
+        yield SimpleNamespace(run=session.run, tmp=tmp, user=user, installed=installed)
+    finally:
+        session.close()
 
 
-def test_every_operator_finishes_with_exec_default(operated):
+# The tests on the operators' scene (operated, Bake Asset, save -> reopen) come first, in this order:
+# the later steps make scenes of their own.
+def step(blender, code: str) -> dict:
+    out = blender.run(code)
+    (blender.tmp / "out.json").write_text(json.dumps(out, default=str))  # for a look after a failure
+    if "timings" in out:
+        print("seconds per operator:", out["timings"])
+    return out
+
+
+@pytest.fixture(scope="module")
+def operated(blender):
+    return blender.tmp, step(blender, OPERATORS), blender.user
+
+
+@pytest.fixture(scope="module")
+def unsaved(blender):
+    return step(blender, UNSAVED)
+
+
+def test_every_operator_finishes_with_exec_default(blender, operated):
     tmp, out, user = operated
-    print("seconds per operator:", out["timings"])
-    assert out["module_file"].startswith(str(user))  # the installed copy
+    assert blender.installed["module_file"].startswith(str(user))  # the installed copy
     assert out["loader"][0] > 0 and out["loader"][1:] == [True, True]  # the open file was not reset or changed
     assert all(v == ["FINISHED"] for v in out["ops"].values()), out["ops"]
     assert {"SCENEFIT_PT_asset", "SCENEFIT_PT_scene", "SCENEFIT_PT_style", "SCENEFIT_PT_quality",
@@ -299,7 +353,7 @@ def test_every_operator_finishes_with_exec_default(operated):
     assert out["after_revert"] == "AssetMaterial" and out["world_after_revert"] == "User World"
     assert out["world"] == "SceneFit Light" and out["camera"] == "SceneFit Camera" and out["shadow_catcher"]
     kinds = sorted(Path(f).name.split("-")[0] for f in out["run_folders"])
-    assert kinds == ["adapt", "bake", "compose", "convert", "convert", "light", "mitsuba"], out["run_folders"]
+    assert kinds == ["adapt", "compose", "convert", "convert", "light", "mitsuba"], out["run_folders"]
     # Constant channels stay constants: the sphere's roughness 0.5 and metallic 0 are socket values, not images.
     assert out["convert_constants"] == {"Roughness": [False, 0.5], "Metallic": [False, 0.0]}
     assert out["open_composite_options"] == ["REGISTER"]
@@ -327,61 +381,12 @@ def test_export_uses_the_photo_camera_and_the_estimated_light(operated):
     assert env.shape[0] > 16 and np.allclose(env.mean(), light.mean(), rtol=0.1)
 
 
-def test_results_survive_save_and_reopen_and_the_artists_data_is_unchanged(operated):
-    _, out, _ = operated
-    assert out["unchanged_before_save"] and out["unchanged_after_reopen"], out["snapshot"]
-    names = {name for name, _ in out["images"]}
-    assert len(names) >= 7  # 3 maps per material x 3 runs + the light
-    reopened = {name: (size, ok) for name, size, ok in out["reopened_images"]}
-    assert set(reopened) == names
-    assert all(size[0] > 0 and size[1] > 0 and ok for size, ok in reopened.values()), reopened
-
-
-def test_the_job_path_reports_progress_cancels_fails_cleanly_and_never_touches_bpy(operated):
-    _, out, _ = operated
-    job = out["job"]
-    assert job["status"] == "done" and "convert" in job["stages"] and job["steps"] >= 1
-    assert job["result_maps"] == {"base_color": "base_color.png", "roughness": 0.5, "metallic": 0.0}
-    assert out["worker_touched_bpy"] == [] and out["control_caught"]
-    assert out["job_material"].startswith("Sphere SceneFit convert")
-    assert out["runtime"] == [True, 0.5, "convert: fit 3/6", True, [8, 8]]
-    assert out["cancelled"] == "cancelled" and out["cancel_left"] == []
-    status, error = out["error"]
-    assert status == "failed" and "missing.png" in error and "Traceback" not in error
-    assert out["after_load"] == ["cancelled", True, False]
-
-
-def test_unsaved_file_results_are_packed_and_survive_saving(operated):
-    _, out, _ = operated
-    assert out["unsaved_ops"] == [["FINISHED"]]
-    assert out["run_all"] == ["SceneFit Camera", "SceneFit Light", "Sphere SceneFit convert"]
-    # base colour (roughness and metallic stay values), the light and the composite
-    assert len(out["unsaved_packed"]) == 3 and all(packed for _, packed in out["unsaved_packed"])
-    assert out["unsaved_outside_temp_and_addon"]
-    assert len(out["unsaved_reopened"]) == 3 and all(w > 0 and h > 0 for _, (w, h) in out["unsaved_reopened"])
-    assert out["unsaved_unchanged"]
-
-
-def test_run_all_is_the_command_lines_pipeline_and_shows_the_composite(operated):
-    _, out, _ = operated
-    assert out["run_composite"] == ["run", [64, 48]]  # loaded as an image, the photo's size
-    stages = out["run_report"]["stages"]
-    assert list(stages) == ["convert", "light", "adapt", "compose", "bake"]
-    assert [stages[k]["status"] for k in ("convert", "light", "compose")] == ["ran"] * 3
-    assert stages["adapt"] == {"status": "skipped", "why": "the Style section has no prompt"}
-    assert stages["bake"]["status"] == "skipped" and "Bake Asset" in stages["bake"]["why"]
-    assert out["run_report"]["composite"] == "compose/composite.png"  # relative: the folder was swapped in
-    # The panel's camera (50 degrees, 14 above the horizon) is the light stage's and so the composite's.
-    camera = stages["light"]["report"]["decisions"]["photo_camera"]
-    assert camera["fov_deg"] == pytest.approx(50.0) and camera["pitch_deg"] == pytest.approx(-14.0)
-    assert stages["compose"]["report"]["camera"]["fov_deg"] == pytest.approx(50.0)
-    # written beside and swapped in whole: nothing but the run's folder is left
-    assert len(out["run_folder_siblings"]) == 1 and out["run_folder_siblings"][0].startswith("run-")
-
-
-def test_bake_asset_writes_valid_gltf_that_reads_back(operated, validator, run_py):
-    tmp, out, _ = operated
+def test_bake_asset_writes_valid_gltf_that_reads_back(blender, operated, validator, run_py):
+    tmp = blender.tmp
+    out = step(blender, BAKE)
     assert out["ops"]["bake_glb"] == out["ops"]["bake_gltf"] == ["FINISHED"]
+    (folder,) = out["bake_folders"]   # Bake Asset without a path: one run folder of its own
+    assert Path(folder).parent.name == "Sphere" and Path(folder).name.startswith("bake-")
     after, before = out["bake_unchanged"][1:]
     assert out["bake_unchanged"][0], [(a, b) for a, b in zip(after, before) if a != b]
     assert "power of two" in out["bake_refused"]
@@ -415,8 +420,60 @@ def test_bake_asset_writes_valid_gltf_that_reads_back(operated, validator, run_p
     assert err["base_color"] <= 1.0 and err["roughness"] <= 1.0 and err["metallic"] <= 1.0, err
 
 
-def test_missing_dependencies_are_one_sentence(operated):
-    _, out, _ = operated
+def test_results_survive_save_and_reopen_and_the_artists_data_is_unchanged(blender, operated):
+    out = step(blender, REOPEN)
+    assert out["unchanged_before_save"] and out["unchanged_after_reopen"], out["snapshot"]
+    names = {name for name, _ in out["images"]}
+    assert len(names) >= 7  # 3 maps per material x 3 runs + the light
+    reopened = {name: (size, ok) for name, size, ok in out["reopened_images"]}
+    assert set(reopened) == names
+    assert all(size[0] > 0 and size[1] > 0 and ok for size, ok in reopened.values()), reopened
+
+
+def test_the_job_path_reports_progress_cancels_fails_cleanly_and_never_touches_bpy(blender):
+    out = step(blender, JOBS)
+    job = out["job"]
+    assert job["status"] == "done" and "convert" in job["stages"] and job["steps"] >= 1
+    assert job["result_maps"] == {"base_color": "base_color.png", "roughness": 0.5, "metallic": 0.0}
+    assert out["worker_touched_bpy"] == [] and out["control_caught"]
+    assert out["job_material"].startswith("Sphere SceneFit convert")
+    assert out["runtime"] == [True, 0.5, "convert: fit 3/6", True, [8, 8]]
+    assert out["cancelled"] == "cancelled" and out["cancel_left"] == []
+    status, error = out["error"]
+    assert status == "failed" and "missing.png" in error and "Traceback" not in error
+    assert out["after_load"] == ["cancelled", True, False]
+
+
+def test_unsaved_file_results_are_packed_and_survive_saving(unsaved):
+    out = unsaved
+    assert out["unsaved_ops"] == [["FINISHED"]]
+    assert out["run_all"] == ["SceneFit Camera", "SceneFit Light", "Sphere SceneFit convert"]
+    # base colour (roughness and metallic stay values), the light and the composite
+    assert len(out["unsaved_packed"]) == 3 and all(packed for _, packed in out["unsaved_packed"])
+    assert out["unsaved_outside_temp_and_addon"]
+    assert len(out["unsaved_reopened"]) == 3 and all(w > 0 and h > 0 for _, (w, h) in out["unsaved_reopened"])
+    assert out["unsaved_unchanged"]
+
+
+def test_run_all_is_the_command_lines_pipeline_and_shows_the_composite(unsaved):
+    out = unsaved
+    assert out["run_composite"] == ["run", [64, 48]]  # loaded as an image, the photo's size
+    stages = out["run_report"]["stages"]
+    assert list(stages) == ["convert", "light", "adapt", "compose", "bake"]
+    assert [stages[k]["status"] for k in ("convert", "light", "compose")] == ["ran"] * 3
+    assert stages["adapt"] == {"status": "skipped", "why": "the Style section has no prompt"}
+    assert stages["bake"]["status"] == "skipped" and "Bake Asset" in stages["bake"]["why"]
+    assert out["run_report"]["composite"] == "compose/composite.png"  # relative: the folder was swapped in
+    # The panel's camera (50 degrees, 14 above the horizon) is the light stage's and so the composite's.
+    camera = stages["light"]["report"]["decisions"]["photo_camera"]
+    assert camera["fov_deg"] == pytest.approx(50.0) and camera["pitch_deg"] == pytest.approx(-14.0)
+    assert stages["compose"]["report"]["camera"]["fov_deg"] == pytest.approx(50.0)
+    # written beside and swapped in whole: nothing but the run's folder is left
+    assert len(out["run_folder_siblings"]) == 1 and out["run_folder_siblings"][0].startswith("run-")
+
+
+def test_missing_dependencies_are_one_sentence(blender):
+    out = step(blender, MISSING)   # the module's last test: it disables the add-on
     reported, sentence = out["missing"]
     assert sentence.startswith("Missing Python modules: NoSuchModule;") and sentence.count(".") == 1
     assert sentence in reported and "Traceback" not in reported
