@@ -266,8 +266,9 @@ UNSAVED = r"""
 obj, mat, image, world = make_scene()
 before = snapshot()
 bpy.context.scene.scenefit.prompt = ""  # Run All: convert, light, the composite set up; adapt skipped (no prompt)
-bpy.context.scene.scenefit.fov = math.radians(50.0)         # the panel's camera reaches the Mitsuba composite
-bpy.context.scene.scenefit.elevation = math.radians(14.0)
+bpy.context.scene.scenefit.camera_from = "panel"            # the panel's camera reaches the Mitsuba composite
+bpy.context.scene.scenefit.fov = math.radians(50.0)
+bpy.context.scene.scenefit.pitch = math.radians(-14.0)
 with timed("run_all"):
     ops = [bpy.ops.scenefit.run()]
 out["unsaved_ops"] = [sorted(o) for o in ops]
