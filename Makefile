@@ -10,11 +10,12 @@ PLATFORM ?= linux-x64
 # Mitsuba's llvm variant loads this library (found lazily, after `setup` may have installed it).
 export DRJIT_LIBLLVM_PATH ?= $(shell tools/find_llvm.sh 2>/dev/null)
 
-.PHONY: help setup test demo bench corpus extension extension-nowheels check-extension validate clean
+.PHONY: help setup test test-quick demo bench corpus extension extension-nowheels check-extension validate clean
 
 help:
 	@echo "make demo       set up on first use, run SceneFit on the bundled example -> out/demo/"
-	@echo "make test       set up on first use, run the tests"
+	@echo "make test       set up on first use, run the tests (all of them: what CI runs)"
+	@echo "make test-quick the tests without those marked slow (multi-process, worker environments)"
 	@echo "make bench      speed and accuracy table (benchmarks/run.py)"
 	@echo "make corpus     every real asset in ../shared/corpus through convert -> bake -> glTF validator"
 	@echo "                (benchmarks/results/corpus.md; installs npm's gltf-validator into .venv/node)"
@@ -33,6 +34,9 @@ $(STAMP): requirements.txt requirements-ray.txt pyproject.toml tools/setup.sh to
 
 test: setup
 	$(PY) -m pytest -q tests
+
+test-quick: setup
+	$(PY) -m pytest -q -m "not slow" tests
 
 demo: setup
 	$(VENV)/bin/scenefit demo --out out/demo

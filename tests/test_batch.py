@@ -179,6 +179,7 @@ def test_cli_bad_jobs_file_exits_2(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow   # a local Ray cluster
 def test_ray_batch_retries_resumes_and_matches_in_process(in_process, local_ray, tmp_path):
     from scenefit.workers.batch_ray import RayDispatcher
 
@@ -218,6 +219,7 @@ def test_model_cache_loads_once_and_survives_a_released_text_encoder(tmp_path):
     assert second.embed("a muddy ball").shape[1] == 77
 
 
+@pytest.mark.slow   # a local Ray cluster
 def test_remote_job_streams_progress_cancels_and_returns_its_folder(in_process, local_ray, tmp_path):
     """What the add-on does with a worker environment: hand a job to Ray, follow it, cancel it, fetch it."""
     import threading
@@ -257,6 +259,7 @@ def _sum_over_ranks(value_per_rank: float) -> tuple[int, int, float]:
     return dist.get_rank(), int(os.environ["WORLD_SIZE"]), float(x)
 
 
+@pytest.mark.slow   # a local Ray cluster
 def test_ray_launches_a_torch_distributed_group_on_one_node(local_ray):
     from scenefit.workers.batch_ray import run_on_ranks
 

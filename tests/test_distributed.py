@@ -24,6 +24,8 @@ import numpy as np
 import pytest
 import torch
 
+pytestmark = pytest.mark.slow   # several processes (torchrun, a Ray cluster): what make test-quick leaves out
+
 # The adapt stage's views-per-step system (core/adapt/ package, devtools/) is landing in parallel;
 # until it is on main this module is skipped.
 pytest.importorskip("scenefit.devtools.tiny_models")

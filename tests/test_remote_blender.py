@@ -7,7 +7,7 @@ local Ray cluster of two CPUs."""
 import pytest
 from conftest import run_installed_extension
 
-pytestmark = pytest.mark.blender
+pytestmark = [pytest.mark.blender, pytest.mark.slow]   # a Ray cluster behind Blender's jobs
 
 SCRIPT = r"""
 import json, time
