@@ -292,11 +292,14 @@ def main() -> int:
     # The photo camera (scenefit camera) on views of real HDR panoramas with known fov, pitch and roll.
     if "camera" in parts and not args.quick:
         subprocess.run([sys.executable, str(Path(__file__).with_name("bench_camera.py"))], check=True)
-        log("camera bench done")
+        subprocess.run([sys.executable, str(Path(__file__).with_name("bench_camera_cost.py"))], check=True)
+        log("camera benches done")
+        cost = (RESULTS / "camera_cost.md").read_text().split("## Every view")[0].split("\n\n", 3)[-1].strip()
         sections += ["## The photo's camera: `scenefit camera` on real panoramas", "",
                      "Median and 90th-percentile errors per field, split by maps with and without architecture: "
                      "[camera.md](camera.md). The real assets of the corpus: `make corpus` "
-                     "([corpus.md](corpus.md)).", ""]
+                     "([corpus.md](corpus.md)).", "", "What a wrong camera costs the composite "
+                     "([camera_cost.md](camera_cost.md)):", "", cost, ""]
 
     total = time.perf_counter() - started
     load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
