@@ -26,6 +26,23 @@ def run_python(code: str, env: dict | None = None, timeout: float = 300) -> subp
     return proc
 
 
+def scenefit_here(*args) -> subprocess.CompletedProcess:
+    """`scenefit ARGS` run in this process (scenefit.cli.main) with its output captured, shaped like the
+    finished process it stands for: for the commands on asset folders, which need no Blender. One that
+    would import bpy fails the test (bpy is one Blender per process: those run as processes of their own)."""
+    import contextlib
+    import io
+
+    from scenefit.cli import main
+
+    had_bpy = "bpy" in sys.modules
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([str(a) for a in args])
+    assert had_bpy or "bpy" not in sys.modules, f"scenefit {args[0]} imported bpy into the test process"
+    return subprocess.CompletedProcess(["scenefit", *map(str, args)], code, out.getvalue(), err.getvalue())
+
+
 @pytest.fixture(scope="session")
 def run_py():
     return run_python

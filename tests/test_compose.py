@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -17,6 +15,8 @@ from scenefit.core.maps import PBRMaps
 from scenefit.core.photo import PhotoCamera
 from scenefit.core.pipeline import sun_environment
 from scenefit.core.primitives import uv_sphere
+
+from conftest import scenefit_here
 
 CAMERA = PhotoCamera(yaw_deg=90.0, pitch_deg=-20.0, fov_deg=60.0, width=128, height=96)
 SPHERE = uv_sphere(0.5, 24, 12)
@@ -126,9 +126,8 @@ def test_cli_compose_writes_every_layer_and_leaves_the_photo_alone(tmp_path):
                                         "width": 128, "height": 96}}}))
     before = hashlib.sha256(photo_path.read_bytes()).hexdigest()
     out = tmp_path / "out"
-    proc = subprocess.run([sys.executable, "-m", "scenefit.cli", "compose", str(asset), "--photo", str(photo_path),
-                           "--at", "0.5,0.7", "--light", str(light_path), "--out", str(out), "--spp", "8",
-                           "--quiet"], capture_output=True, text=True, timeout=600)
+    proc = scenefit_here("compose", str(asset), "--photo", str(photo_path), "--at", "0.5,0.7", "--light",
+                         str(light_path), "--out", str(out), "--spp", "8", "--quiet")
     assert proc.returncode == 0, proc.stderr
     assert hashlib.sha256(photo_path.read_bytes()).hexdigest() == before
     report = json.loads((out / "report.json").read_text())
@@ -143,13 +142,11 @@ def test_cli_compose_writes_every_layer_and_leaves_the_photo_alone(tmp_path):
     assert read_image(out / "layers" / "shadow.png").min() < 0.5
 
     # The folder holds this run's results: a second compose into it is refused (one unit per run).
-    again = subprocess.run([sys.executable, "-m", "scenefit.cli", "compose", str(asset), "--photo", str(photo_path),
-                            "--at", "0.5,0.7", "--light", str(light_path), "--out", str(out), "--spp", "8", "--quiet"],
-                           capture_output=True, text=True, timeout=600)
+    again = scenefit_here("compose", str(asset), "--photo", str(photo_path), "--at", "0.5,0.7", "--light",
+                          str(light_path), "--out", str(out), "--spp", "8", "--quiet")
     assert again.returncode == 2 and "--replace" in again.stderr, again.stderr
-    bad = subprocess.run([sys.executable, "-m", "scenefit.cli", "compose", str(asset), "--photo", str(photo_path),
-                          "--at", "2000,5", "--light", str(light_path), "--out", str(tmp_path / "bad")],
-                         capture_output=True, text=True, timeout=600)
+    bad = scenefit_here("compose", str(asset), "--photo", str(photo_path), "--at", "2000,5", "--light",
+                        str(light_path), "--out", str(tmp_path / "bad"))
     assert bad.returncode == 2 and "outside" in bad.stderr and not (tmp_path / "bad").exists()
 
 
@@ -189,9 +186,8 @@ def test_cli_compose_keeps_a_photo_larger_than_the_light_stages_copy_at_its_size
     photo_path = write_image(tmp_path / "photo.png", rng.uniform(0.2, 0.8, (600, 1200, 3)).astype(np.float32))
     light_path = write_image(tmp_path / "light.exr", sun_environment([1.0, 0.0, 1.0], height=32))
     out = tmp_path / "out"
-    proc = subprocess.run([sys.executable, "-m", "scenefit.cli", "compose", str(asset), "--photo", str(photo_path),
-                           "--at", "600,480", "--light", str(light_path), "--out", str(out), "--spp", "2",
-                           "--denoiser", "none", "--quiet"], capture_output=True, text=True, timeout=600)
+    proc = scenefit_here("compose", str(asset), "--photo", str(photo_path), "--at", "600,480", "--light",
+                         str(light_path), "--out", str(out), "--spp", "2", "--denoiser", "none", "--quiet")
     assert proc.returncode == 0, proc.stderr
     assert read_image(out / "composite.png").shape == (600, 1200, 3)
     assert json.loads((out / "report.json").read_text())["placement"]["pixel"] == [600.0, 480.0]

@@ -23,6 +23,8 @@ from scenefit.core.texture.fit_direct import encode_for_metric
 from scenefit.core.texture.uv_raster import rasterize_uv
 from scenefit.core.mesh import normalize_to_unit_sphere
 
+from conftest import scenefit_here
+
 
 def smooth_maps(size: int = 64) -> PBRMaps:
     yy, xx = np.mgrid[0:size, 0:size] / size
@@ -113,25 +115,26 @@ def test_resolution_follows_the_asset_and_the_preset_cap():
 
 def test_cli_convert_render_export_on_an_asset_folder(tmp_path):
     asset = save_asset_folder(uv_sphere(segments=16, rings=8), smooth_maps(32), tmp_path / "asset")
-    proc = scenefit("convert", str(asset), "--out", str(tmp_path / "c"), "--preset", "draft", "--iterations", "20",
+    proc = scenefit_here("convert", str(asset), "--out", str(tmp_path / "c"), "--preset", "draft", "--iterations", "20",
                     "--quiet")
     assert proc.returncode == 0, proc.stderr
     report = json.loads((tmp_path / "c" / "report.json").read_text())
     assert report["decisions"]["method"] == "direct" and report["iterations"] == 20
     assert (tmp_path / "c" / "maps" / "texture.pt").is_file()
 
-    proc = scenefit("render", str(asset), "--texture", str(tmp_path / "c" / "maps" / "texture.pt"), "--out",
+    proc = scenefit_here("render", str(asset), "--texture", str(tmp_path / "c" / "maps" / "texture.pt"), "--out",
                     str(tmp_path / "r"), "--views", "2", "--size", "32", "--spp", "4", "--quiet")
     assert proc.returncode == 0, proc.stderr
     views = sorted((tmp_path / "r").glob("view_*.png"))
     assert len(views) == 2 and read_image(views[0]).shape == (32, 32, 3)
 
-    proc = scenefit("export", str(asset), "--out", str(tmp_path / "x"), "--size", "32", "--spp", "4")
+    proc = scenefit_here("export", str(asset), "--out", str(tmp_path / "x"), "--size", "32", "--spp", "4")
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "x" / "scene.xml").is_file() and (tmp_path / "x" / "mesh.ply").is_file()
 
 
 def test_cli_bad_input_is_a_sentence_not_a_traceback(tmp_path):
+    # processes of their own: convert imports bpy for an asset file, even a missing one
     proc = scenefit("convert", str(tmp_path / "missing.glb"), "--out", str(tmp_path / "o"))
     assert proc.returncode == 2
     assert "does not exist" in proc.stderr and "Traceback" not in proc.stderr

@@ -13,9 +13,11 @@ from scenefit.core.maps import PBRMaps
 from scenefit.core.primitives import uv_sphere
 
 from asset_builder import write_obj
+from conftest import scenefit_here
 
 
 def scenefit(*args: str) -> subprocess.CompletedProcess:
+    """A process of its own: the asset file is read (and the game asset baked) by bpy."""
     return subprocess.run([sys.executable, "-m", "scenefit.cli", *args], capture_output=True, text=True, timeout=900)
 
 
@@ -30,7 +32,7 @@ def test_run_composes_and_a_second_run_reuses_every_stage(tmp_path):
     out = tmp_path / "run"
     args = (str(asset), "--photo", str(photo_path), "--at", "0.5,0.8", "--out", str(out), "--preset", "draft",
             "--guidance", "none", "--spp", "4", "--quiet")
-    first = scenefit("run", *args)
+    first = scenefit_here("run", *args)
     assert first.returncode == 0, first.stderr
     report = json.loads((out / "report.json").read_text())
     status = {name: stage["status"] for name, stage in report["stages"].items()}
@@ -41,13 +43,13 @@ def test_run_composes_and_a_second_run_reuses_every_stage(tmp_path):
     light = report["stages"]["light"]["report"]
     assert light["map_size"] == [128, 64] and "capped at the draft preset" in light["decisions"]["envmap_height"]["why"]
 
-    second = scenefit("run", *args)
+    second = scenefit_here("run", *args)
     assert second.returncode == 0, second.stderr
     again = json.loads((out / "report.json").read_text())
     assert again["reused"] == ["convert", "light", "compose"]
 
     # A compose setting changes only the compose stage.
-    third = scenefit("run", *args[:-3], "--spp", "2", "--quiet")
+    third = scenefit_here("run", *args[:-3], "--spp", "2", "--quiet")
     assert third.returncode == 0, third.stderr
     last = json.loads((out / "report.json").read_text())
     assert last["reused"] == ["convert", "light"] and last["stages"]["compose"]["status"] == "ran"
