@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import scenefit_here
+
 pytestmark = pytest.mark.blender
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -375,8 +377,8 @@ def test_bake_compresses_like_the_input_keeps_tangents_and_writes_the_chosen_tex
     assert out["images"][base["source"]]["mimeType"] == "image/jpeg"
     assert report["texture_size"] == 16 and report["output"]["compress"] == "meshopt"
     assert validator(str(baked))["issues"]["numErrors"] == 0   # the conftest's validator (tools/gltf_validate.js)
-    proc = scenefit("bake", str(asset), "--texture", str(tmp_path / "convert/maps/texture.pt"), "--out",
-                    str(tmp_path / "x.glb"), "--max-texture", "100")
+    proc = scenefit_here("bake", str(asset), "--texture", str(tmp_path / "convert/maps/texture.pt"), "--out",
+                         str(tmp_path / "x.glb"), "--max-texture", "100")   # refused before Blender is needed
     assert proc.returncode == 2 and "--max-texture must be a power of two between 4 and 8192, got 100." in proc.stderr
 
 

@@ -8,7 +8,6 @@ import os
 import re
 import shutil
 import struct
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +17,8 @@ import torch
 from scenefit.core.errors import InputError
 from scenefit.core.game_bake import check_texture_size
 from scenefit.core.maps import PBRMaps, resize_channels
+
+from conftest import scenefit_here
 
 pytestmark = pytest.mark.blender
 
@@ -342,9 +343,6 @@ def test_baking_inside_a_users_session_changes_nothing_of_theirs(run_py, tmp_pat
 
 
 def test_bake_refuses_an_asset_folder_in_one_sentence(tmp_path, example_asset):
-    import sys
-
-    proc = subprocess.run([sys.executable, "-m", "scenefit.cli", "bake", str(example_asset), "--texture", "t.pt",
-                           "--out", str(tmp_path / "x.glb")], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    proc = scenefit_here("bake", str(example_asset), "--texture", "t.pt", "--out", str(tmp_path / "x.glb"))
     assert proc.returncode == 2 and "asset folder" in proc.stderr and "Traceback" not in proc.stderr
     assert not (tmp_path / "x.glb").exists()
