@@ -185,7 +185,8 @@ def block_sections(renders: list[dict], textures: list[dict]) -> list[str]:
                              ("s / iteration", "forward_backward_s", ".3f")]), ""]
 
 
-PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "batch", "samplers", "study", "camera")
+PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "batch", "samplers", "study", "camera",
+         "speed")
 TITLES = {"convert": "Convert", "light": "Light", "compose": "Compose", "adapt": "Adapt (tiny models)",
           "run": "End to end: `scenefit run`"}
 
@@ -300,6 +301,14 @@ def main() -> int:
                      "[camera.md](camera.md). The real assets of the corpus: `make corpus` "
                      "([corpus.md](corpus.md)).", "", "What a wrong camera costs the composite "
                      "([camera_cost.md](camera_cost.md)):", "", cost, ""]
+
+    # scenefit run on real 2k assets and a 12 MP photo, draft and balanced (issue 23's speed goals).
+    if "speed" in parts and not args.quick:
+        subprocess.run([sys.executable, str(Path(__file__).with_name("bench_real_speed.py"))], check=True)
+        log("real-asset speed bench done")
+        table = (RESULTS / "real_speed.md").read_text().split("\n\n", 3)[-1].strip()
+        sections += ["## `scenefit run` on real 2k assets and a 12 MP photo", "",
+                     "[real_speed.md](real_speed.md):", "", table, ""]
 
     total = time.perf_counter() - started
     load = " / ".join(f"{x:.1f}" for x in os.getloadavg())

@@ -8,7 +8,7 @@ from .options import (PRESETS, add_asset_args, add_old_photo_elevation_arg, add_
 
 
 def run(args) -> int:
-    from ..core.compose import COMPOSE_MAX_SIDE, ComposeInputs, compose_to_folder, light_camera
+    from ..core.compose import ComposeInputs, compose_to_folder, light_camera
     from ..core.convert import asset_stack
     from ..core.lighting import load_photo
     from ..core.mesh import normalize_to_unit_sphere
@@ -21,7 +21,7 @@ def run(args) -> int:
     config = stage_config("compose", args.preset, size=args.object_size, shadow_type=args.shadow, spp=args.spp,
                             sampler_type=args.sampler, denoiser_type=args.denoiser, exposure=args.exposure)
     mesh, maps = load_asset(args.asset, args.object)
-    photo, info = load_photo(args.photo, max_side=COMPOSE_MAX_SIDE)
+    photo, info = load_photo(args.photo, max_side=config.max_side)
     h, w = photo.shape[:2]
     placement = Placement.parse(args.at, tuple(info["size"])).pixel((h, w))
     envmap = load_environment(args.light)

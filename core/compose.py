@@ -76,9 +76,13 @@ class ComposeConfig:
     shadow_max_side: int = 1024        # the floor passes render at most this many pixels on the long side and
                                        # the matte is scaled up: shadows are soft, and a 12 MP floor pass would
                                        # cost ten times the object pass for no visible change
+    max_side: int = COMPOSE_MAX_SIDE   # the composite's long side at most (a larger photo is reduced to it)
     seed: int = 0
 
     def __post_init__(self) -> None:
+        if not 64 <= self.max_side <= COMPOSE_MAX_SIDE:
+            raise InputError(f"The composite's long side must be between 64 and {COMPOSE_MAX_SIDE} pixels, got "
+                             f"{self.max_side}.")
         if not 0.0 < self.size <= 2.0:
             raise InputError(f"--object-size is the fraction of the photo's height the asset spans, in (0, 2]; "
                              f"got {self.size}.")
@@ -413,10 +417,10 @@ class ComposeJob:
             return spp, {"spp": spp, "from": "given" if spp == c.spp else f"given {c.spp}, rounded by the sampler"}
         t0 = time.perf_counter()
         integrator = self._object_integrator()
-        box = self.placement.pixel_box
         pilot = self._sampler_spp(c.pilot_spp)
-        a = self._render(self.object_scene, integrator, box, pilot, c.seed + 101)
-        b = self._render(self.object_scene, integrator, box, pilot, c.seed + 202)
+        camera, box = pilot_view(self.camera, self.placement.pixel_box)
+        a = self._render(self.object_scene, integrator, box, pilot, c.seed + 101, camera)
+        b = self._render(self.object_scene, integrator, box, pilot, c.seed + 202, camera)
         covered = (a[..., 3] > 0.999) & (b[..., 3] > 0.999)
         self.timings["pilot"] = time.perf_counter() - t0
         if not covered.any():
@@ -559,10 +563,16 @@ class ComposeJob:
         object_rgb, alpha = self._object_layers()
         matte = self.matte()
         photo_linear = srgb_to_linear(self.photo).astype(np.float32)
-        composite = composite_linear(object_rgb, alpha[..., None], photo_linear, matte)
         changed = (alpha > 0) | (matte < 1.0).any(axis=-1)
-        composite = np.where(changed[..., None], composite, photo_linear)
-        display = np.where(changed[..., None], linear_to_srgb(np.clip(composite, 0.0, 1.0)), self.photo)
+        # Only the box of changed pixels is computed: elsewhere the composite is the photo, exactly.
+        composite, display = photo_linear.copy(), np.array(self.photo, dtype=np.float32)
+        if changed.any():
+            ys, xs = np.nonzero(changed.any(axis=1))[0], np.nonzero(changed.any(axis=0))[0]
+            box = (slice(ys[0], ys[-1] + 1), slice(xs[0], xs[-1] + 1))
+            inside = changed[box][..., None]
+            mixed = composite_linear(object_rgb[box], alpha[box][..., None], photo_linear[box], matte[box])
+            composite[box] = np.where(inside, mixed, photo_linear[box])
+            display[box] = np.where(inside, linear_to_srgb(np.clip(composite[box], 0.0, 1.0)), display[box])
         self.timings["finish"] = time.perf_counter() - t0
         report = {
             "stage": "compose",
@@ -581,6 +591,7 @@ class ComposeJob:
                        "floor_pass": self.decisions["floor_pass"], "pixels": self.decisions.get("shadow_pixels", 0),
                        **({"paper": self.decisions["paper"]} if "paper" in self.decisions else {})},
             "decisions": {"spp": self.decisions["spp"]},
+            "composite_size": [int(self.photo.shape[1]), int(self.photo.shape[0])],   # config.max_side bounds it
             "changed_pixels": int(changed.sum()),
             "render_windows": {"object": list(self.object_window),
                                **({"floor": list(self.floor_window),
@@ -590,6 +601,25 @@ class ComposeJob:
             "timings_seconds": {k: round(v, 3) for k, v in self.timings.items()},
         }
         return ComposeResult(composite, display, object_rgb, alpha, matte, changed, self.placement, report)
+
+
+# The pilot measures the noise of a pixel, which barely depends on the pixel's size: the asset's whole
+# box seen through the same camera with fewer, larger pixels (at most this many on its long side) is
+# enough, where a 12 MP photo's asset spans ~1500 px.
+PILOT_MAX_SIDE = 256
+
+
+def pilot_view(camera: PhotoCamera, box: tuple[int, int, int, int], side: int = PILOT_MAX_SIDE
+               ) -> tuple[PhotoCamera, tuple[int, int, int, int]]:
+    """(camera, box): `camera` with its pixels k times larger and `box` (x0, y0, x1, y1) in them, so the
+    box is at most `side` pixels on its long side (k = 1 when it already is)."""
+    x0, y0, x1, y1 = box
+    k = max(1, -(-max(x1 - x0, y1 - y0) // side))
+    if k == 1:
+        return camera, box
+    small = replace(camera, width=max(1, camera.width // k), height=max(1, camera.height // k))
+    x1, y1 = min(-(-x1 // k), small.width), min(-(-y1 // k), small.height)
+    return small, (min(x0 // k, x1 - 1), min(y0 // k, y1 - 1), x1, y1)
 
 
 def build_compose(inputs: ComposeInputs, config: ComposeConfig = ComposeConfig(),

@@ -48,9 +48,11 @@ TABLES: dict[str, dict[str, dict]] = {
         "final": {},
     },
     # Compose: the final render's noise target and sample cap (the paper renders evaluation at 1024 spp;
-    # here a denoised render aims at a noise level, see README "Composition").
+    # here a denoised render aims at a noise level, see README "Composition"). A draft is a quick look:
+    # at most 2048 px on the long side (a 12 MP photo's composite costs a quarter), the others at the
+    # photo's size up to COMPOSE_MAX_SIDE.
     "compose": {
-        "draft": {"noise_target": 0.06, "max_spp": 16},
+        "draft": {"noise_target": 0.06, "max_spp": 16, "max_side": 2048},
         "balanced": {"noise_target": 0.03, "max_spp": 64},
         "final": {"noise_target": 0.015, "max_spp": 256},
     },

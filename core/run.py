@@ -342,7 +342,7 @@ class PipelineRun:
         self.texture_path, self.upstream = self.out / "adapt" / "maps" / WEIGHTS_FILE, self.keys["adapt"]
 
     def compose(self) -> None:
-        from .compose import COMPOSE_MAX_SIDE, ComposeInputs, compose_to_folder, light_camera
+        from .compose import ComposeInputs, compose_to_folder, light_camera
         from .lighting import load_photo
         from .pipeline import load_environment
         from .texture.bake import load_neural_texture, texture_maps_for_mesh
@@ -355,7 +355,7 @@ class PipelineRun:
 
         def compose(folder: Path) -> dict:
             stack = texture_maps_for_mesh(load_neural_texture(texture_path), self.normalized)
-            full, _ = load_photo(self.photo_path, max_side=COMPOSE_MAX_SIDE)   # the composite is at the photo's size
+            full, _ = load_photo(self.photo_path, max_side=config.max_side)   # at the photo's size, up to max_side
             fh, fw = full.shape[:2]
             camera, camera_from = light_camera(light_path, self.photo_info, fw, fh)
             inputs = ComposeInputs(self.mesh, stack, full, self.placement.pixel((fh, fw)),
