@@ -92,8 +92,12 @@ def _light(args, out: Path) -> int:
     photo, info = load_photo(args.photo)
     where = placement(args, (info["size"][1], info["size"][0]))   # --at in pixels means the photo as stored
     camera, estimate = photo_camera(args, photo.shape[:2])
+    if args.sun_from_shadow:
+        config = replace(config, sun_deg=shadow_sun(args.sun_from_shadow, camera, info, photo.shape[:2]))
     result = estimate_light(photo, where.pixel(photo.shape[:2]), config, photo_camera=camera, photo_info=info,
                             progress=progress(args))
+    if args.sun_from_shadow:
+        result.decisions["sun"]["from"] = "the shadow given by --sun-from-shadow (foot, top, tip)"
     result.decisions["critic"]["choice"] = {"asked": args.critic, "chosen": critic.choice, "why": critic.reason}
     result.decisions["camera"] = estimate
     outputs = write_light_outputs(result, out)
@@ -106,6 +110,15 @@ def _light(args, out: Path) -> int:
         print(f"light: {result.decisions['scene_type']['chosen']} scene, depth {depth_used}, scales "
               f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {Path(args.out) / 'light.exr'}")
     return 0
+
+
+def shadow_sun(points: list[str], camera, info: dict, hw: tuple[int, int]) -> tuple[float, float]:
+    """--sun-from-shadow FOOT TOP TIP as --sun's (azimuth, elevation), through the photo's camera."""
+    from ..core.lighting.shadow_hint import sun_from_shadow
+    from ..core.placement import Placement
+
+    foot, top, tip = (Placement.parse(p, (info["size"][0], info["size"][1])).pixel(hw) for p in points)
+    return sun_from_shadow(camera, foot, top, tip)
 
 
 def photo_camera(args, hw: tuple[int, int]):
@@ -127,10 +140,14 @@ def add_parser(sub) -> None:
     p.add_argument("--scene", choices=("auto", "indoor", "outdoor"), help="scene type (default: auto)")
     add_photo_camera_args(p)
     add_old_photo_elevation_arg(p)
-    p.add_argument("--sun", type=sun_angles, metavar="AZ,EL",
-                   help="the dominant light's direction in degrees: azimuth from the photo's view direction, "
-                        "positive to the right (90: from the right, 180: from behind the camera), elevation above "
-                        "the horizon; the unseen light is centred there")
+    sun = p.add_mutually_exclusive_group()
+    sun.add_argument("--sun", type=sun_angles, metavar="AZ,EL",
+                     help="the dominant light's direction in degrees: azimuth from the photo's view direction, "
+                          "positive to the right (90: from the right, 180: from behind the camera), elevation above "
+                          "the horizon; the unseen light is centred there")
+    sun.add_argument("--sun-from-shadow", nargs=3, metavar=("FOOT", "TOP", "TIP"),
+                     help="the sun from a shadow in the photo: the foot of something upright on the floor, its top, "
+                          "and the tip of its shadow, each X,Y as --at takes it")
     p.add_argument("--depth", choices=("auto", "model", "geometric"), default="auto",
                    help="auto: the depth model if it is on this machine, else the geometric room")
     p.add_argument("--depth-model", help="hub id or local folder of a transformers depth model")

@@ -1,0 +1,72 @@
+"""The sun from a shadow the artist points at (issue 21's hint): the foot of something upright, its
+top and its shadow's tip, through the photo's camera, give --sun's azimuth and elevation."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from scenefit.cli import main
+from scenefit.core.errors import InputError
+from scenefit.core.imageio import write_image
+from scenefit.core.lighting.estimate import sun_direction
+from scenefit.core.lighting.panorama import CAMERA_HEIGHT
+from scenefit.core.lighting.shadow_hint import sun_from_shadow
+from scenefit.core.photo import PhotoCamera
+
+CAMERA = PhotoCamera(yaw_deg=90.0, pitch_deg=-15.0, fov_deg=60.0, width=640, height=480, roll_deg=2.0)
+ORIGIN = np.array([0.0, 0.0, CAMERA_HEIGHT])
+
+
+def shadow_pixels(sun_deg, foot=(0.4, 4.0), height=1.2, camera=CAMERA):
+    """The photo pixels of a post's foot and top and of its shadow's tip under the sun `sun_deg`."""
+    d = sun_direction(sun_deg, camera)
+    base = np.array([foot[0], foot[1], 0.0])
+    top = base + np.array([0.0, 0.0, height])
+    tip = top - d * (top[2] / d[2])
+    return [tuple(camera.project(p[None], ORIGIN)[0]) for p in (base, top, tip)]
+
+
+@pytest.mark.parametrize("sun", [(40.0, 35.0), (-120.0, 20.0), (170.0, 8.0), (0.0, 60.0), (-15.0, 30.0)])  # (a shadow toward the camera stays in front of it)
+def test_the_shadow_gives_back_the_sun_that_cast_it(sun):
+    az, el = sun_from_shadow(CAMERA, *shadow_pixels(sun))
+    assert (az, el) == (pytest.approx(sun[0], abs=1e-6), pytest.approx(sun[1], abs=1e-6))
+
+
+def test_a_sun_straight_overhead_casts_the_shadow_onto_the_foot():
+    foot, top, _ = shadow_pixels((10.0, 45.0))
+    assert sun_from_shadow(CAMERA, foot, top, foot)[1] == pytest.approx(90.0, abs=1e-6)
+
+
+def test_a_turned_camera_measures_azimuth_from_its_own_view():
+    turned = PhotoCamera(yaw_deg=30.0, pitch_deg=-20.0, fov_deg=50.0, width=400, height=300)
+    foot = (3.0, 1.5)     # in front of a camera looking along yaw 30
+    az, el = sun_from_shadow(turned, *shadow_pixels((65.0, 30.0), foot=foot, camera=turned))
+    assert (az, el) == (pytest.approx(65.0, abs=1e-6), pytest.approx(30.0, abs=1e-6))
+
+
+def test_points_that_cannot_be_a_shadow_are_one_sentence():
+    foot, top, tip = shadow_pixels((40.0, 35.0))
+    with pytest.raises(InputError, match="above the horizon"):
+        sun_from_shadow(CAMERA, (320.0, 20.0), top, tip)          # the foot in the sky
+    with pytest.raises(InputError, match="not above the foot"):
+        sun_from_shadow(CAMERA, foot, (foot[0], foot[1] + 40.0), tip)   # the top below the foot
+    with pytest.raises(InputError, match="straight above"):
+        sun_from_shadow(CAMERA, foot, (foot[0] + 150.0, top[1]), tip)   # the top beside it
+
+
+def test_scenefit_light_takes_the_shadow_and_reports_where_the_sun_came_from(tmp_path, capsys):
+    photo = write_image(tmp_path / "yard.png", np.broadcast_to(np.linspace(0.9, 0.3, 48)[:, None, None],
+                                                               (48, 64, 3)).astype(np.float32))
+    camera = PhotoCamera(pitch_deg=-15.0, fov_deg=60.0, width=64, height=48)
+    points = [f"{x / 64:.6f},{y / 48:.6f}" for x, y in shadow_pixels((40.0, 35.0), foot=(0.3, 5.0), camera=camera)]
+    common = ["light", "--photo", str(photo), "--at", "0.5,0.8", "--fov", "60", "--pitch", "-15", "--roll", "0",
+              "--preset", "draft", "--critic", "none", "--quiet"]
+    assert main(common + ["--sun-from-shadow", *points, "--out", str(tmp_path / "light")]) == 0
+    sun = json.loads((tmp_path / "light" / "report.json").read_text())["decisions"]["sun"]
+    assert sun["deg"] == [pytest.approx(40.0, abs=0.05), pytest.approx(35.0, abs=0.05)]
+    assert "shadow" in sun["from"]
+    capsys.readouterr()
+    assert main(common + ["--sun", "10,20", "--sun-from-shadow", *points, "--out", str(tmp_path / "both")]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1 and not (tmp_path / "both").exists()
