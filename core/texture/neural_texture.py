@@ -249,8 +249,9 @@ class NeuralTexture(torch.nn.Module):
                 raise InputError(f"This texture's base is {tuple(base.shape[:2])} but the raster is {h}x{w}; give "
                                  "the base for this raster (base_logit_at).")
             if self.residual_is_zero():
-                fill = _tensor(fill_index).to(base.device, torch.int64).reshape(-1)
-                return self.base_values(base).reshape(-1, len(CHANNELS))[fill].view(h, w, len(CHANNELS))
+                # The base itself, every texel: the asset's own image, uncovered texels included (a
+                # palette several materials sample then bakes to the same pixels for each of them).
+                return self.base_values(base).reshape(h, w, len(CHANNELS))
         if base_logit is not None:
             return self.texture_from_plan(self.plan(position_map, mask, fill_index), base_logit)
         key = _cache_key((position_map, mask, fill_index))
