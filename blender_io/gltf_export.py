@@ -9,6 +9,8 @@ the exporter writes it unchanged; the base colour image carries the original alp
 """
 from __future__ import annotations
 
+import hashlib
+
 import shutil
 import tempfile
 from dataclasses import replace
@@ -69,9 +71,14 @@ def constant_channels(material) -> dict[str, float]:
             if source(bsdf.inputs[name]) is None}
 
 
-def _load_png(bpy, folder: Path, name: str, pixels: np.ndarray, colorspace: str):
+def _load_png(bpy, folder: Path, name: str, pixels: np.ndarray, colorspace: str, shared: dict | None = None):
     """An 8-bit image holding exactly `pixels` (uint8, rows top to bottom), saved as PNG by Blender
-    (straight alpha, as glTF wants) and packed, so the exporter writes these bytes."""
+    (straight alpha, as glTF wants) and packed, so the exporter writes these bytes. `shared` maps the
+    pixels already written to their image: materials that bake to the same pixels (a palette texture
+    many materials sample) share one image, as the input did, instead of each writing a copy."""
+    key = (colorspace, pixels.shape, hashlib.sha256(np.ascontiguousarray(pixels).tobytes()).hexdigest())
+    if shared is not None and key in shared:
+        return shared[key]
     h, w, c = pixels.shape
     rgba = np.concatenate([pixels, np.full((h, w, 4 - c), 255, np.uint8)], axis=2) if c < 4 else pixels
     image = bpy.data.images.new(name, w, h, alpha=c == 4)
@@ -81,11 +88,14 @@ def _load_png(bpy, folder: Path, name: str, pixels: np.ndarray, colorspace: str)
     image.file_format = "PNG"
     image.save()
     image.pack()  # the exporter reads packed pixels; the temporary folder can go
+    if shared is not None:
+        shared[key] = image
     return image
 
 
-def apply_baked_material(material, baked: BakedMaterial, folder: Path) -> list[str]:
-    """Rewire `material` (a fresh import, or a copy) to the baked maps; returns what was done."""
+def apply_baked_material(material, baked: BakedMaterial, folder: Path, shared: dict | None = None) -> list[str]:
+    """Rewire `material` (a fresh import, or a copy) to the baked maps; returns what was done. `shared`:
+    the images written so far in this export (see _load_png)."""
     import bpy
 
     bsdf = principled_bsdf(material)
@@ -104,7 +114,7 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path) -> list[s
     base = nodes.new("ShaderNodeTexImage")
     base.name = base.label = "SceneFit Base Color"
     base.extension = extension
-    base.image = _load_png(bpy, folder, f"{material.name}_base_color", rgba, "sRGB")
+    base.image = _load_png(bpy, folder, f"{material.name}_base_color", rgba, "sRGB", shared)
     base.location = (bsdf.location.x - 700, bsdf.location.y)
     links.new(base.outputs["Color"], bsdf.inputs["Base Color"])
     if alpha is not None:
@@ -127,7 +137,7 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path) -> list[s
         mr = nodes.new("ShaderNodeTexImage")
         mr.name = mr.label = "SceneFit Metallic Roughness"
         mr.extension = extension
-        mr.image = _load_png(bpy, folder, f"{material.name}_metallic_roughness", packed, "Non-Color")
+        mr.image = _load_png(bpy, folder, f"{material.name}_metallic_roughness", packed, "Non-Color", shared)
         mr.location = (bsdf.location.x - 700, bsdf.location.y - 300)
         separate = nodes.new("ShaderNodeSeparateColor")
         separate.location = (bsdf.location.x - 300, bsdf.location.y - 300)
@@ -216,13 +226,13 @@ def bake_materials_to_gltf(materials: list, baked: list[BakedMaterial], out_file
                            output: GltfOutput = GltfOutput()) -> dict:
     """Put `baked[i]` into `materials[i]` (each material once) and export the scene (or `selection_only`)."""
     report = {"materials": []}
-    done = set()
+    done, shared = set(), {}
     with tempfile.TemporaryDirectory(prefix="scenefit-bake-") as folder:
         for maps, material in zip(baked, materials):
             if material.name in done:
                 continue
             done.add(material.name)
-            notes = apply_baked_material(material, maps, Path(folder))
+            notes = apply_baked_material(material, maps, Path(folder), shared)
             report["materials"].append(dict(maps.report(), done=notes))
         written = export_gltf(out_file, file_format, selection_only, protect, output)
     report["files"] = [str(p) for p in written]
