@@ -146,8 +146,10 @@ def show_photo(data, image) -> None:
 
 
 def object_base(obj) -> tuple[np.ndarray, float]:
-    """The object's bottom centre in world space and its height (evaluated bounding box)."""
-    corners = np.array([obj.matrix_world @ _vector(c) for c in obj.bound_box], dtype=np.float64)
+    """The object's (or a list of objects': one asset's) bottom centre in world space and its height
+    (evaluated bounding boxes)."""
+    objects = obj if isinstance(obj, (list, tuple)) else [obj]
+    corners = np.array([o.matrix_world @ _vector(c) for o in objects for c in o.bound_box], dtype=np.float64)
     lo, hi = corners.min(axis=0), corners.max(axis=0)
     return np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]]), float(hi[2] - lo[2])
 
@@ -213,7 +215,8 @@ def photo_behind_render(scene, image) -> None:
 
 def setup_composite(context, obj, photo_path: str | Path, placement: tuple[float, float], size: float,
                     camera: PhotoCamera, scene_camera=None) -> dict:
-    """Camera, photo background, shadow catcher and compositing for `obj` in the photo; returns them.
+    """Camera, photo background, shadow catcher and compositing for `obj` (an object, or a list of the
+    objects of one asset) in the photo; returns them.
 
     scene_camera: the artist's camera that shows the photo (blender_io/scene_camera.py), used as it is;
     else SceneFit's camera, with `camera`'s field of view, pitch and roll, is placed around the asset

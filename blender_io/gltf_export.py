@@ -283,39 +283,59 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
 
 def bake_copy_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_file: str | Path,
                       file_format: str = "glb", output: GltfOutput = GltfOutput()) -> dict:
-    """bake_object_to_gltf for an object in the user's session: a copy of the object, its mesh and its
-    materials gets the maps and is exported alone, then removed. The copies carry the originals'
-    names while the exporter runs (the originals are renamed meanwhile and renamed back after), so
-    the file names its materials as the user does. Nothing of the user's is changed."""
+    """bake_object_to_gltf for an object in the user's session (see bake_copies_to_gltf): slot
+    `slots[i]` of `obj` gets `baked[i]`. Nothing of the user's is changed."""
+    return bake_copies_to_gltf([obj], baked, [[(obj, slot)] for slot in slots], out_file, file_format, output)
+
+
+def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[list[tuple]], out_file: str | Path,
+                        file_format: str = "glb", output: GltfOutput = GltfOutput()) -> dict:
+    """Objects of the user's session written as one asset: a copy of each object, its mesh and its materials
+    gets the maps (`baked[i]` into the material in each (object, slot number) pair of `slots[i]`) and the
+    copies alone are exported, then removed. The copies carry the originals' names while the exporter runs
+    (the originals are renamed meanwhile and renamed back after), so the file names its objects and
+    materials as the user does. Nothing of the user's is changed."""
     import bpy
 
+    if len(baked) != len(slots):
+        raise InputError(f"{len(baked)} baked materials for {len(slots)} materials of the asset.")
     scene = bpy.context.scene
     images_before = set(bpy.data.images)  # the maps made below are removed after; nothing else is
-    copy = obj.copy()
-    copy.data = obj.data.copy()
-    originals = {slot: obj.material_slots[slot].material for slot in slots}
-    copies = {}
-    renamed = []
+    copies, material_copies, renamed = {}, {}, []
     try:
-        for slot, material in originals.items():
-            if material.name not in copies:
-                copies[material.name] = material.copy()
-            copy.material_slots[slot].link = obj.material_slots[slot].link
-            copy.material_slots[slot].material = copies[material.name]
-        scene.collection.objects.link(copy)
-        for original, duplicate in [(obj, copy), *[(bpy.data.materials[n], c) for n, c in copies.items()]]:
+        for obj in objects:
+            copy = obj.copy()
+            copy.data = obj.data.copy()
+            copies[obj.name] = copy
+            scene.collection.objects.link(copy)
+        materials = []
+        for pairs in slots:
+            for obj, slot in pairs:
+                material = obj.material_slots[slot].material
+                if material.name not in material_copies:
+                    material_copies[material.name] = material.copy()
+                copy = copies[obj.name]
+                copy.material_slots[slot].link = obj.material_slots[slot].link
+                copy.material_slots[slot].material = material_copies[material.name]
+            obj, slot = pairs[0]
+            materials.append(material_copies[obj.material_slots[slot].material.name])
+        for original, duplicate in [*[(bpy.data.objects[n], c) for n, c in copies.items()],
+                                    *[(bpy.data.materials[n], c) for n, c in material_copies.items()]]:
             name = original.name
             original.name = f"{name}~scenefit"
             renamed.append((original, name))
             duplicate.name = name
-        report = bake_object_to_gltf(copy, baked, slots, out_file, file_format, whole_scene=False, output=output)
+        report = bake_materials_to_gltf(materials, baked, out_file, file_format, list(copies.values()),
+                                        output=output)
     finally:
         # (a SceneFit result material's own image nodes are also named "SceneFit …": keep those)
         images = set(bpy.data.images) - images_before
-        mesh = copy.data
-        bpy.data.objects.remove(copy)
-        bpy.data.meshes.remove(mesh)
-        for duplicate in copies.values():
+        for copy in copies.values():
+            mesh = copy.data
+            bpy.data.objects.remove(copy)
+            if mesh.users == 0:
+                bpy.data.meshes.remove(mesh)
+        for duplicate in material_copies.values():
             bpy.data.materials.remove(duplicate)
         for image in images:
             bpy.data.images.remove(image)

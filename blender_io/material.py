@@ -314,10 +314,12 @@ def _load_image(path: str | os.PathLike, colorspace: str):
     return image
 
 
-def write_result_material(obj, maps_paths: dict, name: str | None = None, assign: bool = True):
+def write_result_material(obj, maps_paths: dict, name: str | None = None, assign: bool = True,
+                          wrap: tuple[str, str] | None = None):
     """A new material with image textures for the result maps; returns it.
 
     maps_paths: {"base_color": path (sRGB image), "roughness": path or float, "metallic": path or float}.
+    wrap: how UVs outside [0, 1] read the maps, (u, v), as the material they replace (default repeat).
     Nothing of the user's is modified or deleted: new images are loaded (never reused), and when
     `assign` puts the new material in the object's active slot, the material it replaces gets a
     fake user so it survives saving.
@@ -343,6 +345,8 @@ def write_result_material(obj, maps_paths: dict, name: str | None = None, assign
         tex = nodes.new("ShaderNodeTexImage")
         tex.name = tex.label = f"SceneFit {socket}"
         tex.image = _load_image(value, space)
+        if wrap is not None and wrap[0] == wrap[1]:
+            tex.extension = EXTENSION_OF_WRAP[wrap[0]]
         tex.location = (bsdf.location.x - 400, bsdf.location.y - 300 * row)
         links.new(tex.outputs["Color"], bsdf.inputs[socket])
     if assign:

@@ -29,14 +29,18 @@ class SceneMesh:
     notes: list[str]
 
 
-def scene_mesh(objects, depsgraph, name: str) -> SceneMesh:
-    """The mesh objects `objects` in world space, one mesh; materials shared by objects counted once."""
+def scene_mesh(objects, depsgraph, name: str, strict: bool = False) -> SceneMesh:
+    """The mesh objects `objects` in world space, one mesh; materials shared by objects counted once.
+    strict: an object that cannot be textured is refused (the objects the artist chose in Blender)
+    instead of left out with a note (an asset file's scene)."""
     parts, materials, users, taken, notes = [], [], [], [], []
     index_of: dict[str, int] = {}
     for obj in sorted(objects, key=lambda o: o.name):   # a fixed order: convert and bake read alike
         try:
             mesh, slots = object_mesh_and_slots(obj, depsgraph, space="world")
         except InputError as error:
+            if strict:
+                raise
             notes.append(f"object '{obj.name}' is left as it is ({error})")
             continue
         local = []

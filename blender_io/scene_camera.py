@@ -70,25 +70,32 @@ def horizontal_fov_deg(camera, width: int, height: int) -> float:
 
 def scene_view(camera, obj, photo_size: tuple[int, int], depsgraph) -> tuple[SceneView, list[str]]:
     """The arrangement of `obj` seen through the artist's `camera` (blender_io/placement.SceneView) and
-    notes on what SceneFit does not model (lens shift, a tilted or unevenly scaled asset)."""
+    notes on what SceneFit does not model (lens shift, a tilted or unevenly scaled asset). `obj` may be a
+    list of the objects of one asset: read in world space, they stand as they are (no turn of their own)."""
     width, height = photo_size
     notes = []
     if abs(camera.data.shift_x) > 1e-4 or abs(camera.data.shift_y) > 1e-4:
         notes.append(f"the camera's lens shift ({camera.data.shift_x:.3f}, {camera.data.shift_y:.3f}) is not "
                      "modelled: the composite keeps the principal point at the photo's centre")
-    evaluated = obj.evaluated_get(depsgraph)
-    mesh = evaluated.to_mesh()
-    try:
-        points = np.empty(len(mesh.vertices) * 3, np.float64)
-        mesh.vertices.foreach_get("co", points)
-    finally:
-        evaluated.to_mesh_clear()
-    matrix = np.array(obj.matrix_world, np.float64)
-    points = points.reshape(-1, 3) @ matrix[:3, :3].T + matrix[:3, 3]
-    axes = matrix[:3, :3] / np.linalg.norm(matrix[:3, :3], axis=0)
-    if abs(axes[2, 2]) < 0.9999:
-        notes.append(f"'{obj.name}' is tilted off the vertical; SceneFit stands it upright on the floor")
-    yaw = math.degrees(math.atan2(axes[1, 0], axes[0, 0]))
+    objects = list(obj) if isinstance(obj, (list, tuple)) else [obj]
+    clouds = []
+    for part in objects:
+        evaluated = part.evaluated_get(depsgraph)
+        mesh = evaluated.to_mesh()
+        try:
+            points = np.empty(len(mesh.vertices) * 3, np.float64)
+            mesh.vertices.foreach_get("co", points)
+        finally:
+            evaluated.to_mesh_clear()
+        matrix = np.array(part.matrix_world, np.float64)
+        clouds.append(points.reshape(-1, 3) @ matrix[:3, :3].T + matrix[:3, 3])
+    points = np.concatenate(clouds)
+    yaw = 0.0
+    if len(objects) == 1:   # one object is read in object space: its own turn and tilt are the asset's
+        axes = matrix[:3, :3] / np.linalg.norm(matrix[:3, :3], axis=0)
+        if abs(axes[2, 2]) < 0.9999:
+            notes.append(f"'{objects[0].name}' is tilted off the vertical; SceneFit stands it upright on the floor")
+        yaw = math.degrees(math.atan2(axes[1, 0], axes[0, 0]))
     camera_matrix = np.array(camera.matrix_world, np.float64)
     seen = asset_in_view(camera_matrix, horizontal_fov_deg(camera, width, height), width, height, points, yaw,
                          f"The scene camera '{camera.name}'")

@@ -1,7 +1,8 @@
-"""Bake Asset: the active object with its SceneFit texture written as a game asset (GLB or glTF).
+"""Bake Asset: the asset (the selected objects, or the active object with all its materials) with its
+SceneFit texture written as a game asset (GLB or glTF), every material baked in its own UVs.
 
 The maps are baked from the neural texture in the background job (plain arrays, no bpy); a COPY of
-the object and its materials gets them and is exported by Blender's glTF exporter on the main
+each object and its materials gets them and is exported by Blender's glTF exporter on the main
 thread, then removed: the artist's object, materials and scene stay as they were.
 """
 from __future__ import annotations
@@ -11,13 +12,12 @@ from pathlib import Path
 import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 
-from ..blender_io.gltf_export import FORMATS, bake_copy_to_gltf, constant_channels, normal_mapped
-from ..blender_io.material import material_wrap
+from ..blender_io.gltf_export import FORMATS, bake_copies_to_gltf, normal_mapped
 from ..core.errors import InputError
 from ..core.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TEXTURE_FORMATS, GltfOutput
 from ..core.pipeline import write_report
 from . import work
-from .common import OnMesh, one_material_object, run_folder
+from .common import OnMesh, asset_layout, run_folder
 from .jobs import JobOperator
 from .properties import PATH
 
@@ -42,8 +42,8 @@ def texture_file(context) -> Path:
 
 
 class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
-    """Write the active object with its SceneFit texture baked into its material as a game asset (glTF 2.0);
-    the object, its materials and the scene are left as they are"""
+    """Write the asset (the selected objects, or the active one) with its SceneFit texture baked into every
+    material as a game asset (glTF 2.0); the objects, their materials and the scene are left as they are"""
 
     bl_idname = "scenefit.bake_asset"
     bl_label = "Bake Asset"
@@ -69,39 +69,43 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
             raise InputError(f"Texture size must be a power of two from 4 to 8192 (or 0 for the fitted size), got {size}.")
         GltfOutput(self.compress, self.textures, self.max_texture)  # a bad setting is one sentence before any work
         texture = texture_file(context)
-        obj, mesh, slot, material = one_material_object(context)
-        self._output = GltfOutput(self.compress, self.textures, self.max_texture, tangents=normal_mapped(material))
+        layout = asset_layout(context)   # the selected objects, or the active one with all its materials
+        self._output = GltfOutput(self.compress, self.textures, self.max_texture,
+                                  tangents=any(normal_mapped(m) for m in layout.materials))
         if self.filepath:
             out_file = Path(bpy.path.abspath(self.filepath))
             if out_file.suffix.lower() != f".{self.file_format}":
                 out_file = out_file.with_suffix(f".{self.file_format}")
             self._folder = None
         else:
-            self._folder = run_folder(context, "bake", obj.name)
-            out_file = Path(f"{bpy.path.clean_name(obj.name)}.{self.file_format}")
-        self._object_name, self._slots, self._out_file = obj.name, [slot], out_file
-        return work.bake_game_maps, {"texture": str(texture), "mesh": mesh, "names": [material.name],
-                                     "size": self.texture_size, "max_size": self.max_texture,
-                                     "constants": [constant_channels(material)],
-                                     "wraps": [material_wrap(material)]}
+            self._folder = run_folder(context, "bake", layout.name)
+            out_file = Path(f"{bpy.path.clean_name(layout.name)}.{self.file_format}")
+        self._objects, self._slots, self._out_file = layout.objects, layout.slots, out_file
+        return work.bake_game_maps, dict(layout.bake_data(), texture=str(texture), size=self.texture_size,
+                                         max_size=self.max_texture)
 
     def apply(self, context, result) -> str:
-        obj = bpy.data.objects.get(self._object_name)
-        if obj is None:
-            raise InputError(f"The object '{self._object_name}' was deleted while SceneFit baked it.")
+        gone = [name for name in self._objects if name not in bpy.data.objects]
+        if gone:
+            raise InputError(f"The object '{gone[0]}' was deleted while SceneFit baked it.")
+        objects = [bpy.data.objects[name] for name in self._objects]
+        slots = [[(bpy.data.objects[name], number) for name, number in pairs] for pairs in self._slots]
+        if any(number >= len(obj.material_slots) for pairs in slots for obj, number in pairs):
+            raise InputError("A material slot of the asset was removed while SceneFit baked it; bake again.")
+        shown = objects[0].name if len(objects) == 1 else f"{len(objects)} objects ({', '.join(self._objects)})"
 
         def export(folder: Path | None) -> dict:
             out_file = self._out_file if folder is None else folder / self._out_file
-            report = bake_copy_to_gltf(obj, result["baked"], self._slots, out_file, self.file_format, self._output)
-            report.update({"object": obj.name, "format": self.file_format, "texture_size": result["size"],
-                           "file": str(out_file)})
+            report = bake_copies_to_gltf(objects, result["baked"], slots, out_file, self.file_format, self._output)
+            report.update({"object": objects[0].name if len(objects) == 1 else None, "objects": list(self._objects),
+                           "format": self.file_format, "texture_size": result["size"], "file": str(out_file)})
             if folder is not None:
                 write_report(folder / "report.json", report)
             return report
 
         # A run folder is written whole; a chosen file is moved into place once the exporter has finished.
         report = export(None) if self._folder is None else work.written_whole(str(self._folder), export)
-        return f"Baked '{obj.name}' at {result['size']}² into {report['file']}"
+        return f"Baked '{shown}' at {result['size']}² into {report['file']}"
 
 
 classes = (SCENEFIT_OT_bake_asset,)

@@ -6,14 +6,17 @@ import math
 import os
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import bpy
 
 from ..blender_io import maps_from_material
 from ..core.errors import InputError
+from ..core.materials import AssetMaterials
 
 ADDON_PACKAGE = __package__.rpartition(".")[0]
+TAG = "scenefit"   # what every datablock SceneFit makes carries (operators/results.py)
 
 
 # -- dependencies ------------------------------------------------------------------------------------
@@ -57,16 +60,102 @@ def one_material_object(context):
     obj = context.active_object
     mesh, slots = object_mesh_and_slots(obj, context.evaluated_depsgraph_get())
     if len(slots) != 1:
-        raise InputError(f"'{obj.name}' uses {len(slots)} materials; in Blender SceneFit works on objects with one "
-                         f"material, so save the file and run `scenefit run FILE.blend --object \"{obj.name}\"`, "
-                         f"which fits every material and bakes them back into a GLB.")
+        raise InputError(f"'{obj.name}' uses {len(slots)} materials; this step works on objects with one material, "
+                         f"while Run All and Bake Asset take every material (and several selected objects).")
     return obj, mesh, slots[0], obj.material_slots[slots[0]].material
+
+
+@dataclass
+class AssetLayout:
+    """What an operator works on in Blender, read without touching any pixels.
+
+    objects: the asset's object names (one, or the selected ones as one asset).
+    mesh: their mesh, material_index numbering `materials` (object space for one object, as the artist's
+    object is wherever it is moved; world space for several, as an asset file's scene is read).
+    materials: the material datablocks, one per material of the asset.
+    slots: slots[i] = the (object name, slot number) pairs that hold materials[i] (a result replaces them all).
+    """
+
+    name: str
+    objects: list[str]
+    mesh: object
+    materials: list
+    slots: list[list[tuple[str, int]]]
+
+    def read(self, context) -> AssetMaterials:
+        """Every material's maps and what was read (procedural chains are baked over their own faces)."""
+        from ..blender_io.material import read_material
+
+        users = [bpy.data.objects[pairs[0][0]] for pairs in self.slots]
+        return AssetMaterials(mesh=self.mesh, materials=tuple(
+            read_material(m, obj, pairs[0][1]) for m, obj, pairs in zip(self.materials, users, self.slots)))
+
+    def bake_data(self) -> dict:
+        """What core.game_bake needs to bake each material in its own UVs (plain data, for a job)."""
+        from ..blender_io.gltf_export import constant_channels
+        from ..blender_io.material import material_wrap
+
+        return {"mesh": self.mesh, "names": [m.name for m in self.materials],
+                "constants": [constant_channels(m) for m in self.materials],
+                "wraps": [material_wrap(m) for m in self.materials]}
+
+
+def asset_objects(context) -> list:
+    """The selected mesh objects when two or more are (one asset), else the active object; SceneFit's own
+    objects (its camera, shadow catcher) never count."""
+    selected = [o for o in context.selected_objects if o.type == "MESH" and TAG not in o]
+    if len(selected) >= 2:
+        return sorted(selected, key=lambda o: o.name)
+    obj = context.active_object
+    if obj is None or obj.type != "MESH":
+        raise InputError("No mesh object is active; select the asset (one object, or several to fit them as one).")
+    return [obj]
+
+
+def asset_layout(context) -> AssetLayout:
+    """The asset of Run All and Bake Asset: the selected objects in world space, or the active object with
+    all its material slots. One sentence (InputError) for what cannot be textured."""
+    from ..blender_io.material import object_mesh_and_slots
+    from ..blender_io.scene_asset import scene_mesh
+
+    objects = asset_objects(context)
+    depsgraph = context.evaluated_depsgraph_get()
+    active = context.active_object
+    name = active.name if active in objects else objects[0].name
+    if len(objects) == 1:
+        obj = objects[0]
+        mesh, used = object_mesh_and_slots(obj, depsgraph)
+        return AssetLayout(name, [obj.name], mesh, [obj.material_slots[s].material for s in used],
+                           [[(obj.name, s)] for s in used])
+    try:
+        scene = scene_mesh(objects, depsgraph, name, strict=True)
+    except InputError as error:
+        raise InputError(f"The selection cannot be textured as one asset: {error}") from None
+    index = {m.name: i for i, m in enumerate(scene.materials)}
+    slots: list[list[tuple[str, int]]] = [[] for _ in scene.materials]
+    for obj in objects:   # every slot holding one of the asset's materials gets its result
+        for number, slot in enumerate(obj.material_slots):
+            if slot.material is not None and slot.material.name in index:
+                slots[index[slot.material.name]].append((obj.name, number))
+    return AssetLayout(name, [o.name for o in objects], scene.mesh, list(scene.materials), slots)
 
 
 def gather_asset(context):
     """The active object, its mesh (object space) and material maps, as core data."""
     obj, mesh, _, material = one_material_object(context)
     return obj, mesh, maps_from_material(material)
+
+
+def scene_layout(op, context, refusal: str):
+    """(photo, AssetLayout) for Run All, which fits the asset (any number of materials and objects) into
+    the photo (mode Scene); `refusal` ends the one sentence said in another mode."""
+    settings = context.scene.scenefit
+    if settings.mode != "scene":
+        raise InputError(f"{refusal} (mode Scene); mode '{settings.mode}' does not.")
+    photo = photo_path(context)
+    layout = asset_layout(context)
+    op._object_name = layout.name
+    return photo, layout
 
 
 def scene_asset(op, context, refusal: str):

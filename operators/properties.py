@@ -6,7 +6,8 @@ only the artist's choices and the datablocks SceneFit made are saved with the .b
 import math
 
 import bpy
-from bpy.props import EnumProperty, FloatProperty, FloatVectorProperty, PointerProperty, StringProperty
+from bpy.props import (CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
+                       PointerProperty, StringProperty)
 
 from ..core.photo import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG
 from ..core.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
@@ -39,6 +40,15 @@ def _path_options() -> set[str]:
 
 
 PATH = _path_options()
+
+
+class SceneFitSlot(bpy.types.PropertyGroup):
+    """One material slot the last result went to: what it held before (the artist's) and SceneFit's material."""
+
+    asset_object: PointerProperty(name="Object", type=bpy.types.Object)
+    slot: IntProperty(name="Slot", min=0)
+    original: PointerProperty(name="Original material", type=bpy.types.Material)
+    result: PointerProperty(name="SceneFit material", type=bpy.types.Material)
 
 
 class SceneFitSettings(bpy.types.PropertyGroup):
@@ -79,6 +89,8 @@ class SceneFitSettings(bpy.types.PropertyGroup):
     result_material: PointerProperty(name="SceneFit material", type=bpy.types.Material)
     original_material: PointerProperty(name="Original material", type=bpy.types.Material)
     result_object: PointerProperty(name="Asset", type=bpy.types.Object)
+    # Every slot of every object the last result went to (the Results section switches them all).
+    result_slots: CollectionProperty(name="Result slots", type=SceneFitSlot)
     result_world: PointerProperty(name="SceneFit World", type=bpy.types.World)
     original_world: PointerProperty(name="Original World", type=bpy.types.World)
     texture_path: StringProperty(name="Neural texture", subtype="FILE_PATH", options=PATH,
@@ -87,7 +99,7 @@ class SceneFitSettings(bpy.types.PropertyGroup):
     composite_path: StringProperty(name="Composite", subtype="FILE_PATH", options=PATH, description="The last composite render")
 
 
-classes = (SceneFitSettings,)
+classes = (SceneFitSlot, SceneFitSettings)
 
 
 def register() -> None:

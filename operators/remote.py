@@ -67,6 +67,9 @@ def remote_work(op, context, address: str) -> tuple:
     models = replace(models, cache_dir=None, device_type="auto")
     # The job's folder comes back whole as this run's new folder (nothing of it while it runs or if cancelled).
     folder = run_folder(context, op.job_name, obj.name)
+    # Where the results go (Run's apply): the object's active slot, as for one material ever.
+    op._layout = {"objects": [obj.name], "slots": [[(obj.name, obj.active_material_index)]], "wraps": None,
+                  "name": obj.name}
     return work_remotely, {
         "mesh": mesh, "maps": maps, "photo": str(photo), "at": tuple(settings.placement), "worker": address,
         "out": str(folder.parent), "name": folder.name, "preset": settings.preset,
@@ -111,7 +114,10 @@ def run_result(folder: str | Path, report: dict) -> dict:
             "maps": {k: path(outputs[k]) for k in ("base_color", "roughness", "metallic")},
             "hdr": str(light) if light.is_file() else "", "composite": str(composite) if composite.is_file() else "",
             "stages": {name: stage["status"] for name, stage in stages.items()},
-            "adapt_skipped": stages.get("adapt", {}).get("why", "")}
+            "adapt_skipped": stages.get("adapt", {}).get("why", ""),
+            # the camera the light stage used, which the Cycles set-up takes (as after a local run)
+            "camera": {k: v for k, v in stages.get("light", {}).get("report", {}).get("decisions", {})
+                       .get("photo_camera", {}).items() if k in ("fov_deg", "pitch_deg", "roll_deg")}}
 
 
 def apply_remote(op, context, result: dict) -> str:

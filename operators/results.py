@@ -31,23 +31,87 @@ def material_images(material) -> list:
 
 
 def apply_result_material(context, object_name: str, result: dict, stage: str):
-    """A new material from result['maps'] on the object; the artist's material is kept as the original."""
-    settings = context.scene.scenefit
+    """A new material from result['maps'] in the object's active slot; the artist's material is kept as the original."""
     obj = bpy.data.objects.get(object_name)
-    if obj is None:
-        raise InputError(f"The object '{object_name}' was deleted while SceneFit ran; the maps are in "
-                         f"'{Path(result['report']).parent}'.")
-    current = obj.active_material
-    if current is not None and TAG not in current:
-        settings.original_material = current  # the artist's own, never one SceneFit made
-    mat = write_result_material(obj, result["maps"], name=f"{obj.name} SceneFit {stage}")
-    mat[TAG] = stage
-    for image in material_images(mat):
-        _settle_image(image, stage)
-    settings.result_material, settings.result_object = mat, obj
+    if obj is not None and not obj.material_slots:   # (a generated texture on an object without material)
+        obj.data.materials.append(None)
+    slot = obj.active_material_index if obj is not None else 0
+    return apply_result_materials(context, [[(object_name, slot)]], [result["maps"]], result, stage,
+                                  names=[f"{object_name} SceneFit {stage}"])[0]
+
+
+def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: list[dict], result: dict, stage: str,
+                           names: list[str] | None = None, wraps: list | None = None) -> list:
+    """A new material per material of the asset, from maps[i], in every slot slots[i] names ((object name,
+    slot number) pairs); returns them. What each slot held is kept as its original (a fake user, so saving
+    keeps it) for the Results section's switch; a slot that held an earlier SceneFit result keeps the
+    artist's material it replaced as its original. Nothing is changed when an object or slot is gone."""
+    settings = context.scene.scenefit
+    where = Path(result["report"]).parent
+    targets = []
+    for pairs in slots:
+        found = []
+        for name, number in pairs:
+            obj = bpy.data.objects.get(name)
+            if obj is None or number >= len(obj.material_slots):
+                raise InputError(f"The object '{name}' (or its material slot {number + 1}) was deleted while SceneFit "
+                                 f"ran; the maps are in '{where}'.")
+            found.append((obj, number))
+        targets.append(found)
+    if settings.result_slots:
+        previous = {(e.asset_object.name, e.slot): e.original for e in settings.result_slots if e.asset_object}
+    else:   # a file from before every slot was recorded
+        previous = {(settings.result_object.name, settings.result_object.active_material_index):
+                    settings.original_material} if settings.result_object is not None else {}
+    records, made = [], []
+    for index, (found, paths) in enumerate(zip(targets, maps)):
+        first, number = found[0]
+        held = first.material_slots[number].material
+        artists = previous.get((first.name, number)) if held is not None and TAG in held else held
+        name = names[index] if names else f"{artists.name if artists else first.name} SceneFit {stage}"
+        mat = write_result_material(first, paths, name=name, assign=False, wrap=wraps[index] if wraps else None)
+        mat[TAG] = stage
+        for image in material_images(mat):
+            _settle_image(image, stage)
+        for obj, number in found:
+            current = obj.material_slots[number].material
+            original = previous.get((obj.name, number)) if current is not None and TAG in current else current
+            if current is not None:
+                current.use_fake_user = True   # whichever is swapped out survives saving
+            obj.material_slots[number].material = mat
+            records.append((obj, number, original, mat))
+        made.append(mat)
+    settings.result_slots.clear()
+    for obj, number, original, mat in records:
+        entry = settings.result_slots.add()
+        entry.asset_object, entry.slot, entry.original, entry.result = obj, number, original, mat
+    settings.result_material, settings.result_object = made[0], records[0][0]
+    if records[0][2] is not None:
+        settings.original_material = records[0][2]
     if result.get("texture"):
         settings.texture_path = relative_if_saved(result["texture"])
-    return mat
+    return made
+
+
+def result_targets(layout) -> dict:
+    """Where a job's result goes, as plain data kept on the operator while the job runs (the datablocks
+    are found again by name when it ends): an operators.common.AssetLayout's objects and slots, the
+    wrap of each material's maps, and the result's name where the asset is one object with one material
+    (as ever: '<object> SceneFit <stage>'; else each is named after the artist's material it replaces)."""
+    from ..blender_io.material import material_wrap
+
+    one = len(layout.objects) == 1 and len(layout.materials) == 1
+    return {"objects": list(layout.objects), "slots": [list(pairs) for pairs in layout.slots],
+            "wraps": [material_wrap(m) for m in layout.materials], "name": layout.objects[0] if one else None}
+
+
+def apply_layout_results(context, targets: dict, result: dict, stage: str) -> list:
+    """The job's maps into every slot of `targets` (result_targets): result['material_maps'] has each
+    material's own (several materials), else result['maps'] goes to the one material's slots."""
+    per_material = result.get("material_maps") or [result["maps"]]
+    maps = [{k: m[k] for k in ("base_color", "roughness", "metallic")} for m in per_material]
+    names = [f"{targets['name']} SceneFit {stage}"] if targets["name"] else None
+    return apply_result_materials(context, targets["slots"], maps, result, stage, names=names, wraps=targets["wraps"])
 
 
 def apply_result_world(context, hdr_path: str, stage: str = "light"):
@@ -96,6 +160,21 @@ class SCENEFIT_OT_use_result(bpy.types.Operator):
                 self.report({"ERROR"}, "There is no such World; estimate the light first.")
                 return {"CANCELLED"}
             assign_world(context.scene, world)
+            return {"FINISHED"}
+        if settings.result_slots:   # every slot of every object the last result went to
+            switched = 0
+            for entry in settings.result_slots:
+                obj, mat = entry.asset_object, entry.result if self.which == "RESULT" else entry.original
+                if obj is None or mat is None or entry.slot >= len(obj.material_slots):
+                    continue
+                current = obj.material_slots[entry.slot].material
+                if current is not None:
+                    current.use_fake_user = True  # whichever is swapped out survives saving
+                obj.material_slots[entry.slot].material = mat
+                switched += 1
+            if not switched:
+                self.report({"ERROR"}, "There is no such material; convert or adapt the asset first.")
+                return {"CANCELLED"}
             return {"FINISHED"}
         obj = settings.result_object
         mat = settings.result_material if self.which == "RESULT" else settings.original_material

@@ -9,9 +9,9 @@ from ..blender_io.compose import setup_composite
 from ..core.errors import SceneFitError
 from ..core.photo import PhotoCamera
 from . import work
-from .common import OnMesh, model_settings, photo_path, photo_view, run_folder, scene_asset
+from .common import OnMesh, model_settings, photo_path, photo_view, run_folder, scene_layout
 from .jobs import JobOperator
-from .results import apply_composite_image, apply_result_material, apply_result_world
+from .results import apply_composite_image, apply_layout_results, apply_result_world, result_targets
 
 GUIDANCE = (("auto", "Auto", "Adapt with Stable Diffusion 2 when its weights are on this machine"),
             ("sd2", "Stable Diffusion 2", "Adapt; fail when the weights are missing"),
@@ -19,8 +19,9 @@ GUIDANCE = (("auto", "Auto", "Adapt with Stable Diffusion 2 when its weights are
 
 
 class SCENEFIT_OT_run(OnMesh, JobOperator):
-    """Run the whole pipeline on the active object as `scenefit run` does: convert, estimate the photo's light,
-    adapt (when the diffusion models are here and there is a prompt), compose; then apply the results"""
+    """Run the whole pipeline on the asset as `scenefit run` does (the selected objects, or the active one with
+    all its materials): convert, estimate the photo's light, adapt (when the diffusion models are here and
+    there is a prompt), compose; then apply the results to every material slot"""
 
     bl_idname = "scenefit.run"
     bl_label = "Run All"
@@ -31,28 +32,36 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
 
     def prepare(self, context):
         settings = context.scene.scenefit
-        photo, obj, mesh, maps = scene_asset(self, context, "Run All fits the asset into the photo; use Convert "
-                                                            "and Adapt for the other modes")
+        photo, layout = scene_layout(self, context, "Run All fits the asset into the photo; use Convert and "
+                                                    "Adapt for the other modes")
+        mesh, maps = layout.read(context).fitting_view()   # several materials: their atlas (core/materials.py)
         guidance, why_no_adapt = self.guidance, ""
         if not settings.prompt.strip() and guidance == "auto":
             guidance, why_no_adapt = "none", "the Style section has no prompt"
         # The artist's camera when it shows the photo, else the panel's or the estimate; the Cycles set-up
         # takes the camera the run used, so both composites agree.
-        view = photo_view(context, photo, obj)
+        view = photo_view(context, photo, [bpy.data.objects[name] for name in layout.objects])
         self._scene_camera = view["scene_camera"]
+        self._layout = result_targets(layout)
         return work.run, {"mesh": mesh, "maps": maps, "photo": str(photo), "view": view,
-                          "preset": settings.preset, "prompt": settings.prompt, "guidance": guidance, "why_no_adapt": why_no_adapt, "models": model_settings(context)[0],
-                          "out": str(run_folder(context, "run", obj.name))}
+                          "preset": settings.preset, "prompt": settings.prompt, "guidance": guidance,
+                          "why_no_adapt": why_no_adapt, "models": model_settings(context)[0],
+                          # several materials: each baked in its own UVs for its slots
+                          "materials": layout.bake_data() if len(layout.materials) > 1 else None,
+                          "out": str(run_folder(context, "run", layout.name))}
 
     def apply(self, context, result) -> str:
-        mat = apply_result_material(context, self._object_name, result, result["stage"])
+        mats = apply_layout_results(context, self._layout, result, result["stage"])
         world = apply_result_world(context, result["hdr"], "run")
         image = apply_composite_image(context, result["composite"], "run")
-        lines = [f"material '{mat.name}'", f"World '{world.name}'", f"composite image '{image.name}'"]
+        lines = [f"material{'s' if len(mats) > 1 else ''} {', '.join(repr(m.name) for m in mats)}",
+                 f"World '{world.name}'", f"composite image '{image.name}'"]
         settings = context.scene.scenefit
         try:
-            scene_camera = bpy.data.objects.get(self._scene_camera) if self._scene_camera else None
-            made = setup_composite(context, bpy.data.objects[self._object_name], photo_path(context),
+            name = getattr(self, "_scene_camera", "")   # (not set when the run went to a worker)
+            scene_camera = bpy.data.objects.get(name) if name else None
+            objects = [bpy.data.objects[name] for name in self._layout["objects"] if name in bpy.data.objects]
+            made = setup_composite(context, objects, photo_path(context),
                                    tuple(settings.placement), settings.size, PhotoCamera(**result["camera"]),
                                    scene_camera=scene_camera)
             lines.append(f"Cycles composite set up through '{made['camera'].name}' (F12 renders it)")

@@ -183,6 +183,34 @@ def run_config(data: dict):
                      turn_deg=view["turn_deg"], models=data["models"])
 
 
+def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:
+    """Each material's maps baked from the neural texture in that material's own UVs (core.game_bake, as
+    Bake Asset and the command line's bake do), written into folder/<n>/: what the new material in its
+    slots shows. The run's own maps are the atlas of every material (core.materials), which no slot reads.
+    data['materials']: operators.common.AssetLayout.bake_data()."""
+    import numpy as np
+
+    from ..core.game_bake import bake_game_maps as bake, default_texture_size
+    from ..core.imageio import write_image
+    from ..core.texture.bake import load_neural_texture
+
+    info = data["materials"]
+    texture = load_neural_texture(texture_path)
+    size = default_texture_size(texture, len(info["names"]))
+    baked = bake(texture, info["mesh"], list(info["names"]), size, [dict(c) for c in info["constants"]],
+                 [tuple(w) for w in info["wraps"]])
+    maps = []
+    for index, material in enumerate(baked, start=1):
+        where = folder / str(index)
+        paths = {"base_color": str(write_image(where / "base_color.png", material.base_color / 255.0, "uint8"))}
+        for key in ("roughness", "metallic"):
+            value = getattr(material, key)
+            paths[key] = str(write_image(where / f"{key}.png", value / 255.0, "uint8")) \
+                if isinstance(value, np.ndarray) else float(value)
+        maps.append(dict(paths, name=material.name, size=size))
+    return maps
+
+
 def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
     """The command line's pipeline (core.run.run_pipeline: convert -> light -> adapt -> compose; the
     game bake is Bake Asset's, on the main thread) into data['out']; returns what Blender applies."""
@@ -197,16 +225,20 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
         stages = report["stages"]
         if stages["adapt"]["status"] == "skipped" and data.get("why_no_adapt"):
             stages["adapt"]["why"] = data["why_no_adapt"]
-        write_report(folder / "report.json", report)  # paths relative to the run folder, which moves
         last = "adapt" if stages["adapt"]["status"] != "skipped" else "convert"
         outputs = stages[last]["report"]["outputs"]
+        per_material = material_results(data, outputs["weights"], folder / "materials") \
+            if data.get("materials") else []
+        if per_material:
+            report["materials_in_blender"] = per_material
+        write_report(folder / "report.json", report)  # paths relative to the run folder, which moves
         return {"stage": last, "report": str(folder / "report.json"), "texture": outputs["weights"],
                 "maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
                 "hdr": str(folder / "light" / "light.exr"), "composite": report["composite"],
                 "camera": {k: stages["light"]["report"]["decisions"]["photo_camera"][k]
                            for k in ("fov_deg", "pitch_deg", "roll_deg")},
                 "stages": {name: stage["status"] for name, stage in stages.items()},
-                "adapt_skipped": stages["adapt"].get("why", "")}
+                "adapt_skipped": stages["adapt"].get("why", ""), "material_maps": per_material}
 
     return written_whole(data["out"], write)
 

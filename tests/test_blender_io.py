@@ -195,4 +195,4 @@ def test_operators_take_the_material_the_faces_use_and_refuse_several_in_one_sen
     """)
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["one"] == "Painted" and out["slot"] == 1
-    assert "uses 2 materials" in out["error"] and "scenefit run" in out["error"] and "\n" not in out["error"]
+    assert "uses 2 materials" in out["error"] and "Run All" in out["error"] and "\n" not in out["error"]

@@ -1,0 +1,296 @@
+"""Run All and Bake Asset in Blender on an object with three materials and on a selection of two objects
+(issue 23): every slot of every object gets a new SceneFit material with that material's own maps (baked
+in its own UVs, not the atlas), the Results switch restores every slot, the artist's materials are kept,
+and Bake Asset writes a GLB that validates with every material baked.
+
+One Blender session for the module (conftest.PythonSession), the extension installed from its zip, every
+operator through EXEC_DEFAULT. Each material's base colour is one colour of its own, so a result that
+took another material's cell of the atlas shows the wrong colour.
+"""
+import json
+import struct
+from contextlib import closing
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from conftest import PythonSession, extension_and_models, fill_in
+
+from scenefit.core.imageio import read_image
+
+pytestmark = pytest.mark.blender
+
+# sRGB colours (as stored in 8-bit images) of the materials, by name.
+COLOURS = {"Red": (0.80, 0.10, 0.10), "Green": (0.10, 0.75, 0.15), "Blue": (0.10, 0.20, 0.85),
+           "Yellow": (0.90, 0.80, 0.10), "Grey": (0.5, 0.5, 0.5)}
+
+INSTALL = r"""
+import json, sys, time
+from importlib import import_module
+from pathlib import Path
+import numpy as np
+import bpy
+
+tmp, zip_path = Path(TMP), ZIP
+MODULE = "bl_ext.user_default.scenefit"
+bpy.ops.extensions.package_install_files(repo="user_default", filepath=zip_path, enable_on_install=True)
+bpy.context.preferences.addons[MODULE].preferences.offline = True
+imageio = import_module(MODULE + ".core.imageio")
+imageio.write_image(tmp / "photo.png", np.random.default_rng(1).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32))
+COLOURS = COLOURS_HERE
+
+def colour_material(name):
+    # A material whose Base Color is a 16x16 image of one colour (with a little noise), roughness 0.6.
+    image = bpy.data.images.new(f"{name} image", 16, 16)
+    pixels = np.ones((16, 16, 4), np.float32)
+    noise = np.random.default_rng(len(name)).uniform(-0.02, 0.02, (16, 16, 3))
+    pixels[..., :3] = np.clip(np.array(COLOURS[name], np.float32) + noise, 0, 1)
+    image.pixels.foreach_set(pixels.ravel())
+    image.pack()
+    mat = bpy.data.materials.new(name)
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    links.new(tex.outputs["Color"], nodes["Principled BSDF"].inputs["Base Color"])
+    nodes["Principled BSDF"].inputs["Roughness"].default_value = 0.6
+    return mat
+
+def new_scene():
+    bpy.ops.wm.read_homefile(use_empty=True)  # (factory settings would disable the extension)
+    s = bpy.context.scene.scenefit
+    s.preset, s.photo_path, s.prompt = "draft", str(tmp / "photo.png"), ""
+    s.output_dir = str(tmp / "runs") + "/"
+
+def split_faces(obj, names, by):
+    # Material slots `names`, face i using slot by(polygon).
+    for name in names:
+        obj.data.materials.append(colour_material(name))
+    for poly in obj.data.polygons:
+        poly.material_index = by(poly)
+
+def base_colour(mat):
+    # Median stored (sRGB) colour of the image behind the material's Base Color.
+    link = mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].links[0]
+    image = link.from_node.image
+    w, h = image.size
+    px = np.empty(w * h * image.channels, np.float32)
+    image.pixels.foreach_get(px)
+    return [round(float(v), 4) for v in np.median(px.reshape(-1, image.channels)[:, :3], axis=0)], [w, h]
+
+def artists(names):
+    # What the artist's materials are: nodes, links, their image's pixels (must never change).
+    out = {}
+    for name in names:
+        mat = bpy.data.materials[name]
+        image = bpy.data.images[f"{name} image"]
+        out[name] = [sorted(n.bl_idname for n in mat.node_tree.nodes), len(mat.node_tree.links),
+                     round(float(np.sum(np.array(image.pixels[:]))), 3), "scenefit" in mat]
+    return out
+
+def slots(objects):
+    return {o: [s.material.name for s in bpy.data.objects[o].material_slots] for o in objects}
+
+def results(objects):
+    # Per slot: the material, whether SceneFit made it, and its base colour image's median colour and size.
+    out = {}
+    for o in objects:
+        for i, s in enumerate(bpy.data.objects[o].material_slots):
+            colour, size = base_colour(s.material)
+            out[f"{o}/{i}"] = [s.material.name, s.material.get("scenefit"), colour, size]
+    return out
+
+def operate(objects, originals, glb):
+    # Run All, the switch both ways, Bake Asset; what each left.
+    res, t = {}, time.perf_counter()
+    res["run"] = sorted(bpy.ops.scenefit.run(guidance="none"))
+    res["seconds_run"] = round(time.perf_counter() - t, 2)
+    res["results"] = results(objects)
+    res["fake_users"] = {n: bpy.data.materials[n].use_fake_user for n in originals}
+    res["revert"] = sorted(bpy.ops.scenefit.use_result(target="MATERIAL", which="ORIGINAL"))
+    res["reverted"] = slots(objects)
+    res["again"] = sorted(bpy.ops.scenefit.use_result(target="MATERIAL", which="RESULT"))
+    res["switched_back"] = slots(objects)
+    report = json.loads((Path(bpy.path.abspath(bpy.context.scene.scenefit.composite_path)).parent.parent
+                         / "report.json").read_text())
+    res["stages"] = {k: v["status"] for k, v in report["stages"].items()}
+    res["materials_in_blender"] = [m["name"] for m in report.get("materials_in_blender", [])]
+    before = [sorted(x.name for x in getattr(bpy.data, k)) for k in ("objects", "meshes", "materials", "images")]
+    t = time.perf_counter()
+    res["bake"] = sorted(bpy.ops.scenefit.bake_asset(filepath=str(glb)))
+    res["seconds_bake"] = round(time.perf_counter() - t, 2)
+    after = [sorted(x.name for x in getattr(bpy.data, k)) for k in ("objects", "meshes", "materials", "images")]
+    res["bake_left_session_as_it_was"] = before == after
+    res["artists"] = artists(originals)
+    return res
+"""
+
+# An object with three materials: a cube whose faces use Red, Green and Blue, two faces each.
+THREE = r"""
+new_scene()
+bpy.ops.mesh.primitive_cube_add()
+cube = bpy.context.active_object
+split_faces(cube, ["Red", "Green", "Blue"], lambda poly: poly.index % 3)
+originals = ["Red", "Green", "Blue"]
+before = artists(originals)
+out.update(operate(["Cube"], originals, tmp / "three.glb"))
+out["artists_before"] = before
+"""
+
+# A selection of two objects (one with one material, one with two) and an object left out of it.
+SELECTION = r"""
+new_scene()
+bpy.ops.mesh.primitive_plane_add(location=(0, 4, 0))
+bystander = bpy.context.active_object
+bystander.name = "Bystander"
+bystander.data.materials.append(colour_material("Grey"))
+bpy.ops.mesh.primitive_cube_add(location=(-1.5, 0, 1), scale=(0.8, 0.8, 0.8))
+box = bpy.context.active_object
+box.name = "Box"
+box.data.materials.append(colour_material("Red"))
+bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8, location=(1.5, 0, 1))
+ball = bpy.context.active_object
+ball.name = "Ball"
+split_faces(ball, ["Blue", "Yellow"], lambda poly: int(poly.center.z > 0))
+bystander.select_set(False)
+box.select_set(True)
+ball.select_set(True)
+bpy.context.view_layer.objects.active = ball
+originals = ["Red", "Blue", "Yellow"]
+before = artists(originals + ["Grey"])
+out.update(operate(["Box", "Ball"], originals, tmp / "selection.glb"))
+out["artists"] = artists(originals + ["Grey"])
+out["artists_before"] = before
+out["bystander"] = [s.material.name for s in bystander.material_slots]
+"""
+
+# What cannot work is one sentence: faces on an empty slot, in an object and in a selection.
+REFUSALS = r"""
+new_scene()
+bpy.ops.mesh.primitive_cube_add()
+cube = bpy.context.active_object
+cube.data.materials.append(colour_material("Red"))
+cube.data.materials.append(None)
+cube.data.polygons[0].material_index = 1
+said = {}
+for what in ("object", "selection"):
+    if what == "selection":
+        cube.location.x = 3
+        bpy.ops.mesh.primitive_uv_sphere_add(segments=8, ring_count=4)
+        bpy.context.active_object.data.materials.append(colour_material("Blue"))
+        cube.select_set(True)
+    try:
+        bpy.ops.scenefit.run(guidance="none")
+        said[what] = "finished"
+    except RuntimeError as error:
+        said[what] = str(error)
+out["said"] = said
+out["materials"] = sorted(m.name for m in bpy.data.materials)
+"""
+
+
+@pytest.fixture(scope="module")
+def blender(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("multi_material")
+    zip_path, tiny, user = extension_and_models(tmp)
+    with closing(PythonSession(env={"BLENDER_USER_RESOURCES": str(user)})) as session:
+        session.run(fill_in(INSTALL, tmp, zip_path, tiny).replace("COLOURS_HERE", repr(COLOURS)))
+        yield SimpleNamespace(run=session.run, tmp=tmp)
+
+
+def step(blender, code: str) -> dict:
+    out = blender.run(code)
+    (blender.tmp / "out.json").write_text(json.dumps(out, default=str))  # for a look after a failure
+    print({k: v for k, v in out.items() if k.startswith("seconds")})
+    return out
+
+
+def glb_materials(path: Path, tmp: Path) -> dict[str, list[float]]:
+    """Each material of a .glb with the median stored colour of its base colour image."""
+    data = path.read_bytes()
+    assert data[:4] == b"glTF"
+    length, kind = struct.unpack_from("<I4s", data, 12)
+    doc = json.loads(data[20:20 + length])
+    binary = data[20 + length + 8:]
+    out = {}
+    for index, material in enumerate(doc["materials"]):
+        texture = material["pbrMetallicRoughness"]["baseColorTexture"]["index"]
+        image = doc["images"][doc["textures"][texture]["source"]]
+        view = doc["bufferViews"][image["bufferView"]]
+        file = tmp / f"{path.stem}_{index}.png"
+        file.write_bytes(binary[view.get("byteOffset", 0):view.get("byteOffset", 0) + view["byteLength"]])
+        out[material["name"]] = np.median(read_image(file)[..., :3].reshape(-1, 3), axis=0).tolist()
+    out["_meshes"] = len(doc["meshes"])
+    out["_nodes"] = sorted(n.get("name", "") for n in doc["nodes"] if "mesh" in n)
+    return out
+
+
+def check_slots(out: dict, expected: dict[str, str]) -> None:
+    """Every slot ('Object/slot' -> the artist's material there) got a new SceneFit material of that colour."""
+    got = out["results"]
+    assert sorted(got) == sorted(expected)
+    for key, original in expected.items():
+        name, tag, colour, size = got[key]
+        assert tag == "convert" and name == f"{original} SceneFit convert", got[key]   # the last stage that ran
+        assert np.allclose(colour, COLOURS[original], atol=0.03), (key, original, colour)
+        assert size[0] == size[1] and size[0] >= 4
+    assert len({got[k][0] for k in expected}) == len(set(expected.values()))   # one result per material
+    assert all(out["fake_users"].values()), out["fake_users"]
+
+
+def check_switch(out: dict, expected: dict[str, str]) -> None:
+    """Original restores every slot; SceneFit puts every result back."""
+    for switch in ("revert", "again", "bake"):
+        assert out[switch] == ["FINISHED"], out
+    restored = {f"{o}/{i}": name for o, names in out["reverted"].items() for i, name in enumerate(names)}
+    assert restored == expected
+    back = {f"{o}/{i}": name for o, names in out["switched_back"].items() for i, name in enumerate(names)}
+    assert back == {k: v[0] for k, v in out["results"].items()}
+
+
+def check_glb(path: Path, tmp: Path, validator, expected: dict[str, str]) -> dict:
+    report = validator(str(path))
+    assert report["issues"]["numErrors"] == 0, report["issues"]["messages"]
+    found = glb_materials(path, tmp)
+    names = {f"{o} SceneFit convert" for o in expected.values()}   # the slots' materials, by their names
+    assert set(found) - {"_meshes", "_nodes"} == names, found
+    for original in set(expected.values()):
+        assert np.allclose(found[f"{original} SceneFit convert"], COLOURS[original], atol=0.03), (original, found)
+    return found
+
+
+def test_an_object_with_three_materials_through_run_all_and_bake_asset(blender, validator):
+    out = step(blender, THREE)
+    assert out["run"] == ["FINISHED"]
+    assert out["stages"]["convert"] == "ran" and out["stages"]["compose"] == "ran"
+    assert out["materials_in_blender"] == ["Red", "Green", "Blue"]
+    expected = {"Cube/0": "Red", "Cube/1": "Green", "Cube/2": "Blue"}
+    check_slots(out, expected)
+    check_switch(out, expected)
+    assert out["artists"] == out["artists_before"] and not any(v[3] for v in out["artists"].values())
+    assert out["bake_left_session_as_it_was"]
+    found = check_glb(blender.tmp / "three.glb", blender.tmp, validator, expected)
+    assert found["_meshes"] == 1 and found["_nodes"] == ["Cube"]
+
+
+def test_a_selection_of_two_objects_through_run_all_and_bake_asset(blender, validator):
+    out = step(blender, SELECTION)
+    assert out["run"] == ["FINISHED"]
+    assert out["materials_in_blender"] == ["Blue", "Yellow", "Red"]   # objects by name, then their slots
+    expected = {"Box/0": "Red", "Ball/0": "Blue", "Ball/1": "Yellow"}
+    check_slots(out, expected)
+    check_switch(out, expected)
+    assert out["bystander"] == ["Grey"]   # not selected: not part of the asset
+    assert out["artists"] == out["artists_before"]
+    assert out["bake_left_session_as_it_was"]
+    found = check_glb(blender.tmp / "selection.glb", blender.tmp, validator, expected)
+    assert found["_nodes"] == ["Ball", "Box"]   # the selection, not the bystander
+
+
+def test_what_cannot_be_textured_is_one_sentence(blender):
+    out = step(blender, REFUSALS)
+    said = out["said"]
+    assert "Faces of 'Cube' use material slot 2, which holds no material." in said["object"], said
+    assert "The selection cannot be textured as one asset: Faces of 'Cube' use material slot 2" in said["selection"]
+    assert all("Traceback" not in s and s.count(". ") == 0 for s in said.values()), said
+    assert not any("SceneFit" in m for m in out["materials"])   # nothing was made
