@@ -1,13 +1,14 @@
-"""Convert: fit SceneFit's neural texture to the active object's own maps, as a background job."""
+"""Convert: SceneFit's neural texture from the asset's own maps (the selected objects, or the active object
+with all its materials), as a background job."""
 from __future__ import annotations
 
 import bpy
 from bpy.props import IntProperty
 
 from . import work
-from .common import OnMesh, gather_asset, run_folder
+from .common import OnMesh, asset_layout, run_folder
 from .jobs import JobOperator
-from .results import apply_result_material
+from .results import apply_layout_results, result_targets
 
 
 class SCENEFIT_OT_convert(OnMesh, JobOperator):
@@ -21,15 +22,21 @@ class SCENEFIT_OT_convert(OnMesh, JobOperator):
                             description="For scripts and quick looks; 0 keeps the preset's")
 
     def prepare(self, context):
-        obj, mesh, maps = gather_asset(context)
-        self._object_name = obj.name
-        out = run_folder(context, "convert", obj.name)
-        return work.convert, {"mesh": mesh, "maps": maps, "preset": context.scene.scenefit.preset,
-                              "iterations": self.iterations, "out": str(out)}
+        layout = asset_layout(context)   # the selected objects, or the active one with all its materials
+        asset = layout.read(context)
+        self._object_name, self._layout = layout.name, result_targets(layout)
+        out = run_folder(context, "convert", layout.name)
+        data = {"preset": context.scene.scenefit.preset, "iterations": self.iterations, "out": str(out)}
+        if len(layout.materials) == 1:
+            mesh, maps = asset.fitting_view()
+            return work.convert, dict(data, mesh=mesh, maps=maps)
+        # several materials: fitted as their atlas, then each baked in its own UVs for its slots
+        return work.convert, dict(data, asset=asset, materials=layout.bake_data())
 
     def apply(self, context, result) -> str:
-        mat = apply_result_material(context, self._object_name, result, "convert")
-        return f"Converted: material '{mat.name}' ({result['psnr_db']:.1f} dB on the covered texels)"
+        mats = apply_layout_results(context, self._layout, result, "convert")
+        return (f"Converted: material{'s' if len(mats) > 1 else ''} {', '.join(repr(m.name) for m in mats)} "
+                f"({result['psnr_db']:.1f} dB on the covered texels)")
 
 
 classes = (SCENEFIT_OT_convert,)

@@ -45,13 +45,18 @@ def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> 
     def write(out: Path) -> dict:
         # A roughness or metallic that holds one value stays that value (a factor on the socket), as
         # on the command line, instead of a baked 16-bit map.
-        _, report = convert_and_bake(data["mesh"], data["maps"], out,
+        asset = data.get("asset")   # several materials (core.materials.AssetMaterials), else mesh and maps
+        _, report = convert_and_bake(asset or data["mesh"], None if asset else data["maps"], out,
                                      stage_config("convert", data["preset"], **overrides), progress=progress,
                                      cancel=cancel, keep_constants=True)
+        per_material = material_results(data, report["outputs"]["weights"], out / "materials") \
+            if data.get("materials") else []
+        if per_material:
+            report["materials_in_blender"] = per_material
         write_report(out / "report.json", report)
         return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
                 "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
-                "psnr_db": report["psnr_covered_texels_db"]}
+                "psnr_db": report["psnr_covered_texels_db"], "material_maps": per_material}
 
     return written_whole(data["out"], write)
 

@@ -164,6 +164,17 @@ out["artists_before"] = before
 out["bystander"] = [s.material.name for s in bystander.material_slots]
 """
 
+# Convert on the same object, twice: the second reads the first's results and keeps the artist's as originals.
+CONVERT = r"""
+new_scene()
+bpy.ops.mesh.primitive_cube_add()
+split_faces(bpy.context.active_object, ["Red", "Green", "Blue"], lambda poly: poly.index % 3)
+out["convert"] = [sorted(bpy.ops.scenefit.convert()), sorted(bpy.ops.scenefit.convert())]
+out["results"] = results(["Cube"])
+out["revert"] = sorted(bpy.ops.scenefit.use_result(target="MATERIAL", which="ORIGINAL"))
+out["reverted"] = slots(["Cube"])
+"""
+
 # What cannot work is one sentence: faces on an empty slot, in an object and in a selection.
 REFUSALS = r"""
 new_scene()
@@ -285,6 +296,17 @@ def test_a_selection_of_two_objects_through_run_all_and_bake_asset(blender, vali
     assert out["bake_left_session_as_it_was"]
     found = check_glb(blender.tmp / "selection.glb", blender.tmp, validator, expected)
     assert found["_nodes"] == ["Ball", "Box"]   # the selection, not the bystander
+
+
+def test_convert_takes_every_material_too(blender):
+    out = step(blender, CONVERT)
+    assert out["convert"] == [["FINISHED"], ["FINISHED"]] and out["revert"] == ["FINISHED"]
+    for key, original in {"Cube/0": "Red", "Cube/1": "Green", "Cube/2": "Blue"}.items():
+        name, tag, colour, _ = out["results"][key]
+        # (the second convert's material, named after the artist's one as the first's was)
+        assert tag == "convert" and name == f"{original} SceneFit convert.001", out["results"][key]
+        assert np.allclose(colour, COLOURS[original], atol=0.03), (key, colour)
+    assert out["reverted"] == {"Cube": ["Red", "Green", "Blue"]}
 
 
 def test_what_cannot_be_textured_is_one_sentence(blender):
