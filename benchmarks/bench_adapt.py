@@ -40,7 +40,8 @@ def _run(base: Path, inpaint: Path, model_resolution: int, stages, iterations: i
                          views_per_step=views_per_step,
                          models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint), dtype_type=dtype_type))
     inputs = AdaptInputs(mesh=mesh, raster=raster, texture=texture, photo=photo, placement=Placement((0.5, 0.6), 0.5))
-    adapt_texture(inputs, AdaptConfig(**{**config.__dict__, "iterations": warmup}))  # warm-up: kernels compiled
+    if warmup:
+        adapt_texture(inputs, AdaptConfig(**{**config.__dict__, "iterations": warmup}))  # warm-up: kernels compiled
     if torch.cuda.is_available():
         torch.cuda.reset_peak_memory_stats()
     t = time.perf_counter()

@@ -36,15 +36,22 @@ def tiny_tokenizer():
 # Stable Diffusion 2's UNet shape (865M parameters), for timing with random weights on a GPU.
 SD2_UNET = {"sample_size": 64, "block_out_channels": (320, 640, 1280, 1280), "cross_attention_dim": 1024,
             "layers_per_block": 2, "attention_head_dim": (5, 10, 20, 20)}
+# The whole of SD2 at its real size (stabilityai/stable-diffusion-2-base's configs): the UNet above, the
+# SD VAE (8x downsampling, 84M) and a text encoder of OpenCLIP ViT-H's size (23 layers of 1024, 340M).
+SD2_SIZED = {**SD2_UNET, "vae_block_out_channels": (128, 256, 512, 512), "vae_layers_per_block": 2,
+             "text_layers": 23, "text_heads": 16, "text_intermediate": 4096}
 
 
 def build_tiny_sd(folder: str | Path, in_channels: int = 4, seed: int = 0, sample_size: int = 16,
                   block_out_channels: tuple[int, ...] = (32, 64), cross_attention_dim: int = 32,
-                  layers_per_block: int = 1, attention_head_dim: tuple[int, ...] | None = None) -> Path:
+                  layers_per_block: int = 1, attention_head_dim: tuple[int, ...] | None = None,
+                  vae_block_out_channels: tuple[int, ...] = (8, 16), vae_layers_per_block: int = 1,
+                  text_layers: int = 2, text_heads: int = 4, text_intermediate: int | None = None) -> Path:
     """Write unet/, vae/, text_encoder/, tokenizer/, scheduler/ and model_index.json into `folder`.
 
     in_channels 4 is the text-to-image model, 9 the inpainting one (latents, mask, masked image).
-    The VAE halves the resolution once (a 32-pixel render gives 16x16 latents).
+    The VAE halves the resolution once per block after the first (tiny: a 32-pixel render gives 16x16
+    latents; SD2_SIZED: 8x, as SD's). build_tiny_sd(folder, **SD2_SIZED) is Stable Diffusion 2's size.
     """
     import torch
     from diffusers import AutoencoderKL, DDPMScheduler, UNet2DConditionModel
@@ -63,12 +70,16 @@ def build_tiny_sd(folder: str | Path, in_channels: int = 4, seed: int = 0, sampl
         attention_head_dim=attention_head_dim or tuple(max(1, c // 16) for c in block_out_channels),
         use_linear_projection=True,  # as SD2
     )
-    vae = AutoencoderKL(in_channels=3, out_channels=3, latent_channels=4, block_out_channels=(8, 16),
-                        down_block_types=("DownEncoderBlock2D",) * 2, up_block_types=("UpDecoderBlock2D",) * 2,
-                        layers_per_block=1, norm_num_groups=8, sample_size=2 * sample_size)
+    levels = len(vae_block_out_channels)
+    vae = AutoencoderKL(in_channels=3, out_channels=3, latent_channels=4, block_out_channels=vae_block_out_channels,
+                        down_block_types=("DownEncoderBlock2D",) * levels, up_block_types=("UpDecoderBlock2D",) * levels,
+                        layers_per_block=vae_layers_per_block, norm_num_groups=min(32, vae_block_out_channels[0]),
+                        sample_size=sample_size * 2 ** (levels - 1))
     text_encoder = CLIPTextModel(CLIPTextConfig(
-        vocab_size=len(tokenizer), hidden_size=cross_attention_dim, intermediate_size=2 * cross_attention_dim,
-        num_hidden_layers=2, num_attention_heads=4, max_position_embeddings=77, projection_dim=cross_attention_dim,
+        vocab_size=len(tokenizer), hidden_size=cross_attention_dim,
+        intermediate_size=text_intermediate or 2 * cross_attention_dim,
+        num_hidden_layers=text_layers, num_attention_heads=text_heads, max_position_embeddings=77,
+        projection_dim=cross_attention_dim,
         bos_token_id=tokenizer.bos_token_id, eos_token_id=tokenizer.eos_token_id, pad_token_id=tokenizer.pad_token_id))
     scheduler = DDPMScheduler(num_train_timesteps=1000, beta_start=0.00085, beta_end=0.012,
                               beta_schedule="scaled_linear", prediction_type="epsilon", clip_sample=False)
