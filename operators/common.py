@@ -215,6 +215,7 @@ def photo_view(context, photo: Path, obj=None) -> dict:
     """How a job sees the photo, decided once for every operator:
 
     camera: {"fov_deg", "pitch_deg", "roll_deg"} to use, or None to estimate it from the photo in the job;
+    sun_deg: the dominant light's (azimuth, elevation) the artist set (Pick Sun), or None;
     camera_source: "blender" (the artist's camera shows the photo), "user" (the panel's values), or
     "estimate"; scene_camera: that camera's name; placement, size, turn_deg: where the asset stands (from
     the arrangement through the artist's camera, else the panel's); notes: what is not modelled."""
@@ -244,6 +245,8 @@ def photo_view(context, photo: Path, obj=None) -> dict:
     elif settings.camera_from == "panel":
         view.update(camera={"fov_deg": math.degrees(settings.fov), "pitch_deg": math.degrees(settings.pitch),
                             "roll_deg": math.degrees(settings.roll)}, camera_source="user")
+    view["sun_deg"] = ((math.degrees(settings.sun_azimuth), math.degrees(settings.sun_elevation))
+                       if settings.sun_from == "set" else None)
     return view
 
 

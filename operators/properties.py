@@ -23,6 +23,10 @@ CAMERA_SOURCES = (
     ("estimate", "From the photo", "Estimated from the photo's lines and EXIF (Match Camera shows what was found)"),
     ("panel", "As set here", "The field of view, pitch and roll below"),
 )
+SUN_SOURCES = (
+    ("estimate", "From the photo", "The light stage finds the dominant light from the photo"),
+    ("set", "As set here", "The azimuth and elevation below (Pick Sun sets them from a shadow in the photo)"),
+)
 MODES = (
     ("scene", "Scene", "Restyle the asset so it fits the photo (the prompt describes how it should look there)"),
     ("generate", "Generate", "Make a new texture from the prompt alone"),
@@ -70,6 +74,13 @@ class SceneFitSettings(bpy.types.PropertyGroup):
     roll: FloatProperty(name="Roll", subtype="ANGLE", default=0.0, min=-0.8, max=0.8,
                         description="How far the photo's camera is turned counter-clockwise about its view (the "
                                     "horizon then appears turned clockwise)")
+    sun_from: EnumProperty(name="Sun", items=SUN_SOURCES, default="estimate",
+                           description="Where the dominant light comes from")
+    sun_azimuth: FloatProperty(name="Azimuth", subtype="ANGLE", default=0.0, min=-math.pi, max=math.pi,
+                               description="The sun's direction from the photo's view, positive to the right "
+                                           "(90°: from the right, 180°: from behind the camera)")
+    sun_elevation: FloatProperty(name="Elevation", subtype="ANGLE", default=math.radians(45.0), min=0.0,
+                                 max=math.pi / 2, description="The sun's height above the horizon")
     # Style
     mode: EnumProperty(name="Mode", items=MODES, default="scene")
     prompt: StringProperty(name="Prompt", description="How the asset should look, e.g. 'a leather sofa, "

@@ -100,6 +100,8 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
         critic = "diffusion" if models_available(data["models"], need_inpaint=False)[0] else "none"
     overrides = {"scene_type": data["scene_type"], "critic_type": critic, "models": data["models"],
                  "depth": data["depth"]}
+    if data["view"].get("sun_deg"):   # the artist's sun (Pick Sun), as --sun
+        overrides["sun_deg"] = tuple(data["view"]["sun_deg"])
     config = stage_config("light", data["preset"], **overrides)
     config = replace(config, outpaint=replace(config.outpaint, completion_type=data.get("outpaint", "auto")))
     if data.get("iterations"):  # quick looks and tests
@@ -185,7 +187,8 @@ def run_config(data: dict):
     return RunConfig(preset=data["preset"], prompt=data["prompt"], guidance_type=data["guidance"],
                      size=view["size"], camera_overrides=dict(view["camera"] or {}),
                      camera_source=camera_source(view)[0], camera_why=camera_source(view)[1],
-                     turn_deg=view["turn_deg"], models=data["models"])
+                     turn_deg=view["turn_deg"], models=data["models"],
+                     stage_overrides={"light": {"sun_deg": tuple(view["sun_deg"])}} if view.get("sun_deg") else {})
 
 
 def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:

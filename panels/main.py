@@ -93,6 +93,13 @@ class SCENEFIT_PT_scene(_Subsection, bpy.types.Panel):
         col.prop(settings, "size")
         col.prop(settings, "scene_type")
         draw_camera(settings, context, self.layout.column(align=True))
+        sun = self.layout.column(align=True)
+        row = sun.row(align=True)
+        row.prop(settings, "sun_from", text="Sun")
+        row.operator("scenefit.pick_sun", text="", icon="LIGHT_SUN")
+        if settings.sun_from == "set":
+            sun.prop(settings, "sun_azimuth")
+            sun.prop(settings, "sun_elevation")
 
 
 def draw_camera(settings, context, col) -> None:

@@ -70,3 +70,35 @@ def test_scenefit_light_takes_the_shadow_and_reports_where_the_sun_came_from(tmp
     capsys.readouterr()
     assert main(common + ["--sun", "10,20", "--sun-from-shadow", *points, "--out", str(tmp_path / "both")]) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1 and not (tmp_path / "both").exists()
+
+
+@pytest.mark.blender
+def test_pick_sun_in_blender_sets_the_light_stages_sun(run_py, tmp_path):
+    """Pick Sun's three points (as EXEC_DEFAULT takes them) become the Scene section's sun, which the
+    light stage then uses: its report says so."""
+    photo = write_image(tmp_path / "yard.png", np.broadcast_to(np.linspace(0.9, 0.3, 120)[:, None, None],
+                                                               (120, 160, 3)).astype(np.float32))
+    camera = PhotoCamera(pitch_deg=-15.0, fov_deg=60.0, width=160, height=120)
+    foot, top, tip = ([x / 160, y / 120] for x, y in shadow_pixels((-50.0, 30.0), foot=(0.2, 5.0), camera=camera))
+    proc = run_py(f"""
+        import json, math
+        from pathlib import Path
+        import bpy, addon_utils
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        addon_utils.enable("scenefit", default_set=True)
+        settings = bpy.context.scene.scenefit
+        settings.photo_path, settings.preset = {str(photo)!r}, "draft"
+        settings.camera_from, settings.fov, settings.pitch = "panel", math.radians(60.0), math.radians(-15.0)
+        out = {{"before": settings.sun_from}}
+        out["ops"] = list(bpy.ops.scenefit.pick_sun(foot={foot}, top={top}, tip={tip}))
+        out["sun"] = [settings.sun_from, math.degrees(settings.sun_azimuth), math.degrees(settings.sun_elevation)]
+        out["light"] = list(bpy.ops.scenefit.estimate_light(critic="none", outpaint="prior"))
+        report = Path(bpy.path.abspath(settings.light_path)).parent / "report.json"
+        out["decision"] = json.loads(report.read_text())["decisions"]["sun"]
+        print("JSON" + json.dumps(out))
+    """)
+    out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    assert out["before"] == "estimate" and out["ops"] == ["FINISHED"] and out["light"] == ["FINISHED"]
+    source, azimuth, elevation = out["sun"]
+    assert source == "set" and (azimuth, elevation) == (pytest.approx(-50.0, abs=0.01), pytest.approx(30.0, abs=0.01))
+    assert out["decision"]["deg"] == [pytest.approx(-50.0, abs=0.01), pytest.approx(30.0, abs=0.01)]
