@@ -62,7 +62,70 @@ def draw_marker() -> None:
     gpu.state.line_width_set(1.0)
 
 
-class SCENEFIT_OT_pick_placement(bpy.types.Operator):
+class PhotoClicks:
+    """Operator mixin: clicks in the photo seen through the scene camera, modal in a 3D Viewport. The
+    view goes into the camera; each left click inside the photo's frame is handed to `clicked(context,
+    point)` (point: fractions of the photo, y from the top), which returns the operator's result when
+    done or None for another click; Esc or a right click cancels and restores the view."""
+
+    def start_clicks(self, context, prepare, first_prompt: str) -> set:
+        """invoke's body: prepare(context) sets up the camera (or raises SceneFitError), then clicking begins."""
+        if context.area is None or context.area.type != "VIEW_3D":
+            self.report({"ERROR"}, f"{self.bl_label} works in a 3D Viewport; run it from the SceneFit panel there.")
+            return {"CANCELLED"}
+        try:
+            prepare(context)
+        except SceneFitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        _, rv3d = window_region(context.area)
+        if rv3d is None:
+            self.report({"ERROR"}, "This 3D Viewport has no view to click in.")
+            return {"CANCELLED"}
+        self._view_before = rv3d.view_perspective
+        rv3d.view_perspective = "CAMERA"
+        self.ask(context, first_prompt)
+        context.window.cursor_modal_set("CROSSHAIR")
+        context.window_manager.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def ask(self, context, prompt: str) -> None:
+        context.area.header_text_set(f"{prompt}; Esc or right click cancels")
+
+    def modal(self, context, event):
+        action = classify_event(event.type, event.value)
+        region, rv3d = window_region(context.area)
+        if action == CANCEL:
+            rv3d.view_perspective = self._view_before
+            self._end(context)
+            return {"CANCELLED"}
+        if action != CLICK:
+            return {"RUNNING_MODAL"} if event.type in ("LEFTMOUSE", "RIGHTMOUSE") else {"PASS_THROUGH"}
+        # The click is in window coordinates; the frame is in the viewport region's.
+        mouse = (event.mouse_x - region.x, event.mouse_y - region.y)
+        rect = camera_frame_in_region(context.scene, region, rv3d)
+        point = placement_from_click(mouse, rect) if rect is not None else None
+        if point is None:
+            self.report({"WARNING"}, "Click inside the photo's frame.")
+            return {"RUNNING_MODAL"}
+        result = self.clicked(context, point)
+        if result is None:
+            return {"RUNNING_MODAL"}
+        self._end(context)
+        return result
+
+    def cancel(self, context):
+        self._end(context)
+
+    def _end(self, context):
+        if context.area is not None:
+            context.area.header_text_set(None)
+            context.area.tag_redraw()
+        if context.window is not None:
+            context.window.cursor_modal_restore()
+
+
+class SCENEFIT_OT_pick_placement(PhotoClicks, bpy.types.Operator):
     """Show the photo through SceneFit's camera and click where the asset stands (Esc or right click cancels)"""
 
     bl_idname = "scenefit.pick_placement"
@@ -92,56 +155,13 @@ class SCENEFIT_OT_pick_placement(bpy.types.Operator):
         return {"FINISHED"}
 
     def invoke(self, context, event):
-        if context.area is None or context.area.type != "VIEW_3D":
-            self.report({"ERROR"}, "Pick Placement works in a 3D Viewport; run it from the SceneFit panel there.")
-            return {"CANCELLED"}
-        try:
-            self._camera(context)
-        except SceneFitError as error:
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
-        _, rv3d = window_region(context.area)
-        if rv3d is None:
-            self.report({"ERROR"}, "This 3D Viewport has no view to click in.")
-            return {"CANCELLED"}
-        self._view_before = rv3d.view_perspective
-        rv3d.view_perspective = "CAMERA"
-        context.area.header_text_set("Click where the asset stands in the photo; Esc or right click cancels")
-        context.window.cursor_modal_set("CROSSHAIR")
-        context.window_manager.modal_handler_add(self)
-        return {"RUNNING_MODAL"}
+        return self.start_clicks(context, self._camera, "Click where the asset stands in the photo")
 
-    def modal(self, context, event):
-        action = classify_event(event.type, event.value)
-        region, rv3d = window_region(context.area)
-        if action == CANCEL:
-            rv3d.view_perspective = self._view_before
-            self._end(context)
-            return {"CANCELLED"}
-        if action != CLICK:
-            return {"RUNNING_MODAL"} if event.type in ("LEFTMOUSE", "RIGHTMOUSE") else {"PASS_THROUGH"}
-        # The click is in window coordinates; the frame is in the viewport region's.
-        mouse = (event.mouse_x - region.x, event.mouse_y - region.y)
-        rect = camera_frame_in_region(context.scene, region, rv3d)
-        placement = placement_from_click(mouse, rect) if rect is not None else None
-        if placement is None:
-            self.report({"WARNING"}, "Click inside the photo's frame.")
-            return {"RUNNING_MODAL"}
-        self.x, self.y = placement
-        context.scene.scenefit.placement = placement
-        self._end(context)
-        self.report({"INFO"}, f"Placement {placement[0]:.3f}, {placement[1]:.3f}")
+    def clicked(self, context, point):
+        self.x, self.y = point
+        context.scene.scenefit.placement = point
+        self.report({"INFO"}, f"Placement {point[0]:.3f}, {point[1]:.3f}")
         return {"FINISHED"}
-
-    def cancel(self, context):
-        self._end(context)
-
-    def _end(self, context):
-        if context.area is not None:
-            context.area.header_text_set(None)
-            context.area.tag_redraw()
-        if context.window is not None:
-            context.window.cursor_modal_restore()
 
 
 classes = (SCENEFIT_OT_pick_placement,)

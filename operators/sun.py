@@ -12,10 +12,9 @@ from dataclasses import replace
 import bpy
 from bpy.props import FloatVectorProperty
 
-from ..blender_io.placement import CANCEL, CLICK, classify_event, placement_from_click
 from ..core.errors import InputError, SceneFitError
 from .common import artist_camera, composite_camera, photo_path, photo_view
-from .placement import camera_frame_in_region, window_region
+from .placement import PhotoClicks
 
 STEPS = ("foot", "top", "tip")
 ASK = {"foot": "Click the foot of something upright on the floor (a post, a person, a table leg)",
@@ -39,7 +38,7 @@ def sun_from_points(context, points: dict) -> tuple[float, float]:
     return sun_from_shadow(camera, foot, top, tip)
 
 
-class SCENEFIT_OT_pick_sun(bpy.types.Operator):
+class SCENEFIT_OT_pick_sun(PhotoClicks, bpy.types.Operator):
     """Click the foot of something upright, its top and the tip of its shadow in the photo: the sun's direction
     for the light stage (Esc or right click cancels)"""
 
@@ -64,61 +63,26 @@ class SCENEFIT_OT_pick_sun(bpy.types.Operator):
         return {"FINISHED"}
 
     def invoke(self, context, event):
-        if context.area is None or context.area.type != "VIEW_3D":
-            self.report({"ERROR"}, "Pick Sun works in a 3D Viewport; run it from the SceneFit panel there.")
-            return {"CANCELLED"}
-        try:
-            photo = photo_path(context)
-            if context.scene.camera is None or (artist_camera(context, photo)[0] is None
-                                                and "scenefit" not in context.scene.camera):
-                raise InputError("Pick Sun clicks in the photo seen through the camera: set it up first (Match "
-                                 "Camera or Pick Placement), or make the camera that shows the photo active.")
-        except SceneFitError as error:
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
-        _, rv3d = window_region(context.area)
-        if rv3d is None:
-            self.report({"ERROR"}, "This 3D Viewport has no view to click in.")
-            return {"CANCELLED"}
-        self._view_before, self._points = rv3d.view_perspective, {}
-        rv3d.view_perspective = "CAMERA"
-        context.area.header_text_set(f"{ASK['foot']}; Esc or right click cancels")
-        context.window.cursor_modal_set("CROSSHAIR")
-        context.window_manager.modal_handler_add(self)
-        return {"RUNNING_MODAL"}
+        self._points = {}
+        return self.start_clicks(context, _check_camera, ASK["foot"])
 
-    def modal(self, context, event):
-        action = classify_event(event.type, event.value)
-        region, rv3d = window_region(context.area)
-        if action == CANCEL:
-            rv3d.view_perspective = self._view_before
-            self._end(context)
-            return {"CANCELLED"}
-        if action != CLICK:
-            return {"RUNNING_MODAL"} if event.type in ("LEFTMOUSE", "RIGHTMOUSE") else {"PASS_THROUGH"}
-        rect = camera_frame_in_region(context.scene, region, rv3d)
-        point = placement_from_click((event.mouse_x - region.x, event.mouse_y - region.y), rect) if rect else None
-        if point is None:
-            self.report({"WARNING"}, "Click inside the photo's frame.")
-            return {"RUNNING_MODAL"}
+    def clicked(self, context, point):
         step = STEPS[len(self._points)]
         self._points[step] = point
         setattr(self, step, point)
         if len(self._points) < len(STEPS):
-            context.area.header_text_set(f"{ASK[STEPS[len(self._points)]]}; Esc or right click cancels")
-            return {"RUNNING_MODAL"}
-        self._end(context)
+            self.ask(context, ASK[STEPS[len(self._points)]])
+            return None
         return self.execute(context)
 
-    def cancel(self, context):
-        self._end(context)
 
-    def _end(self, context):
-        if context.area is not None:
-            context.area.header_text_set(None)
-            context.area.tag_redraw()
-        if context.window is not None:
-            context.window.cursor_modal_restore()
+def _check_camera(context) -> None:
+    """Clicks need the photo behind the scene camera: SceneFit's, or the artist's that shows it."""
+    photo = photo_path(context)
+    camera = context.scene.camera
+    if camera is None or ("scenefit" not in camera and artist_camera(context, photo)[0] is None):
+        raise InputError("Pick Sun clicks in the photo seen through the camera: set it up first (Match Camera or "
+                         "Pick Placement), or make the camera that shows the photo active.")
 
 
 classes = (SCENEFIT_OT_pick_sun,)
