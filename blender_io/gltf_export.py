@@ -22,6 +22,7 @@ from ..core.errors import InputError
 from ..core.game_bake import BakedMaterial
 from ..core.gltf_meshopt import encoded_glb
 from ..core.gltf_output import GltfOutput, output_like_input
+from ..core.imageio import srgb_to_linear
 from ..core.maps import resize_channels
 from .material import EXTENSION_OF_WRAP, image_pixels_linear, material_wrap, principled_bsdf
 from .node_values import source
@@ -111,14 +112,23 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path, shared: d
         notes.append(f"alpha of '{alpha[0].image.name}' carried into the base colour image at {size}²")
     # The maps were baked wrapped as the material's sampler says, so the exporter must write that sampler.
     extension = EXTENSION_OF_WRAP[baked.wrap[0]] if baked.wrap[0] == baked.wrap[1] else "REPEAT"
-    base = nodes.new("ShaderNodeTexImage")
-    base.name = base.label = "SceneFit Base Color"
-    base.extension = extension
-    base.image = _load_png(bpy, folder, f"{material.name}_base_color", rgba, "sRGB", shared)
-    base.location = (bsdf.location.x - 700, bsdf.location.y)
-    links.new(base.outputs["Color"], bsdf.inputs["Base Color"])
-    if alpha is not None:
-        links.new(base.outputs["Alpha"], alpha[1])
+    if alpha is None and bool((rgba == rgba[0, 0]).all()):
+        # One colour everywhere (a material that gave a plain colour, not adapted): a factor, as it came,
+        # not an image of that colour.
+        for link in list(bsdf.inputs["Base Color"].links):
+            links.remove(link)
+        linear = srgb_to_linear(rgba[0, 0, :3].astype(np.float32) / 255.0)
+        bsdf.inputs["Base Color"].default_value = (*(float(v) for v in linear), 1.0)
+        notes.append("base colour: one colour, written as a factor")
+    else:
+        base = nodes.new("ShaderNodeTexImage")
+        base.name = base.label = "SceneFit Base Color"
+        base.extension = extension
+        base.image = _load_png(bpy, folder, f"{material.name}_base_color", rgba, "sRGB", shared)
+        base.location = (bsdf.location.x - 700, bsdf.location.y)
+        links.new(base.outputs["Color"], bsdf.inputs["Base Color"])
+        if alpha is not None:
+            links.new(base.outputs["Alpha"], alpha[1])
 
     if getattr(bsdf, "unlit", False):
         notes.append("unlit: only the base colour is written (an unlit material has no roughness or metallic)")

@@ -1,6 +1,6 @@
 """A game asset out no larger than the one in (issue 20): materials that share one texture, as a
 palette or atlas does (Kenney's diorama: 44 materials, one colour map), bake to one shared image
-again, not one copy per material (it grew 2.3x)."""
+again, not one copy per material (it grew 2.3x); a material of one plain colour stays a factor."""
 from __future__ import annotations
 
 import json
@@ -38,6 +38,11 @@ for k in range(3):
     mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
     obj.data.materials.append(mat)
 bpy.ops.export_scene.gltf(filepath=str(Path(FOLDER) / "blocks.glb"), export_format="GLB")
+bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 2.0, 0.5))   # a plain colour, no texture
+plain = bpy.data.materials.new("plain")
+plain.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.2, 0.5, 0.8, 1.0)
+bpy.context.active_object.data.materials.append(plain)
+bpy.ops.export_scene.gltf(filepath=str(Path(FOLDER) / "with_plain.glb"), export_format="GLB")
 """
 
 
@@ -65,3 +70,15 @@ def test_materials_sharing_a_palette_bake_to_one_shared_image(run_py, tmp_path, 
     assert len(baked["images"]) == 1, [image.get("name") for image in baked["images"]]
     assert out.stat().st_size <= 1.2 * asset.stat().st_size, (out.stat().st_size, asset.stat().st_size)
     assert validator(out)["issues"]["numErrors"] == 0
+
+    # A material that gave a plain colour keeps it as a factor (to 8 bits), not an image of that colour.
+    asset = tmp_path / "with_plain.glb"
+    proc = scenefit("convert", asset, "--out", tmp_path / "convert_plain", "--preset", "draft", "--quiet")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = tmp_path / "with_plain_baked.glb"
+    proc = scenefit("bake", asset, "--texture", tmp_path / "convert_plain" / "maps" / "texture.pt", "--out", out)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    materials = {m["name"]: m["pbrMetallicRoughness"] for m in gltf_json(out)["materials"]}
+    assert "baseColorTexture" not in materials["plain"] and "baseColorTexture" in materials["block0"]
+    assert materials["plain"]["baseColorFactor"] == [pytest.approx(v, abs=0.01) for v in (0.2, 0.5, 0.8, 1.0)]
+    assert len(gltf_json(out)["images"]) == 1
