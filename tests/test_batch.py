@@ -238,9 +238,12 @@ def test_remote_job_streams_progress_cancels_and_returns_its_folder(in_process, 
     assert all(0 <= e.step <= e.total for e in events) and events[-1].fraction == 1.0
     assert outputs(folder) == outputs(reference / "a")
 
-    # Cancelled at its first progress event: the worker stops with Cancelled and nothing comes back.
+    # Cancelled at its first progress event: the worker stops with Cancelled and nothing comes back. (A
+    # fit of many iterations: the exact start converts in a blink, so a plain convert could finish
+    # before the cancel reached the worker, as it did under load.)
     cancel = threading.Event()
-    long_job = replace(job, name="long", preset="final", stages=("convert",))
+    long_job = replace(job, name="long", preset="final", stages=("convert",),
+                       overrides={"convert": {"iterations": 100000}})
     with pytest.raises(Cancelled):
         run_remote(long_job, tmp_path / "back", progress=lambda event: cancel.set(), cancel=cancel)
     assert not (tmp_path / "back" / "long").exists()
