@@ -12,8 +12,6 @@ the asset's silhouette with the ground truth's. Writes benchmarks/results/camera
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
 import sys
 import time
 from dataclasses import replace
@@ -30,6 +28,7 @@ from scenefit.core.photo import PhotoCamera, develop_photo, perspective_view
 from scenefit.core.presets import stage_config
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from results_files import machine_load, write_results  # noqa: E402
 from bench_light import metered_exposure, real_views, resize  # noqa: E402  (the light bench's protocol)
 from bench_camera import CORPUS_HDRI  # noqa: E402
 
@@ -121,13 +120,10 @@ def main(argv: list[str] | None = None) -> int:
         rows += measure(name, mesh, stack)
         print(f"{name}: " + ", ".join(f"{r['camera']} {r['rmse']:.4f}/{r['iou']:.2f}" for r in rows[-len(WRONG):]),
               flush=True)
-    load = subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    seconds = time.perf_counter() - started
-    (out / "camera_cost.md").write_text(markdown(rows, load, seconds))
-    (out / "camera_cost.json").write_text(json.dumps({"rows": rows, "load": load, "seconds": seconds}, indent=1) + "\n")
-    print((out / "camera_cost.md").read_text().split("## Every view")[0])
+    load, seconds = machine_load(), time.perf_counter() - started
+    table = write_results(args.out, "camera_cost", markdown(rows, load, seconds),
+                          {"rows": rows, "load": load, "seconds": seconds})
+    print(table.read_text().split("## Every view")[0])
     return 0
 
 

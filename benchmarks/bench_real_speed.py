@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 import time
@@ -20,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from results_files import machine_load, write_results  # noqa: E402
 from corpus import CORPUS, timed  # noqa: E402  (the corpus bench's runner: exit code, seconds, peak memory)
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -85,13 +85,10 @@ def main(argv: list[str] | None = None) -> int:
                                 args.timeout))
                 print(f"{rows[-1]['asset']} {preset}: exit {rows[-1]['rc']}, {rows[-1]['seconds']} s wall, "
                       f"{rows[-1].get('pipeline_seconds')} s pipeline", flush=True)
-    load = subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    seconds = time.perf_counter() - started
-    (out / "real_speed.md").write_text(markdown(rows, load, seconds))
-    (out / "real_speed.json").write_text(json.dumps({"rows": rows, "load": load, "seconds": seconds}, indent=1) + "\n")
-    print((out / "real_speed.md").read_text())
+    load, seconds = machine_load(), time.perf_counter() - started
+    table = write_results(args.out, "real_speed", markdown(rows, load, seconds),
+                          {"rows": rows, "load": load, "seconds": seconds})
+    print(table.read_text())
     return 0
 
 

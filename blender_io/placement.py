@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.compose import rotation_z
 from ..core.errors import InputError
 from ..core.photo import PhotoCamera
 from ..core.photo_camera import pitch_roll_from_camera_to_world
@@ -114,7 +115,7 @@ def asset_in_view(camera_to_world: np.ndarray, fov_deg: float, width: int, heigh
     camera = PhotoCamera(yaw_deg=yaw, pitch_deg=pitch, fov_deg=fov_deg, width=width, height=height, roll_deg=roll)
     points = np.asarray(points, np.float64)
     # The bottom centre of the bounding box in axes where the camera looks along +Y, as core takes it.
-    turn = _rotation_z(90.0 - yaw)
+    turn = rotation_z(90.0 - yaw)
     turned = points @ turn.T
     lo, hi = turned.min(axis=0), turned.max(axis=0)
     base = turn.T @ np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])
@@ -130,8 +131,3 @@ def asset_in_view(camera_to_world: np.ndarray, fov_deg: float, width: int, heigh
                      placement=(float(x / width), float(y / height)),
                      size=float((ys.max() - ys.min()) / height),
                      turn_deg=float((object_yaw_deg - facing - 90.0 + 180.0) % 360.0 - 180.0))
-
-
-def _rotation_z(deg: float) -> np.ndarray:
-    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

@@ -146,7 +146,8 @@ def camera_origin() -> np.ndarray:
     return np.array([0.0, 0.0, CAMERA_HEIGHT])
 
 
-def _rotation_z(deg: float) -> np.ndarray:
+def rotation_z(deg: float) -> np.ndarray:
+    """The 3x3 rotation by `deg` about the world's Z (up) axis."""
     c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
@@ -176,7 +177,7 @@ def place_asset(normalized: Mesh, camera: PhotoCamera, pixel: tuple[float, float
     to_camera = origin[:2] - anchor[:2]
     # front (-Y) -> towards the camera, then the requested turn
     facing = math.degrees(math.atan2(to_camera[1], to_camera[0])) + 90.0 + turn_deg
-    rotated = normalized.positions.astype(np.float64) @ _rotation_z(facing).T
+    rotated = normalized.positions.astype(np.float64) @ rotation_z(facing).T
     lo, hi = rotated.min(axis=0), rotated.max(axis=0)
 
     def placed(scale: float) -> np.ndarray:
@@ -210,7 +211,7 @@ def place_asset(normalized: Mesh, camera: PhotoCamera, pixel: tuple[float, float
 
 def placement_transform(normalized: Mesh, placement: ObjectPlacement) -> tuple[np.ndarray, float, np.ndarray]:
     """(rotation R, scale s, offset t) with world = R @ p * s + t for the normalised mesh's points p."""
-    rotation = _rotation_z(placement.facing_deg)
+    rotation = rotation_z(placement.facing_deg)
     rotated = normalized.positions.astype(np.float64) @ rotation.T
     offset = _offset(rotated.min(axis=0), rotated.max(axis=0), placement.scale, placement.base, placement.on_floor)
     return rotation, placement.scale, offset

@@ -184,9 +184,10 @@ def run_config(data: dict):
     from ..core.run import RunConfig
 
     view = data["view"]
+    source, why = camera_source(view)
     return RunConfig(preset=data["preset"], prompt=data["prompt"], guidance_type=data["guidance"],
-                     size=view["size"], camera_overrides=dict(view["camera"] or {}),
-                     camera_source=camera_source(view)[0], camera_why=camera_source(view)[1],
+                     size=view["size"], camera_overrides=dict(view["camera"] or {}), camera_source=source,
+                     camera_why=why,
                      turn_deg=view["turn_deg"], models=data["models"],
                      stage_overrides={"light": {"sun_deg": tuple(view["sun_deg"])}} if view.get("sun_deg") else {})
 

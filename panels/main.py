@@ -93,13 +93,8 @@ class SCENEFIT_PT_scene(_Subsection, bpy.types.Panel):
         col.prop(settings, "size")
         col.prop(settings, "scene_type")
         draw_camera(settings, context, self.layout.column(align=True))
-        sun = self.layout.column(align=True)
-        row = sun.row(align=True)
-        row.prop(settings, "sun_from", text="Sun")
-        row.operator("scenefit.pick_sun", text="", icon="LIGHT_SUN")
-        if settings.sun_from == "set":
-            sun.prop(settings, "sun_azimuth")
-            sun.prop(settings, "sun_elevation")
+        draw_choice(self.layout.column(align=True), settings, "sun_from", "Sun", "scenefit.pick_sun", "LIGHT_SUN",
+                    ("sun_azimuth", "sun_elevation") if settings.sun_from == "set" else ())
 
 
 def draw_camera(settings, context, col) -> None:
@@ -114,13 +109,17 @@ def draw_camera(settings, context, col) -> None:
         col.label(text=f"Camera: '{camera.name}' (it shows the photo)", icon="CAMERA_DATA")
         col.label(text="The asset is composed where it stands in its view.")
         return
+    draw_choice(col, settings, "camera_from", "Camera", "scenefit.match_camera", "VIEW_CAMERA",
+                ("fov", "pitch", "roll") if settings.camera_from == "panel" else ())
+
+
+def draw_choice(col, settings, choice: str, label: str, operator: str, icon: str, values: tuple[str, ...]) -> None:
+    """A source choice with the button that finds it, then the values it leaves to set by hand."""
     row = col.row(align=True)
-    row.prop(settings, "camera_from", text="Camera")
-    row.operator("scenefit.match_camera", text="", icon="VIEW_CAMERA")
-    if settings.camera_from == "panel":
-        col.prop(settings, "fov")
-        col.prop(settings, "pitch")
-        col.prop(settings, "roll")
+    row.prop(settings, choice, text=label)
+    row.operator(operator, text="", icon=icon)
+    for name in values:
+        col.prop(settings, name)
 
 
 class SCENEFIT_PT_style(_Subsection, bpy.types.Panel):
