@@ -45,7 +45,7 @@ from .mesh import Mesh, normalize_to_unit_sphere, vertex_normals
 from .photo import PhotoCamera
 from .placement import DEFAULT_OBJECT_SIZE
 from .progress import ProgressCallback, check_cancel, emit
-from .render import ENVMAP_TO_WORLD, _bitmap_texture, _mitsuba_mesh
+from .render import ENVMAP_TO_WORLD, _mitsuba_mesh, material_shapes
 
 SHADOW_TYPES = ("ratio", "paper", "none")
 SAMPLER_TYPES = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
@@ -223,7 +223,8 @@ def placed_mesh(normalized: Mesh, placement: ObjectPlacement) -> Mesh:
     normals = normalized.normals if normalized.normals is not None else vertex_normals(normalized.positions,
                                                                                        normalized.faces)
     return Mesh.from_arrays(normalized.positions.astype(np.float64) @ rotation.T * scale + offset, normalized.faces,
-                            normalized.uvs, np.asarray(normals, np.float64) @ rotation.T, name=normalized.name)
+                            normalized.uvs, np.asarray(normals, np.float64) @ rotation.T, normalized.name,
+                            normalized.material_index, normalized.wraps, normalized.atlas)
 
 
 def photo_camera_in_object_frame(camera: PhotoCamera, normalized: Mesh, placement: ObjectPlacement
@@ -298,15 +299,12 @@ def _scene(mi, envmap: np.ndarray, mesh: Mesh | None, maps: np.ndarray | None, b
     scene: dict = {"type": "scene",
                    "environment": {"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(envmap, np.float32)),
                                    "to_world": mi.ScalarTransform4f(ENVMAP_TO_WORLD)}}
-    if mesh is not None:
+    if mesh is not None and black:   # the floor passes: the asset's shape alone
         shape = _mitsuba_mesh(mi, mesh)
-        if black:
-            shape.set_bsdf(mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}}))
-        else:
-            shape.set_bsdf(mi.load_dict({"type": "principled", "base_color": _bitmap_texture(mi, maps[..., 0:3]),
-                                         "roughness": _bitmap_texture(mi, maps[..., 3:4]),
-                                         "metallic": _bitmap_texture(mi, maps[..., 4:5])}))
+        shape.set_bsdf(mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}}))
         scene["asset"] = shape
+    elif mesh is not None:   # one shape per material, sampling its own texels with its wrap mode
+        scene.update(material_shapes(mi, mesh, maps)[0])
     if floor_albedo is not None:
         scene["floor"] = {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale(1000.0 * CAMERA_HEIGHT),
                           "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": floor_albedo}}}

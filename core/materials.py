@@ -10,7 +10,7 @@ paper instead re-maps the whole mesh into one new atlas; a game pipeline wants i
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -67,11 +67,14 @@ class AssetMaterials:
 
     def fitting_view(self) -> tuple[Mesh, PBRMaps]:
         """One mesh and one set of maps that every single-texture stage (render, adapt) can use:
-        the asset itself for one material, the atlas for several."""
+        the asset itself for one material, the atlas for several. The mesh carries each material's
+        wrap mode, and an atlas mesh says it is one, so renders sample each material's own cell with
+        its own UVs (core.render, material_parts)."""
+        mesh = replace(self.mesh, wraps=tuple(self.wraps))
         if len(self.materials) == 1:
-            return self.mesh, self.materials[0].maps
+            return mesh, self.materials[0].maps
         size = atlas_cell_size([m.maps for m in self.materials])
-        return atlas_mesh(self.mesh), atlas_maps([m.maps for m in self.materials], size)
+        return atlas_mesh(mesh), atlas_maps([m.maps for m in self.materials], size)
 
     def report(self) -> list[dict]:
         return [m.report() for m in self.materials]
@@ -98,7 +101,8 @@ def atlas_cell_size(maps: list[PBRMaps]) -> int:
 
 
 def atlas_mesh(mesh: Mesh) -> Mesh:
-    """The mesh with each material's UVs moved into its atlas cell (vertices split between materials)."""
+    """The mesh with each material's UVs moved into its atlas cell (vertices split between materials);
+    it keeps its wrap modes and is marked `atlas` (own_uv_mesh undoes the move)."""
     if mesh.material_index is None or mesh.material_count == 1:
         return mesh
     count, g = mesh.material_count, atlas_grid(mesh.material_count)
@@ -112,7 +116,63 @@ def atlas_mesh(mesh: Mesh) -> Mesh:
     uv = np.stack([(uv[:, 0] + col) / g, (uv[:, 1] + (g - 1 - row)) / g], axis=1)
     normals = None if mesh.normals is None else mesh.normals[vertex]
     return Mesh.from_arrays(mesh.positions[vertex], inverse.reshape(-1, 3), uv, normals, mesh.name,
-                            mesh.material_index)
+                            mesh.material_index, mesh.wraps, atlas=True)
+
+
+def own_uv_mesh(mesh: Mesh) -> Mesh:
+    """An atlas mesh with each material's own UVs back (its move into its cell undone); other meshes as
+    they are. The faces and vertices stay those of `mesh`."""
+    if not mesh.atlas:
+        return mesh
+    g = atlas_grid(mesh.material_count)
+    material = np.zeros(len(mesh.positions), np.int64)
+    material[mesh.faces.reshape(-1)] = np.repeat(mesh.material_index, 3)   # atlas_mesh split shared vertices
+    row, col = material // g, material % g
+    uv = mesh.uvs.astype(np.float64) * g
+    uv = np.stack([uv[:, 0] - col, uv[:, 1] - (g - 1 - row)], axis=1)
+    return Mesh.from_arrays(mesh.positions, mesh.faces, uv, mesh.normals, mesh.name, mesh.material_index, mesh.wraps)
+
+
+def mesh_raster(mesh: Mesh, size: int) -> UVRaster:
+    """The UV raster at size² of a mesh as fitting_view gives it: an atlas mesh's materials each in their
+    own cell, wrapped as their samplers say (atlas_raster); one material with its wrap mode."""
+    wraps = list(mesh.wraps) or [("repeat", "repeat")] * mesh.material_count
+    if mesh.atlas:
+        return atlas_raster(mesh, own_uv_mesh(mesh), size, wraps)
+    return rasterize_uv(mesh, size, wrap=wraps[0] if mesh.material_count == 1 else "repeat")
+
+
+@dataclass(frozen=True)
+class MaterialPart:
+    """One material's faces as a renderer draws them: in its own UVs, sampling its own texels (rows,
+    cols) of the maps the renderer is given (its atlas cell, or all of them) with its wrap mode."""
+
+    index: int
+    mesh: Mesh
+    wrap: tuple[str, str]
+    rows: slice
+    cols: slice
+
+
+def material_parts(mesh: Mesh, shape: tuple[int, int]) -> list[MaterialPart]:
+    """The parts a renderer draws `mesh` as, for maps of `shape` (H, W): one per material of an atlas
+    mesh (a material without faces has none), else the whole mesh. So UVs that tile past [0, 1] read
+    their own material's texels, never a neighbouring cell's."""
+    wraps = list(mesh.wraps) or [("repeat", "repeat")] * mesh.material_count
+    h, w = shape
+    if not mesh.atlas:
+        wrap = wraps[0] if mesh.material_count == 1 else ("repeat", "repeat")
+        return [MaterialPart(0, mesh, wrap, slice(0, h), slice(0, w))]
+    own, count = own_uv_mesh(mesh), mesh.material_count
+    cell_h, cell_w = h // atlas_grid(count), w // atlas_grid(count)   # as atlas_raster places the texels
+    parts = []
+    for index in range(count):
+        if not (mesh.material_index == index).any():
+            continue
+        r, c = atlas_cell(index, count)
+        parts.append(MaterialPart(index, material_submesh(own, index), wraps[index],
+                                  slice(r * cell_h, (r + 1) * cell_h), slice(c * cell_w, (c + 1) * cell_w)))
+    return parts
 
 
 def atlas_raster(atlas: Mesh, mesh: Mesh, size: int, wraps: list[tuple[str, str]]) -> UVRaster:

@@ -21,6 +21,11 @@ class Mesh:
     normals:   (V, 3) float32 unit vertex normals, or None for flat shading.
     material_index: (F,) int32 material slot of each face, or None when the mesh has one material.
         Several materials each own their UV layout (they may overlap in UV space).
+    wraps: per material slot, how its UVs outside [0, 1] read its maps, (u, v) as its textures'
+        sampler says (core.texture.uv_raster.WRAP_MODES); () reads every slot as repeat.
+    atlas: the UVs are core.materials' atlas (each material's own UVs moved into its cell of one
+        square), as fitting_view gives them; renderers and rasterisers then sample each material's
+        cell with its own UVs and wrap mode (core.materials.own_uv_mesh undoes the move).
     """
 
     positions: np.ndarray
@@ -29,6 +34,8 @@ class Mesh:
     normals: np.ndarray | None = None
     name: str = "asset"
     material_index: np.ndarray | None = None
+    wraps: tuple[tuple[str, str], ...] = ()
+    atlas: bool = False
 
     def __post_init__(self) -> None:
         p, f, uv = self.positions, self.faces, self.uvs
@@ -55,13 +62,16 @@ class Mesh:
                                  "(Mesh > Normals > Reset Vectors) or leave them out.")
         if self.material_index is not None and self.material_index.shape != (len(f),):
             raise InputError(f"Mesh '{self.name}' has {len(self.material_index)} face materials for {len(f)} faces.")
+        if self.wraps and len(self.wraps) != self.material_count:
+            raise InputError(f"Mesh '{self.name}' has {len(self.wraps)} wrap modes for {self.material_count} materials.")
         # Freeze the arrays too, so nothing downstream edits the user's data in place.
         for a in (p, f, uv, self.normals, self.material_index):
             if a is not None:
                 a.setflags(write=False)
 
     @staticmethod
-    def from_arrays(positions, faces, uvs, normals=None, name: str = "asset", material_index=None) -> "Mesh":
+    def from_arrays(positions, faces, uvs, normals=None, name: str = "asset", material_index=None,
+                    wraps: tuple[tuple[str, str], ...] = (), atlas: bool = False) -> "Mesh":
         positions, faces = np.asarray(positions), np.asarray(faces)
         # Checked before the cast to int32: an int64 index of 2^32 + 5 would otherwise wrap to a valid 5.
         if faces.dtype.kind in "iu" and positions.ndim == 2 and faces.ndim == 2 and faces.shape[-1:] == (3,):
@@ -78,6 +88,8 @@ class Mesh:
             normals=None if normals is None else np.ascontiguousarray(normals, dtype=np.float32),
             name=name,
             material_index=None if material_index is None else np.ascontiguousarray(material_index, dtype=np.int32),
+            wraps=tuple(tuple(w) for w in wraps),
+            atlas=atlas,
         )
 
     @property
@@ -115,7 +127,7 @@ def normalize_to_unit_sphere(mesh: Mesh, radius: float = NORMALIZED_RADIUS) -> t
         raise InputError(f"Mesh '{mesh.name}' is degenerate: all its vertices are at one point.")
     scale = float(extent / radius)
     normalized = Mesh.from_arrays(((p - center) / scale), mesh.faces, mesh.uvs, mesh.normals, mesh.name,
-                                  mesh.material_index)
+                                  mesh.material_index, mesh.wraps, mesh.atlas)
     return normalized, NormalizeTransform(center=center.astype(np.float32), scale=scale)
 
 

@@ -16,14 +16,17 @@ Conventions:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .backend import Backend, init_mitsuba
 from .camera import Camera
 from .errors import InputError
+from .maps import FLAT_NORMAL
+from .materials import MaterialPart, material_parts
 from .mesh import Mesh, vertex_normals
+from .texture.uv_raster import wrap_modes
 
 # Rotation taking Mitsuba's envmap frame (Y up) to Blender's world (Z up), chosen so that
 # Mitsuba's direction->(u, v) lookup equals Blender's equirectangular Environment Texture:
@@ -35,12 +38,10 @@ ENVMAP_TO_WORLD = np.array(
      [0.0, 0.0, 0.0, 1.0]]
 )
 
-BASE_COLOR_KEY = "asset.bsdf.base_color.data"
-ROUGHNESS_KEY = "asset.bsdf.roughness.data"
-METALLIC_KEY = "asset.bsdf.metallic.data"
+# Each material's BSDF's maps, under its shape's id; with a normal map the principled BSDF sits inside
+# Mitsuba's `normalmap` BSDF, one level down.
+MAP_NAMES = ("base_color", "roughness", "metallic")
 ENVMAP_KEY = "environment.data"
-# With a normal map the principled BSDF sits inside Mitsuba's `normalmap` BSDF, one level down.
-NESTED_PREFIX = "asset.bsdf.nested_bsdf."
 
 
 def blender_direction_to_equirect_uv(direction: np.ndarray) -> np.ndarray:
@@ -139,11 +140,123 @@ def _mitsuba_mesh(mi, mesh: Mesh):
     return m
 
 
-def _bitmap_texture(mi, data: np.ndarray) -> dict:
+def _bitmap_texture(mi, data: np.ndarray, wrap: str = "repeat") -> dict:
     data = np.ascontiguousarray(data, dtype=np.float32)
     if data.ndim == 2:
         data = data[..., None]
-    return {"type": "bitmap", "bitmap": mi.Bitmap(data), "raw": True, "filter_type": "bilinear"}
+    return {"type": "bitmap", "bitmap": mi.Bitmap(data), "raw": True, "filter_type": "bilinear", "wrap_mode": wrap}
+
+
+@dataclass(frozen=True)
+class DrawnPart:
+    """A material part as Mitsuba draws it. Mitsuba has one wrap mode per bitmap, so a part whose u and
+    v wrap differently is drawn with the same result another way (see drawn_part): `mesh` holds the
+    UVs drawn, `mode` is the bitmaps' wrap mode, and `doubled` the axis (0 = u, 1 = v) whose texels
+    are followed by their mirror image, or None."""
+
+    part: MaterialPart
+    mesh: Mesh
+    mode: str
+    doubled: int | None = None
+
+    def texels(self, maps):
+        """This part's texels of torch maps (H, W, C), as its bitmaps hold them (gradients flow through)."""
+        import torch
+
+        cell = maps[self.part.rows, self.part.cols]
+        if self.doubled is not None:
+            cell = torch.cat([cell, torch.flip(cell, dims=[1 - self.doubled])], dim=1 - self.doubled)
+        return cell.float().contiguous()
+
+
+def drawn_part(part: MaterialPart) -> DrawnPart:
+    """How Mitsuba draws `part` with its wrap mode (u, v) exactly. One mode for both: the bitmaps wrap so.
+    A clamped axis beside another mode: its UVs are cut at the centres of its edge texels and held
+    there (past them clamp reads the edge texels, as any mode does at those UVs), and the bitmaps wrap
+    as the other axis says. Repeat beside mirror: the texels followed by their mirror image along the
+    mirrored axis, repeated, at half that axis's UV (one mirror period is one repeat of the pair)."""
+    u, v = wrap_modes(part.wrap)
+    if u == v:
+        return DrawnPart(part, part.mesh, u)
+    mesh, size = part.mesh, (part.cols.stop - part.cols.start, part.rows.stop - part.rows.start)
+    for axis, mode in enumerate((u, v)):
+        if mode == "clamp":
+            low, high = 0.5 / size[axis], 1.0 - 0.5 / size[axis]
+            mesh = cut_at_uv(cut_at_uv(mesh, axis, low), axis, high)
+            uv = mesh.uvs.copy()
+            uv[:, axis] = np.clip(uv[:, axis], low, high)
+            mesh = Mesh.from_arrays(mesh.positions, mesh.faces, uv, mesh.normals, mesh.name)
+    rest = [mode for mode in (u, v) if mode != "clamp"]
+    if len(rest) == 1:
+        return DrawnPart(part, mesh, rest[0])
+    axis = (u, v).index("mirror")
+    uv = mesh.uvs.astype(np.float64)
+    # Rows run top first (v = 1 is row 0): the doubled image's lower half is the mirror below v = 0.
+    uv[:, axis] = uv[:, 0] / 2 if axis == 0 else (1.0 + uv[:, 1]) / 2
+    return DrawnPart(part, Mesh.from_arrays(mesh.positions, mesh.faces, uv, mesh.normals, mesh.name), "repeat", axis)
+
+
+def cut_at_uv(mesh: Mesh, axis: int, value: float) -> Mesh:
+    """`mesh` with every triangle that crosses the line uv[axis] = value cut along it (into three), so
+    each piece lies on one side. Cut points are made once per edge, so neighbours share them."""
+    coord = mesh.uvs[:, axis].astype(np.float64)
+    above = coord[mesh.faces] > value
+    crossing = above.any(axis=1) & ~above.all(axis=1)
+    if not crossing.any():
+        return mesh
+    faces, side = mesh.faces[crossing].astype(np.int64), above[crossing]
+    lone = np.where(side.sum(axis=1) == 1, side.argmax(axis=1), (~side).argmax(axis=1))
+    a, b, c = np.take_along_axis(faces, (lone[:, None] + np.arange(3)) % 3, axis=1).T  # winding kept
+    edges, inverse = np.unique(np.sort(np.concatenate([np.stack([a, b], 1), np.stack([a, c], 1)]), axis=1),
+                               axis=0, return_inverse=True)
+    lo, hi = edges.T
+    t = ((value - coord[lo]) / (coord[hi] - coord[lo]))[:, None]
+    normals = mesh.normals if mesh.normals is not None else vertex_normals(mesh.positions, mesh.faces)
+
+    def at_cuts(attr: np.ndarray) -> np.ndarray:
+        attr = attr.astype(np.float64)
+        return np.concatenate([attr, attr[lo] + t * (attr[hi] - attr[lo])])
+
+    uv, cut_normals = at_cuts(mesh.uvs), at_cuts(normals)
+    uv[len(mesh.uvs):, axis] = value
+    cut_normals /= np.maximum(np.linalg.norm(cut_normals, axis=1, keepdims=True), 1e-12)
+    ab, ac = np.split(len(mesh.positions) + inverse.reshape(-1), 2)
+    pieces = np.concatenate([np.stack([a, ab, ac], 1), np.stack([ab, b, c], 1), np.stack([ab, c, ac], 1)])
+    return Mesh.from_arrays(at_cuts(mesh.positions), np.concatenate([mesh.faces[~crossing], pieces]), uv,
+                            cut_normals, mesh.name)
+
+
+def material_shapes(mi, mesh: Mesh, maps: np.ndarray, normal_map: np.ndarray | None = None
+                    ) -> tuple[dict[str, object], dict[str, DrawnPart], dict[str, dict[str, str]]]:
+    """The asset as Mitsuba shapes, one per material part (core.materials.material_parts), each with a
+    principled BSDF whose bitmaps hold its texels of `maps` (H, W, 5) and wrap as its sampler says;
+    inside a `normalmap` BSDF where `normal_map` (H, W, 3) has a map for it (a cell that is all flat
+    is a material without one). Returns the shapes, the drawn parts and each part's map parameters,
+    all by shape id."""
+    import torch
+
+    maps = torch.from_numpy(np.ascontiguousarray(maps, dtype=np.float32))
+    parts = material_parts(mesh, tuple(maps.shape[:2]))
+    if normal_map is not None:   # its own size: each part reads its own cell of it
+        normal_map = torch.from_numpy(np.ascontiguousarray(normal_map, dtype=np.float32))
+        normal_parts = {p.index: p for p in material_parts(mesh, tuple(normal_map.shape[:2]))}
+    shapes, drawn, keys = {}, {}, {}
+    for part in parts:
+        shape_id = "asset" if len(parts) == 1 else f"asset_{part.index}"
+        drawn[shape_id] = piece = drawn_part(part)
+        texels = piece.texels(maps).numpy()
+        bsdf = {"type": "principled", **{name: _bitmap_texture(mi, texels[..., lo:hi], piece.mode)
+                                         for name, (lo, hi) in zip(MAP_NAMES, ((0, 3), (3, 4), (4, 5)))}}
+        prefix = f"{shape_id}.bsdf."
+        normal = None if normal_map is None else replace(piece, part=normal_parts[part.index]).texels(normal_map).numpy()
+        if normal is not None and not np.allclose(normal, FLAT_NORMAL):
+            bsdf = {"type": "normalmap", "normalmap": _bitmap_texture(mi, np.clip(normal, 0.0, 1.0), piece.mode),
+                    "bsdf": bsdf}
+            prefix += "nested_bsdf."
+        keys[shape_id] = {name: f"{prefix}{name}.data" for name in MAP_NAMES}
+        shapes[shape_id] = _mitsuba_mesh(mi, piece.mesh)
+        shapes[shape_id].set_bsdf(mi.load_dict(bsdf))
+    return shapes, drawn, keys
 
 
 def pad_envmap(envmap):
@@ -173,30 +286,21 @@ class AssetRenderer:
         h, w = maps_shape
         self.mesh, self.options, self.maps_shape = mesh, options, (h, w)
         self.envmap_shape = envmap.shape
-        grey = np.full((h, w), 0.5, np.float32)
+        if normal_map is not None:
+            normal_map = np.asarray(normal_map, dtype=np.float32)
+            if normal_map.ndim != 3 or normal_map.shape[2] != 3 or not np.isfinite(normal_map).all():
+                raise InputError(f"The normal map must be a finite RGB image, got shape {normal_map.shape}.")
+        grey = np.concatenate([np.full((h, w, 4), 0.5, np.float32), np.zeros((h, w, 1), np.float32)], axis=-1)
+        # One shape per material, each sampling its own texels with its own wrap mode (material_shapes).
+        shapes, self.parts, self.keys = material_shapes(mi, mesh, grey, normal_map)
         scene: dict = {
             "type": "scene",
             "integrator": {"type": options.integrator_type, "max_depth": options.max_depth,
                            "hide_emitters": options.hide_emitters},
             "environment": {"type": "envmap", "bitmap": mi.Bitmap(envmap),
                             "to_world": mi.ScalarTransform4f(ENVMAP_TO_WORLD)},
-            "asset": _mitsuba_mesh(mi, mesh),
+            **shapes,
         }
-        bsdf = {
-            "type": "principled",
-            "base_color": _bitmap_texture(mi, np.full((h, w, 3), 0.5, np.float32)),
-            "roughness": _bitmap_texture(mi, grey),
-            "metallic": _bitmap_texture(mi, np.zeros((h, w), np.float32)),
-        }
-        self.keys = {"base_color": BASE_COLOR_KEY, "roughness": ROUGHNESS_KEY, "metallic": METALLIC_KEY}
-        if normal_map is not None:
-            normal_map = np.asarray(normal_map, dtype=np.float32)
-            if normal_map.ndim != 3 or normal_map.shape[2] != 3 or not np.isfinite(normal_map).all():
-                raise InputError(f"The normal map must be a finite RGB image, got shape {normal_map.shape}.")
-            bsdf = {"type": "normalmap", "normalmap": _bitmap_texture(mi, np.clip(normal_map, 0.0, 1.0)),
-                    "bsdf": bsdf}
-            self.keys = {name: NESTED_PREFIX + key.removeprefix("asset.bsdf.") for name, key in self.keys.items()}
-        scene["asset"].set_bsdf(mi.load_dict(bsdf))
         if options.floor:
             z = float(mesh.positions[:, 2].min())
             scene["floor"] = {
@@ -212,7 +316,7 @@ class AssetRenderer:
             }
         self.scene = mi.load_dict(scene)
         self.params = mi.traverse(self.scene)
-        wanted = [*self.keys.values(), ENVMAP_KEY]
+        wanted = [*(key for keys in self.keys.values() for key in keys.values()), ENVMAP_KEY]
         for key in wanted:
             if key not in self.params:
                 raise RuntimeError(f"Mitsuba scene lacks parameter {key}; got {list(self.params.keys())[:20]}")
@@ -278,10 +382,10 @@ class AssetRenderer:
             import mitsuba as mi
 
             @dr.wrap(source="torch", target="drjit")
-            def render(base_color, roughness, metallic, envmap, sensor_index: int, spp: int, seed: int):
-                self.params[self.keys["base_color"]] = base_color
-                self.params[self.keys["roughness"]] = roughness
-                self.params[self.keys["metallic"]] = metallic
+            def render(texels: dict, envmap, sensor_index: int, spp: int, seed: int):
+                for shape_id, maps in texels.items():
+                    for name, values in zip(MAP_NAMES, maps):
+                        self.params[self.keys[shape_id][name]] = values
                 self.params[ENVMAP_KEY] = envmap
                 self.params.update()
                 sensor = self._sensor_by_index[sensor_index]
@@ -310,7 +414,9 @@ class AssetRenderer:
             raise InputError(f"Environment map shape {tuple(envmap.shape)} differs from the scene's {self.envmap_shape}.")
         sensor = self._sensor(camera)
         self._sensor_by_index = {0: sensor}
-        image = self._render_fn()(*maps, pad_envmap(envmap.float()), 0, int(spp), int(seed))
+        # Each part's own texels (torch slices, so gradients reach the maps given).
+        texels = {shape_id: [part.texels(m) for m in maps] for shape_id, part in self.parts.items()}
+        image = self._render_fn()(texels, pad_envmap(envmap.float()), 0, int(spp), int(seed))
         if image.requires_grad:
             self._track_pending(image)
         image = image.to(torch.float32)
@@ -343,7 +449,7 @@ class AssetRenderer:
             tensor = tensor[..., None]
         if tuple(tensor.shape) != (*self.maps_shape, channels):
             raise InputError(f"The {name} map has shape {tuple(tensor.shape)}, expected {(*self.maps_shape, channels)}.")
-        return tensor.float().contiguous()
+        return tensor
 
     def render_aovs(self, camera: Camera) -> dict[str, np.ndarray]:
         """Shading normals (world space), depth and coverage, one sample at pixel centres, no gradients."""

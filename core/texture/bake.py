@@ -34,10 +34,11 @@ def bake_texture(texture: NeuralTexture, position_map, mask, fill_index, base_lo
 
 
 def texture_maps_for_mesh(texture: NeuralTexture, normalized_mesh) -> np.ndarray:
-    """(R, R, 5) maps of a neural texture on a (normalised) mesh's UV layout, at the texture's resolution."""
-    from .uv_raster import rasterize_uv
+    """(R, R, 5) maps of a neural texture on a (normalised) mesh's UV layout, at the texture's resolution:
+    an atlas mesh's materials each in their own cell, wrapped as their samplers say (as convert fits them)."""
+    from ..materials import mesh_raster
 
-    raster = rasterize_uv(normalized_mesh, texture.config.resolution)
+    raster = mesh_raster(normalized_mesh, texture.config.resolution)
     return bake_texture(texture, raster.position, raster.border, raster.fill_index)
 
 
