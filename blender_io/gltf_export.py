@@ -20,16 +20,18 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..core.game_bake import BakedMaterial
+from ..core.gltf_ktx2 import check_ktx2_output, ktx2_glb
 from ..core.gltf_meshopt import encoded_glb
-from ..core.gltf_output import GltfOutput, output_like_input
-from ..core.imageio import srgb_to_linear
+from ..core.gltf_output import GltfOutput, output_like_input, skinned_meshes_moved_to_root
+from ..core.imageio import srgb_to_linear, write_image
 from ..core.maps import resize_channels
 from .material import EXTENSION_OF_WRAP, image_pixels_linear, material_wrap, principled_bsdf
 from .node_values import source
 
 FORMATS = {"glb": "GLB", "gltf": "GLTF_SEPARATE"}
 # --textures -> the exporter's image format (AUTO keeps the PNGs SceneFit bakes, and each other image's own format).
-_IMAGE_FORMATS = {"png": "AUTO", "jpeg": "JPEG", "webp": "WEBP"}
+# ktx2: the exporter writes PNGs, which core.gltf_ktx2 then encodes.
+_IMAGE_FORMATS = {"png": "AUTO", "jpeg": "JPEG", "webp": "WEBP", "ktx2": "AUTO"}
 
 
 def _alpha_source(bsdf):
@@ -62,7 +64,8 @@ def _with_tangents(output: GltfOutput) -> GltfOutput:
     writes it, and engines and the validator want TANGENT with it)."""
     import bpy
 
-    return replace(output, tangents=output.tangents or any(normal_mapped(m) for m in bpy.data.materials))
+    tangents = output.tangents or any(normal_mapped(m) for m in bpy.data.materials)
+    return replace(output, tangents=tangents, normals=output.normals or tangents)  # glTF: no TANGENT without NORMAL
 
 
 def constant_channels(material) -> dict[str, float]:
@@ -80,15 +83,15 @@ def _load_png(bpy, folder: Path, name: str, pixels: np.ndarray, colorspace: str,
     key = (colorspace, pixels.shape, hashlib.sha256(np.ascontiguousarray(pixels).tobytes()).hexdigest())
     if shared is not None and key in shared:
         return shared[key]
-    h, w, c = pixels.shape
-    rgba = np.concatenate([pixels, np.full((h, w, 4 - c), 255, np.uint8)], axis=2) if c < 4 else pixels
-    image = bpy.data.images.new(name, w, h, alpha=c == 4)
+    # Written at zlib's highest level and packed as written: the exporter passes a packed PNG's bytes
+    # through unchanged (Blender's own PNG writer makes files about 1.8x larger).
+    path = write_image(folder / f"{bpy.path.clean_name(name)}.png", pixels.astype(np.float32) / 255.0, "uint8",
+                       smallest=True)
+    image = bpy.data.images.load(str(path))
+    image.name = name
     image.colorspace_settings.name = colorspace
-    image.pixels.foreach_set((rgba[::-1].astype(np.float32) / 255.0).ravel())
-    image.filepath_raw = str(folder / f"{bpy.path.clean_name(name)}.png")
-    image.file_format = "PNG"
-    image.save()
-    image.pack()  # the exporter reads packed pixels; the temporary folder can go
+    image.alpha_mode = "STRAIGHT"
+    image.pack()  # the temporary folder can go
     if shared is not None:
         shared[key] = image
     return image
@@ -181,6 +184,8 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
         raise InputError(f"The output '{out_file.name}' should end in .{file_format} for --format {file_format}.")
     if output.compress == "meshopt" and file_format != "glb":
         raise InputError("--compress meshopt writes .glb files only; use --format glb, or --compress none or draco.")
+    if output.textures == "ktx2":
+        check_ktx2_output(file_format)
     out_file.parent.mkdir(parents=True, exist_ok=True)
     addon_utils.enable("io_scene_gltf2", default_set=False)
     layer = bpy.context.view_layer
@@ -194,13 +199,17 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
                                   use_selection=selection_only is not None, use_active_scene=True,
                                   export_apply=True, export_cameras=True, export_lights=True,
                                   export_image_format=_IMAGE_FORMATS[output.textures], export_materials="EXPORT",
-                                  export_tangents=output.tangents,
+                                  export_tangents=output.tangents, export_normals=output.normals, export_optimize_animation_keep_anim_armature=False,
                                   # glTF multiplies COLOR_0 into the base colour, and the baked base colour
                                   # already holds the vertex colours it read: no COLOR_n no material uses
                                   export_all_vertex_colors=False,
                                   export_draco_mesh_compression_enable=output.compress == "draco")
+        staged = staging / out_file.name
+        if output.skins_at_root:
+            skinned_meshes_moved_to_root(staged)
+        if output.textures == "ktx2":
+            ktx2_glb(staged)
         if output.compress == "meshopt":
-            staged = staging / out_file.name
             encoded_glb(staged, staged)
         refuse_overwriting([out_file.parent / p.name for p in staging.iterdir()], list(protect), "the glTF")
         written = []
@@ -254,7 +263,8 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
                     texture_size: int | None = None, object_name: str | None = None, protect: tuple = (),
                     output: GltfOutput | None = None) -> dict:
     """`scenefit bake`: the asset file loaded into a temporary scene, the neural texture baked per
-    material at `texture_size`² (default: the fitted size, rounded up to a power of two), written
+    material at `texture_size`² (default: each material's own image size, rounded up to a power of
+    two), its base the material's own maps, written
     as glTF 2.0. `texture` is a NeuralTexture or the path of a texture.pt. Returns the report.
     `output`: compression, texture format and size cap (default: as the input, see
     core.gltf_output.output_like_input); tangents are written where a material has a normal map.
@@ -262,12 +272,12 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
     Known bpy 5.0.1 crash: once the exporter has run on the temporary scene and the scene is
     removed, the next glTF import in the same process segfaults. `scenefit bake` is a process of
     its own; long-lived callers should run it as a subprocess (or use bake_copy_to_gltf)."""
-    from ..core.game_bake import bake_game_maps, default_texture_size
+    from ..core.game_bake import bake_game_maps, own_texture_size
     from ..core.texture.bake import load_neural_texture
     import bpy
 
     from .asset_file import loaded_asset
-    from .material import object_mesh_and_slots
+    from .material import object_mesh_and_slots, read_material
     from .scene_asset import scene_mesh
 
     if not hasattr(texture, "texture"):
@@ -278,16 +288,21 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
         if object_name is None and len(meshes) > 1:   # the whole scene is the asset, as convert read it
             whole = scene_mesh(meshes, depsgraph, Path(asset_path).stem)
             mesh, materials, taken = whole.mesh, whole.materials, whole.objects
+            own = [read_material(m, o, slot).maps for m, (o, slot) in zip(materials, whole.users)]
         else:
             mesh, slots = object_mesh_and_slots(obj, depsgraph, space="world")  # as convert
             materials, taken = [obj.material_slots[s].material for s in slots], [obj.name]
+            own = [read_material(m, obj, slot).maps for m, slot in zip(materials, slots)]
         output = _with_tangents(output or output_like_input(asset_path))
-        size = min(texture_size or default_texture_size(texture, len(materials)), output.max_texture)
-        baked = bake_game_maps(texture, mesh, [m.name for m in materials], size,
-                               [constant_channels(m) for m in materials], [material_wrap(m) for m in materials])
+        # Each material at its own images' size (--texture-size: all at that size), within --max-texture;
+        # the base is the material's own maps at that size, so the preset's working size costs no detail.
+        sizes = [min(texture_size, output.max_texture) if texture_size else own_texture_size(maps, output.max_texture)
+                 for maps in own]
+        baked = bake_game_maps(texture, mesh, [m.name for m in materials], sizes,
+                               [constant_channels(m) for m in materials], [material_wrap(m) for m in materials], own)
         report = bake_materials_to_gltf(materials, baked, out_file, file_format, protect=protect, output=output)
         report.update({"asset": str(asset_path), "object": taken[0] if len(taken) == 1 else None, "objects": taken,
-                       "format": file_format, "texture_size": size})
+                       "format": file_format, "texture_size": max(sizes)})
     return report
 
 

@@ -87,6 +87,9 @@ def bake_socket(obj, slot: int, socket, size: int, pixels_of,
         bpy.data.meshes.remove(mesh)
         bpy.data.materials.remove(mat)
         bpy.data.images.remove(image)
+        # The view layer still lists the removed object until it is updated: a later walk of its
+        # objects (the glTF export's selection) would touch freed memory and crash Blender.
+        bpy.context.view_layer.update()
 
 
 def _image_copies(mesh, wrap: tuple[str, str]) -> list[tuple[int, int]]:

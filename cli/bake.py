@@ -15,6 +15,7 @@ def run(args) -> int:
     from ..core.asset_io import is_asset_folder
     from ..core.errors import InputError
     from ..core.game_bake import check_texture_size
+    from ..core.gltf_ktx2 import check_ktx2_output
     from ..core.gltf_output import output_like_input
 
     if is_asset_folder(args.asset):
@@ -28,6 +29,8 @@ def run(args) -> int:
     targets = [out] + ([out.with_suffix(".bin")] if args.format == "gltf" else [])
     refuse_overwriting(targets + ([Path(args.report)] if args.report else []), list(protect))
     output = output_like_input(args.asset, args.compress, args.textures, args.max_texture)
+    if output.textures == "ktx2":
+        check_ktx2_output(args.format)
     report = bake_asset_file(args.asset, Path(args.texture), args.out, args.format, args.texture_size, args.object,
                              protect=protect, output=output)
     for material in report["materials"]:
@@ -52,7 +55,8 @@ def add_parser(sub) -> None:
     p.add_argument("--compress", choices=COMPRESSIONS,
                    help="mesh compression: none, draco (Blender's exporter) or meshopt (.glb only, meshoptimizer's "
                         "encoder) (default: as the input)")
-    p.add_argument("--textures", choices=TEXTURE_FORMATS, help="image format of the textures (default: the input's)")
+    p.add_argument("--textures", choices=TEXTURE_FORMATS, help="image format of the textures; ktx2: KHR_texture_basisu, ETC1S for colour and UASTC for data, "
+                        "with mipmaps (.glb only; needs Basis Universal's basisu) (default: the input's)")
     p.add_argument("--max-texture", type=int, default=DEFAULT_MAX_TEXTURE,
                    help=f"largest baked texture side, a power of two (default: {DEFAULT_MAX_TEXTURE})")
     p.add_argument("--report", help="also write what was baked as JSON here")

@@ -11,13 +11,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
 from .errors import InputError
 from .imageio import linear_to_srgb
+from .maps import PBRMaps
 from .materials import atlas_grid, atlas_slices, material_submesh
 from .mesh import Mesh, normalize_to_unit_sphere
 from .texture.bake import bake_texture
-from .texture.neural_texture import NeuralTexture
+from .texture.neural_texture import NeuralTexture, to_logit
 from .texture.uv_raster import rasterize_uv
 
 # A channel whose covered texels all lie within this many 8-bit steps of each other is a constant.
@@ -84,6 +86,22 @@ def _channel(plane: np.ndarray, mask: np.ndarray, original: float | None) -> np.
     return round(mean, 4) if flat else data
 
 
+def own_texture_size(maps: PBRMaps, cap: int) -> int:
+    """A material's bake size: its own base colour's longer side rounded up to a power of two, at
+    most `cap` (--max-texture), so a 2k texture bakes at 2k whatever size the preset adapted at."""
+    side = max(4, max(maps.resolution))
+    return min(check_texture_size(cap), 1 << (side - 1).bit_length())
+
+
+def own_base_logit(texture: NeuralTexture, maps: PBRMaps, size: int):
+    """A residual texture's base taken from the material's own maps at size² (not from the copy the
+    texture stores at its preset's resolution), as logits; None for a texture without a base."""
+    if not texture.config.residual:
+        return None
+    stack = torch.from_numpy(np.clip(maps.stacked_at(size, size), 0.0, 1.0).astype(np.float32))
+    return to_logit(stack, torch.tensor(texture.config.channel_min), torch.tensor(texture.config.channel_max))
+
+
 def material_base(texture: NeuralTexture, index: int, count: int, size: int):
     """A residual texture's base for material `index`'s own UV square at size²: its atlas cell (the
     whole texture for one material) resampled; None for a texture without a base."""
@@ -94,18 +112,20 @@ def material_base(texture: NeuralTexture, index: int, count: int, size: int):
     return texture.base_logit_at(rows, cols, size)
 
 
-def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: int,
+def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: int | list[int],
                    constants: list[dict[str, float]] | None = None,
-                   wraps: list[tuple[str, str]] | None = None) -> list[BakedMaterial]:
-    """Every material's maps at `size`² in its own UV layout.
+                   wraps: list[tuple[str, str]] | None = None,
+                   own_maps: list[PBRMaps] | None = None) -> list[BakedMaterial]:
+    """Every material's maps at `size`² (or size[i]² for material i) in its own UV layout.
 
     `mesh` is the asset as read (with material_index for several materials, in object space); it is
     normalised here exactly as for fitting, so the network sees the same points. constants[i]
     maps the channels ("roughness", "metallic") that were plain values in material i to those values.
     wraps[i]: how material i's UVs outside [0, 1] read its maps (its sampler; default repeat), as
-    convert fitted them.
+    convert fitted them. own_maps[i]: material i's own maps, the base of a residual texture at full
+    detail (without them the base is the texture's stored copy, resampled).
     """
-    size = check_texture_size(size)
+    sizes = [check_texture_size(s) for s in (size if isinstance(size, list) else [size] * len(names))]
     if len(names) != mesh.material_count:
         raise InputError(f"Mesh '{mesh.name}' uses {mesh.material_count} materials, but {len(names)} names "
                          "were given.")
@@ -113,9 +133,11 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
     baked = []
     for index, name in enumerate(names):
         wrap = tuple(wraps[index]) if wraps else ("repeat", "repeat")
+        size = sizes[index]
         raster = rasterize_uv(material_submesh(normalized, index), size, wrap=wrap)
-        maps = bake_texture(texture, raster.position, raster.border, raster.fill_index,
-                            material_base(texture, index, len(names), size))
+        base = own_base_logit(texture, own_maps[index], size) if own_maps else \
+            material_base(texture, index, len(names), size)
+        maps = bake_texture(texture, raster.position, raster.border, raster.fill_index, base)
         base = np.round(linear_to_srgb(maps[..., 0:3]) * 255.0).astype(np.uint8)
         was = constants[index] if constants else {}
         baked.append(BakedMaterial(name=name, base_color=base,

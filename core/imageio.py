@@ -194,11 +194,13 @@ def read_color_image(path: str | os.PathLike, upright: bool = False) -> np.ndarr
     return srgb_to_linear(rgb)
 
 
-def write_image(path: str | os.PathLike, pixels: np.ndarray, dtype: str | None = None) -> Path:
+def write_image(path: str | os.PathLike, pixels: np.ndarray, dtype: str | None = None,
+                smallest: bool = False) -> Path:
     """Write through a temporary file in the same folder and rename, so no half-written file is seen.
 
     dtype: "uint8", "uint16", "half" or "float"; by default uint8 for PNG/JPEG and float for EXR/HDR.
     Values are written as given: convert colour spaces before calling.
+    smallest: a PNG at zlib's highest level (slower to write; for files that ship, like a game bake).
     """
     import OpenImageIO as oiio
 
@@ -222,6 +224,8 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, dtype: str | None =
         if path.suffix.lower() == ".exr":
             spec.attribute("compression", "zip")
         spec.attribute("oiio:UnassociatedAlpha", 1)  # colour is stored as given, never divided by alpha
+        if smallest:
+            spec.attribute("png:compressionLevel", 9)
         if not out.open(tmp, spec):
             raise InputError(f"Cannot open '{path}' for writing: {out.geterror()}")
         ok = out.write_image(np.ascontiguousarray(pixels))

@@ -14,6 +14,7 @@ from bpy.props import EnumProperty, IntProperty, StringProperty
 
 from ..blender_io.gltf_export import FORMATS, bake_copies_to_gltf, normal_mapped
 from ..core.errors import InputError
+from ..core.gltf_ktx2 import check_ktx2_output
 from ..core.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TEXTURE_FORMATS, GltfOutput
 from ..core.pipeline import write_report
 from . import work
@@ -28,7 +29,9 @@ COMPRESS_ITEMS = (("none", "None", "Plain mesh data"),
                   ("draco", "Draco", "KHR_draco_mesh_compression, by Blender's exporter"),
                   ("meshopt", "meshopt", "EXT_meshopt_compression, by meshoptimizer's encoder (.glb only)"))
 TEXTURE_ITEMS = (("png", "PNG", "Lossless"), ("jpeg", "JPEG", "Smaller, lossy (images with alpha stay PNG)"),
-                 ("webp", "WebP", "Smaller; needs an engine that reads EXT_texture_webp"))
+                 ("webp", "WebP", "Smaller; needs an engine that reads EXT_texture_webp"),
+                 ("ktx2", "KTX2", "GPU-compressed (KHR_texture_basisu: ETC1S colour, UASTC data; .glb only; "
+                                  "needs Basis Universal's basisu)"))
 assert [k for k, *_ in COMPRESS_ITEMS] == list(COMPRESSIONS) and [k for k, *_ in TEXTURE_ITEMS] == list(TEXTURE_FORMATS)
 
 
@@ -68,6 +71,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         if size and (size < 4 or size & (size - 1)):
             raise InputError(f"Texture size must be a power of two from 4 to 8192 (or 0 for the fitted size), got {size}.")
         GltfOutput(self.compress, self.textures, self.max_texture)  # a bad setting is one sentence before any work
+        if self.textures == "ktx2":
+            check_ktx2_output(self.file_format)
         texture = texture_file(context)
         layout = asset_layout(context)   # the selected objects, or the active one with all its materials
         self._output = GltfOutput(self.compress, self.textures, self.max_texture,

@@ -196,6 +196,35 @@ def test_a_skinned_gltf_converts_and_bakes_with_its_skin(assets, tmp_path):
     assert {"Rig", "Body", "Bone", "Upper"} <= {n["name"] for n in out["nodes"]}
 
 
+def test_a_skinned_mesh_at_the_root_stays_at_the_root(assets, tmp_path, validator):
+    """Blender parents a skinned mesh to its armature; glTF ignores a skinned mesh node's transform, so
+    under a parent it only draws NODE_SKINNED_MESH_NON_ROOT. An input whose skinned mesh is a root node
+    (the Khronos Fox) gets it back as a root node, and the validator no warning the input did not have;
+    an input that parented it (Blender's own export) keeps it parented, as it came."""
+    from scenefit.core.gltf_meshopt import read_gltf, write_glb
+
+    document, chunk = read_gltf(assets / "skinned.glb")
+    nodes = document["nodes"]
+    body = next(i for i, n in enumerate(nodes) if n.get("name") == "Body")
+    parent = next(n for n in nodes if body in n.get("children", []))
+    parent["children"].remove(body)
+    document["scenes"][0]["nodes"].append(body)
+    rooted = tmp_path / "rooted.glb"
+    write_glb(rooted, document, chunk)
+    assert "NODE_SKINNED_MESH_NON_ROOT" not in {m["code"] for m in validator(str(rooted))["issues"]["messages"]}
+
+    _, out = convert_and_bake(rooted, tmp_path / "rooted")
+    body = next(i for i, n in enumerate(out["nodes"]) if n["name"] == "Body")
+    assert "skin" in out["nodes"][body] and body in out["scenes"][0]["nodes"]
+    assert not any(body in n.get("children", []) for n in out["nodes"])
+    report = validator(str(tmp_path / "rooted" / "baked.glb"))["issues"]
+    assert report["numErrors"] == 0 and "NODE_SKINNED_MESH_NON_ROOT" not in {m["code"] for m in report["messages"]}
+
+    _, out = convert_and_bake(assets / "skinned.glb", tmp_path / "parented")
+    body = next(i for i, n in enumerate(out["nodes"]) if n["name"] == "Body")
+    assert any(body in n.get("children", []) for n in out["nodes"])
+
+
 def test_bake_keeps_the_names_the_startup_scene_also_uses(assets, tmp_path):
     """A material 'Material' and a camera 'Camera' come back under exactly those names (the startup
     scene's own made them 'Material.001' and 'Camera.001'); the Mapping node's Cycles bake runs in the

