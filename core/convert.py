@@ -20,7 +20,7 @@ import torch
 
 from .errors import InputError
 from .maps import PBRMaps
-from .materials import AssetMaterials, atlas_grid, atlas_maps, atlas_mesh, atlas_raster, atlas_slices
+from .materials import AssetMaterials, atlas_grid, atlas_maps, atlas_mesh, atlas_raster, atlas_slices, mesh_raster
 from .mesh import Mesh, NormalizeTransform, normalize_to_unit_sphere
 from .progress import ProgressCallback, emit
 from .texture.fit_direct import fit_direct, masked_psnr
@@ -126,11 +126,12 @@ def asset_stack(maps: PBRMaps, what: str = "the asset's maps") -> np.ndarray:
 
 def convert_asset(mesh: Mesh, maps: PBRMaps, config: ConvertConfig = ConvertConfig(),
                   progress: ProgressCallback | None = None, cancel: threading.Event | None = None,
-                  rasterize: Callable[[Mesh, int], UVRaster] = rasterize_uv) -> ConvertResult:
+                  rasterize: Callable[[Mesh, int], UVRaster] = mesh_raster) -> ConvertResult:
     """Fit a neural texture to the asset's maps. Nothing given is modified.
 
-    rasterize(normalised mesh, resolution): its UV raster; rasterize_uv (UVs repeating past [0, 1])
-    unless the material's sampler wraps otherwise (see convert_materials)."""
+    rasterize(normalised mesh, resolution): its UV raster; by default as the renderer reads it
+    (core.materials.mesh_raster: an atlas mesh's materials in their own cells, each wrapped as its
+    sampler says; the mesh's wrap mode, else repeat)."""
     started = time.perf_counter()
     normalized, transform = normalize_to_unit_sphere(mesh)
     resolution, why = choose_resolution(maps, config)

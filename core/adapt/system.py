@@ -467,8 +467,8 @@ def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfi
     than 0 of a distributed run nothing is written and the report's outputs are empty).
     """
     from ..mesh import normalize_to_unit_sphere
+    from ..materials import mesh_raster
     from ..texture.bake import bake_maps
-    from ..texture.uv_raster import rasterize_uv
 
     out_dir = Path(out_dir)
     join_process_group()  # under torchrun: this rank's GPU is chosen before the models load
@@ -476,7 +476,7 @@ def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfi
         models = load_guidance_models(config.models, config.views_type == "local+global")
     normalized, _ = normalize_to_unit_sphere(mesh)
     res = texture.config.resolution if texture is not None else int(resolution or stage_config("texture", config.texture_preset).resolution)
-    raster = rasterize_uv(normalized, res)
+    raster = mesh_raster(normalized, res)   # each material's own cell and wrap mode, as the renderer reads them
     inputs = AdaptInputs(mesh=normalized, raster=raster, texture=texture, photo=photo, placement=placement,
                          envmap=envmap, photo_camera=photo_camera)
     result = adapt_texture(inputs, config, progress=progress, cancel=cancel, checkpoint_dir=out_dir / "checkpoint",
