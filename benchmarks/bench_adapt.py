@@ -25,7 +25,10 @@ from scenefit.core.primitives import uv_sphere
 from scenefit.core.presets import stage_config
 from scenefit.core.texture import NeuralTexture, rasterize_uv
 
-PHASES = (("render", "render"), ("VAE encode", "vae"), ("UNet passes", "unet"), ("VAE backward", "vae_backward"),
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from results_files import machine_load  # noqa: E402
+
+PHASES = (("constant work", "constants"), ("render", "render"), ("VAE encode", "vae"), ("UNet passes", "unet"), ("VAE backward", "vae_backward"),
           ("render backward", "render_backward"), ("LoRA loss + backward", "lora"), ("Adam steps", "step"))
 
 
@@ -104,6 +107,45 @@ def bench_adapt(quick: bool = False) -> dict:
     return {"rows": rows, "markdown": markdown}
 
 
+def sd2_draft_row(models: Path, dtype_type: str, cache: bool) -> dict:
+    """The draft preset's scene-mode step with SD2-sized random models (devtools SD2_SIZED, built in
+    `models`/sd2-base and sd2-inpaint): step 0 run twice, the first with the view's constant work
+    computed (cold), the second reusing it when `cache` (warm); seconds by phase per step and the
+    process's peak resident memory. Meant for a process of its own (peak memory is the process's)."""
+    from scenefit.core.adapt import AdaptSystem
+    from scenefit.core.adapt.system import _peak_memory_mb
+
+    config = stage_config("adapt", "draft", prompt="a mossy sphere in a swamp", checkpoint_every=0, preview_every=0,
+                          models=ModelConfig(base_model=str(models / "sd2-base"),
+                                             inpaint_model=str(models / "sd2-inpaint"), dtype_type=dtype_type))
+    mesh = uv_sphere(segments=32, rings=16)
+    photo = np.random.default_rng(0).uniform(0.2, 0.8, (480, 640, 3)).astype(np.float32)
+    inputs = AdaptInputs(mesh=mesh, raster=rasterize_uv(mesh, 128), photo=photo, placement=Placement((0.5, 0.6), 0.5),
+                         texture=NeuralTexture(stage_config("texture", "draft", resolution=128), seed=0))
+    started = time.perf_counter()
+    system = AdaptSystem.build(inputs, config, cache_constants=cache)
+    build_s = time.perf_counter() - started
+    steps = []
+    for _ in range(2):
+        before = dict(system.timer.totals)
+        system.step(0)
+        steps.append({k: v - before.get(k, 0.0) for k, v in system.timer.totals.items()})
+    return {"setup": f"SD2-sized random models, CPU, draft (256 px, {config.stages[0].spp} spp, 1 view, "
+                     f"{config.global_crops} crops, 512-px model input), {system.models.dtype}, "
+                     f"constants {'cached' if cache else 'recomputed'}",
+            "dtype": str(system.models.dtype), "cache": cache, "build_s": build_s,
+            "cold": steps[0], "warm": steps[1], "cold_s": sum(steps[0].values()), "warm_s": sum(steps[1].values()),
+            "peak_memory_mb": _peak_memory_mb(system.device), "load": machine_load()}
+
+
 if __name__ == "__main__":
-    out = bench_adapt(quick="--quick" in sys.argv)
-    print(out["markdown"])
+    if "--sd2" in sys.argv:   # python benchmarks/bench_adapt.py --sd2 MODELS DTYPE cache|nocache OUT.json
+        import json
+
+        folder, dtype, cache, out = sys.argv[sys.argv.index("--sd2") + 1:][:4]
+        row = sd2_draft_row(Path(folder), dtype, cache == "cache")
+        Path(out).write_text(json.dumps(row, indent=1, default=str) + "\n")
+        print(json.dumps(row, indent=1, default=str))
+    else:
+        out = bench_adapt(quick="--quick" in sys.argv)
+        print(out["markdown"])

@@ -87,7 +87,7 @@ def test_short_scene_run_changes_the_texture_and_resumes_exactly(tiny_models, as
     assert events[1].preview is not None and events[1].preview.shape == (32, 32, 3) and events[0].preview is None
     assert full.decisions["reference_injection"].choice == 4   # the tiny UNet's 4 self-attention layers
     # Every phase is timed, and the phases are parts of the run (they cannot add up to more than it).
-    assert set(full.timings) == {"render", "vae", "unet", "vae_backward", "render_backward", "lora", "step"}
+    assert set(full.timings) == {"constants", "render", "vae", "unet", "vae_backward", "render_backward", "lora", "step"}
     assert sum(full.timings.values()) <= full.seconds
     # The coarse stage renders 16 px, the fine one 32 px.
     assert [h["stage_size"] for h in full.history] == [16, 16, 32, 32]
@@ -284,3 +284,69 @@ def test_cli_adapt_and_demo_guidance(tiny_models, asset, tmp_path, monkeypatch, 
     err = capsys.readouterr().err
     assert "stabilityai/stable-diffusion-2-base" in err and "Traceback" not in err
     assert not (tmp_path / "demo").exists()
+
+
+# -- issue 24's cost work: the constant work of the fixed view bank, half-precision frozen weights ------
+
+def _cost_config(tiny_models, dtype_type: str = "fp32", **overrides) -> AdaptConfig:
+    """One bank view (so every step comes back to it), one stage, fp32 unless asked."""
+    base, inpaint = tiny_models
+    values = dict(iterations=3, stages=(StageSpec(1.0, 32, 2, (500, 990)),), views=1, view_variants=1,
+                  checkpoint_every=0, preview_every=0,
+                  models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint), dtype_type=dtype_type))
+    values.update(overrides)
+    return _config(tiny_models, **values)
+
+
+def test_the_view_bank_is_fixed_by_the_seed_and_spans_the_papers_azimuths(tiny_models):
+    from scenefit.core.adapt.sampling import draw_view_bank
+
+    config, box = _cost_config(tiny_models, views=24, view_variants=2), (20.0, 10.0, 16.0)
+    bank = draw_view_bank(config, (48, 64), box)
+    assert len(bank) == 48 and bank == draw_view_bank(config, (48, 64), box)
+    assert sorted({b.azimuth_deg for b in bank}) == [15.0 * k for k in range(24)]
+    assert all(len(b.crops) == config.global_crops for b in bank)
+    assert bank != draw_view_bank(_cost_config(tiny_models, views=24, view_variants=2, seed=1), (48, 64), box)
+
+
+def test_cached_constant_work_gives_the_same_steps_as_recomputing_it(tiny_models, asset, one_render_thread):
+    """One bank view, three steps: the cached run computes its constants (reference latents, normal
+    weights, crop masks, masked-photo latents) once and reuses them twice; the uncached run recomputes
+    them every step by the same code. Equal bit for bit (one render thread)."""
+    config = _cost_config(tiny_models)
+    runs = {}
+    for cache in (True, False):
+        system = AdaptSystem.build(_inputs(asset), config, cache_constants=cache)
+        history = [system.step(i) for i in range(config.iterations)]
+        runs[cache] = (system.constants, [p.detach().clone() for p in system.texture.parameters()], history)
+    (cached, after, history), (uncached, after_uncached, history_uncached) = runs[True], runs[False]
+    assert (cached.misses, cached.hits) == (1, 2) and (uncached.misses, uncached.hits) == (3, 0)
+    assert all(torch.equal(a, b) for a, b in zip(after, after_uncached)) and history == history_uncached
+    assert any((a - b).abs().max() > 0 for a, b in zip(after, asset[2].parameters())), "the steps did nothing"
+
+
+def _view_gradient(tiny_models, asset, dtype_type: str) -> torch.Tensor:
+    system = AdaptSystem.build(_inputs(asset), _cost_config(tiny_models, dtype_type))
+    system.optimizer.zero_grad(set_to_none=True)
+    system.train_view(system.sample(0, 0))
+    return torch.cat([p.grad.flatten() for p in system.texture.parameters() if p.grad is not None]).double()
+
+
+def test_bf16_frozen_weights_give_the_fp32_gradient_within_tolerance(tiny_models, asset, one_render_thread):
+    """bf16 keeps 8 significant bits (unit roundoff 2^-9 = 0.2%). The texture's gradient passes the VAE
+    forward, the UNet passes whose difference is the score, and the VAE backward, each rounding its
+    activations; some 40 layers of independent 0.2% roundings add up to a few percent, so we ask for
+    the direction within cos >= 0.98 (angle <= 11 degrees) and the norm within 10% (seen here: cos
+    0.998, norm +0.3%). A wrong cast (a gradient truncated to bf16 before its sum, a layer in the
+    wrong scale) is off by far more. Runs wherever torch has bf16 (emulated on older CPUs: slower, same
+    numbers); ModelConfig's "auto" picks it only where the CPU computes it natively."""
+    from scenefit.core.guidance.models import cpu_computes_bf16
+
+    if cpu_computes_bf16():
+        assert ModelConfig().dtype() == torch.bfloat16
+    full = _view_gradient(tiny_models, asset, "fp32")
+    half = _view_gradient(tiny_models, asset, "bf16")
+    assert torch.isfinite(half).all() and full.norm() > 0
+    cosine = float(torch.dot(full, half) / (full.norm() * half.norm()))
+    assert cosine >= 0.98, cosine
+    assert abs(float(half.norm() / full.norm()) - 1.0) <= 0.10

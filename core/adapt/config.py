@@ -60,6 +60,8 @@ class AdaptConfig:
     views_per_step: views whose gradients are averaged in one step (spread over the ranks of
     torch.distributed when there are several, else rendered in turn on one device).
     global_crops: global views (crops of the photo at several scales) scored per view.
+    view_variants: scene and edit modes draw from a fixed bank of views x view_variants views (each
+    with its λ_FOV, background and crops), so what depends only on a view is computed once.
     shadow_type / shadow_spp: the global views' shadow, made by the compose stage's floor passes.
     """
 
@@ -80,6 +82,7 @@ class AdaptConfig:
     condition_dropout: float = 0.1
     views: int = 24
     views_per_step: int = 4
+    view_variants: int = 2                        # fixed views per azimuth (sampling.draw_view_bank)
     elevation: float = 15.0
     elevation_choices: tuple[float, ...] = ()     # "generate": (20, 30, 45) with small perturbations
     fov_range: tuple[float, float] = (1.0, 1.21)
@@ -126,6 +129,7 @@ class AdaptConfig:
         need(self.lora_rank >= 1, f"lora_rank must be at least 1, got {self.lora_rank}.")
         need(0.0 <= self.condition_dropout <= 1.0, "condition_dropout must be in [0, 1].")
         need(self.views >= 1, f"views must be at least 1, got {self.views}.")
+        need(self.view_variants >= 1, f"view_variants must be at least 1, got {self.view_variants}.")
         need(self.views_per_step >= 1, f"views_per_step must be at least 1, got {self.views_per_step}.")
         need(-90.0 < self.elevation < 90.0 and all(-90.0 < e < 90.0 for e in self.elevation_choices),
              "elevations must be strictly between -90 and 90 degrees.")

@@ -3,6 +3,12 @@
 A view's choices come from generators seeded by (seed, iteration, view index) only, so a run
 resumed from a checkpoint repeats the uninterrupted one, and the views of a step are the same
 whether one device renders all of them or each rank of torch.distributed renders its share.
+
+Scene and edit modes draw their views from a fixed bank (`draw_view_bank`, drawn once from the seed):
+`view_variants` entries on each of the paper's `views` azimuths, each with its own field of view,
+background, reference-render seed and global crops. What depends only on an entry (the reference
+render's latents, the ⟨camera, normal⟩ weights, each crop's mask and masked-photo latents) is then
+the same every time the entry comes back, so the stage computes it once (core/adapt/constants.py).
 """
 from __future__ import annotations
 
@@ -39,19 +45,71 @@ class ViewSample:
     crops: list[tuple[float, float, float]]
     rng: np.random.Generator            # for the draws that follow (ε_ψ's update)
     generator: torch.Generator
+    entry: int | None = None            # the view bank's entry (None: drawn afresh, "generate")
+    reference_seed: int = 0             # the reference render's seed (the entry's, so it can be cached)
+
+
+@dataclass(frozen=True)
+class BankView:
+    """One fixed view of the bank: an azimuth of the paper's set and the choices drawn for it once."""
+
+    azimuth_deg: float
+    elevation_deg: float
+    fov_multiplier: float
+    background: tuple[float, float, float]
+    reference_seed: int
+    crops: tuple[tuple[float, float, float], ...]
+
+
+# The bank's own stream of the seed (the steps' streams are (seed, iteration, view)).
+BANK_STREAM = 0x5CE4E
+
+
+def uses_view_bank(config: AdaptConfig) -> bool:
+    """Scene and edit modes have constant work per view (the reference, the photo); "generate" has none."""
+    return config.mode_type != "generate"
+
+
+def draw_view_bank(config: AdaptConfig, photo_hw: tuple[int, int] | None,
+                   object_box: tuple[float, float, float] | None) -> list[BankView]:
+    """`views` x `view_variants` fixed views: each azimuth of the paper's set, with λ_FOV, elevation,
+    background, reference seed and crops drawn as a step would draw them, once, from the seed."""
+    rng = np.random.default_rng([config.seed, BANK_STREAM])
+    bank = []
+    for k in range(config.views):
+        for _ in range(config.view_variants):
+            camera = _camera(config, rng, k, 8)
+            background = background_color(rng, config.background_random_p)
+            crops = ()
+            if config.views_type == "local+global" and photo_hw is not None and object_box is not None:
+                crops = tuple(sample_crops(photo_hw, object_box, config.global_crops, rng))
+            bank.append(BankView(camera.azimuth_deg, camera.elevation_deg, camera.fov_multiplier, background,
+                                 int(rng.integers(2**31 - 2**16)), crops))
+    return bank
 
 
 def sample_view(config: AdaptConfig, iteration: int, index: int, latent_res: int, envmap: np.ndarray | None,
-                photo_hw: tuple[int, int] | None, object_box: tuple[float, float, float] | None) -> ViewSample:
+                photo_hw: tuple[int, int] | None, object_box: tuple[float, float, float] | None,
+                bank: list[BankView] | None = None) -> ViewSample:
     """The choices for view `index` of step `iteration`; object_box: the square (x0, y0, side) in photo
-    pixels that every global crop must hold (None: no global views)."""
+    pixels that every global crop must hold (None: no global views); bank: the fixed views to pick
+    from (None: camera, background and crops drawn afresh)."""
     rng = np.random.default_rng([config.seed, iteration, index])
     generator = torch.Generator().manual_seed(int(rng.integers(2**62)))
     progress = iteration / max(1, config.iterations - 1)
     stage = stage_at(config, iteration)
-    camera = sample_camera(config, rng, stage.render_size)
+    entry = None
+    if bank:
+        entry = int(rng.integers(len(bank)))
+        fixed = bank[entry]
+        camera = Camera(fixed.azimuth_deg, fixed.elevation_deg, fixed.fov_multiplier, width=stage.render_size,
+                        height=stage.render_size)
+        background = fixed.background
+    else:
+        camera = sample_camera(config, rng, stage.render_size)
     env, light = sample_light(config, rng, envmap)
-    background = background_color(rng, config.background_random_p)
+    if not bank:
+        background = background_color(rng, config.background_random_p)
     t = sample_timestep(rng, stage.t_range, progress, config.timestep_anneal_type)
     noise = torch.randn(1, 4, latent_res, latent_res, generator=generator)
     lam = interpolation_lambda(progress, config.critic.lambda_end, config.critic.critic_type)
@@ -60,16 +118,23 @@ def sample_view(config: AdaptConfig, iteration: int, index: int, latent_res: int
         prompt = f"{prompt}, {view_suffix(camera.azimuth_deg)}"
     render_seed = int(rng.integers(2**31 - 2**16))
     crops = []
-    if config.views_type == "local+global" and photo_hw is not None and object_box is not None:
+    if bank:
+        crops = list(bank[entry].crops)
+    elif config.views_type == "local+global" and photo_hw is not None and object_box is not None:
         crops = sample_crops(photo_hw, object_box, config.global_crops, rng)
+    reference_seed = bank[entry].reference_seed if bank else render_seed
     return ViewSample(index, stage, camera, env, light, background, t, lam, noise, render_seed, prompt, crops,
-                      rng, generator)
+                      rng, generator, entry, reference_seed)
 
 
 def sample_camera(config: AdaptConfig, rng: np.random.Generator, size: int) -> Camera:
     """One of `views` evenly spaced azimuths, the user's elevation (or one of the choices, perturbed),
     and λ_FOV uniform in fov_range."""
-    azimuth = 360.0 * int(rng.integers(config.views)) / config.views
+    return _camera(config, rng, int(rng.integers(config.views)), size)
+
+
+def _camera(config: AdaptConfig, rng: np.random.Generator, k: int, size: int) -> Camera:
+    azimuth = 360.0 * k / config.views
     if config.elevation_choices:
         elevation = float(config.elevation_choices[int(rng.integers(len(config.elevation_choices)))])
         elevation = float(np.clip(elevation + rng.uniform(-5.0, 5.0), -89.0, 89.0))

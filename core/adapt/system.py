@@ -1,11 +1,13 @@
 """The adapt stage as a small system: build (models, texture, renderer, critics, resume), step (one
 optimisation step over `views_per_step` views), finish (the result and its decisions).
 
-One view of a step (core/adapt/sampling.py draws its camera, light, background, t and noise):
+One view of a step (core/adapt/sampling.py draws its camera, light, background, t and noise; scene
+and edit modes pick it from a fixed bank whose constant work, core/adapt/constants.py, is done once):
   render the texture (Mitsuba, differentiable) -> local view (object on a solid colour) and global
   views (the asset rendered through the photo camera where compose places it, with compose's shadow
-  matte and compositing rule, crops at several scales; core/adapt/global_views.py) -> VAE encode -> critics (UNet passes;
-  local and global weighed equally) -> backward through the VAE and the renderer into the texture,
+  matte and compositing rule, crops at several scales; core/adapt/global_views.py) -> per image:
+  VAE encode -> critic (UNet passes; local and global weighed equally) -> backward through the VAE
+  (one image's encoder graph held at a time) -> then backward through the renderer into the texture,
   scaled by 1 / views_per_step -> ε_ψ's LoRA loss on the local latents (same weight).
 After the step's views (and the ranks' shares, summed by torch.distributed): one Adam step on the
 texture and one on ε_ψ.
@@ -26,8 +28,7 @@ from ..guidance.critics import ScoreCritic
 from ..guidance.injection import ReferenceInjector
 from ..guidance.lora import LoraCritic, camera_condition
 from ..guidance.models import GuidanceModels, load_guidance_models, locate_models
-from ..guidance.views import global_view, latent_mask, local_view, masked_image
-from ..guidance.weighting import normal_weight_map
+from ..guidance.views import global_view, local_view
 from ..mesh import Mesh
 from ..photo import PhotoCamera, photo_camera_for
 from ..placement import Placement
@@ -38,11 +39,12 @@ from ..texture.neural_texture import NeuralTexture, split_channels
 from ..texture.uv_raster import UVRaster
 from .checkpoint import CHECKPOINT_FILE, load_checkpoint, save_checkpoint
 from .config import AdaptConfig
+from .constants import ConstantWork, ViewConstants, bank_box
 from .distributed import join_process_group, rank_world, sum_gradients, views_of_rank
 from .global_views import GlobalRender, GlobalScene
-from .sampling import ViewSample, sample_view
+from .sampling import ViewSample, draw_view_bank, sample_view, uses_view_bank
 
-PHASES = ("render", "vae", "unet", "vae_backward", "render_backward", "lora", "step")
+PHASES = ("constants", "render", "vae", "unet", "vae_backward", "render_backward", "lora", "step")
 
 
 @dataclass
@@ -124,23 +126,24 @@ class AdaptSystem:
 
     def __init__(self, inputs: AdaptInputs, config: AdaptConfig, models: GuidanceModels, texture: NeuralTexture,
                  renderer: AssetRenderer, critics: _Critics, rank: int, world: Decision,
-                 checkpoint_path: Path | None) -> None:
+                 checkpoint_path: Path | None, cache_constants: bool = True) -> None:
         self.inputs, self.config, self.models = inputs, config, models
         self.texture, self.renderer, self.critics = texture, renderer, critics
         self.rank, self.world = rank, world
         self.device = models.device
         raster = inputs.raster
         self.plan = texture.plan(raster.position, raster.border, raster.fill_index)
-        self.reference_stack = None
-        if config.uses_reference:
-            with torch.no_grad():
-                self.reference_stack = texture.texture_from_plan(self.plan).detach()
+        with torch.no_grad():  # the starting texture: the reference, and the global views' fixed coverage
+            self.start_stack = texture.texture_from_plan(self.plan).detach()
+        self.reference_stack = self.start_stack if config.uses_reference else None
         self.base_env = torch.from_numpy(np.ascontiguousarray(renderer_environment(inputs, config)))
         self.photo = None if inputs.photo is None else np.clip(np.asarray(inputs.photo, np.float32), 0.0, 1.0)
         self.global_scene = None
         if config.views_type == "local+global":
             self.global_scene = _global_scene(inputs, config, self.photo, np.asarray(self.base_env))
         self.latent_res = config.model_resolution // models.vae_scale_factor
+        self.bank = draw_view_bank(config, *bank_box(self)) if uses_view_bank(config) else None
+        self.constants = ConstantWork(self, cache_constants)
         self.uncond = models.embed(config.negative_prompt)
         self.optimizer = torch.optim.Adam(texture.parameters(), lr=config.lr_texture)
         self.my_views = views_of_rank(config.views_per_step, rank, world.choice)
@@ -155,9 +158,10 @@ class AdaptSystem:
 
     @classmethod
     def build(cls, inputs: AdaptInputs, config: AdaptConfig, models: GuidanceModels | None = None,
-              checkpoint_dir: str | Path | None = None) -> "AdaptSystem":
+              checkpoint_dir: str | Path | None = None, cache_constants: bool = True) -> "AdaptSystem":
         """Validate, find and load the models (a missing one fails here, before any work), copy the
-        texture, set up the renderer and critics, and resume from `checkpoint_dir` when it holds one."""
+        texture, set up the renderer and critics, and resume from `checkpoint_dir` when it holds one.
+        cache_constants False recomputes each view's constant work every step (for comparison)."""
         inputs.validate(config)
         # Join torchrun's group first: it picks this rank's GPU, where the models must then go.
         rank, _, world = join_process_group()
@@ -174,7 +178,7 @@ class AdaptSystem:
                                  SceneOptions(max_depth=config.max_depth, hide_emitters=True))
         checkpoint_path = Path(checkpoint_dir) / CHECKPOINT_FILE if checkpoint_dir is not None else None
         system = cls(inputs, config, models, texture, renderer, _build_critics(models, config), rank,
-                     world, checkpoint_path)
+                     world, checkpoint_path, cache_constants)
         system.resume()
         if models.device.type == "cuda":
             torch.cuda.reset_peak_memory_stats()
@@ -212,15 +216,15 @@ class AdaptSystem:
         return metrics
 
     def sample(self, iteration: int, index: int) -> ViewSample:
-        hw = None if self.photo is None else self.photo.shape[:2]
-        box = None if self.global_scene is None else self.global_scene.box
-        return sample_view(self.config, iteration, index, self.latent_res, self.inputs.envmap, hw, box)
+        return sample_view(self.config, iteration, index, self.latent_res, self.inputs.envmap, *bank_box(self),
+                           self.bank)
 
     def train_view(self, view: ViewSample) -> dict:
         """Render, score and back-propagate one view (its loss weighted 1 / views_per_step); returns its metrics."""
         weight = 1.0 / self.config.views_per_step
         env = self.base_env if view.envmap is None else torch.from_numpy(view.envmap)
-        reference_view, weight_map = self._reference_and_weights(view, env)
+        constants = self.constants.get(view, env)
+        self.timer.lap("constants")
         maps = split_channels(self.texture.texture_from_plan(self.plan))
         out = self.renderer.render(view.camera, *maps, env, spp=view.stage.spp, seed=view.render_seed)
         rendered = [torch.cat([out.rgb, out.alpha], dim=-1)]
@@ -232,12 +236,10 @@ class AdaptSystem:
         self.timer.lap("render")
         # Gradients stop at the leaves, so the two halves of backward can be timed.
         leaves = [r.detach().to(self.device).requires_grad_(True) for r in rendered]
-        image, latents, reference_latents, global_inputs = self._encode_views(view, leaves, placed, reference_view)
-        self.timer.lap("vae")
-        loss, metrics = self._score(view, latents, reference_latents, weight_map, global_inputs)
-        self.timer.lap("unet")
-        (loss * weight).backward()
-        self.timer.lap("vae_backward")
+        share = 0.5 * weight if view.crops else weight   # local and global weighed equally
+        image, latents, metrics = self._local(view, leaves[0], constants, share)
+        if view.crops:
+            self._global(view, leaves[1], placed, constants, share, metrics)
         grads = [torch.nan_to_num(leaf.grad if leaf.grad is not None else torch.zeros_like(leaf),
                                   nan=0.0, posinf=0.0, neginf=0.0).to(r.device) for leaf, r in zip(leaves, rendered)]
         torch.autograd.backward(rendered, grads)  # one pass through the texture for both renders
@@ -256,60 +258,39 @@ class AdaptSystem:
     def _condition(self, view: ViewSample) -> torch.Tensor:
         return camera_condition(view.camera.origin, view.camera.forward, view.light)
 
-    def _reference_and_weights(self, view: ViewSample, env: torch.Tensor):
-        """The frozen reference's local view and the ⟨camera, normal⟩ weights, both without gradients
-        (rendered first, so the scene holds the texture's maps when its backward pass replays the paths)."""
-        reference_view = weight_map = None
-        if self.reference_stack is not None:
-            with torch.no_grad():
-                ref = self.renderer.render(view.camera, *split_channels(self.reference_stack), env,
-                                           spp=view.stage.spp, seed=view.render_seed)
-                reference_view = local_view(ref.rgb, ref.alpha, view.background, self.config.model_resolution)
-        if self.config.normal_weight_type != "none":
-            aov = self.renderer.render_aovs(view.camera)
-            weight_map = normal_weight_map(aov["normal"], aov["coverage"], view.camera.forward,
-                                           (self.latent_res, self.latent_res),
-                                           weight_type=self.config.normal_weight_type).to(self.device)
-        return reference_view, weight_map
-
-    def _encode_views(self, view: ViewSample, leaves: list[torch.Tensor], placed: GlobalRender | None,
-                      reference_view: torch.Tensor | None):
-        """Local view, reference and global views -> latents (global: with mask and masked-photo latents).
-        leaves: the local render (h, w, 4) and, with global views, the asset's layer in the photo."""
-        image = local_view(leaves[0][..., 0:3], leaves[0][..., 3:4], view.background, self.config.model_resolution)
+    def _local(self, view: ViewSample, leaf: torch.Tensor, constants: ViewConstants, share: float):
+        """The local view encoded, scored (ε_φ with the reference injected, ε_ψ) and back-propagated to
+        its leaf at `share` of the step; its encoder graph is freed before the next image's is built."""
+        image = local_view(leaf[..., 0:3], leaf[..., 3:4], view.background, self.config.model_resolution)
         latents = self.models.encode(image)
-        reference_latents = None
-        if reference_view is not None:
-            with torch.no_grad():
-                reference_latents = self.models.encode(reference_view)
-        global_inputs = []
-        for crop in view.crops:
-            g_image, g_alpha = global_view(leaves[1][..., 0:3], leaves[1][..., 3:4], placed.rect, self.photo,
-                                           placed.matte, crop, self.config.model_resolution)
-            with torch.no_grad():
-                masked_latents = self.models.encode(masked_image(g_image, g_alpha))
-            global_inputs.append((self.models.encode(g_image), latent_mask(g_alpha, (self.latent_res,) * 2),
-                                  masked_latents))
-        return image, latents, reference_latents, global_inputs
-
-    def _score(self, view: ViewSample, latents, reference_latents, weight_map, global_inputs):
-        """The critics' surrogate loss (∇z = w_t w_n (ε_φ - ε̂)); local and global weighed equally."""
-        noise = view.noise.to(self.device)
-        text = self.models.embed(view.prompt)
-        local = self.critics.local(latents, view.t, noise, text, self.uncond, lam=view.lam,
-                                   condition=self._condition(view), reference_latents=reference_latents,
-                                   weight_map=weight_map)
+        self.timer.lap("vae")
+        local = self.critics.local(latents, view.t, view.noise.to(self.device), self.models.embed(view.prompt),
+                                   self.uncond, lam=view.lam, condition=self._condition(view),
+                                   reference_latents=constants.reference_latents, weight_map=constants.weight_map)
+        self.timer.lap("unet")
+        (local.loss * share).backward()
+        self.timer.lap("vae_backward")
         metrics = {"local_grad_norm": local.metrics["grad_norm"], "nonfinite": local.metrics["nonfinite"]}
-        if not global_inputs:
-            return local.loss, metrics
-        losses, norms = [], []
-        for g_latents, mask, masked_latents in global_inputs:
-            g = self.critics.glob(g_latents, view.t, noise, text, self.uncond, extra=(mask, masked_latents))
-            losses.append(g.loss)
+        return image, latents.detach(), metrics
+
+    def _global(self, view: ViewSample, leaf: torch.Tensor, placed: GlobalRender, constants: ViewConstants,
+                share: float, metrics: dict) -> None:
+        """Each crop of the asset in the photo encoded, scored by the inpainting critic (its mask and
+        masked-photo latents from the constants) and back-propagated at `share` / crops."""
+        norms = []
+        for crop, (mask, masked_latents) in zip(view.crops, constants.crops):
+            g_image, _ = global_view(leaf[..., 0:3], leaf[..., 3:4], placed.rect, self.photo, placed.matte, crop,
+                                     self.config.model_resolution)
+            g_latents = self.models.encode(g_image)
+            self.timer.lap("vae")
+            g = self.critics.glob(g_latents, view.t, view.noise.to(self.device), self.models.embed(view.prompt),
+                                  self.uncond, extra=(mask, masked_latents))
+            self.timer.lap("unet")
+            (g.loss * (share / len(view.crops))).backward()
+            self.timer.lap("vae_backward")
             norms.append(g.metrics["grad_norm"])
             metrics["nonfinite"] += g.metrics["nonfinite"]
         metrics["global_grad_norm"] = float(np.mean(norms))
-        return 0.5 * local.loss + 0.5 * torch.stack(losses).mean(), metrics
 
     # -- reporting and finish ------------------------------------------------------------------------
 
@@ -350,6 +331,11 @@ class AdaptSystem:
             "reference_injection": Decision(injected, f"the reference's keys and values injected into {injected} "
                                             "attention layers" if injected else "no reference injection"),
             "world_size": self.world,
+            "constant_work": Decision(
+                {"cached": self.constants.cache, "bank": len(self.bank or ()), "computed": self.constants.misses,
+                 "reused": self.constants.hits},
+                "reference latents, normal weights, crop masks and masked-photo latents computed once per view of "
+                "the fixed bank" if self.constants.cache and self.bank else "recomputed every step"),
             "views_per_step": Decision(config.views_per_step,
                                        f"{mine} view(s) rendered in turn on this rank, gradients averaged"
                                        + (f" over {world} ranks" if world > 1 else "")),
@@ -439,14 +425,14 @@ def _peak_memory_mb(device) -> float | None:
 
 def adapt_texture(inputs: AdaptInputs, config: AdaptConfig, progress: ProgressCallback | None = None,
                   cancel: threading.Event | None = None, checkpoint_dir: str | Path | None = None,
-                  models: GuidanceModels | None = None) -> AdaptResult:
+                  models: GuidanceModels | None = None, cache_constants: bool = True) -> AdaptResult:
     """Run the adapt stage; returns a new NeuralTexture (the input texture is left as it was).
 
     Models are located (and a missing one reported) before any work. With `checkpoint_dir`, a
     checkpoint is written every `checkpoint_every` iterations and a run with the same settings
     resumes from it.
     """
-    system = AdaptSystem.build(inputs, config, models, checkpoint_dir)
+    system = AdaptSystem.build(inputs, config, models, checkpoint_dir, cache_constants)
     for iteration in range(system.start, config.iterations):
         check_cancel(cancel)
         metrics = system.step(iteration)
