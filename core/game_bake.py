@@ -46,6 +46,10 @@ class BakedMaterial:
     metallic: np.ndarray | float
     coverage: float
     wrap: tuple[str, str] = ("repeat", "repeat")
+    covered: np.ndarray | None = None       # (N, N) bool: the texels inside the material's UV triangles
+    # (min, max) linear value the texture can hold, per channel ("base_color", "roughness", "metallic"):
+    # an asset's roughness of 0 comes back as the range's 0.03, which is not a change of the map.
+    ranges: dict | None = None
 
     def report(self) -> dict:
         def describe(value):
@@ -130,6 +134,9 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
         raise InputError(f"Mesh '{mesh.name}' uses {mesh.material_count} materials, but {len(names)} names "
                          "were given.")
     normalized, _ = normalize_to_unit_sphere(mesh)
+    config = texture.config
+    ranges = {"base_color": config.base_color_range, "roughness": config.roughness_range,
+              "metallic": config.metallic_range}
     baked = []
     for index, name in enumerate(names):
         wrap = tuple(wraps[index]) if wraps else ("repeat", "repeat")
@@ -143,5 +150,5 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
         baked.append(BakedMaterial(name=name, base_color=base,
                                    roughness=_channel(maps[..., 3], raster.mask, was.get("roughness")),
                                    metallic=_channel(maps[..., 4], raster.mask, was.get("metallic")),
-                                   coverage=raster.coverage, wrap=wrap))
+                                   coverage=raster.coverage, wrap=wrap, covered=raster.mask, ranges=ranges))
     return baked

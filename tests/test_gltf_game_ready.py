@@ -215,3 +215,78 @@ def test_no_normals_are_added_to_an_asset_that_had_none(painted, tmp_path, valid
     assert proc.returncode == 0, proc.stderr[-2000:]
     attributes = [set(p["attributes"]) for m in read_gltf(out)[0]["meshes"] for p in m["primitives"]]
     assert attributes and not any({"NORMAL", "TANGENT"} & names for names in attributes), attributes
+
+
+SHARED = r"""
+import bpy, numpy as np
+from pathlib import Path
+folder = Path(FOLDER)
+bpy.ops.wm.read_factory_settings(use_empty=True)
+
+def image(name, rgb, colorspace):
+    size = rgb.shape[0]
+    img = bpy.data.images.new(name, size, size)
+    img.pixels.foreach_set(np.concatenate([rgb, np.ones((size, size, 1))], -1).astype(np.float32)[::-1].ravel())
+    img.filepath_raw = str(folder / f"{name}.png")
+    img.file_format = "PNG"
+    img.save()
+    img.colorspace_settings.name = colorspace
+    return img
+
+rng = np.random.default_rng(3)
+y, x = np.mgrid[0:128, 0:128] / 128
+base = np.clip(np.stack([0.5 + 0.4 * np.sin(9 * x), 0.5 + 0.4 * np.cos(7 * y), 0.5 + 0.3 * np.sin(5 * (x + y))], -1)
+               + rng.normal(0, 0.03, (128, 128, 3)), 0, 1)
+orm = np.stack([rng.uniform(0.3, 1, (128, 128)),              # R: occlusion, which nothing fits
+                np.where(x < 0.3, 0.0, 0.2 + 0.6 * y),          # G: roughness, 0 on a third (below what renders)
+                np.where(y < 0.5, 0.0, 1.0)], -1)               # B: metallic
+bpy.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16)
+obj = bpy.context.active_object
+mat = bpy.data.materials.new("Shared")
+nodes, links = mat.node_tree.nodes, mat.node_tree.links
+bsdf = nodes["Principled BSDF"]
+tex = nodes.new("ShaderNodeTexImage")
+tex.image = image("shared_base", base, "sRGB")
+links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])          # one image as base colour and emission
+links.new(tex.outputs["Color"], bsdf.inputs["Emission Color"])
+bsdf.inputs["Emission Strength"].default_value = 1.0
+packed = nodes.new("ShaderNodeTexImage")
+packed.image = image("shared_orm", orm, "Non-Color")
+separate = nodes.new("ShaderNodeSeparateColor")
+links.new(packed.outputs["Color"], separate.inputs["Color"])
+links.new(separate.outputs["Green"], bsdf.inputs["Roughness"])
+links.new(separate.outputs["Blue"], bsdf.inputs["Metallic"])
+obj.data.materials.append(mat)
+bpy.ops.export_scene.gltf(filepath=str(folder / "shared.glb"), export_format="GLB")
+"""
+
+
+def images_by_name(path: Path) -> dict[str, bytes]:
+    document, chunk = read_gltf(path)
+    views = document["bufferViews"]
+    return {image["name"]: chunk[views[image["bufferView"]].get("byteOffset", 0):][:views[image["bufferView"]]["byteLength"]]
+            for image in document.get("images", [])}
+
+
+def test_maps_a_bake_leaves_unchanged_are_written_as_the_inputs_own_images(run_py, tmp_path, validator):
+    """One image as base colour and emission, and a packed image (occlusion in R, roughness in G with
+    texels below what renders, metallic in B): baked without adaptation, the file carries the input's
+    two images byte for byte (it used to add a re-encoded base colour and a new packed image without
+    the occlusion: 3 images, larger than the input); a texture that changed them writes new ones."""
+    run_py(SHARED.replace("FOLDER", repr(str(tmp_path))))
+    asset = tmp_path / "shared.glb"
+    for start, extra in (("exact", ()), ("fit", ("--iterations", "10"))):
+        proc = scenefit("convert", asset, "--out", tmp_path / start, "--preset", "draft", "--resolution", "64",
+                        "--init", start, *extra, "--quiet")
+        assert proc.returncode == 0, proc.stderr[-2000:]
+    kept, changed = tmp_path / "kept.glb", tmp_path / "changed.glb"
+    for out, start in ((kept, "exact"), (changed, "fit")):
+        proc = scenefit("bake", asset, "--texture", tmp_path / start / "maps" / "texture.pt", "--out", out)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+    original = images_by_name(asset)
+    assert images_by_name(kept) == original
+    assert kept.stat().st_size <= 1.05 * asset.stat().st_size
+    assert validator(str(kept))["issues"]["numErrors"] == 0
+    rewritten = images_by_name(changed)
+    assert rewritten["shared_base"] == original["shared_base"]      # emission still samples the input's image
+    assert set(rewritten) == {"shared_base", "Shared_base_color", "Shared_metallic_roughness"}, sorted(rewritten)
