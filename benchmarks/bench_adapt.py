@@ -107,21 +107,21 @@ def bench_adapt(quick: bool = False) -> dict:
     return {"rows": rows, "markdown": markdown}
 
 
-def sd2_draft_row(models: Path, dtype_type: str, cache: bool) -> dict:
-    """The draft preset's scene-mode step with SD2-sized random models (devtools SD2_SIZED, built in
+def sd2_row(models: Path, preset: str, dtype_type: str, cache: bool) -> dict:
+    """A preset's scene-mode step with SD2-sized random models (devtools SD2_SIZED, built in
     `models`/sd2-base and sd2-inpaint): step 0 run twice, the first with the view's constant work
     computed (cold), the second reusing it when `cache` (warm); seconds by phase per step and the
     process's peak resident memory. Meant for a process of its own (peak memory is the process's)."""
     from scenefit.core.adapt import AdaptSystem
     from scenefit.core.adapt.system import _peak_memory_mb
 
-    config = stage_config("adapt", "draft", prompt="a mossy sphere in a swamp", checkpoint_every=0, preview_every=0,
+    config = stage_config("adapt", preset, prompt="a mossy sphere in a swamp", checkpoint_every=0, preview_every=0,
                           models=ModelConfig(base_model=str(models / "sd2-base"),
                                              inpaint_model=str(models / "sd2-inpaint"), dtype_type=dtype_type))
     mesh = uv_sphere(segments=32, rings=16)
     photo = np.random.default_rng(0).uniform(0.2, 0.8, (480, 640, 3)).astype(np.float32)
     inputs = AdaptInputs(mesh=mesh, raster=rasterize_uv(mesh, 128), photo=photo, placement=Placement((0.5, 0.6), 0.5),
-                         texture=NeuralTexture(stage_config("texture", "draft", resolution=128), seed=0))
+                         texture=NeuralTexture(stage_config("texture", preset, resolution=128), seed=0))
     started = time.perf_counter()
     system = AdaptSystem.build(inputs, config, cache_constants=cache)
     build_s = time.perf_counter() - started
@@ -130,20 +130,71 @@ def sd2_draft_row(models: Path, dtype_type: str, cache: bool) -> dict:
         before = dict(system.timer.totals)
         system.step(0)
         steps.append({k: v - before.get(k, 0.0) for k, v in system.timer.totals.items()})
-    return {"setup": f"SD2-sized random models, CPU, draft (256 px, {config.stages[0].spp} spp, 1 view, "
-                     f"{config.global_crops} crops, 512-px model input), {system.models.dtype}, "
+    stage = config.stages[0]
+    return {"setup": f"{preset} ({stage.render_size} px, {stage.spp} spp, {config.views_per_step} view(s), "
+                     f"{config.global_crops} crops, {config.model_resolution}-px model input), "
+                     f"{str(system.models.dtype).removeprefix('torch.')}, "
                      f"constants {'cached' if cache else 'recomputed'}",
-            "dtype": str(system.models.dtype), "cache": cache, "build_s": build_s,
+            "preset": preset, "iterations": config.iterations, "dtype": str(system.models.dtype), "cache": cache, "build_s": build_s,
             "cold": steps[0], "warm": steps[1], "cold_s": sum(steps[0].values()), "warm_s": sum(steps[1].values()),
             "peak_memory_mb": _peak_memory_mb(system.device), "load": machine_load()}
 
 
+def sd2_markdown(rows: list[dict]) -> str:
+    """The SD2-size rows (sd2_row's, one process each) as a table: per step, cold and warm."""
+    lines = ["# Adapt at SD2 size on this CPU (random weights), scene mode\n",
+             "`python benchmarks/bench_adapt.py --sd2 MODELS PRESET DTYPE cache|nocache OUT.json`, each row its own process; "
+             "'cold': the step that first meets its view (constant work computed), 'warm': the same view again "
+             "(constant work reused when cached). Seconds; peak resident memory of the process.\n",
+             "| setup | peak GB | cold step s | warm step s | " + " | ".join(f"warm {name}" for name, _ in PHASES) + " | load |",
+             "|---|---|---|---|" + "---|" * len(PHASES) + "---|"]
+    for r in rows:
+        phases = " | ".join(f"{r['warm'].get(key, 0.0):.1f}" for _, key in PHASES)
+        lines.append(f"| {r['setup']} | {r['peak_memory_mb'] / 1024:.2f} | {r['cold_s']:.1f} | {r['warm_s']:.1f} | "
+                     f"{phases} | {r['load'].split('load average:')[-1].strip()} |")
+    return "\n".join(lines) + "\n"
+
+
+def sd2_bench(presets: tuple[str, ...] = ("draft", "balanced")) -> Path:
+    """`make bench`'s SD2-size part: builds the random models once (benchmarks/gpu_check.build_models),
+    then per preset a bf16 cached row, and for draft the fp32 uncached row it is compared with, each in
+    a process of its own (peak memory is the process's); writes results/adapt_sd2.md and .json."""
+    import json
+    import subprocess
+
+    from gpu_check import build_models
+
+    with tempfile.TemporaryDirectory(prefix="scenefit-sd2-") as tmp:
+        folder = Path(tmp)
+        build_models(folder / "models", dry_run=False)
+        runs = [(preset, "auto", "cache") for preset in presets] + [("draft", "fp32", "nocache")]
+        rows = []
+        for preset, dtype, cache in runs:
+            out = folder / f"{preset}_{dtype}_{cache}.json"
+            subprocess.run([sys.executable, __file__, "--sd2", str(folder / "models"), preset, dtype, cache, str(out)],
+                           check=True, capture_output=True)
+            rows.append(json.loads(out.read_text()))
+    from results_files import write_results
+
+    return write_results(Path(__file__).resolve().parent / "results", "adapt_sd2", sd2_markdown(rows), {"rows": rows})
+
+
 if __name__ == "__main__":
-    if "--sd2" in sys.argv:   # python benchmarks/bench_adapt.py --sd2 MODELS DTYPE cache|nocache OUT.json
+    if "--sd2-bench" in sys.argv:   # python benchmarks/bench_adapt.py --sd2-bench (-> results/adapt_sd2)
+        print(sd2_bench())
+    elif "--sd2-table" in sys.argv:   # python benchmarks/bench_adapt.py --sd2-table ROW.json ... (-> results/adapt_sd2)
         import json
 
-        folder, dtype, cache, out = sys.argv[sys.argv.index("--sd2") + 1:][:4]
-        row = sd2_draft_row(Path(folder), dtype, cache == "cache")
+        from results_files import write_results
+
+        rows = [json.loads(Path(f).read_text()) for f in sys.argv[sys.argv.index("--sd2-table") + 1:]]
+        print(write_results(Path(__file__).resolve().parent / "results", "adapt_sd2", sd2_markdown(rows),
+                            {"rows": rows}))
+    elif "--sd2" in sys.argv:   # python benchmarks/bench_adapt.py --sd2 MODELS PRESET DTYPE cache|nocache OUT.json
+        import json
+
+        folder, preset, dtype, cache, out = sys.argv[sys.argv.index("--sd2") + 1:][:5]
+        row = sd2_row(Path(folder), preset, dtype, cache == "cache")
         Path(out).write_text(json.dumps(row, indent=1, default=str) + "\n")
         print(json.dumps(row, indent=1, default=str))
     else:

@@ -186,7 +186,7 @@ def block_sections(renders: list[dict], textures: list[dict]) -> list[str]:
 
 
 PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "batch", "samplers", "study", "camera",
-         "speed")
+         "speed", "start", "sd2")
 TITLES = {"convert": "Convert", "light": "Light", "compose": "Compose", "adapt": "Adapt (tiny models)",
           "run": "End to end: `scenefit run`"}
 
@@ -309,6 +309,22 @@ def main() -> int:
         table = (RESULTS / "real_speed.md").read_text().split("\n\n", 3)[-1].strip()
         sections += ["## `scenefit run` on real 2k assets and a 12 MP photo", "",
                      "[real_speed.md](real_speed.md):", "", table, ""]
+
+    # The exact start against the paper's fit on real assets (issue 23).
+    if "start" in parts and not args.quick:
+        subprocess.run([sys.executable, str(Path(__file__).with_name("bench_start.py"))], check=True)
+        log("exact start against fit done")
+        table = (RESULTS / "start.md").read_text().split("\n\n", 2)[-1].strip()
+        sections += ["## The exact start against the paper's fit (`--init fit`), real assets", "",
+                     "[start.md](start.md):", "", table, ""]
+
+    # Adapt at SD2's size on this CPU (issue 24): random-weight models of the real size, per preset.
+    if "sd2" in parts and not args.quick:
+        subprocess.run([sys.executable, str(Path(__file__).with_name("bench_adapt.py")), "--sd2-bench"], check=True)
+        log("adapt at SD2 size done")
+        table = (RESULTS / "adapt_sd2.md").read_text().split("\n\n", 2)[-1].strip()
+        sections += ["## Adapt at SD2's size on this CPU (random weights)", "", "[adapt_sd2.md](adapt_sd2.md):", "",
+                     table, ""]
 
     total = time.perf_counter() - started
     load = " / ".join(f"{x:.1f}" for x in os.getloadavg())

@@ -25,6 +25,7 @@ from ..core.gltf_meshopt import encoded_glb
 from ..core.gltf_output import GltfOutput, output_like_input, skinned_meshes_moved_to_root
 from ..core.imageio import linear_to_srgb, srgb_to_linear, write_image
 from ..core.maps import resize_channels
+from ..core.quiet import native_output_captured
 from .material import EXTENSION_OF_WRAP, image_pixels_linear, material_wrap, principled_bsdf
 from .node_values import source
 
@@ -289,15 +290,16 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
         if selection_only is not None:
             for obj in layer.objects:
                 obj.select_set(obj in selection_only)
-        bpy.ops.export_scene.gltf(filepath=str(staging / out_file.name), export_format=FORMATS[file_format],
-                                  use_selection=selection_only is not None, use_active_scene=True,
-                                  export_apply=True, export_cameras=True, export_lights=True,
-                                  export_image_format=_IMAGE_FORMATS[output.textures], export_materials="EXPORT",
-                                  export_tangents=output.tangents, export_normals=output.normals, export_optimize_animation_keep_anim_armature=False,
-                                  # glTF multiplies COLOR_0 into the base colour, and the baked base colour
-                                  # already holds the vertex colours it read: no COLOR_n no material uses
-                                  export_all_vertex_colors=False,
-                                  export_draco_mesh_compression_enable=output.compress == "draco")
+        with native_output_captured():   # the exporter's log lines (INFO, sampler notes) stay off the terminal
+            bpy.ops.export_scene.gltf(filepath=str(staging / out_file.name), export_format=FORMATS[file_format],
+                                      use_selection=selection_only is not None, use_active_scene=True,
+                                      export_apply=True, export_cameras=True, export_lights=True,
+                                      export_image_format=_IMAGE_FORMATS[output.textures], export_materials="EXPORT",
+                                      export_tangents=output.tangents, export_normals=output.normals, export_optimize_animation_keep_anim_armature=False,
+                                      # glTF multiplies COLOR_0 into the base colour, and the baked base colour
+                                      # already holds the vertex colours it read: no COLOR_n no material uses
+                                      export_all_vertex_colors=False,
+                                      export_draco_mesh_compression_enable=output.compress == "draco")
         staged = staging / out_file.name
         if output.skins_at_root:
             skinned_meshes_moved_to_root(staged)

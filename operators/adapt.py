@@ -37,6 +37,23 @@ def gather_adapt(op, context, texture: str) -> dict:
         "render_size": op.render_size, "out": str(run_folder(context, "adapt", obj.name))}
 
 
+def adapt_seconds_here(context, iterations: int | None = None) -> float | None:
+    """The projected seconds of an adaptation at the panel's preset when it would run in this Blender on a
+    CPU with the diffusion models present (panels/quality.py's measurement); None otherwise."""
+    from ..core.errors import SceneFitError
+    from ..core.guidance.models import locate_models
+    from ..panels.quality import adapt_projection
+
+    models, _ = model_settings(context)
+    try:
+        if models.device().type != "cpu":
+            return None
+        locate_models(models, need_inpaint=context.scene.scenefit.mode == "scene")
+    except (SceneFitError, ImportError):
+        return None   # no models (the job says so at its start) or no torch (the dependency check does)
+    return adapt_projection(context.scene.scenefit.preset, iterations)
+
+
 class SCENEFIT_OT_adapt(OnMesh, JobOperator):
     """Restyle the asset's converted texture with diffusion guidance so it fits the photo (Esc cancels)"""
 
@@ -58,6 +75,9 @@ class SCENEFIT_OT_adapt(OnMesh, JobOperator):
             if not texture or not Path(texture).is_file():
                 raise InputError("Adapt starts from the converted texture; run Convert on this asset first.")
         return work.adapt, gather_adapt(self, context, texture)
+
+    def long_local_work(self, context) -> float | None:
+        return adapt_seconds_here(context, self.iterations or None)
 
     def apply(self, context, result) -> str:
         mat = apply_result_material(context, self._object_name, result, "adapt")

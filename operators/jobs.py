@@ -78,6 +78,26 @@ def redraw(context) -> None:
                 area.tag_redraw()
 
 
+def long_work_warning(context, label: str, seconds: float | None, runs_remotely: bool) -> str | None:
+    """One sentence when a job would run here for longer than LONG_LOCAL_SECONDS; None when it is short,
+    unknown, or goes to the worker environment the preferences name."""
+    from ..panels.quality import LONG_LOCAL_SECONDS, duration_text
+
+    if seconds is None or seconds < LONG_LOCAL_SECONDS:
+        return None
+    if runs_remotely:
+        from .remote import worker_address
+
+        try:
+            if worker_address(context) is not None:
+                return None
+        except SceneFitError:
+            pass   # a worker set up wrongly: the job's start says so
+    return (f"{label} would run on this CPU for about {duration_text(seconds)} (measured with models of Stable "
+            "Diffusion 2's size on a 2-core CPU); a GPU, or a worker environment set in the add-on's preferences "
+            "(Jobs), runs it far sooner.")
+
+
 class JobOperator(bpy.types.Operator):
     """Base of the operators that run a long stage. Subclasses set job_name and define prepare/apply."""
 
@@ -107,6 +127,13 @@ class JobOperator(bpy.types.Operator):
                 return remote_work(self, context, address)
         return self.prepare(context)
 
+    def long_local_work(self, context) -> float | None:
+        """Projected seconds of work this job does when it runs here on a CPU (None: short, or unknown)."""
+        return None
+
+    def long_work_warning(self, context) -> str | None:
+        return long_work_warning(context, self.bl_label, self.long_local_work(context), self.runs_remotely)
+
     def apply_result(self, context, result) -> str:
         if getattr(self, "_remote", False):
             from .remote import apply_remote
@@ -116,8 +143,13 @@ class JobOperator(bpy.types.Operator):
 
     # -- synchronous: scripts and `blender -b` -------------------------------------------------------
     def execute(self, context):
+        if getattr(self, "_long_confirmed", False) and context.window is not None and not bpy.app.background:
+            return self._start_job(context)   # confirmed in invoke's dialog: as the background job
         try:
             check_dependencies()
+            warning = self.long_work_warning(context)
+            if warning:
+                self.report({"WARNING"}, warning)
             work, data = self.job_work(context)
             result = background.run_inline(work, data, TerminalProgress())
             message = self.apply_result(context, result)
@@ -131,6 +163,19 @@ class JobOperator(bpy.types.Operator):
     def invoke(self, context, event):
         if context.window is None or bpy.app.background:
             return self.execute(context)
+        try:
+            warning = self.long_work_warning(context)
+        except SceneFitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        if warning:
+            self._long_confirmed = True    # the dialog's confirmation calls execute, which starts the job
+            return context.window_manager.invoke_confirm(self, event, title=f"{self.bl_label}: hours of work",
+                                                         message=warning, confirm_text="Start here",
+                                                         icon="WARNING")
+        return self._start_job(context)
+
+    def _start_job(self, context):
         try:
             check_dependencies()
             work, data = self.job_work(context)

@@ -9,6 +9,7 @@ from ..blender_io.compose import setup_composite
 from ..core.errors import SceneFitError
 from ..core.photo import PhotoCamera
 from . import work
+from .adapt import adapt_seconds_here
 from .common import OnMesh, model_settings, photo_path, photo_view, run_folder, scene_layout
 from .jobs import JobOperator
 from .results import apply_composite_image, apply_layout_results, apply_result_world, result_targets
@@ -49,6 +50,11 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
                           # several materials: each baked in its own UVs for its slots
                           "materials": layout.bake_data() if len(layout.materials) > 1 else None,
                           "out": str(run_folder(context, "run", layout.name))}
+
+    def long_local_work(self, context) -> float | None:
+        if self.guidance == "none" or (self.guidance == "auto" and not context.scene.scenefit.prompt.strip()):
+            return None   # no adaptation: the rest takes seconds
+        return adapt_seconds_here(context)
 
     def apply(self, context, result) -> str:
         mats = apply_layout_results(context, self._layout, result, result["stage"])

@@ -145,7 +145,7 @@ class SCENEFIT_PT_quality(_Subsection, bpy.types.Panel):
         col.prop(settings, "preset", expand=True)
         col.prop(settings, "output_dir")
         sub = col.column(align=True)
-        for stage in EXPECTED_SECONDS:
+        for stage in (*EXPECTED_SECONDS, "adapt"):
             sub.label(text=expected_line(stage, settings.preset))
         sub.label(text=f"(the example asset on a {BENCH_MACHINE})")
 

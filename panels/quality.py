@@ -3,7 +3,8 @@ whole `scenefit run` on the bundled example in a 320x240 photo, seconds per stag
 
 benchmarks/ is not shipped in the extension, so the numbers are copied here; tests/test_placement.py
 checks them against trade_run.json so they cannot drift from the measurement silently. None: not
-measured on that machine (adapt needs the Stable Diffusion 2 weights).
+measured on that machine. Adapt's time is projected from its seconds per iteration with models of
+Stable Diffusion 2's size (benchmarks/results/adapt_sd2.json, checked there too): on a CPU it is hours.
 """
 
 BENCH_MACHINE = "2-core AMD EPYC, no GPU"
@@ -13,11 +14,39 @@ EXPECTED_SECONDS: dict[str, dict[str, float | None]] = {
     "convert": {"draft": 6.397, "balanced": 23.81, "final": 152.077},
     "light": {"draft": 0.036, "balanced": 0.034, "final": 0.033},
     "compose": {"draft": 1.275, "balanced": 4.968, "final": 7.293},
-    "adapt": {"draft": None, "balanced": None, "final": None},
 }
+
+# Adapt with random-weight models of Stable Diffusion 2's size on the same CPU (bf16, each view's constant
+# work cached): seconds per iteration once the step's views have been met. None: not measured.
+ADAPT_SECONDS_PER_ITERATION: dict[str, float | None] = {"draft": 40.0, "balanced": 181.5, "final": None}
+ADAPT_ITERATIONS = {"draft": 300, "balanced": 1500, "final": 4000}   # the presets' (core/preset_tables.py)
+# Local work projected longer than this asks before it starts (and offers the worker environment).
+LONG_LOCAL_SECONDS = 3600.0
+
+
+def adapt_projection(preset: str, iterations: int | None = None) -> float | None:
+    """Seconds an adaptation at `preset` (and `iterations`, else the preset's) takes on the bench CPU."""
+    per_iteration = ADAPT_SECONDS_PER_ITERATION.get(preset)
+    if per_iteration is None:
+        return None
+    return per_iteration * (iterations or ADAPT_ITERATIONS[preset])
+
+
+def duration_text(seconds: float) -> str:
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 2 * 86400:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:.1f} days"
 
 
 def expected_line(stage: str, preset: str) -> str:
+    if stage == "adapt":
+        seconds = adapt_projection(preset)
+        return "adapt: not measured yet" if seconds is None else \
+            f"adapt: about {duration_text(seconds)} on a CPU (SD2 size; a GPU: far less)"
     seconds = EXPECTED_SECONDS.get(stage, {}).get(preset)
     if seconds is None:
         return f"{stage}: not measured yet"

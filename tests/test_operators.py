@@ -112,6 +112,11 @@ with timed("light"):
     ops["light"] = bpy.ops.scenefit.estimate_light(critic="none", outpaint="prior")
 with timed("adapt"):
     ops["adapt"] = bpy.ops.scenefit.adapt(iterations=2, model_resolution=32, render_size=16)
+# The warning before hours of local work: the draft preset's 300 iterations here, not the 2 just run.
+adapt_op, job_ops = import_module(MODULE + ".operators.adapt"), import_module(MODULE + ".operators.jobs")
+out["long_work"] = [job_ops.long_work_warning(bpy.context, "Adapt", adapt_op.adapt_seconds_here(bpy.context), True),
+                    job_ops.long_work_warning(bpy.context, "Adapt", adapt_op.adapt_seconds_here(bpy.context, 2), True),
+                    bpy.context.scene.scenefit.preset]
 with timed("compose"):
     ops["compose"] = bpy.ops.scenefit.compose(samples=2)
 with timed("export"):
@@ -360,6 +365,22 @@ def test_every_operator_finishes_with_exec_default(blender, operated):
     assert out["open_composite_options"] == ["REGISTER"]
     assert all(p.startswith("//scenefit/") for p in out["paths"].values()), out["paths"]
     assert all(path.startswith("//scenefit/") for _, path in out["images"]), out["images"]
+
+
+def test_hours_of_local_adaptation_are_said_before_they_start(operated):
+    """Adapt with the models present on a CPU: the preset's iterations at the measured seconds per
+    iteration (SD2 size) is hours, said in one sentence that offers the worker; two iterations are not."""
+    _, out, _ = operated
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("quality", Path(__file__).resolve().parents[1] / "panels" / "quality.py")
+    quality = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(quality)
+    sentence, short, preset = out["long_work"]
+    hours = quality.duration_text(quality.adapt_projection(preset))
+    assert short is None and hours.endswith(" h"), hours
+    assert sentence.endswith(".") and ". " not in sentence, sentence
+    assert f"about {hours}" in sentence and "worker environment" in sentence, sentence
 
 
 def test_composite_shows_the_photo_around_the_asset(operated):

@@ -136,6 +136,27 @@ def test_quality_panel_times_are_the_bench_measurements():
     assert shown >= 9   # convert, light and compose at every preset
 
 
+def test_adapts_projected_time_is_the_sd2_bench_measurement():
+    """The panel's adapt time and the warning before hours of local work come from the SD2-size bench
+    (benchmarks/results/adapt_sd2.json: the cached bf16 rows, warm step) and the presets' iterations."""
+    import importlib.util
+
+    from scenefit.core.presets import stage_config
+
+    root = Path(__file__).resolve().parent.parent
+    spec = importlib.util.spec_from_file_location("quality", root / "panels" / "quality.py")
+    quality = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(quality)
+    rows = json.loads((root / "benchmarks/results/adapt_sd2.json").read_text())["rows"]
+    measured = {row["preset"]: row["warm_s"] for row in rows if row["cache"] and "bfloat16" in row["dtype"]}
+    for preset, seconds in quality.ADAPT_SECONDS_PER_ITERATION.items():
+        assert (seconds is None and preset not in measured) or seconds == pytest.approx(measured[preset], abs=0.1)
+        iterations = stage_config("adapt", preset, prompt="a test").iterations
+        assert quality.ADAPT_ITERATIONS[preset] == iterations
+    assert quality.adapt_projection("draft", 10) == pytest.approx(10 * quality.ADAPT_SECONDS_PER_ITERATION["draft"])
+    assert [quality.duration_text(s) for s in (30, 600, 12000, 4 * 86400)] == ["30 s", "10 min", "3.3 h", "4.0 days"]
+
+
 def test_blender_shows_a_sideways_stored_photo_upright_like_the_pipeline(tmp_path, run_py):
     """Blender ignores EXIF Orientation; the photo it shows behind the camera (where the artist clicks
     the placement) must be the upright picture the pipeline reads, and must survive save and reopen."""
