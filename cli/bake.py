@@ -26,6 +26,8 @@ def run(args) -> int:
     # The asset's own files (a .gltf's buffers and images too) and the texture are never written over.
     protect = tuple(asset_files(args.asset)) + tuple(asset_files(args.texture))
     out = Path(args.out)
+    if args.format is None:   # the file name says which: a.gltf is the separate layout, anything else a .glb
+        args.format = "gltf" if out.suffix.lower() == ".gltf" else "glb"
     targets = [out] + ([out.with_suffix(".bin")] if args.format == "gltf" else [])
     refuse_overwriting(targets + ([Path(args.report)] if args.report else []), list(protect))
     output = output_like_input(args.asset, args.compress, args.textures, args.max_texture)
@@ -48,10 +50,11 @@ def add_parser(sub) -> None:
     p = sub.add_parser("bake", help="write the asset with its fitted/adapted texture as glTF 2.0 (.glb/.gltf)")
     add_asset_args(p)
     p.add_argument("--texture", required=True, help="texture.pt from `scenefit convert` or `scenefit adapt`")
-    p.add_argument("--format", choices=("glb", "gltf"), default="glb",
-                   help="glb: one binary file; gltf: .gltf + .bin + PNG files (default: glb)")
+    p.add_argument("--format", choices=("glb", "gltf"),
+                   help="glb: one binary file; gltf: .gltf + .bin + image files (default: from --out's extension)")
     p.add_argument("--out", required=True, help="output file, ending in .glb or .gltf")
-    p.add_argument("--texture-size", type=int, help="power of two (default: the fitted size, rounded up)")
+    p.add_argument("--texture-size", type=int, help="power of two, for every material (default: each material's own images' size, "
+                                                        "rounded up to a power of two, at most --max-texture)")
     p.add_argument("--compress", choices=COMPRESSIONS,
                    help="mesh compression: none, draco (Blender's exporter) or meshopt (.glb only, meshoptimizer's "
                         "encoder) (default: as the input)")

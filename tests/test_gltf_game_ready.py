@@ -173,6 +173,9 @@ def test_ktx2_is_refused_in_one_sentence_where_it_cannot_be_written(painted, tmp
     proc = scenefit("bake", asset, "--texture", texture, "--out", tmp_path / "a.gltf", "--format", "gltf",
                     "--textures", "ktx2")
     assert proc.returncode == 2 and "writes .glb files only" in proc.stderr, proc.stderr[-1000:]
+    # Without --format the name says it (it used to refuse a.gltf as "should end in .glb").
+    proc = scenefit("bake", asset, "--texture", texture, "--out", tmp_path / "a.gltf", "--textures", "ktx2")
+    assert proc.returncode == 2 and "writes .glb files only" in proc.stderr, proc.stderr[-1000:]
     proc = scenefit("bake", asset, "--texture", texture, "--out", tmp_path / "a.glb", "--textures", "ktx2",
                     env={"SCENEFIT_BASISU": str(tmp_path / "nowhere" / "basisu")})
     assert proc.returncode == 2 and "SCENEFIT_BASISU" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
