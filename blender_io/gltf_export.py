@@ -23,7 +23,7 @@ from ..core.game_bake import BakedMaterial
 from ..core.gltf_ktx2 import check_ktx2_output, ktx2_glb
 from ..core.gltf_meshopt import encoded_glb
 from ..core.gltf_output import GltfOutput, output_like_input, skinned_meshes_moved_to_root
-from ..core.imageio import linear_to_srgb, srgb_to_linear, write_image
+from ..core.imageio import srgb_to_linear, write_image
 from ..core.maps import resize_channels
 from ..core.quiet import native_output_captured
 from .material import EXTENSION_OF_WRAP, image_pixels_linear, material_wrap, principled_bsdf
@@ -98,71 +98,36 @@ def _load_png(bpy, folder: Path, name: str, pixels: np.ndarray, colorspace: str,
     return image
 
 
-# A baked map within this many 8-bit steps of the material's own image on every covered texel is that
-# image: the float round trip of an unchanged map (the exact start, no adaptation) moves a texel by one.
-UNCHANGED_STEPS = 1
-_SEPARATE = {"SEPARATE_COLOR": ("Red", "Green", "Blue"), "SEPRGB": ("R", "G", "B")}
-
-
-def _image_behind(socket):
-    """(image node, channel index or None for the colour) that feeds `socket` directly or through one
-    RGB Separate Color, sampled at the plain UVs (no mapping in between); None otherwise."""
-    linked = source(socket)
-    if linked is None:
-        return None
-    node, output = linked
-    channel = None
-    if node.type in _SEPARATE and getattr(node, "mode", "RGB") == "RGB" and output.name in _SEPARATE[node.type]:
-        channel = _SEPARATE[node.type].index(output.name)
-        linked = source(node.inputs[0])
-        if linked is None:
-            return None
-        node, output = linked
-    if node.type != "TEX_IMAGE" or node.image is None or output.name != "Color":
-        return None
-    return (node, channel) if _plain_uvs(node.inputs["Vector"]) else None
-
-
-def _plain_uvs(socket) -> bool:
-    """The socket reads the UVs as they are: unlinked, a UV Map node, or an identity Mapping of those
-    (the glTF importer adds one for a KHR_texture_transform that only names the UV set)."""
-    linked = source(socket)
-    if linked is None or linked[0].type == "UVMAP":
-        return True
-    node = linked[0]
-    if node.type != "MAPPING" or node.vector_type not in ("POINT", "TEXTURE"):
-        return False
-    identity = {"Location": (0.0, 0.0, 0.0), "Rotation": (0.0, 0.0, 0.0), "Scale": (1.0, 1.0, 1.0)}
-    for name, value in identity.items():
-        given = node.inputs.get(name)
-        if given is not None and (given.is_linked or not np.allclose(tuple(given.default_value), value, atol=1e-6)):
-            return False
-    return _plain_uvs(node.inputs["Vector"])
-
-
-def _unchanged(image, planes: list[tuple[int | None, np.ndarray, tuple]], covered: np.ndarray | None,
-               srgb: bool) -> bool:
-    """Whether `image` holds each plane (channel index or None for RGB, the baked bytes, the linear
-    range the texture holds that channel in) on the covered texels to UNCHANGED_STEPS: then the
-    material's own image (its own encoding, the texels the mesh does not cover, any channel packed
-    beside them) is written instead of a re-encoded copy."""
-    if covered is None or tuple(image.size)[::-1] != covered.shape:
-        return False
-    pixels = image_pixels_linear(image)
-    for channel, plane, (lo, hi) in planes:
-        have = np.clip(pixels[..., :3] if channel is None else pixels[..., channel], lo, hi)
-        have = np.round((linear_to_srgb(have) if srgb else have) * 255.0)
-        if np.abs(have[covered] - plane[covered].astype(np.float64)).max(initial=0.0) > UNCHANGED_STEPS:
-            return False
-    return True
-
-
 def apply_baked_material(material, baked: BakedMaterial, folder: Path, shared: dict | None = None) -> list[str]:
     """Rewire `material` (a fresh import, or a copy) to the baked maps; returns what was done. `shared`:
     the images written so far in this export (see _load_png)."""
+    bsdf = principled_bsdf(material)
+    notes = []
+    if "base_color" in baked.unchanged:
+        # What the material already gives (the exact start, nothing adapted): its own nodes and images are
+        # written as they came, shared images, texture transforms, alpha and all.
+        notes.append("base colour: unchanged, the material's own nodes and images kept")
+    else:
+        notes += _write_base_color(material, bsdf, baked, folder, shared)
+    if getattr(bsdf, "unlit", False):
+        notes.append("unlit: only the base colour is written (an unlit material has no roughness or metallic)")
+        return notes
+    if {"roughness", "metallic"} <= baked.unchanged:
+        notes.append("roughness and metallic: unchanged, the material's own nodes and images kept")
+        return notes
+    return notes + _write_roughness_metallic(material, bsdf, baked, folder, shared)
+
+
+def _extension(baked: BakedMaterial) -> str:
+    """The maps were baked wrapped as the material's sampler says, so the exporter must write that sampler."""
+    return EXTENSION_OF_WRAP[baked.wrap[0]] if baked.wrap[0] == baked.wrap[1] else "REPEAT"
+
+
+def _write_base_color(material, bsdf, baked: BakedMaterial, folder: Path, shared: dict | None) -> list[str]:
+    """The baked base colour into the material: a factor when it is one colour, else a new image (with
+    the alpha the material had, resized into it)."""
     import bpy
 
-    bsdf = principled_bsdf(material)
     nodes, links = material.node_tree.nodes, material.node_tree.links
     notes = []
     size = baked.base_color.shape[0]
@@ -173,8 +138,6 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path, shared: d
         a = np.round(np.clip(resize_channels(original, size, size), 0.0, 1.0) * 255.0).astype(np.uint8)
         rgba = np.concatenate([rgba, a[..., None]], axis=2)
         notes.append(f"alpha of '{alpha[0].image.name}' carried into the base colour image at {size}²")
-    # The maps were baked wrapped as the material's sampler says, so the exporter must write that sampler.
-    extension = EXTENSION_OF_WRAP[baked.wrap[0]] if baked.wrap[0] == baked.wrap[1] else "REPEAT"
     if alpha is None and bool((rgba == rgba[0, 0]).all()):
         # One colour everywhere (a material that gave a plain colour, not adapted): a factor, as it came,
         # not an image of that colour.
@@ -183,22 +146,26 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path, shared: d
         linear = srgb_to_linear(rgba[0, 0, :3].astype(np.float32) / 255.0)
         bsdf.inputs["Base Color"].default_value = (*(float(v) for v in linear), 1.0)
         notes.append("base colour: one colour, written as a factor")
-    elif _base_unchanged(bsdf, baked, alpha):
-        notes.append(f"base colour: the material's own image '{source(bsdf.inputs['Base Color'])[0].image.name}', "
-                     "unchanged")
     else:
         base = nodes.new("ShaderNodeTexImage")
         base.name = base.label = "SceneFit Base Color"
-        base.extension = extension
+        base.extension = _extension(baked)
         base.image = _load_png(bpy, folder, f"{material.name}_base_color", rgba, "sRGB", shared)
         base.location = (bsdf.location.x - 700, bsdf.location.y)
         links.new(base.outputs["Color"], bsdf.inputs["Base Color"])
         if alpha is not None:
             links.new(base.outputs["Alpha"], alpha[1])
+    return notes
 
-    if getattr(bsdf, "unlit", False):
-        notes.append("unlit: only the base colour is written (an unlit material has no roughness or metallic)")
-        return notes
+
+def _write_roughness_metallic(material, bsdf, baked: BakedMaterial, folder: Path, shared: dict | None) -> list[str]:
+    """The baked roughness and metallic into the material: factors where constant, else one packed image
+    (G roughness, B metallic, as glTF packs them) through Separate Color."""
+    import bpy
+
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    notes = []
+    size = baked.base_color.shape[0]
     textured = {k: v for k, v in (("Roughness", baked.roughness), ("Metallic", baked.metallic))
                 if isinstance(v, np.ndarray)}
     for socket_name, value in (("Roughness", baked.roughness), ("Metallic", baked.metallic)):
@@ -207,15 +174,12 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path, shared: d
                 links.remove(link)
             bsdf.inputs[socket_name].default_value = float(value)
             notes.append(f"{socket_name}: constant {float(value):.4g} written as a factor")
-    kept = _packed_unchanged(bsdf, baked, textured)
-    if kept is not None:
-        notes.append(f"{' and '.join(textured)}: the material's own image '{kept}', unchanged")
-    elif textured:
+    if textured:
         zeros = np.zeros((size, size), np.uint8)
         packed = np.stack([zeros, textured.get("Roughness", zeros), textured.get("Metallic", zeros)], axis=2)
         mr = nodes.new("ShaderNodeTexImage")
         mr.name = mr.label = "SceneFit Metallic Roughness"
-        mr.extension = extension
+        mr.extension = _extension(baked)
         mr.image = _load_png(bpy, folder, f"{material.name}_metallic_roughness", packed, "Non-Color", shared)
         mr.location = (bsdf.location.x - 700, bsdf.location.y - 300)
         separate = nodes.new("ShaderNodeSeparateColor")
@@ -226,35 +190,6 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path, shared: d
                 links.new(separate.outputs[channel], bsdf.inputs[socket_name])
         notes.append(f"{' and '.join(textured)}: packed image at {size}² (G roughness, B metallic)")
     return notes
-
-
-def _range(baked: BakedMaterial, channel: str) -> tuple[float, float]:
-    return (baked.ranges or {}).get(channel, (0.0, 1.0))
-
-
-def _base_unchanged(bsdf, baked: BakedMaterial, alpha) -> bool:
-    """The base colour comes straight from an image that already holds the baked colours (and its own
-    alpha, if any): the material is left as it is."""
-    behind = _image_behind(bsdf.inputs["Base Color"])
-    if behind is None or behind[1] is not None:
-        return False
-    node = behind[0]
-    if alpha is not None and alpha[0].image != node.image:
-        return False
-    return _unchanged(node.image, [(None, baked.base_color, _range(baked, "base_color"))], baked.covered, srgb=True)
-
-
-def _packed_unchanged(bsdf, baked: BakedMaterial, textured: dict) -> str | None:
-    """The name of the one image whose channels already hold every textured channel (roughness in G,
-    metallic in B, as glTF packs them), left wired as it is; None when a new packed image is needed."""
-    if not textured:
-        return None
-    behind = [_image_behind(bsdf.inputs[name]) for name in textured]
-    if any(b is None or b[1] is None for b in behind) or len({b[0].image for b in behind}) != 1:
-        return None
-    image = behind[0][0].image
-    planes = [(b[1], plane, _range(baked, name.lower())) for b, (name, plane) in zip(behind, textured.items())]
-    return image.name if _unchanged(image, planes, baked.covered, srgb=False) else None
 
 
 def export_gltf(out_file: str | Path, file_format: str, selection_only: list | None = None,

@@ -8,7 +8,7 @@ these maps into the asset's materials and writes glTF 2.0 with Blender's exporte
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -46,10 +46,9 @@ class BakedMaterial:
     metallic: np.ndarray | float
     coverage: float
     wrap: tuple[str, str] = ("repeat", "repeat")
-    covered: np.ndarray | None = None       # (N, N) bool: the texels inside the material's UV triangles
-    # (min, max) linear value the texture can hold, per channel ("base_color", "roughness", "metallic"):
-    # an asset's roughness of 0 comes back as the range's 0.03, which is not a change of the map.
-    ranges: dict | None = None
+    # The channels ("base_color", "roughness", "metallic") whose baked maps are what the material already
+    # gives (see unchanged_channels): its own nodes are written for them, not a re-encoded copy.
+    unchanged: frozenset = frozenset()
 
     def report(self) -> dict:
         def describe(value):
@@ -116,6 +115,39 @@ def material_base(texture: NeuralTexture, index: int, count: int, size: int):
     return texture.base_logit_at(rows, cols, size)
 
 
+# A baked map within this many 8-bit steps of the material's own map on every covered texel is that map:
+# the float round trip of an unchanged map (the exact start, nothing adapted) moves a texel by one.
+UNCHANGED_STEPS = 1
+
+
+def unchanged_channels(baked: BakedMaterial, own: PBRMaps, covered: np.ndarray, config) -> frozenset:
+    """The channels whose baked bytes are the material's own maps (read through its nodes: factors,
+    texture transforms, vertex colours and all) on every covered texel, to UNCHANGED_STEPS. Own values
+    outside what the texture holds (config's ranges: a roughness of 0 comes back as 0.03) count as held.
+    A map baked smaller than the material's own image is never unchanged: the size asked for wins."""
+    size = baked.base_color.shape[0]
+    stack = own.stacked_at(size, size)
+    ranges = {"base_color": config.base_color_range, "roughness": config.roughness_range,
+              "metallic": config.metallic_range}
+    planes = {"base_color": (stack[..., 0:3], baked.base_color), "roughness": (stack[..., 3], baked.roughness),
+              "metallic": (stack[..., 4], baked.metallic)}
+    same = set()
+    for name, (mine, written) in planes.items():
+        native = getattr(own, name)
+        if isinstance(native, np.ndarray) and max(native.shape[:2]) > size:
+            continue   # baked smaller than the material's image (--texture-size, --max-texture): a new image
+        lo, hi = ranges[name]
+        mine = np.clip(mine, lo, hi)
+        mine = np.round((linear_to_srgb(mine) if name == "base_color" else mine) * 255.0)
+        written = np.broadcast_to(np.asarray(written if isinstance(written, np.ndarray) else
+                                             np.round(float(written) * 255.0), np.float64), mine.shape)
+        if name != "base_color":   # a factor written as the asset gave it (0 where the texture held 0.03)
+            written = np.clip(written, np.round(lo * 255.0), np.round(hi * 255.0))
+        if np.abs(mine[covered] - written[covered]).max(initial=0.0) <= UNCHANGED_STEPS:
+            same.add(name)
+    return frozenset(same)
+
+
 def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: int | list[int],
                    constants: list[dict[str, float]] | None = None,
                    wraps: list[tuple[str, str]] | None = None,
@@ -134,9 +166,6 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
         raise InputError(f"Mesh '{mesh.name}' uses {mesh.material_count} materials, but {len(names)} names "
                          "were given.")
     normalized, _ = normalize_to_unit_sphere(mesh)
-    config = texture.config
-    ranges = {"base_color": config.base_color_range, "roughness": config.roughness_range,
-              "metallic": config.metallic_range}
     baked = []
     for index, name in enumerate(names):
         wrap = tuple(wraps[index]) if wraps else ("repeat", "repeat")
@@ -150,5 +179,8 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
         baked.append(BakedMaterial(name=name, base_color=base,
                                    roughness=_channel(maps[..., 3], raster.mask, was.get("roughness")),
                                    metallic=_channel(maps[..., 4], raster.mask, was.get("metallic")),
-                                   coverage=raster.coverage, wrap=wrap, covered=raster.mask, ranges=ranges))
+                                   coverage=raster.coverage, wrap=wrap))
+        if own_maps:
+            baked[-1] = replace(baked[-1], unchanged=unchanged_channels(baked[-1], own_maps[index], raster.mask,
+                                                                         texture.config))
     return baked

@@ -260,6 +260,23 @@ links.new(packed.outputs["Color"], separate.inputs["Color"])
 links.new(separate.outputs["Green"], bsdf.inputs["Roughness"])
 links.new(separate.outputs["Blue"], bsdf.inputs["Metallic"])
 obj.data.materials.append(mat)
+# A second object: its colour image tiled 3x by a texture transform and tinted by a factor.
+bpy.ops.mesh.primitive_cube_add(location=(3, 0, 0))
+cube = bpy.context.active_object
+tiled = bpy.data.materials.new("Tiled")
+nodes, links = tiled.node_tree.nodes, tiled.node_tree.links
+uv, mapping, tex = nodes.new("ShaderNodeUVMap"), nodes.new("ShaderNodeMapping"), nodes.new("ShaderNodeTexImage")
+mapping.inputs["Scale"].default_value = (3.0, 3.0, 1.0)
+tex.image = image("tiled_base", base[::-1, ::-1].copy(), "sRGB")
+tint = nodes.new("ShaderNodeMix")
+tint.data_type, tint.blend_type = "RGBA", "MULTIPLY"
+tint.inputs["Factor"].default_value = 1.0
+tint.inputs["B"].default_value = (0.8, 0.6, 0.4, 1.0)
+links.new(uv.outputs["UV"], mapping.inputs["Vector"])
+links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+links.new(tex.outputs["Color"], tint.inputs["A"])
+links.new(tint.outputs["Result"], nodes["Principled BSDF"].inputs["Base Color"])
+cube.data.materials.append(tiled)
 bpy.ops.export_scene.gltf(filepath=str(folder / "shared.glb"), export_format="GLB")
 """
 
@@ -272,10 +289,11 @@ def images_by_name(path: Path) -> dict[str, bytes]:
 
 
 def test_maps_a_bake_leaves_unchanged_are_written_as_the_inputs_own_images(run_py, tmp_path, validator):
-    """One image as base colour and emission, and a packed image (occlusion in R, roughness in G with
-    texels below what renders, metallic in B): baked without adaptation, the file carries the input's
-    two images byte for byte (it used to add a re-encoded base colour and a new packed image without
-    the occlusion: 3 images, larger than the input); a texture that changed them writes new ones."""
+    """One image as base colour and emission, a packed image (occlusion in R, roughness in G with texels
+    below what renders, metallic in B), and a second material tiling its image 3x with a tint: baked
+    without adaptation, the file carries the input's images byte for byte and the material's transform
+    and factor (it used to add a re-encoded base colour, a packed image without the occlusion and the
+    tiled image baked in: larger than the input); a texture that changed them writes new ones."""
     run_py(SHARED.replace("FOLDER", repr(str(tmp_path))))
     asset = tmp_path / "shared.glb"
     for start, extra in (("exact", ()), ("fit", ("--iterations", "10"))):
@@ -288,8 +306,14 @@ def test_maps_a_bake_leaves_unchanged_are_written_as_the_inputs_own_images(run_p
         assert proc.returncode == 0, proc.stderr[-2000:]
     original = images_by_name(asset)
     assert images_by_name(kept) == original
+    # The tiled material keeps its transform and factor (not a new image with them baked in).
+    materials = {m["name"]: m for m in read_gltf(kept)[0]["materials"]}
+    colour = materials["Tiled"]["pbrMetallicRoughness"]
+    assert colour["baseColorTexture"]["extensions"]["KHR_texture_transform"]["scale"] == [3, 3]
+    assert colour["baseColorFactor"][:3] == pytest.approx([0.8, 0.6, 0.4], abs=1e-3)
     assert kept.stat().st_size <= 1.05 * asset.stat().st_size
     assert validator(str(kept))["issues"]["numErrors"] == 0
     rewritten = images_by_name(changed)
     assert rewritten["shared_base"] == original["shared_base"]      # emission still samples the input's image
-    assert set(rewritten) == {"shared_base", "Shared_base_color", "Shared_metallic_roughness"}, sorted(rewritten)
+    assert {"shared_base", "Shared_base_color", "Shared_metallic_roughness", "Tiled_base_color"} <= set(rewritten)
+    assert "shared_orm" not in rewritten, sorted(rewritten)
