@@ -160,6 +160,20 @@ def _offset(lo: np.ndarray, hi: np.ndarray, scale: float, anchor, on_floor: bool
     return np.array([anchor[0] - centre[0] * scale, anchor[1] - centre[1] * scale, z0])
 
 
+# An asset this many times wider than tall (a ground plane around a small thing) reaches behind the
+# camera at any useful size, since --object-size sets its height: the message then says what helps.
+FLAT_RATIO = 20.0
+
+
+def _behind_the_camera(size: float, extent: np.ndarray) -> str:
+    ratio = float(max(extent[0], extent[1]) / max(extent[2], 1e-9))
+    if ratio >= FLAT_RATIO:
+        return (f"The asset is {ratio:.0f} times as wide as it is tall (a ground plane?): at --object-size {size:g} it "
+                "would reach behind the camera, and only a tiny one fits; give the object to place with --object.")
+    return (f"At --object-size {size:g} the asset would reach behind the camera; pick a smaller size or a point "
+            "further away.")
+
+
 def place_asset(normalized: Mesh, camera: PhotoCamera, pixel: tuple[float, float], size: float,
                 turn_deg: float = 0.0) -> ObjectPlacement:
     """Stand the normalised asset on the floor under `pixel` (or float it on the pixel's ray when the
@@ -191,8 +205,7 @@ def place_asset(normalized: Mesh, camera: PhotoCamera, pixel: tuple[float, float
     for _ in range(8):  # the projected height is nearly linear in the scale; a few fixed-point steps
         world = placed(scale)
         if ((world - origin) @ forward).min() <= 1e-3:
-            raise InputError(f"At --object-size {size:g} the asset would reach behind the camera; pick a smaller "
-                             "size or a point further away.")
+            raise InputError(_behind_the_camera(size, hi - lo))
         ys = camera.project(world, origin)[:, 1]
         extent = float(ys.max() - ys.min())
         scale *= target / max(extent, 1e-6)

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from scenefit.core.asset_io import save_asset_folder
-from scenefit.core.compose import ComposeConfig, ComposeInputs, compose, horizon_row
+from scenefit.core.compose import ComposeConfig, ComposeInputs, compose, horizon_row, place_asset
 from scenefit.core.errors import InputError
 from scenefit.core.imageio import read_image, write_image
 from scenefit.core.maps import PBRMaps
+from scenefit.core.mesh import Mesh, normalize_to_unit_sphere
 from scenefit.core.photo import PhotoCamera
 from scenefit.core.pipeline import sun_environment
 from scenefit.core.primitives import uv_sphere
@@ -112,8 +113,18 @@ def test_bad_inputs_are_sentences():
     with pytest.raises(InputError):
         ComposeConfig(size=0.0)
     steep = PhotoCamera(yaw_deg=90.0, pitch_deg=-80.0, fov_deg=120.0, width=128, height=96)
-    with pytest.raises(InputError, match="behind the camera"):
+    with pytest.raises(InputError, match="smaller size or a point") as error:
         run(sun_environment([0, 0, 1]), at=(64.0, 95.5), shadow="none", spp=1, camera=steep, size=2.0)
+    assert str(error.value).count(". ") == 0
+    # A wide ground plane around a small thing (bevy's PalmTree: 80:1) reaches behind at any size.
+    plane = Mesh(positions=np.array([[-40, -40, 0], [40, -40, 0], [40, 40, 0], [-40, 40, 0], [0, 0, 1]], np.float32),
+                 faces=np.array([[0, 1, 2], [0, 2, 3], [0, 1, 4]], np.int32),
+                 uvs=np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.5]], np.float32))
+    normalized, _ = normalize_to_unit_sphere(plane)
+    for size in (0.3, 0.05):
+        with pytest.raises(InputError, match="80 times as wide as it is tall.*--object"):
+            place_asset(normalized, PhotoCamera(yaw_deg=90.0, pitch_deg=-10.0, fov_deg=60.0, width=64, height=48),
+                        (32.0, 36.0), size)
 
 
 def test_cli_compose_writes_every_layer_and_leaves_the_photo_alone(tmp_path):
