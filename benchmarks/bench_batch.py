@@ -10,6 +10,7 @@ start-up (a few seconds) is left out; starting the workers is counted.
 """
 from __future__ import annotations
 
+import json
 import sys
 import tempfile
 import time
@@ -85,6 +86,19 @@ def bench_batch(quick: bool = False, adapt_rows: list[dict] | None = None) -> di
     return {"rows": rows, "estimate": estimate, "markdown": "\n".join(md)}
 
 
+def cpu_sd2_jobs(overhead: float) -> str:
+    """Jobs per hour on this CPU from the SD2-size adapt rows (results/adapt_sd2.json: bf16, cached, the
+    warm step), per preset: iterations x seconds per iteration + the batch overhead per job."""
+    path = Path(__file__).resolve().parent / "results" / "adapt_sd2.json"
+    if not path.is_file():
+        return ""
+    rows = [r for r in json.loads(path.read_text())["rows"] if r.get("cache") and "bfloat16" in r.get("dtype", "")]
+    parts = [f"{r['preset']} {r['iterations']} x {r['warm_s']:.0f} s = {(r['iterations'] * r['warm_s'] + overhead) / 3600:.1f} h "
+             f"per job, {3600.0 / (r['iterations'] * r['warm_s'] + overhead):.3f} jobs/hour" for r in rows]
+    return (" On this CPU, from adapt at SD2 size ([adapt_sd2.md](adapt_sd2.md)): " + "; ".join(parts) + "."
+            if parts else "")
+
+
 def paper_estimate(adapt_rows: list[dict], batch_rows: list[dict], gpus=(4, 8, 32)) -> dict:
     """Jobs per hour at the paper's settings on N GPUs: 4 GPUs per job (one view each), N/4 jobs at once,
     each 4000 iterations of the per-view iteration cost the adapt bench measured (the SD2-sized row on
@@ -95,10 +109,7 @@ def paper_estimate(adapt_rows: list[dict], batch_rows: list[dict], gpus=(4, 8, 3
     if local is not None:
         overhead = max(0.0, local["wall_s"] / local["jobs"] - local["mean_job_s"])
     if not gpu_rows:
-        cpu = next((r for r in adapt_rows if "iteration_s" in r), None)
-        per = "" if cpu is None else (
-            f" Here only the tiny-model CPU cost was measured ({cpu['iteration_s']:.3f} s per iteration, "
-            f"{cpu['setup']}); it says nothing about SD2 on a GPU.")
+        per = cpu_sd2_jobs(overhead)
         return {"iteration_s": None, "overhead_s": overhead, "per_gpus": {},
                 "text": "Paper settings on N GPUs: needs the adapt bench's SD2-sized row, measured where CUDA exists "
                         "(`make bench` on a GPU machine); jobs/hour = floor(N / 4) x 3600 / (4000 x s per "
