@@ -140,7 +140,7 @@ def sd2_row(models: Path, preset: str, dtype_type: str, cache: bool) -> dict:
             "peak_memory_mb": _peak_memory_mb(system.device), "load": machine_load()}
 
 
-def sd2_markdown(rows: list[dict]) -> str:
+def sd2_markdown(rows: list[dict], light: list[dict] = ()) -> str:
     """The SD2-size rows (sd2_row's, one process each) as a table: per step, cold and warm."""
     lines = ["# Adapt at SD2 size on this CPU (random weights), scene mode\n",
              "`python benchmarks/bench_adapt.py --sd2 MODELS PRESET DTYPE cache|nocache OUT.json`, each row its own process; "
@@ -152,7 +152,36 @@ def sd2_markdown(rows: list[dict]) -> str:
         phases = " | ".join(f"{r['warm'].get(key, 0.0):.1f}" for _, key in PHASES)
         lines.append(f"| {r['setup']} | {r['peak_memory_mb'] / 1024:.2f} | {r['cold_s']:.1f} | {r['warm_s']:.1f} | "
                      f"{phases} | {r['load'].split('load average:')[-1].strip()} |")
+    if light:
+        lines += ["\nThe light stage's diffusion critic with the same models (`scenefit light --critic diffusion`):\n",
+                  "| setup | s per iteration | peak GB | load |", "|---|---|---|---|"]
+        lines += [f"| {r['setup']} | {r['per_iteration_s']:.1f} | {r['peak_memory_mb'] / 1024:.2f} | "
+                  f"{r['load'].split('load average:')[-1].strip()} |" for r in light]
     return "\n".join(lines) + "\n"
+
+
+def sd2_light_row(models: Path, folder: Path, iterations: int = 2) -> dict:
+    """`scenefit light --critic diffusion --preset draft` with the SD2-size models on a corpus view
+    (benchmarks/corpus.photo_from), in a process of its own: seconds per critic iteration from its
+    report, and the peak resident memory of this process's children (run it before any other child)."""
+    import json
+    import resource
+    import subprocess
+
+    from corpus import photo_from
+
+    photo = photo_from("noon_grass_1k", folder / "noon.png")
+    out = folder / "light"
+    subprocess.run([sys.executable, "-m", "scenefit.cli", "light", "--photo", str(photo), "--at", "0.5,0.75",
+                    "--out", str(out), "--preset", "draft", "--critic", "diffusion", "--iterations", str(iterations),
+                    "--outpaint", "prior", "--base-model", str(models / "sd2-base"), "--inpaint-model",
+                    str(models / "sd2-inpaint"), "--offline", "--quiet"], check=True, capture_output=True)
+    report = json.loads((out / "report.json").read_text())
+    seconds = report["decisions"]["optimisation"]["seconds"]
+    return {"setup": f"light, diffusion critic, draft ({iterations} iterations), "
+                     f"{report['decisions']['critic'].get('dtype', '?')}",
+            "per_iteration_s": seconds / iterations,
+            "peak_memory_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0, "load": machine_load()}
 
 
 def sd2_bench(presets: tuple[str, ...] = ("draft", "balanced")) -> Path:
@@ -167,6 +196,7 @@ def sd2_bench(presets: tuple[str, ...] = ("draft", "balanced")) -> Path:
     with tempfile.TemporaryDirectory(prefix="scenefit-sd2-") as tmp:
         folder = Path(tmp)
         build_models(folder / "models", dry_run=False)
+        light = sd2_light_row(folder / "models", folder)   # first: its peak is then the only child's
         runs = [(preset, "auto", "cache") for preset in presets] + [("draft", "fp32", "nocache")]
         rows = []
         for preset, dtype, cache in runs:
@@ -176,7 +206,8 @@ def sd2_bench(presets: tuple[str, ...] = ("draft", "balanced")) -> Path:
             rows.append(json.loads(out.read_text()))
     from results_files import write_results
 
-    return write_results(Path(__file__).resolve().parent / "results", "adapt_sd2", sd2_markdown(rows), {"rows": rows})
+    return write_results(Path(__file__).resolve().parent / "results", "adapt_sd2", sd2_markdown(rows, [light]),
+                         {"rows": rows, "light": [light]})
 
 
 if __name__ == "__main__":
@@ -187,9 +218,10 @@ if __name__ == "__main__":
 
         from results_files import write_results
 
-        rows = [json.loads(Path(f).read_text()) for f in sys.argv[sys.argv.index("--sd2-table") + 1:]]
-        print(write_results(Path(__file__).resolve().parent / "results", "adapt_sd2", sd2_markdown(rows),
-                            {"rows": rows}))
+        files = [json.loads(Path(f).read_text()) for f in sys.argv[sys.argv.index("--sd2-table") + 1:]]
+        rows, light = [r for r in files if "warm_s" in r], [r for r in files if "per_iteration_s" in r]
+        print(write_results(Path(__file__).resolve().parent / "results", "adapt_sd2", sd2_markdown(rows, light),
+                            {"rows": rows, "light": light}))
     elif "--sd2" in sys.argv:   # python benchmarks/bench_adapt.py --sd2 MODELS PRESET DTYPE cache|nocache OUT.json
         import json
 
