@@ -302,29 +302,17 @@ def main() -> int:
                      "([corpus.md](corpus.md)).", "", "What a wrong camera costs the composite "
                      "([camera_cost.md](camera_cost.md)):", "", cost, ""]
 
-    # scenefit run on real 2k assets and a 12 MP photo, draft and balanced (issue 23's speed goals).
-    if "speed" in parts and not args.quick:
-        subprocess.run([sys.executable, str(Path(__file__).with_name("bench_real_speed.py"))], check=True)
-        log("real-asset speed bench done")
-        table = (RESULTS / "real_speed.md").read_text().split("\n\n", 3)[-1].strip()
-        sections += ["## `scenefit run` on real 2k assets and a 12 MP photo", "",
-                     "[real_speed.md](real_speed.md):", "", table, ""]
-
-    # The exact start against the paper's fit on real assets (issue 23).
-    if "start" in parts and not args.quick:
-        subprocess.run([sys.executable, str(Path(__file__).with_name("bench_start.py"))], check=True)
-        log("exact start against fit done")
-        table = (RESULTS / "start.md").read_text().split("\n\n", 2)[-1].strip()
-        sections += ["## The exact start against the paper's fit (`--init fit`), real assets", "",
-                     "[start.md](start.md):", "", table, ""]
-
-    # Adapt at SD2's size on this CPU (issue 24): random-weight models of the real size, per preset.
-    if "sd2" in parts and not args.quick:
-        subprocess.run([sys.executable, str(Path(__file__).with_name("bench_adapt.py")), "--sd2-bench"], check=True)
-        log("adapt at SD2 size done")
-        table = (RESULTS / "adapt_sd2.md").read_text().split("\n\n", 2)[-1].strip()
-        sections += ["## Adapt at SD2's size on this CPU (random weights)", "", "[adapt_sd2.md](adapt_sd2.md):", "",
-                     table, ""]
+    # Benches run as processes of their own, each writing its results file, quoted here.
+    separate = (  # (part, script and arguments, results stem, paragraphs before its table, title)
+        ("speed", ["bench_real_speed.py"], "real_speed", 3, "`scenefit run` on real 2k assets and a 12 MP photo"),
+        ("start", ["bench_start.py"], "start", 2, "The exact start against the paper's fit (`--init fit`), real assets"),
+        ("sd2", ["bench_adapt.py", "--sd2-bench"], "adapt_sd2", 2, "Adapt at SD2's size on this CPU (random weights)"))
+    for part, command, stem, before, title in separate:
+        if part in parts and not args.quick:
+            subprocess.run([sys.executable, str(Path(__file__).with_name(command[0])), *command[1:]], check=True)
+            log(f"{stem} done")
+            table = (RESULTS / f"{stem}.md").read_text().split("\n\n", before)[-1].strip()
+            sections += [f"## {title}", "", f"[{stem}.md]({stem}.md):", "", table, ""]
 
     total = time.perf_counter() - started
     load = " / ".join(f"{x:.1f}" for x in os.getloadavg())

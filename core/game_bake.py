@@ -96,12 +96,13 @@ def own_texture_size(maps: PBRMaps, cap: int) -> int:
     return min(check_texture_size(cap), 1 << (side - 1).bit_length())
 
 
-def own_base_logit(texture: NeuralTexture, maps: PBRMaps, size: int):
-    """A residual texture's base taken from the material's own maps at size² (not from the copy the
-    texture stores at its preset's resolution), as logits; None for a texture without a base."""
+def own_base_logit(texture: NeuralTexture, own_stack: np.ndarray):
+    """A residual texture's base taken from the material's own maps (`own_stack`: PBRMaps.stacked_at
+    the bake's size, not the copy the texture stores at its preset's resolution), as logits; None for a
+    texture without a base."""
     if not texture.config.residual:
         return None
-    stack = torch.from_numpy(np.clip(maps.stacked_at(size, size), 0.0, 1.0).astype(np.float32))
+    stack = torch.from_numpy(np.clip(own_stack, 0.0, 1.0).astype(np.float32))
     return to_logit(stack, torch.tensor(texture.config.channel_min), torch.tensor(texture.config.channel_max))
 
 
@@ -120,13 +121,13 @@ def material_base(texture: NeuralTexture, index: int, count: int, size: int):
 UNCHANGED_STEPS = 1
 
 
-def unchanged_channels(baked: BakedMaterial, own: PBRMaps, covered: np.ndarray, config) -> frozenset:
+def unchanged_channels(baked: BakedMaterial, own: PBRMaps, own_stack: np.ndarray, covered: np.ndarray,
+                       config) -> frozenset:
     """The channels whose baked bytes are the material's own maps (read through its nodes: factors,
     texture transforms, vertex colours and all) on every covered texel, to UNCHANGED_STEPS. Own values
     outside what the texture holds (config's ranges: a roughness of 0 comes back as 0.03) count as held.
     A map baked smaller than the material's own image is never unchanged: the size asked for wins."""
-    size = baked.base_color.shape[0]
-    stack = own.stacked_at(size, size)
+    size, stack = baked.base_color.shape[0], own_stack
     ranges = {"base_color": config.base_color_range, "roughness": config.roughness_range,
               "metallic": config.metallic_range}
     planes = {"base_color": (stack[..., 0:3], baked.base_color), "roughness": (stack[..., 3], baked.roughness),
@@ -171,16 +172,17 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
         wrap = tuple(wraps[index]) if wraps else ("repeat", "repeat")
         size = sizes[index]
         raster = rasterize_uv(material_submesh(normalized, index), size, wrap=wrap)
-        base = own_base_logit(texture, own_maps[index], size) if own_maps else \
-            material_base(texture, index, len(names), size)
+        own_stack = own_maps[index].stacked_at(size, size) if own_maps else None   # resized once, used twice
+        base = own_base_logit(texture, own_stack) if own_maps else material_base(texture, index, len(names), size)
         maps = bake_texture(texture, raster.position, raster.border, raster.fill_index, base)
         base = np.round(linear_to_srgb(maps[..., 0:3]) * 255.0).astype(np.uint8)
         was = constants[index] if constants else {}
-        baked.append(BakedMaterial(name=name, base_color=base,
-                                   roughness=_channel(maps[..., 3], raster.mask, was.get("roughness")),
-                                   metallic=_channel(maps[..., 4], raster.mask, was.get("metallic")),
-                                   coverage=raster.coverage, wrap=wrap))
+        material = BakedMaterial(name=name, base_color=base,
+                                 roughness=_channel(maps[..., 3], raster.mask, was.get("roughness")),
+                                 metallic=_channel(maps[..., 4], raster.mask, was.get("metallic")),
+                                 coverage=raster.coverage, wrap=wrap)
         if own_maps:
-            baked[-1] = replace(baked[-1], unchanged=unchanged_channels(baked[-1], own_maps[index], raster.mask,
-                                                                         texture.config))
+            material = replace(material, unchanged=unchanged_channels(material, own_maps[index], own_stack,
+                                                                      raster.mask, texture.config))
+        baked.append(material)
     return baked
