@@ -193,16 +193,18 @@ def _write_roughness_metallic(material, bsdf, baked: BakedMaterial, folder: Path
 
 
 def export_gltf(out_file: str | Path, file_format: str, selection_only: list | None = None,
-                protect: tuple = (), output: GltfOutput = GltfOutput()) -> list[Path]:
+                protect: tuple = (), output: GltfOutput = GltfOutput(), replace: bool = False) -> list[Path]:
     """Write the current scene (or only `selection_only` objects) with Blender's glTF exporter, with
     `output`'s compression (Draco by the exporter, meshopt by meshoptimizer's encoder after it),
     texture format and tangents.
 
     The files are written into a temporary folder beside `out_file` and moved into place once the
     exporter has finished, so a failed export leaves nothing half-written; none is moved over a file
-    in `protect` (the asset's own files: a .gltf's buffers and images). Returns the written paths.
+    in `protect` (the asset's own files: a .gltf's buffers and images), nor over any existing file
+    unless `replace` (Blender's file browser has asked; the command line has --replace). Returns the
+    written paths.
     """
-    from ..core.asset_files import refuse_overwriting
+    from ..core.asset_files import refuse_overwriting, refuse_replacing
 
     import addon_utils
     import bpy
@@ -242,7 +244,10 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
             ktx2_glb(staged)
         if output.compress == "meshopt":
             encoded_glb(staged, staged)
-        refuse_overwriting([out_file.parent / p.name for p in staging.iterdir()], list(protect), "the glTF")
+        targets = [out_file.parent / p.name for p in sorted(staging.iterdir())]
+        refuse_overwriting(targets, list(protect), "the glTF")
+        if not replace:
+            refuse_replacing(targets)
         written = []
         for path in sorted(staging.iterdir()):
             target = out_file.parent / path.name
@@ -273,7 +278,7 @@ def bake_object_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_f
 
 def bake_materials_to_gltf(materials: list, baked: list[BakedMaterial], out_file: str | Path, file_format: str = "glb",
                            selection_only: list | None = None, protect: tuple = (),
-                           output: GltfOutput = GltfOutput()) -> dict:
+                           output: GltfOutput = GltfOutput(), replace: bool = False) -> dict:
     """Put `baked[i]` into `materials[i]` (each material once) and export the scene (or `selection_only`)."""
     report = {"materials": []}
     done, shared = set(), {}
@@ -284,7 +289,7 @@ def bake_materials_to_gltf(materials: list, baked: list[BakedMaterial], out_file
             done.add(material.name)
             notes = apply_baked_material(material, maps, Path(folder), shared)
             report["materials"].append(dict(maps.report(), done=notes))
-        written = export_gltf(out_file, file_format, selection_only, protect, output)
+        written = export_gltf(out_file, file_format, selection_only, protect, output, replace)
     report["files"] = [str(p) for p in written]
     report["output"] = output.report()
     return report
@@ -292,7 +297,7 @@ def bake_materials_to_gltf(materials: list, baked: list[BakedMaterial], out_file
 
 def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_format: str = "glb",
                     texture_size: int | None = None, object_name: str | None = None, protect: tuple = (),
-                    output: GltfOutput | None = None) -> dict:
+                    output: GltfOutput | None = None, replace: bool = False) -> dict:
     """`scenefit bake`: the asset file loaded into a temporary scene, the neural texture baked per
     material at `texture_size`² (default: each material's own image size, rounded up to a power of
     two), its base the material's own maps, written
@@ -331,7 +336,8 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
                  for maps in own]
         baked = bake_game_maps(texture, mesh, [m.name for m in materials], sizes,
                                [constant_channels(m) for m in materials], [material_wrap(m) for m in materials], own)
-        report = bake_materials_to_gltf(materials, baked, out_file, file_format, protect=protect, output=output)
+        report = bake_materials_to_gltf(materials, baked, out_file, file_format, protect=protect, output=output,
+                                        replace=replace)
         report.update({"asset": str(asset_path), "object": taken[0] if len(taken) == 1 else None, "objects": taken,
                        "format": file_format, "texture_size": max(sizes)})
     return report
@@ -345,7 +351,7 @@ def bake_copy_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_fil
 
 
 def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[list[tuple]], out_file: str | Path,
-                        file_format: str = "glb", output: GltfOutput = GltfOutput()) -> dict:
+                        file_format: str = "glb", output: GltfOutput = GltfOutput(), replace: bool = False) -> dict:
     """Objects of the user's session written as one asset: a copy of each object, its mesh and its materials
     gets the maps (`baked[i]` into the material in each (object, slot number) pair of `slots[i]`) and the
     copies alone are exported, then removed. The copies carry the originals' names while the exporter runs
@@ -382,7 +388,7 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
             renamed.append((original, name))
             duplicate.name = name
         report = bake_materials_to_gltf(materials, baked, out_file, file_format, list(copies.values()),
-                                        output=output)
+                                        output=output, replace=replace)
     finally:
         # (a SceneFit result material's own image nodes are also named "SceneFit …": keep those)
         images = set(bpy.data.images) - images_before

@@ -11,7 +11,7 @@ def run(args) -> int:
     import json
 
     from ..blender_io.gltf_export import bake_asset_file
-    from ..core.asset_files import asset_files, refuse_overwriting
+    from ..core.asset_files import asset_files, refuse_overwriting, refuse_replacing
     from ..core.asset_io import is_asset_folder
     from ..core.errors import InputError
     from ..core.game_bake import check_texture_size
@@ -29,12 +29,15 @@ def run(args) -> int:
     if args.format is None:   # the file name says which: a.gltf is the separate layout, anything else a .glb
         args.format = "gltf" if out.suffix.lower() == ".gltf" else "glb"
     targets = [out] + ([out.with_suffix(".bin")] if args.format == "gltf" else [])
-    refuse_overwriting(targets + ([Path(args.report)] if args.report else []), list(protect))
+    targets += [Path(args.report)] if args.report else []
+    refuse_overwriting(targets, list(protect))
+    if not args.replace:   # before any work; the images of a .gltf are checked once their names are known
+        refuse_replacing(targets)
     output = output_like_input(args.asset, args.compress, args.textures, args.max_texture)
     if output.textures == "ktx2":
         check_ktx2_output(args.format)
     report = bake_asset_file(args.asset, Path(args.texture), args.out, args.format, args.texture_size, args.object,
-                             protect=protect, output=output)
+                             protect=protect, output=output, replace=args.replace)
     for material in report["materials"]:
         print(f"material '{material['name']}': base colour texture, roughness {material['roughness']}, "
               f"metallic {material['metallic']} at {material['size']}²")
@@ -63,4 +66,6 @@ def add_parser(sub) -> None:
     p.add_argument("--max-texture", type=int, default=DEFAULT_MAX_TEXTURE,
                    help=f"largest baked texture side, a power of two (default: {DEFAULT_MAX_TEXTURE})")
     p.add_argument("--report", help="also write what was baked as JSON here")
+    p.add_argument("--replace", action="store_true",
+                   help="write over files of an earlier bake at --out (and --report) (default: refuse)")
     p.set_defaults(func=run)

@@ -78,6 +78,16 @@ def refuse_overwriting(targets: list[Path], protected: list[Path], what: str = "
                              "another output path or folder (SceneFit never writes over its inputs).")
 
 
+def refuse_replacing(targets: list[Path], option: str = "--replace") -> None:
+    """One sentence when a file about to be written already exists: an earlier run's output (or
+    anything else the user keeps there) is replaced only when asked for with `option`."""
+    existing = [Path(t) for t in targets if Path(t).exists()]
+    if existing:
+        more = f" (and {len(existing) - 1} more file{'s' if len(existing) > 2 else ''} it would write)" if len(existing) > 1 else ""
+        raise InputError(f"'{existing[0]}' already exists{more}; give {option} to write over it, or choose another "
+                         "output path.")
+
+
 def _identity(path: Path) -> tuple[int, int] | None:
     try:
         stat = os.stat(path)

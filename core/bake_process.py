@@ -27,7 +27,8 @@ def asset_file_bake(asset: str | Path, object_name: str | None = None) -> tuple[
         folder.mkdir(parents=True, exist_ok=True)
         glb, report_file = folder / f"{Path(asset).stem}.glb", folder / "bake.json"
         command = [sys.executable, "-m", CLI_MODULE, "bake", str(asset), "--texture", str(texture),
-                   "--out", str(glb), "--report", str(report_file), "--quiet"]
+                   "--out", str(glb), "--report", str(report_file), "--quiet",
+                   "--replace"]   # the stage's own folder: a stage redone replaces its own earlier bake
         if object_name:
             command += ["--object", object_name]
         done = subprocess.run(command, capture_output=True, text=True)

@@ -101,7 +101,9 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
 
         def export(folder: Path | None) -> dict:
             out_file = self._out_file if folder is None else folder / self._out_file
-            report = bake_copies_to_gltf(objects, result["baked"], slots, out_file, self.file_format, self._output)
+            # A chosen file is written over as Blender's own exporters do; a run folder is new.
+            report = bake_copies_to_gltf(objects, result["baked"], slots, out_file, self.file_format, self._output,
+                                         replace=True)
             report.update({"object": objects[0].name if len(objects) == 1 else None, "objects": list(self._objects),
                            "format": self.file_format, "texture_size": result["size"], "file": str(out_file)})
             if folder is not None:

@@ -166,6 +166,26 @@ def test_bake_refuses_to_write_over_the_asset_or_the_texture(tmp_path, capsys):
     assert snapshot(tmp_path) == before
 
 
+def test_bake_refuses_to_replace_an_earlier_bake_unless_asked(tmp_path, capsys):
+    model = _glb(tmp_path / "model.glb")
+    texture = tmp_path / "texture.pt"
+    texture.write_bytes(b"weights")
+    (tmp_path / "baked.glb").write_bytes(b"an earlier bake")
+    (tmp_path / "notes.json").write_text("the user's notes")
+    before = snapshot(tmp_path)
+    err = refused(capsys, "bake", str(model), "--texture", str(texture), "--out", str(tmp_path / "baked.glb"))
+    assert "'" + str(tmp_path / "baked.glb") + "' already exists" in err and "--replace" in err
+    err = refused(capsys, "bake", str(model), "--texture", str(texture), "--out", str(tmp_path / "new.gltf"),
+                  "--report", str(tmp_path / "notes.json"))
+    assert "notes.json' already exists" in err
+    assert snapshot(tmp_path) == before
+    # --replace passes that check; this texture file is then refused for what it is, and nothing is written
+    err = refused(capsys, "bake", str(model), "--texture", str(texture), "--out", str(tmp_path / "baked.glb"),
+                  "--replace")
+    assert "already exists" not in err
+    assert snapshot(tmp_path) == before
+
+
 def test_the_files_a_gltf_asset_is_made_of_are_known(tmp_path):
     from scenefit.core.asset_files import asset_files
 
