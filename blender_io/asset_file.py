@@ -112,50 +112,50 @@ def _blender_reason(error: Exception) -> str:
 
 
 def _append_blend(bpy, scene, path: Path, object_name: str | None) -> None:
+    """Every object of the file (a named one's children come with it; the others are left out later)."""
     with bpy.data.libraries.load(str(path), link=False) as (source, target):
         names = list(source.objects)
         if object_name is not None and object_name not in names:
             raise InputError(f"No object '{object_name}' in '{path.name}'; objects: {', '.join(names) or 'none'}.")
-        target.objects = [object_name] if object_name is not None else names
+        target.objects = names
     for obj in target.objects:
         if obj is not None:
             scene.collection.objects.link(obj)
 
 
-def _file_mesh_names(bpy, scene, path: Path, suffix: str) -> list[str]:
-    """The names of the file's mesh objects. Only the named object of a .blend was appended, so its
-    others are linked for a look (linked objects keep their names; the cleanup removes them)."""
-    if suffix != ".blend":
-        return [o.name for o in scene.objects if o.type == "MESH"]
-    with bpy.data.libraries.load(str(path), link=True) as (source, target):
-        target.objects = list(source.objects)
-    return sorted(o.name for o in target.objects if o is not None and o.type == "MESH")
+def _asset_node_names(scene) -> list[str]:
+    """What --object can name: the mesh objects and every node with meshes under it."""
+    return sorted(o.name for o in scene.objects
+                  if o.type == "MESH" or any(c.type == "MESH" for c in o.children_recursive))
 
 
 def load_asset_file(path: str | Path, object_name: str | None = None) -> tuple[Mesh, PBRMaps]:
-    """The named mesh object (or the one with most faces) and its maps; several materials come as
+    """The asset (the file's meshes, or the named node's) and its maps; several materials come as
     one atlas (see AssetMaterials.fitting_view)."""
     return load_asset_materials(path, object_name).fitting_view()
 
 
 def load_asset_materials(path: str | Path, object_name: str | None = None) -> AssetMaterials:
-    """The named mesh object (or the one with most faces) with every material its faces use."""
+    """The asset's mesh in world space with every material its faces use: every mesh of the file, or
+    the named node and the meshes under it."""
     import bpy
 
-    with loaded_asset(path, object_name) as (obj, scene):
+    with loaded_asset(path, object_name) as (meshes, scene):
         depsgraph = bpy.context.evaluated_depsgraph_get()
-        meshes = [o for o in scene.objects if o.type == "MESH"]
-        if object_name is None and len(meshes) > 1:   # the whole scene is the asset (--object takes one)
-            return read_scene_materials(meshes, depsgraph, Path(path).stem)
+        if len(meshes) > 1:
+            return read_scene_materials(meshes, depsgraph, object_name or Path(path).stem,
+                                        "the whole scene" if object_name is None else f"'{object_name}'")
         # With its node's world transform: a painting stood upright by its node stands upright, a
         # mirrored node stays mirrored, as the baked file (which keeps the transforms) shows it.
-        return read_object_materials(obj, depsgraph, space="world")
+        return read_object_materials(meshes[0], depsgraph, space="world")
 
 
 @contextmanager
 def loaded_asset(path: str | Path, object_name: str | None = None):
-    """(object, temporary scene), with the context pointing at that scene, while the block runs;
-    everything the load brought is removed afterwards (see the module's note)."""
+    """(the asset's mesh objects, temporary scene), with the context pointing at that scene, while the
+    block runs: every mesh object of the file, or with `object_name` that object (a mesh, or a node
+    such as an empty) and the mesh objects under it. Everything the load brought is removed
+    afterwards (see the module's note)."""
     import bpy
 
     path = Path(path)
@@ -191,18 +191,26 @@ def loaded_asset(path: str | Path, object_name: str | None = None):
                                  "or gltfpack can) and give that file.") from None
             raise InputError(f"Asset file '{path}' cannot be read ({reason}); check that it is a valid "
                              f"'{suffix}' file, or export it again.") from None
-        meshes = [o for o in scene.objects if o.type == "MESH"]
-        if object_name is not None:
-            obj = next((o for o in meshes if o.name == object_name or o.name.startswith(object_name + ".")), None)
-            if obj is None:
-                named = next((o for o in scene.objects if o.name == object_name), None)
-                what = f"'{object_name}' in '{path.name}' is a {named.type.lower()} object, not a mesh" \
-                    if named is not None else f"No mesh object '{object_name}' in '{path.name}'"
-                names = ", ".join(_file_mesh_names(bpy, scene, path, suffix)) or "none"
-                raise InputError(f"{what}; give one of its mesh objects: {names}.")
-        elif meshes:
-            obj = max(meshes, key=lambda o: len(o.data.polygons))
-        else:
-            raise InputError(f"'{path.name}' holds no mesh object.")
+        meshes = asset_meshes(scene, object_name, path)
         with bpy.context.temp_override(scene=scene, view_layer=scene.view_layers[0]):
-            yield obj, scene
+            yield meshes, scene
+
+
+def asset_meshes(scene, object_name: str | None, path: Path) -> list:
+    """The mesh objects that make the asset, in a fixed order: all of the scene's, or the named
+    object's (itself when a mesh, and every mesh under it: a bike's frame, wheels and chain)."""
+    meshes = sorted((o for o in scene.objects if o.type == "MESH"), key=lambda o: o.name)
+    if object_name is None:
+        if not meshes:
+            raise InputError(f"'{path.name}' holds no mesh object.")
+        return meshes
+    # (a name the importer had to change gets Blender's ".001": the file's own name still finds it)
+    named = next((o for o in scene.objects if o.name == object_name), None) or next(
+        (o for o in scene.objects if o.name.startswith(object_name + ".")), None)
+    taken = [] if named is None else [o for o in [named, *named.children_recursive] if o.type == "MESH"]
+    if not taken:
+        what = f"No object '{object_name}' in '{path.name}'" if named is None else \
+            f"'{object_name}' in '{path.name}' is a {named.type.lower()} object with no mesh under it"
+        names = ", ".join(_asset_node_names(scene)) or "none"
+        raise InputError(f"{what}; give one of its mesh objects or a node above them: {names}.")
+    return sorted(taken, key=lambda o: o.name)

@@ -318,14 +318,14 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
 
     if not hasattr(texture, "texture"):
         texture = load_neural_texture(texture)
-    with loaded_asset(asset_path, object_name) as (obj, scene):
+    with loaded_asset(asset_path, object_name) as (meshes, scene):
         depsgraph = bpy.context.evaluated_depsgraph_get()
-        meshes = [o for o in scene.objects if o.type == "MESH"]
-        if object_name is None and len(meshes) > 1:   # the whole scene is the asset, as convert read it
-            whole = scene_mesh(meshes, depsgraph, Path(asset_path).stem)
+        if len(meshes) > 1:   # several objects are the asset, joined as convert read them
+            whole = scene_mesh(meshes, depsgraph, object_name or Path(asset_path).stem)
             mesh, materials, taken = whole.mesh, whole.materials, whole.objects
             own = [read_material(m, o, slot).maps for m, (o, slot) in zip(materials, whole.users)]
         else:
+            obj = meshes[0]
             mesh, slots = object_mesh_and_slots(obj, depsgraph, space="world")  # as convert
             materials, taken = [obj.material_slots[s].material for s in slots], [obj.name]
             own = [read_material(m, obj, slot).maps for m, slot in zip(materials, slots)]

@@ -72,10 +72,11 @@ def _joined(parts: list[tuple[Mesh, np.ndarray]], name: str) -> Mesh:
                             material_index=index if index.max() > 0 else None)
 
 
-def read_scene_materials(objects, depsgraph, name: str) -> AssetMaterials:
-    """The whole scene as one asset: its joined mesh and every material it uses, read once each."""
+def read_scene_materials(objects, depsgraph, name: str, what: str = "the whole scene") -> AssetMaterials:
+    """Several mesh objects as one asset (`what` says which: the whole scene, or a named node): their
+    joined mesh and every material they use, read once each."""
     scene = scene_mesh(objects, depsgraph, name)
     materials = tuple(read_material(m, obj, slot) for m, (obj, slot) in zip(scene.materials, scene.users))
-    notes = (f"the whole scene: {len(scene.objects)} mesh object(s) with their world transforms "
+    notes = (f"{what}: {len(scene.objects)} mesh object(s) with their world transforms "
              f"({', '.join(scene.objects)})", *scene.notes)
     return AssetMaterials(mesh=scene.mesh, materials=materials, notes=notes)

@@ -266,12 +266,12 @@ def test_a_skinned_gltf_loads_into_a_temporary_scene_of_an_open_file(assets, run
 
 @pytest.mark.parametrize("suffix", (".blend", ".glb"))
 def test_object_naming_a_camera_lists_the_mesh_objects_there_are(assets, suffix, tmp_path):
-    """--object naming a non-mesh object says what it is and lists the file's meshes (a .blend, of
-    which only the named object is appended, listed "mesh objects: none")."""
+    """--object naming a non-mesh object with no mesh under it says what it is and lists what can be
+    taken (a .blend once listed "mesh objects: none": only the named object was appended)."""
     proc = scenefit("convert", str(assets / f"names{suffix}"), "--object", "Camera", "--out", str(tmp_path / "out"))
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
-    assert f"'Camera' in 'names{suffix}' is a camera object, not a mesh; give one of its mesh objects: Cube." \
-        in proc.stderr
+    assert (f"'Camera' in 'names{suffix}' is a camera object with no mesh under it; give one of its mesh objects "
+            "or a node above them: Cube.") in proc.stderr, proc.stderr
 
 
 def test_tiling_uvs_convert_and_bake_alike_and_keep_their_samplers(assets, tmp_path):

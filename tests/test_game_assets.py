@@ -68,7 +68,7 @@ for name, path in assets.items():
     run = work / "runs" / name
     baked_file = run / f"baked.{'gltf' if name == 'two_materials' else 'glb'}"
     # What bake wrote, recomputed from the same texture and mesh (the bake is deterministic).
-    with loaded_asset(path) as (obj, scene):
+    with loaded_asset(path) as ([obj], scene):
         mesh, slots = object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get(), space="world")
         materials = [obj.material_slots[s].material for s in slots]
         expected = {b.name: b for b in bake_game_maps(load_neural_texture(run / "convert/maps/texture.pt"), mesh,
