@@ -4,7 +4,8 @@ Assets: the corpus's glTF files with 2048² textures (Khronos' MaterialsVariants
 per material; CesiumMilkTruck, Draco-compressed). The photo: a 4000x3000 view of a real HDR panorama
 of the corpus, 60° wide, auto-exposed, JPEG. `--guidance none` (no adaptation), presets draft and
 balanced, each a fresh run folder in a fresh process: wall seconds (Python and the libraries
-starting included), the pipeline's own total and each stage's share, and peak memory.
+starting included), the pipeline's own total and each stage's seconds, and peak memory. The game
+bake is a process of its own that runs beside light and compose: its seconds overlap theirs.
 Writes benchmarks/results/real_speed.md and .json.
 """
 from __future__ import annotations

@@ -194,6 +194,9 @@ def read_color_image(path: str | os.PathLike, upright: bool = False) -> np.ndarr
     return srgb_to_linear(rgb)
 
 
+PNG_LEVEL = 3
+
+
 def write_image(path: str | os.PathLike, pixels: np.ndarray, dtype: str | None = None,
                 smallest: bool = False) -> Path:
     """Write through a temporary file in the same folder and rename, so no half-written file is seen.
@@ -224,8 +227,8 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, dtype: str | None =
         if path.suffix.lower() == ".exr":
             spec.attribute("compression", "zip")
         spec.attribute("oiio:UnassociatedAlpha", 1)  # colour is stored as given, never divided by alpha
-        if smallest:
-            spec.attribute("png:compressionLevel", 9)
+        # zlib level 3 unless asked for the smallest: half the time of the usual 6 for ~10% more bytes
+        spec.attribute("png:compressionLevel", 9 if smallest else PNG_LEVEL)
         if not out.open(tmp, spec):
             raise InputError(f"Cannot open '{path}' for writing: {out.geterror()}")
         ok = out.write_image(np.ascontiguousarray(pixels))

@@ -16,6 +16,7 @@ import hashlib
 import json
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
@@ -24,8 +25,9 @@ import numpy as np
 import torch
 
 from .atomic import write_json_atomic
-# GameBake: bake(texture.pt, stage folder) -> the bake's report with "outputs", the game asset written
-# from the asset's own file. It needs Blender, which core/ never imports: bake_process runs it as a child.
+# GameBake: bake(texture.pt, stage folder, cancel) -> the started bake of the asset's own file; its wait()
+# gives the report with "outputs". It needs Blender, which core/ never imports: bake_process runs it as a
+# child process, so it runs while the run composes.
 from .bake_process import GameBake
 from .errors import InputError
 from .guidance.models import GuidanceModels, ModelCache, ModelConfig
@@ -103,6 +105,18 @@ class StageRunner:
         self.fresh = False   # once a stage runs, every later stage runs too
 
     def run(self, name: str, key: str, work: Callable[[Path], dict]) -> dict:
+        """Reuse the stage, or do `work(folder) -> report` and record it."""
+        def begin(folder: Path) -> Callable[[], dict]:
+            report = work(folder)
+            return lambda: report
+
+        return self.start(name, key, begin)()
+
+    def start(self, name: str, key: str, begin: Callable[[Path], Callable[[], dict]],
+              later_stages_follow: bool = True) -> Callable[[], dict]:
+        """Reuse the stage, or `begin(folder)` its work, which returns a function that waits for its report.
+        Returns a function that waits, records the stage and gives its report. `later_stages_follow`
+        False: a stage started ahead of others (the bake, while compose runs) does not make them run."""
         check_cancel(self.cancel)
         folder = self.out / name
         record = folder / STAGE_FILE
@@ -117,22 +131,27 @@ class StageRunner:
             if saved.get("key") == key and all(Path(p).exists() for p in _paths(report["outputs"])):
                 emit(self.progress, "run", index + 1, len(STAGES), f"{name}: reused (same settings and inputs)")
                 self.stages[name] = {"status": "reused", "key": key, "seconds": 0.0, "report": report}
-                return report
-        self.fresh = True
+                return lambda: report
+        self.fresh = self.fresh or later_stages_follow
         emit(self.progress, "run", index, len(STAGES), f"{name}: running")
         t0 = time.perf_counter()
         record.unlink(missing_ok=True)  # a stage half redone is not a finished stage
-        report = work(folder)
-        seconds = time.perf_counter() - t0
-        # Outputs are kept relative to the stage's folder: the run's folder may be moved (Blender swaps
-        # it into place, a batch worker sends it home) and a later run must still find them.
-        from .pipeline import relative_paths
+        wait = begin(folder)
 
-        write_json_atomic(record, {"key": key, "report": dict(report, outputs=relative_paths(report.get("outputs", {}),
-                                                                                            folder))})
-        self.stages[name] = {"status": "ran", "key": key, "seconds": round(seconds, 3), "report": report}
-        emit(self.progress, "run", index + 1, len(STAGES), f"{name}: done in {seconds:.1f} s")
-        return report
+        def finish() -> dict:
+            report = wait()
+            seconds = time.perf_counter() - t0
+            # Outputs are kept relative to the stage's folder: the run's folder may be moved (Blender swaps
+            # it into place, a batch worker sends it home) and a later run must still find them.
+            from .pipeline import relative_paths
+
+            write_json_atomic(record, {"key": key, "report": dict(report, outputs=relative_paths(
+                report.get("outputs", {}), folder))})
+            self.stages[name] = {"status": "ran", "key": key, "seconds": round(seconds, 3), "report": report}
+            emit(self.progress, "run", index + 1, len(STAGES), f"{name}: done in {seconds:.1f} s")
+            return report
+
+        return finish
 
     def skip(self, name: str, status: str, why: str) -> None:
         self.stages[name] = {"status": status, "why": why}
@@ -168,10 +187,10 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     """
     run = PipelineRun(mesh, maps, photo_path, placement, out_dir, config, progress, cancel, models)  # 1. inputs
     run.convert()                         # 2. the asset's maps -> neural texture
-    run.light()                           # 3. photo + placement -> the HDR map and the photo camera
-    run.adapt()                           # 4. the texture adapted to the scene (only with the SD2 weights)
-    run.compose()                         # 5. the texture in the photo under the estimated light
-    run.bake(bake, bake_skipped_why)      # 6. the texture written into the asset's own file (glTF)
+    with run.baking(bake, bake_skipped_why):  # 6. the texture written into the asset's own file (glTF): a process
+        run.light()                       # 3.    of its own, from when the texture is final (after 2, or after 4)
+        run.adapt()                       # 4. the texture adapted to the scene (only with the SD2 weights)
+        run.compose()                     # 5. the texture in the photo under the estimated light
     return run.finish()                   # 7. report.json
 
 
@@ -218,6 +237,7 @@ class PipelineRun:
         self.runner = StageRunner(self.out, progress, cancel)
         self.texture_path = self.light_path = None
         self.keys: dict[str, str] = {}
+        self.texture_final: Callable[[], None] = lambda: None   # what waits for the final texture (the bake)
 
     def stage_config(self, stage: str, **values):
         """The preset's config for `stage` with `values`, then the run's own overrides for it."""
@@ -340,6 +360,7 @@ class PipelineRun:
 
         self.runner.run("adapt", self.keys["adapt"], adapt)
         self.texture_path, self.upstream = self.out / "adapt" / "maps" / WEIGHTS_FILE, self.keys["adapt"]
+        self.texture_final()
 
     def compose(self) -> None:
         from .compose import ComposeInputs, compose_to_folder, light_camera
@@ -365,26 +386,58 @@ class PipelineRun:
 
         self.runner.run("compose", self.keys["compose"], compose)
 
-    def bake(self, bake: GameBake | None, skipped_why: str) -> None:
+    @contextmanager
+    def baking(self, bake: GameBake | None, skipped_why: str):
+        """The game bake around the stages after convert: started once the texture is final (at once
+        without adaptation, else when adapt calls texture_final), waited for after the block, and
+        stopped if the block fails (a cancel, a refusal), so no bake outlives its run."""
         if bake is None:
             self.runner.skip("bake", "skipped", skipped_why)
+            yield
             return
-        texture = self.texture_path
-        self.runner.run("bake", _digest("bake", self.upstream, self.asset_key), lambda folder: bake(texture, folder))
+        started: list = []   # the bake's process, once begun
+        finishes: list = []  # the runner's wait for it
+
+        def start() -> None:
+            if finishes:
+                return
+            texture = self.texture_path
+
+            def begin(folder: Path) -> Callable[[], dict]:
+                started.append(bake(texture, folder, self.cancel))
+                return started[0].wait
+
+            finishes.append(self.runner.start("bake", _digest("bake", self.upstream, self.asset_key), begin,
+                                              later_stages_follow=False))
+
+        self.texture_final = start
+        try:
+            if not self.found:
+                start()
+            yield
+            start()
+        except BaseException:
+            for process in started:
+                process.stop()
+            raise
+        finally:
+            self.texture_final = lambda: None
+        finishes[0]()
 
     def finish(self) -> dict:
         from dataclasses import replace
 
         from .pipeline import environment_info, write_report
 
+        stages = {name: self.runner.stages[name] for name in STAGES if name in self.runner.stages}
         report = {
             "stage": "run",
             "config": _plain(replace(self.config, models=self.config.models)),
             "inputs": {"asset": self.mesh.name, "asset_digest": self.asset_key, "photo": self.photo_info,
                        "photo_digest": self.photo_key, "placement_px": list(self.placement_px)},
-            "stages": self.runner.stages,
+            "stages": stages,
             "composite": str(self.out / "compose" / "composite.png"),
-            "reused": [name for name, s in self.runner.stages.items() if s["status"] == "reused"],
+            "reused": [name for name, s in stages.items() if s["status"] == "reused"],
             "environment": environment_info(),
             "seconds_total": round(time.perf_counter() - self.started, 3),
         }

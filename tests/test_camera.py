@@ -231,3 +231,36 @@ def test_user_values_override_the_estimate_and_move_the_horizon(tmp_path):
     # Level, unrolled: the horizon runs through the middle of the photo.
     assert given.horizon == ((0.0, 60.0), (160.0, 60.0)) and est.horizon[0][1] < 60.0
     assert est.overridden() is est
+
+
+def test_theta_votes_equal_every_segment_scored_in_every_bin():
+    """The coarse search adds each segment only to the theta bins its kernel reaches; scored directly in
+    all 45 bins (max of the vertical and horizontal kernels, weighted) the table is the same, for segments
+    anywhere, along the horizon (slope near 0: nearly every bin) and through the image centre."""
+    from scenefit.core import photo_camera as pc
+
+    rng = np.random.default_rng(3)
+    ends = rng.uniform(-1.0, 1.0, (60, 4))
+    ends[:5, 1], ends[:5, 3] = 0.01, 0.012   # just above the horizon of a level camera: slopes near 0
+    # (exactly on it a segment's circle is the horizon and its theta is undefined, in either computation)
+    ends[5:8, :2] = 0.0                      # from the centre
+    weights = rng.uniform(0.1, 1.0, 60)
+    pitch, roll = np.array([0.0, -12.0, 7.0, -24.0]), np.array([0.0, 2.5, -5.0, 1.0])
+    focal = pc.focal_from_fov(65.0)
+    votes = pc._theta_votes(ends, weights, focal, pitch, roll, chunk=3)
+    n, m = pc._great_circles(ends, focal)
+    for p in range(len(pitch)):
+        for b in range(pc.THETA_BINS):
+            frame = pc.camera_frame(pitch[p], roll[p], b * pc.THETA_STEP_DEG)
+            vertical = pc._kernel(pc._signed_residual_deg(n, m, frame[0]), pc.COARSE_TOLERANCE_DEG)
+            # the two horizontal families, 90 deg apart: the kernel of the nearer, in degrees of theta
+            meet = np.cross(n, frame[0])
+            meet /= np.maximum(np.linalg.norm(meet, axis=-1, keepdims=True), 1e-12)
+            theta = np.degrees(np.arctan2(meet @ frame[2], meet @ frame[1])) % 90.0
+            turned = np.cos(0.02) * meet + np.sin(0.02) * np.cross(frame[0], meet)
+            slope = np.abs(pc._signed_residual_deg(n, m, turned)) / np.degrees(0.02)
+            off = np.abs((-theta + 45.0) % 90.0 - 45.0)
+            horizontal = pc._kernel(slope * off, pc.COARSE_TOLERANCE_DEG)
+            expected = np.sum(weights * np.maximum(vertical, horizontal)) / np.sum(weights)
+            assert votes[p, b] == pytest.approx(expected, abs=1e-9), (p, b)
+    assert votes.max() > votes.min() + 0.05   # the table is not flat: the check compares something

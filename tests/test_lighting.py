@@ -295,3 +295,21 @@ def test_bad_placement_and_config_are_rejected(tmp_path):
                  "--quiet"]) == 2
     with pytest.raises(InputError):
         stage_config("light", "draft", scene_type="underwater")
+
+
+def test_a_photo_read_again_is_the_same_and_a_changed_file_is_read_anew(tmp_path):
+    """A run reads its photo several times (inputs, camera, light) and decodes it once; what a caller
+    does to its copy never reaches the next, and a file written again is decoded again."""
+    import os
+
+    path = tmp_path / "photo.png"
+    write_image(path, np.full((40, 60, 3), 0.25, np.float32))
+    first, info = load_photo(path)
+    first[:] = 1.0
+    info["size"] = [1, 1]
+    again, info_again = load_photo(path)
+    assert np.allclose(again, 0.25, atol=1 / 255) and info_again["size"] == [60, 40]
+    write_image(path, np.full((40, 60, 3), 0.75, np.float32))
+    stat = path.stat()
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))   # (a file system's coarse clock)
+    assert np.allclose(load_photo(path)[0], 0.75, atol=1 / 255)

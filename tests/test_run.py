@@ -115,3 +115,68 @@ def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monk
     out.rename(moved)
     assert main([str(moved) if a == str(out) else a for a in args]) == 0
     assert json.loads((moved / "report.json").read_text())["reused"] == ["convert", "light", "compose"]
+
+
+def _sphere_and_photo(tmp_path):
+    maps = PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0)
+    photo = write_image(tmp_path / "photo.png", np.broadcast_to(np.linspace(0.9, 0.3, 48)[:, None, None],
+                                                                (48, 64, 3)).astype(np.float32))
+    return uv_sphere(0.5, 12, 6), maps, photo
+
+
+def _bake_running(script: str, started: list):
+    """A GameBake whose process is `script` (python), so the test sees when it starts and whether it lives."""
+    from scenefit.core.bake_process import BakeProcess
+
+    def bake(texture, folder, cancel=None):
+        folder.mkdir(parents=True, exist_ok=True)
+        process = BakeProcess([sys.executable, "-c", script.format(folder=str(folder))], "asset.glb",
+                              folder / "asset.glb", folder / "bake.json", cancel)
+        started.append((process, texture))
+        return process
+
+    return bake
+
+
+def test_the_game_bake_runs_beside_light_and_compose_and_a_cancel_stops_it(tmp_path):
+    """Without adaptation the bake starts once convert is done and runs while light and compose do; a
+    cancel during compose stops it: no bake process outlives the run."""
+    import threading
+
+    import pytest
+
+    from scenefit.core.errors import Cancelled
+    from scenefit.core.run import RunConfig, run_pipeline
+
+    mesh, maps, photo = _sphere_and_photo(tmp_path)
+    started, cancel, seen = [], threading.Event(), []
+
+    def progress(event) -> None:
+        seen.append((event.message, bool(started)))
+        if event.message == "compose: running":
+            cancel.set()
+
+    bake = _bake_running("import time; time.sleep(120)", started)
+    with pytest.raises(Cancelled):
+        run_pipeline(mesh, maps, photo, (0.5, 0.8), tmp_path / "run", RunConfig(preset="draft", guidance_type="none"),
+                     progress=progress, cancel=cancel, bake=bake)
+    assert ("light: running", True) in seen      # the bake was already running when light began
+    process, texture = started[0]
+    assert texture.name == "texture.pt" and texture.is_file()
+    assert process.process.poll() is not None     # stopped, not left running for two minutes
+
+
+def test_a_failed_game_bake_fails_the_run_in_one_sentence(tmp_path):
+    from scenefit.core.errors import SceneFitError
+    from scenefit.core.run import RunConfig, run_pipeline
+
+    import pytest
+
+    mesh, maps, photo = _sphere_and_photo(tmp_path)
+    script = "import sys; print('scenefit: error: The asset has no mesh.', file=sys.stderr); sys.exit(2)"
+    with pytest.raises(SceneFitError, match="game bake of 'asset.glb' failed: The asset has no mesh.$"):
+        run_pipeline(mesh, maps, photo, (0.5, 0.8), tmp_path / "run", RunConfig(preset="draft", guidance_type="none"),
+                     bake=_bake_running(script, []))
+    # the stages that finished are recorded; the bake is not
+    assert (tmp_path / "run" / "compose" / "stage.json").is_file()
+    assert not (tmp_path / "run" / "bake" / "stage.json").exists()

@@ -9,6 +9,8 @@ light_preview.png (tone-mapped) and returns the report's fields.
 """
 from __future__ import annotations
 
+import copy
+import functools
 import math
 import threading
 import time
@@ -124,6 +126,25 @@ def load_photo(path: str | Path, max_side: int | None = PHOTO_WORKING_SIDE) -> t
     and the composite refer to the photo as every viewer shows it.
     """
     path = Path(path)
+    try:
+        stat = path.stat()
+        key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+    except OSError:
+        key = None   # read_image says what is wrong with it
+    if key is None:
+        return _decoded_photo(path, max_side)
+    rgb, info = _decoded_photo_once(key, path, max_side)
+    return rgb.copy(), copy.deepcopy(info)
+
+
+@functools.lru_cache(maxsize=2)
+def _decoded_photo_once(key: tuple, path: Path, max_side: int | None) -> tuple[np.ndarray, dict]:
+    """A run reads its photo at the light stage's size several times (inputs, camera, light): once
+    decoded here while the file stays the same (`key`: its path, time and size)."""
+    return _decoded_photo(path, max_side)
+
+
+def _decoded_photo(path: Path, max_side: int | None) -> tuple[np.ndarray, dict]:
     pixels = read_image(path, max_side=max_side, upright=True)
     if pixels.shape[2] == 1:
         pixels = np.repeat(pixels, 3, axis=2)
