@@ -11,6 +11,7 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..core.quiet import native_output_captured
+from .interrupts import interrupt_held
 
 # Samples per texel: the emission of a procedural chain needs no light paths, only anti-aliasing.
 BAKE_SAMPLES = 4
@@ -76,7 +77,8 @@ def bake_socket(obj, slot: int, socket, size: int, pixels_of,
             raise InputError(f"'{socket.node.name}' drives {socket.name} of '{material.name}' through a procedural "
                              f"node setup, over UVs that reach {len(copies)} copies of the texture (SceneFit bakes "
                              f"at most {MAX_COPIES}); bake it to an image in Blender first.")
-        with native_output_captured():  # Blender says "Info: Baking map saved ..." for every bake
+        # Blender says "Info: Baking map saved ..." for every bake; a Ctrl-C inside Cycles' Python would be lost
+        with native_output_captured(), interrupt_held():
             if copies == [(0, 0)]:
                 bpy.ops.object.bake(type="EMIT", margin=max(2, size // 64), use_clear=True)
                 return pixels_of(image)[..., :3].copy()

@@ -367,3 +367,30 @@ def test_a_ctrl_c_inside_a_render_is_an_interrupt_not_a_traceback(tmp_path, caps
     assert main(["render", str(tmp_path), "--out", str(parser_out)]) == 130
     err = capsys.readouterr().err
     assert "interrupted" in err and "Traceback" not in err
+
+
+def test_a_ctrl_c_inside_cycles_python_is_raised_once_the_bake_returns(run_py):
+    """Cycles' bake runs its engine's Python inside the operator; a KeyboardInterrupt raised there is
+    printed and dropped by Blender, and the bake finished as if nothing had happened (exit 0). Under
+    interrupt_held the Ctrl-C is noted and raised after the operator; the handler is Python's again."""
+    done = run_py("""
+        import os, signal, time
+        from scenefit.blender_io.interrupts import interrupt_held
+
+        def operator_that_drops_exceptions():   # what Blender does with an engine callback's exception
+            try:
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.2)
+            except KeyboardInterrupt:
+                print("dropped")
+
+        operator_that_drops_exceptions()          # without: the interrupt is lost
+        try:
+            with interrupt_held():
+                operator_that_drops_exceptions()
+            print("lost")
+        except KeyboardInterrupt:
+            print("raised after the operator")
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    """)
+    assert done.stdout.split() == ["dropped", "raised", "after", "the", "operator"], done.stdout
