@@ -130,14 +130,14 @@ def _write_base_color(material, bsdf, baked: BakedMaterial, folder: Path, shared
 
     nodes, links = material.node_tree.nodes, material.node_tree.links
     notes = []
-    size = baked.base_color.shape[0]
+    height, width = baked.base_color.shape[:2]
     rgba = baked.base_color
     alpha = _alpha_source(bsdf)
     if alpha is not None:
         original = image_pixels_linear(alpha[0].image)[..., 3]
-        a = np.round(np.clip(resize_channels(original, size, size), 0.0, 1.0) * 255.0).astype(np.uint8)
+        a = np.round(np.clip(resize_channels(original, height, width), 0.0, 1.0) * 255.0).astype(np.uint8)
         rgba = np.concatenate([rgba, a[..., None]], axis=2)
-        notes.append(f"alpha of '{alpha[0].image.name}' carried into the base colour image at {size}²")
+        notes.append(f"alpha of '{alpha[0].image.name}' carried into the base colour image at {width}x{height}")
     if alpha is None and bool((rgba == rgba[0, 0]).all()):
         # One colour everywhere (a material that gave a plain colour, not adapted): a factor, as it came,
         # not an image of that colour.
@@ -165,7 +165,7 @@ def _write_roughness_metallic(material, bsdf, baked: BakedMaterial, folder: Path
 
     nodes, links = material.node_tree.nodes, material.node_tree.links
     notes = []
-    size = baked.base_color.shape[0]
+    height, width = baked.base_color.shape[:2]
     textured = {k: v for k, v in (("Roughness", baked.roughness), ("Metallic", baked.metallic))
                 if isinstance(v, np.ndarray)}
     for socket_name, value in (("Roughness", baked.roughness), ("Metallic", baked.metallic)):
@@ -175,7 +175,7 @@ def _write_roughness_metallic(material, bsdf, baked: BakedMaterial, folder: Path
             bsdf.inputs[socket_name].default_value = float(value)
             notes.append(f"{socket_name}: constant {float(value):.4g} written as a factor")
     if textured:
-        zeros = np.zeros((size, size), np.uint8)
+        zeros = np.zeros((height, width), np.uint8)
         packed = np.stack([zeros, textured.get("Roughness", zeros), textured.get("Metallic", zeros)], axis=2)
         mr = nodes.new("ShaderNodeTexImage")
         mr.name = mr.label = "SceneFit Metallic Roughness"
@@ -188,7 +188,7 @@ def _write_roughness_metallic(material, bsdf, baked: BakedMaterial, folder: Path
         for socket_name, channel in (("Roughness", "Green"), ("Metallic", "Blue")):
             if socket_name in textured:
                 links.new(separate.outputs[channel], bsdf.inputs[socket_name])
-        notes.append(f"{' and '.join(textured)}: packed image at {size}² (G roughness, B metallic)")
+        notes.append(f"{' and '.join(textured)}: packed image at {width}x{height} (G roughness, B metallic)")
     return notes
 
 
@@ -308,7 +308,7 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
     Known bpy 5.0.1 crash: once the exporter has run on the temporary scene and the scene is
     removed, the next glTF import in the same process segfaults. `scenefit bake` is a process of
     its own; long-lived callers should run it as a subprocess (or use bake_copy_to_gltf)."""
-    from ..core.game_bake import bake_game_maps, own_texture_size
+    from ..core.game_bake import bake_game_maps, own_texture_shape
     from ..core.texture.bake import load_neural_texture
     import bpy
 
@@ -330,16 +330,17 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
             materials, taken = [obj.material_slots[s].material for s in slots], [obj.name]
             own = [read_material(m, obj, slot).maps for m, slot in zip(materials, slots)]
         output = _with_tangents(output or output_like_input(asset_path))
-        # Each material at its own images' size (--texture-size: all at that size), within --max-texture;
-        # the base is the material's own maps at that size, so the preset's working size costs no detail.
-        sizes = [min(texture_size, output.max_texture) if texture_size else own_texture_size(maps, output.max_texture)
+        # Each material at its own images' shape (--texture-size: all square at that size), within
+        # --max-texture; the base is the material's own maps at that shape, so the preset's working size
+        # costs no detail.
+        sizes = [min(texture_size, output.max_texture) if texture_size else own_texture_shape(maps, output.max_texture)
                  for maps in own]
         baked = bake_game_maps(texture, mesh, [m.name for m in materials], sizes,
                                [constant_channels(m) for m in materials], [material_wrap(m) for m in materials], own)
         report = bake_materials_to_gltf(materials, baked, out_file, file_format, protect=protect, output=output,
                                         replace=replace)
         report.update({"asset": str(asset_path), "object": taken[0] if len(taken) == 1 else None, "objects": taken,
-                       "format": file_format, "texture_size": max(sizes)})
+                       "format": file_format, "texture_size": max(max(m.base_color.shape[:2]) for m in baked)})
     return report
 
 

@@ -40,7 +40,7 @@ def run(args) -> int:
                              protect=protect, output=output, replace=args.replace)
     for material in report["materials"]:
         print(f"material '{material['name']}': base colour texture, roughness {material['roughness']}, "
-              f"metallic {material['metallic']} at {material['size']}²")
+              f"metallic {material['metallic']} at {material['width']}x{material['height']}")
         for line in material["done"]:
             print(f"  {line}")
     if args.report:

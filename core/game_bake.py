@@ -54,7 +54,9 @@ class BakedMaterial:
         def describe(value):
             return "texture" if isinstance(value, np.ndarray) else f"factor {value:.4g}"
 
-        return {"name": self.name, "size": int(self.base_color.shape[0]), "uv_coverage": round(self.coverage, 4),
+        height, width = self.base_color.shape[:2]
+        return {"name": self.name, "size": int(max(height, width)), "width": int(width), "height": int(height),
+                "uv_coverage": round(self.coverage, 4),
                 "base_color": "texture (sRGB)", "roughness": describe(self.roughness),
                 "metallic": describe(self.metallic), "wrap": list(self.wrap)}
 
@@ -89,11 +91,15 @@ def _channel(plane: np.ndarray, mask: np.ndarray, original: float | None) -> np.
     return round(mean, 4) if flat else data
 
 
-def own_texture_size(maps: PBRMaps, cap: int) -> int:
-    """A material's bake size: its own base colour's longer side rounded up to a power of two, at
-    most `cap` (--max-texture), so a 2k texture bakes at 2k whatever size the preset adapted at."""
-    side = max(4, max(maps.resolution))
-    return min(check_texture_size(cap), 1 << (side - 1).bit_length())
+def own_texture_shape(maps: PBRMaps, cap: int) -> tuple[int, int]:
+    """A material's bake shape (height, width): its own base colour's sides each rounded up to a power
+    of two, halved together while the longer is over `cap` (--max-texture), so a 2k texture bakes at 2k
+    whatever size the preset adapted at, and a 2048x512 strip stays a strip."""
+    cap = check_texture_size(cap)
+    height, width = (1 << (max(4, side) - 1).bit_length() for side in maps.resolution)
+    while max(height, width) > cap:
+        height, width = max(4, height // 2), max(4, width // 2)
+    return height, width
 
 
 def own_base_logit(texture: NeuralTexture, own_stack: np.ndarray):
@@ -127,15 +133,14 @@ def unchanged_channels(baked: BakedMaterial, own: PBRMaps, own_stack: np.ndarray
     texture transforms, vertex colours and all) on every covered texel, to UNCHANGED_STEPS. Own values
     outside what the texture holds (config's ranges: a roughness of 0 comes back as 0.03) count as held.
     A map baked smaller than the material's own image is never unchanged: the size asked for wins."""
-    size, stack = baked.base_color.shape[0], own_stack
     ranges = {"base_color": config.base_color_range, "roughness": config.roughness_range,
               "metallic": config.metallic_range}
-    planes = {"base_color": (stack[..., 0:3], baked.base_color), "roughness": (stack[..., 3], baked.roughness),
-              "metallic": (stack[..., 4], baked.metallic)}
+    planes = {"base_color": (own_stack[..., 0:3], baked.base_color), "roughness": (own_stack[..., 3], baked.roughness),
+              "metallic": (own_stack[..., 4], baked.metallic)}
     same = set()
     for name, (mine, written) in planes.items():
         native = getattr(own, name)
-        if isinstance(native, np.ndarray) and max(native.shape[:2]) > size:
+        if isinstance(native, np.ndarray) and any(n > b for n, b in zip(native.shape[:2], baked.base_color.shape[:2])):
             continue   # baked smaller than the material's image (--texture-size, --max-texture): a new image
         lo, hi = ranges[name]
         mine = np.clip(mine, lo, hi)
@@ -149,11 +154,12 @@ def unchanged_channels(baked: BakedMaterial, own: PBRMaps, own_stack: np.ndarray
     return frozenset(same)
 
 
-def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: int | list[int],
+def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: int | list[int | tuple[int, int]],
                    constants: list[dict[str, float]] | None = None,
                    wraps: list[tuple[str, str]] | None = None,
                    own_maps: list[PBRMaps] | None = None) -> list[BakedMaterial]:
-    """Every material's maps at `size`² (or size[i]² for material i) in its own UV layout.
+    """Every material's maps at `size`² (or size[i] for material i: a side, or (height, width)) in its
+    own UV layout.
 
     `mesh` is the asset as read (with material_index for several materials, in object space); it is
     normalised here exactly as for fitting, so the network sees the same points. constants[i]
@@ -162,7 +168,8 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
     convert fitted them. own_maps[i]: material i's own maps, the base of a residual texture at full
     detail (without them the base is the texture's stored copy, resampled).
     """
-    sizes = [check_texture_size(s) for s in (size if isinstance(size, list) else [size] * len(names))]
+    shapes = [tuple(check_texture_size(side) for side in (s if isinstance(s, tuple) else (s, s)))
+              for s in (size if isinstance(size, list) else [size] * len(names))]
     if len(names) != mesh.material_count:
         raise InputError(f"Mesh '{mesh.name}' uses {mesh.material_count} materials, but {len(names)} names "
                          "were given.")
@@ -170,10 +177,15 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
     baked = []
     for index, name in enumerate(names):
         wrap = tuple(wraps[index]) if wraps else ("repeat", "repeat")
-        size = sizes[index]
-        raster = rasterize_uv(material_submesh(normalized, index), size, wrap=wrap)
-        own_stack = own_maps[index].stacked_at(size, size) if own_maps else None   # resized once, used twice
-        base = own_base_logit(texture, own_stack) if own_maps else material_base(texture, index, len(names), size)
+        height, width = shapes[index]
+        raster = rasterize_uv(material_submesh(normalized, index), height, width, wrap=wrap)
+        own_stack = own_maps[index].stacked_at(height, width) if own_maps else None   # resized once, used twice
+        if own_maps:
+            base = own_base_logit(texture, own_stack)
+        else:   # (the texture's own copy is square: a square bake)
+            if height != width:
+                raise InputError(f"A {width}x{height} bake needs the material's own maps; give a square size.")
+            base = material_base(texture, index, len(names), height)
         maps = bake_texture(texture, raster.position, raster.border, raster.fill_index, base)
         base = np.round(linear_to_srgb(maps[..., 0:3]) * 255.0).astype(np.uint8)
         was = constants[index] if constants else {}

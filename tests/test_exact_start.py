@@ -12,8 +12,10 @@ from scenefit.core.errors import InputError
 from scenefit.core.game_bake import bake_game_maps
 from scenefit.core.imageio import linear_to_srgb
 from scenefit.core.maps import PBRMaps
+from scenefit.core.mesh import normalize_to_unit_sphere
 from scenefit.core.primitives import uv_sphere
 from scenefit.core.texture.bake import bake_maps, load_neural_texture, texture_maps_for_mesh
+from scenefit.core.texture.uv_raster import rasterize_uv
 
 
 def asset_maps(size: int = 32) -> PBRMaps:
@@ -99,3 +101,25 @@ def test_asking_for_fitting_settings_asks_for_the_fit():
     assert stage_config("convert", "draft", iterations=5).init_type == "fit"
     assert stage_config("convert", "draft", method_type="inverse").init_type == "fit"
     assert stage_config("convert", "draft", iterations=5, init_type="exact").init_type == "exact"
+
+
+def test_a_non_square_image_bakes_at_its_own_shape():
+    """A 128x32 strip bakes as a 128x32 image (it baked 128², four times the texels, stretched), texel
+    for texel the asset's own when nothing is adapted; --max-texture halves both sides together."""
+    from scenefit.core.game_bake import own_texture_shape
+
+    rng = np.random.default_rng(5)
+    strip = PBRMaps(rng.uniform(0.05, 0.95, (32, 128, 3)).astype(np.float32), 0.5, 0.0)
+    assert own_texture_shape(strip, 4096) == (32, 128)
+    assert own_texture_shape(strip, 64) == (16, 64)
+    assert own_texture_shape(PBRMaps(np.zeros((30, 100, 3), np.float32), 0.5, 0.0), 4096) == (32, 128)
+    assert own_texture_shape(PBRMaps(np.zeros((4, 4096, 3), np.float32), 0.5, 0.0), 256) == (4, 256)
+    mesh = uv_sphere(0.5, 16, 8)
+    result = exact(mesh, strip)
+    (baked,) = bake_game_maps(result.texture, mesh, ["Strip"], [own_texture_shape(strip, 4096)], own_maps=[strip])
+    assert baked.base_color.shape == (32, 128, 3) and baked.report()["width"] == 128
+    covered = rasterize_uv(normalize_to_unit_sphere(mesh)[0], 32, 128).mask
+    assert covered.mean() > 0.5
+    want = np.round(linear_to_srgb(strip.base_color) * 255)
+    assert np.abs(baked.base_color[covered].astype(float) - want[covered]).max() <= 1.0
+    assert "base_color" in baked.unchanged
