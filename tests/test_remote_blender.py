@@ -124,12 +124,15 @@ def test_run_on_ray_streams_progress_and_previews_and_applies_the_results(handed
     run = out["run"]
     print("remote run:", run["seconds"], "s;", out.get("run_message"))
     assert run["status"] == "done", run["error"]
-    assert {"convert", "light", "adapt"} <= set(run["stages"])          # the worker's stages, in the panel
+    # The worker's stages, in the panel (polled every 50 ms: the exact start's convert can be over
+    # between two looks, so the report below shows it ran)
+    assert {"light", "adapt"} <= set(run["stages"])
     assert run["has_preview"] and run["preview_serial"] >= 1             # adapt's previews reached the icon
     assert len(run["fractions"]) > 3 and max(run["fractions"]) <= 1.0
     report = out["run_report"]
     assert report["status"] == "done" and report["worker"]["pid"] != 0
-    assert report["stages"]["run"]["stages"]["adapt"]["status"] == "ran"
+    assert {name: report["stages"]["run"]["stages"][name]["status"] for name in ("convert", "light", "adapt")} == \
+        {"convert": "ran", "light": "ran", "adapt": "ran"}
     name, tag, images = out["run_material"]
     assert tag == "adapt" and name != "AssetMaterial"
     assert images and all(p.startswith("//scenefit/Sphere/run-") for p in images)   # next to the .blend, relative
