@@ -56,7 +56,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
                              description="Where to write; empty: a new run folder next to the .blend")
     file_format: EnumProperty(name="Format", items=FORMAT_ITEMS, default="glb")
     texture_size: IntProperty(name="Texture size", default=0, min=0, max=8192, options={"SKIP_SAVE"},
-                              description="Pixels per side (a power of two); 0: the size the texture was fitted at")
+                              description="Pixels per side (a power of two) for every material; 0: each "
+                                          "material's own images' size")
     compress: EnumProperty(name="Compression", items=COMPRESS_ITEMS, default="none")
     textures: EnumProperty(name="Textures", items=TEXTURE_ITEMS, default="png")
     max_texture: IntProperty(name="Max texture", default=DEFAULT_MAX_TEXTURE, min=4, max=8192,
@@ -69,7 +70,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
     def prepare(self, context):
         size = self.texture_size
         if size and (size < 4 or size & (size - 1)):
-            raise InputError(f"Texture size must be a power of two from 4 to 8192 (or 0 for the fitted size), got {size}.")
+            raise InputError(f"Texture size must be a power of two from 4 to 8192 (or 0 for each material's own "
+                             f"images' size), got {size}.")
         GltfOutput(self.compress, self.textures, self.max_texture)  # a bad setting is one sentence before any work
         if self.textures == "ktx2":
             check_ktx2_output(self.file_format)
@@ -86,8 +88,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
             self._folder = run_folder(context, "bake", layout.name)
             out_file = Path(f"{bpy.path.clean_name(layout.name)}.{self.file_format}")
         self._objects, self._slots, self._out_file = layout.objects, layout.slots, out_file
-        return work.bake_game_maps, dict(layout.bake_data(), texture=str(texture), size=self.texture_size,
-                                         max_size=self.max_texture)
+        return work.bake_game_maps, dict(layout.bake_data(), **layout.own_maps(context), texture=str(texture),
+                                         size=self.texture_size, max_size=self.max_texture)
 
     def apply(self, context, result) -> str:
         gone = [name for name in self._objects if name not in bpy.data.objects]
@@ -112,7 +114,7 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
 
         # A run folder is written whole; a chosen file is moved into place once the exporter has finished.
         report = export(None) if self._folder is None else work.written_whole(str(self._folder), export)
-        return f"Baked '{shown}' at {result['size']}² into {report['file']}"
+        return f"Baked '{shown}' at up to {result['size']} px a side into {report['file']}"
 
 
 classes = (SCENEFIT_OT_bake_asset,)

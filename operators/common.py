@@ -99,6 +99,23 @@ class AssetLayout:
                 "constants": [constant_channels(m) for m in self.materials],
                 "wraps": [material_wrap(m) for m in self.materials]}
 
+    def own_maps(self, context) -> dict:
+        """Each material's own maps, which the game bake takes its shape and base from (plain data). A
+        slot that holds a SceneFit result is read through the artist's material it replaced: the result's
+        images are the texture's working copy, not the asset's; `results[i]` says so (its baked maps are
+        then always written anew, never kept as 'unchanged')."""
+        from ..blender_io.material import read_material
+
+        originals = {(e.asset_object.name, e.slot): e.original for e in context.scene.scenefit.result_slots
+                     if e.asset_object is not None and e.original is not None}
+        own, results = [], []
+        for material, pairs in zip(self.materials, self.slots):
+            name, number = pairs[0]
+            artists = originals.get((name, number)) if TAG in material else None
+            own.append(read_material(artists or material, bpy.data.objects[name], number).maps)
+            results.append(TAG in material)
+        return {"own_maps": own, "results": results}
+
 
 def asset_objects(context) -> list:
     """The selected mesh objects when two or more are (one asset), else the active object; SceneFit's own

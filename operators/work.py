@@ -253,15 +253,22 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
 
 
 def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
-    """The neural texture baked per material at data['size']² (0: the fitted size) for glTF."""
-    from ..core.game_bake import bake_game_maps as bake, default_texture_size
+    """The neural texture baked per material for glTF: at data['size']² for all, or (0) each at its own
+    images' shape from its own maps (data['own_maps']), within data['max_size'], as `scenefit bake` does."""
+    from dataclasses import replace
+
+    from ..core.game_bake import bake_game_maps as bake, own_texture_shape
     from ..core.progress import emit
     from ..core.texture.bake import load_neural_texture
 
     texture = load_neural_texture(data["texture"])
-    size = min(data["size"] or default_texture_size(texture, len(data["names"])), data.get("max_size", 8192))
-    emit(progress, "bake", 0, 1, f"{len(data['names'])} material(s) at {size}²")
-    baked = bake(texture, data["mesh"], list(data["names"]), size, [dict(c) for c in data["constants"]],
-                 [tuple(w) for w in data.get("wraps", ())] or None)
+    cap, own = data.get("max_size", 8192), list(data["own_maps"])
+    shapes = [min(data["size"], cap) if data["size"] else own_texture_shape(maps, cap) for maps in own]
+    shown = ", ".join(sorted({f"{s}²" if isinstance(s, int) else f"{s[1]}x{s[0]}" for s in shapes}))
+    emit(progress, "bake", 0, 1, f"{len(data['names'])} material(s) at {shown}")
+    baked = bake(texture, data["mesh"], list(data["names"]), shapes, [dict(c) for c in data["constants"]],
+                 [tuple(w) for w in data.get("wraps", ())] or None, own)
+    # a slot holding a SceneFit result keeps no nodes of its own: its maps are written anew
+    baked = [replace(b, unchanged=frozenset()) if result else b for b, result in zip(baked, data["results"])]
     emit(progress, "bake", 1, 1, "maps ready")
-    return {"baked": baked, "size": size}
+    return {"baked": baked, "size": max(max(b.base_color.shape[:2]) for b in baked)}

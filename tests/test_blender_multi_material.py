@@ -41,10 +41,10 @@ imageio.write_image(tmp / "photo.png", np.random.default_rng(1).uniform(0.2, 0.8
 COLOURS = COLOURS_HERE
 
 def colour_material(name):
-    # A material whose Base Color is a 16x16 image of one colour (with a little noise), roughness 0.6.
-    image = bpy.data.images.new(f"{name} image", 16, 16)
-    pixels = np.ones((16, 16, 4), np.float32)
-    noise = np.random.default_rng(len(name)).uniform(-0.02, 0.02, (16, 16, 3))
+    # A material whose Base Color is a 24x12 image of one colour (with a little noise), roughness 0.6.
+    image = bpy.data.images.new(f"{name} image", 24, 12)
+    pixels = np.ones((12, 24, 4), np.float32)
+    noise = np.random.default_rng(len(name)).uniform(-0.02, 0.02, (12, 24, 3))
     pixels[..., :3] = np.clip(np.array(COLOURS[name], np.float32) + noise, 0, 1)
     image.pixels.foreach_set(pixels.ravel())
     image.pack()
@@ -217,20 +217,24 @@ def step(blender, code: str) -> dict:
 
 
 def glb_materials(path: Path, tmp: Path) -> dict[str, list[float]]:
-    """Each material of a .glb with the median stored colour of its base colour image."""
+    """Each material of a .glb with the median stored colour of its base colour image ("_sizes": each
+    image's height and width)."""
     data = path.read_bytes()
     assert data[:4] == b"glTF"
     length, kind = struct.unpack_from("<I4s", data, 12)
     doc = json.loads(data[20:20 + length])
     binary = data[20 + length + 8:]
-    out = {}
+    out, sizes = {}, {}
     for index, material in enumerate(doc["materials"]):
         texture = material["pbrMetallicRoughness"]["baseColorTexture"]["index"]
         image = doc["images"][doc["textures"][texture]["source"]]
         view = doc["bufferViews"][image["bufferView"]]
         file = tmp / f"{path.stem}_{index}.png"
         file.write_bytes(binary[view.get("byteOffset", 0):view.get("byteOffset", 0) + view["byteLength"]])
-        out[material["name"]] = np.median(read_image(file)[..., :3].reshape(-1, 3), axis=0).tolist()
+        pixels = read_image(file)
+        out[material["name"]] = np.median(pixels[..., :3].reshape(-1, 3), axis=0).tolist()
+        sizes[material["name"]] = list(pixels.shape[:2])
+    out["_sizes"] = sizes
     out["_meshes"] = len(doc["meshes"])
     out["_nodes"] = sorted(n.get("name", "") for n in doc["nodes"] if "mesh" in n)
     return out
@@ -264,9 +268,12 @@ def check_glb(path: Path, tmp: Path, validator, expected: dict[str, str]) -> dic
     assert report["issues"]["numErrors"] == 0, report["issues"]["messages"]
     found = glb_materials(path, tmp)
     names = {f"{o} SceneFit convert" for o in expected.values()}   # the slots' materials, by their names
-    assert set(found) - {"_meshes", "_nodes"} == names, found
+    assert set(found) - {"_meshes", "_nodes", "_sizes"} == names, found
     for original in set(expected.values()):
         assert np.allclose(found[f"{original} SceneFit convert"], COLOURS[original], atol=0.03), (original, found)
+    # Each at its own image's shape (the artist's 24x12, sides rounded up to powers of two: 32x16), read
+    # through the result material in the slot, as `scenefit bake` does; it was the texture's square atlas cell
+    assert set(map(tuple, found["_sizes"].values())) == {(16, 32)}, found["_sizes"]
     return found
 
 

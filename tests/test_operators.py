@@ -168,8 +168,11 @@ gltf_export = import_module(MODULE + ".blender_io.gltf_export")
 game_bake = import_module(MODULE + ".core.game_bake")
 texture = import_module(MODULE + ".core.texture.bake").load_neural_texture(bpy.path.abspath(bpy.context.scene.scenefit.texture_path))
 mesh_b, _ = import_module(MODULE + ".blender_io.material").object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())
-(expected,) = game_bake.bake_game_maps(texture, mesh_b, [obj.active_material.name], game_bake.default_texture_size(texture, 1),
-                                       [gltf_export.constant_channels(obj.active_material)])
+# (each material at its own images' shape, from the artist's maps behind the result in the slot)
+own = import_module(MODULE + ".operators.common").asset_layout(bpy.context).own_maps(bpy.context)["own_maps"]
+out["bake_shape"] = list(game_bake.own_texture_shape(own[0], import_module(MODULE + ".core.gltf_output").DEFAULT_MAX_TEXTURE))
+(expected,) = game_bake.bake_game_maps(texture, mesh_b, [obj.active_material.name], [tuple(out["bake_shape"])],
+                                       [gltf_export.constant_channels(obj.active_material)], None, own)
 np.savez(tmp / "expected_bake.npz", base_color=expected.base_color, roughness=np.asarray(expected.roughness),
          metallic=np.asarray(expected.metallic))
 out["bake_material"] = obj.active_material.name
@@ -430,7 +433,7 @@ def test_bake_asset_writes_valid_gltf_that_reads_back(blender, operated, validat
         from scenefit.core.imageio import linear_to_srgb
         want = np.load({str(tmp / "expected_bake.npz")!r})
         (material,) = load_asset_materials({glb!r}).materials
-        err = {{"name": material.name,
+        err = {{"name": material.name, "shape": list(material.maps.base_color.shape[:2]),
                 "base_color": float(np.abs(np.round(linear_to_srgb(material.maps.base_color) * 255) - want["base_color"]).max())}}
         for channel in ("roughness", "metallic"):
             got, expected = np.asarray(getattr(material.maps, channel)), want[channel]
@@ -440,6 +443,7 @@ def test_bake_asset_writes_valid_gltf_that_reads_back(blender, operated, validat
     err = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
     assert err["name"] == out["bake_material"]
     assert err["base_color"] <= 1.0 and err["roughness"] <= 1.0 and err["metallic"] <= 1.0, err
+    assert err["shape"] == out["bake_shape"], (err, out["bake_shape"])
 
 
 def test_results_survive_save_and_reopen_and_the_artists_data_is_unchanged(blender, operated):
