@@ -7,6 +7,8 @@ example need Blender (bpy), which core/ never imports. One module per command, e
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import sys
 
 from ..core.errors import Cancelled, SceneFitError
@@ -42,7 +44,8 @@ def main(argv: list[str] | None = None) -> int:
         return stop.code if isinstance(stop.code, int) else 2
     try:
         try:
-            return args.func(args)
+            with _quiet_if_asked(args):
+                return args.func(args)
         except RuntimeError as error:   # Dr.Jit wraps a Ctrl-C inside a render in its own error
             if _interrupted(error):
                 raise KeyboardInterrupt from error
@@ -57,6 +60,16 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as error:   # a full disk, a read-only folder, a file in the way: a sentence, not a traceback
         print(f"scenefit: error: {os_error_sentence(error, getattr(args, 'out', None))}", file=sys.stderr)
         return 2
+
+
+def _quiet_if_asked(args):
+    """--quiet: nothing on stdout (the per-material lines, the summary), unless the output itself was
+    asked for (--json, --dry-run, or a command whose output is its result: `prompt`, whose --quiet
+    drops only the model's analysis); errors still go to stderr. One rule for every command."""
+    asked = getattr(args, "json", False) or getattr(args, "dry_run", False) or args.command == "prompt"
+    if getattr(args, "quiet", False) and not asked:
+        return contextlib.redirect_stdout(io.StringIO())
+    return contextlib.nullcontext()
 
 
 def _interrupted(error: BaseException) -> bool:

@@ -106,9 +106,8 @@ def _light(args, out: Path) -> int:
     report["environment"] = environment_info()
     write_report(out / "report.json", report)
     depth_used = result.decisions.get("depth", {}).get("method", "none (outdoor)")
-    if not args.quiet:
-        print(f"light: {result.decisions['scene_type']['chosen']} scene, depth {depth_used}, scales "
-              f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {Path(args.out) / 'light.exr'}")
+    print(f"light: {result.decisions['scene_type']['chosen']} scene, depth {depth_used}, scales "
+          f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {Path(args.out) / 'light.exr'}")
     return 0
 
 

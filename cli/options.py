@@ -145,7 +145,7 @@ def add_asset_args(p: argparse.ArgumentParser, optional: bool = False) -> None:
     p.add_argument("--object", help="the object (a mesh, or a node such as an empty) to take from the asset "
                                     "file, with every mesh under it (default: every mesh object of the file, as "
                                     "one asset)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true", help="no progress bar and nothing printed but errors")
 
 
 def add_lighting_args(p: argparse.ArgumentParser) -> None:

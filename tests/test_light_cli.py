@@ -40,6 +40,25 @@ def test_quiet_prints_nothing_on_success(tmp_path, capsys):
     assert captured.out == "" and captured.err == ""
 
 
+def test_quiet_is_one_rule_for_every_command_and_keeps_what_was_asked_for(tmp_path, capsys):
+    """convert --quiet printed its per-material lines and summary; now --quiet prints nothing on stdout in
+    every command, while an output asked for (--dry-run's JSON) still comes."""
+    from scenefit.cli import main
+    from scenefit.core.asset_io import save_asset_folder
+    from scenefit.core.maps import PBRMaps
+    from scenefit.core.primitives import uv_sphere
+
+    asset = save_asset_folder(uv_sphere(0.5, 12, 6), PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0),
+                              tmp_path / "asset")
+    for out, quiet in (("loud", ()), ("quiet", ("--quiet",))):
+        assert main(["convert", str(asset), "--out", str(tmp_path / out), "--preset", "draft", *quiet]) == 0
+        printed = capsys.readouterr().out
+        assert ("converted" in printed and "material" in printed) if not quiet else printed == "", printed
+    write_image(tmp_path / "photo.png", np.full((24, 32, 3), 0.4, np.float32))
+    assert main(["light", "--photo", str(tmp_path / "photo.png"), "--at", "0.5,0.8", "--dry-run", "--quiet"]) == 0
+    assert "config" in _strict(capsys.readouterr().out)
+
+
 def test_an_absent_depth_model_is_looked_for_once_per_process(tmp_path, monkeypatch):
     import time
 
