@@ -131,7 +131,7 @@ def load_photo(path: str | Path, max_side: int | None = PHOTO_WORKING_SIDE) -> t
         key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
     except OSError:
         key = None   # read_image says what is wrong with it
-    if key is None:
+    if key is None or max_side is None or max_side > PHOTO_WORKING_SIDE:   # (a full-size copy is read once a run)
         return _decoded_photo(path, max_side)
     rgb, info = _decoded_photo_once(key, path, max_side)
     return rgb.copy(), copy.deepcopy(info)
@@ -140,7 +140,8 @@ def load_photo(path: str | Path, max_side: int | None = PHOTO_WORKING_SIDE) -> t
 @functools.lru_cache(maxsize=2)
 def _decoded_photo_once(key: tuple, path: Path, max_side: int | None) -> tuple[np.ndarray, dict]:
     """A run reads its photo at the light stage's size several times (inputs, camera, light): once
-    decoded here while the file stays the same (`key`: its path, time and size)."""
+    decoded here while the file stays the same (`key`: its path, time and size). Two such copies at
+    most (about 9 MB each) stay in a long-lived process such as Blender."""
     return _decoded_photo(path, max_side)
 
 
