@@ -64,9 +64,10 @@ def main(argv: list[str] | None = None) -> int:
 
 def _quiet_if_asked(args):
     """--quiet: nothing on stdout (the per-material lines, the summary), unless the output itself was
-    asked for (--json, --dry-run, or a command whose output is its result: `prompt`, whose --quiet
-    drops only the model's analysis); errors still go to stderr. One rule for every command."""
-    asked = getattr(args, "json", False) or getattr(args, "dry_run", False) or args.command == "prompt"
+    asked for (--json, --dry-run, batch's --events for a calling program, or a command whose output is
+    its result: `prompt`, whose --quiet drops only the model's analysis); errors still go to stderr.
+    One rule for every command."""
+    asked = any(getattr(args, name, False) for name in ("json", "dry_run", "events")) or args.command == "prompt"
     if getattr(args, "quiet", False) and not asked:
         return contextlib.redirect_stdout(io.StringIO())
     return contextlib.nullcontext()
