@@ -308,7 +308,7 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
     Known bpy 5.0.1 crash: once the exporter has run on the temporary scene and the scene is
     removed, the next glTF import in the same process segfaults. `scenefit bake` is a process of
     its own; long-lived callers should run it as a subprocess (or use bake_copy_to_gltf)."""
-    from ..core.game_bake import bake_game_maps, own_texture_shape
+    from ..core.game_bake import bake_game_maps, bake_shapes
     from ..core.texture.bake import load_neural_texture
     import bpy
 
@@ -333,9 +333,8 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
         # Each material at its own images' shape (--texture-size: all square at that size), within
         # --max-texture; the base is the material's own maps at that shape, so the preset's working size
         # costs no detail.
-        sizes = [min(texture_size, output.max_texture) if texture_size else own_texture_shape(maps, output.max_texture)
-                 for maps in own]
-        baked = bake_game_maps(texture, mesh, [m.name for m in materials], sizes,
+        baked = bake_game_maps(texture, mesh, [m.name for m in materials], bake_shapes(own, texture_size,
+                                                                                       output.max_texture),
                                [constant_channels(m) for m in materials], [material_wrap(m) for m in materials], own)
         report = bake_materials_to_gltf(materials, baked, out_file, file_format, protect=protect, output=output,
                                         replace=replace)

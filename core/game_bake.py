@@ -102,6 +102,12 @@ def own_texture_shape(maps: PBRMaps, cap: int) -> tuple[int, int]:
     return height, width
 
 
+def bake_shapes(own_maps: list[PBRMaps], texture_size: int | None, cap: int) -> list[int | tuple[int, int]]:
+    """Each material's bake size for bake_game_maps: `texture_size`² for all when given (within `cap`),
+    else each at its own images' shape (own_texture_shape). The command line and Bake Asset alike."""
+    return [min(texture_size, cap) if texture_size else own_texture_shape(maps, cap) for maps in own_maps]
+
+
 def own_base_logit(texture: NeuralTexture, own_stack: np.ndarray):
     """A residual texture's base taken from the material's own maps (`own_stack`: PBRMaps.stacked_at
     the bake's size, not the copy the texture stores at its preset's resolution), as logits; None for a

@@ -257,13 +257,13 @@ def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Eve
     images' shape from its own maps (data['own_maps']), within data['max_size'], as `scenefit bake` does."""
     from dataclasses import replace
 
-    from ..core.game_bake import bake_game_maps as bake, own_texture_shape
+    from ..core.game_bake import bake_game_maps as bake, bake_shapes
     from ..core.progress import emit
     from ..core.texture.bake import load_neural_texture
 
     texture = load_neural_texture(data["texture"])
-    cap, own = data.get("max_size", 8192), list(data["own_maps"])
-    shapes = [min(data["size"], cap) if data["size"] else own_texture_shape(maps, cap) for maps in own]
+    own = list(data["own_maps"])
+    shapes = bake_shapes(own, data["size"], data.get("max_size", 8192))
     shown = ", ".join(sorted({f"{s}²" if isinstance(s, int) else f"{s[1]}x{s[0]}" for s in shapes}))
     emit(progress, "bake", 0, 1, f"{len(data['names'])} material(s) at {shown}")
     baked = bake(texture, data["mesh"], list(data["names"]), shapes, [dict(c) for c in data["constants"]],
