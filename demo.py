@@ -21,12 +21,12 @@ from .core.imageio import read_image, write_image
 from .core.lighting import load_photo
 from .core.placement import Placement
 from .core.presets import stage_config
-from .core.mesh import normalize_to_unit_sphere
 from .core.photo import PhotoCamera, develop_photo, perspective_view, studiolight_path
 from .core.pipeline import constant_environment, contact_sheet, environment_info, load_environment, write_report
 from .core.progress import ProgressCallback, emit
 from .core.run import RunConfig, run_pipeline
-from .core.texture.bake import load_neural_texture, texture_maps_for_mesh
+from .core.surface_layout import texture_view
+from .core.texture.bake import load_neural_texture
 
 DEMO_STUDIOLIGHT = "interior"
 DEMO_PHOTO_CAMERA = PhotoCamera(yaw_deg=60.0, pitch_deg=-12.0, fov_deg=60.0, width=768, height=512)
@@ -94,8 +94,9 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     compose_stage = run["stages"]["compose"]["report"]
     texture_path = Path(compose_stage["inputs"]["texture"])
     photo, photo_read = load_photo(inputs / "photo.png")
-    normalized, _ = normalize_to_unit_sphere(mesh)
-    stack = texture_maps_for_mesh(load_neural_texture(texture_path), normalized)
+    texture = load_neural_texture(texture_path)
+    view = texture_view(texture, mesh)
+    mesh, stack = view.mesh, view.stack(texture)
     camera, _ = light_camera(out / "light" / "light.exr", photo_read, photo.shape[1], photo.shape[0])
     placement = Placement.parse(DEMO_PLACEMENT, (photo.shape[1], photo.shape[0])).pixel(photo.shape[:2])
     constant_report = compose_to_folder(

@@ -26,6 +26,7 @@ from ..core.gltf_output import GltfOutput, output_like_input, skinned_meshes_mov
 from ..core.imageio import srgb_to_linear, write_image
 from ..core.maps import resize_channels
 from ..core.quiet import native_output_captured
+from ..core.texture.uv_raster import sample_image
 from .material import EXTENSION_OF_WRAP, image_pixels_linear, material_wrap, principled_bsdf
 from .node_values import source
 
@@ -103,6 +104,10 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path, shared: d
     the images written so far in this export (see _load_png)."""
     bsdf = principled_bsdf(material)
     notes = []
+    if baked.uv_map:
+        notes.append(f"baked into a new UV map '{baked.uv_map}' (Smart UV Project): the asset's own UVs share texels "
+                     "between surfaces, and the adapted result differs per surface; its own UVs stay for its "
+                     "other images")
     if "base_color" in baked.unchanged:
         # What the material already gives (the exact start, nothing adapted): its own nodes and images are
         # written as they came, shared images, texture transforms, alpha and all.
@@ -123,6 +128,16 @@ def _extension(baked: BakedMaterial) -> str:
     return EXTENSION_OF_WRAP[baked.wrap[0]] if baked.wrap[0] == baked.wrap[1] else "REPEAT"
 
 
+def _read_through(material, image_node, baked: BakedMaterial) -> None:
+    """An image baked in a new UV map reads that map (a UV Map node; the exporter writes its TEXCOORD)."""
+    if baked.uv_map is None:
+        return
+    uv = material.node_tree.nodes.new("ShaderNodeUVMap")
+    uv.uv_map = baked.uv_map
+    uv.location = (image_node.location.x - 250, image_node.location.y)
+    material.node_tree.links.new(uv.outputs["UV"], image_node.inputs["Vector"])
+
+
 def _write_base_color(material, bsdf, baked: BakedMaterial, folder: Path, shared: dict | None) -> list[str]:
     """The baked base colour into the material: a factor when it is one colour, else a new image (with
     the alpha the material had, resized into it)."""
@@ -135,7 +150,12 @@ def _write_base_color(material, bsdf, baked: BakedMaterial, folder: Path, shared
     alpha = _alpha_source(bsdf)
     if alpha is not None:
         original = image_pixels_linear(alpha[0].image)[..., 3]
-        a = np.round(np.clip(resize_channels(original, height, width), 0.0, 1.0) * 255.0).astype(np.uint8)
+        if baked.own_uv is not None:   # baked in a new UV map: the alpha read through each texel's own UV
+            read = sample_image(original[..., None], baked.own_uv.reshape(-1, 2), material_wrap(material))
+            original = read.reshape(height, width)
+        else:
+            original = resize_channels(original, height, width)
+        a = np.round(np.clip(original, 0.0, 1.0) * 255.0).astype(np.uint8)
         rgba = np.concatenate([rgba, a[..., None]], axis=2)
         notes.append(f"alpha of '{alpha[0].image.name}' carried into the base colour image at {width}x{height}")
     if alpha is None and bool((rgba == rgba[0, 0]).all()):
@@ -152,6 +172,7 @@ def _write_base_color(material, bsdf, baked: BakedMaterial, folder: Path, shared
         base.extension = _extension(baked)
         base.image = _load_png(bpy, folder, f"{material.name}_base_color", rgba, "sRGB", shared)
         base.location = (bsdf.location.x - 700, bsdf.location.y)
+        _read_through(material, base, baked)
         links.new(base.outputs["Color"], bsdf.inputs["Base Color"])
         if alpha is not None:
             links.new(base.outputs["Alpha"], alpha[1])
@@ -182,6 +203,7 @@ def _write_roughness_metallic(material, bsdf, baked: BakedMaterial, folder: Path
         mr.extension = _extension(baked)
         mr.image = _load_png(bpy, folder, f"{material.name}_metallic_roughness", packed, "Non-Color", shared)
         mr.location = (bsdf.location.x - 700, bsdf.location.y - 300)
+        _read_through(material, mr, baked)
         separate = nodes.new("ShaderNodeSeparateColor")
         separate.location = (bsdf.location.x - 300, bsdf.location.y - 300)
         links.new(mr.outputs["Color"], separate.inputs["Color"])
@@ -308,34 +330,42 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
     Known bpy 5.0.1 crash: once the exporter has run on the temporary scene and the scene is
     removed, the next glTF import in the same process segfaults. `scenefit bake` is a process of
     its own; long-lived callers should run it as a subprocess (or use bake_copy_to_gltf)."""
-    from ..core.game_bake import bake_game_maps, bake_shapes
+    from ..core.game_bake import bake_game_maps, bake_shapes, materials_to_remap
     from ..core.texture.bake import load_neural_texture
     import bpy
 
     from .asset_file import loaded_asset
     from .material import object_mesh_and_slots, read_material
     from .scene_asset import scene_mesh
+    from .uv_unwrap import NEW_UV_MAP, new_uv_map_active
 
     if not hasattr(texture, "texture"):
         texture = load_neural_texture(texture)
     with loaded_asset(asset_path, object_name) as (meshes, scene):
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        if len(meshes) > 1:   # several objects are the asset, joined as convert read them
-            whole = scene_mesh(meshes, depsgraph, object_name or Path(asset_path).stem)
-            mesh, materials, taken = whole.mesh, whole.materials, whole.objects
-            own = [read_material(m, o, slot).maps for m, (o, slot) in zip(materials, whole.users)]
-        else:
+        def read() -> tuple:
+            depsgraph = bpy.context.evaluated_depsgraph_get()
+            if len(meshes) > 1:   # several objects are the asset, joined as convert read them
+                whole = scene_mesh(meshes, depsgraph, object_name or Path(asset_path).stem)
+                return whole.mesh, whole.materials, whole.objects, list(whole.users)
             obj = meshes[0]
             mesh, slots = object_mesh_and_slots(obj, depsgraph, space="world")  # as convert
-            materials, taken = [obj.material_slots[s].material for s in slots], [obj.name]
-            own = [read_material(m, obj, slot).maps for m, slot in zip(materials, slots)]
+            return mesh, [obj.material_slots[s].material for s in slots], [obj.name], [(obj, s) for s in slots]
+
+        mesh, materials, taken, users = read()
+        own = [read_material(m, o, slot).maps for m, (o, slot) in zip(materials, users)]
+        wraps = [material_wrap(m) for m in materials]
         output = _with_tangents(output or output_like_input(asset_path))
+        # Adapted per surface on UVs that share texels: those materials' maps go into a new UV map.
+        remap, remapped = materials_to_remap(texture, mesh, wraps), None
+        if remap:
+            with new_uv_map_active(meshes, [materials[i] for i in sorted(remap)]):
+                remapped = read()[0]
         # Each material at its own images' shape (--texture-size: all square at that size), within
         # --max-texture; the base is the material's own maps at that shape, so the preset's working size
         # costs no detail.
         baked = bake_game_maps(texture, mesh, [m.name for m in materials], bake_shapes(own, texture_size,
                                                                                        output.max_texture),
-                               [constant_channels(m) for m in materials], [material_wrap(m) for m in materials], own)
+                               [constant_channels(m) for m in materials], wraps, own, remapped, remap, NEW_UV_MAP)
         report = bake_materials_to_gltf(materials, baked, out_file, file_format, protect=protect, output=output,
                                         replace=replace)
         report.update({"asset": str(asset_path), "object": taken[0] if len(taken) == 1 else None, "objects": taken,
@@ -351,13 +381,17 @@ def bake_copy_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_fil
 
 
 def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[list[tuple]], out_file: str | Path,
-                        file_format: str = "glb", output: GltfOutput = GltfOutput(), replace: bool = False) -> dict:
+                        file_format: str = "glb", output: GltfOutput = GltfOutput(), replace: bool = False,
+                        new_uvs: dict | None = None) -> dict:
     """Objects of the user's session written as one asset: a copy of each object, its mesh and its materials
     gets the maps (`baked[i]` into the material in each (object, slot number) pair of `slots[i]`) and the
     copies alone are exported, then removed. The copies carry the originals' names while the exporter runs
     (the originals are renamed meanwhile and renamed back after), so the file names its objects and
-    materials as the user does. Nothing of the user's is changed."""
+    materials as the user does. Nothing of the user's is changed. `new_uvs`: per object name, the UVs per loop
+    of the new UV map that materials baked per surface read (blender_io.uv_unwrap.unwrapped_copies)."""
     import bpy
+
+    from .uv_unwrap import add_uv_map
 
     if len(baked) != len(slots):
         raise InputError(f"{len(baked)} baked materials for {len(slots)} materials of the asset.")
@@ -370,6 +404,8 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
             copy.data = obj.data.copy()
             copies[obj.name] = copy
             scene.collection.objects.link(copy)
+            if new_uvs and obj.name in new_uvs:
+                add_uv_map(copy, new_uvs[obj.name])
         materials = []
         for pairs in slots:
             for obj, slot in pairs:

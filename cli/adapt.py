@@ -78,6 +78,8 @@ def _adapt(args, out: Path) -> int:
         report["prompt_writing"] = written.to_report()
     write_report(out / "report.json", report)
     print(f"adapted '{mesh.name}' ({args.mode}, {result.iterations} iterations, {result.seconds:.1f} s) -> {args.out}/maps")
+    if report["uv_layout"]["uv_layout"] != "own":   # the texture reads per surface in a new layout
+        print(f"  {report['uv_layout']['why']}; compose and `scenefit bake` read it there (bake: a new UV map)")
     return 0
 
 

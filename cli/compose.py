@@ -11,10 +11,10 @@ def run(args) -> int:
     from ..core.compose import ComposeInputs, compose_to_folder, light_camera
     from ..core.convert import asset_stack
     from ..core.lighting import load_photo
-    from ..core.mesh import normalize_to_unit_sphere
     from ..core.pipeline import environment_info, load_environment
     from ..core.placement import Placement
-    from ..core.texture.bake import load_neural_texture, texture_maps_for_mesh
+    from ..core.surface_layout import texture_view
+    from ..core.texture.bake import load_neural_texture
 
     from ..core.presets import stage_config
 
@@ -27,8 +27,9 @@ def run(args) -> int:
     envmap = load_environment(args.light)
     camera, camera_source = light_camera(args.light, info, w, h, args.fov, photo_pitch(args))
     if args.texture:
-        normalized, _ = normalize_to_unit_sphere(mesh)
-        stack, source = texture_maps_for_mesh(load_neural_texture(Path(args.texture)), normalized), "neural texture"
+        texture = load_neural_texture(Path(args.texture))
+        view = texture_view(texture, mesh)
+        mesh, stack, source = view.mesh, view.stack(texture), "neural texture"
     else:
         stack, source = asset_stack(maps, f"'{args.asset}'"), "the asset's own maps"
     with output(args) as out:

@@ -8,20 +8,26 @@ from .options import (add_asset_args, add_lighting_args, add_orbit_camera_args, 
 
 
 def run(args) -> int:
+    from dataclasses import replace
+
     import torch
 
     from ..core.convert import asset_stack
     from ..core.limits import check_render_size
     from ..core.mesh import normalize_to_unit_sphere
-    from ..core.texture.bake import load_neural_texture, texture_maps_for_mesh
+    from ..core.surface_layout import texture_view
+    from ..core.texture.bake import load_neural_texture
 
     # Sizes and inputs are refused before the output folder is made or anything is rendered.
     check_render_size(args.size, args.size)
     mesh, maps = load_asset(args.asset, args.object)
     normalized, _ = normalize_to_unit_sphere(mesh)
     if args.texture:
-        stack = torch.from_numpy(texture_maps_for_mesh(load_neural_texture(Path(args.texture)), normalized))
-        label = "neural texture"
+        texture = load_neural_texture(Path(args.texture))
+        view = texture_view(texture, normalized)
+        if view.mesh is not normalized:   # adaptation's new UV layout: the asset's normal map is in its own UVs
+            normalized, maps = view.mesh, replace(maps, normal=None)
+        stack, label = torch.from_numpy(view.stack(texture)), "neural texture"
     else:
         stack, label = torch.from_numpy(asset_stack(maps, f"'{args.asset}'")), "asset maps"
     with output(args) as out:

@@ -17,10 +17,11 @@ from .errors import InputError
 from .imageio import linear_to_srgb
 from .maps import PBRMaps
 from .materials import atlas_grid, atlas_slices, material_submesh
+from .surface_layout import own_uvs_at, uv_sharing
 from .mesh import Mesh, normalize_to_unit_sphere
 from .texture.bake import bake_texture
 from .texture.neural_texture import NeuralTexture, to_logit
-from .texture.uv_raster import rasterize_uv
+from .texture.uv_raster import rasterize_uv, sample_image
 
 # A channel whose covered texels all lie within this many 8-bit steps of each other is a constant.
 CONSTANT_SPREAD = 1
@@ -49,6 +50,10 @@ class BakedMaterial:
     # The channels ("base_color", "roughness", "metallic") whose baked maps are what the material already
     # gives (see unchanged_channels): its own nodes are written for them, not a re-encoded copy.
     unchanged: frozenset = frozenset()
+    # Baked in a new UV map (an adapted texture on UVs that share texels, core.surface_layout): its name,
+    # and each texel's UV in the material's own map (so its other images, alpha, can be carried over).
+    uv_map: str | None = None
+    own_uv: np.ndarray | None = None
 
     def report(self) -> dict:
         def describe(value):
@@ -58,7 +63,8 @@ class BakedMaterial:
         return {"name": self.name, "size": int(max(height, width)), "width": int(width), "height": int(height),
                 "uv_coverage": round(self.coverage, 4),
                 "base_color": "texture (sRGB)", "roughness": describe(self.roughness),
-                "metallic": describe(self.metallic), "wrap": list(self.wrap)}
+                "metallic": describe(self.metallic), "wrap": list(self.wrap),
+                **({"uv_map": self.uv_map} if self.uv_map else {})}
 
 
 def check_texture_size(size: int) -> int:
@@ -163,7 +169,8 @@ def unchanged_channels(baked: BakedMaterial, own: PBRMaps, own_stack: np.ndarray
 def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: int | list[int | tuple[int, int]],
                    constants: list[dict[str, float]] | None = None,
                    wraps: list[tuple[str, str]] | None = None,
-                   own_maps: list[PBRMaps] | None = None) -> list[BakedMaterial]:
+                   own_maps: list[PBRMaps] | None = None, remapped: Mesh | None = None,
+                   remap: frozenset = frozenset(), uv_map: str | None = None) -> list[BakedMaterial]:
     """Every material's maps at `size`² (or size[i] for material i: a side, or (height, width)) in its
     own UV layout.
 
@@ -173,6 +180,8 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
     wraps[i]: how material i's UVs outside [0, 1] read its maps (its sampler; default repeat), as
     convert fitted them. own_maps[i]: material i's own maps, the base of a residual texture at full
     detail (without them the base is the texture's stored copy, resampled).
+    remap: the materials baked into the new UV map `uv_map` instead (materials_to_remap), whose UVs are
+    `remapped`'s (the same asset read with that map active: the same faces in the same order).
     """
     shapes = [tuple(check_texture_size(side) for side in (s if isinstance(s, tuple) else (s, s)))
               for s in (size if isinstance(size, list) else [size] * len(names))]
@@ -184,6 +193,11 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
     for index, name in enumerate(names):
         wrap = tuple(wraps[index]) if wraps else ("repeat", "repeat")
         height, width = shapes[index]
+        if index in remap:
+            baked.append(_remapped_material(texture, normalized, remapped, index, name, max(height, width), wrap,
+                                            own_maps[index] if own_maps else None, constants[index] if constants else {},
+                                            uv_map))
+            continue
         raster = rasterize_uv(material_submesh(normalized, index), height, width, wrap=wrap)
         own_stack = own_maps[index].stacked_at(height, width) if own_maps else None   # resized once, used twice
         if own_maps:
@@ -204,3 +218,35 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
                                                                       raster.mask, texture.config))
         baked.append(material)
     return baked
+
+
+def materials_to_remap(texture: NeuralTexture, mesh: Mesh, wraps: list[tuple[str, str]]) -> frozenset:
+    """The materials whose maps go into a new UV map: none unless adaptation worked per surface (the texture
+    carries a new layout); then those whose own UVs share texels (core.surface_layout.uv_sharing)."""
+    if getattr(texture, "layout", None) is None:
+        return frozenset()
+    return frozenset(index for index in range(mesh.material_count)
+                     if uv_sharing(replace(material_submesh(mesh, index), wraps=(tuple(wraps[index]),)))
+                     .needs_new_layout())
+
+
+def _remapped_material(texture: NeuralTexture, normalized: Mesh, remapped: Mesh | None, index: int, name: str,
+                       side: int, wrap: tuple[str, str], own: PBRMaps | None, was: dict, uv_map: str | None
+                       ) -> BakedMaterial:
+    """Material `index` baked at side² in the new UV map: each texel's base is the material's own maps read
+    at that point's own UV (with its own wrap mode), its residual the network at the point."""
+    if remapped is None or own is None or len(remapped.faces) != len(normalized.faces):
+        raise InputError(f"Material '{name}' is baked into a new UV map, which needs the asset read with that "
+                         "map and the material's own maps.")
+    moved, _ = normalize_to_unit_sphere(remapped)
+    faces = np.arange(len(normalized.faces)) if normalized.material_index is None else \
+        np.flatnonzero(normalized.material_index == index)
+    raster = rasterize_uv(material_submesh(moved, index), side, side, wrap="clamp")
+    own_uv = own_uvs_at(raster, normalized, faces)
+    h, w = own.resolution
+    values = sample_image(own.stacked_at(h, w), own_uv.reshape(-1, 2), wrap).reshape(side, side, -1)
+    maps = bake_texture(texture, raster.position, raster.border, raster.fill_index, own_base_logit(texture, values))
+    return BakedMaterial(name=name, base_color=np.round(linear_to_srgb(maps[..., 0:3]) * 255.0).astype(np.uint8),
+                         roughness=_channel(maps[..., 3], raster.mask, was.get("roughness")),
+                         metallic=_channel(maps[..., 4], raster.mask, was.get("metallic")),
+                         coverage=raster.coverage, wrap=("clamp", "clamp"), uv_map=uv_map, own_uv=own_uv)

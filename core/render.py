@@ -451,6 +451,19 @@ class AssetRenderer:
             raise InputError(f"The {name} map has shape {tuple(tensor.shape)}, expected {(*self.maps_shape, channels)}.")
         return tensor
 
+    def render_albedo(self, camera: Camera, maps: np.ndarray) -> np.ndarray:
+        """(H, W, 4): the base colour of `maps` (H, W, 5) seen at each pixel centre, and 1 where the asset
+        is hit (0 elsewhere): what the texture shows, without light or noise."""
+        import mitsuba as mi
+        import torch
+
+        stack = torch.from_numpy(np.ascontiguousarray(maps, np.float32))
+        self.render(camera, stack[..., 0:3], stack[..., 3:4], stack[..., 4:5],
+                    torch.ones(self.envmap_shape, dtype=torch.float32), spp=1)   # sets the maps into the scene
+        integrator = mi.load_dict({"type": "aov", "aovs": "aa:albedo,dd:depth"})
+        image = np.array(mi.render(self.scene, sensor=self._sensor(camera), integrator=integrator, spp=1))
+        return np.concatenate([image[..., 0:3], (image[..., 3:4] > 0).astype(np.float32)], axis=2)
+
     def render_aovs(self, camera: Camera) -> dict[str, np.ndarray]:
         """Shading normals (world space), depth and coverage, one sample at pixel centres, no gradients."""
         import mitsuba as mi

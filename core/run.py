@@ -288,7 +288,8 @@ class PipelineRun:
     def light(self) -> None:
         from .lighting import estimate_light, light_report, write_light_outputs
         from .scene_needs import report as needs_report
-        from .texture.bake import load_neural_texture, texture_maps_for_mesh
+        from .surface_layout import texture_view
+        from .texture.bake import load_neural_texture
 
         config, envmap_height = self.light_config()
         # The diffusion critic scores renders of the asset itself (as converted), not a stand-in sphere.
@@ -304,7 +305,8 @@ class PipelineRun:
             camera, estimate = self.photo_camera()
             asset = {}
             if critic_sees_asset:
-                stack = texture_maps_for_mesh(load_neural_texture(self.texture_path), self.normalized)
+                texture = load_neural_texture(self.texture_path)
+                stack = texture_view(texture, self.normalized).stack(texture)   # convert's: the own UVs
                 asset = {"mesh": self.mesh, "maps": torch.as_tensor(stack)}
             result = estimate_light(self.photo, self.placement_px, config, photo_camera=camera,
                                     photo_info=self.photo_info, progress=self.progress, cancel=self.cancel,
@@ -366,7 +368,8 @@ class PipelineRun:
         from .compose import ComposeInputs, compose_to_folder, light_camera
         from .lighting import load_photo
         from .pipeline import load_environment
-        from .texture.bake import load_neural_texture, texture_maps_for_mesh
+        from .surface_layout import texture_view
+        from .texture.bake import load_neural_texture
 
         config = self.stage_config("compose", size=self.config.size, shadow_type=self.config.shadow_type,
                                    spp=self.config.compose_spp)
@@ -375,11 +378,12 @@ class PipelineRun:
         texture_path, light_path = self.texture_path, self.light_path
 
         def compose(folder: Path) -> dict:
-            stack = texture_maps_for_mesh(load_neural_texture(texture_path), self.normalized)
+            texture = load_neural_texture(texture_path)
+            view = texture_view(texture, self.mesh)   # adaptation's new UV layout, when it made one
             full, _ = load_photo(self.photo_path, max_side=config.max_side)   # at the photo's size, up to max_side
             fh, fw = full.shape[:2]
             camera, camera_from = light_camera(light_path, self.photo_info, fw, fh)
-            inputs = ComposeInputs(self.mesh, stack, full, self.placement.pixel((fh, fw)),
+            inputs = ComposeInputs(view.mesh, view.stack(texture), full, self.placement.pixel((fh, fw)),
                                    load_environment(light_path), camera, turn_deg=self.config.turn_deg)
             extra = {"inputs": {"texture": str(texture_path), "light": str(light_path), "camera_from": camera_from}}
             return compose_to_folder(inputs, config, folder, extra, progress=self.progress, cancel=self.cancel)

@@ -88,8 +88,10 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
             self._folder = run_folder(context, "bake", layout.name)
             out_file = Path(f"{bpy.path.clean_name(layout.name)}.{self.file_format}")
         self._objects, self._slots, self._out_file = layout.objects, layout.slots, out_file
+        remap, remapped, self._new_uvs = new_uv_map(context, layout, texture)
         return work.bake_game_maps, dict(layout.bake_data(), **layout.own_maps(context), texture=str(texture),
-                                         size=self.texture_size, max_size=self.max_texture)
+                                         size=self.texture_size, max_size=self.max_texture, remap=remap,
+                                         remapped=remapped)
 
     def apply(self, context, result) -> str:
         gone = [name for name in self._objects if name not in bpy.data.objects]
@@ -105,7 +107,7 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
             out_file = self._out_file if folder is None else folder / self._out_file
             # A chosen file is written over as Blender's own exporters do; a run folder is new.
             report = bake_copies_to_gltf(objects, result["baked"], slots, out_file, self.file_format, self._output,
-                                         replace=True)
+                                         replace=True, new_uvs=self._new_uvs)
             report.update({"object": objects[0].name if len(objects) == 1 else None, "objects": list(self._objects),
                            "format": self.file_format, "texture_size": result["size"], "file": str(out_file)})
             if folder is not None:
@@ -115,6 +117,36 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         # A run folder is written whole; a chosen file is moved into place once the exporter has finished.
         report = export(None) if self._folder is None else work.written_whole(str(self._folder), export)
         return f"Baked '{shown}' at up to {result['size']} px a side into {report['file']}"
+
+
+def new_uv_map(context, layout, texture) -> tuple[frozenset, object, dict]:
+    """(the materials baked into a new UV map, the asset read through it, each object's new UVs per loop):
+    a texture adapted per surface on UVs that share texels (core.game_bake.materials_to_remap), as
+    `scenefit bake` does; nothing otherwise. Made on copies, so the artist's meshes keep their UVs."""
+    from ..blender_io.material import material_wrap
+    from ..blender_io.uv_unwrap import unwrapped_copies
+    from ..core.game_bake import materials_to_remap
+    from ..core.texture.bake import load_neural_texture
+
+    loaded = load_neural_texture(texture)
+    if loaded.layout is None:
+        return frozenset(), None, {}
+    remap = materials_to_remap(loaded, layout.mesh, [material_wrap(m) for m in layout.materials])
+    if not remap:
+        return remap, None, {}
+    objects = [bpy.data.objects[name] for name in layout.objects]
+
+    def read(copies: list):
+        from ..blender_io.material import object_mesh_and_slots
+        from ..blender_io.scene_asset import scene_mesh
+
+        depsgraph = context.evaluated_depsgraph_get()
+        if len(copies) == 1:
+            return object_mesh_and_slots(copies[0], depsgraph)[0]
+        return scene_mesh(copies, depsgraph, layout.name, strict=True).mesh
+
+    remapped, loops = unwrapped_copies(objects, [layout.materials[i] for i in sorted(remap)], read)
+    return remap, remapped, loops
 
 
 classes = (SCENEFIT_OT_bake_asset,)

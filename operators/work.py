@@ -257,6 +257,7 @@ def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Eve
     images' shape from its own maps (data['own_maps']), within data['max_size'], as `scenefit bake` does."""
     from dataclasses import replace
 
+    from ..blender_io.uv_unwrap import NEW_UV_MAP
     from ..core.game_bake import bake_game_maps as bake, bake_shapes
     from ..core.progress import emit
     from ..core.texture.bake import load_neural_texture
@@ -267,7 +268,8 @@ def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Eve
     shown = ", ".join(sorted({f"{s}²" if isinstance(s, int) else f"{s[1]}x{s[0]}" for s in shapes}))
     emit(progress, "bake", 0, 1, f"{len(data['names'])} material(s) at {shown}")
     baked = bake(texture, data["mesh"], list(data["names"]), shapes, [dict(c) for c in data["constants"]],
-                 [tuple(w) for w in data.get("wraps", ())] or None, own)
+                 [tuple(w) for w in data.get("wraps", ())] or None, own, data.get("remapped"),
+                 data.get("remap", frozenset()), NEW_UV_MAP)
     # a slot holding a SceneFit result keeps no nodes of its own: its maps are written anew
     baked = [replace(b, unchanged=frozenset()) if result else b for b, result in zip(baked, data["results"])]
     emit(progress, "bake", 1, 1, "maps ready")

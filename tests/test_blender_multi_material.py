@@ -88,6 +88,17 @@ def artists(names):
                      round(float(np.sum(np.array(image.pixels[:]))), 3), "scenefit" in mat]
     return out
 
+def box_and_ball():
+    # A red box and a sphere (its materials to be added), side by side.
+    bpy.ops.mesh.primitive_cube_add(location=(-1.5, 0, 1), scale=(0.8, 0.8, 0.8))
+    box = bpy.context.active_object
+    box.name = "Box"
+    box.data.materials.append(colour_material("Red"))
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8, location=(1.5, 0, 1))
+    ball = bpy.context.active_object
+    ball.name = "Ball"
+    return box, ball
+
 def slots(objects):
     return {o: [s.material.name for s in bpy.data.objects[o].material_slots] for o in objects}
 
@@ -144,13 +155,7 @@ bpy.ops.mesh.primitive_plane_add(location=(0, 4, 0))
 bystander = bpy.context.active_object
 bystander.name = "Bystander"
 bystander.data.materials.append(colour_material("Grey"))
-bpy.ops.mesh.primitive_cube_add(location=(-1.5, 0, 1), scale=(0.8, 0.8, 0.8))
-box = bpy.context.active_object
-box.name = "Box"
-box.data.materials.append(colour_material("Red"))
-bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8, location=(1.5, 0, 1))
-ball = bpy.context.active_object
-ball.name = "Ball"
+box, ball = box_and_ball()
 split_faces(ball, ["Blue", "Yellow"], lambda poly: int(poly.center.z > 0))
 bystander.select_set(False)
 box.select_set(True)
@@ -162,6 +167,44 @@ out.update(operate(["Box", "Ball"], originals, tmp / "selection.glb"))
 out["artists"] = artists(originals + ["Grey"])
 out["artists_before"] = before
 out["bystander"] = [s.material.name for s in bystander.material_slots]
+"""
+
+# A texture adapted per surface (stood in for by a residual that varies over the surface) on a selection
+# whose sphere has mirrored UVs: Bake Asset bakes the sphere's materials into a new UV map, on copies.
+MIRRORED = r"""
+new_scene()
+box, ball = box_and_ball()
+uv = np.empty(2 * len(ball.data.loops), np.float32)
+ball.data.uv_layers.active.uv.foreach_get("vector", uv)
+uv = uv.reshape(-1, 2)
+uv[:, 0] = np.abs(uv[:, 0] - 0.5) * 2.0
+ball.data.uv_layers.active.uv.foreach_set("vector", uv.ravel())
+split_faces(ball, ["Blue", "Yellow"], lambda poly: int(poly.center.z > 0))
+box.select_set(True)
+ball.select_set(True)
+bpy.context.view_layer.objects.active = ball
+import torch
+common = import_module(MODULE + ".operators.common")
+convert = import_module(MODULE + ".core.convert")
+layouts = import_module(MODULE + ".core.surface_layout")
+saving = import_module(MODULE + ".core.texture.bake")
+asset = common.asset_layout(bpy.context).read(bpy.context)
+texture = convert.convert_materials(asset, convert.ConvertConfig(texture_preset="draft", resolution=32)).texture
+view, layout, why = layouts.adapting_view(texture, asset.fitting_view()[0])
+out["layout"] = why
+texture.layout = layout
+with torch.no_grad():
+    generator = torch.Generator().manual_seed(0)
+    texture.encoding.table.normal_(0.0, 1.0, generator=generator)
+    texture.mlp[2].weight.normal_(0.0, 1.0, generator=generator)
+bpy.context.scene.scenefit.texture_path = str(saving.save_neural_texture(texture, tmp / "mirrored.pt"))
+layers = lambda: {o.name: [l.name for l in o.data.uv_layers] for o in (box, ball)}
+out["uv_layers_before"] = layers()
+before = [sorted(x.name for x in getattr(bpy.data, k)) for k in ("objects", "meshes", "materials", "images")]
+out["bake"] = sorted(bpy.ops.scenefit.bake_asset(filepath=str(tmp / "mirrored.glb")))
+after = [sorted(x.name for x in getattr(bpy.data, k)) for k in ("objects", "meshes", "materials", "images")]
+out["bake_left_session_as_it_was"] = before == after
+out["uv_layers_after"] = layers()
 """
 
 # Convert on the same object, twice: the second reads the first's results and keeps the artist's as originals.
@@ -323,3 +366,22 @@ def test_what_cannot_be_textured_is_one_sentence(blender):
     assert "The selection cannot be textured as one asset: Faces of 'Cube' use material slot 2" in said["selection"]
     assert all("Traceback" not in s and s.count(". ") == 0 for s in said.values()), said
     assert not any("SceneFit" in m for m in out["materials"])   # nothing was made
+
+
+def test_bake_asset_bakes_a_texture_adapted_per_surface_into_a_new_uv_map(blender, validator):
+    """Mirrored UVs (the sphere's two materials) get the new UV map on the exported copies; the cube's own
+    UVs hold its result and are kept; the artist's meshes keep their UV maps."""
+    out = step(blender, MIRRORED)
+    assert out["layout"]["uv_layout"] == "new (xatlas)", out["layout"]
+    assert out["bake"] == ["FINISHED"] and out["bake_left_session_as_it_was"]
+    assert out["uv_layers_after"] == out["uv_layers_before"]
+    path = blender.tmp / "mirrored.glb"
+    assert validator(str(path))["issues"]["numErrors"] == 0
+    data = path.read_bytes()
+    length = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + length])
+    coords = {m["name"]: m["pbrMetallicRoughness"]["baseColorTexture"].get("texCoord", 0) for m in doc["materials"]}
+    assert coords == {"Red": 0, "Blue": 1, "Yellow": 1}, coords
+    ball = next(m for m in doc["meshes"] if any(doc["materials"][p["material"]]["name"] == "Blue"
+                                                 for p in m["primitives"]))
+    assert all("TEXCOORD_1" in p["attributes"] for p in ball["primitives"])

@@ -14,7 +14,8 @@ from scenefit.core.imageio import linear_to_srgb
 from scenefit.core.maps import PBRMaps
 from scenefit.core.mesh import normalize_to_unit_sphere
 from scenefit.core.primitives import uv_sphere
-from scenefit.core.texture.bake import bake_maps, load_neural_texture, texture_maps_for_mesh
+from scenefit.core.surface_layout import texture_view
+from scenefit.core.texture.bake import bake_maps, load_neural_texture
 from scenefit.core.texture.uv_raster import rasterize_uv
 
 
@@ -66,7 +67,7 @@ def test_an_exact_start_saves_loads_and_bakes_back_to_the_asset(tmp_path):
                         tmp_path)
     again = load_neural_texture(outputs["weights"])
     assert again.config.residual and torch.equal(again.base_logit, result.texture.base_logit)
-    np.testing.assert_allclose(texture_maps_for_mesh(again, result.mesh), result.predicted().numpy(), atol=1e-6)
+    np.testing.assert_allclose(texture_view(again, result.mesh).stack(again), result.predicted().numpy(), atol=1e-6)
     # The game bake at the texture's own size writes the asset's own base colour back (8-bit sRGB).
     (baked,) = bake_game_maps(again, mesh, ["Ball"], 32)
     want = np.round(linear_to_srgb(result.target[..., 0:3].numpy()) * 255)

@@ -213,3 +213,16 @@ def test_bad_environment_map_is_rejected():
         AssetRenderer(uv_sphere(), TEX, np.ones((16, 16, 3), np.float32))
     with pytest.raises(InputError):
         AssetRenderer(uv_sphere(), TEX, np.full((16, 32, 3), np.nan, np.float32))
+
+
+def test_render_albedo_is_the_base_colour_where_the_asset_is_hit_and_nothing_elsewhere():
+    from scenefit.core.backend import init_mitsuba
+
+    init_mitsuba()
+    maps = np.zeros((8, 8, 5), np.float32)
+    maps[..., :3], maps[..., 3] = (0.2, 0.5, 0.7), 0.5
+    renderer = AssetRenderer(uv_sphere(0.5, 16, 8), (8, 8), np.ones((8, 16, 3), np.float32))
+    out = renderer.render_albedo(Camera(width=32, height=32), maps)
+    hit = out[..., 3] > 0
+    assert 0.2 < hit.mean() < 0.9
+    assert np.allclose(out[hit][:, :3], (0.2, 0.5, 0.7), atol=1e-4) and not out[~hit][:, :3].any()

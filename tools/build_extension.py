@@ -44,12 +44,14 @@ DIST = ROOT / "dist"
 # What the extension needs at run time (not bpy, pytest or matplotlib: development only).
 RUNTIME = [
     "mitsuba", "drjit", "torch", "diffusers", "transformers", "peft", "accelerate",
-    "opencv-contrib-python-headless", "OpenImageIO", "openai", "pyoidn", "meshopt",
+    "opencv-contrib-python-headless", "OpenImageIO", "openai", "pyoidn", "meshopt", "xatlas",
 ]
 LEFT_OUT = {"numpy": "Blender ships numpy"}
 # Bundled on every platform the registry has a wheel for, left out (said so) where it has none: the
 # composite is then made without denoising's help (pyoidn 2.5.1.0 has no Linux arm64 wheel).
-WHERE_PUBLISHED = {"pyoidn", "meshopt"}  # without meshopt, EXT_meshopt_compression files are refused
+# Without meshopt, EXT_meshopt_compression files are refused; without xatlas (no Linux arm64 wheel), adaptation
+# on UVs that share texels stays in them (said in its report).
+WHERE_PUBLISHED = {"pyoidn", "meshopt", "xatlas"}
 
 # Blender platform -> pip platform tags (pip does not expand manylinux_2_x to older glibc tags itself)
 # and the marker environment of that platform.

@@ -52,7 +52,9 @@ class AdaptInputs:
     """What the stage works on. mesh: normalised (radius 0.5); raster: its UV raster at the texture's
     resolution; texture: the converted neural texture (None only for "generate"); photo: sRGB float
     (H, W, 3) in [0, 1] and placement ("scene"); envmap: (He, 2He, 3) linear ("envmap" light);
-    photo_camera: the light stage's camera for the photo (None: the light stage's default for it)."""
+    photo_camera: the light stage's camera for the photo (None: the light stage's default for it);
+    base_logit: the texture's base for `raster` when it is not the texture's own layout, and `layout`
+    that layout (core.surface_layout: the asset's UVs share texels, so adaptation works in new ones)."""
 
     mesh: Mesh
     raster: UVRaster
@@ -61,6 +63,8 @@ class AdaptInputs:
     placement: Placement | None = None
     envmap: np.ndarray | None = None
     photo_camera: PhotoCamera | None = None
+    base_logit: torch.Tensor | None = None
+    layout: object | None = None
 
     def validate(self, config: AdaptConfig) -> None:
         if config.mode_type != "generate" and self.texture is None:
@@ -133,8 +137,9 @@ class AdaptSystem:
         self.device = models.device
         raster = inputs.raster
         self.plan = texture.plan(raster.position, raster.border, raster.fill_index)
+        self.base_logit = None if inputs.base_logit is None else inputs.base_logit.to(self.device)
         with torch.no_grad():  # the starting texture: the reference, and the global views' fixed coverage
-            self.start_stack = texture.texture_from_plan(self.plan).detach()
+            self.start_stack = texture.texture_from_plan(self.plan, self.base_logit).detach()
         self.reference_stack = self.start_stack if config.uses_reference else None
         self.base_env = torch.from_numpy(np.ascontiguousarray(renderer_environment(inputs, config)))
         self.photo = None if inputs.photo is None else np.clip(np.asarray(inputs.photo, np.float32), 0.0, 1.0)
@@ -225,7 +230,7 @@ class AdaptSystem:
         env = self.base_env if view.envmap is None else torch.from_numpy(view.envmap)
         constants = self.constants.get(view, env)
         self.timer.lap("constants")
-        maps = split_channels(self.texture.texture_from_plan(self.plan))
+        maps = split_channels(self.texture.texture_from_plan(self.plan, self.base_logit))
         out = self.renderer.render(view.camera, *maps, env, spp=view.stage.spp, seed=view.render_seed)
         rendered = [torch.cat([out.rgb, out.alpha], dim=-1)]
         placed = None
@@ -377,6 +382,7 @@ def _working_texture(inputs: AdaptInputs, config: AdaptConfig) -> NeuralTexture:
                              seed=config.seed)
     texture = NeuralTexture(inputs.texture.config, seed=None)
     texture.load_state_dict(inputs.texture.state_dict())
+    texture.layout = inputs.layout if inputs.layout is not None else inputs.texture.layout
     return texture
 
 
@@ -454,6 +460,7 @@ def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfi
     """
     from ..mesh import normalize_to_unit_sphere
     from ..materials import mesh_raster
+    from ..surface_layout import adapting_view
     from ..texture.bake import bake_maps
 
     out_dir = Path(out_dir)
@@ -463,18 +470,22 @@ def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfi
     normalized, _ = normalize_to_unit_sphere(mesh)
     res = texture.config.resolution if texture is not None else int(resolution or stage_config("texture", config.texture_preset).resolution)
     raster = mesh_raster(normalized, res)   # each material's own cell and wrap mode, as the renderer reads them
-    inputs = AdaptInputs(mesh=normalized, raster=raster, texture=texture, photo=photo, placement=placement,
-                         envmap=envmap, photo_camera=photo_camera)
+    # Where the asset's UVs share texels the result could not differ per surface: a new layout.
+    emit(progress, "adapt", 0, config.iterations, "checking whether the UVs give every surface its own texels")
+    view, layout, uv_report = adapting_view(texture, normalized)
+    inputs = AdaptInputs(mesh=view.mesh if view else normalized, raster=view.raster if view else raster,
+                         texture=texture, photo=photo, placement=placement, envmap=envmap,
+                         photo_camera=photo_camera, base_logit=view.base_logit if view else None, layout=layout)
     result = adapt_texture(inputs, config, progress=progress, cancel=cancel, checkpoint_dir=out_dir / "checkpoint",
                            models=models)
     check_cancel(cancel)
     paths = {}
-    if rank_world()[0] == 0:  # one writer in a distributed run
+    if rank_world()[0] == 0:  # one writer in a distributed run; maps/ in the asset's own UVs, as ever
         paths = bake_maps(result.texture, raster.position, raster.border, raster.fill_index, out_dir / "maps")
     per_it = result.seconds_per_iteration()
     report = {
         "stage": "adapt", "config": config.to_dict(), "schedule": config.schedule(),
-        "decisions": decisions_to_dict(result.decisions),
+        "decisions": decisions_to_dict(result.decisions), "uv_layout": uv_report,
         "iterations": result.iterations, "resumed_from": result.resumed_from, "seconds": round(result.seconds, 3),
         "seconds_per_iteration": {k: round(v, 4) for k, v in per_it.items()},
         "peak_memory_mb": None if result.peak_memory_mb is None else round(result.peak_memory_mb, 1),

@@ -33,15 +33,6 @@ def bake_texture(texture: NeuralTexture, position_map, mask, fill_index, base_lo
         return texture.texture(position_map, mask, fill_index, base_logit).cpu().numpy().astype(np.float32)
 
 
-def texture_maps_for_mesh(texture: NeuralTexture, normalized_mesh) -> np.ndarray:
-    """(R, R, 5) maps of a neural texture on a (normalised) mesh's UV layout, at the texture's resolution:
-    an atlas mesh's materials each in their own cell, wrapped as their samplers say (as convert fits them)."""
-    from ..materials import mesh_raster
-
-    raster = mesh_raster(normalized_mesh, texture.config.resolution)
-    return bake_texture(texture, raster.position, raster.border, raster.fill_index)
-
-
 def bake_maps(texture: NeuralTexture, position_map, mask, fill_index, out_dir: str | os.PathLike,
               constants: dict[str, float] | None = None) -> dict[str, Path | float]:
     """Write base_color.png, roughness.png, metallic.png and texture.pt into out_dir (atomically).
@@ -67,6 +58,8 @@ def save_neural_texture(texture: NeuralTexture, path: str | os.PathLike) -> Path
     state = {k: v.detach().cpu() for k, v in texture.state_dict().items()}
     payload = {"format": WEIGHTS_FORMAT, "version": WEIGHTS_VERSION,
                "config": texture.config.to_dict(), "state_dict": state}
+    if getattr(texture, "layout", None) is not None:   # adaptation's new UV layout (core.surface_layout)
+        payload["layout"] = texture.layout.to_payload()
     buffer = io.BytesIO()
     torch.save(payload, buffer)
     return write_bytes_atomic(path, buffer.getvalue())
@@ -103,4 +96,11 @@ def load_neural_texture(path: str | os.PathLike, device: str | torch.device = "c
         texture.load_state_dict(payload["state_dict"])
     except RuntimeError as error:
         raise InputError(f"The weights in '{path}' do not match their config: {error}") from error
+    if payload.get("layout") is not None:
+        from ..surface_layout import SurfaceLayout
+
+        try:
+            texture.layout = SurfaceLayout.from_payload(payload["layout"])
+        except (KeyError, TypeError, ValueError, AttributeError):
+            raise InputError(f"'{path}' has an unreadable UV layout; adapt the asset again.") from None
     return texture.to(device)

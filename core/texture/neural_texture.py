@@ -143,6 +143,8 @@ class NeuralTexture(torch.nn.Module):
                 self.mlp[2].weight.zero_()   # the residual is exactly zero at the start
             self.register_buffer("base_logit", torch.zeros(config.resolution, config.resolution, len(CHANNELS)))
         self._plan_cache: tuple | None = None
+        # Where adaptation re-mapped the surface (core.surface_layout.SurfaceLayout), saved with the weights.
+        self.layout = None
 
     # -- the exact start ---------------------------------------------------------------------------
 

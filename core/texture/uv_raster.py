@@ -237,6 +237,27 @@ def _texel(coord: np.ndarray, size: int, mode: str) -> tuple[np.ndarray, np.ndar
     return (np.where(tile % 2 == 1, size - 1 - local, local) if mode == "mirror" else local), tile
 
 
+def sample_image(image: np.ndarray, uv: np.ndarray, wrap: str | tuple[str, str] = "repeat") -> np.ndarray:
+    """(N, C) bilinear reads of `image` (H, W, C) at `uv` (N, 2), outside [0, 1] as `wrap` says per axis:
+    the texture lookup a glTF sampler makes, in rasterize_uv's texel convention."""
+    height, width = image.shape[:2]
+    modes = wrap_modes(wrap)
+    x = np.asarray(uv[:, 0], np.float64) * width - 0.5
+    y = (1.0 - np.asarray(uv[:, 1], np.float64)) * height - 0.5
+    out = np.zeros((len(uv), image.shape[2]), np.float64)
+    for axis_x, weight_x in ((np.floor(x), 1.0 - (x - np.floor(x))), (np.floor(x) + 1, x - np.floor(x))):
+        for axis_y, weight_y in ((np.floor(y), 1.0 - (y - np.floor(y))), (np.floor(y) + 1, y - np.floor(y))):
+            col = _texel_index(axis_x.astype(np.int64), width, modes[0])
+            row = _texel_index(axis_y.astype(np.int64), height, modes[1])
+            out += (weight_x * weight_y)[:, None] * image[row, col]
+    return out.astype(np.float32)
+
+
+def _texel_index(coord: np.ndarray, size: int, mode: str) -> np.ndarray:
+    """The image texel an integer texel coordinate of the tiled plane reads (clamp: the nearest edge)."""
+    return np.clip(coord, 0, size - 1) if mode == "clamp" else _texel(coord, size, mode)[0]
+
+
 def _unwrapped(index: np.ndarray, tile: np.ndarray, size: int, mode: str) -> np.ndarray:
     """The coordinate in the tiled plane of texel `index` in copy `tile` (the inverse of _texel)."""
     if mode == "clamp":
