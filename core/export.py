@@ -2,6 +2,9 @@
 
 Layout written into `out_dir`:
     scene.xml, mesh.ply, base_color.png (sRGB), roughness.png / metallic.png (linear), envmap.exr
+Several materials are several shapes, each with its own UVs, images and wrap mode (mesh_0.ply,
+base_color_0.png, ...), as SceneFit's renders draw them (never one atlas whose tiling UVs read a
+neighbouring material's cell).
 """
 from __future__ import annotations
 
@@ -19,7 +22,8 @@ from .imageio import linear_to_srgb, write_image
 from .maps import PBRMaps
 from .mesh import Mesh, normalize_to_unit_sphere
 from .pipeline import check_environment
-from .render import ENVMAP_TO_WORLD, _mitsuba_mesh
+from .materials import material_parts
+from .render import ENVMAP_TO_WORLD, _mitsuba_mesh, drawn_part
 
 
 def _add(parent: ET.Element, tag: str, **attrs) -> ET.Element:
@@ -31,13 +35,42 @@ def _matrix(parent: ET.Element, name: str, m: np.ndarray) -> None:
     _add(t, "matrix", value=" ".join(f"{x:.9g}" for x in np.asarray(m, dtype=np.float64).ravel()))
 
 
-def _texture_or_value(parent: ET.Element, name: str, value, filename: str | None) -> None:
+def _texture_or_value(parent: ET.Element, name: str, value, filename: str | None, wrap: str = "repeat") -> None:
     if filename is None:
         _add(parent, "float", name=name, value=f"{float(value):.6g}")
         return
     tex = _add(parent, "texture", type="bitmap", name=name)
     _add(tex, "string", name="filename", value=filename)
     _add(tex, "boolean", name="raw", value="true")
+    _add(tex, "string", name="wrap_mode", value=wrap)
+
+
+def _exported_parts(mi, mesh: Mesh, maps: PBRMaps, out_dir: Path) -> list[dict]:
+    """Each material part as the live renderer draws it (core.render.drawn_part: its own UVs, its own
+    texels, its wrap mode), written as a PLY and its images; one material keeps the plain names
+    (mesh.ply, base_color.png, ...), several are numbered (mesh_0.ply, base_color_0.png, ...)."""
+    import torch
+
+    stack = torch.from_numpy(np.ascontiguousarray(maps.stacked(), np.float32))
+    drawn = [drawn_part(part) for part in material_parts(mesh, maps.resolution)]
+    out = []
+    for index, part in enumerate(drawn):
+        tag = "" if len(drawn) == 1 else f"_{index}"
+        texels = part.texels(stack).numpy()
+        # The PLY holds Mitsuba's own texture convention (v = 0 at the top row), so it is read unflipped.
+        tmp_ply = out_dir / f".mesh{tag}.ply{TEMP_MARK}"
+        _mitsuba_mesh(mi, part.mesh).write_ply(str(tmp_ply))
+        tmp_ply.replace(out_dir / f"mesh{tag}.ply")
+        write_image(out_dir / f"base_color{tag}.png", linear_to_srgb(texels[..., 0:3]))
+        files = {"mesh": f"mesh{tag}.ply", "base_color": f"base_color{tag}.png", "wrap": part.mode}
+        for channel, name in ((3, "roughness"), (4, "metallic")):
+            if isinstance(getattr(maps, name), np.ndarray):
+                write_image(out_dir / f"{name}{tag}.png", texels[..., channel], dtype="uint16")
+                files[name] = f"{name}{tag}.png"
+            else:
+                files[name] = float(getattr(maps, name))
+        out.append(files)
+    return out
 
 
 @dataclass(frozen=True)
@@ -81,20 +114,7 @@ def export_mitsuba_scene(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, camera:
         origin = transform.to_object(camera.origin)
         target = transform.to_object(np.asarray(camera.target, dtype=np.float64))
         up, fov_axis = np.array([0.0, 0.0, 1.0]), "smaller"
-    # The PLY holds Mitsuba's own texture convention (v = 0 at the top row), so it is read unflipped.
-    tmp_ply = out_dir / f".mesh.ply{TEMP_MARK}"
-    _mitsuba_mesh(mi, mesh).write_ply(str(tmp_ply))
-    tmp_ply.replace(out_dir / "mesh.ply")
-    write_image(out_dir / "base_color.png", linear_to_srgb(maps.base_color))
-    files: dict[str, str | None] = {}
-    for name in ("roughness", "metallic"):
-        value = getattr(maps, name)
-        if isinstance(value, np.ndarray):
-            write_image(out_dir / f"{name}.png", value, dtype="uint16")
-            files[name] = f"{name}.png"
-        else:
-            files[name] = None
-
+    parts = _exported_parts(mi, mesh, maps, out_dir)
     scene = ET.Element("scene", version="3.0.0")
     integrator = _add(scene, "integrator", type="path")
     _add(integrator, "integer", name="max_depth", value=max_depth)
@@ -116,15 +136,17 @@ def export_mitsuba_scene(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, camera:
     _add(emitter, "string", name="filename", value="envmap.exr")
     _matrix(emitter, "to_world", ENVMAP_TO_WORLD)
 
-    shape = _add(scene, "shape", type="ply")
-    _add(shape, "string", name="filename", value="mesh.ply")
-    _add(shape, "boolean", name="flip_tex_coords", value="false")
-    bsdf = _add(shape, "bsdf", type="principled")
-    base = _add(bsdf, "texture", type="bitmap", name="base_color")
-    _add(base, "string", name="filename", value="base_color.png")  # sRGB, decoded by Mitsuba
-    _texture_or_value(bsdf, "roughness", maps.roughness, files["roughness"])
-    _texture_or_value(bsdf, "metallic", maps.metallic, files["metallic"])
-
+    for files in parts:
+        shape = _add(scene, "shape", type="ply")
+        _add(shape, "string", name="filename", value=files["mesh"])
+        _add(shape, "boolean", name="flip_tex_coords", value="false")
+        bsdf = _add(shape, "bsdf", type="principled")
+        base = _add(bsdf, "texture", type="bitmap", name="base_color")
+        _add(base, "string", name="filename", value=files["base_color"])  # sRGB, decoded by Mitsuba
+        _add(base, "string", name="wrap_mode", value=files["wrap"])
+        for name in ("roughness", "metallic"):
+            _texture_or_value(bsdf, name, files[name], files[name] if isinstance(files[name], str) else None,
+                              files["wrap"])
     ET.indent(scene)
     xml_path = out_dir / "scene.xml"
     write_text_atomic(xml_path, ET.tostring(scene, encoding="unicode") + "\n")

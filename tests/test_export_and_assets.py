@@ -109,3 +109,25 @@ def test_developed_photo_clips_highlights_like_a_camera():
     assert 40 < photo.mean() < 200
     # Brightness is exposure-normalised: a 100x brighter scene gives the same photo.
     assert np.abs(develop_photo(view * 100).astype(int) - photo.astype(int)).max() <= 1
+
+
+def test_several_materials_export_as_shapes_that_each_read_their_own_maps_wrapped_as_their_sampler_says(tmp_path):
+    """Three materials whose UVs tile about 3.8 times, each wrapped its own way: the exported scene, loaded
+    by Mitsuba alone, shows each material's own texels where an atlas would reach into its neighbour's."""
+    import mitsuba as mi
+    from scenefit.core.export import LookAt
+    from test_render_materials import banded_plane, expected_albedo
+
+    asset = banded_plane([("repeat", "repeat"), ("mirror", "mirror"), ("clamp", "clamp")])
+    mesh, maps = asset.fitting_view()
+    camera = LookAt(origin=(0.0, -2.5, 0.0), target=(0.0, 0.0, 0.0), fov_deg=24.0, width=96, height=96)
+    xml = export_mitsuba_scene(mesh, maps, tmp_path / "scene", camera=camera, spp=1)
+    assert {"mesh_0.ply", "mesh_2.ply", "base_color_1.png"} <= {p.name for p in xml.parent.iterdir()}
+    integrator = mi.load_dict({"type": "aov", "aovs": "albedo:albedo,p:position,d:depth"})
+    image = np.array(mi.render(mi.load_file(str(xml)), integrator=integrator, spp=1), dtype=np.float64)
+    hit = image[..., 6] > 0
+    expected, clear = expected_albedo(asset, image[..., 3:6][hit])
+    error = np.abs(image[..., 0:3][hit] - expected).max(axis=1)[clear]
+    assert len(error) > 3000
+    # 8-bit sRGB images: a few thousandths; a neighbour's texels or another wrap mode: tenths.
+    assert np.quantile(error, 0.99) < 0.02, np.quantile(error, [0.5, 0.99])
