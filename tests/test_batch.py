@@ -339,3 +339,23 @@ def test_a_worker_loads_the_models_once_and_reuses_them_with_the_same_outputs(tm
     assert {k for k in first if not k.endswith(".json")} >= {"adapt/maps/texture.pt", "compose/composite.png"}
     assert {k: v for k, v in first.items() if not k.endswith(".json")} == {
         k: v for k, v in second.items() if not k.endswith(".json")}
+
+
+def test_a_killed_workers_job_folder_is_removed_by_the_next_worker_and_nothing_else(tmp_path):
+    """A worker killed mid-job (a stopped Ray actor) leaves its scenefit-job-<pid>-... folder; the next
+    worker removes those whose process is gone, never a running process's or another name."""
+    import os
+    import subprocess
+
+    from scenefit.workers.batch import JOB_FOLDER_PREFIX, remove_orphaned_job_folders
+
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    orphan = tmp_path / f"{JOB_FOLDER_PREFIX}{gone.pid}-abc"
+    running = tmp_path / f"{JOB_FOLDER_PREFIX}{os.getpid()}-def"
+    others = [tmp_path / f"{JOB_FOLDER_PREFIX}x", tmp_path / "scenefit-jobs-12-a", tmp_path / f"{JOB_FOLDER_PREFIX}12"]
+    for folder in [orphan, running, *others]:
+        (folder / "out").mkdir(parents=True)
+        (folder / "out" / "composite.png").write_bytes(b"x")
+    assert remove_orphaned_job_folders(tmp_path) == [orphan]
+    assert not orphan.exists() and running.is_dir() and all(f.is_dir() for f in others)

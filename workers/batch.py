@@ -16,6 +16,8 @@ from __future__ import annotations
 import io
 import json
 import math
+import os
+import shutil
 import tarfile
 import tempfile
 import threading
@@ -31,6 +33,10 @@ from .jobs import BatchSettings, Job, JobsFile, with_user_paths
 from ..core.output_folder import check_output_folder, check_subfolder, folder_in_place, install_folder
 
 REPORT = "report.json"
+# A job's unpacked inputs and its output, in the system's temp folder: scenefit-job-<pid>-XXXX. A worker
+# killed mid-job (a Ray actor stopped, a process killed) cannot remove its own; the next worker on the
+# machine removes those whose process is gone.
+JOB_FOLDER_PREFIX = "scenefit-job-"
 SUMMARY_JSON, SUMMARY_MD, CONTACT_SHEET = "summary.json", "summary.md", "contact_sheet.png"
 RESERVED_NAMES = (SUMMARY_JSON, SUMMARY_MD, CONTACT_SHEET)
 # What a job's contact-sheet cell shows, the first that exists (the composite once compose runs).
@@ -89,6 +95,29 @@ class JobResult:
     outputs: bytes          # the job's folder, packed
 
 
+def remove_orphaned_job_folders(root: str | Path | None = None) -> list[Path]:
+    """Remove the job folders (JOB_FOLDER_PREFIX<pid>-...) in `root` (the temp folder) whose process no
+    longer runs; a folder of a running process, or any other name, is left alone. Returns those removed."""
+    removed = []
+    for folder in Path(root or tempfile.gettempdir()).glob(f"{JOB_FOLDER_PREFIX}*-*"):
+        pid = folder.name[len(JOB_FOLDER_PREFIX):].split("-", 1)[0]
+        if not pid.isdigit() or not folder.is_dir() or folder.is_symlink() or _running(int(pid)):
+            continue
+        shutil.rmtree(folder, ignore_errors=True)
+        removed.append(folder)
+    return removed
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:   # another user's process
+        return True
+    return True
+
+
 class JobWorker:
     """Runs jobs one after another; what it loads (models) stays loaded for its next job.
 
@@ -101,6 +130,7 @@ class JobWorker:
         from ..core.guidance.models import ModelCache
 
         self.threads_before = set_threads(threads) if threads is not None else None
+        remove_orphaned_job_folders()
         self.cancel_event = threading.Event()
         self.models = ModelCache()
         self.jobs_run = 0
@@ -110,7 +140,7 @@ class JobWorker:
         started = time.perf_counter()
         self.cancel_event.clear()
         progress = None if progress_sink is None else SinkProgress(progress_sink, payload.job.name)
-        with tempfile.TemporaryDirectory(prefix="scenefit-job-") as tmp:
+        with tempfile.TemporaryDirectory(prefix=f"{JOB_FOLDER_PREFIX}{os.getpid()}-") as tmp:
             job = unpacked_job(payload, Path(tmp) / "in")
             out = Path(tmp) / "out"
             out.mkdir()
