@@ -29,14 +29,14 @@ def run(args) -> int:
     if args.texture:
         texture = load_neural_texture(Path(args.texture))
         view = texture_view(texture, mesh)
-        mesh, stack, source = view.mesh, view.stack(texture), "neural texture"
+        mesh, stack, source, layout = view.mesh, view.stack(texture), "neural texture", view.report["uv_layout"]
     else:
-        stack, source = asset_stack(maps, f"'{args.asset}'"), "the asset's own maps"
+        stack, source, layout = asset_stack(maps, f"'{args.asset}'"), "the asset's own maps", "own"
     with output(args) as out:
         report = compose_to_folder(
             ComposeInputs(mesh, stack, photo, placement, envmap, camera), config, out,
             {"inputs": {"asset": args.asset, "texture": args.texture or source, "photo": info, "light": args.light,
-                        "camera_from": camera_source},
+                        "camera_from": camera_source, "uv_layout": layout},
              "environment": environment_info()},
             progress=progress(args))
     shadow = report["shadow"]

@@ -385,7 +385,8 @@ class PipelineRun:
             camera, camera_from = light_camera(light_path, self.photo_info, fw, fh)
             inputs = ComposeInputs(view.mesh, view.stack(texture), full, self.placement.pixel((fh, fw)),
                                    load_environment(light_path), camera, turn_deg=self.config.turn_deg)
-            extra = {"inputs": {"texture": str(texture_path), "light": str(light_path), "camera_from": camera_from}}
+            extra = {"inputs": {"texture": str(texture_path), "light": str(light_path), "camera_from": camera_from,
+                                "uv_layout": view.report["uv_layout"]}}
             return compose_to_folder(inputs, config, folder, extra, progress=self.progress, cancel=self.cancel)
 
         self.runner.run("compose", self.keys["compose"], compose)
