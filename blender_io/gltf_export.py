@@ -356,10 +356,17 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
         wraps = [material_wrap(m) for m in materials]
         output = _with_tangents(output or output_like_input(asset_path))
         # Adapted per surface on UVs that share texels: those materials' maps go into a new UV map.
-        remap, remapped = materials_to_remap(texture, mesh, wraps), None
+        remap, remapped, unmapped = materials_to_remap(texture, mesh, wraps), None, None
         if remap:
-            with new_uv_map_active(meshes, [materials[i] for i in sorted(remap)]):
-                remapped = read()[0]
+            try:
+                with new_uv_map_active(meshes, [materials[i] for i in sorted(remap)]):
+                    remapped = read()[0]
+            except (RuntimeError, InputError) as error:   # Smart UV Project failed: the asset's own UVs, said so
+                remap, unmapped = frozenset(), f"no new UV map could be made ({str(error)[:160]}); baked in the " \
+                                               "asset's own UVs, where surfaces that share texels show one result"
+                for me in {o.data for o in meshes}:
+                    if NEW_UV_MAP in me.uv_layers:
+                        me.uv_layers.remove(me.uv_layers[NEW_UV_MAP])
         # Each material at its own images' shape (--texture-size: all square at that size), within
         # --max-texture; the base is the material's own maps at that shape, so the preset's working size
         # costs no detail.
@@ -370,6 +377,8 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
                                         replace=replace)
         report.update({"asset": str(asset_path), "object": taken[0] if len(taken) == 1 else None, "objects": taken,
                        "format": file_format, "texture_size": max(max(m.base_color.shape[:2]) for m in baked)})
+        if unmapped:
+            report["uv_map"] = unmapped
     return report
 
 

@@ -43,6 +43,8 @@ def run(args) -> int:
               f"metallic {material['metallic']} at {material['width']}x{material['height']}")
         for line in material["done"]:
             print(f"  {line}")
+    if "uv_map" in report:
+        print(f"  {report['uv_map']}")
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
     print(f"wrote {', '.join(report['files'])} (glTF 2.0 by Blender's exporter)")

@@ -211,8 +211,14 @@ def adapting_view(texture: NeuralTexture | None, mesh: Mesh) -> tuple[TextureVie
                             "why": f"{sharing.shared:.0%} of the surface shares texels in the asset's UVs, but "
                                    "xatlas (the unwrapper) is not installed here, so surfaces that share texels "
                                    "show one result"}
-    layout = new_layout(normalize_to_unit_sphere(mesh)[0], texture.config.resolution, sharing)
-    view = texture_view(texture, mesh, layout)
+    try:
+        layout = new_layout(normalize_to_unit_sphere(mesh)[0], texture.config.resolution, sharing)
+        view = texture_view(texture, mesh, layout)
+    except (RuntimeError, ValueError, InputError) as error:   # xatlas failed, or its charts hold no texel
+        return None, None, {"uv_layout": "own", **sharing.report(),
+                            "why": f"{sharing.shared:.0%} of the surface shares texels in the asset's UVs, but no "
+                                   f"new layout could be made ({str(error)[:160]}), so surfaces that share texels "
+                                   "show one result"}
     why = (f"{sharing.shared:.0%} of the surface shares texels in the asset's UVs (collapsed "
            f"{sharing.collapsed:.0%}, overlapping {sharing.overlapped:.0%}), so a result there could not "
            "differ per surface; adapted in a new layout by xatlas")

@@ -163,3 +163,16 @@ def test_adaptation_works_in_the_new_layout_and_saves_it(tiny_models, tmp_path):
     assert read_image(report["outputs"]["base_color"]).shape[:2] == own.resolution
     view = texture_view(saved, mesh)
     assert view.report["uv_layout"] == "new (xatlas)" and len(view.mesh.faces) == len(mesh.faces)
+
+
+def test_an_unwrapper_that_fails_leaves_adaptation_in_the_asset_uvs_and_says_why(monkeypatch):
+    import scenefit.core.surface_layout as surface_layout
+
+    def failing(*_, **__):
+        raise RuntimeError("xatlas: no charts")
+
+    monkeypatch.setattr(surface_layout, "new_layout", failing)
+    shared = convert_asset(mirrored(sphere()), smooth_maps(), ConvertConfig(texture_preset="draft", resolution=64))
+    view, layout, report = adapting_view(shared.texture, shared.mesh)
+    assert view is None and layout is None and report["uv_layout"] == "own"
+    assert "no new layout could be made (xatlas: no charts)" in report["why"] and report["shared_surface"] > 0.4

@@ -99,17 +99,55 @@ def scenefit(*args) -> subprocess.CompletedProcess:
                           timeout=600, cwd=ROOT, env=dict(os.environ))
 
 
-def test_an_adapted_texture_on_mirrored_uvs_bakes_into_a_new_uv_map(tmp_path, validator):
-    import cv2
-
-    python(BUILD.replace("FOLDER", repr(str(tmp_path))))
-    asset = tmp_path / "mirrored.glb"
-    proc = scenefit("convert", asset, "--out", tmp_path / "convert", "--preset", "draft", "--resolution", "64",
+@pytest.fixture(scope="module")
+def adapted(tmp_path_factory) -> tuple[Path, Path]:
+    """(the mirrored sphere's GLB, a texture adapted per surface in a new layout for it)."""
+    folder = tmp_path_factory.mktemp("mirrored")
+    python(BUILD.replace("FOLDER", repr(str(folder))))
+    asset = folder / "mirrored.glb"
+    proc = scenefit("convert", asset, "--out", folder / "convert", "--preset", "draft", "--resolution", "64",
                     "--quiet")
     assert proc.returncode == 0, proc.stderr[-2000:]
-    adapted = tmp_path / "adapted.pt"
-    python(ADAPTED.replace("TEXTURE", repr(str(tmp_path / "convert/maps/texture.pt")))
-           .replace("ASSET", repr(str(asset))).replace("OUT", repr(str(adapted))))
+    texture = folder / "adapted.pt"
+    python(ADAPTED.replace("TEXTURE", repr(str(folder / "convert/maps/texture.pt")))
+           .replace("ASSET", repr(str(asset))).replace("OUT", repr(str(texture))))
+    return asset, texture
+
+
+# Smart UV Project failing (as an operator can on a broken mesh): the bake goes on in the asset's own UVs.
+UNWRAP_FAILS = r"""
+import json
+import scenefit.blender_io.uv_unwrap as uv_unwrap
+from scenefit.blender_io.gltf_export import bake_asset_file
+from contextlib import contextmanager
+
+@contextmanager
+def failing(objects, materials):
+    raise RuntimeError("Error: smart_project found no faces")
+    yield
+
+uv_unwrap.new_uv_map_active = failing
+report = bake_asset_file(ASSET, TEXTURE, OUT)
+print(json.dumps(report))
+"""
+
+
+def test_a_failed_unwrap_bakes_in_the_asset_uvs_and_says_so(adapted, tmp_path, validator):
+    asset, texture = adapted
+    out = tmp_path / "own_uvs.glb"
+    report = json.loads(python(UNWRAP_FAILS.replace("ASSET", repr(str(asset))).replace("TEXTURE", repr(str(texture)))
+                               .replace("OUT", repr(str(out)))).strip().splitlines()[-1])
+    assert "no new UV map could be made (Error: smart_project found no faces)" in report["uv_map"]
+    assert "uv_map" not in report["materials"][0]
+    assert validator(str(out))["issues"]["numErrors"] == 0
+    document, _ = read_gltf(out)
+    assert "TEXCOORD_1" not in document["meshes"][0]["primitives"][0]["attributes"]
+
+
+def test_an_adapted_texture_on_mirrored_uvs_bakes_into_a_new_uv_map(adapted, tmp_path, validator):
+    import cv2
+
+    asset, adapted = adapted
     baked = tmp_path / "baked.glb"
     proc = scenefit("bake", asset, "--texture", adapted, "--out", baked, "--report", tmp_path / "bake.json")
     assert proc.returncode == 0, proc.stderr[-2000:]
