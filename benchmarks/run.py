@@ -186,7 +186,7 @@ def block_sections(renders: list[dict], textures: list[dict]) -> list[str]:
 
 
 PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "batch", "samplers", "study", "camera",
-         "speed", "start", "sd2")
+         "speed", "start", "uv_layout", "sd2")
 TITLES = {"convert": "Convert", "light": "Light", "compose": "Compose", "adapt": "Adapt (tiny models)",
           "run": "End to end: `scenefit run`"}
 
@@ -306,6 +306,7 @@ def main() -> int:
     separate = (  # (part, script and arguments, results stem, paragraphs before its table, title)
         ("speed", ["bench_real_speed.py"], "real_speed", 3, "`scenefit run` on real 2k assets and a 12 MP photo"),
         ("start", ["bench_start.py"], "start", 2, "The exact start against the paper's fit (`--init fit`), real assets"),
+        ("uv_layout", ["bench_uv_layout.py"], "uv_layout", 3, "Adaptation's new UV layout where real assets' UVs share texels"),
         ("sd2", ["bench_adapt.py", "--sd2-bench"], "adapt_sd2", 2, "Adapt at SD2's size on this CPU (random weights)"))
     for part, command, stem, before, title in separate:
         if part in parts and not args.quick:
