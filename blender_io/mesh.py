@@ -38,15 +38,16 @@ def mesh_from_object(obj, depsgraph, space: str = "object") -> Mesh:
     try:
         if me is None or len(me.polygons) == 0:
             raise InputError(f"Object '{obj.name}' has no faces; SceneFit needs a surface to texture.")
+        # No UV map at all: every corner at (0, 0), as Blender's own renders read it (one texel per
+        # material); adaptation then unwraps it anew (core.surface_layout: its UVs are all collapsed).
         uv_layer = me.uv_layers.active
-        if uv_layer is None:
-            raise InputError(f"Object '{obj.name}' has no UV map; unwrap it (UV > Smart UV Project) first.")
         me.calc_loop_triangles()
         n_tris, n_loops, n_verts = len(me.loop_triangles), len(me.loops), len(me.vertices)
         tri_loops = _get(me.loop_triangles, "loops", n_tris, 3, np.int32).ravel()
         co = _get(me.vertices, "co", n_verts, 3, np.float32)
         loop_vertex = _get(me.loops, "vertex_index", n_loops, 1, np.int32)
-        loop_uv = _get(uv_layer.uv, "vector", n_loops, 2, np.float32)
+        loop_uv = np.zeros((n_loops, 2), np.float32) if uv_layer is None else \
+            _get(uv_layer.uv, "vector", n_loops, 2, np.float32)
         loop_normal = _get(me.corner_normals, "vector", n_loops, 3, np.float32)
         tri_material = _get(me.loop_triangles, "material_index", n_tris, 1, np.int32)
     finally:

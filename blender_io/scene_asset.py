@@ -3,7 +3,7 @@ material_index numbers the distinct materials of all of them. A bike is its fram
 not the object with the most faces; compose places and lights the whole, and bake re-textures
 every object's materials and writes the whole scene back.
 
-Objects that cannot be textured (no faces, no UV map, no material) are left out of the texture and
+Objects that cannot be textured (no faces, no material) are left out of the texture and
 named in the notes; the exporter still writes them unchanged."""
 from __future__ import annotations
 

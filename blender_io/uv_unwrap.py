@@ -26,7 +26,7 @@ def new_uv_map_active(objects: list, materials: list):
     import bpy
 
     meshes = list({obj.data.name: obj.data for obj in objects}.values())
-    before = {me.name: me.uv_layers.active.name for me in meshes}
+    before = {me.name: me.uv_layers.active.name if me.uv_layers.active else None for me in meshes}
     for me in meshes:
         layer = me.uv_layers.new(name=NEW_UV_MAP, do_init=True)   # a copy of the active map
         me.uv_layers.active = layer
@@ -58,8 +58,9 @@ def new_uv_map_active(objects: list, materials: list):
         for obj in selected:
             obj.select_set(True)
         view_layer.objects.active = active
-        for me in meshes:
-            me.uv_layers.active = me.uv_layers[before[me.name]]
+        for me in meshes:   # (a mesh that had no UV map keeps the new one as its only one)
+            if before[me.name] is not None:
+                me.uv_layers.active = me.uv_layers[before[me.name]]
 
 
 def unwrapped_copies(objects: list, materials: list, read) -> tuple[object, dict]:

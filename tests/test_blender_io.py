@@ -65,10 +65,9 @@ bpy.ops.mesh.primitive_plane_add()
 bare = bpy.context.active_object
 bare.data.uv_layers.remove(bare.data.uv_layers[0])
 bare.data.update()  # tag it, so the depsgraph re-evaluates
-try:
-    mesh_from_object(bare, bpy.context.evaluated_depsgraph_get())
-except InputError as e:
-    errors["no_uv"] = str(e)
+# No UV map at all: read with every corner at (0, 0) (its material's plain colour), the mesh untouched.
+no_uv = mesh_from_object(bare, bpy.context.evaluated_depsgraph_get())
+out["no_uv"] = [float(abs(no_uv.uvs).max()), len(no_uv.faces), len(bare.data.uv_layers)]
 try:
     maps_from_material(None)
 except InputError as e:
@@ -141,7 +140,7 @@ def test_extraction_leaves_blender_data_untouched(extracted):
 
 def test_bad_input_raises_input_error_with_a_fix(extracted):
     errors = extracted["errors"]
-    assert "Smart UV Project" in errors["no_uv"]
+    assert extracted["no_uv"] == [0.0, 2, 0]   # a plane without UVs: read at (0, 0), no UV map added
     assert "has no material" in errors["no_material"]
     assert "Principled BSDF" in errors["no_bsdf"]
 

@@ -186,3 +186,45 @@ def test_an_adapted_texture_on_mirrored_uvs_bakes_into_a_new_uv_map(adapted, tmp
         return pixels[row, col]
 
     assert np.abs(read(new_uv[half]) - read(new_uv[partner])).mean() > 0.05
+
+
+def uv_less_ball(folder: Path) -> Path:
+    """An OBJ sphere with no texture coordinates at all and two plain-colour materials (top, bottom)."""
+    (folder / "ball.mtl").write_text("newmtl Red\nKd 0.8 0.1 0.1\nnewmtl Blue\nKd 0.1 0.2 0.85\n")
+    rings, segments = 8, 16
+    verts = [(0.0, 0.0, 1.0)] + [(np.sin(np.pi * i / rings) * np.cos(2 * np.pi * j / segments),
+                                  np.sin(np.pi * i / rings) * np.sin(2 * np.pi * j / segments), np.cos(np.pi * i / rings))
+                                 for i in range(1, rings) for j in range(segments)] + [(0.0, 0.0, -1.0)]
+    ring = lambda i, j: 1 + i * segments + j % segments   # noqa: E731
+    faces = [(0, ring(0, j), ring(0, j + 1)) for j in range(segments)]
+    faces += [f for i in range(rings - 2) for j in range(segments)
+              for f in ((ring(i, j), ring(i + 1, j), ring(i + 1, j + 1)), (ring(i, j), ring(i + 1, j + 1), ring(i, j + 1)))]
+    faces += [(ring(rings - 2, j), len(verts) - 1, ring(rings - 2, j + 1)) for j in range(segments)]
+    up = [f for f in faces if np.mean([verts[k][2] for k in f]) > 0]
+    lines = ["mtllib ball.mtl", *(f"v {x:.5f} {y:.5f} {z:.5f}" for x, y, z in verts), "usemtl Red",
+             *(f"f {a + 1} {b + 1} {c + 1}" for a, b, c in up), "usemtl Blue",
+             *(f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces if (a, b, c) not in up)]
+    (folder / "ball.obj").write_text("\n".join(lines) + "\n")
+    return folder / "ball.obj"
+
+
+def test_an_asset_with_no_uv_map_converts_exactly_and_an_adapted_texture_bakes_into_a_new_one(tmp_path, validator):
+    """No UV map at all (an OBJ without texture coordinates): it was refused ("unwrap it first"). Each
+    material reads as its plain colour (every corner at UV 0, 0, as Blender renders it); adaptation
+    finds every face collapsed and works in a new layout, and the bake writes it as the file's UV map."""
+    asset = uv_less_ball(tmp_path)
+    proc = scenefit("convert", asset, "--out", tmp_path / "convert", "--preset", "draft", "--quiet")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    report = json.loads((tmp_path / "convert" / "report.json").read_text())
+    assert [(m["name"], m["psnr_db"]) for m in report["decisions"]["materials"]] == [("Red", 100.0), ("Blue", 100.0)]
+    adapted = tmp_path / "adapted.pt"
+    python(ADAPTED.replace("TEXTURE", repr(str(tmp_path / "convert/maps/texture.pt")))
+           .replace("ASSET", repr(str(asset))).replace("OUT", repr(str(adapted))))
+    baked = tmp_path / "ball.glb"
+    proc = scenefit("bake", asset, "--texture", adapted, "--out", baked, "--report", tmp_path / "bake.json")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    materials = json.loads((tmp_path / "bake.json").read_text())["materials"]
+    assert [(m["name"], m.get("uv_map")) for m in materials] == [("Red", "SceneFit UV"), ("Blue", "SceneFit UV")]
+    assert validator(str(baked))["issues"]["numErrors"] == 0
+    document, _ = read_gltf(baked)
+    assert all("TEXCOORD_0" in p["attributes"] for m in document["meshes"] for p in m["primitives"])
