@@ -207,12 +207,7 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
                 raise InputError(f"A {width}x{height} bake needs the material's own maps; give a square size.")
             base = material_base(texture, index, len(names), height)
         maps = bake_texture(texture, raster.position, raster.border, raster.fill_index, base)
-        base = np.round(linear_to_srgb(maps[..., 0:3]) * 255.0).astype(np.uint8)
-        was = constants[index] if constants else {}
-        material = BakedMaterial(name=name, base_color=base,
-                                 roughness=_channel(maps[..., 3], raster.mask, was.get("roughness")),
-                                 metallic=_channel(maps[..., 4], raster.mask, was.get("metallic")),
-                                 coverage=raster.coverage, wrap=wrap)
+        material = _baked_material(name, maps, raster, constants[index] if constants else {}, wrap)
         if own_maps:
             material = replace(material, unchanged=unchanged_channels(material, own_maps[index], own_stack,
                                                                       raster.mask, texture.config))
@@ -246,7 +241,13 @@ def _remapped_material(texture: NeuralTexture, normalized: Mesh, remapped: Mesh 
     h, w = own.resolution
     values = sample_image(own.stacked_at(h, w), own_uv.reshape(-1, 2), wrap).reshape(side, side, -1)
     maps = bake_texture(texture, raster.position, raster.border, raster.fill_index, own_base_logit(texture, values))
+    return _baked_material(name, maps, raster, was, ("clamp", "clamp"), uv_map=uv_map, own_uv=own_uv)
+
+
+def _baked_material(name: str, maps: np.ndarray, raster, was: dict, wrap: tuple[str, str], **layout) -> BakedMaterial:
+    """Baked maps (H, W, 5) as glTF stores them: 8-bit sRGB base colour, roughness and metallic as images or,
+    where constant, factors (`was`: the material's own plain values)."""
     return BakedMaterial(name=name, base_color=np.round(linear_to_srgb(maps[..., 0:3]) * 255.0).astype(np.uint8),
                          roughness=_channel(maps[..., 3], raster.mask, was.get("roughness")),
                          metallic=_channel(maps[..., 4], raster.mask, was.get("metallic")),
-                         coverage=raster.coverage, wrap=("clamp", "clamp"), uv_map=uv_map, own_uv=own_uv)
+                         coverage=raster.coverage, wrap=wrap, **layout)

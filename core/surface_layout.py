@@ -259,9 +259,3 @@ def transferred_base(texture: NeuralTexture, mesh: Mesh, raster: UVRaster) -> to
     stack = torch.from_numpy(read.reshape(*raster.resolution, values.shape[2]))
     config = texture.config
     return to_logit(stack, torch.tensor(config.channel_min), torch.tensor(config.channel_max))
-
-
-def with_layout(texture: NeuralTexture, layout: SurfaceLayout | None) -> NeuralTexture:
-    """`texture` carrying `layout` (saved with it in texture.pt)."""
-    texture.layout = layout
-    return texture

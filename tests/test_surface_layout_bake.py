@@ -5,9 +5,6 @@ results (through the asset's own UVs they could only show one)."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -15,8 +12,9 @@ import pytest
 
 from scenefit.core.gltf_meshopt import read_gltf
 
+from conftest import built_and_converted, run_python, scenefit_process
+
 pytestmark = pytest.mark.blender
-ROOT = Path(__file__).resolve().parent.parent
 
 BUILD = r"""
 import bpy, numpy as np
@@ -89,27 +87,20 @@ print(json.dumps({"layers": [l.name for l in me.uv_layers], "position": co.resha
 
 
 def python(code: str) -> str:
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, cwd=ROOT)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return proc.stdout
+    """What `code` printed, run in a fresh interpreter (a fresh bpy)."""
+    return run_python(code).stdout
 
 
-def scenefit(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "scenefit.cli", *map(str, args)], capture_output=True, text=True,
-                          timeout=600, cwd=ROOT, env=dict(os.environ))
+scenefit = scenefit_process
 
 
 @pytest.fixture(scope="module")
 def adapted(tmp_path_factory) -> tuple[Path, Path]:
     """(the mirrored sphere's GLB, a texture adapted per surface in a new layout for it)."""
     folder = tmp_path_factory.mktemp("mirrored")
-    python(BUILD.replace("FOLDER", repr(str(folder))))
-    asset = folder / "mirrored.glb"
-    proc = scenefit("convert", asset, "--out", folder / "convert", "--preset", "draft", "--resolution", "64",
-                    "--quiet")
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    asset, converted = built_and_converted(BUILD, folder, "mirrored.glb")
     texture = folder / "adapted.pt"
-    python(ADAPTED.replace("TEXTURE", repr(str(folder / "convert/maps/texture.pt")))
+    python(ADAPTED.replace("TEXTURE", repr(str(converted)))
            .replace("ASSET", repr(str(asset))).replace("OUT", repr(str(texture))))
     return asset, texture
 
