@@ -174,62 +174,124 @@ def assets(run_py, tmp_path_factory) -> Path:
     return folder
 
 
-def convert_and_bake(asset: Path, work: Path) -> tuple[dict, dict]:
-    """(convert's report, the baked GLB's JSON) from `scenefit convert` then `scenefit bake` of `asset`."""
-    proc = scenefit("convert", str(asset), "--out", str(work / "convert"), "--preset", "draft", "--iterations", "20",
-                    "--resolution", "32", "--quiet")
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    report = json.loads((work / "convert" / "report.json").read_text())
-    baked = work / "baked.glb"
-    proc = scenefit("bake", str(asset), "--texture", str(work / "convert/maps/texture.pt"), "--out", str(baked),
-                    "--texture-size", "32", "--report", str(work / "bake.json"))
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return report, gltf_json(baked)
+# Each convert runs in one bpy process for the module (bpy costs seconds to start), as the command runs:
+# scenefit.cli.main, after Blender's startup scene (Cube, Camera, Light) is read again, so each convert
+# meets what a fresh process meets. Each bake is a process of its own, as `scenefit bake` is (bpy cannot
+# import a glTF after its exporter ran); the bakes run side by side.
+CONVERTS = r"""
+import contextlib, io, json
+import bpy
+from scenefit.cli import main
+
+results = {}
+for name, args in json.loads(JOBS):
+    bpy.ops.wm.read_factory_settings()
+    assert {o.name for o in bpy.data.objects} == {"Cube", "Camera", "Light"}
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main(args)
+    results[name] = {"code": code, "stderr": err.getvalue()}
+print("JSON" + json.dumps(results))
+"""
+
+DEFAULT_FIT = ("--preset", "draft", "--iterations", "20", "--resolution", "32", "--quiet")
+PALETTE_FIT = ("--preset", "draft", "--iterations", "300", "--resolution", "16", "--quiet")
 
 
-def test_a_skinned_gltf_converts_and_bakes_with_its_skin(assets, tmp_path):
+def _derived_assets(assets: Path, folder: Path) -> dict[str, Path]:
+    """The inputs made from the built ones by editing their glTF (no Blender needed)."""
+    from scenefit.core.gltf_meshopt import encoded_glb, read_gltf, write_glb
+
+    document, chunk = read_gltf(assets / "skinned.glb")   # the skinned mesh moved to the scene's root
+    nodes = document["nodes"]
+    body = next(i for i, n in enumerate(nodes) if n.get("name") == "Body")
+    next(n for n in nodes if body in n.get("children", []))["children"].remove(body)
+    document["scenes"][0]["nodes"].append(body)
+    write_glb(folder / "rooted.glb", document, chunk)
+    rewrite_glb_json(assets / "palette.glb", folder / "palette.glb", _texcoord_only_transform)
+    rewrite_glb_json(assets / "palette.glb", folder / "unlit.glb",
+                     lambda data: (_unlit(data), _texcoord_only_transform(data)))
+    return {"skinned": assets / "skinned.glb", "rooted": folder / "rooted.glb", "names": assets / "names.glb",
+            "tiled": assets / "tiled.glb", "palette": folder / "palette.glb", "unlit": folder / "unlit.glb",
+            "meshopt": encoded_glb(assets / "palette.glb", folder / "meshopt.glb"), "draco": assets / "draco.glb",
+            "painted": assets / "painted.glb"}
+
+
+@pytest.fixture(scope="module")
+def runs(assets, run_py, tmp_path_factory) -> dict[str, dict]:
+    """name -> {"asset", "work", "convert": (code, stderr), "bake": (code, stderr)} for every input here,
+    plus the two refusals of --object Camera ("camera.blend", "camera.glb": convert only)."""
+    folder = tmp_path_factory.mktemp("import_runs")
+    inputs = _derived_assets(assets, folder)
+    jobs = []
+    for name, asset in inputs.items():
+        fit = PALETTE_FIT if name == "palette" else DEFAULT_FIT
+        jobs.append((name, ["convert", str(asset), "--out", str(folder / name / "convert"), *fit]))
+    for suffix in (".blend", ".glb"):
+        jobs.append((f"camera{suffix}", ["convert", str(assets / f"names{suffix}"), "--object", "Camera", "--out",
+                                         str(folder / f"camera{suffix}")]))
+    proc = run_py(CONVERTS.replace("JOBS", repr(json.dumps(jobs))), timeout=900)
+    converted = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    out = {name: {"convert": (c["code"], c["stderr"])} for name, c in converted.items()}
+    bakes = {}
+    for name, asset in inputs.items():
+        work = folder / name
+        out[name].update(asset=asset, work=work)
+        if out[name]["convert"][0] == 0:
+            size = "16" if name == "palette" else "32"
+            bakes[name] = subprocess.Popen(
+                [sys.executable, "-m", "scenefit.cli", "bake", str(asset), "--texture",
+                 str(work / "convert/maps/texture.pt"), "--out", str(work / "baked.glb"), "--texture-size", size,
+                 "--report", str(work / "bake.json")], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                text=True, cwd=ROOT)
+    for name, bake in bakes.items():
+        _, err = bake.communicate(timeout=900)
+        out[name]["bake"] = (bake.returncode, err)
+    return out
+
+
+def convert_and_bake(runs: dict, name: str) -> tuple[dict, dict]:
+    """(convert's report, the baked GLB's JSON) of `scenefit convert` then `scenefit bake` of input `name`."""
+    run = runs[name]
+    assert run["convert"][0] == 0, run["convert"][1][-2000:]
+    assert run["bake"][0] == 0, run["bake"][1][-2000:]
+    return json.loads((run["work"] / "convert" / "report.json").read_text()), gltf_json(run["work"] / "baked.glb")
+
+
+def test_a_skinned_gltf_converts_and_bakes_with_its_skin(runs):
     """Blender's glTF importer makes bone shapes through the context object; in the startup scene that
     was the Cube of another scene ("Object 'Cube' not in collection 'Scene Collection'")."""
-    report, out = convert_and_bake(assets / "skinned.glb", tmp_path)
+    report, out = convert_and_bake(runs, "skinned")
     assert [m["name"] for m in report["decisions"]["materials"]] == ["Skin"]
     assert len(out["skins"]) == 1 and len(out["skins"][0]["joints"]) == 2
     assert {"Rig", "Body", "Bone", "Upper"} <= {n["name"] for n in out["nodes"]}
 
 
-def test_a_skinned_mesh_at_the_root_stays_at_the_root(assets, tmp_path, validator):
+def test_a_skinned_mesh_at_the_root_stays_at_the_root(runs, validator):
     """Blender parents a skinned mesh to its armature; glTF ignores a skinned mesh node's transform, so
     under a parent it only draws NODE_SKINNED_MESH_NON_ROOT. An input whose skinned mesh is a root node
     (the Khronos Fox) gets it back as a root node, and the validator no warning the input did not have;
     an input that parented it (Blender's own export) keeps it parented, as it came."""
-    from scenefit.core.gltf_meshopt import read_gltf, write_glb
-
-    document, chunk = read_gltf(assets / "skinned.glb")
-    nodes = document["nodes"]
-    body = next(i for i, n in enumerate(nodes) if n.get("name") == "Body")
-    parent = next(n for n in nodes if body in n.get("children", []))
-    parent["children"].remove(body)
-    document["scenes"][0]["nodes"].append(body)
-    rooted = tmp_path / "rooted.glb"
-    write_glb(rooted, document, chunk)
+    rooted = runs["rooted"]["asset"]   # the built file with Body moved to the scene's root
     assert "NODE_SKINNED_MESH_NON_ROOT" not in {m["code"] for m in validator(str(rooted))["issues"]["messages"]}
 
-    _, out = convert_and_bake(rooted, tmp_path / "rooted")
+    _, out = convert_and_bake(runs, "rooted")
     body = next(i for i, n in enumerate(out["nodes"]) if n["name"] == "Body")
     assert "skin" in out["nodes"][body] and body in out["scenes"][0]["nodes"]
     assert not any(body in n.get("children", []) for n in out["nodes"])
-    report = validator(str(tmp_path / "rooted" / "baked.glb"))["issues"]
+    report = validator(str(runs["rooted"]["work"] / "baked.glb"))["issues"]
     assert report["numErrors"] == 0 and "NODE_SKINNED_MESH_NON_ROOT" not in {m["code"] for m in report["messages"]}
 
-    _, out = convert_and_bake(assets / "skinned.glb", tmp_path / "parented")
+    _, out = convert_and_bake(runs, "skinned")
     body = next(i for i, n in enumerate(out["nodes"]) if n["name"] == "Body")
     assert any(body in n.get("children", []) for n in out["nodes"])
 
 
-def test_bake_keeps_the_names_the_startup_scene_also_uses(assets, tmp_path):
+def test_bake_keeps_the_names_the_startup_scene_also_uses(assets, runs):
     """A material 'Material' and a camera 'Camera' come back under exactly those names (the startup
     scene's own made them 'Material.001' and 'Camera.001'); the Mapping node's Cycles bake runs in the
     scene it reads (it stopped at "Object "Cube" is not in view layer")."""
-    report, out = convert_and_bake(assets / "names.glb", tmp_path)
+    report, out = convert_and_bake(runs, "names")
     assert [m["name"] for m in report["decisions"]["materials"]] == ["Material"]
     source = gltf_json(assets / "names.glb")
     assert [m["name"] for m in out["materials"]] == ["Material"]
@@ -265,22 +327,22 @@ def test_a_skinned_gltf_loads_into_a_temporary_scene_of_an_open_file(assets, run
 
 
 @pytest.mark.parametrize("suffix", (".blend", ".glb"))
-def test_object_naming_a_camera_lists_the_mesh_objects_there_are(assets, suffix, tmp_path):
+def test_object_naming_a_camera_lists_the_mesh_objects_there_are(runs, suffix):
     """--object naming a non-mesh object with no mesh under it says what it is and lists what can be
     taken (a .blend once listed "mesh objects: none": only the named object was appended)."""
-    proc = scenefit("convert", str(assets / f"names{suffix}"), "--object", "Camera", "--out", str(tmp_path / "out"))
-    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    code, stderr = runs[f"camera{suffix}"]["convert"]
+    assert code == 2 and "Traceback" not in stderr, stderr[-2000:]
     assert (f"'Camera' in 'names{suffix}' is a camera object with no mesh under it; give one of its mesh objects "
-            "or a node above them: Cube.") in proc.stderr, proc.stderr
+            "or a node above them: Cube.") in stderr, stderr
 
 
-def test_tiling_uvs_convert_and_bake_alike_and_keep_their_samplers(assets, tmp_path):
+def test_tiling_uvs_convert_and_bake_alike_and_keep_their_samplers(runs):
     """Convert fitted the atlas (UVs past a cell reached into the next one) while bake refused the
     material whose UVs all lie outside [0, 1] ("covers no texel centre"); now both wrap each
     material as its sampler says, cover the same texels, and the baked file keeps the samplers."""
-    report, out = convert_and_bake(assets / "tiled.glb", tmp_path)
+    report, out = convert_and_bake(runs, "tiled")
     converted = {m["name"]: m for m in report["decisions"]["materials"]}
-    baked = {m["name"]: m for m in json.loads((tmp_path / "bake.json").read_text())["materials"]}
+    baked = {m["name"]: m for m in json.loads((runs["tiled"]["work"] / "bake.json").read_text())["materials"]}
     for name in ("Tiles", "Mirror"):
         assert converted[name]["uv_coverage"] == baked[name]["uv_coverage"] == 1.0, (converted, baked)
     assert {m["name"]: m["wrap"] for m in report["materials"]} == {"Tiles": ["repeat", "repeat"],
@@ -324,29 +386,20 @@ def _texcoord_only_transform(data: dict) -> None:
     data["extensionsUsed"] = sorted(set(data.get("extensionsUsed", [])) | {"KHR_texture_transform"})
 
 
-def test_palette_textures_convert_and_bake_each_face_as_the_texel_it_samples(assets, tmp_path):
+def test_palette_textures_convert_and_bake_each_face_as_the_texel_it_samples(assets, runs):
     """UVs collapsed to points were refused ("has no UV area ... Unwrap it again"), which would lose
     the palette's colours. Each face now samples its texel in convert and bake alike, and the baked
     palette gives every face the colour it had. The importer's Mapping node for a texture transform
     that moves nothing is read through (it sent the image to a Cycles bake, which saw no UV area:
     Kenney's palettes came back black)."""
-    asset = tmp_path / "palette.glb"
-    rewrite_glb_json(assets / "palette.glb", asset, _texcoord_only_transform)
-    proc = scenefit("convert", str(asset), "--out", str(tmp_path / "convert"), "--preset", "draft", "--iterations",
-                    "300", "--resolution", "16", "--quiet")
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    report = json.loads((tmp_path / "convert" / "report.json").read_text())
+    report, out = convert_and_bake(runs, "palette")   # its texture transform names only the UV set
     assert report["psnr_covered_texels_db"] > 30, report["psnr_covered_texels_db"]
     assert not any("Cycles" in line for line in report["materials"][0]["read"]), report["materials"][0]["read"]
-    baked = tmp_path / "baked.glb"
-    proc = scenefit("bake", str(asset), "--texture", str(tmp_path / "convert/maps/texture.pt"), "--out", str(baked),
-                    "--texture-size", "16", "--report", str(tmp_path / "bake.json"))
-    assert proc.returncode == 0, proc.stderr[-2000:]
     converted = report["decisions"]["materials"][0]["uv_coverage"]
-    baked_coverage = json.loads((tmp_path / "bake.json").read_text())["materials"][0]["uv_coverage"]
+    work = runs["palette"]["work"]
+    baked_coverage = json.loads((work / "bake.json").read_text())["materials"][0]["uv_coverage"]
     assert converted == baked_coverage == round(20 / 256, 4)
-    out = gltf_json(baked)
-    image = glb_image(baked, out, out["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["index"])
+    image = glb_image(work / "baked.glb", out, out["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["index"])
     palette = np.load(assets / "palette.npy")
     rows, cols = np.divmod(3 * np.arange(20) + 1, 16)
     error = np.abs(image[rows, cols] - np.round(palette[rows, cols] * 255) / 255)  # the image's sRGB bytes
@@ -359,13 +412,11 @@ def _unlit(data: dict) -> None:
     data["extensionsUsed"] = sorted(set(data.get("extensionsUsed", [])) | {"KHR_materials_unlit"})
 
 
-def test_an_unlit_material_reads_its_colour_as_base_colour_and_stays_unlit(assets, tmp_path):
+def test_an_unlit_material_reads_its_colour_as_base_colour_and_stays_unlit(runs):
     """KHR_materials_unlit comes in as an Emission shader mixed by Light Path, no Principled BSDF:
     it was refused ("has no Principled BSDF node"). Its colour is the base colour now, and the
     baked file is unlit again, with the baked image as its colour."""
-    asset = tmp_path / "unlit.glb"
-    rewrite_glb_json(assets / "palette.glb", asset, lambda data: (_unlit(data), _texcoord_only_transform(data)))
-    report, out = convert_and_bake(asset, tmp_path)
+    report, out = convert_and_bake(runs, "unlit")
     material = report["materials"][0]
     assert any(line.startswith("unlit (KHR_materials_unlit)") for line in material["kept"]), material
     assert any(line.startswith("Base Color <- image 'palette'") for line in material["read"]), material["read"]
@@ -374,28 +425,24 @@ def test_an_unlit_material_reads_its_colour_as_base_colour_and_stays_unlit(asset
     assert "baseColorTexture" in out["materials"][0]["pbrMetallicRoughness"]
 
 
-def test_a_meshopt_compressed_file_converts_and_bakes(assets, tmp_path):
+def test_a_meshopt_compressed_file_converts_and_bakes(runs):
     """Blender 5.0's importer has no EXT_meshopt_compression decoder: such a file (valid per the
     validator) was refused "check that it is a valid '.glb' file, or export it again"."""
-    from scenefit.core.gltf_meshopt import encoded_glb
-
-    asset = encoded_glb(assets / "palette.glb", tmp_path / "meshopt.glb")
-    report, out = convert_and_bake(asset, tmp_path)
+    report, out = convert_and_bake(runs, "meshopt")
     assert report["decisions"]["materials"][0]["uv_coverage"] == round(20 / 32 ** 2, 4)  # each face its texel
     assert [m["name"] for m in out["materials"]] == ["Palette"] and len(out["meshes"]) == 1
 
 
-def test_bake_compresses_like_the_input_keeps_tangents_and_writes_the_chosen_textures(assets, tmp_path,
-                                                                                         validator):
+def test_bake_compresses_like_the_input_keeps_tangents_and_writes_the_chosen_textures(runs, tmp_path, validator):
     """The bake of a Draco file came back uncompressed and without the TANGENT a normal map needs (a
     validator warning the input did not have). It is compressed as the input by default, carries
     tangents, and --compress / --textures / --max-texture choose otherwise."""
-    asset = assets / "draco.glb"
-    _, out = convert_and_bake(asset, tmp_path)
+    asset, texture = runs["draco"]["asset"], runs["draco"]["work"] / "convert/maps/texture.pt"
+    _, out = convert_and_bake(runs, "draco")
     assert "KHR_draco_mesh_compression" in out["extensionsUsed"]
     assert all("TANGENT" in p["attributes"] for mesh in out["meshes"] for p in mesh["primitives"])
     baked = tmp_path / "meshopt.glb"
-    proc = scenefit("bake", str(asset), "--texture", str(tmp_path / "convert/maps/texture.pt"), "--out", str(baked),
+    proc = scenefit("bake", str(asset), "--texture", str(texture), "--out", str(baked),
                     "--texture-size", "32", "--compress", "meshopt", "--textures", "jpeg", "--max-texture", "16",
                     "--report", str(tmp_path / "meshopt.json"))
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -406,21 +453,21 @@ def test_bake_compresses_like_the_input_keeps_tangents_and_writes_the_chosen_tex
     assert out["images"][base["source"]]["mimeType"] == "image/jpeg"
     assert report["texture_size"] == 16 and report["output"]["compress"] == "meshopt"
     assert validator(str(baked))["issues"]["numErrors"] == 0   # the conftest's validator (tools/gltf_validate.js)
-    proc = scenefit_here("bake", str(asset), "--texture", str(tmp_path / "convert/maps/texture.pt"), "--out",
+    proc = scenefit_here("bake", str(asset), "--texture", str(texture), "--out",
                          str(tmp_path / "x.glb"), "--max-texture", "100")   # refused before Blender is needed
     assert proc.returncode == 2 and "--max-texture must be a power of two between 4 and 8192, got 100." in proc.stderr
 
 
-def test_vertex_colours_are_baked_into_the_base_colour_and_not_multiplied_in_again(assets, tmp_path):
+def test_vertex_colours_are_baked_into_the_base_colour_and_not_multiplied_in_again(runs):
     """Vertex colours are read as base colour (Blender's bake of the Color Attribute chain); the
     exporter then still wrote COLOR_0 (and a second, made-up COLOR_1), which glTF multiplies into
     the baked base colour that already holds them: the colours came out squared."""
-    asset = assets / "painted.glb"
-    assert any("COLOR_0" in p["attributes"] for m in gltf_json(asset)["meshes"] for p in m["primitives"])
-    report, out = convert_and_bake(asset, tmp_path)
+    assert any("COLOR_0" in p["attributes"] for m in gltf_json(runs["painted"]["asset"])["meshes"]
+               for p in m["primitives"])
+    report, out = convert_and_bake(runs, "painted")
     assert any("Color Attribute" in line for line in report["materials"][0]["read"]), report["materials"][0]["read"]
     assert not any(name.startswith("COLOR_") for m in out["meshes"] for p in m["primitives"] for name in p["attributes"])
-    image = glb_image(tmp_path / "baked.glb", out, out["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]
+    image = glb_image(runs["painted"]["work"] / "baked.glb", out, out["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]
                       ["index"])
     size = image.shape[0]
     u, v = np.meshgrid((np.arange(size) + 0.5) / size, 1 - (np.arange(size) + 0.5) / size)
