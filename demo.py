@@ -19,12 +19,14 @@ from .core.asset_io import is_asset_folder, load_asset_folder
 from .core.compose import ComposeInputs, compose_to_folder, light_camera
 from .core.imageio import read_image, write_image
 from .core.lighting import load_photo
-from .core.placement import Placement
+from .core.photo import develop_photo, perspective_view, studiolight_path
+from .core.pipeline import (constant_environment, contact_sheet, environment_info, load_environment,
+                            write_report)
 from .core.presets import stage_config
-from .core.photo import PhotoCamera, develop_photo, perspective_view, studiolight_path
-from .core.pipeline import constant_environment, contact_sheet, environment_info, load_environment, write_report
 from .core.progress import ProgressCallback, emit
 from .core.run import RunConfig, run_pipeline
+from .core.scene.camera import PhotoCamera
+from .core.scene.placement import Placement
 from .core.surface_layout import texture_view
 from .core.texture.bake import load_neural_texture
 

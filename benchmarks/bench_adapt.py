@@ -19,11 +19,11 @@ import torch
 
 from scenefit.core.adapt import AdaptConfig, AdaptInputs, StageSpec, adapt_texture
 from scenefit.core.guidance import ModelConfig
-from scenefit.core.placement import Placement
-from scenefit.devtools.tiny_models import SD2_UNET, build_tiny_pair, build_tiny_sd
-from scenefit.core.primitives import uv_sphere
 from scenefit.core.presets import stage_config
+from scenefit.core.primitives import uv_sphere
+from scenefit.core.scene.placement import Placement
 from scenefit.core.texture import NeuralTexture, rasterize_uv
+from scenefit.devtools.tiny_models import SD2_UNET, build_tiny_pair, build_tiny_sd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from results_files import machine_load  # noqa: E402

@@ -26,8 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from scenefit.core.imageio import read_image, write_image
-from scenefit.core.photo import PhotoCamera, develop_photo, perspective_view
+from scenefit.core.photo import develop_photo, perspective_view
 from scenefit.core.photo_camera import estimate_photo_camera
+from scenefit.core.scene.camera import PhotoCamera
 
 RESULTS = Path(__file__).resolve().parent / "results"
 CORPUS_HDRI = Path(__file__).resolve().parents[2] / "shared" / "corpus" / "hdri"

@@ -24,8 +24,9 @@ from scenefit.core.compose import ComposeInputs, compose
 from scenefit.core.convert import target_stack
 from scenefit.core.imageio import read_image
 from scenefit.core.lighting import estimate_light
-from scenefit.core.photo import PhotoCamera, develop_photo, perspective_view
+from scenefit.core.photo import develop_photo, perspective_view
 from scenefit.core.presets import stage_config
+from scenefit.core.scene.camera import PhotoCamera
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from results_files import machine_load, write_results  # noqa: E402

@@ -22,8 +22,9 @@ from scenefit.core.compose import ComposeConfig, ComposeInputs, build_compose
 from scenefit.core.convert import target_stack
 from scenefit.core.denoise import denoise
 from scenefit.core.imageio import linear_to_srgb
-from scenefit.core.photo import PhotoCamera, studiolight_path
+from scenefit.core.photo import studiolight_path
 from scenefit.core.pipeline import load_environment
+from scenefit.core.scene.camera import PhotoCamera
 
 RESULTS = Path(__file__).resolve().parent / "results"
 REFERENCE_SPP = 1024

@@ -33,12 +33,13 @@ import torch
 
 from scenefit.core.imageio import read_image, srgb_to_linear
 from scenefit.core.lighting import estimate_light
-from scenefit.core.presets import stage_config
 from scenefit.core.lighting.cues import CueConfig
 from scenefit.core.lighting.estimate import default_object
 from scenefit.core.lighting.hdr import ApparatusScene, hdr_from_scales, tonemap_preview
 from scenefit.core.lighting.measure import SphereProbe, angular_error_deg, compare_maps, object_mse
-from scenefit.core.photo import PhotoCamera, camera_exposure, develop_photo, perspective_view, studiolight_path
+from scenefit.core.photo import camera_exposure, develop_photo, perspective_view, studiolight_path
+from scenefit.core.presets import stage_config
+from scenefit.core.scene.camera import PhotoCamera
 
 RESULTS = Path(__file__).resolve().parent / "results"
 DEVELOPMENT = {"studio": "indoor", "interior": "indoor", "city": "outdoor", "forest": "outdoor"}

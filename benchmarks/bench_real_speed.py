@@ -32,7 +32,8 @@ GOALS = {"draft": 30.0, "balanced": 120.0}   # seconds (issue 23)
 
 def twelve_megapixels(path: Path, hdri: str = "vestibule_1k") -> Path:
     from scenefit.core.imageio import read_image, write_image
-    from scenefit.core.photo import PhotoCamera, develop_photo, perspective_view
+    from scenefit.core.photo import develop_photo, perspective_view
+    from scenefit.core.scene.camera import PhotoCamera
 
     hdr = read_image(CORPUS / "hdri" / f"{hdri}.hdr")[..., :3]
     camera = PhotoCamera(yaw_deg=90.0, pitch_deg=-10.0, fov_deg=60.0, width=PHOTO[0], height=PHOTO[1])

@@ -181,7 +181,8 @@ def status(row: dict) -> str:
 def photo_from(hdri: str, path: Path) -> Path:
     """A 640x480, 60° view of a real HDR panorama, auto-exposed and 8-bit, as a camera would take it."""
     from scenefit.core.imageio import read_image, write_image
-    from scenefit.core.photo import PhotoCamera, develop_photo, perspective_view
+    from scenefit.core.photo import develop_photo, perspective_view
+    from scenefit.core.scene.camera import PhotoCamera
 
     hdr = read_image(CORPUS / "hdri" / f"{hdri}.hdr")[..., :3]
     radiance = perspective_view(hdr, PhotoCamera(yaw_deg=90.0, pitch_deg=-10.0, fov_deg=60.0, width=640, height=480))

@@ -51,7 +51,8 @@ print("RESULT", json.dumps({"peak_mb": peak_mb()}))
 PHOTOS = """
 import numpy as np, cv2
 from scenefit.core.imageio import read_image
-from scenefit.core.photo import PhotoCamera, camera_exposure, develop_photo, perspective_view, studiolight_path
+from scenefit.core.photo import camera_exposure, develop_photo, perspective_view, studiolight_path
+from scenefit.core.scene.camera import PhotoCamera
 def development_photo(name, yaw):
     hdr = read_image(studiolight_path(name))[..., :3]
     camera = PhotoCamera(yaw_deg=yaw, pitch_deg=-10.0, fov_deg=60.0, width=320, height=240)
@@ -117,9 +118,9 @@ COMPOSE = PHOTOS + """
 from dataclasses import replace
 from scenefit.core.asset_io import load_asset_folder
 from scenefit.core.compose import ComposeInputs, compose
-from scenefit.core.presets import stage_config
 from scenefit.core.convert import target_stack
 from scenefit.core.imageio import linear_to_srgb
+from scenefit.core.presets import stage_config
 camera, photo, hdr = development_photo("city", 90.0)
 mesh, maps = load_asset_folder(ASSET)
 inputs = ComposeInputs(mesh, target_stack(maps, 512), photo, (160.0, 200.0), resized(hdr, 128), camera)
@@ -149,10 +150,10 @@ RUN = PHOTOS + """
 from dataclasses import replace
 from scenefit.core.asset_io import load_asset_folder
 from scenefit.core.compose import ComposeInputs, compose
-from scenefit.core.presets import stage_config
 from scenefit.core.convert import target_stack
 from scenefit.core.imageio import read_image, write_image
 from scenefit.core.lighting.measure import SphereProbe, compare_maps
+from scenefit.core.presets import stage_config
 from scenefit.core.run import RunConfig, run_pipeline
 camera, photo, hdr = development_photo("city", 90.0)
 photo_path = write_image(OUT + "/photo.png", photo)

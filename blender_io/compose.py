@@ -2,7 +2,7 @@
 shadow-catcher floor under the asset. After `setup_composite`, F12 in Cycles renders the composite.
 
 Only new objects and data are made (tagged ["scenefit"]); the asset is not moved: the camera is
-placed around it (blender_io/placement.py) looking along +Y, the direction the light stage takes
+placed around it (core/scene/asset_pose.py `camera_for_placement`) looking along +Y, the direction the light stage takes
 for the photo, so the estimated World lights the asset from the right side.
 """
 from __future__ import annotations
@@ -14,8 +14,8 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..core.imageio import CHECK_SIDE, read_image, stored_orientation
-from ..core.photo import PHOTO_YAW_DEG, PhotoCamera
-from .placement import camera_for_placement, camera_pose
+from ..core.scene.asset_pose import camera_for_placement
+from ..core.scene.camera import PHOTO_YAW_DEG, PhotoCamera, camera_pose
 from .world import world_controls
 
 TAG = "scenefit"

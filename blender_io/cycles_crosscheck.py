@@ -12,7 +12,7 @@ from the two floor renders instead.) The photo goes behind in numpy, as Blender'
 
 Geometry is core's: the camera stands CAMERA_HEIGHT above the floor z = 0 looking along the
 PhotoCamera's forward with its up (horizontal field of view), and the asset is the mesh
-core.compose.placed_mesh returns (already in world space).
+core.scene.asset_pose.placed_mesh returns (already in world space).
 """
 from __future__ import annotations
 
@@ -21,9 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.lighting.panorama import CAMERA_HEIGHT
 from ..core.mesh import Mesh
-from ..core.photo import PhotoCamera
+from ..core.scene.camera import CAMERA_HEIGHT, PhotoCamera
 from .compose import camera_rotation, new_plane, transparent_cycles
 from .material import write_result_material
 from .world import assign_world, world_from_hdr

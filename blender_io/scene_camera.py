@@ -1,6 +1,6 @@
 """The artist's own camera. When the scene's active camera shows the photo as its background (as the
 fSpy importer and matching by eye leave it), SceneFit composes through that camera as it is: its field
-of view, pitch, roll and position, with the asset where the artist put it (blender_io/placement.py's
+of view, pitch, roll and position, with the asset where the artist put it (core/scene/asset_pose.py's
 asset_in_view turns that arrangement into the pipeline's placement, size and turn). Nothing of the
 artist's is changed: the camera is read, never moved.
 """
@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError
-from .placement import SceneView, asset_in_view
+from ..core.scene.asset_pose import SceneView, asset_in_view
 
 TAG = "scenefit"   # SceneFit's own objects carry it (blender_io/compose.py); its camera is SceneFit's to move
 
@@ -69,7 +69,7 @@ def horizontal_fov_deg(camera, width: int, height: int) -> float:
 
 
 def scene_view(camera, obj, photo_size: tuple[int, int], depsgraph) -> tuple[SceneView, list[str]]:
-    """The arrangement of `obj` seen through the artist's `camera` (blender_io/placement.SceneView) and
+    """The arrangement of `obj` seen through the artist's `camera` (core/scene/asset_pose.SceneView) and
     notes on what SceneFit does not model (lens shift, a tilted or unevenly scaled asset). `obj` may be a
     list of the objects of one asset: read in world space, they stand as they are (no turn of their own)."""
     width, height = photo_size

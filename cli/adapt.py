@@ -84,7 +84,7 @@ def _adapt(args, out: Path) -> int:
 
 
 def add_parser(sub) -> None:
-    from ..core.placement import DEFAULT_OBJECT_SIZE
+    from ..core.scene.placement import DEFAULT_OBJECT_SIZE
 
     p = sub.add_parser("adapt", help="restyle a converted texture with diffusion guidance (or texture/edit from a "
                                      "prompt); several GPUs: torchrun --nproc_per_node N -m scenefit.cli adapt ...")

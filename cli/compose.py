@@ -12,7 +12,7 @@ def run(args) -> int:
     from ..core.convert import asset_stack
     from ..core.lighting import load_photo
     from ..core.pipeline import environment_info, load_environment
-    from ..core.placement import Placement
+    from ..core.scene.placement import Placement
     from ..core.surface_layout import texture_view
     from ..core.texture.bake import load_neural_texture
 
@@ -47,7 +47,7 @@ def run(args) -> int:
 
 def add_parser(sub) -> None:
     from ..core.compose import SAMPLER_TYPES, SHADOW_TYPES
-    from ..core.placement import DEFAULT_OBJECT_SIZE
+    from ..core.scene.placement import DEFAULT_OBJECT_SIZE
 
     p = sub.add_parser("compose", help="render the asset into the photo under the estimated light, with its shadow")
     add_asset_args(p)

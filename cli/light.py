@@ -114,7 +114,7 @@ def _light(args, out: Path) -> int:
 def shadow_sun(points: list[str], camera, info: dict, hw: tuple[int, int]) -> tuple[float, float]:
     """--sun-from-shadow FOOT TOP TIP as --sun's (azimuth, elevation), through the photo's camera."""
     from ..core.lighting.shadow_hint import sun_from_shadow
-    from ..core.placement import Placement
+    from ..core.scene.placement import Placement
 
     foot, top, tip = (Placement.parse(p, (info["size"][0], info["size"][1])).pixel(hw) for p in points)
     return sun_from_shadow(camera, foot, top, tip)

@@ -55,9 +55,9 @@ def positive_float(text: str) -> float:
 
 
 def placement_point(text: str) -> tuple[float, float]:
-    """--at X,Y: where the object stands (every command; core/placement.py parse_point says what is taken)."""
+    """--at X,Y: where the object stands (every command; core/scene/placement.py parse_point says what is taken)."""
     from ..core.errors import InputError
-    from ..core.placement import parse_point
+    from ..core.scene.placement import parse_point
 
     try:
         return parse_point(text)
@@ -217,9 +217,9 @@ def add_old_photo_elevation_arg(p: argparse.ArgumentParser) -> None:
 
 
 def add_placement_args(p: argparse.ArgumentParser, required: bool = False, object_size: float | None = None) -> None:
-    """Where the object goes in the photo (core/placement.py): --at, and --object-size unless the
+    """Where the object goes in the photo (core/scene/placement.py): --at, and --object-size unless the
     command has no use for it (object_size None)."""
-    from ..core.placement import DEFAULT_AT
+    from ..core.scene.placement import DEFAULT_AT
 
     p.add_argument("--at", required=required, type=placement_point, default=None if required else DEFAULT_AT,
                    help="X,Y of the object in the photo: fractions of its width and height (both <= 1), or pixels of "
@@ -232,7 +232,7 @@ def add_placement_args(p: argparse.ArgumentParser, required: bool = False, objec
 def placement(args, photo_hw: tuple[int, int]):
     """The Placement of --at and --object-size in a photo of photo_hw, as stored (one parser, one error
     message)."""
-    from ..core.placement import DEFAULT_OBJECT_SIZE, Placement
+    from ..core.scene.placement import DEFAULT_OBJECT_SIZE, Placement
 
     return Placement.parse(args.at, (photo_hw[1], photo_hw[0]), getattr(args, "object_size", DEFAULT_OBJECT_SIZE))
 
@@ -257,6 +257,7 @@ def require(args, *names: str) -> None:
     missing = [n for n in names if not getattr(args, n.lstrip("-").replace("-", "_"), None)]
     if missing:
         raise InputError(f"`scenefit {args.command}` needs {' and '.join(missing)} (only --dry-run runs without).")
+
 
 def add_prompt_service_args(p: argparse.ArgumentParser, prefix: str = "") -> None:
     """The chat endpoint that writes scene-conditional prompts. `prefix` ("prompt-") keeps them apart

@@ -54,7 +54,7 @@ def run(args) -> int:
 
 def add_parser(sub) -> None:
     from ..core.compose import SHADOW_TYPES
-    from ..core.placement import DEFAULT_OBJECT_SIZE
+    from ..core.scene.placement import DEFAULT_OBJECT_SIZE
 
     p = sub.add_parser("run", help="convert, light, adapt, compose and bake in one go (resumable)")
     add_asset_args(p)

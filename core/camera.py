@@ -12,23 +12,9 @@ import numpy as np
 
 from .errors import InputError
 from .mesh import NORMALIZED_RADIUS
+from .scene.frame import look_frame
 
 CAMERA_DISTANCE = 2.0  # d_cam in the paper
-WORLD_UP = (0.0, 0.0, 1.0)
-
-
-def look_frame(forward) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(forward, right, up) unit vectors of a camera looking along `forward` with the world's +Z up
-    (Blender's convention: right = forward x Z, up = right x forward). The one camera frame every
-    camera in SceneFit uses: orbit cameras, photo cameras, and ε_ψ's camera condition."""
-    f = np.asarray(forward, np.float64)
-    f = f / np.linalg.norm(f)
-    right = np.cross(f, WORLD_UP)
-    norm = np.linalg.norm(right)
-    if norm < 1e-12:
-        raise InputError("A camera looking straight up or down has no horizon to orient it; tilt it a little.")
-    right /= norm
-    return f, right, np.cross(right, f)
 
 
 def fov_from_multiplier(fov_multiplier: float, radius: float = NORMALIZED_RADIUS,

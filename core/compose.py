@@ -5,7 +5,7 @@
     result = job.finish()                    # denoise, matte, composite, report
     write_compose_outputs(result, out_dir)
 
-Geometry is the light stage's (core/lighting/panorama.py): the photo camera (`PhotoCamera`) stands
+Geometry is the scene's (core/scene/): the photo camera (`PhotoCamera`) stands
 CAMERA_HEIGHT above the floor z = 0, and the asset stands on the floor where the ray through the
 picked pixel meets it (`place_on_floor`), turned to face the camera and scaled so that it spans
 `size` of the photo's height. The light map is latitude-longitude in Blender's convention and in
@@ -40,19 +40,20 @@ from .backend import init_mitsuba
 from .denoise import DENOISER_TYPES, denoise, oidn_available
 from .errors import InputError, check_choice
 from .imageio import linear_to_srgb, srgb_to_linear
-from .lighting.panorama import CAMERA_HEIGHT, pixel_ray, place_on_floor
-from .mesh import Mesh, normalize_to_unit_sphere, vertex_normals
-from .photo import PhotoCamera
-from .placement import DEFAULT_OBJECT_SIZE
+from .mesh import Mesh, normalize_to_unit_sphere
 from .progress import ProgressCallback, check_cancel, emit
-from .render import ENVMAP_TO_WORLD, _mitsuba_mesh, material_shapes
+from .render import _mitsuba_mesh, material_shapes
+from .scene.asset_pose import ASSUMED_CAMERA_HEIGHT_M, ObjectPlacement, place_asset, placed_mesh
+from .scene.camera import CAMERA_HEIGHT, PhotoCamera, camera_origin, horizon_row
+from .scene.frame import ENVMAP_TO_WORLD
+from .scene.mattes import composite_linear, paper_shadow_matte
+from .scene.placement import DEFAULT_OBJECT_SIZE
 
 SHADOW_TYPES = ("ratio", "paper", "none")
 SAMPLER_TYPES = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
 # The composite is made at the photo's own size up to this long side (a 24 MP photo is halved), which
 # keeps the stage's memory near 1.5 GB; the light stage works on a smaller copy.
 COMPOSE_MAX_SIDE = 4096
-ASSUMED_CAMERA_HEIGHT_M = 1.5   # to state placements in metres: a hand-held camera at chest height
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
 
 
@@ -116,180 +117,6 @@ class ComposeInputs:
     camera: PhotoCamera               # the light stage's photo camera (its width/height are replaced by the photo's)
     turn_deg: float = 0.0             # extra turn about Z after facing the camera (the adapt stage's global
                                       # views turn the asset so the photo camera sees the side a view samples)
-
-
-@dataclass(frozen=True)
-class ObjectPlacement:
-    """Where the asset stands and how big it is; world units are camera heights (CAMERA_HEIGHT = 1)."""
-
-    pixel: tuple[float, float]
-    base: tuple[float, float, float]    # the point under the asset's centre (on the floor when on_floor)
-    on_floor: bool
-    why: str
-    scale: float                        # normalised mesh (radius 0.5) -> world
-    facing_deg: float                   # rotation about Z that turns the asset's front (-Y) to the camera
-    height: float                       # world height of the placed asset
-    pixel_box: tuple[int, int, int, int]  # x0, y0, x1, y1 of its projection (clipped to the photo)
-
-    def report(self) -> dict:
-        m = ASSUMED_CAMERA_HEIGHT_M / CAMERA_HEIGHT
-        return {"pixel": [round(v, 2) for v in self.pixel], "on_floor": self.on_floor, "why": self.why,
-                "base_camera_heights": [round(v, 4) for v in self.base],
-                "base_m": [round(v * m, 3) for v in self.base],
-                "distance_m": round(float(np.linalg.norm(np.subtract(self.base, (0, 0, CAMERA_HEIGHT)))) * m, 3),
-                "height_m": round(self.height * m, 3), "scale": round(self.scale, 5),
-                "facing_deg": round(self.facing_deg, 2), "pixel_box": list(self.pixel_box),
-                "metres_assume": f"camera {ASSUMED_CAMERA_HEIGHT_M} m above the floor"}
-
-
-def camera_origin() -> np.ndarray:
-    return np.array([0.0, 0.0, CAMERA_HEIGHT])
-
-
-def rotation_z(deg: float) -> np.ndarray:
-    """The 3x3 rotation by `deg` about the world's Z (up) axis."""
-    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _offset(lo: np.ndarray, hi: np.ndarray, scale: float, anchor, on_floor: bool) -> np.ndarray:
-    """Translation putting the scaled, rotated asset (bounds lo, hi) at `anchor`: its bottom on the floor
-    under the anchor when it stands, its middle on the anchor when it floats."""
-    centre = (lo + hi) / 2
-    z0 = -lo[2] * scale if on_floor else anchor[2] - centre[2] * scale
-    return np.array([anchor[0] - centre[0] * scale, anchor[1] - centre[1] * scale, z0])
-
-
-# An asset this many times wider than tall (a ground plane around a small thing) reaches behind the
-# camera at any useful size, since --object-size sets its height: the message then says what helps.
-FLAT_RATIO = 20.0
-
-
-def _behind_the_camera(size: float, extent: np.ndarray) -> str:
-    ratio = float(max(extent[0], extent[1]) / max(extent[2], 1e-9))
-    if ratio >= FLAT_RATIO:
-        return (f"The asset is {ratio:.0f} times as wide as it is tall (a ground plane?): at --object-size {size:g} it "
-                "would reach behind the camera, and only a tiny one fits; give the object to place with --object.")
-    return (f"At --object-size {size:g} the asset would reach behind the camera; pick a smaller size or a point "
-            "further away.")
-
-
-def place_asset(normalized: Mesh, camera: PhotoCamera, pixel: tuple[float, float], size: float,
-                turn_deg: float = 0.0) -> ObjectPlacement:
-    """Stand the normalised asset on the floor under `pixel` (or float it on the pixel's ray when the
-    pixel is above the horizon), facing the camera (then turned by `turn_deg` about Z), scaled so its
-    projection spans `size` x photo height."""
-    floor = place_on_floor(camera, pixel)
-    origin = camera_origin()
-    on_floor = not floor.clamped
-    if on_floor:
-        anchor = floor.object_position
-        why = "the picked point is on the floor: the asset stands there"
-    else:  # as far as the nearest floor point in that direction, on the picked pixel's own ray
-        anchor = origin + pixel_ray(camera, *pixel) * float(np.linalg.norm(floor.object_position - origin))
-        why = "the picked point is above the horizon: the asset floats on its ray and casts no floor shadow"
-    to_camera = origin[:2] - anchor[:2]
-    # front (-Y) -> towards the camera, then the requested turn
-    facing = math.degrees(math.atan2(to_camera[1], to_camera[0])) + 90.0 + turn_deg
-    rotated = normalized.positions.astype(np.float64) @ rotation_z(facing).T
-    lo, hi = rotated.min(axis=0), rotated.max(axis=0)
-
-    def placed(scale: float) -> np.ndarray:
-        return rotated * scale + _offset(lo, hi, scale, anchor, on_floor)
-
-    target = size * camera.height
-    distance = float(np.linalg.norm(anchor - origin))
-    _, _, _, _, half_h = camera.basis()
-    scale = size * 2 * half_h * distance / max(hi[2] - lo[2], 1e-6)
-    forward = camera.basis()[0]
-    for _ in range(8):  # the projected height is nearly linear in the scale; a few fixed-point steps
-        world = placed(scale)
-        if ((world - origin) @ forward).min() <= 1e-3:
-            raise InputError(_behind_the_camera(size, hi - lo))
-        ys = camera.project(world, origin)[:, 1]
-        extent = float(ys.max() - ys.min())
-        scale *= target / max(extent, 1e-6)
-    world = placed(scale)
-    xy = camera.project(world, origin)
-    x0, y0 = np.floor(xy.min(axis=0)).astype(int)
-    x1, y1 = np.ceil(xy.max(axis=0)).astype(int)
-    box = (int(np.clip(x0 - 2, 0, camera.width)), int(np.clip(y0 - 2, 0, camera.height)),
-           int(np.clip(x1 + 2, 0, camera.width)), int(np.clip(y1 + 2, 0, camera.height)))
-    if box[2] <= box[0] or box[3] <= box[1]:
-        raise InputError("The placed asset falls outside the photo; pick a point inside it.")
-    base = (anchor[0], anchor[1], 0.0 if on_floor else anchor[2])
-    return ObjectPlacement(tuple(float(v) for v in pixel), tuple(float(v) for v in base), on_floor, why,
-                           float(scale), float(facing), float((hi[2] - lo[2]) * scale), box)
-
-
-def placement_transform(normalized: Mesh, placement: ObjectPlacement) -> tuple[np.ndarray, float, np.ndarray]:
-    """(rotation R, scale s, offset t) with world = R @ p * s + t for the normalised mesh's points p."""
-    rotation = rotation_z(placement.facing_deg)
-    rotated = normalized.positions.astype(np.float64) @ rotation.T
-    offset = _offset(rotated.min(axis=0), rotated.max(axis=0), placement.scale, placement.base, placement.on_floor)
-    return rotation, placement.scale, offset
-
-
-def placed_mesh(normalized: Mesh, placement: ObjectPlacement) -> Mesh:
-    """The normalised mesh moved into the photo's world (the caller's mesh is not touched)."""
-    rotation, scale, offset = placement_transform(normalized, placement)
-    normals = normalized.normals if normalized.normals is not None else vertex_normals(normalized.positions,
-                                                                                       normalized.faces)
-    return Mesh.from_arrays(normalized.positions.astype(np.float64) @ rotation.T * scale + offset, normalized.faces,
-                            normalized.uvs, np.asarray(normals, np.float64) @ rotation.T, normalized.name,
-                            normalized.material_index, normalized.wraps, normalized.atlas)
-
-
-def photo_camera_in_object_frame(camera: PhotoCamera, normalized: Mesh, placement: ObjectPlacement
-                                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The photo camera's (origin, forward, up) in the normalised asset's own frame: rendering the
-    unmoved asset from there shows exactly what the photo camera sees of the placed one (a similarity
-    keeps angles, so the field of view is the same)."""
-    rotation, scale, offset = placement_transform(normalized, placement)
-    forward, _, up, _, _ = camera.basis()
-    origin = rotation.T @ (camera_origin() - offset) / scale
-    return origin, rotation.T @ forward, rotation.T @ up
-
-
-def envmap_in_object_frame(envmap, placement: ObjectPlacement):
-    """The world's light map as the unmoved asset sees it: the asset is turned by facing_deg about Z, so
-    the map turns the other way (a shift of its columns, to the nearest column)."""
-    shift = int(round(placement.facing_deg / 360.0 * envmap.shape[1]))
-    return np.roll(envmap, shift, axis=1) if isinstance(envmap, np.ndarray) else envmap.roll(shift, 1)
-
-
-def paper_shadow_matte(intensity, floor, threshold_fraction: float):
-    """The appendix's shadow ("Scene Composition"): floor pixels darker than threshold_fraction x the
-    floor's mean intensity are shadowed; their intensity divided by the lit pixels' mean is the matte
-    ("scale by norm([1,1,1]) / E(I | lit) and convert to transparency"), lit pixels keep the photo (1).
-
-    intensity: (h, w) torch tensor (differentiable: the light stage's critic views pass gradients
-    through the shadowed pixels); floor: (h, w) bool. Returns (matte, threshold, lit mean, shadowed).
-    """
-    import torch
-
-    if not bool(floor.any()):
-        return torch.ones_like(intensity), 0.0, 0.0, torch.zeros_like(floor)
-    threshold = threshold_fraction * intensity[floor].mean()
-    shadowed = floor & (intensity < threshold)
-    lit = floor & ~shadowed
-    lit_mean = intensity[lit].mean() if bool(lit.any()) else intensity[floor].mean()
-    matte = torch.where(shadowed, (intensity / lit_mean.clamp_min(1e-12)).clamp(0.0, 1.0), torch.ones_like(intensity))
-    return matte, float(threshold.detach()), float(lit_mean.detach()), shadowed
-
-
-def composite_linear(object_rgb, alpha, photo_linear, matte):
-    """The one compositing rule, in linear light: the asset's premultiplied radiance over the photo,
-    which its shadow matte darkens. Arithmetic only, so it serves numpy (compose) and torch (the adapt
-    stage's global views, differentiable in object_rgb and alpha) alike."""
-    return object_rgb + (1.0 - alpha) * photo_linear * matte
-
-
-def horizon_row(camera: PhotoCamera) -> int:
-    """The first image row with any pixel looking below the horizon (camera.height: none does)."""
-    below = (camera.ray_directions()[..., 2] < 0).any(axis=1)
-    rows = np.flatnonzero(below)
-    return int(rows[0]) if len(rows) else camera.height
 
 
 # -- Mitsuba ------------------------------------------------------------------------------------------
@@ -692,7 +519,7 @@ def light_camera(light_path, photo_info: dict, width: int, height: int, fov_deg:
     import json
     from pathlib import Path
 
-    from .photo import photo_camera_for
+    from .scene.camera import photo_camera_for
 
     report_path = Path(light_path).with_name("report.json")
     camera = None

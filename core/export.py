@@ -20,10 +20,11 @@ from .camera import Camera
 from .errors import InputError
 from .imageio import linear_to_srgb, write_image
 from .maps import PBRMaps
+from .materials import material_parts
 from .mesh import Mesh, normalize_to_unit_sphere
 from .pipeline import check_environment
-from .materials import material_parts
-from .render import ENVMAP_TO_WORLD, _mitsuba_mesh, drawn_part
+from .render import _mitsuba_mesh, drawn_part
+from .scene.frame import ENVMAP_TO_WORLD
 
 
 def _add(parent: ET.Element, tag: str, **attrs) -> ET.Element:

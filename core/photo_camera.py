@@ -19,7 +19,7 @@ at EXIF's or the default field of view, their confidence counting how much the l
 Camera coordinates inside this module: x right, y up, z forward (the view axis); image points are
 normalised so that the half width is 1 (x_n = (u - W/2) / (W/2), y_n = (H/2 - v) / (W/2)) and the
 ray through (x_n, y_n) is (x_n, y_n, F) with F = 1 / tan(horizontal fov / 2). The principal point is
-the image centre, as in core/photo.PhotoCamera.
+the image centre, as in core/scene/camera.PhotoCamera.
 """
 from __future__ import annotations
 
@@ -32,7 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .photo import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG, PHOTO_YAW_DEG, PhotoCamera
+from .scene.camera import (DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG, PHOTO_YAW_DEG, PhotoCamera,
+                           pitch_roll_from_camera_to_world)
 
 SOURCES = ("user", "blender", "fspy", "exif_35mm", "exif_sensor", "lines", "default")
 # Sensor width (long side, mm) of common cameras whose JPEGs may lack the 35 mm equivalent, from the
@@ -281,22 +282,6 @@ def _fspy_camera(state, path: Path) -> dict:
     return {"fov_deg": fov, "pitch_deg": pitch, "roll_deg": roll, "image_size": size, "principal_point": principal}
 
 
-def pitch_roll_from_camera_to_world(rotation: np.ndarray, shown: str | Path = "the camera") -> tuple[float, float]:
-    """Pitch and roll (degrees) of a camera-to-world rotation whose columns are the camera's right, up and
-    backward (-view) axes in a Z-up world (fSpy's and Blender's camera convention)."""
-    right, up, back = (rotation[:, i] / max(np.linalg.norm(rotation[:, i]), 1e-12) for i in range(3))
-    forward = -back
-    level_right = np.cross(forward, (0.0, 0.0, 1.0))
-    if np.linalg.norm(level_right) < 1e-9:
-        raise InputError(f"{shown} looks straight up or down, so it has no horizon to take pitch and roll from; "
-                         "solve it again with the camera tilted less.")
-    level_right /= np.linalg.norm(level_right)
-    level_up = np.cross(level_right, forward)
-    pitch = math.degrees(math.asin(float(np.clip(forward[2], -1.0, 1.0))))
-    roll = math.degrees(math.atan2(float(right @ level_up), float(right @ level_right)))
-    return pitch, roll
-
-
 def _from_fspy(camera: dict, width: int, height: int) -> CameraEstimate:
     notes = ["camera solved by fSpy (vanishing lines drawn by hand); world Z taken as up, fSpy's default axes"]
     fw, fh = camera["image_size"]
@@ -387,7 +372,6 @@ def horizon_points(up: np.ndarray, focal: float, width: int, height: int) -> tup
         y_n = -(up[0] * x_n + up[2] * focal) / up[1]
         points.append((round((x_n + 1.0) * width / 2.0, 2), round(height / 2.0 - y_n * width / 2.0, 2)))
     return tuple(points)
-
 
 
 # -- the photo's own lines -------------------------------------------------------------------------
@@ -683,7 +667,6 @@ def _standard_errors(ends: np.ndarray, weights: np.ndarray, params, families: np
     errors = np.full(4, np.inf)
     errors[list(free)] = np.sqrt(np.maximum(np.diag(cov), 0.0))
     return np.nan_to_num(errors, nan=np.inf)
-
 
 
 def _judge(ends: np.ndarray, weights: np.ndarray, params, families: np.ndarray, fov_fixed: float | None,

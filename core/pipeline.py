@@ -36,7 +36,7 @@ def sun_environment(direction, sun_radiance: float = 2000.0, sky_radiance: float
                     height: int = 64) -> np.ndarray:
     """A grey sky with one small disc sun towards world `direction` (Blender's lat-long convention):
     hard-edged shadows with a known direction, for tests and benchmarks."""
-    from .render import equirect_directions
+    from .scene.frame import equirect_directions
 
     d = np.asarray(direction, np.float64)
     d = d / np.linalg.norm(d)

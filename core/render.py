@@ -26,45 +26,14 @@ from .errors import InputError
 from .maps import FLAT_NORMAL
 from .materials import MaterialPart, material_parts
 from .mesh import Mesh, vertex_normals
+from .scene.frame import ENVMAP_TO_WORLD
 from .texture.uv_raster import wrap_modes
 
-# Rotation taking Mitsuba's envmap frame (Y up) to Blender's world (Z up), chosen so that
-# Mitsuba's direction->(u, v) lookup equals Blender's equirectangular Environment Texture:
-# local (x, y, z) -> world (z, x, y).
-ENVMAP_TO_WORLD = np.array(
-    [[0.0, 0.0, 1.0, 0.0],
-     [1.0, 0.0, 0.0, 0.0],
-     [0.0, 1.0, 0.0, 0.0],
-     [0.0, 0.0, 0.0, 1.0]]
-)
 
 # Each material's BSDF's maps, under its shape's id; with a normal map the principled BSDF sits inside
 # Mitsuba's `normalmap` BSDF, one level down.
 MAP_NAMES = ("base_color", "roughness", "metallic")
 ENVMAP_KEY = "environment.data"
-
-
-def blender_direction_to_equirect_uv(direction: np.ndarray) -> np.ndarray:
-    """(u, v) in [0, 1] of Blender's equirectangular mapping; v measured from the TOP row.
-
-    Blender (intern/cycles/kernel/geom, direction_to_equirectangular with its default range):
-    u = 0.5 - atan2(d.y, d.x) / 2pi, v_bottom = atan2(d.z, hypot(d.x, d.y)) / pi + 0.5.
-    """
-    d = np.asarray(direction, dtype=np.float64)
-    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-    u = 0.5 - np.arctan2(d[..., 1], d[..., 0]) / (2 * np.pi)
-    v_top = 0.5 - np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])) / np.pi
-    return np.stack([u % 1.0, v_top], axis=-1)
-
-
-def equirect_directions(height: int, width: int) -> np.ndarray:
-    """World direction (Blender convention) through the centre of each texel of an (H, W) map."""
-    u = (np.arange(width) + 0.5) / width
-    v_top = (np.arange(height) + 0.5) / height
-    phi = (0.5 - u) * 2.0 * np.pi                 # atan2(d.y, d.x)
-    elevation = (0.5 - v_top) * np.pi
-    el, ph = np.meshgrid(elevation, phi, indexing="ij")
-    return np.stack([np.cos(ph) * np.cos(el), np.sin(ph) * np.cos(el), np.sin(el)], axis=-1)
 
 
 @dataclass(frozen=True)

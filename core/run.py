@@ -33,9 +33,9 @@ from .errors import InputError
 from .guidance.models import GuidanceModels, ModelCache, ModelConfig
 from .maps import PBRMaps
 from .mesh import Mesh
-from .photo import PhotoCamera
-from .placement import DEFAULT_OBJECT_SIZE
 from .progress import ProgressCallback, check_cancel, emit
+from .scene.camera import PhotoCamera
+from .scene.placement import DEFAULT_OBJECT_SIZE
 
 GUIDANCE_TYPES = ("auto", "sd2", "none")
 STAGES = ("convert", "light", "adapt", "compose", "bake")
@@ -214,7 +214,7 @@ class PipelineRun:
                  models: ModelCache | None) -> None:
         from .lighting import load_photo
         from .mesh import normalize_to_unit_sphere
-        from .placement import Placement
+        from .scene.placement import Placement
 
         self.started = time.perf_counter()
         self.mesh, self.maps, self.config, self.progress, self.cancel = mesh, maps, config, progress, cancel
@@ -337,7 +337,7 @@ class PipelineRun:
     def adapt(self) -> None:
         from .adapt import adapt_and_bake
         from .compose import light_camera
-        from .placement import Placement
+        from .scene.placement import Placement
         from .texture.bake import WEIGHTS_FILE, load_neural_texture
 
         if not self.found:

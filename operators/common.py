@@ -252,7 +252,7 @@ def photo_view(context, photo: Path, obj=None) -> dict:
         else:
             import numpy as np
 
-            from ..blender_io.placement import camera_pose
+            from ..core.scene.camera import camera_pose
 
             _, pitch, roll = camera_pose(np.array(camera.matrix_world), f"The scene camera '{camera.name}'")
             fov = horizontal_fov_deg(camera, *size)
@@ -271,8 +271,8 @@ def composite_camera(context, photo: Path, view: dict):
     """The PhotoCamera the Cycles set-up uses when no job hands one back: the view's, else the camera the
     World's light map was estimated with (its report.json), else the estimate from the photo."""
     from ..core.compose import light_camera
-    from ..core.photo import PhotoCamera
     from ..core.photo_camera import photo_camera_estimate
+    from ..core.scene.camera import PhotoCamera
 
     if view["camera"] is not None:
         return PhotoCamera(**view["camera"])

@@ -9,9 +9,9 @@ import bpy
 from bpy.props import (CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
                        PointerProperty, StringProperty)
 
-from ..core.photo import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG
-from ..core.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
 from ..core.presets import PRESET_DESCRIPTIONS, PRESET_NAMES
+from ..core.scene.camera import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG
+from ..core.scene.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
 
 PRESETS = tuple((name, name.capitalize(), PRESET_DESCRIPTIONS[name]) for name in PRESET_NAMES)
 SCENE_TYPES = (

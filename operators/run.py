@@ -7,7 +7,7 @@ from bpy.props import EnumProperty
 
 from ..blender_io.compose import setup_composite
 from ..core.errors import SceneFitError
-from ..core.photo import PhotoCamera
+from ..core.scene.camera import PhotoCamera
 from . import work
 from .adapt import adapt_seconds_here
 from .common import OnMesh, model_settings, photo_path, photo_view, run_folder, scene_layout

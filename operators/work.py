@@ -89,8 +89,8 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
     from ..core.guidance import models_available
     from ..core.lighting import estimate_light as estimate, light_report, load_photo, write_light_outputs
     from ..core.pipeline import write_report
-    from ..core.placement import Placement
     from ..core.presets import stage_config
+    from ..core.scene.placement import Placement
 
     photo, info = load_photo(data["photo"])
     h, w = photo.shape[:2]
@@ -136,10 +136,10 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
 
     from ..core.adapt import StageSpec, adapt_and_bake
     from ..core.compose import light_camera
-    from ..core.placement import Placement
-    from ..core.presets import stage_config
     from ..core.imageio import linear_to_srgb, read_color_image
     from ..core.pipeline import load_environment, write_report
+    from ..core.presets import stage_config
+    from ..core.scene.placement import Placement
     from ..core.texture.bake import load_neural_texture
 
     mode = data["mode"]

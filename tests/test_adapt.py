@@ -12,11 +12,11 @@ from scenefit.core.adapt import (GENERATE_STAGES, SCENE_STAGES, AdaptConfig, Ada
                                  spherical_gaussian_environment, stage_at, view_suffix)
 from scenefit.core.errors import Cancelled, InputError, ModelMissingError
 from scenefit.core.guidance import CriticConfig, ModelConfig
-from scenefit.core.placement import Placement
 from scenefit.core.presets import stage_config
-from scenefit.devtools.tiny_models import build_tiny_pair
 from scenefit.core.primitives import uv_sphere
+from scenefit.core.scene.placement import Placement
 from scenefit.core.texture import NeuralTexture, rasterize_uv
+from scenefit.devtools.tiny_models import build_tiny_pair
 
 TINY_STAGES = (StageSpec(0.5, 16, 2, (30, 990)), StageSpec(0.5, 32, 2, (500, 990)))
 

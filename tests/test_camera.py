@@ -8,11 +8,11 @@ import struct
 import numpy as np
 import pytest
 
-from scenefit.core.camera import look_frame
 from scenefit.core.errors import InputError
 from scenefit.core.imageio import write_image
-from scenefit.core.photo import PhotoCamera
 from scenefit.core.photo_camera import estimate_photo_camera, sensor_width_mm
+from scenefit.core.scene.camera import PhotoCamera
+from scenefit.core.scene.frame import look_frame
 
 SIZE = (96, 64)
 

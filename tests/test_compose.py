@@ -8,14 +8,15 @@ import numpy as np
 import pytest
 
 from scenefit.core.asset_io import save_asset_folder
-from scenefit.core.compose import ComposeConfig, ComposeInputs, compose, horizon_row, place_asset
+from scenefit.core.compose import ComposeConfig, ComposeInputs, compose
 from scenefit.core.errors import InputError
 from scenefit.core.imageio import read_image, write_image
 from scenefit.core.maps import PBRMaps
 from scenefit.core.mesh import Mesh, normalize_to_unit_sphere
-from scenefit.core.photo import PhotoCamera
 from scenefit.core.pipeline import sun_environment
 from scenefit.core.primitives import uv_sphere
+from scenefit.core.scene.asset_pose import place_asset
+from scenefit.core.scene.camera import PhotoCamera, horizon_row
 
 from conftest import scenefit_here
 
@@ -162,7 +163,7 @@ def test_cli_compose_writes_every_layer_and_leaves_the_photo_alone(tmp_path):
 
 
 def test_photo_camera_projection_inverts_its_pixel_rays():
-    from scenefit.core.lighting.panorama import pixel_ray
+    from scenefit.core.scene.camera import pixel_ray
 
     origin = np.array([0.0, 0.0, 1.0])
     for x, y in ((0.5, 0.5), (100.25, 7.0), (64.0, 95.5)):

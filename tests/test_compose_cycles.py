@@ -8,9 +8,9 @@ import numpy as np
 
 from scenefit.core.compose import ComposeConfig, ComposeInputs, build_compose
 from scenefit.core.imageio import linear_to_srgb, read_image, srgb_to_linear, write_image
-from scenefit.core.photo import PhotoCamera
 from scenefit.core.pipeline import image_psnr, sun_environment
 from scenefit.core.primitives import uv_sphere
+from scenefit.core.scene.camera import PhotoCamera
 
 CAMERA = PhotoCamera(yaw_deg=90.0, pitch_deg=-20.0, fov_deg=60.0, width=128, height=96)
 # Measured on the development machine (AMD EPYC, 2 cores; Mitsuba 64 spp + OIDN, Cycles 32 samples +
@@ -43,9 +43,9 @@ def test_mitsuba_composite_matches_cycles(tmp_path, run_py):
         import json, numpy as np, bpy, addon_utils
         addon_utils.enable('cycles')
         bpy.ops.wm.read_factory_settings(use_empty=True)
-        from scenefit.core.mesh import Mesh
-        from scenefit.core.photo import PhotoCamera
         from scenefit.blender_io.cycles_crosscheck import composite_scene, render_passes
+        from scenefit.core.mesh import Mesh
+        from scenefit.core.scene.camera import PhotoCamera
         d = np.load({str(tmp_path / 'placed.npz')!r})
         mesh = Mesh.from_arrays(d['positions'], d['faces'], d['uvs'], d['normals'])
         camera = PhotoCamera(**{json.dumps(CAMERA.__dict__)})

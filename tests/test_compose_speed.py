@@ -8,12 +8,12 @@ import pytest
 from scenefit.core.compose import (COMPOSE_MAX_SIDE, PILOT_MAX_SIDE, ComposeConfig, ComposeInputs, compose,
                                    pilot_view)
 from scenefit.core.errors import InputError
-from scenefit.core.lighting import load_photo
 from scenefit.core.imageio import write_image
-from scenefit.core.photo import PhotoCamera
+from scenefit.core.lighting import load_photo
 from scenefit.core.pipeline import sun_environment
 from scenefit.core.presets import stage_config
 from scenefit.core.primitives import uv_sphere
+from scenefit.core.scene.camera import PhotoCamera
 
 
 def test_the_pilot_sees_the_whole_box_with_fewer_larger_pixels():
@@ -23,6 +23,8 @@ def test_the_pilot_sees_the_whole_box_with_fewer_larger_pixels():
     assert (small.width, small.height, small.fov_deg) == (666, 500, camera.fov_deg)
     assert box == (206, 271, 461, 422) and max(box[2] - box[0], box[3] - box[1]) <= PILOT_MAX_SIDE
     # (the box's corners, divided by 6, rounded outwards: every pixel of the asset is in it)
+
+
 def test_a_pilot_with_larger_pixels_chooses_the_samples_the_full_pilot_would():
     """Noise per pixel barely depends on the pixel's size: a pilot at an eighth of the resolution picks
     about the sample count a full-resolution pilot picks."""

@@ -13,12 +13,13 @@ from scenefit.core.asset_io import load_asset_folder, save_asset_folder
 from scenefit.core.camera import Camera
 from scenefit.core.errors import InputError
 from scenefit.core.export import export_mitsuba_scene
-from scenefit.core.imageio import linear_to_srgb, srgb_to_linear
+from scenefit.core.imageio import linear_to_srgb, read_image, srgb_to_linear
 from scenefit.core.maps import PBRMaps
-from scenefit.core.photo import PhotoCamera, develop_photo, perspective_view, studiolight_path
-from scenefit.core.imageio import read_image
+from scenefit.core.photo import develop_photo, perspective_view, studiolight_path
 from scenefit.core.primitives import uv_sphere
-from scenefit.core.render import AssetRenderer, SceneOptions, blender_direction_to_equirect_uv
+from scenefit.core.render import AssetRenderer, SceneOptions
+from scenefit.core.scene.camera import PhotoCamera
+from scenefit.core.scene.frame import blender_direction_to_equirect_uv
 
 
 def striped_maps(h: int = 32, w: int = 64) -> PBRMaps:

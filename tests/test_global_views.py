@@ -6,13 +6,14 @@ import pytest
 import torch
 
 from scenefit.core.adapt.global_views import GlobalScene, turn_for_azimuth
-from scenefit.core.compose import ComposeConfig, ComposeInputs, compose, envmap_in_object_frame, place_asset
+from scenefit.core.compose import ComposeConfig, ComposeInputs, compose
 from scenefit.core.guidance.views import global_view
 from scenefit.core.mesh import normalize_to_unit_sphere
-from scenefit.core.photo import PhotoCamera
-from scenefit.core.placement import Placement
 from scenefit.core.primitives import uv_sphere
-from scenefit.core.render import blender_direction_to_equirect_uv, equirect_directions
+from scenefit.core.scene.asset_pose import envmap_in_object_frame, place_asset
+from scenefit.core.scene.camera import PhotoCamera
+from scenefit.core.scene.frame import blender_direction_to_equirect_uv, equirect_directions
+from scenefit.core.scene.placement import Placement
 
 SPP = 256
 CAMERA = PhotoCamera(yaw_deg=90.0, pitch_deg=-15.0, fov_deg=60.0, width=64, height=48)

@@ -10,8 +10,8 @@ import torch
 from scenefit.core.errors import InputError, ModelMissingError
 from scenefit.core.guidance import (CriticConfig, LoraCritic, ModelConfig, ReferenceInjector, ScoreCritic,
                                     camera_condition, load_guidance_models, locate_models, models_available)
+from scenefit.core.scene.placement import Placement
 from scenefit.devtools.tiny_models import build_tiny_pair
-from scenefit.core.placement import Placement
 from scenefit.core.guidance.views import (global_view, inpainting_input, latent_mask, local_view,
                                           masked_image, sample_crops)
 from scenefit.core.guidance.weighting import (add_noise, guard_gradient, interpolation_lambda, predicted_x0,

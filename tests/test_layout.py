@@ -52,7 +52,7 @@ def test_the_import_graph_finds_known_edges():
 
 
 def test_no_import_circle_anywhere():
-    """core.compose <-> lighting <-> guidance was one (the photo camera now lives in core/photo.py), and
+    """core.compose <-> lighting <-> guidance was one (the photo camera now lives in core/scene/), and
     core.presets <-> convert / adapt.config another (the tables are data in core/preset_tables.py)."""
     known = modules()
     graph = {name: {t for t in imports(name, path, known) if t in known and not name.startswith(t + ".")}
@@ -92,3 +92,40 @@ def test_no_function_in_core_is_over_80_lines():
 def test_the_length_check_sees_a_long_function():
     # run_pipeline is well over ten lines, so a limit of ten must flag it.
     assert any("run_pipeline" in f for f in long_functions(ROOT / "core" / "run.py", 10))
+
+
+# The scene's geometry (docs/architecture.md, core/scene/): every stage and blender_io read it, and it
+# reads only core's foundations, so it can never pull a stage (or Blender) in.
+SCENE_MAY_IMPORT = ("core.scene.", "core.errors", "core.mesh")
+
+
+def test_the_scenes_geometry_imports_no_stage():
+    known = modules()
+    bad = sorted((name, target) for name, path in known.items() if name.startswith("core.scene.")
+                 for target in imports(name, path, known)
+                 if target.split(".")[0] in PACKAGES and not target.startswith(SCENE_MAY_IMPORT))
+    assert bad == []
+    assert "core.scene.camera" in imports("core.scene.floor", known["core.scene.floor"], known)   # the check sees edges
+
+
+# Each of these is defined once, in core/scene/ (they were spread over photo, placement, camera, render,
+# lighting/panorama, compose and blender_io/placement).
+SCENE_CONCEPTS = ("PhotoCamera", "PHOTO_YAW_DEG", "DEFAULT_PITCH_DEG", "DEFAULT_FOV_DEG", "CAMERA_HEIGHT",
+                  "camera_origin", "pixel_ray", "horizon_row", "camera_pose", "pitch_roll_from_camera_to_world",
+                  "look_frame", "rotation_z", "ENVMAP_TO_WORLD", "blender_direction_to_equirect_uv",
+                  "equirect_directions", "place_on_floor", "FloorPoint", "DEFAULT_AT", "DEFAULT_OBJECT_SIZE",
+                  "Placement", "place_asset", "ObjectPlacement", "camera_for_placement", "asset_in_view",
+                  "composite_linear", "paper_shadow_matte")
+
+
+def test_the_scenes_concepts_are_defined_once_in_core_scene():
+    where = {}
+    for name, path in modules().items():
+        for node in ast.parse(path.read_text()).body:
+            targets = [node.name] if isinstance(node, (ast.FunctionDef, ast.ClassDef)) else \
+                [t.id for t in getattr(node, "targets", []) if isinstance(t, ast.Name)]
+            for target in set(targets) & set(SCENE_CONCEPTS):
+                where.setdefault(target, []).append(name)
+    assert {concept: modules_ for concept, modules_ in where.items()
+            if len(modules_) != 1 or not modules_[0].startswith("core.scene.")} == {}
+    assert set(where) == set(SCENE_CONCEPTS)

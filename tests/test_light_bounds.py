@@ -11,8 +11,9 @@ from scenefit.core.imageio import srgb_to_linear
 from scenefit.core.lighting import estimate_light
 from scenefit.core.lighting.cues import exposure_clip_scale
 from scenefit.core.lighting.depth import DepthConfig
-from scenefit.core.photo import PhotoCamera, camera_exposure, develop_photo
+from scenefit.core.photo import camera_exposure, develop_photo
 from scenefit.core.presets import stage_config
+from scenefit.core.scene.camera import PhotoCamera
 
 OLD_CAP = 1e5          # the clipped scale's former cap, which two real indoor views reached
 STABLE_FACTOR = 2.0    # a 0.12-stop exposure change may move the clipped scale by at most this

@@ -63,8 +63,8 @@ def test_an_absent_depth_model_is_looked_for_once_per_process(tmp_path, monkeypa
     import time
 
     from scenefit.core.lighting import depth
-    from scenefit.core.lighting.panorama import place_on_floor
-    from scenefit.core.photo import PhotoCamera
+    from scenefit.core.scene.camera import PhotoCamera
+    from scenefit.core.scene.floor import place_on_floor
 
     calls = []
     monkeypatch.setattr(depth, "load_depth_estimator", lambda *a, **k: calls.append(a) or (_ for _ in ()).throw(
@@ -91,8 +91,8 @@ def test_an_absent_depth_model_is_looked_for_once_per_process(tmp_path, monkeypa
 def _evenly_lit_estimate(sun_deg):
     from scenefit.core.lighting import estimate_light
     from scenefit.core.lighting.depth import DepthConfig
-    from scenefit.core.photo import PhotoCamera
     from scenefit.core.presets import stage_config
+    from scenefit.core.scene.camera import PhotoCamera
 
     photo = np.full((48, 64, 3), 0.45, np.float32)
     camera = PhotoCamera(yaw_deg=90.0, pitch_deg=-10.0, fov_deg=60.0, width=64, height=48)   # looks along +Y

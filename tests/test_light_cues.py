@@ -8,12 +8,13 @@ import pytest
 
 from scenefit.core.imageio import srgb_to_linear
 from scenefit.core.lighting import estimate_light
-from scenefit.core.presets import stage_config
 from scenefit.core.lighting.cues import CueConfig, build_cues, exposure_clip_scale
 from scenefit.core.lighting.hdr import is_dark_environment
 from scenefit.core.lighting.measure import dominant_direction
-from scenefit.core.photo import PhotoCamera, develop_photo
-from scenefit.core.render import equirect_directions
+from scenefit.core.photo import develop_photo
+from scenefit.core.presets import stage_config
+from scenefit.core.scene.camera import PhotoCamera
+from scenefit.core.scene.frame import equirect_directions
 
 
 def _sun_radiance(sun_value: float, size=(60, 80), radius=4):

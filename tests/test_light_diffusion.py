@@ -11,15 +11,15 @@ import torch
 from scenefit.core.errors import ModelMissingError
 from scenefit.core.guidance import ModelConfig, load_guidance_models
 from scenefit.core.guidance.lora import ADAPTER
-from scenefit.devtools.tiny_models import build_tiny_sd
 from scenefit.core.imageio import write_image
 from scenefit.core.lighting import estimate as estimate_module
 from scenefit.core.lighting.diffusion_critic import DiffusionCriticConfig, DiffusionLightCritic
 from scenefit.core.lighting.estimate import LightConfig, estimate_light
+from scenefit.devtools.tiny_models import build_tiny_sd
 from scenefit.core.lighting.hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, CriticRequest, OptimiseConfig,
                                         optimise_scales)
 from scenefit.core.primitives import uv_sphere
-from scenefit.core.render import equirect_directions
+from scenefit.core.scene.frame import equirect_directions
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -110,9 +110,9 @@ def _optimal_denoiser(score, target_latents):
 
 @pytest.mark.parametrize("start", [2.0, 32.0])
 def test_diffusion_steps_move_the_scale_toward_the_truth(tiny_base, start):
+    from scenefit.core.imageio import srgb_to_linear
     from scenefit.core.lighting.diffusion_critic import tonemap_srgb_torch
     from scenefit.core.lighting.hdr import compose_hdr
-    from scenefit.core.imageio import srgb_to_linear
 
     scene = _sphere_only_scene()
     ldr, regions = _bright_spot()
@@ -143,8 +143,8 @@ def test_diffusion_steps_move_the_scale_toward_the_truth(tiny_base, start):
 
 def test_composited_views_hold_the_photo_around_the_apparatus_and_pass_gradients_to_the_light(tiny_base):
     from scenefit.core.guidance.views import paste_layer, photo_crop
-    from scenefit.core.lighting.hdr import compose_hdr, per_view_losses
     from scenefit.core.imageio import srgb_to_linear
+    from scenefit.core.lighting.hdr import compose_hdr, per_view_losses
 
     scene = _scene()
     critic, prompts = _critic(tiny_base, scene)
@@ -182,8 +182,8 @@ def test_composited_views_hold_the_photo_around_the_apparatus_and_pass_gradients
 
 
 def test_the_light_vector_describes_the_map_and_conditions_eps_psi(tiny_base):
-    from scenefit.core.lighting.hdr import LightVector
     from scenefit.core.imageio import srgb_to_linear
+    from scenefit.core.lighting.hdr import LightVector
 
     ldr, regions = _bright_spot()
     vector = LightVector(torch.from_numpy(srgb_to_linear(ldr)), {k: torch.from_numpy(v) for k, v in regions.items()})
@@ -278,7 +278,7 @@ def _seam_jump(ldr, rows):
 def test_outpainting_keeps_the_photo_and_paints_the_rest(tiny_base, tiny_inpaint):
     from scenefit.core.lighting.outpaint import OutpaintConfig, outpaint_panorama
     from scenefit.core.lighting.panorama import outdoor_panorama
-    from scenefit.core.photo import PhotoCamera
+    from scenefit.core.scene.camera import PhotoCamera
 
     models = load_guidance_models(ModelConfig(base_model=str(tiny_base), inpaint_model=str(tiny_inpaint)),
                                   need_inpaint=True)

@@ -10,8 +10,9 @@ from scenefit.core.lighting import estimate_light
 from scenefit.core.lighting.cues import LOBE_ELEVATION_DEG, photo_bright_side
 from scenefit.core.lighting.depth import DepthConfig
 from scenefit.core.lighting.measure import dominant_direction
-from scenefit.core.photo import PhotoCamera, develop_photo
+from scenefit.core.photo import develop_photo
 from scenefit.core.presets import stage_config
+from scenefit.core.scene.camera import PhotoCamera
 
 
 def _side_lit_room(side: str, width: int = 96, height: int = 72) -> np.ndarray:

@@ -6,7 +6,7 @@ import pytest
 
 from scenefit.core.lighting.measure import (DIFFUSE_ALBEDO, SILVER_F0, probe_geometry, probe_scores, render_probe,
                                             rgb_angular_error_deg, si_rmse, stylelight_tonemap)
-from scenefit.core.render import blender_direction_to_equirect_uv
+from scenefit.core.scene.frame import blender_direction_to_equirect_uv
 
 FORWARD = np.array([0.0, 1.0, 0.0])
 

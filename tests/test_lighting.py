@@ -11,16 +11,17 @@ import torch
 from scenefit.core.errors import InputError, ModelMissingError
 from scenefit.core.imageio import read_image, write_image
 from scenefit.core.lighting import estimate_light, load_photo
-from scenefit.core.presets import stage_config
 from scenefit.core.lighting.depth import DepthConfig, estimate_ray_distance
+from scenefit.core.presets import stage_config
 from scenefit.core.lighting.hdr import (ApparatusConfig, ApparatusScene, CriticRequest, OptimiseConfig, compose_hdr,
                                         is_dark_environment, light_prompt, optimise_scales, prior_scales)
-from scenefit.core.lighting.panorama import ORIGIN_LIFT, fill_panorama, indoor_panorama, place_on_floor
+from scenefit.core.lighting.panorama import fill_panorama, indoor_panorama
 from scenefit.core.lighting.reference_critic import ReferenceCritic
 from scenefit.core.lighting.regions import RegionThresholds, bright_regions
-from scenefit.core.photo import PhotoCamera
 from scenefit.core.primitives import uv_sphere
-from scenefit.core.render import equirect_directions
+from scenefit.core.scene.camera import PhotoCamera
+from scenefit.core.scene.floor import ORIGIN_LIFT, place_on_floor
+from scenefit.core.scene.frame import equirect_directions
 
 # -- a synthetic box room with a smooth colour on every wall -----------------------------------------
 ROOM_MIN = np.array([-3.0, -2.0, 0.0])

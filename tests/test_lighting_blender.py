@@ -9,7 +9,8 @@ import torch
 from scenefit.core.camera import Camera
 from scenefit.core.imageio import read_image, write_image
 from scenefit.core.primitives import uv_sphere
-from scenefit.core.render import AssetRenderer, equirect_directions
+from scenefit.core.render import AssetRenderer
+from scenefit.core.scene.frame import equirect_directions
 
 SIZE = 32
 LIGHT = np.array([1.0, -1.0, 1.0]) / np.sqrt(3.0)   # right of, towards and above the camera at azimuth 0
@@ -42,7 +43,7 @@ def test_estimated_map_lights_a_sphere_from_the_same_side_in_blender_and_mitsuba
         import bpy, addon_utils, mathutils
         addon_utils.enable('cycles')
         bpy.ops.wm.read_factory_settings(use_empty=True)
-        from scenefit.blender_io.world import world_from_hdr, assign_world
+        from scenefit.blender_io.world import assign_world, world_from_hdr
         scene = bpy.context.scene
         mine = bpy.data.worlds.new("User World")
         mine.use_nodes = True

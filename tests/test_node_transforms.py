@@ -88,12 +88,13 @@ from pathlib import Path
 import numpy as np
 import bpy, addon_utils, mathutils
 from scenefit.blender_io.asset_file import load_asset_file
-from scenefit.blender_io.cycles_crosscheck import photo_camera_object
 from scenefit.blender_io.compose import transparent_cycles
-from scenefit.core.compose import ComposeConfig, ComposeInputs, build_compose, placement_transform
+from scenefit.blender_io.cycles_crosscheck import photo_camera_object
+from scenefit.core.compose import ComposeConfig, ComposeInputs, build_compose
 from scenefit.core.mesh import normalize_to_unit_sphere
-from scenefit.core.photo import PhotoCamera
 from scenefit.core.pipeline import sun_environment
+from scenefit.core.scene.asset_pose import placement_transform
+from scenefit.core.scene.camera import PhotoCamera
 
 folder = Path(FOLDER)
 camera = PhotoCamera(yaw_deg=90.0, pitch_deg=-15.0, fov_deg=50.0, width=160, height=120)

@@ -6,10 +6,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenefit.blender_io.placement import (CANCEL, CLICK, PASS, asset_in_view, camera_for_placement, classify_event,
-                                           frame_rect, placement_from_click, region_from_placement)
+from scenefit.blender_io.placement import (CANCEL, CLICK, PASS, classify_event, frame_rect,
+                                           placement_from_click, region_from_placement)
 from scenefit.core.errors import InputError
-from scenefit.core.photo import PhotoCamera
+from scenefit.core.scene.asset_pose import asset_in_view, camera_for_placement
+from scenefit.core.scene.camera import PhotoCamera
 
 RECT = frame_rect([(300.0, 500.0), (300.0, 200.0), (100.0, 200.0), (100.0, 500.0)])  # view_frame order
 
@@ -83,10 +84,10 @@ def _turn(deg: float) -> np.ndarray:
 def test_the_pipeline_composes_the_asset_as_the_artists_camera_shows_it(yaw, pitch, roll, object_yaw):
     """asset_in_view turns an artist's arrangement (their camera, the asset where they put it) into the
     placement, size and turn core's place_asset takes: every vertex lands on the same photo pixel."""
-    from scenefit.core.compose import camera_origin, place_asset, placed_mesh
-    from scenefit.core.mesh import Mesh
+    from scenefit.core.mesh import Mesh, normalize_to_unit_sphere
     from scenefit.core.primitives import uv_sphere
-    from scenefit.core.mesh import normalize_to_unit_sphere
+    from scenefit.core.scene.asset_pose import place_asset, placed_mesh
+    from scenefit.core.scene.camera import camera_origin
 
     width, height, fov = 640, 480, 55.0
     sphere = uv_sphere(0.5, 12, 6)

@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.camera import Camera, fov_from_multiplier, look_frame, whole_object_multiplier
+from scenefit.core.camera import Camera, fov_from_multiplier, whole_object_multiplier
 from scenefit.core.errors import InputError
 from scenefit.core.mesh import Mesh, normalize_to_unit_sphere
 from scenefit.core.primitives import grid_plane, uv_sphere
-from scenefit.core.render import (AssetRenderer, SceneOptions, SphereSpec, blender_direction_to_equirect_uv,
-                                  equirect_directions)
+from scenefit.core.render import AssetRenderer, SceneOptions, SphereSpec
+from scenefit.core.scene.frame import blender_direction_to_equirect_uv, equirect_directions, look_frame
 
 TEX = (32, 32)
 

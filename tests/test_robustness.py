@@ -234,7 +234,7 @@ def test_bad_options_are_refused_before_any_work(tmp_path, asset, capsys, args):
 @pytest.mark.parametrize("command", ["light", "adapt", "compose", "run"])
 def test_at_and_object_size_mean_one_thing_in_every_command(command):
     from scenefit.cli import build_parser
-    from scenefit.core.placement import Placement
+    from scenefit.core.scene.placement import Placement
 
     parser = build_parser()
     action = {a.dest: a for a in parser._subparsers._group_actions[0].choices[command]._actions}

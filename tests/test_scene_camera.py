@@ -30,7 +30,7 @@ def test_run_all_composes_through_the_artists_matched_camera(run_py, tmp_path):
         import bpy, addon_utils
         import numpy as np
         from mathutils import Matrix
-        from scenefit.core.photo import PhotoCamera
+        from scenefit.core.scene.camera import PhotoCamera
 
         bpy.ops.wm.read_factory_settings(use_empty=True)
         addon_utils.enable("scenefit", default_set=True)
@@ -112,8 +112,8 @@ def test_run_all_composes_through_the_artists_matched_camera(run_py, tmp_path):
 
 def test_camera_overlay_draws_the_lines_found_and_never_writes_over_a_file(tmp_path, capsys):
     from scenefit.cli import main
-    from scenefit.core.photo import PhotoCamera
     from scenefit.core.photo_camera import estimate_photo_camera
+    from scenefit.core.scene.camera import PhotoCamera
     from test_camera import _box_room
 
     camera = PhotoCamera(yaw_deg=105.0, pitch_deg=-14.0, fov_deg=65.0, width=384, height=288, roll_deg=3.0)
@@ -144,7 +144,7 @@ def test_camera_overlay_draws_the_lines_found_and_never_writes_over_a_file(tmp_p
 
 
 def test_match_camera_makes_scenefits_camera_from_the_photos_lines(run_py, tmp_path):
-    from scenefit.core.photo import PhotoCamera
+    from scenefit.core.scene.camera import PhotoCamera
     from test_camera import _box_room
 
     truth = PhotoCamera(yaw_deg=105.0, pitch_deg=-14.0, fov_deg=65.0, width=384, height=288, roll_deg=3.0)
@@ -153,7 +153,7 @@ def test_match_camera_makes_scenefits_camera_from_the_photos_lines(run_py, tmp_p
         import json, math
         import bpy, addon_utils
         import numpy as np
-        from scenefit.blender_io.placement import camera_pose
+        from scenefit.core.scene.camera import camera_pose
 
         bpy.ops.wm.read_factory_settings(use_empty=True)
         addon_utils.enable("scenefit", default_set=True)

@@ -21,13 +21,13 @@ import torch
 
 from scenefit.core.camera import Camera
 from scenefit.core.convert import convert_asset
-from scenefit.core.presets import stage_config
 from scenefit.core.errors import InputError
 from scenefit.core.imageio import write_image
 from scenefit.core.lighting import estimate_light, load_photo
 from scenefit.core.lighting.depth import DepthConfig
 from scenefit.core.maps import PBRMaps
 from scenefit.core.mesh import Mesh
+from scenefit.core.presets import stage_config
 from scenefit.core.primitives import uv_sphere
 from scenefit.core.render import AssetRenderer
 
@@ -243,8 +243,8 @@ def test_a_tiny_1e6_spot_in_an_exr_photo_is_kept(tmp_path):
 def test_grazing_and_straight_down_photo_cameras_compose_finite(pitch):
     """A photo camera a half degree below the horizon (the object one row under it, seen edge-on on a
     floor that is nearly a line) and one looking straight down both give a finite composite."""
-    from scenefit.core.compose import ComposeInputs, compose, horizon_row
-    from scenefit.core.photo import PhotoCamera
+    from scenefit.core.compose import ComposeInputs, compose
+    from scenefit.core.scene.camera import PhotoCamera, horizon_row
 
     camera = PhotoCamera(yaw_deg=90.0, pitch_deg=pitch, fov_deg=60.0, width=32, height=24)
     y = min(23.0, horizon_row(camera) + 1.0) if pitch > -45 else 12.0

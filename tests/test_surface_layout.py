@@ -15,7 +15,7 @@ from scenefit.core.mesh import Mesh, normalize_to_unit_sphere
 from scenefit.core.primitives import uv_sphere
 from scenefit.core.render import AssetRenderer
 from scenefit.core.surface_layout import (SHARED_LIMIT, adapting_view, new_layout, own_uvs_at, texture_view,
-                                         uv_sharing)
+                                          uv_sharing)
 from scenefit.core.texture.bake import load_neural_texture, save_neural_texture
 from scenefit.core.texture.uv_raster import sample_image
 
@@ -143,7 +143,7 @@ def test_adaptation_works_in_the_new_layout_and_saves_it(tiny_models, tmp_path):
     layout, and maps/ stay in the asset's own UVs."""
     from scenefit.core.adapt import AdaptConfig, StageSpec, adapt_and_bake
     from scenefit.core.guidance import ModelConfig
-    from scenefit.core.placement import Placement
+    from scenefit.core.scene.placement import Placement
     from scenefit.core.texture.uv_raster import rasterize_uv
 
     mesh = mirrored(uv_sphere(0.5, 16, 8))

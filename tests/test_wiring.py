@@ -16,10 +16,10 @@ import scenefit.core.run as run_module
 from scenefit.cli import build_parser, main
 from scenefit.core.asset_io import save_asset_folder
 from scenefit.core.imageio import write_image
-from scenefit.workers.jobs import load_jobs
 from scenefit.core.maps import PBRMaps
-from scenefit.core.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
 from scenefit.core.primitives import uv_sphere
+from scenefit.core.scene.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
+from scenefit.workers.jobs import load_jobs
 
 from asset_builder import write_obj
 

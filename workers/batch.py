@@ -282,10 +282,10 @@ def _load_asset(job: Job):
 
 
 def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
-    from ..core.presets import stage_config
     from ..core.lighting import estimate_light, light_report, load_photo, write_light_outputs
     from ..core.pipeline import convert_and_bake
-    from ..core.placement import Placement
+    from ..core.presets import stage_config
+    from ..core.scene.placement import Placement
 
     if "adapt" in job.stages:
         raise InputError(f"Job '{job.name}': stage adapt runs inside the whole pipeline in a batch; "

@@ -18,12 +18,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
-from ..compose import (ComposeConfig, ComposeInputs, ObjectPlacement, envmap_in_object_frame,
-                       photo_camera_in_object_frame, place_asset, shadow_matte)
+from ..compose import ComposeConfig, ComposeInputs, shadow_matte
+from ..scene.asset_pose import (ObjectPlacement, envmap_in_object_frame, photo_camera_in_object_frame,
+                                place_asset)
 from ..mesh import Mesh, normalize_to_unit_sphere
-from ..photo import PhotoCamera
-from ..placement import Placement
 from ..render import AssetRenderer, SceneOptions, WindowCamera
+from ..scene.camera import PhotoCamera
+from ..scene.placement import Placement
 
 
 @dataclass

@@ -21,7 +21,7 @@ from ..camera import Camera
 from ..guidance.lora import AMBIENT_LIGHT
 from ..guidance.views import background_color, sample_crops
 from ..guidance.weighting import interpolation_lambda, sample_timestep
-from ..render import equirect_directions
+from ..scene.frame import equirect_directions
 from .config import AdaptConfig, StageSpec, stage_at
 
 Light = tuple[float, float, float, float, float]   # the appendix's (c_x, c_y, c_r, c_v, b_v)

@@ -30,11 +30,11 @@ from ..guidance.lora import LoraCritic, camera_condition
 from ..guidance.models import GuidanceModels, load_guidance_models, locate_models
 from ..guidance.views import global_view, local_view
 from ..mesh import Mesh
-from ..photo import PhotoCamera, photo_camera_for
-from ..placement import Placement
+from ..presets import stage_config
 from ..progress import ProgressCallback, check_cancel, emit
 from ..render import AssetRenderer, SceneOptions
-from ..presets import stage_config
+from ..scene.camera import PhotoCamera, photo_camera_for
+from ..scene.placement import Placement
 from ..texture.neural_texture import NeuralTexture, split_channels
 from ..texture.uv_raster import UVRaster
 from .checkpoint import CHECKPOINT_FILE, load_checkpoint, save_checkpoint

@@ -8,11 +8,11 @@ injection.py  ReferenceInjector: attention processors concatenating the referenc
 views.py      local view on solid colours, global view crops in the photo, the 9-channel inpainting input
 weighting.py  timesteps, w_t, λ schedule, ⟨camera, normal⟩ map, guard rails
 """
+from ..scene.placement import Placement
 from .critics import CRITIC_TYPES, CriticConfig, CriticOutput, ScoreCritic
 from .injection import ReferenceInjector
 from .lora import LoraCritic, camera_condition
 from .models import GuidanceModels, ModelConfig, load_guidance_models, locate_models, models_available
-from ..placement import Placement
 
 __all__ = [
     "CRITIC_TYPES", "CriticConfig", "CriticOutput", "GuidanceModels", "LoraCritic", "ModelConfig", "Placement",

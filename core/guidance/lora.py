@@ -14,7 +14,7 @@ from contextlib import contextmanager
 import numpy as np
 import torch
 
-from ..camera import look_frame
+from ..scene.frame import look_frame
 
 ADAPTER = "scenefit_vsd"
 LIGHT_DIM = 5

@@ -122,7 +122,7 @@ def global_view(rgb: torch.Tensor, alpha: torch.Tensor, rect: tuple[float, float
 
     Differentiable with respect to rgb and alpha.
     """
-    from ..compose import composite_linear  # here: compose -> lighting -> guidance would import in a circle
+    from ..scene.mattes import composite_linear
 
     obj = paste_layer(torch.cat([rgb, alpha], dim=-1), rect, crop, size)
     obj_rgb, obj_alpha = obj[:, :3], obj[:, 3:4]

@@ -41,8 +41,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..imageio import srgb_to_linear
-from ..render import equirect_directions
-from ..photo import PhotoCamera
+from ..scene.camera import PhotoCamera
+from ..scene.frame import equirect_directions
 from .regions import RegionThresholds, intensity
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)

@@ -22,8 +22,8 @@ import numpy as np
 
 from ..errors import InputError, ModelMissingError
 from ..guidance.models import load_depth_estimator
-from ..photo import PhotoCamera
-from .panorama import CAMERA_HEIGHT, FloorPoint, geometric_ray_distance
+from ..scene.camera import CAMERA_HEIGHT, PhotoCamera
+from ..scene.floor import FloorPoint, geometric_ray_distance
 
 DEFAULT_DEPTH_MODEL = "depth-anything/Depth-Anything-V2-Small-hf"
 DEPTH_TYPES = ("auto", "model", "geometric")

@@ -172,7 +172,7 @@ class DiffusionLightCritic:
             return {"apparatus": display.permute(2, 0, 1)[None]}
         if request.alphas is None or request.floor_alphas is None:
             raise InputError("The composited light critic needs the object's and the floor's coverage in the request.")
-        from ..compose import composite_linear, paper_shadow_matte
+        from ..scene.mattes import composite_linear, paper_shadow_matte
 
         alpha = request.alphas[i].to(leaf)
         floor = request.floor_alphas[i].to(leaf)[..., 0] > 0.5

@@ -25,19 +25,21 @@ from ..errors import InputError, ModelMissingError, check_choice
 from ..guidance.models import ModelConfig
 from ..imageio import linear_to_srgb, read_image, srgb_to_linear, write_image
 from ..mesh import Mesh, normalize_to_unit_sphere
-from ..photo import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG, PhotoCamera, camera_exposure  # defaults defined once
+from ..photo import camera_exposure
 from ..primitives import uv_sphere
 from ..progress import ProgressCallback, check_cancel, emit
-from .depth import DepthConfig, estimate_ray_distance
+from ..scene.camera import DEFAULT_PITCH_DEG, PhotoCamera
 from .cues import CueConfig, build_cues
+from .depth import DepthConfig, estimate_ray_distance
 from .diffusion_critic import DiffusionCriticConfig
 from .outpaint import OutpaintConfig
 from .hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, Critic, OptimiseConfig, OptimiseResult,
                   hdr_from_scales, is_dark_environment, light_prompt, optimise_scales, prior_scales, tonemap_preview,
                   DEFAULT_L_WHITE)
-from .panorama import Panorama, indoor_panorama, outdoor_panorama, place_on_floor
-from .scene_type import scene_type_cue
+from ..scene.floor import place_on_floor
+from .panorama import Panorama, indoor_panorama, outdoor_panorama
 from .regions import RegionThresholds, bright_regions
+from .scene_type import scene_type_cue
 
 # The panorama is built (and its lights found) at least this tall, whatever map size is asked for; a
 # smaller map is area-averaged from it, which keeps every light's energy. A lamp smaller than a texel
@@ -200,9 +202,9 @@ def _metadata(path: Path) -> dict:
 
 
 def default_photo_camera(config: LightConfig, photo_info: dict, width: int, height: int) -> tuple[PhotoCamera, dict]:
-    """The camera the light stage assumes for a photo when none is given: core/photo.py's, with the
+    """The camera the light stage assumes for a photo when none is given: core/scene/camera.py's, with the
     config's field of view and pitch (the one definition of the frame and the defaults)."""
-    from ..photo import photo_camera_for
+    from ..scene.camera import photo_camera_for
 
     return photo_camera_for(photo_info, width, height, config.fov_deg, config.camera_pitch_deg)
 

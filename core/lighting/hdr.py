@@ -62,7 +62,7 @@ class LightVector:
     """
 
     def __init__(self, ldr_linear: torch.Tensor, masks: dict[str, torch.Tensor]) -> None:
-        from ..render import equirect_directions
+        from ..scene.frame import equirect_directions
 
         h, w = ldr_linear.shape[:2]
         level = ldr_linear.double().mean(dim=-1)

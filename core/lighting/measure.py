@@ -15,7 +15,8 @@ import torch
 
 from ..camera import Camera
 from ..primitives import uv_sphere
-from ..render import AssetRenderer, equirect_directions
+from ..render import AssetRenderer
+from ..scene.frame import equirect_directions
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
 MATERIALS = {"diffuse": (0.8, 1.0, 0.0), "glossy": (0.9, 0.15, 1.0)}   # base colour, roughness, metallic
@@ -117,7 +118,7 @@ def sample_envmap(envmap: np.ndarray, dirs: np.ndarray) -> np.ndarray:
     """Bilinear radiance of a lat-long map along world directions (..., 3), wrapping in u."""
     import cv2
 
-    from ..render import blender_direction_to_equirect_uv
+    from ..scene.frame import blender_direction_to_equirect_uv
 
     h, w = envmap.shape[:2]
     flat = dirs.reshape(-1, 1, 3)
@@ -131,7 +132,7 @@ def sample_envmap(envmap: np.ndarray, dirs: np.ndarray) -> np.ndarray:
 
 def probe_geometry(forward: np.ndarray, size: int = 64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(mask (s, s), normals (n, 3), reflected view directions (n, 3)) of a unit sphere seen along `forward`."""
-    from ..camera import look_frame
+    from ..scene.frame import look_frame
 
     f, right, up = look_frame(forward)
     xs = (np.arange(size) + 0.5) / size * 2 - 1
@@ -145,7 +146,7 @@ def probe_geometry(forward: np.ndarray, size: int = 64) -> tuple[np.ndarray, np.
 
 def _lobe_integral(envmap: np.ndarray, axes: np.ndarray, weight) -> np.ndarray:
     """sum over texels of L * weight(axis . texel) * solid angle, normalised per axis, chunked."""
-    from ..render import equirect_directions
+    from ..scene.frame import equirect_directions
 
     h, w = envmap.shape[:2]
     dirs = equirect_directions(h, w).reshape(-1, 3).astype(np.float32)

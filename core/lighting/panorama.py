@@ -27,12 +27,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..photo import PhotoCamera
-from ..render import blender_direction_to_equirect_uv, equirect_directions
-
-CAMERA_HEIGHT = 1.0
-MIN_PLACEMENT_DEPRESSION_DEG = 2.0  # a placement ray must point at least this far below the horizon
-ORIGIN_LIFT = 0.05  # the map is seen from this high above the floor point (camera heights): the object's centre
+from ..scene.camera import CAMERA_HEIGHT, PhotoCamera
+from ..scene.floor import ORIGIN_LIFT, FloorPoint
+from ..scene.frame import blender_direction_to_equirect_uv, equirect_directions
 
 
 @dataclass
@@ -45,54 +42,6 @@ class Panorama:
     inpainted: np.ndarray         # (H, W) bool: hole filled by cv2.inpaint
     unseen: np.ndarray            # (H, W) bool: outside what the photo saw -> mean colour / sky-ground prior
     decisions: dict = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class FloorPoint:
-    """Where the ray through the placement's pixel meets the floor: the object stands there."""
-
-    pixel: tuple[float, float]     # (x, y) in photo pixels
-    object_position: np.ndarray    # world, on the floor z = 0
-    clamped: bool                  # the ray was lifted below the horizon to meet the floor
-
-
-def pixel_ray(camera: PhotoCamera, x: float, y: float) -> np.ndarray:
-    """World direction through photo pixel coordinates (x right, y down, pixel centres at +0.5)."""
-    forward, right, up, half_w, half_h = camera.basis()
-    d = forward + (x / camera.width * 2 - 1) * half_w * right + (1 - y / camera.height * 2) * half_h * up
-    return d / np.linalg.norm(d)
-
-
-def place_on_floor(camera: PhotoCamera, pixel: tuple[float, float], height: float = CAMERA_HEIGHT) -> FloorPoint:
-    """Where the placement pixel's ray meets the floor; rays at or above the horizon are tilted just below it."""
-    x, y = pixel
-    if not (0 <= x <= camera.width and 0 <= y <= camera.height):
-        raise InputError(f"The placement ({x:.1f}, {y:.1f}) lies outside the {camera.width}x{camera.height} photo.")
-    d = pixel_ray(camera, x, y)
-    min_dz = -np.sin(np.radians(MIN_PLACEMENT_DEPRESSION_DEG))
-    clamped = bool(d[2] > min_dz)
-    if clamped:
-        horizontal = d[:2] / max(np.linalg.norm(d[:2]), 1e-9)
-        d = np.array([*(horizontal * np.cos(np.arcsin(-min_dz))), min_dz])
-    t = height / -d[2]
-    origin = np.array([0.0, 0.0, height])
-    return FloorPoint((float(x), float(y)), origin + t * d, clamped)
-
-
-def geometric_ray_distance(camera: PhotoCamera, placement: FloorPoint, height: float = CAMERA_HEIGHT) -> np.ndarray:
-    """The fallback room: floor z = 0 and a cylindrical wall around the camera, (H, W) distances along rays.
-
-    The wall stands at three times the floor distance to the object (at least 4 camera heights),
-    so the object sits well inside the room; rays that do not meet the floor end on the wall.
-    """
-    dirs = camera.ray_directions()
-    reach = float(np.linalg.norm(placement.object_position[:2]))
-    radius = max(3.0 * reach, 4.0 * height)
-    dz = dirs[..., 2]
-    t_floor = np.where(dz < -1e-6, height / np.maximum(-dz, 1e-6), np.inf)
-    horizontal = np.linalg.norm(dirs[..., :2], axis=-1)
-    t_wall = radius / np.maximum(horizontal, 1e-6)
-    return np.minimum(t_floor, t_wall).astype(np.float32)
 
 
 HIGHLIGHT_LEVEL = 0.95             # clipped (the far-light threshold tau_f)

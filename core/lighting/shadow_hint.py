@@ -13,8 +13,7 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from ..photo import PhotoCamera
-from .panorama import CAMERA_HEIGHT, pixel_ray
+from ..scene.camera import CAMERA_HEIGHT, PhotoCamera, pixel_ray
 
 
 def floor_point(camera: PhotoCamera, pixel: tuple[float, float], what: str) -> np.ndarray:

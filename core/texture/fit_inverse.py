@@ -20,7 +20,8 @@ import torch
 from ..camera import Camera
 from ..mesh import Mesh
 from ..progress import ProgressCallback, check_cancel, emit
-from ..render import AssetRenderer, SceneOptions, equirect_directions
+from ..render import AssetRenderer, SceneOptions
+from ..scene.frame import equirect_directions
 from .neural_texture import split_channels
 
 

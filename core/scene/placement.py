@@ -3,8 +3,8 @@
 `--at X,Y` on every command and the Blender panel's placement mean the object's centre in the
 photo, as fractions of its width and height (values above 1 are read as pixels); `--object-size` is
 the fraction of the photo's height the asset spans. The light stage casts its floor ray through the
-centre (core/lighting/panorama.py `place_on_floor`); the compose stage stands the asset on the floor
-there (core/compose.py `place_asset`), and the adapt stage's global views are that composite
+centre (core/scene/floor.py `place_on_floor`); the compose stage stands the asset on the floor
+there (core/scene/asset_pose.py `place_asset`), and the adapt stage's global views are that composite
 (core/adapt/global_views.py).
 """
 from __future__ import annotations
@@ -12,11 +12,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .errors import InputError
+from ..errors import InputError
+
 
 # The one default of every entry point (the command line, the Blender panel, batch jobs, adapt's
 # global views): where the asset stands, and its height as a fraction of the photo's height.
 DEFAULT_AT = (0.5, 0.6)
+
+
 DEFAULT_OBJECT_SIZE = 0.3
 
 
