@@ -16,6 +16,21 @@ ROOT = Path(__file__).resolve().parent.parent
 VALIDATOR_VERSION = "2.0.0-dev.3.10"
 
 
+def threads_per_worker(cores: int, workers: int) -> int:
+    """The cores each of `workers` test workers may use. Every torch (OpenMP) in a worker and in the
+    processes it starts takes all the cores by default; with two workers on two cores that is twice
+    as many threads as cores, and OpenMP's threads spin while they wait for each other: measured on
+    four test files, 142 s of CPU for 78 s against 90 s for 51 s with one thread per worker."""
+    return max(1, cores // max(1, workers))
+
+
+# Set before torch is imported (here or in a process a test starts, which inherits it). A value the
+# caller set stays.
+_WORKERS = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+if _WORKERS > 1:
+    os.environ.setdefault("OMP_NUM_THREADS", str(threads_per_worker(os.cpu_count() or 1, _WORKERS)))
+
+
 def run_python(code: str, env: dict | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
     """Run `code` in a fresh interpreter of this environment; fails the test with its output."""
     full_env = dict(os.environ, **(env or {}))
