@@ -6,7 +6,7 @@ from pathlib import Path
 
 from .options import (add_dry_run_arg, add_model_args, add_old_photo_elevation_arg, add_output_args,
                       add_photo_camera_args, add_placement_args, add_preset_args, model_config, output, photo_pitch,
-                      placement, positive_int, progress, require)
+                      positive_int, progress, require)
 
 
 def sun_angles(text: str) -> tuple[float, float]:
@@ -84,27 +84,23 @@ def run(args) -> int:
 
 
 def _light(args, out: Path) -> int:
-    from ..core.lighting import estimate_light, light_report, load_photo, write_light_outputs
-    from ..core.pipeline import environment_info, write_report
+    from ..core.lighting import estimate_light
+    from ..core.lighting.stage import light_inputs, write_light_stage
+    from ..core.pipeline import environment_info
 
     critic = critic_choice(args, model_config(args))
     config = resolve_config(args, critic.choice)
-    photo, info = load_photo(args.photo)
-    where = placement(args, (info["size"][1], info["size"][0]))   # --at in pixels means the photo as stored
-    camera, estimate = photo_camera(args, photo.shape[:2])
+    inputs = light_inputs(args.photo, args.at, args.fspy, {"fov_deg": args.fov, "pitch_deg": photo_pitch(args),
+                                                           "roll_deg": args.roll})
     if args.sun_from_shadow:
-        config = replace(config, sun_deg=shadow_sun(args.sun_from_shadow, camera, info, photo.shape[:2]))
-    result = estimate_light(photo, where.pixel(photo.shape[:2]), config, photo_camera=camera, photo_info=info,
+        config = replace(config, sun_deg=shadow_sun(args.sun_from_shadow, inputs.camera, inputs.info,
+                                                    inputs.photo.shape[:2]))
+    result = estimate_light(inputs.photo, inputs.pixel, config, photo_camera=inputs.camera, photo_info=inputs.info,
                             progress=progress(args))
     if args.sun_from_shadow:
         result.decisions["sun"]["from"] = "the shadow given by --sun-from-shadow (foot, top, tip)"
     result.decisions["critic"]["choice"] = {"asked": args.critic, "chosen": critic.choice, "why": critic.reason}
-    result.decisions["camera"] = estimate
-    outputs = write_light_outputs(result, out)
-    report = light_report(result, config, outputs)
-    report["photo"] = info
-    report["environment"] = environment_info()
-    write_report(out / "report.json", report)
+    write_light_stage(result, config, out, inputs, {"environment": environment_info()})
     depth_used = result.decisions.get("depth", {}).get("method", "none (outdoor)")
     print(f"light: {result.decisions['scene_type']['chosen']} scene, depth {depth_used}, scales "
           f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {Path(args.out) / 'light.exr'}")
@@ -118,16 +114,6 @@ def shadow_sun(points: list[str], camera, info: dict, hw: tuple[int, int]) -> tu
 
     foot, top, tip = (Placement.parse(p, (info["size"][0], info["size"][1])).pixel(hw) for p in points)
     return sun_from_shadow(camera, foot, top, tip)
-
-
-def photo_camera(args, hw: tuple[int, int]):
-    """(PhotoCamera, its record): the photo's camera as `scenefit camera` finds it (fSpy, EXIF, its lines,
-    else the defaults), with --fov / --pitch / --roll over it; the report says where each came from."""
-    from ..core.photo_camera import photo_camera_estimate
-
-    estimate = photo_camera_estimate(args.photo, args.fspy, {"fov_deg": args.fov, "pitch_deg": photo_pitch(args),
-                                                             "roll_deg": args.roll})
-    return estimate.photo_camera(width=hw[1], height=hw[0]), estimate.to_dict()
 
 
 def add_parser(sub) -> None:

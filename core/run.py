@@ -286,7 +286,8 @@ class PipelineRun:
         return config, height
 
     def light(self) -> None:
-        from .lighting import estimate_light, light_report, write_light_outputs
+        from .lighting import estimate_light
+        from .lighting.stage import LightInputs, write_light_stage
         from .scene_needs import report as needs_report
         from .surface_layout import texture_view
         from .texture.bake import load_neural_texture
@@ -311,12 +312,9 @@ class PipelineRun:
             result = estimate_light(self.photo, self.placement_px, config, photo_camera=camera,
                                     photo_info=self.photo_info, progress=self.progress, cancel=self.cancel,
                                     models=_WithInpaint(self.cache) if self.found else self.cache, **asset)
-            outputs = write_light_outputs(result, folder)
-            report = light_report(result, config, outputs)
-            report["decisions"]["envmap_height"] = needs_report(envmap_height)
-            report["decisions"]["camera"] = estimate
-            write_json_atomic(folder / "report.json", report)
-            return report
+            result.decisions["envmap_height"] = needs_report(envmap_height)
+            return write_light_stage(result, config, folder, LightInputs(self.photo, self.photo_info,
+                                                                         self.placement_px, camera, estimate))
 
         self.runner.run("light", self.keys["light"], light)
         self.light_path = self.out / "light" / "light.exr"

@@ -87,8 +87,8 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
     from dataclasses import replace
 
     from ..core.guidance import models_available
-    from ..core.lighting import estimate_light as estimate, light_report, load_photo, write_light_outputs
-    from ..core.pipeline import write_report
+    from ..core.lighting import estimate_light as estimate, load_photo
+    from ..core.lighting.stage import LightInputs, write_light_stage
     from ..core.presets import stage_config
     from ..core.scene.placement import Placement
 
@@ -110,17 +110,14 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
         size = int(data["model_resolution"])
         config = replace(config, diffusion=replace(config.diffusion, model_resolution=size),
                          outpaint=replace(config.outpaint, resolution=size))
-    camera, record = view_camera(data["photo"], data["view"], w, h)
+    camera, record = view_camera(data["photo"], data["view"], w, h)   # the artist's camera, the panel's or the photo's
+    inputs = LightInputs(photo, info, placement, camera, record)
     result = estimate(photo, placement, config, photo_camera=camera, photo_info=info, progress=progress,
                       cancel=cancel)
-    result.decisions["camera"] = record
 
     def write(out: Path) -> dict:
-        outputs = write_light_outputs(result, out)
-        report = light_report(result, config, outputs)
-        report["photo"] = info
-        write_report(out / "report.json", report)
-        return {"hdr": str(outputs["hdr_exr"]), "preview": str(outputs["preview_png"]),
+        report = write_light_stage(result, config, out, inputs)
+        return {"hdr": str(report["outputs"]["hdr_exr"]), "preview": str(report["outputs"]["preview_png"]),
                 "report": str(out / "report.json"),
                 "scene_type": result.decisions.get("scene_type", {}).get("chosen", ""),
                 "camera": camera_values(result.photo_camera)}

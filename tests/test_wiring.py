@@ -112,6 +112,39 @@ def test_the_light_critic_scores_the_asset_itself(inputs, monkeypatch):
     assert seen["mesh"] is mesh and isinstance(seen["maps"], torch.Tensor) and seen["maps"].shape[-1] == 5
 
 
+def test_a_batch_light_job_lights_the_photo_as_scenefit_light_does(inputs, monkeypatch):
+    """A batch job's light stage once lit every photo through the default camera (60 deg, -10 deg pitch)
+    while `scenefit light` estimated the photo's own (here EXIF's 90 deg). Both now read the photo, the
+    placement and the camera through core/lighting/stage.py and write the same report."""
+    import scenefit.core.lighting as lighting
+    from scenefit.workers.batch import run_job_stages
+
+    from test_camera import _jpeg_with_exif
+
+    # 18 mm (35 mm equivalent) on a 3:2 landscape photo, 36 mm of film across: 90 deg.
+    photo = _jpeg_with_exif(inputs["root"] / "exif.jpg", (120, 80), **{"Exif:FocalLengthIn35mmFilm": 18})
+    real, calls = lighting.estimate_light, []
+
+    def recorded(photo_array, pixel, config, **kwargs):
+        calls.append({"pixel": tuple(pixel), "camera": kwargs.get("photo_camera"), "scene": config.scene_type,
+                      "height": config.map_height, "critic": config.critic_type})
+        return real(photo_array, pixel, config, **kwargs)
+
+    monkeypatch.setattr(lighting, "estimate_light", recorded)
+    assert main(["light", "--photo", str(photo), "--at", "0.5,0.6", "--out", str(inputs["root"] / "cli"),
+                 "--preset", "draft", "--critic", "none", "--depth", "geometric", "--quiet"]) == 0
+    job = load_jobs(_jobs(inputs["root"], inputs["folder"], photo, ["light"])).jobs[0]
+    out = inputs["root"] / "batch"
+    out.mkdir()
+    run_job_stages(job, out)
+    cli_call, batch_call = calls
+    assert cli_call == batch_call
+    assert cli_call["camera"].fov_deg == pytest.approx(90.0, abs=0.1)
+    reports = [json.loads((folder / "report.json").read_text()) for folder in (inputs["root"] / "cli", out / "light")]
+    assert reports[0]["decisions"]["camera"] == reports[1]["decisions"]["camera"]
+    assert reports[0]["photo"] == reports[1]["photo"]
+
+
 def test_the_command_line_and_the_panel_share_one_set_of_defaults():
     """The panel once placed the asset at (0.5, 0.75) at 0.4 of the photo, the command line at (0.5, 0.6), 0.3."""
     import ast

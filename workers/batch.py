@@ -239,11 +239,6 @@ def run_job_stages(job: Job, out: Path, progress=None, cancel=None, models=None)
     ModelCache (None: the pipeline loads what it needs for this job alone).
     """
     if "compose" in job.stages or "bake" in job.stages:
-        try:
-            from ..core.run import run_pipeline  # noqa: F401
-        except ImportError:
-            raise InputError(f"Job '{job.name}': stages compose and bake need `scenefit run`'s pipeline, which "
-                             f"this version lacks; use stages convert and light.") from None
         return _relative_outputs({"run": run_pipeline_for_job(job, out, progress, cancel, models)}, out)
     return _available_stages(job, out, progress, cancel)
 
@@ -282,10 +277,10 @@ def _load_asset(job: Job):
 
 
 def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
-    from ..core.lighting import estimate_light, light_report, load_photo, write_light_outputs
+    from ..core.lighting import estimate_light
+    from ..core.lighting.stage import light_inputs, write_light_stage
     from ..core.pipeline import convert_and_bake
     from ..core.presets import stage_config
-    from ..core.scene.placement import Placement
 
     if "adapt" in job.stages:
         raise InputError(f"Job '{job.name}': stage adapt runs inside the whole pipeline in a batch; "
@@ -296,12 +291,12 @@ def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
         _, reports["convert"] = convert_and_bake(mesh, maps, out / "convert" / "maps",
                                                  stage_config("convert", job.preset, **_stage_overrides(job).get(
                                                      "convert", {})), progress, cancel)
-    if "light" in job.stages:
-        photo, info = load_photo(job.photo)
-        placement = Placement.parse(job.at, tuple(info["size"])).pixel(photo.shape[:2])
+    if "light" in job.stages:   # as `scenefit light` lights it: the photo's own camera, the same files
+        inputs = light_inputs(job.photo, job.at)
         config = stage_config("light", job.preset, **{"critic_type": "none", **job.overrides.get("light", {})})
-        result = estimate_light(photo, placement, config, photo_info=info, progress=progress, cancel=cancel)
-        reports["light"] = light_report(result, config, write_light_outputs(result, out / "light"))
+        result = estimate_light(inputs.photo, inputs.pixel, config, photo_camera=inputs.camera,
+                                photo_info=inputs.info, progress=progress, cancel=cancel)
+        reports["light"] = write_light_stage(result, config, out / "light", inputs)
     return _relative_outputs(reports, out)
 
 

@@ -1,0 +1,56 @@
+"""The light stage from a photo file, as `scenefit light` and a batch job run it: one reading of the
+photo, the placement and the photo's camera, and one writing of the stage's files and report.
+
+    inputs = light_inputs(photo_path, at, fspy, camera_overrides)   # photo, pixel, camera, its record
+    result = estimate_light(inputs.photo, inputs.pixel, config, photo_camera=inputs.camera, ...)
+    report = write_light_stage(result, config, folder, inputs)        # light.exr, previews, report.json
+
+(A batch job's light stage once lit every photo through the default camera while `scenefit light`
+used the photo's own: the copies had drifted. The whole pipeline, core/run.py, reads its camera the
+same way through photo_camera_estimate, and writes its stage record itself.)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..scene.camera import PhotoCamera
+from ..scene.placement import Placement
+from .estimate import LightConfig, LightResult, light_report, load_photo, write_light_outputs
+
+
+@dataclass(frozen=True)
+class LightInputs:
+    photo: np.ndarray          # (h, w, 3) sRGB in [0, 1], the light stage's working copy
+    info: dict                 # what load_photo found: the stored size, orientation, metadata
+    pixel: tuple[float, float]  # the placement in the working copy's pixels
+    camera: PhotoCamera        # the photo's camera at the working copy's size
+    camera_record: dict        # where each of its values came from (the report's decisions.camera)
+
+
+def light_inputs(photo_path: str | Path, at, fspy: str | Path | None = None,
+                 camera_overrides: dict | None = None) -> LightInputs:
+    """The photo read once, the placement `at` ("X,Y" or a pair: fractions, or pixels of the photo as
+    stored) and the photo's camera as `scenefit camera` finds it, with `camera_overrides` over it."""
+    from ..photo_camera import photo_camera_estimate
+
+    photo, info = load_photo(photo_path)
+    h, w = photo.shape[:2]
+    pixel = Placement.parse(at, tuple(info["size"])).pixel((h, w))
+    estimate = photo_camera_estimate(photo_path, fspy, camera_overrides)
+    return LightInputs(photo, info, pixel, estimate.photo_camera(width=w, height=h), estimate.to_dict())
+
+
+def write_light_stage(result: LightResult, config: LightConfig, folder: Path, inputs: LightInputs,
+                      extra: dict | None = None) -> dict:
+    """light.exr and its previews in `folder`, and report.json (the photo's facts, `extra` over it)."""
+    from ..pipeline import write_report
+
+    result.decisions["camera"] = inputs.camera_record
+    report = light_report(result, config, write_light_outputs(result, folder))
+    report["photo"] = inputs.info
+    report.update(extra or {})
+    write_report(Path(folder) / "report.json", report)
+    return report
