@@ -25,19 +25,6 @@ def sun_angles(text: str) -> tuple[float, float]:
     return az, el
 
 
-def critic_choice(args, models):
-    """--critic auto (as the demo's --guidance and --depth): the diffusion critic when SD2 is on this machine."""
-    from ..core.decision import Decision
-    from ..core.guidance import models_available
-
-    if args.critic != "auto":
-        return Decision(args.critic, "the user's choice")
-    found, where = models_available(models, need_inpaint=False)
-    if found:
-        return Decision("diffusion", f"Stable Diffusion 2 found ({where})")
-    return Decision("none", "Stable Diffusion 2 weights are not on this machine, so the prior sets the scales")
-
-
 def resolve_config(args, critic: str):
     """The LightConfig the arguments ask for: the preset, then the options given."""
     from ..core.lighting.depth import DEFAULT_DEPTH_MODEL, DepthConfig
@@ -85,10 +72,10 @@ def run(args) -> int:
 
 def _light(args, out: Path) -> int:
     from ..core.lighting import estimate_light
-    from ..core.lighting.stage import light_inputs, write_light_stage
+    from ..core.lighting.stage import critic_choice, light_inputs, write_light_stage
     from ..core.pipeline import environment_info
 
-    critic = critic_choice(args, model_config(args))
+    critic = critic_choice(args.critic, model_config(args))
     config = resolve_config(args, critic.choice)
     inputs = light_inputs(args.photo, args.at, args.fspy, {"fov_deg": args.fov, "pitch_deg": photo_pitch(args),
                                                            "roll_deg": args.roll})

@@ -86,18 +86,15 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
     """Photo + placement -> light.exr (Blender's equirectangular convention) in data['out']."""
     from dataclasses import replace
 
-    from ..core.guidance import models_available
     from ..core.lighting import estimate_light as estimate, load_photo
-    from ..core.lighting.stage import LightInputs, write_light_stage
+    from ..core.lighting.stage import LightInputs, critic_choice, write_light_stage
     from ..core.presets import stage_config
     from ..core.scene.placement import Placement
 
     photo, info = load_photo(data["photo"])
     h, w = photo.shape[:2]
     placement = Placement.parse(tuple(data["placement"]), tuple(info["size"])).pixel((h, w))
-    critic = data.get("critic", "auto")
-    if critic == "auto":  # the diffusion critic when its weights are on this machine (never downloads)
-        critic = "diffusion" if models_available(data["models"], need_inpaint=False)[0] else "none"
+    critic = critic_choice(data.get("critic", "auto"), data["models"]).choice
     overrides = {"scene_type": data["scene_type"], "critic_type": critic, "models": data["models"],
                  "depth": data["depth"]}
     if data["view"].get("sun_deg"):   # the artist's sun (Pick Sun), as --sun

@@ -145,6 +145,34 @@ def test_a_batch_light_job_lights_the_photo_as_scenefit_light_does(inputs, monke
     assert reports[0]["photo"] == reports[1]["photo"]
 
 
+def test_a_batch_light_job_chooses_the_critic_as_scenefit_light_does(inputs, monkeypatch):
+    """With the SD2 weights on the machine `scenefit light` refines the scales with the diffusion critic;
+    a batch light job always took none. Both now decide 'auto' in core/lighting/stage.critic_choice."""
+    import scenefit.core.guidance.models as models
+    import scenefit.core.lighting as lighting
+    from scenefit.workers.batch import run_job_stages
+
+    class Stop(Exception):
+        pass
+
+    critics = []
+
+    def recorded(photo_array, pixel, config, **kwargs):
+        critics.append(config.critic_type)
+        raise Stop   # the choice is what is compared; the tiny test has no weights to load
+
+    monkeypatch.setattr(models, "models_available", lambda *a, **k: (True, "pretended for the test"))
+    monkeypatch.setattr(lighting, "estimate_light", recorded)
+    with pytest.raises(Stop):
+        main(["light", "--photo", str(inputs["photo"]), "--out", str(inputs["root"] / "cli"), "--preset", "draft",
+              "--quiet"])
+    job = load_jobs(_jobs(inputs["root"], inputs["folder"], inputs["photo"], ["light"])).jobs[0]
+    (inputs["root"] / "batch").mkdir()
+    with pytest.raises(Stop):
+        run_job_stages(job, inputs["root"] / "batch")
+    assert critics == ["diffusion", "diffusion"]
+
+
 def test_the_command_line_and_the_panel_share_one_set_of_defaults():
     """The panel once placed the asset at (0.5, 0.75) at 0.4 of the photo, the command line at (0.5, 0.6), 0.3."""
     import ast
