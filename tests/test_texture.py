@@ -13,12 +13,12 @@ from scenefit.core.errors import Cancelled, InputError
 from scenefit.core.imageio import linear_to_srgb, read_image
 from scenefit.core.mesh import Mesh
 from scenefit.core.presets import stage_config
+from scenefit.core.texture.fit_direct import fit_direct
 from scenefit.core.texture import (
     HashGrid3D,
     NeuralTexture,
     NeuralTextureConfig,
     bake_maps,
-    fit_direct,
     load_neural_texture,
     masked_psnr,
     rasterize_uv,

@@ -2,17 +2,37 @@
 
 rasterize_uv(mesh, H) -> UVRaster           the paper's position map C and coverage
 NeuralTexture(config)                         3D point -> base colour, roughness, metallic
-fit_direct(texture, C, mask, target, ...)     regression in texture space (asset has a UV texture)
+fit_direct.fit_direct(texture, C, mask, ...)  regression in texture space (asset has a UV texture)
 bake_maps(texture, C, border, fill, out_dir)  PNG maps + texture.pt; load_neural_texture() resumes
-"""
-from .bake import bake_maps, bake_texture, load_neural_texture, save_neural_texture
-from .fit_direct import FitResult, encode_for_metric, fit_direct, masked_psnr
-from .hashgrid import HashGrid3D
-from .neural_texture import CHANNELS, NeuralTexture, NeuralTextureConfig, TexelPlan, split_channels
-from .uv_raster import UVRaster, rasterize_uv, seam_fill_index
 
-__all__ = [
-    "CHANNELS", "FitResult", "HashGrid3D", "NeuralTexture", "NeuralTextureConfig", "TexelPlan",
-    "UVRaster", "bake_maps", "bake_texture", "encode_for_metric", "fit_direct", "load_neural_texture",
-    "masked_psnr", "rasterize_uv", "save_neural_texture", "seam_fill_index", "split_channels",
-]
+Each name is imported from its module when first asked for: the UV rasteriser is numpy alone, and a
+module that needs only it (materials, render, compose, hence `scenefit --help` and the refusals the
+command line makes before any work) does not wait the ~2 s that importing torch takes. The function
+fit_direct is imported from its module of the same name: once that module is loaded, the package's
+attribute `fit_direct` is the module (Python sets it), so the package cannot hand out the function.
+"""
+from __future__ import annotations
+
+import importlib
+
+_MODULE_OF = {
+    "bake_maps": "bake", "bake_texture": "bake", "load_neural_texture": "bake", "save_neural_texture": "bake",
+    "FitResult": "fit_direct", "encode_for_metric": "fit_direct", "masked_psnr": "fit_direct",
+    "HashGrid3D": "hashgrid",
+    "CHANNELS": "neural_texture", "NeuralTexture": "neural_texture", "NeuralTextureConfig": "neural_texture",
+    "TexelPlan": "neural_texture", "split_channels": "neural_texture",
+    "UVRaster": "uv_raster", "rasterize_uv": "uv_raster", "seam_fill_index": "uv_raster",
+}
+__all__ = sorted(_MODULE_OF)
+
+
+def __getattr__(name: str):
+    if name not in _MODULE_OF:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{_MODULE_OF[name]}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return __all__
