@@ -47,6 +47,16 @@ def scenefit_process(*args, env: dict | None = None) -> subprocess.CompletedProc
                           timeout=600, cwd=ROOT, env=dict(os.environ, **(env or {})))
 
 
+def scenefit_side_by_side(*commands, env: dict | None = None, timeout: float = 900) -> list[tuple[int, str]]:
+    """(exit code, stderr) of `scenefit ARGS` for each ARGS in `commands`: each a process of its own, as the
+    command runs, all started at once (independent commands: a file's bakes, or its converts)."""
+    procs = [subprocess.Popen([sys.executable, "-m", "scenefit.cli", *map(str, args)], stdout=subprocess.DEVNULL,
+                              stderr=subprocess.PIPE, text=True, cwd=ROOT, env=dict(os.environ, **(env or {})))
+             for args in commands]
+    errors = [proc.communicate(timeout=timeout)[1] for proc in procs]
+    return [(proc.returncode, err) for proc, err in zip(procs, errors)]
+
+
 def built_and_converted(build: str, folder: Path, name: str) -> tuple[Path, Path]:
     """(folder/name, its texture.pt): the asset written by the Blender script `build` (FOLDER in it names
     `folder`), then `scenefit convert --preset draft --resolution 64` of it into folder/convert."""

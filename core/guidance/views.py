@@ -12,6 +12,7 @@ import torch
 import torch.nn.functional as F
 
 from ..errors import InputError
+from ..scene.mattes import composite_linear
 
 GREY = (0.5, 0.5, 0.5)
 
@@ -122,8 +123,6 @@ def global_view(rgb: torch.Tensor, alpha: torch.Tensor, rect: tuple[float, float
 
     Differentiable with respect to rgb and alpha.
     """
-    from ..scene.mattes import composite_linear
-
     obj = paste_layer(torch.cat([rgb, alpha], dim=-1), rect, crop, size)
     obj_rgb, obj_alpha = obj[:, :3], obj[:, 3:4]
     bg = torch.from_numpy(photo_crop(np.asarray(photo, np.float32), crop, size)).to(rgb)

@@ -32,6 +32,7 @@ from ..guidance.critics import CriticConfig, ScoreCritic
 from ..guidance.lora import AMBIENT_LIGHT, LoraCritic, camera_condition
 from ..guidance.models import GuidanceModels
 from ..guidance.views import linear_to_srgb_torch, paste_layer, photo_crop, srgb_to_linear_torch
+from ..scene.mattes import composite_linear, paper_shadow_matte
 from .hdr import DEFAULT_L_WHITE, CriticRequest
 
 VIEWS_TYPES = ("composited", "apparatus")
@@ -172,8 +173,6 @@ class DiffusionLightCritic:
             return {"apparatus": display.permute(2, 0, 1)[None]}
         if request.alphas is None or request.floor_alphas is None:
             raise InputError("The composited light critic needs the object's and the floor's coverage in the request.")
-        from ..scene.mattes import composite_linear, paper_shadow_matte
-
         alpha = request.alphas[i].to(leaf)
         floor = request.floor_alphas[i].to(leaf)[..., 0] > 0.5
         # The object and sphere, tone-mapped like the photo they join; the floor gives only its shadow.
