@@ -52,8 +52,8 @@ if result["rank"] == 0:
 """
 
 
-def rank_work(models: tuple[str, str]) -> dict:
-    """One rank: a 4-views step (its gradients after the sum over ranks) and a 3-step 2-views run."""
+def rank_work(models: tuple[str, str], whole_run: bool = True) -> dict:
+    """One rank: a 4-views step (its gradients after the sum over ranks) and (whole_run) a 3-step 2-views run."""
     import drjit
     import torch.distributed as dist
 
@@ -63,9 +63,9 @@ def rank_work(models: tuple[str, str]) -> dict:
     system = AdaptSystem.build(inputs, four)          # joins the launcher's group (gloo on CPU)
     system.step(0)
     grads = [p.grad.clone() for p in system.texture.parameters()]
-    result = adapt_texture(inputs, two)
+    texture = adapt_texture(inputs, two).texture.state_dict() if whole_run else None
     return {"rank": dist.get_rank(), "world": system.decisions()["world_size"].choice, "views": system.my_views,
-            "grads": grads, "texture": result.texture.state_dict()}
+            "grads": grads, "texture": texture}
 
 
 def setup(models: tuple[str, str]):
@@ -121,7 +121,7 @@ def check_like_one_process(spread: dict, one_process) -> None:
         one = ((g[0] + g[1]) + g[2]) + g[3]
         assert torch.all((got - one).abs() <= 2 * 3 * u * sum(x.abs() for x in g))
     # Two views on two ranks: a + b = b + a, so the runs agree bit for bit over several steps.
-    for name, value in alone.items():
+    for name, value in alone.items() if spread["texture"] is not None else ():
         assert torch.equal(spread["texture"][name], value), name
 
 
@@ -137,6 +137,7 @@ def test_torchrun_two_gloo_ranks_average_view_gradients_like_one_process(tiny_mo
 
 
 def test_ray_ranks_average_view_gradients_like_one_process(tiny_models, one_process):
+    # The step's gradients only: the several-step run adds nothing Ray-specific (torchrun's test has it).
     ray = pytest.importorskip("ray")
     from ray import cloudpickle
 
@@ -145,7 +146,7 @@ def test_ray_ranks_average_view_gradients_like_one_process(tiny_models, one_proc
     cloudpickle.register_pickle_by_value(sys.modules[__name__])
     ray.init(num_cpus=2, object_store_memory=80 * 2**20, include_dashboard=False, log_to_driver=False)
     try:
-        results = run_on_ranks(rank_work, (tiny_models,), world=2)
+        results = run_on_ranks(rank_work, (tiny_models, False), world=2)
     finally:
         ray.shutdown()
         cloudpickle.unregister_pickle_by_value(sys.modules[__name__])

@@ -377,6 +377,9 @@ def test_a_ctrl_c_inside_cycles_python_is_raised_once_the_bake_returns(run_py):
         import os, signal, time
         from scenefit.blender_io.interrupts import interrupt_held
 
+        # A shell's background job starts with SIGINT ignored, and Python then keeps it ignored.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
         def operator_that_drops_exceptions():   # what Blender does with an engine callback's exception
             try:
                 os.kill(os.getpid(), signal.SIGINT)
