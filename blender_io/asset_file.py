@@ -10,6 +10,7 @@ read back as 'Material.001') and stand in the way of importers and bakes that us
 from __future__ import annotations
 
 import re
+import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from ..core.maps import PBRMaps
 from ..core.materials import AssetMaterials
 from ..core.mesh import Mesh
 from ..core.quiet import native_output_captured
+from .fbx_ascii import binary_copy, is_ascii_fbx
 from .material import read_object_materials
 from .scene_asset import read_scene_materials
 
@@ -101,6 +103,18 @@ def _import_into(bpy, scene, path: Path, suffix: str) -> None:
         getattr(getattr(bpy.ops, module), op)(filepath=str(path))
 
 
+@contextmanager
+def _readable(path: Path):
+    """`path`, or while the block runs a copy Blender's importers read: a meshopt-compressed glTF
+    decoded, an ASCII FBX written as binary FBX (its importer reads only binary)."""
+    if not is_ascii_fbx(path):
+        with importable(path) as readable:
+            yield readable
+        return
+    with tempfile.TemporaryDirectory(prefix="scenefit-fbx-") as folder:
+        yield binary_copy(path, Path(folder) / path.name)
+
+
 def _blender_reason(error: Exception) -> str:
     """The last meaningful line of a Blender operator error (they carry the importer's traceback)."""
     lines = [line for line in str(error).splitlines() if line.strip()]
@@ -170,7 +184,7 @@ def loaded_asset(path: str | Path, object_name: str | None = None):
         raise InputError(f"SceneFit cannot read '{suffix}' files; use one of {known}, or an asset folder.")
     if path.stat().st_size == 0:
         raise InputError(f"Asset file '{path}' is empty; export it again.")
-    with _temporary_data(bpy) as scene, importable(path) as readable:
+    with _temporary_data(bpy) as scene, _readable(path) as readable:
         # Blender's importers print to the terminal and raise RuntimeError on a broken file: their
         # chatter is kept off the user's terminal and serves as the error's reason.
         with native_output_captured() as chatter:

@@ -1,0 +1,199 @@
+"""ASCII FBX files, which Blender's FBX importer refuses ("ASCII FBX files are not supported"), read
+by writing the same node tree as a binary FBX first, with Blender's own FBX writer (io_scene_fbx's
+encode_bin, the module its exporter writes with).
+
+An ASCII FBX 7.x file is the binary format's tree written as text: `Name: value, value {children}`,
+arrays as `*N { a: v,v,... }`, object names as "Class::Name" (binary: b"Name\\x00\\x01Class"). The
+text does not say which binary type a number had, so each is typed here as the importer reads it:
+object ids and connection ends are int64, a `P:` property's numbers follow its declared type (int,
+bool and enum int32; KTime int64; everything else, vectors and colours included, float64), the
+geometry's index arrays int32 and its coordinates float64, animation key times int64 and values
+float32. Files older than FBX 7 (a different text layout) are refused in one sentence.
+"""
+from __future__ import annotations
+
+import base64
+import re
+from pathlib import Path
+
+from ..core.errors import InputError
+
+BINARY_MAGIC = b"Kaydara FBX Binary  \x00"
+_TOKEN = re.compile(r"""
+    \s*(?:
+      (?P<comment>;[^\n]*)
+    | (?P<string>"[^"]*")
+    | (?P<key>[A-Za-z_][\w|]*)\s*:
+    | (?P<count>\*\d+)
+    | (?P<number>[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)
+    | (?P<brace>[{},])
+    | (?P<word>[A-Za-z_]\w*)
+    )""", re.VERBOSE)
+_OBJECT_NAME = re.compile(r"^(\w+)::(.*)$", re.DOTALL)
+
+# A P: property's value types by its declared type (the P's second field); the rest are float64.
+_P_INT32 = {"int", "Integer", "enum", "Enum", "bool", "Bool"}
+_P_INT64 = {"KTime", "ULongLong", "LongLong"}
+_INT32_ARRAYS = {"PolygonVertexIndex", "Edges", "UVIndex", "ColorIndex", "NormalsIndex", "NormalIndex",
+                 "BinormalsIndex", "TangentsIndex", "Materials", "Smoothing", "Indexes", "KeyAttrFlags",
+                 "KeyAttrRefCount", "Visibility", "VisibilityIndex", "TextureId", "EdgeCrease", "Hole"}
+_INT64_ARRAYS = {"KeyTime"}
+_FLOAT32_ARRAYS = {"KeyValueFloat", "KeyAttrDataFloat"}
+_INT64_SCALARS = {"LocalTime", "ReferenceTime", "Node"}   # KTime spans, a bind pose's node id
+
+
+def is_ascii_fbx(path: Path) -> bool:
+    """An .fbx file that is not binary (binary FBX starts with its magic)."""
+    with open(path, "rb") as handle:
+        return path.suffix.lower() == ".fbx" and handle.read(len(BINARY_MAGIC)) != BINARY_MAGIC
+
+
+def parse_ascii_fbx(text: str) -> list[tuple]:
+    """The file's top-level nodes, each (name, [(kind, value)], [children])."""
+    tokens = _tokens(text)
+    nodes, end = _nodes(tokens, 0)
+    if end != len(tokens):
+        raise ValueError(f"an unexpected '{tokens[end][1]}' at the top level")
+    return nodes
+
+
+def _tokens(text: str) -> list[tuple[str, str]]:
+    out, at = [], 0
+    text = text.rstrip()
+    while at < len(text):
+        match = _TOKEN.match(text, at)
+        if match is None or match.end() == at:
+            raise ValueError(f"unreadable text at character {at}: {text[at:at + 30]!r}")
+        at = match.end()
+        kind = match.lastgroup
+        if kind != "comment":
+            out.append((kind, match.group(kind)))
+    return out
+
+
+def _nodes(tokens: list, at: int) -> tuple[list, int]:
+    nodes = []
+    while at < len(tokens) and tokens[at] != ("brace", "}"):
+        kind, name = tokens[at]
+        if kind != "key":
+            raise ValueError(f"expected a node name, found '{name}'")
+        props, at = _values(tokens, at + 1)
+        children = []
+        if at < len(tokens) and tokens[at] == ("brace", "{"):
+            children, at = _nodes(tokens, at + 1)
+            if at >= len(tokens):
+                raise ValueError(f"node '{name}' is not closed")
+            at += 1
+        nodes.append((name, props, children))
+    return nodes, at
+
+
+def _values(tokens: list, at: int) -> tuple[list, int]:
+    """A node's values: an array (`*N {a: ...}`) or a comma-separated list (possibly empty)."""
+    if at < len(tokens) and tokens[at][0] == "count":
+        count = int(tokens[at][1][1:])
+        if tokens[at + 1] != ("brace", "{"):
+            raise ValueError("an array without its '{'")
+        at += 2
+        numbers = []
+        if tokens[at] == ("key", "a"):
+            values, at = _values(tokens, at + 1)
+            numbers = [value for _, value in values]
+        if tokens[at] != ("brace", "}") or len(numbers) != count:
+            raise ValueError(f"an array of {count} values holds {len(numbers)}")
+        return [("array", numbers)], at + 1
+    values = []
+    while at < len(tokens) and tokens[at][0] in ("string", "number", "word"):
+        kind, raw = tokens[at]
+        values.append((kind, raw[1:-1].replace("&quot;", '"') if kind == "string" else raw))
+        at += 1
+        if at < len(tokens) and tokens[at] == ("brace", ","):
+            at += 1
+        else:
+            break
+    return values, at
+
+
+def binary_copy(source: Path, out: Path) -> Path:
+    """`out`: the ASCII FBX `source` written as a binary FBX of the same version. InputError (one
+    sentence) for text that is not an FBX 7 file."""
+    try:
+        nodes = parse_ascii_fbx(Path(source).read_text(encoding="utf-8", errors="replace"))
+    except (ValueError, IndexError) as error:
+        raise InputError(f"Asset file '{source}' is an ASCII FBX file that cannot be read ({error}); check that "
+                         "it is a valid FBX file.") from None
+    version = _version(nodes)
+    if version < 7000:
+        raise InputError(f"Asset file '{source}' is an FBX {version / 1000:g} text file; Blender reads FBX 7 and "
+                         "later, so save it from its application as a binary FBX (2011 or later) or as glTF.")
+    from io_scene_fbx import encode_bin   # Blender's add-on, on the path once bpy is imported
+
+    root = encode_bin.FBXElem(b"")
+    # The binary writer stamps its own file id and creation time, which must be of its types.
+    nodes = [node for node in nodes if node[0] not in ("FileId", "CreationTime")]
+    for node in nodes:
+        _element(encode_bin, root, node, parent="")
+    root.elems.append(_with(encode_bin.FBXElem(b"FileId"), "add_bytes", b"\0" * 16))
+    root.elems.append(_with(encode_bin.FBXElem(b"CreationTime"), "add_string", b"1970-01-01 10:00:00:000"))
+    encode_bin.write(str(out), root, version)
+    return out
+
+
+def _with(element, method: str, value):
+    getattr(element, method)(value)
+    return element
+
+
+def _version(nodes: list) -> int:
+    for name, props, children in nodes:
+        if name == "FBXHeaderExtension":
+            for child_name, child_props, _ in children:
+                if child_name == "FBXVersion" and child_props:
+                    return int(child_props[0][1])
+    return 0
+
+
+def _element(encode_bin, parent_element, node: tuple, parent: str) -> None:
+    name, props, children = node
+    element = encode_bin.FBXElem(name.encode())
+    parent_element.elems.append(element)
+    declared = props[1][1] if name == "P" and len(props) > 1 else None
+    for index, (kind, value) in enumerate(props):
+        _add(element, name, parent, index, kind, value, declared)
+    for child in children:
+        _element(encode_bin, element, child, parent=name)
+
+
+def _add(element, name: str, parent: str, index: int, kind: str, value, declared: str | None) -> None:
+    if kind == "array":
+        if name in _INT32_ARRAYS:
+            element.add_int32_array([int(float(v)) for v in value])
+        elif name in _INT64_ARRAYS:
+            element.add_int64_array([int(float(v)) for v in value])
+        elif name in _FLOAT32_ARRAYS:
+            element.add_float32_array([float(v) for v in value])
+        else:
+            element.add_float64_array([float(v) for v in value])
+    elif kind == "string":
+        if name == "Content":   # embedded media, base64 in text
+            element.add_bytes(base64.b64decode(value) if value else b"")
+            return
+        named = _OBJECT_NAME.match(value)
+        raw = (named.group(2) + "\x00\x01" + named.group(1)) if named else value
+        element.add_string(raw.encode("utf-8"))
+    elif kind == "word":
+        element.add_char(value[:1].encode())
+    elif declared is not None:   # a P: property's value
+        if declared in _P_INT32:
+            element.add_int32(int(float(value)))
+        elif declared in _P_INT64:
+            element.add_int64(int(float(value)))
+        else:
+            element.add_float64(float(value))
+    elif parent == "Objects" and index == 0 or name == "C" or name in _INT64_SCALARS:
+        element.add_int64(int(float(value)))
+    elif re.fullmatch(r"[-+]?\d+", value):
+        number = int(value)
+        element.add_int32(number) if -2**31 <= number < 2**31 else element.add_int64(number)
+    else:
+        element.add_float64(float(value))
