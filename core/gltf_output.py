@@ -1,7 +1,8 @@
 """How `scenefit bake` writes its glTF: compression, texture format, the cap on texture size and
 tangents. By default the output is compressed as the input is and its textures are in the input's
-format, and it carries tangents where the input has a normal map (engines need them, and the
-validator warns when a normal-mapped primitive lacks them). Skinned meshes stay root nodes where the
+format, and it carries tangents where the input has them (a glTF without them leaves them to its
+clients, which generate MikkTSpace ones; blender_io.gltf_export adds them for normal-mapped materials
+of other kinds of file). Skinned meshes stay root nodes where the
 input had them so: Blender parents a skinned mesh to its armature, and glTF ignores a skinned mesh
 node's transform, so a parent only earns the validator's NODE_SKINNED_MESH_NON_ROOT warning."""
 from __future__ import annotations
@@ -63,8 +64,8 @@ def _image_format(image: dict) -> str | None:
 def output_like_input(asset: str | Path, compress: str | None = None, textures: str | None = None,
                       max_texture: int | None = None) -> GltfOutput:
     """The output settings: each one given, else as the input file has it (a non-glTF input: none,
-    png). Tangents where the input has them (and, decided from the loaded materials in
-    blender_io.gltf_export, where a material has a normal map)."""
+    png). Tangents where the input has them (and, for inputs that are not glTF, where a loaded material
+    has a normal map: blender_io.gltf_export)."""
     document = _document(Path(asset))
     used = document.get("extensionsUsed", [])
     if compress is None:
