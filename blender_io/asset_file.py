@@ -14,6 +14,7 @@ import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
+from ..core.asset_io import check_asset_path
 from ..core.errors import InputError
 from ..core.gltf_meshopt import importable
 from ..core.maps import PBRMaps
@@ -143,6 +144,13 @@ def _asset_node_names(scene) -> list[str]:
                   if o.type == "MESH" or any(c.type == "MESH" for c in o.children_recursive))
 
 
+def load_asset(path: str | Path, object_name: str | None = None) -> tuple[Mesh, PBRMaps]:
+    """(Mesh, PBRMaps) from an asset folder (read without Blender) or from a file Blender reads."""
+    from ..core.asset_io import is_asset_folder, load_asset_folder
+
+    return load_asset_folder(path) if is_asset_folder(path) else load_asset_file(path, object_name)
+
+
 def load_asset_file(path: str | Path, object_name: str | None = None) -> tuple[Mesh, PBRMaps]:
     """The asset (the file's meshes, or the named node's) and its maps; several materials come as
     one atlas (see AssetMaterials.fitting_view)."""
@@ -173,17 +181,10 @@ def loaded_asset(path: str | Path, object_name: str | None = None):
     import bpy
 
     path = Path(path)
-    if path.is_dir():
-        raise InputError(f"'{path}' is a folder but not a SceneFit asset folder (it has no mesh.npz); give an "
-                         "asset folder or a .blend/.glb/.gltf/.obj/.fbx file.")
-    if not path.is_file():
-        raise InputError(f"Asset file '{path}' does not exist.")
+    check_asset_path(path)
+    if path.is_dir():   # an asset folder is read without Blender (core.asset_io), never imported
+        raise InputError(f"'{path}' is a SceneFit asset folder, not a file Blender reads.")
     suffix = path.suffix.lower()
-    if suffix != ".blend" and suffix not in IMPORTERS:
-        known = ", ".join(sorted({".blend", *IMPORTERS}))
-        raise InputError(f"SceneFit cannot read '{suffix}' files; use one of {known}, or an asset folder.")
-    if path.stat().st_size == 0:
-        raise InputError(f"Asset file '{path}' is empty; export it again.")
     with _temporary_data(bpy) as scene, _readable(path) as readable:
         # Blender's importers print to the terminal and raise RuntimeError on a broken file: their
         # chatter is kept off the user's terminal and serves as the error's reason.

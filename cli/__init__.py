@@ -45,6 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         try:
             with _quiet_if_asked(args):
+                _check_inputs(args)
                 return args.func(args)
         except RuntimeError as error:   # Dr.Jit wraps a Ctrl-C inside a render in its own error
             if _interrupted(error):
@@ -60,6 +61,15 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as error:   # a full disk, a read-only folder, a file in the way: a sentence, not a traceback
         print(f"scenefit: error: {os_error_sentence(error, getattr(args, 'out', None))}", file=sys.stderr)
         return 2
+
+
+def _check_inputs(args) -> None:
+    """The asset path checked before a command loads torch or Blender (seconds), so a mistyped path is
+    refused at once; the rest of each command's inputs are checked where they are read."""
+    if getattr(args, "asset", None) and not getattr(args, "dry_run", False):
+        from ..core.asset_io import check_asset_path
+
+        check_asset_path(args.asset)
 
 
 def _quiet_if_asked(args):

@@ -96,13 +96,9 @@ def output(args, resume: bool = False, reuse: bool = False):
 
 def load_asset(path: str, object_name: str | None = None):
     """(Mesh, PBRMaps) from an asset folder, or from a file Blender reads (needs bpy)."""
-    from ..core.asset_io import is_asset_folder, load_asset_folder
+    from ..blender_io.asset_file import load_asset as load
 
-    if is_asset_folder(path):
-        return load_asset_folder(path)
-    from ..blender_io.asset_file import load_asset_file
-
-    return load_asset_file(path, object_name)
+    return load(path, object_name)
 
 
 def load_asset_materials(path: str, object_name: str | None = None):

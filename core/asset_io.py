@@ -46,9 +46,31 @@ def save_asset_folder(mesh: Mesh, maps: PBRMaps, folder: str | Path) -> Path:
     return folder
 
 
+# The files Blender reads as an asset (blender_io.asset_file has an importer for each but .blend).
+ASSET_FILE_SUFFIXES = (".blend", ".glb", ".gltf", ".obj", ".fbx", ".ply", ".usd", ".usda", ".usdc", ".usdz")
+
+
 def is_asset_folder(path: str | Path) -> bool:
     path = Path(path)
     return path.is_dir() and (path / "mesh.npz").is_file()
+
+
+def check_asset_path(path: str | Path) -> None:
+    """InputError (one sentence) unless `path` is an asset folder or a non-empty file of a kind Blender
+    reads: checked before Blender or torch is loaded, so a mistyped path is refused at once."""
+    path = Path(path)
+    if path.is_dir():
+        if not is_asset_folder(path):
+            raise InputError(f"'{path}' is a folder but not a SceneFit asset folder (it has no mesh.npz); give an "
+                             "asset folder or a .blend/.glb/.gltf/.obj/.fbx file.")
+        return
+    if not path.is_file():
+        raise InputError(f"Asset file '{path}' does not exist.")
+    if path.suffix.lower() not in ASSET_FILE_SUFFIXES:
+        raise InputError(f"SceneFit cannot read '{path.suffix.lower()}' files; use one of "
+                         f"{', '.join(sorted(ASSET_FILE_SUFFIXES))}, or an asset folder.")
+    if path.stat().st_size == 0:
+        raise InputError(f"Asset file '{path}' is empty; export it again.")
 
 
 def load_asset_folder(folder: str | Path) -> tuple[Mesh, PBRMaps]:

@@ -15,7 +15,7 @@ from scenefit.core.asset_io import load_asset_folder, save_asset_folder
 from scenefit.core.convert import ConvertConfig, choose_resolution, convert_asset
 from scenefit.core.presets import stage_config
 from scenefit.core.errors import InputError
-from scenefit.core.imageio import read_image, srgb_to_linear
+from scenefit.core.imageio import read_image
 from scenefit.core.maps import PBRMaps
 from scenefit.core.primitives import uv_sphere
 from scenefit.core.texture.bake import load_neural_texture
@@ -134,11 +134,15 @@ def test_cli_convert_render_export_on_an_asset_folder(tmp_path):
 
 
 def test_cli_bad_input_is_a_sentence_not_a_traceback(tmp_path):
-    # processes of their own: convert imports bpy for an asset file, even a missing one
-    proc = scenefit("convert", str(tmp_path / "missing.glb"), "--out", str(tmp_path / "o"))
-    assert proc.returncode == 2
-    assert "does not exist" in proc.stderr and "Traceback" not in proc.stderr
+    # In this process: an asset path is checked before any command loads Blender (scenefit_here fails
+    # the test if bpy is imported), so a mistyped path is refused at once, not after seconds of loading.
     (tmp_path / "notes.txt").write_text("hello")
-    proc = scenefit("convert", str(tmp_path / "notes.txt"), "--out", str(tmp_path / "o"))
-    assert proc.returncode == 2 and "cannot read '.txt'" in proc.stderr
-    assert not (tmp_path / "o").exists()
+    (tmp_path / "empty.glb").write_bytes(b"")
+    for command in ("convert", "run", "bake", "render", "export"):
+        for asset, words in (("missing.glb", "does not exist"), ("notes.txt", "cannot read '.txt'"),
+                             ("empty.glb", "is empty")):
+            extra = {"run": ["--photo", tmp_path / "p.png", "--at", "0.5,0.6"], "bake": ["--texture", "t.pt"]}
+            proc = scenefit_here(command, tmp_path / asset, "--out", tmp_path / "o.glb", *extra.get(command, []))
+            assert proc.returncode == 2 and words in proc.stderr, (command, asset, proc.stderr)
+            assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.glb", "notes.txt"]

@@ -267,13 +267,9 @@ def _stage_overrides(job: Job) -> dict:
 
 
 def _load_asset(job: Job):
-    from ..core.asset_io import is_asset_folder, load_asset_folder
+    from ..blender_io.asset_file import load_asset   # a Blender/glTF file: bpy in this worker
 
-    if is_asset_folder(job.asset):
-        return load_asset_folder(job.asset)
-    from ..blender_io.asset_file import load_asset_file   # a Blender/glTF file: bpy in this worker
-
-    return load_asset_file(str(job.asset), job.object)
+    return load_asset(str(job.asset), job.object)
 
 
 def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
