@@ -3,8 +3,9 @@ tangents. By default the output is compressed as the input is and its textures a
 format, and it carries tangents where the input has them (a glTF without them leaves them to its
 clients, which generate MikkTSpace ones; blender_io.gltf_export adds them for normal-mapped materials
 of other kinds of file). Skinned meshes stay root nodes where the
-input had them so: Blender parents a skinned mesh to its armature, and glTF ignores a skinned mesh
-node's transform, so a parent only earns the validator's NODE_SKINNED_MESH_NON_ROOT warning."""
+input had them so, and always for inputs of other kinds (FBX, .blend): Blender parents a skinned mesh
+to its armature, and glTF ignores a skinned mesh node's transform, so a parent only earns the
+validator's NODE_SKINNED_MESH_NON_ROOT warning."""
 from __future__ import annotations
 
 import json
@@ -77,8 +78,11 @@ def output_like_input(asset: str | Path, compress: str | None = None, textures: 
                   for primitive in mesh.get("primitives", [])]
     tangents = any("TANGENT" in names for names in attributes)
     normals = not attributes or tangents or any("NORMAL" in names for names in attributes)
+    # A glTF's skinned meshes stay where it had them; another kind of file has no say, so they go to the
+    # root, where glTF wants them (the validator warns NODE_SKINNED_MESH_NON_ROOT under Blender's armature).
+    at_root = _skinned_meshes_at_root(document) if Path(asset).suffix.lower() in (".gltf", ".glb") else True
     return GltfOutput(compress, textures, DEFAULT_MAX_TEXTURE if max_texture is None else max_texture, tangents,
-                      _skinned_meshes_at_root(document), normals)
+                      at_root, normals)
 
 
 def _parents(document: dict) -> dict[int, int]:

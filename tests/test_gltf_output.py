@@ -15,7 +15,17 @@ def test_the_output_is_compressed_textured_and_given_tangents_as_the_input(tmp_p
                      "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TANGENT": 1}}]}]}, b"")
     assert output_like_input(path) == GltfOutput("draco", "jpeg", 2048, tangents=True)
     assert output_like_input(path, "meshopt", "webp", 512) == GltfOutput("meshopt", "webp", 512, tangents=True)
-    assert output_like_input(tmp_path / "asset.obj") == GltfOutput()
+    # Not glTF: nothing to follow, png; skinned meshes at the root, where glTF wants them.
+    assert output_like_input(tmp_path / "asset.obj") == GltfOutput(skins_at_root=True)
+    assert output_like_input(tmp_path / "knight.fbx").skins_at_root
+
+
+def test_skinned_meshes_stay_where_a_gltf_input_had_them(tmp_path):
+    nodes = [{"children": [1]}, {"mesh": 0, "skin": 0}]
+    for name, parented in (("under.glb", True), ("root.glb", False)):
+        write_glb(tmp_path / name, {"asset": {"version": "2.0"}, "nodes": nodes if parented else
+                                    [{}, {"mesh": 0, "skin": 0}]}, b"")
+        assert output_like_input(tmp_path / name).skins_at_root is not parented
 
 
 def test_bad_output_settings_are_one_sentence():
