@@ -19,6 +19,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -105,6 +106,19 @@ def structure(document: dict) -> dict:
             "node_names": sorted(n.get("name", "") for n in document.get("nodes", []))}
 
 
+def _texture_transforms(value) -> list[dict]:
+    """Every KHR_texture_transform object in a glTF document."""
+    if isinstance(value, dict):
+        own = [value["KHR_texture_transform"]] if isinstance(value.get("KHR_texture_transform"), dict) else []
+        return own + [t for v in value.values() for t in _texture_transforms(v)]
+    return [t for v in value for t in _texture_transforms(v)] if isinstance(value, list) else []
+
+
+def _identity(transform: dict) -> bool:
+    return transform.get("offset", [0, 0]) == [0, 0] and transform.get("rotation", 0) == 0 and \
+        transform.get("scale", [1, 1]) == [1, 1] and transform.get("texCoord") in (None, 0)
+
+
 def kept_and_lost(source: Path, baked: Path) -> tuple[list[str], list[str]]:
     if source.suffix.lower() not in (".gltf", ".glb") or not baked.is_file():
         return [], []
@@ -116,10 +130,14 @@ def kept_and_lost(source: Path, baked: Path) -> tuple[list[str], list[str]]:
         if before[key]:
             (kept if after[key] else lost).append(key)
     missing = sorted(set(before["extensions"]) - set(after["extensions"]))
+    if "KHR_texture_transform" in missing and all(_identity(t) for t in _texture_transforms(gltf_json(source))):
+        missing.remove("KHR_texture_transform")   # only {"texCoord": 0}s (Kenney's): nothing to keep
     if missing:
         lost.append("extensions " + ", ".join(missing))
-    if before["node_names"] != after["node_names"]:
-        lost.append("node names changed")
+    # The input's names must come back; an unnamed node (Ingenuity's one) may come back named.
+    renamed = Counter(n for n in before["node_names"] if n) - Counter(after["node_names"])
+    if renamed:
+        lost.append("node names changed: " + ", ".join(sorted(renamed)[:3]))
     return kept, lost
 
 
@@ -218,9 +236,18 @@ def contact_sheet(runs: list[dict], path: Path) -> None:
         write_image(path, sheet(rows))
 
 
+def _merged(before: dict, rows: list[dict], runs: list[dict], measured: str) -> tuple[list, list, str]:
+    """The last full table with `rows` and `runs` (an --only run) in place of their assets' old ones."""
+    new_rows, new_runs = {r["asset"]: r for r in rows}, {r["asset"]: r for r in runs}
+    merged_rows = [new_rows.pop(r["asset"], r) for r in before["assets"]] + list(new_rows.values())
+    merged_runs = [new_runs.pop(r["asset"], r) for r in before["runs"]] + list(new_runs.values())
+    earlier = before.get("measured", f"{' '.join(before['load'])} (at the end {' '.join(before['load_at_end'])})")
+    return merged_rows, merged_runs, f"{earlier}; re-run with --only {', '.join(r['asset'] for r in rows)} at {measured}"
+
+
 def markdown(rows: list[dict], runs: list[dict], load: str) -> str:
     ok = sum(r["status"].startswith("ok") and "dB" not in r["status"] for r in rows)
-    lines = [f"# The corpus: real assets through convert -> bake -> validator\n",
+    lines = ["# The corpus: real assets through convert -> bake -> validator\n",
              f"Made by `make corpus` (benchmarks/corpus.py) on {time.strftime('%Y-%m-%d')}; load average at the "
              f"start: {load}. {ok} of {len(rows)} assets pass (convert >= 30 dB, bake, 0 validator errors).\n",
              "| asset | file | status | convert s | convert GB | PSNR dB | bake s | validator errors / warnings "
@@ -288,9 +315,12 @@ def main() -> int:
         RESULTS.mkdir(parents=True, exist_ok=True)
         contact_sheet(runs, RESULTS / "corpus_sheet.png")
     end = open("/proc/loadavg").read().split()[:3] if Path("/proc/loadavg").exists() else ["?"]
-    (RESULTS / "corpus.json").write_text(json.dumps({"load": load, "load_at_end": end, "assets": rows, "runs": runs},
-                                                    indent=2) + "\n")
-    (RESULTS / "corpus.md").write_text(markdown(rows, runs, f"{' '.join(load)} (at the end {' '.join(end)})"))
+    measured = f"{' '.join(load)} (at the end {' '.join(end)})"
+    if args.only and (RESULTS / "corpus.json").is_file():   # the other assets' rows stay as last measured
+        rows, runs, measured = _merged(json.loads((RESULTS / "corpus.json").read_text()), rows, runs, measured)
+    (RESULTS / "corpus.json").write_text(json.dumps({"load": load, "load_at_end": end, "assets": rows, "runs": runs,
+                                                     "measured": measured}, indent=2) + "\n")
+    (RESULTS / "corpus.md").write_text(markdown(rows, runs, measured))
     print(f"wrote {RESULTS / 'corpus.md'}")
     return 0
 
