@@ -363,8 +363,10 @@ def test_a_ctrl_c_inside_a_render_is_an_interrupt_not_a_traceback(tmp_path, caps
             raise RuntimeError("drjit.custom(<_RenderOp>): error while performing a custom operation") from interrupt
 
     monkeypatch.setattr(render_command, "run", render_interrupted)
-    parser_out = tmp_path / "out"
-    assert main(["render", str(tmp_path), "--out", str(parser_out)]) == 130
+    parser_out, asset = tmp_path / "out", tmp_path / "asset"
+    asset.mkdir()
+    (asset / "mesh.npz").write_bytes(b"")   # an asset folder to the path check that runs before the command
+    assert main(["render", str(asset), "--out", str(parser_out)]) == 130
     err = capsys.readouterr().err
     assert "interrupted" in err and "Traceback" not in err
 
