@@ -249,24 +249,27 @@ def test_remote_job_streams_progress_cancels_and_returns_its_folder(in_process, 
     assert not (tmp_path / "back" / "long").exists()
 
 
-def _sum_over_ranks(value_per_rank: float) -> tuple[int, int, float]:
-    """One rank's part: join the group from torchrun's environment (as the adapt stage does) and sum."""
-    import os
-
+def _sum_over_ranks(value_per_rank: float) -> tuple[int, int, float, int]:
+    """One rank's part, through the adapt stage's own functions: join the group from the environment
+    run_on_ranks sets (torchrun's), and sum a gradient over the ranks as a step does."""
     import torch
-    import torch.distributed as dist
 
-    dist.init_process_group("gloo")
-    x = torch.tensor([value_per_rank * (dist.get_rank() + 1)])
-    dist.all_reduce(x)
-    return dist.get_rank(), int(os.environ["WORLD_SIZE"]), float(x)
+    from scenefit.core.adapt.distributed import join_process_group, sum_gradients
+
+    rank, world, why = join_process_group()
+    weight = torch.nn.Parameter(torch.zeros(1))
+    weight.grad = torch.tensor([value_per_rank * (rank + 1)])
+    sum_gradients([weight])
+    return rank, world, float(weight.grad), why.choice
 
 
 @pytest.mark.slow   # a local Ray cluster
 def test_ray_launches_a_torch_distributed_group_on_one_node(local_ray):
+    """The adapt stage's views spread over Ray ranks (test_distributed checks the same join and sum,
+    step by step against one process, under torchrun)."""
     from scenefit.workers.batch_ray import run_on_ranks
 
-    assert run_on_ranks(_sum_over_ranks, (0.5,), world=2) == [(0, 2, 1.5), (1, 2, 1.5)]
+    assert run_on_ranks(_sum_over_ranks, (0.5,), world=2) == [(0, 2, 1.5, 2), (1, 2, 1.5, 2)]
 
 
 def test_work_remotely_takes_the_add_ons_plain_data(tmp_path):

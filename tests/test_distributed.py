@@ -1,4 +1,6 @@
-"""Views of the adapt stage spread over two processes with torch.distributed (gloo, CPU), by torchrun or Ray.
+"""Views of the adapt stage spread over two processes with torch.distributed (gloo, CPU) by torchrun. Ray
+launches the ranks with torchrun's environment (workers.batch_ray.run_on_ranks); that the adapt stage's
+join and gradient sum work under it is test_batch's test_ray_launches_a_torch_distributed_group_on_one_node.
 
 Why the comparisons can be exact. Each view's loss is weighted 1/V and back-propagated on its own;
 a rank accumulates its views' gradients in its own order and gloo sums the ranks' buffers. On one
@@ -24,7 +26,7 @@ import numpy as np
 import pytest
 import torch
 
-pytestmark = pytest.mark.slow   # several processes (torchrun, a Ray cluster): what make test-quick leaves out
+pytestmark = pytest.mark.slow   # several processes (torchrun): what make test-quick leaves out
 
 # The adapt stage's views-per-step system (core/adapt/ package, devtools/) is landing in parallel;
 # until it is on main this module is skipped.
@@ -41,7 +43,7 @@ from scenefit.devtools.tiny_models import build_tiny_pair  # noqa: E402
 
 STAGES = (StageSpec(1.0, 16, 2, (30, 990)),)
 
-# Run by each rank under torchrun (the Ray launcher calls rank_work directly).
+# Run by each rank under torchrun.
 RANK_SCRIPT = """
 import sys, torch
 sys.path.insert(0, {here!r})
@@ -52,8 +54,8 @@ if result["rank"] == 0:
 """
 
 
-def rank_work(models: tuple[str, str], whole_run: bool = True) -> dict:
-    """One rank: a 4-views step (its gradients after the sum over ranks) and (whole_run) a 3-step 2-views run."""
+def rank_work(models: tuple[str, str]) -> dict:
+    """One rank: a 4-views step (its gradients after the sum over ranks) and a 3-step 2-views run."""
     import drjit
     import torch.distributed as dist
 
@@ -63,7 +65,7 @@ def rank_work(models: tuple[str, str], whole_run: bool = True) -> dict:
     system = AdaptSystem.build(inputs, four)          # joins the launcher's group (gloo on CPU)
     system.step(0)
     grads = [p.grad.clone() for p in system.texture.parameters()]
-    texture = adapt_texture(inputs, two).texture.state_dict() if whole_run else None
+    texture = adapt_texture(inputs, two).texture.state_dict()
     return {"rank": dist.get_rank(), "world": system.decisions()["world_size"].choice, "views": system.my_views,
             "grads": grads, "texture": texture}
 
@@ -121,7 +123,7 @@ def check_like_one_process(spread: dict, one_process) -> None:
         one = ((g[0] + g[1]) + g[2]) + g[3]
         assert torch.all((got - one).abs() <= 2 * 3 * u * sum(x.abs() for x in g))
     # Two views on two ranks: a + b = b + a, so the runs agree bit for bit over several steps.
-    for name, value in alone.items() if spread["texture"] is not None else ():
+    for name, value in alone.items():
         assert torch.equal(spread["texture"][name], value), name
 
 
@@ -134,21 +136,3 @@ def test_torchrun_two_gloo_ranks_average_view_gradients_like_one_process(tiny_mo
                            str(script)], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-4000:]
     check_like_one_process(torch.load(out), one_process)
-
-
-def test_ray_ranks_average_view_gradients_like_one_process(tiny_models, one_process):
-    # The step's gradients only: the several-step run adds nothing Ray-specific (torchrun's test has it).
-    ray = pytest.importorskip("ray")
-    from ray import cloudpickle
-
-    from scenefit.workers.batch_ray import run_on_ranks
-
-    cloudpickle.register_pickle_by_value(sys.modules[__name__])
-    ray.init(num_cpus=2, object_store_memory=80 * 2**20, include_dashboard=False, log_to_driver=False)
-    try:
-        results = run_on_ranks(rank_work, (tiny_models, False), world=2)
-    finally:
-        ray.shutdown()
-        cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
-    assert [r["rank"] for r in results] == [0, 1]
-    check_like_one_process(results[0], one_process)
