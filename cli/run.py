@@ -32,21 +32,45 @@ def game_bake(args):
     return asset_file_bake(args.asset, args.object)
 
 
+def read_asset(args) -> tuple:
+    """(mesh, maps, key, how it was read): the run folder's copy of an earlier run's read of the same
+    files (core/asset_read_cache.py), else the asset itself (a file through Blender)."""
+    import time
+
+    from ..core.asset_read_cache import load_read, read_key
+    from ..core.output_folder import is_run_folder
+
+    start = time.perf_counter()
+    key = read_key(args.asset, args.object)
+    # (only from a SceneFit run folder, whose finished stages this run reuses too; --replace starts over)
+    copied = load_read(args.out, key) if not args.replace and is_run_folder(Path(args.out)) else None
+    mesh, maps = copied or load_asset(args.asset, args.object)
+    how = {"source": "copy" if copied else "asset", "seconds": round(time.perf_counter() - start, 3),
+           "why": "the run folder's copy of an earlier read of the same files" if copied else
+           "read from the asset" + ("" if key else " (only glTF and OBJ reads are kept: their referenced files are "
+                                                    "all known)")}
+    return mesh, maps, key, how
+
+
 def run(args) -> int:
+    from ..core.asset_read_cache import save_read
     from ..core.pipeline import write_report
     from ..core.run import run_pipeline
 
     config, written = run_config(args)
-    mesh, maps = load_asset(args.asset, args.object)
+    mesh, maps, key, how = read_asset(args)
     bake, why_not = game_bake(args)
     # Written beside and swapped in whole, like every command's folder; an earlier run's folder is
     # taken up (its finished stages reused), never mixed with this run's files.
     with output(args, reuse=True) as staging:
         report = run_pipeline(mesh, maps, args.photo, args.at, staging, config, progress=progress(args),
                               bake=bake, bake_skipped_why=why_not)
+        if how["source"] == "asset":
+            save_read(staging, key, mesh, maps)
+        report["asset_read"] = how
         if written is not None:
             report["prompt_writing"] = written.to_report()
-            write_report(staging / "report.json", report)
+        write_report(staging / "report.json", report)
     summary = ", ".join(f"{name} {stage['status']}" for name, stage in report["stages"].items())
     print(f"run done in {report['seconds_total']:.1f} s ({summary}) -> {Path(args.out) / 'compose' / 'composite.png'}")
     return 0

@@ -73,9 +73,19 @@ def test_run_on_an_asset_file_bakes_a_game_asset_and_reuses_it(tmp_path):
     assert glb.read_bytes()[:4] == b"glTF"            # the binary glTF magic
     assert [m["name"] for m in bake["report"]["materials"]] == ["Ball"]
 
+    assert report["asset_read"]["source"] == "asset"
+
     second = scenefit("run", *args)
     assert second.returncode == 0, second.stderr
-    assert json.loads((out / "report.json").read_text())["reused"] == ["convert", "light", "compose", "bake"]
+    report = json.loads((out / "report.json").read_text())
+    assert report["reused"] == ["convert", "light", "compose", "bake"]
+    assert report["asset_read"]["source"] == "copy"   # the same files: Blender's read kept from the first run
+    # A texture of the asset changed: read again, and the stages that depend on it run again.
+    write_image(tmp_path / "obj" / "albedo.png", np.full((32, 32, 3), 0.5, np.float32))
+    third = scenefit("run", *args)
+    assert third.returncode == 0, third.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["asset_read"]["source"] == "asset" and "convert" not in report["reused"]
 
 
 def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monkeypatch, capsys):
