@@ -468,8 +468,6 @@ def fit_lines(srgb: np.ndarray, fov_deg: float | None = None) -> LinesFit:
 
 def photo_segments(srgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Straight segments (OpenCV's LSD) as normalised ends (N, 4), longest first, with length weights."""
-    import cv2
-
     h, w = srgb.shape[:2]
     gray = np.clip(np.round(srgb[..., :3] @ LUMA * 255.0), 0, 255).astype(np.uint8)
     found = _line_detector().detect(gray)[0]

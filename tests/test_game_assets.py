@@ -4,9 +4,7 @@ re-imported. One Blender subprocess builds, converts, bakes and re-imports every
 from __future__ import annotations
 
 import json
-import os
 import re
-import shutil
 import struct
 from pathlib import Path
 

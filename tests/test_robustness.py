@@ -16,7 +16,6 @@ from scenefit.core.atomic import TEMP_MARK
 from scenefit.core.errors import InputError
 from scenefit.core.imageio import read_image, write_image
 from scenefit.core.maps import PBRMaps
-from scenefit.core.mesh import Mesh
 from scenefit.core.output_folder import MARKER, _FolderLock, output_folder, staging_path, write_marker
 
 

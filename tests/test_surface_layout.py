@@ -17,7 +17,6 @@ from scenefit.core.render import AssetRenderer
 from scenefit.core.surface_layout import (SHARED_LIMIT, adapting_view, new_layout, own_uvs_at, texture_view,
                                           uv_sharing)
 from scenefit.core.texture.bake import load_neural_texture, save_neural_texture
-from scenefit.core.texture.uv_raster import sample_image
 
 from test_render_materials import albedo_and_position, banded_plane, expected_albedo
 

@@ -3,9 +3,6 @@ and every triangle spanning the whole UV square (memory bounded by the texture a
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-import textwrap
 from pathlib import Path
 
 import numpy as np

@@ -181,7 +181,6 @@ class LocalProcessJob:
     """
 
     def __init__(self, job: Job, python: str, settings: BatchSettings = BatchSettings(), env: dict | None = None) -> None:
-        import json
         import os
         import queue
         import subprocess
