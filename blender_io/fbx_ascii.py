@@ -16,6 +16,8 @@ import base64
 import re
 from pathlib import Path
 
+import numpy as np
+
 from ..core.errors import InputError
 
 BINARY_MAGIC = b"Kaydara FBX Binary  \x00"
@@ -24,12 +26,13 @@ _TOKEN = re.compile(r"""
       (?P<comment>;[^\n]*)
     | (?P<string>"[^"]*")
     | (?P<key>[A-Za-z_][\w|]*)\s*:
-    | (?P<count>\*\d+)
+    | (?P<array>\*\d+\s*\{[^}]*\})
     | (?P<number>[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)
     | (?P<brace>[{},])
     | (?P<word>[A-Za-z_]\w*)
     )""", re.VERBOSE)
 _OBJECT_NAME = re.compile(r"^(\w+)::(.*)$", re.DOTALL)
+_ARRAY = re.compile(r"\*(\d+)\s*\{\s*(?:a\s*:(.*?))?\s*\}", re.DOTALL)
 
 # A P: property's value types by its declared type (the P's second field); the rest are float64.
 _P_INT32 = {"int", "Integer", "enum", "Enum", "bool", "Bool"}
@@ -44,8 +47,10 @@ _INT64_SCALARS = {"LocalTime", "ReferenceTime", "Node"}   # KTime spans, a bind 
 
 def is_ascii_fbx(path: Path) -> bool:
     """An .fbx file that is not binary (binary FBX starts with its magic)."""
+    if path.suffix.lower() != ".fbx":
+        return False
     with open(path, "rb") as handle:
-        return path.suffix.lower() == ".fbx" and handle.read(len(BINARY_MAGIC)) != BINARY_MAGIC
+        return handle.read(len(BINARY_MAGIC)) != BINARY_MAGIC
 
 
 def parse_ascii_fbx(text: str) -> list[tuple]:
@@ -90,16 +95,11 @@ def _nodes(tokens: list, at: int) -> tuple[list, int]:
 
 def _values(tokens: list, at: int) -> tuple[list, int]:
     """A node's values: an array (`*N {a: ...}`) or a comma-separated list (possibly empty)."""
-    if at < len(tokens) and tokens[at][0] == "count":
-        count = int(tokens[at][1][1:])
-        if tokens[at + 1] != ("brace", "{"):
-            raise ValueError("an array without its '{'")
-        at += 2
-        numbers = []
-        if tokens[at] == ("key", "a"):
-            values, at = _values(tokens, at + 1)
-            numbers = [value for _, value in values]
-        if tokens[at] != ("brace", "}") or len(numbers) != count:
+    if at < len(tokens) and tokens[at][0] == "array":
+        # One token for the whole array, split in C: a mesh's millions of numbers never pass the tokenizer.
+        count, body = _ARRAY.fullmatch(tokens[at][1]).groups()
+        numbers = [number.strip() for number in body.split(",")] if body and body.strip() else []
+        if len(numbers) != int(count):
             raise ValueError(f"an array of {count} values holds {len(numbers)}")
         return [("array", numbers)], at + 1
     values = []
@@ -166,14 +166,15 @@ def _element(encode_bin, parent_element, node: tuple, parent: str) -> None:
 
 def _add(element, name: str, parent: str, index: int, kind: str, value, declared: str | None) -> None:
     if kind == "array":
+        numbers = np.array(value, dtype=np.float64)   # exact for the integers an FBX holds (< 2^53)
         if name in _INT32_ARRAYS:
-            element.add_int32_array([int(float(v)) for v in value])
+            element.add_int32_array(numbers.astype(np.int32))
         elif name in _INT64_ARRAYS:
-            element.add_int64_array([int(float(v)) for v in value])
+            element.add_int64_array(numbers.astype(np.int64))
         elif name in _FLOAT32_ARRAYS:
-            element.add_float32_array([float(v) for v in value])
+            element.add_float32_array(numbers.astype(np.float32))
         else:
-            element.add_float64_array([float(v) for v in value])
+            element.add_float64_array(numbers)
     elif kind == "string":
         if name == "Content":   # embedded media, base64 in text
             element.add_bytes(base64.b64decode(value) if value else b"")
