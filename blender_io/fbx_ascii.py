@@ -99,6 +99,8 @@ def _values(tokens: list, at: int) -> tuple[list, int]:
         # One token for the whole array, split in C: a mesh's millions of numbers never pass the tokenizer.
         count, body = _ARRAY.fullmatch(tokens[at][1]).groups()
         numbers = [number.strip() for number in body.split(",")] if body and body.strip() else []
+        if numbers and not numbers[-1]:   # a trailing comma, as Asset Forge writes
+            numbers.pop()
         if len(numbers) != int(count):
             raise ValueError(f"an array of {count} values holds {len(numbers)}")
         return [("array", numbers)], at + 1

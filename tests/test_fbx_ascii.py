@@ -125,7 +125,7 @@ Objects:  {
 \tGeometry: 4455667788990, "Geometry::Sofa", "Mesh" {
 \t\tVertices: *6 {
 \t\t\ta: 0,0,0,
-1.5,-2e-3,3
+1.5,-2e-3,3,
 \t\t}
 \t\tShading: T
 \t\tProperties70:  {
