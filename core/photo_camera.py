@@ -12,9 +12,12 @@ Each field comes from the best source that has it, best first:
              the three orthogonal (Manhattan) directions of a built scene on the Gauss sphere;
   default    what the light stage assumes without any of these (60 deg, pitch -10 deg, roll 0).
 Where the lines are weak (a forest, a close-up, a smooth sky) the estimate says so in `notes` and the
-field keeps its fallback, so a report never passes a guess off as a measurement. Where they fix pitch
-and roll but not the focal length (one vanishing point, or far ones), pitch and roll are fitted again
-at EXIF's or the default field of view, their confidence counting how much the lens could move them.
+field keeps its fallback, so a report never passes a guess off as a measurement. The lines' field of
+view is the median of its posterior over a profile of lenses (each refitted), under a broad prior of
+what photographers use: where the lines fix the focal length it is theirs; where they hardly do (one
+vanishing point, or far ones) it stays near the prior's 60 deg, and its confidence, from the
+posterior's width, says so. Pitch and roll are fitted at that field of view, their confidence counting
+how much the lens's uncertainty could move them.
 
 Camera coordinates inside this module: x right, y up, z forward (the view axis); image points are
 normalised so that the half width is 1 (x_n = (u - W/2) / (W/2), y_n = (H/2 - v) / (W/2)) and the
@@ -155,9 +158,6 @@ def estimate_photo_camera(photo_path: str | Path, fspy_path: str | Path | None =
     fit = fit_lines(srgb, exif_fov)
     notes += fit.notes
     fov, fov_src, fov_conf = _pick_fov(fit, exif_fov, exif_source)
-    if fit.usable and fov_src == "default":   # pitch and roll again, at the default field of view
-        fit = refit_at_fov(fit, fov, FOV_UNKNOWN_RANGE_DEG)
-        notes += fit.notes[1:]
     pitch, pitch_src, pitch_conf = _pick(fit.pitch_deg, fit.pitch_confidence, DEFAULT_PITCH_DEG)
     roll, roll_src, roll_conf = _pick(fit.roll_deg, fit.roll_confidence, 0.0)
     notes += _fallback_notes(fov_src, pitch_src, roll_src)
@@ -174,9 +174,12 @@ EXIF_CONFIDENCE = {"exif_35mm": 0.9, "exif_sensor": 0.75}
 
 
 def _pick_fov(fit: "LinesFit", exif_fov: float | None, exif_source: str | None) -> tuple[float, str, float]:
+    """EXIF's lens where the photo has one; else the lines' posterior median whatever its confidence (where
+    the lines hardly fix the lens it sits near the default, and was measured closer to the truth than the
+    default on the bench's built scenes); else the default."""
     if exif_fov is not None:
         return exif_fov, exif_source, EXIF_CONFIDENCE[exif_source]
-    if fit.fov_deg is not None and fit.fov_confidence >= MIN_CONFIDENCE:
+    if fit.fov_deg is not None:
         return fit.fov_deg, "lines", fit.fov_confidence
     return DEFAULT_FOV_DEG, "default", 0.0
 
@@ -391,11 +394,14 @@ ROLL_RANGE_DEG = (-15.0, 15.0)
 # the issue's targets for fov, pitch, roll.
 TOLERABLE_DEG = (5.0, 2.0, 1.0)
 INFLATION = 3.0
-# The field of view is fixed by the lines only where a 20% longer or shorter focal length loses whole
-# segments (the profile of the score): a frontal view or a lone vanishing point loses none.
-FOV_PROFILE = 1.2
-FOV_DROP_SEGMENTS = 10.0      # segments lost at +-20% for confidence 1 - 1/e
-FOV_UNKNOWN_RANGE_DEG = (45.0, 80.0)   # what an unknown lens may be, for pitch's spread at the default fov
+# The field of view: the score is profiled over PROFILE_LENSES focal lengths (each refitted) and read as
+# a log-likelihood, each explained segment worth 1 / INFLATION (they are not independent, above); the
+# prior is what photographers use: log focal length normal about the default 60 deg's with
+# LENS_PRIOR_SIGMA (1 sigma: 24-115 deg), pitch normal about level with PITCH_PRIOR_DEG. Its median is
+# the estimate; its 16-84% interval the uncertainty, against TOLERABLE_DEG[0] for the confidence.
+PROFILE_LENSES = 21
+LENS_PRIOR_SIGMA = 1.0
+PITCH_PRIOR_DEG = 30.0
 # A built scene (set on the bench's views, benchmarks/bench_camera.py): at least this share of the
 # segments' length pointing at the three directions, this many verticals, and horizontals.
 MIN_SEGMENTS = 8
@@ -453,17 +459,71 @@ class LinesFit:
 
 def fit_lines(srgb: np.ndarray, fov_deg: float | None = None) -> LinesFit:
     """Field of view (unless given), pitch and roll from the photo's straight lines (sRGB float RGB)."""
-    h, w = srgb.shape[:2]
     ends, weights = photo_segments(srgb)
     counts = {"segments": int(len(ends))}
     if len(ends) < MIN_SEGMENTS:
         return LinesFit(counts=counts, notes=(f"lines: only {len(ends)} straight segments in the photo (a smooth or "
                                               "natural scene), too few to find its vanishing points",))
-    fixed = None if fov_deg is None else float(fov_deg)
-    start = _coarse_search(ends[:COARSE_SEGMENTS], weights[:COARSE_SEGMENTS], fixed)
-    params = max((_refine(ends, weights, s, fixed) for s in start), key=lambda p: _score(ends, weights, p))
-    families = _families(ends, params)
-    return _judge(ends, weights, params, families, fixed, counts)
+    if fov_deg is not None:
+        params = _fit_at_fov(ends, weights, float(fov_deg))
+        return _judge(ends, weights, params, _families(ends, params), counts)
+    profile = fov_profile(ends, weights)
+    fov, low, high = fov_posterior(profile, ends, weights)
+    near = min(profile, key=lambda p: abs(p[0] - fov))
+    params = max((_fit_at_fov(ends, weights, fov), _refine(ends, weights, (fov,) + tuple(near[1:]))),
+                 key=lambda p: _score(ends, weights, p))
+    fit = _judge(ends, weights, params, _families(ends, params), counts)
+    if not fit.usable:
+        return fit
+    half = (high - low) / 2.0
+    fit = _with_lens_spread(fit, (low, high))
+    note = (f"field of view from the lines: {fov:.1f} deg, 68% between {low:.1f} and {high:.1f}" +
+            ("" if half < TOLERABLE_DEG[0] else " (the lines hardly fix the lens: the value leans on the lenses "
+                                                 "photographers use, an fSpy project of the photo would fix it)"))
+    support = 1.0 - math.exp(-sum(fit.counts[k] for k in ("vertical", "horizontal_1", "horizontal_2")) / 8.0)
+    return replace(fit, fov_deg=float(fov), fov_confidence=support / (1.0 + (half / TOLERABLE_DEG[0]) ** 2),
+                   notes=fit.notes + (note,))
+
+
+def _fit_at_fov(ends: np.ndarray, weights: np.ndarray, fov_deg: float) -> tuple:
+    """The best (fov, pitch, roll, theta) with the field of view held."""
+    starts = _coarse_search(ends[:COARSE_SEGMENTS], weights[:COARSE_SEGMENTS], fov_deg)
+    return max((_refine(ends, weights, s) for s in starts), key=lambda p: _score(ends, weights, p))
+
+
+def fov_profile(ends: np.ndarray, weights: np.ndarray) -> list[tuple]:
+    """The best fit at each of PROFILE_LENSES fields of view (even steps of log focal length over
+    FOV_RANGE_DEG): the score's profile. Profiled rather than searched jointly: the score along the
+    focal length is flat with many small peaks, and a joint search picked whichever peak it met."""
+    focals = np.geomspace(focal_from_fov(FOV_RANGE_DEG[1]), focal_from_fov(FOV_RANGE_DEG[0]), PROFILE_LENSES)
+    return [_fit_at_fov(ends, weights, fov_from_focal(f)) for f in focals]
+
+
+def fov_posterior(profile: list[tuple], ends: np.ndarray, weights: np.ndarray) -> tuple[float, float, float]:
+    """Median and 16-84% interval of the field of view over the profile's lenses (constants above). Every
+    lens counts, built scene or not: kept to those that looked like one, the posterior jumped to a lone
+    lens at the range's end on meadows and forests."""
+    segments = np.sum(weights) / np.mean(weights)
+    log_likelihood = [_score(ends, weights, params) * segments / INFLATION - 0.5 * (params[1] / PITCH_PRIOR_DEG) ** 2
+                      for params in profile]
+    return lens_posterior([params[0] for params in profile], log_likelihood)
+
+
+def lens_posterior(fovs, log_likelihood) -> tuple[float, float, float]:
+    """Median and 16-84% interval of the field of view, given each lens's log-likelihood, under the lens
+    prior (log focal length normal about the default's, LENS_PRIOR_SIGMA)."""
+    log_focal = np.log([focal_from_fov(fov) for fov in fovs])
+    log_p = np.asarray(log_likelihood, dtype=np.float64) \
+        - 0.5 * ((log_focal - math.log(focal_from_fov(DEFAULT_FOV_DEG))) / LENS_PRIOR_SIGMA) ** 2
+    order = np.argsort(log_focal)
+    x, p = log_focal[order], np.exp(log_p[order] - np.max(log_p))
+    # Each lens stands for its bin of log focal length, so the cumulative sum is reached at bin edges (at
+    # the nodes, a lens holding all the weight had its median half a step wider: +1.7 deg on the bench).
+    mids = (x[1:] + x[:-1]) / 2.0
+    edges = np.concatenate([[2 * x[0] - mids[0]], mids, [2 * x[-1] - mids[-1]]])
+    cdf = np.concatenate([[0.0], np.cumsum(p) / np.sum(p)])
+    fov_at = lambda q: fov_from_focal(float(np.exp(np.interp(q, cdf, edges))))   # noqa: E731
+    return fov_at(0.5), fov_at(0.84), fov_at(0.16)   # (a longer focal length is a narrower view)
 
 
 def photo_segments(srgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -496,25 +556,30 @@ def _line_detector():
 
 
 def _great_circles(ends: np.ndarray, focal: float) -> tuple[np.ndarray, np.ndarray]:
-    """Each segment's plane through the eye (unit normal n) and its midpoint's ray (unit m)."""
+    """Each segment's plane through the eye (unit normal n) and the ray through its midpoint in the image
+    (unit m), where its residual is measured."""
     f = np.full(len(ends), focal)
     p1 = np.stack([ends[:, 0], ends[:, 1], f], axis=-1)
     p2 = np.stack([ends[:, 2], ends[:, 3], f], axis=-1)
     n = np.cross(p1, p2)
     n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
-    m = p1 / np.linalg.norm(p1, axis=-1, keepdims=True) + p2 / np.linalg.norm(p2, axis=-1, keepdims=True)
+    m = p1 + p2
     return n, m / np.linalg.norm(m, axis=-1, keepdims=True)
 
 
 def _signed_residual_deg(n: np.ndarray, m: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """The angle, at the segment's midpoint, between the segment and the line to direction d's vanishing
-    point (0 when the segment points at it; works for vanishing points at infinity)."""
-    c = np.cross(m, d)
-    c_norm = np.linalg.norm(c, axis=-1)
-    cos = np.sum(n * c, axis=-1)
-    sin = np.sum(np.cross(n, c) * m, axis=-1) * np.sign(cos + 1e-300)
-    angle = np.degrees(np.arctan2(sin, np.abs(cos)))
-    return np.where(c_norm > 1e-9, angle, 90.0)
+    """The angle in the image, at the segment's midpoint, between the segment and the line to direction
+    d's vanishing point (0 when the segment points at it; works for vanishing points at infinity).
+
+    Measured in the image plane, not between great circles on the sphere: there, a segment far off
+    the axis of a wide lens is foreshortened, its angles squeezed, so every tolerance widened with the
+    lens and the fit preferred fields of view of 120-170 deg (the bench's corridors)."""
+    n, m, d = np.broadcast_arrays(n, m, d)
+    along = np.stack([n[..., 1], -n[..., 0]], axis=-1)            # the segment's image line n . (x, y, 1) = 0
+    to_vp = d[..., :2] - m[..., :2] / m[..., 2:3] * d[..., 2:3]    # homogeneous: scale does not change angles
+    cross = along[..., 0] * to_vp[..., 1] - along[..., 1] * to_vp[..., 0]
+    angle = (np.degrees(np.arctan2(cross, np.sum(along * to_vp, axis=-1))) + 90.0) % 180.0 - 90.0
+    return np.where(np.linalg.norm(to_vp, axis=-1) > 1e-9, angle, 90.0)
 
 
 def _kernel(residual_deg: np.ndarray, tolerance: float) -> np.ndarray:
@@ -530,25 +595,22 @@ def _score(ends: np.ndarray, weights: np.ndarray, params, tolerance: float = TOL
     return float(np.sum(weights * _kernel(res, tolerance).max(axis=1)) / np.sum(weights))
 
 
-def _coarse_search(ends: np.ndarray, weights: np.ndarray, fov_deg: float | None) -> list[tuple]:
-    """The best few (fov, pitch, roll, theta) on a grid. Each segment votes for the horizontal direction
-    its great circle meets (theta mod 90 deg pairs the two horizontal families), so theta costs a
-    histogram, not a search; the exact score then refines these."""
-    fovs = [fov_deg] if fov_deg is not None else [fov_from_focal(f) for f in np.geomspace(
-        focal_from_fov(FOV_RANGE_DEG[1]), focal_from_fov(FOV_RANGE_DEG[0]), 14)]
+def _coarse_search(ends: np.ndarray, weights: np.ndarray, fov_deg: float) -> list[tuple]:
+    """The best few (fov, pitch, roll, theta) on a grid at one field of view: the best of each 12 deg band
+    of pitch, three of them. Each segment votes for the horizontal direction its great circle meets
+    (theta mod 90 deg pairs the two horizontal families), so theta costs a histogram, not a search; the
+    exact score then refines these."""
     pitch, roll = np.meshgrid(np.arange(PITCH_RANGE_DEG[0], PITCH_RANGE_DEG[1] + 0.1, 3.0),
                               np.arange(ROLL_RANGE_DEG[0], ROLL_RANGE_DEG[1] + 0.1, 2.5), indexing="ij")
     pitch, roll = pitch.ravel(), roll.ravel()
+    scores = _theta_votes(ends, weights, focal_from_fov(fov_deg), pitch, roll)
+    per_pitch = np.max(scores, axis=1)
+    bands = np.floor(pitch / 12.0)
     best = []
-    for fov in fovs:
-        scores = _theta_votes(ends, weights, focal_from_fov(fov), pitch, roll)
-        # one start per lens, or (one lens given) the best of each 12 deg band of pitch
-        per_pitch = np.max(scores, axis=1)
-        bands = np.floor(pitch / 12.0) if len(fovs) == 1 else np.zeros_like(pitch)
-        for band in np.unique(bands):
-            i = int(np.flatnonzero(bands == band)[np.argmax(per_pitch[bands == band])])
-            t = int(np.argmax(scores[i]))
-            best.append((float(scores[i, t]), (float(fov), float(pitch[i]), float(roll[i]), THETA_STEP_DEG * t)))
+    for band in np.unique(bands):
+        i = int(np.flatnonzero(bands == band)[np.argmax(per_pitch[bands == band])])
+        t = int(np.argmax(scores[i]))
+        best.append((float(scores[i, t]), (float(fov_deg), float(pitch[i]), float(roll[i]), THETA_STEP_DEG * t)))
     best.sort(key=lambda b: -b[0])
     return [b[1] for b in best[:3]]
 
@@ -596,17 +658,17 @@ def _theta_votes(ends: np.ndarray, weights: np.ndarray, focal: float, pitch: np.
 REFINE_STEPS = (2.0, 1.0, 0.5, 1.0)   # first steps of (fov, pitch, roll, theta), halved down to 1/64
 
 
-def _refine(ends: np.ndarray, weights: np.ndarray, start, fov_fixed: float | None) -> tuple:
-    """Pattern search on the exact score from a coarse start (no gradient: the score is piecewise)."""
+def _refine(ends: np.ndarray, weights: np.ndarray, start) -> tuple:
+    """Pattern search on the exact score from a coarse start, its field of view held (no gradient: the
+    score is piecewise)."""
     x = list(start)
-    free = (1, 2, 3) if fov_fixed is not None else (0, 1, 2, 3)
     steps = list(REFINE_STEPS)
     best = _score(ends, weights, x)
     for _ in range(500):   # a bound, never reached in practice
         if steps[1] <= REFINE_STEPS[1] / 64:
             break
         improved = False
-        for i in free:
+        for i in (1, 2, 3):
             for sign in (1.0, -1.0):
                 y = list(x)
                 y[i] += sign * steps[i]
@@ -621,10 +683,9 @@ def _refine(ends: np.ndarray, weights: np.ndarray, start, fov_fixed: float | Non
 
 
 def _in_range(params) -> bool:
-    """The search's range (a little wider for the field of view, whose grid ends are not walls)."""
-    fov, pitch, roll, _ = params
-    return FOV_RANGE_DEG[0] / 2 <= fov <= 170.0 and PITCH_RANGE_DEG[0] <= pitch <= PITCH_RANGE_DEG[1] \
-        and ROLL_RANGE_DEG[0] <= roll <= ROLL_RANGE_DEG[1]
+    """The search's range of pitch and roll (the field of view is held)."""
+    _, pitch, roll, _ = params
+    return PITCH_RANGE_DEG[0] <= pitch <= PITCH_RANGE_DEG[1] and ROLL_RANGE_DEG[0] <= roll <= ROLL_RANGE_DEG[1]
 
 
 def _families(ends: np.ndarray, params) -> np.ndarray:
@@ -667,64 +728,37 @@ def _standard_errors(ends: np.ndarray, weights: np.ndarray, params, families: np
     return np.nan_to_num(errors, nan=np.inf)
 
 
-def _judge(ends: np.ndarray, weights: np.ndarray, params, families: np.ndarray, fov_fixed: float | None,
-           counts: dict, judged: bool = False) -> LinesFit:
-    """The fit's values and confidences, or none where the segments do not show a built scene (judged:
-    they were found to show one before, at another field of view)."""
+def _judge(ends: np.ndarray, weights: np.ndarray, params, families: np.ndarray, counts: dict) -> LinesFit:
+    """The fit's pitch and roll and their confidences at its field of view (held: the caller sets the
+    lines' own), or none where the segments do not show a built scene."""
     share = float(np.sum(weights[families >= 0]) / np.sum(weights))
     per = [int(np.sum(families == k)) for k in range(3)]
     counts.update(vertical=per[0], horizontal_1=per[1], horizontal_2=per[2], inlier_share=round(share, 3))
     seen = dict(counts=counts, segments=ends, weights=weights, families=families)
-    if not judged and (share < MIN_INLIER_SHARE or per[0] < MIN_VERTICAL or per[1] + per[2] < MIN_HORIZONTAL
+    if (share < MIN_INLIER_SHARE or per[0] < MIN_VERTICAL or per[1] + per[2] < MIN_HORIZONTAL
                        or max(per[1:]) < MIN_MAIN_HORIZONTAL):
         return LinesFit(**seen, notes=(
             f"lines: {len(ends)} segments, {per[0]} vertical and {per[1] + per[2]} horizontal ones pointing at "
             f"orthogonal vanishing points ({share:.0%} of their length): not enough of a built scene's lines to "
             "fix the camera",))
-    free = (1, 2, 3) if fov_fixed is not None else (0, 1, 2, 3)
-    errors = _standard_errors(ends, weights, params, families, free)
+    errors = _standard_errors(ends, weights, params, families, (1, 2, 3))
     support = 1.0 - math.exp(-sum(per) / 8.0)
-    fov_conf, drop = (0.0, None) if fov_fixed is not None else _fov_confidence(ends, weights, params)
     conf = [support / (1.0 + (INFLATION * float(errors[i]) / TOLERABLE_DEG[i]) ** 2) for i in (1, 2)]
-    fov, pitch, roll, _ = params
+    _, pitch, roll, _ = params
     note = (f"lines: {len(ends)} segments, {sum(per)} pointing at the vanishing points (vertical {per[0]}, "
-            f"horizontal {per[1]} and {per[2]})" + ("" if drop is None else
-            f"; a focal length 20% off loses {drop:.0f} of them"))
-    return LinesFit(fov_deg=None if fov_fixed is not None else float(fov), pitch_deg=float(pitch),
-                    roll_deg=float((roll + 180.0) % 360.0 - 180.0), fov_confidence=support * fov_conf,
+            f"horizontal {per[1]} and {per[2]})")
+    return LinesFit(pitch_deg=float(pitch), roll_deg=float((roll + 180.0) % 360.0 - 180.0),
                     pitch_confidence=conf[0], roll_confidence=conf[1], params=tuple(float(v) for v in params),
                     notes=(note,), **seen)
 
 
-def _fov_confidence(ends: np.ndarray, weights: np.ndarray, params) -> tuple[float, float]:
-    """How firmly the lines fix the focal length: the segments lost (the score's drop in segments of
-    mean weight) at a focal length FOV_PROFILE times longer and shorter, the others refitted."""
-    best = _score(ends, weights, params)
-    drops = []
-    for k in (FOV_PROFILE, 1.0 / FOV_PROFILE):
-        fov = fov_from_focal(focal_from_fov(params[0]) * k)
-        drops.append((best - _score(ends, weights, _refine(ends, weights, (fov,) + tuple(params[1:]), fov)))
-                     * np.sum(weights) / np.mean(weights))
-    drop = max(min(drops), 0.0)
-    return 1.0 - math.exp(-drop / FOV_DROP_SEGMENTS), drop
-
-
-def refit_at_fov(fit: LinesFit, fov_deg: float, fov_range: tuple[float, float] | None = None) -> LinesFit:
-    """The lines' pitch and roll at a field of view they did not fix (EXIF's or the default); with
-    fov_range, their confidence also counts how far they move over that range of lenses."""
-    # A fresh coarse search at this fov: the free fit's pitch may belong to a very different lens.
-    starts = _coarse_search(fit.segments[:COARSE_SEGMENTS], fit.weights[:COARSE_SEGMENTS], fov_deg)
-    starts.append((fov_deg,) + tuple(fit.params[1:]))
-    params = max((_refine(fit.segments, fit.weights, s, fov_deg) for s in starts),
-                 key=lambda q: _score(fit.segments, fit.weights, q))
-    out = _judge(fit.segments, fit.weights, params, _families(fit.segments, params), fov_deg,
-                 dict(segments=int(len(fit.segments))), judged=True)
-    if fov_range is None:
-        return out
-    first, last = (_refine(fit.segments, fit.weights, (f,) + tuple(params[1:]), f) for f in fov_range)
+def _with_lens_spread(fit: LinesFit, fov_range: tuple[float, float]) -> LinesFit:
+    """The fit with pitch's and roll's confidence also counting how far they move over `fov_range`, the
+    lenses the lines leave possible (pitch trades against the focal length when the verticals converge)."""
+    first, last = (_refine(fit.segments, fit.weights, (f,) + tuple(fit.params[1:])) for f in fov_range)
     spread = [abs(first[i] - last[i]) / 2.0 for i in (1, 2)]
     pitch_conf, roll_conf = (min(c, 1.0 / (1.0 + (u / TOLERABLE_DEG[i + 1]) ** 2))
-                             for i, (c, u) in enumerate(zip((out.pitch_confidence, out.roll_confidence), spread)))
-    note = (f"pitch and roll from the lines at {fov_deg:g} deg; over lenses of {fov_range[0]:g}-{fov_range[1]:g} deg "
-            f"they move +-{spread[0]:.1f} and +-{spread[1]:.1f} deg")
-    return replace(out, pitch_confidence=pitch_conf, roll_confidence=roll_conf, notes=out.notes + (note,))
+                             for i, (c, u) in enumerate(zip((fit.pitch_confidence, fit.roll_confidence), spread)))
+    note = (f"over lenses of {fov_range[0]:.0f}-{fov_range[1]:.0f} deg pitch and roll move +-{spread[0]:.1f} and "
+            f"+-{spread[1]:.1f} deg")
+    return replace(fit, pitch_confidence=pitch_conf, roll_confidence=roll_conf, notes=fit.notes + (note,))

@@ -264,3 +264,68 @@ def test_theta_votes_equal_every_segment_scored_in_every_bin():
             expected = np.sum(weights * np.maximum(vertical, horizontal)) / np.sum(weights)
             assert votes[p, b] == pytest.approx(expected, abs=1e-9), (p, b)
     assert votes.max() > votes.min() + 0.05   # the table is not flat: the check compares something
+
+
+def test_a_segments_residual_is_its_angle_in_the_image_even_far_off_a_wide_lens_axis():
+    """Known answers from plain 2D geometry: the angle, in the photo, between a segment and the line from
+    its midpoint to the vanishing point. On the sphere that angle shrinks far off the axis of a wide
+    lens, which once made every tolerance wider there and the fit prefer 120-170 deg lenses."""
+    from scenefit.core import photo_camera as pc
+
+    focal = pc.focal_from_fov(150.0)
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        ends = rng.uniform(-1.0, 1.0, (1, 4))
+        ends[0, :2] = rng.uniform(0.7, 1.0, 2) * rng.choice([-1, 1], 2)   # near a corner, far off the axis
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        n, m = pc._great_circles(ends, focal)
+        got = float(pc._signed_residual_deg(n, m, d)[0])
+        mid = (ends[0, :2] + ends[0, 2:]) / 2
+        along = ends[0, 2:] - ends[0, :2]
+        to_vp = focal * d[:2] - mid * d[2]          # the vanishing point f d_xy / d_z, homogeneous
+        expected = np.degrees(np.arctan2(along[0] * to_vp[1] - along[1] * to_vp[0], along @ to_vp))
+        assert abs(got) == pytest.approx(abs((expected + 90.0) % 180.0 - 90.0), abs=1e-6)
+    # a segment pointing at the vanishing point has none; one across it, 90 deg
+    ends = np.array([[0.8, 0.6, 0.4, 0.3]])
+    n, m = pc._great_circles(ends, focal)
+    assert float(pc._signed_residual_deg(n, m, np.array([0.0, 0.0, 1.0]))[0]) == pytest.approx(0.0, abs=1e-9)
+    assert abs(float(pc._signed_residual_deg(n, m, np.array([-0.6, 0.8, 0.0]))[0])) == pytest.approx(90.0)
+
+
+def test_a_frontal_level_view_says_its_lines_hardly_fix_the_lens(tmp_path):
+    """Level and square to the room, only the depth edges converge (one vanishing point, at the centre):
+    every lens fits them alike. The estimate stays among the usual lenses and says it is unsure, while
+    pitch and roll, which the lines do fix, are found."""
+    camera = PhotoCamera(yaw_deg=90.0, pitch_deg=0.0, fov_deg=40.0, width=384, height=288, roll_deg=0.0)
+    write_image(tmp_path / "room.png", _box_room(camera, n=160))
+    est = estimate_photo_camera(tmp_path / "room.png")
+    assert est.fov_source == "lines" and est.fov_confidence < 0.5
+    assert 24.0 < est.fov_deg < 115.0   # the prior's one-sigma range of lenses, not an end of the search
+    assert any("hardly fix the lens" in note for note in est.notes)
+    assert est.pitch_deg == pytest.approx(0.0, abs=0.5) and est.roll_deg == pytest.approx(0.0, abs=0.3)
+
+
+def test_the_lens_posterior_at_its_extremes(monkeypatch):
+    """Known answers: a lens holding all the likelihood is the median, exactly (its bin's middle, not
+    half a step off); two equal neighbours (no prior) put it on their shared edge; no information gives
+    the prior's median, the default 60 deg, with its one-sigma interval of log focal length."""
+    from scenefit.core import photo_camera as pc
+
+    focals = np.geomspace(pc.focal_from_fov(120.0), pc.focal_from_fov(20.0), 21)
+    fovs = [pc.fov_from_focal(f) for f in focals]
+    for k in (3, 10, 17):
+        median, low, high = pc.lens_posterior(fovs, [200.0 if i == k else 0.0 for i in range(21)])
+        assert median == pytest.approx(fovs[k], abs=1e-9) and low < median < high
+        assert math.log(pc.focal_from_fov(low) / pc.focal_from_fov(high)) < math.log(focals[1] / focals[0])
+    with monkeypatch.context() as m:
+        m.setattr(pc, "LENS_PRIOR_SIGMA", 1e9)
+        median, _, _ = pc.lens_posterior(fovs, [200.0 if i in (6, 7) else 0.0 for i in range(21)])
+    assert pc.focal_from_fov(median) == pytest.approx(math.sqrt(focals[6] * focals[7]), rel=1e-9)
+    # flat likelihood over a fine, wide grid: the prior itself
+    focals = np.geomspace(pc.focal_from_fov(170.0), pc.focal_from_fov(2.0), 2001)
+    median, low, high = pc.lens_posterior([pc.fov_from_focal(f) for f in focals], np.zeros(2001))
+    sigma = pc.LENS_PRIOR_SIGMA
+    assert median == pytest.approx(60.0, abs=0.1)
+    assert math.log(pc.focal_from_fov(low) / pc.focal_from_fov(60.0)) == pytest.approx(0.9945 * sigma, rel=0.01)
+    assert math.log(pc.focal_from_fov(60.0) / pc.focal_from_fov(high)) == pytest.approx(0.9945 * sigma, rel=0.01)
