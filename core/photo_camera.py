@@ -402,6 +402,12 @@ INFLATION = 3.0
 PROFILE_LENSES = 21
 LENS_PRIOR_SIGMA = 1.0
 PITCH_PRIOR_DEG = 30.0
+# The lens needs more of a built scene than pitch and roll: below this share of the segments' length
+# explained (a forest's trunks with stray branches, 0.31-0.35 on the bench; built scenes mostly 0.36-0.81)
+# the lens is the default and pitch and roll are fitted at it, their confidence counting how far
+# DEFAULT_LENS_RANGE_DEG could move them.
+LENS_MIN_INLIER_SHARE = 0.35
+DEFAULT_LENS_RANGE_DEG = (45.0, 80.0)
 # A built scene (set on the bench's views, benchmarks/bench_camera.py): at least this share of the
 # segments' length pointing at the three directions, this many verticals, and horizontals.
 MIN_SEGMENTS = 8
@@ -475,6 +481,14 @@ def fit_lines(srgb: np.ndarray, fov_deg: float | None = None) -> LinesFit:
     fit = _judge(ends, weights, params, _families(ends, params), counts)
     if not fit.usable:
         return fit
+    if fit.counts["inlier_share"] < LENS_MIN_INLIER_SHARE:
+        params = _fit_at_fov(ends, weights, DEFAULT_FOV_DEG)
+        fit = _judge(ends, weights, params, _families(ends, params), dict(segments=counts["segments"]))
+        note = (f"field of view: the lines explain too little of the photo ({fit.counts['inlier_share']:.0%} of "
+                f"the segments' length, under {LENS_MIN_INLIER_SHARE:.0%}) to fix the lens; pitch and roll at the "
+                f"default {DEFAULT_FOV_DEG:g} deg")
+        return _with_lens_spread(replace(fit, notes=fit.notes + (note,)), DEFAULT_LENS_RANGE_DEG) \
+            if fit.usable else fit
     half = (high - low) / 2.0
     fit = _with_lens_spread(fit, (low, high))
     note = (f"field of view from the lines: {fov:.1f} deg, 68% between {low:.1f} and {high:.1f}" +

@@ -329,3 +329,27 @@ def test_the_lens_posterior_at_its_extremes(monkeypatch):
     assert median == pytest.approx(60.0, abs=0.1)
     assert math.log(pc.focal_from_fov(low) / pc.focal_from_fov(60.0)) == pytest.approx(0.9945 * sigma, rel=0.01)
     assert math.log(pc.focal_from_fov(60.0) / pc.focal_from_fov(high)) == pytest.approx(0.9945 * sigma, rel=0.01)
+
+
+def test_a_room_under_clutter_keeps_the_default_lens_and_says_so(tmp_path):
+    """Straight strokes in every direction (a forest's branches, say) over a room's edges: the lines
+    still show its horizon, but explain too little of the photo to pick a lens. The lens is the default,
+    said in the notes; pitch and roll come from the lines at that lens."""
+    import cv2
+
+    camera = PhotoCamera(yaw_deg=105.0, pitch_deg=-14.0, fov_deg=65.0, width=384, height=288, roll_deg=3.0)
+    img = _box_room(camera)
+    rng = np.random.default_rng(1)
+    for _ in range(340):
+        x, y, angle, length = rng.uniform(0, 384), rng.uniform(0, 288), rng.uniform(0, np.pi), rng.uniform(15, 60)
+        ends = ((x, y), (x + length * np.cos(angle), y + length * np.sin(angle)))
+        a, b = (tuple(int(v * 16) for v in p) for p in ends)
+        cv2.line(img, a, b, (0.1, 0.1, 0.1), 2, cv2.LINE_AA, shift=4)
+    write_image(tmp_path / "cluttered.png", img)
+    est = estimate_photo_camera(tmp_path / "cluttered.png")
+    from scenefit.core.photo_camera import LENS_MIN_INLIER_SHARE, MIN_INLIER_SHARE
+    assert MIN_INLIER_SHARE <= est.lines["inlier_share"] < LENS_MIN_INLIER_SHARE   # the case meant
+    assert (est.fov_deg, est.fov_source, est.fov_confidence) == (60.0, "default", 0.0)
+    assert any("explain too little of the photo" in note for note in est.notes)
+    assert (est.pitch_source, est.roll_source) == ("lines", "lines")
+    assert est.pitch_deg == pytest.approx(-14.0, abs=1.5) and est.roll_deg == pytest.approx(3.0, abs=0.7)
