@@ -25,13 +25,12 @@ from .atomic import write_bytes_atomic
 from .errors import InputError
 from .maps import PBRMaps
 from .mesh import Mesh
+from .source_graph import reachable_sources
 
 CACHE_FILE = ".asset-read.npz"
 CACHEABLE = (".glb", ".gltf", ".obj")
-_ROOT = Path(__file__).resolve().parent.parent
-# The code whose output the copy holds: Blender's side of reading, and the types it builds.
-_READER_SOURCES = ("blender_io", "core/materials.py", "core/maps.py", "core/mesh.py", "core/asset_files.py",
-                   "core/gltf_meshopt.py", "core/imageio.py")
+# The code whose output the copy holds: Blender's reader and every module it can reach.
+READER = "blender_io.asset_file"
 
 
 def read_key(path: str | Path, object_name: str | None) -> str | None:
@@ -41,15 +40,11 @@ def read_key(path: str | Path, object_name: str | None) -> str | None:
         return None
     h = hashlib.sha256()
     h.update(json.dumps([object_name, _blender_version()]).encode())
-    for source in sorted(p for name in _READER_SOURCES for p in _sources(_ROOT / name)):
+    for source in reachable_sources(READER):
         h.update(source.read_bytes())
     for file in asset_files(path):
         h.update(file.name.encode() + b"\0" + file.read_bytes())
     return h.hexdigest()
-
-
-def _sources(path: Path) -> list[Path]:
-    return sorted(path.rglob("*.py")) if path.is_dir() else [path] if path.is_file() else []
 
 
 def _blender_version() -> str:

@@ -51,3 +51,29 @@ def test_the_key_changes_with_every_file_the_asset_reads_and_the_object(tmp_path
     (tmp_path / "model.fbx").write_bytes(b"Kaydara FBX Binary  \x00")
     assert read_key(tmp_path / "model.fbx", None) is None       # its external images are not all known
     assert read_key(tmp_path / "missing.glb", None) is None
+
+
+def test_the_key_follows_every_module_the_reader_reaches(tmp_path):
+    """The reader's code in the key is the import graph from Blender's reader, not a hand-kept list
+    (which had missed core/texture/uv_raster.py and core/asset_io.py): on a small tree, modules reached
+    at module level, in a function, relatively and through a package's __init__ are in; the rest out."""
+    from scenefit.core.asset_read_cache import READER
+    from scenefit.core.source_graph import ROOT, reachable_sources
+
+    files = {
+        "blender_io/__init__.py": "",
+        "blender_io/asset_file.py": "from ..core import mesh\n\ndef read():\n    from ..core.texture.uv_raster import r\n",
+        "core/__init__.py": "", "core/mesh.py": "import numpy\n", "core/texture/__init__.py": "",
+        "core/texture/uv_raster.py": "from ..errors import E\n", "core/errors.py": "",
+        "core/compose.py": "from .mesh import Mesh\n", "cli/__init__.py": "from ..blender_io import asset_file\n",
+    }
+    for name, text in files.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    got = {str(p.relative_to(tmp_path)) for p in reachable_sources("blender_io.asset_file", root=tmp_path)}
+    assert got == {"blender_io/__init__.py", "blender_io/asset_file.py", "core/__init__.py", "core/mesh.py",
+                   "core/texture/__init__.py", "core/texture/uv_raster.py", "core/errors.py"}
+    # and on the project itself
+    real = {str(p.relative_to(ROOT)) for p in reachable_sources(READER)}
+    assert {"blender_io/asset_file.py", "blender_io/fbx_ascii.py", "core/gltf_meshopt.py", "core/mesh.py",
+            "core/texture/uv_raster.py"} <= real and "core/compose.py" not in real and "cli/run.py" not in real

@@ -4,37 +4,10 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ("core", "cli", "blender_io", "operators", "panels", "workers")
+from scenefit.core.source_graph import PACKAGES, ROOT, module_imports as imports, project_modules as modules
+
 # What core/ may never import, at any level: Blender, what talks to Blender, and the layers above it.
 ABOVE_CORE = ("bpy", "bmesh", "mathutils", "addon_utils", "blender_io", "operators", "panels", "cli", "workers")
-
-
-def modules() -> dict[str, Path]:
-    found = {}
-    for package in PACKAGES:
-        for path in (ROOT / package).rglob("*.py"):
-            name = ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
-            found[name] = path
-    return found
-
-
-def imports(name: str, path: Path, known: dict[str, Path]) -> set[str]:
-    """Every project module (or outside top-level name) that `name` imports, relative imports resolved."""
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    out = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            out |= {a.name.removeprefix("scenefit.") for a in node.names}
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")[:len(package.split(".")) - (node.level - 1)]
-                target = ".".join(base + ([node.module] if node.module else []))
-            else:
-                target = (node.module or "").removeprefix("scenefit.")
-            subs = [f"{target}.{a.name}" for a in node.names if f"{target}.{a.name}" in known]
-            out |= set(subs) if subs else {target}
-    return {m for m in out if m}
 
 
 def test_core_never_imports_blender_or_the_layers_above_it():
