@@ -71,8 +71,7 @@ def run(args) -> int:
 
 
 def _light(args, out: Path) -> int:
-    from ..core.lighting import estimate_light
-    from ..core.lighting.stage import critic_choice, light_inputs, write_light_stage
+    from ..core.lighting.stage import critic_choice, light_inputs, run_light, write_light
     from ..core.pipeline import environment_info
 
     critic = critic_choice(args.critic, model_config(args))
@@ -82,12 +81,11 @@ def _light(args, out: Path) -> int:
     if args.sun_from_shadow:
         config = replace(config, sun_deg=shadow_sun(args.sun_from_shadow, inputs.camera, inputs.info,
                                                     inputs.photo.shape[:2]))
-    result = estimate_light(inputs.photo, inputs.pixel, config, photo_camera=inputs.camera, photo_info=inputs.info,
-                            progress=progress(args))
+    result = run_light(inputs, config, progress(args))
     if args.sun_from_shadow:
         result.decisions["sun"]["from"] = "the shadow given by --sun-from-shadow (foot, top, tip)"
     result.decisions["critic"]["choice"] = {"asked": args.critic, "chosen": critic.choice, "why": critic.reason}
-    write_light_stage(result, config, out, inputs, {"environment": environment_info()})
+    write_light(result, out, {"environment": environment_info()})
     depth_used = result.decisions.get("depth", {}).get("method", "none (outdoor)")
     print(f"light: {result.decisions['scene_type']['chosen']} scene, depth {depth_used}, scales "
           f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {Path(args.out) / 'light.exr'}")

@@ -3,7 +3,7 @@
     job = build_compose(inputs, config)      # place the asset, build the Mitsuba scenes, pick spp
     while not job.done: job.step()           # one render pass per step (object, floor with/without it)
     result = job.finish()                    # denoise, matte, composite, report
-    write_compose_outputs(result, out_dir)
+    report = write_compose(result, folder)   # composite.png/.exr, layers/, report.json
 
 Geometry is the scene's (core/scene/): the photo camera (`PhotoCamera`) stands
 CAMERA_HEIGHT above the floor z = 0, and the asset stands on the floor where the ray through the
@@ -487,15 +487,25 @@ def compose(inputs: ComposeInputs, config: ComposeConfig = ComposeConfig(), prog
     return result
 
 
-def write_compose_outputs(result: ComposeResult, out_dir) -> dict[str, str]:
-    """composite.png (sRGB, the photo's size), composite.exr (linear), layers/object_rgba.png (16-bit,
-    straight alpha), layers/shadow.png (16-bit matte, 1 = untouched)."""
-    from concurrent.futures import ThreadPoolExecutor
+def write_compose(result: ComposeResult, folder, extra: dict | None = None) -> dict:
+    """The stage's files in `folder`: composite.png (sRGB, the photo's size), composite.exr (linear),
+    layers/object_rgba.png (16-bit, straight alpha), layers/shadow.png (16-bit matte, 1 = untouched), and
+    report.json (`extra` over the result's report); returns the report."""
     from pathlib import Path
+
+    from .atomic import write_json_atomic
+
+    report = {**result.report, **(extra or {})}
+    report["outputs"] = _write_images(result, Path(folder))
+    write_json_atomic(Path(folder) / "report.json", report)
+    return report
+
+
+def _write_images(result: ComposeResult, out) -> dict[str, str]:
+    from concurrent.futures import ThreadPoolExecutor
 
     from .imageio import write_image
 
-    out = Path(out_dir)
     alpha = result.alpha[..., None]
     straight = np.where(alpha > 0, result.object_rgb / np.maximum(alpha, 1e-8), 0.0)
     rgba = np.concatenate([linear_to_srgb(np.clip(straight, 0.0, 1.0)), alpha], axis=-1)
@@ -542,14 +552,7 @@ def light_camera(light_path, photo_info: dict, width: int, height: int, fov_deg:
 
 def compose_to_folder(inputs: ComposeInputs, config: ComposeConfig, out_dir, report_extra: dict | None = None,
                       progress: ProgressCallback | None = None, cancel: threading.Event | None = None) -> dict:
-    """compose() and write its images and report.json into out_dir; returns the report."""
-    from pathlib import Path
-
-    from .atomic import write_json_atomic
-
+    """compose() then write_compose() into out_dir; returns the report."""
     result = compose(inputs, config, progress, cancel)
     check_cancel(cancel)
-    report = {**result.report, **(report_extra or {})}
-    report["outputs"] = write_compose_outputs(result, out_dir)
-    write_json_atomic(Path(out_dir) / "report.json", report)
-    return report
+    return write_compose(result, out_dir, report_extra)

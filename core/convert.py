@@ -84,6 +84,9 @@ class ConvertResult:
     iterations: int
     history: list[float] = field(default_factory=list)
     decisions: dict = field(default_factory=dict)
+    config: ConvertConfig | None = None           # set by the stage (core.pipeline.run_convert), for its report
+    constants: dict = field(default_factory=dict)  # channels that stay a number: name -> value
+    materials_report: dict = field(default_factory=dict)   # an asset's materials and notes, for the report
 
     def predicted(self) -> torch.Tensor:
         with torch.no_grad():

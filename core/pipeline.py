@@ -4,7 +4,7 @@ from __future__ import annotations
 import platform
 import threading
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -128,46 +128,65 @@ def environment_info() -> dict:
     }
 
 
-def convert_and_bake(mesh: Mesh | AssetMaterials, maps: PBRMaps | None, out_dir: str | Path,
-                     config: ConvertConfig = ConvertConfig(), progress: ProgressCallback | None = None,
-                     cancel: threading.Event | None = None, keep_constants: bool = True) -> tuple[ConvertResult, dict]:
-    """Convert the asset's maps to a neural texture and bake it into `out_dir`; returns the result and report.
+@dataclass(frozen=True)
+class ConvertInputs:
+    """What the convert stage reads: a mesh with its maps, or every material of an asset (maps None:
+    the maps are then fitted as the atlas, core.materials, and `scenefit bake` writes them per material
+    in the asset's own UV layout). keep_constants: a roughness/metallic that holds one value stays that
+    number (reported in decisions > channels, written in outputs as a float) instead of a baked 16-bit
+    map; on by default, so no entry point can forget it (batch's convert-only jobs once did)."""
 
-    Pass (mesh, maps), or (AssetMaterials, None) for every material of an asset: the maps are then
-    baked as the atlas (core.materials), and `scenefit bake` writes them per material in the asset's
-    own UV layout.
-    keep_constants: a roughness/metallic that holds one value stays that number (reported in
-    decisions > channels, returned in outputs as a float) instead of a baked 16-bit map. On by
-    default, so no entry point can forget it (batch's convert-only jobs once did).
-    """
-    out_dir = Path(out_dir)
-    if isinstance(mesh, AssetMaterials):
-        result = convert_materials(mesh, config, progress=progress, cancel=cancel)
+    asset: Mesh | AssetMaterials
+    maps: PBRMaps | None = None
+    keep_constants: bool = True
+
+
+def run_convert(inputs: ConvertInputs, config: ConvertConfig = ConvertConfig(),
+                progress: ProgressCallback | None = None, cancel: threading.Event | None = None) -> ConvertResult:
+    """The convert stage: the asset's maps as a neural texture (which channels stay numbers decided here)."""
+    asset, maps = inputs.asset, inputs.maps
+    if isinstance(asset, AssetMaterials):
+        result = convert_materials(asset, config, progress=progress, cancel=cancel)
     else:
-        result = convert_asset(mesh, maps, config, progress=progress, cancel=cancel)
-    check_cancel(cancel)
-    constants = {}
-    if keep_constants:
-        channels = (material_constant_channels([m.maps for m in mesh.materials], [m.name for m in mesh.materials])
-                    if isinstance(mesh, AssetMaterials) else constant_channels(maps))
-        constants = {name: d.choice for name, d in channels.items() if d.choice != "map"}
+        result = convert_asset(asset, maps, config, progress=progress, cancel=cancel)
+    result.config = config
+    if inputs.keep_constants:
+        channels = (material_constant_channels([m.maps for m in asset.materials], [m.name for m in asset.materials])
+                    if isinstance(asset, AssetMaterials) else constant_channels(maps))
+        result.constants = {name: d.choice for name, d in channels.items() if d.choice != "map"}
         result.decisions["channels"] = {name: needs_report(d) for name, d in channels.items()}
-    paths = bake_maps(result.texture, result.raster.position, result.raster.border, result.raster.fill_index, out_dir,
-                      constants=constants)
-    report = {
+    if isinstance(asset, AssetMaterials):
+        result.materials_report = {
+            "materials": [dict(m.report(), psnr_db=d["psnr_db"], uv_coverage=d["uv_coverage"])
+                          for m, d in zip(asset.materials, result.decisions["materials"])],
+            "notes": list(asset.notes)}
+    return result
+
+
+def write_convert(result: ConvertResult, folder: str | Path) -> dict:
+    """The texture baked into `folder` (core.texture.bake); returns the stage's report."""
+    paths = bake_maps(result.texture, result.raster.position, result.raster.border, result.raster.fill_index,
+                      Path(folder), constants=result.constants)
+    return {
         "stage": "convert",
-        "config": asdict(config),
+        "config": asdict(result.config),
         "decisions": result.decisions,
         "psnr_covered_texels_db": round(result.psnr, 3),
         "seconds": round(result.seconds, 3),
         "iterations": result.iterations,
         "outputs": {k: v if isinstance(v, float) else str(v) for k, v in paths.items()},
+        **result.materials_report,
     }
-    if isinstance(mesh, AssetMaterials):
-        report["materials"] = [dict(m.report(), psnr_db=d["psnr_db"], uv_coverage=d["uv_coverage"])
-                               for m, d in zip(mesh.materials, result.decisions["materials"])]
-        report["notes"] = list(mesh.notes)
-    return result, report
+
+
+def convert_and_bake(mesh: Mesh | AssetMaterials, maps: PBRMaps | None, out_dir: str | Path,
+                     config: ConvertConfig = ConvertConfig(), progress: ProgressCallback | None = None,
+                     cancel: threading.Event | None = None, keep_constants: bool = True) -> tuple[ConvertResult, dict]:
+    """run_convert then write_convert into `out_dir` (ConvertInputs says what mesh, maps and
+    keep_constants mean); returns the result and the report."""
+    result = run_convert(ConvertInputs(mesh, maps, keep_constants), config, progress, cancel)
+    check_cancel(cancel)
+    return result, write_convert(result, out_dir)
 
 
 def write_report(path: str | Path, report: dict) -> Path:

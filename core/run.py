@@ -286,8 +286,7 @@ class PipelineRun:
         return config, height
 
     def light(self) -> None:
-        from .lighting import estimate_light
-        from .lighting.stage import LightInputs, write_light_stage
+        from .lighting.stage import LightInputs, run_light, write_light
         from .scene_needs import report as needs_report
         from .surface_layout import texture_view
         from .texture.bake import load_neural_texture
@@ -309,12 +308,11 @@ class PipelineRun:
                 texture = load_neural_texture(self.texture_path)
                 stack = texture_view(texture, self.normalized).stack(texture)   # convert's: the own UVs
                 asset = {"mesh": self.mesh, "maps": torch.as_tensor(stack)}
-            result = estimate_light(self.photo, self.placement_px, config, photo_camera=camera,
-                                    photo_info=self.photo_info, progress=self.progress, cancel=self.cancel,
-                                    models=_WithInpaint(self.cache) if self.found else self.cache, **asset)
+            inputs = LightInputs(self.photo, self.photo_info, self.placement_px, camera, estimate)
+            result = run_light(inputs, config, self.progress, self.cancel,
+                               models=_WithInpaint(self.cache) if self.found else self.cache, asset=asset)
             result.decisions["envmap_height"] = needs_report(envmap_height)
-            return write_light_stage(result, config, folder, LightInputs(self.photo, self.photo_info,
-                                                                         self.placement_px, camera, estimate))
+            return write_light(result, folder)
 
         self.runner.run("light", self.keys["light"], light)
         self.light_path = self.out / "light" / "light.exr"

@@ -86,8 +86,8 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
     """Photo + placement -> light.exr (Blender's equirectangular convention) in data['out']."""
     from dataclasses import replace
 
-    from ..core.lighting import estimate_light as estimate, load_photo
-    from ..core.lighting.stage import LightInputs, critic_choice, write_light_stage
+    from ..core.lighting import load_photo
+    from ..core.lighting.stage import LightInputs, critic_choice, run_light, write_light
     from ..core.presets import stage_config
     from ..core.scene.placement import Placement
 
@@ -109,11 +109,10 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
                          outpaint=replace(config.outpaint, resolution=size))
     camera, record = view_camera(data["photo"], data["view"], w, h)   # the artist's camera, the panel's or the photo's
     inputs = LightInputs(photo, info, placement, camera, record)
-    result = estimate(photo, placement, config, photo_camera=camera, photo_info=info, progress=progress,
-                      cancel=cancel)
+    result = run_light(inputs, config, progress, cancel)
 
     def write(out: Path) -> dict:
-        report = write_light_stage(result, config, out, inputs)
+        report = write_light(result, out)
         return {"hdr": str(report["outputs"]["hdr_exr"]), "preview": str(report["outputs"]["preview_png"]),
                 "report": str(out / "report.json"),
                 "scene_type": result.decisions.get("scene_type", {}).get("chosen", ""),

@@ -102,3 +102,38 @@ def test_the_scenes_concepts_are_defined_once_in_core_scene():
     assert {concept: modules_ for concept, modules_ in where.items()
             if len(modules_) != 1 or not modules_[0].startswith("core.scene.")} == {}
     assert set(where) == set(SCENE_CONCEPTS)
+
+
+# Each stage: run(inputs, config, progress, cancel) -> Result and write(result, folder) -> report (the
+# game bake is a child `scenefit bake` process, core/bake_process.py, and keeps that process's shape).
+STAGE_SHAPES = {"convert": ("core/pipeline.py", "run_convert", "write_convert"),
+                "light": ("core/lighting/stage.py", "run_light", "write_light"),
+                "adapt": ("core/adapt/system.py", "adapt_texture", "write_adapt"),
+                "compose": ("core/compose.py", "compose", "write_compose")}
+
+
+def function_args(path: Path, name: str) -> list[tuple[str, str]]:
+    """(name, annotation as written) of the module-level function `name`'s parameters."""
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, ast.FunctionDef) and node.name == name:
+            return [(a.arg, ast.unparse(a.annotation) if a.annotation else "") for a in node.args.args]
+    raise AssertionError(f"{path.name} has no function {name}")
+
+
+def test_every_stage_has_one_shape_run_then_write():
+    for stage, (source, run, write) in STAGE_SHAPES.items():
+        run_args = function_args(ROOT / source, run)
+        assert [a for a, _ in run_args[:4]] == ["inputs", "config", "progress", "cancel"], stage
+        assert run_args[0][1].endswith("Inputs") and run_args[1][1].endswith("Config"), stage
+        write_args = function_args(ROOT / source, write)
+        assert [a for a, _ in write_args[:2]] == ["result", "folder"] and write_args[0][1].endswith("Result"), stage
+
+
+def test_the_pipeline_runs_each_stage_through_its_shape():
+    """core/run.py strings the stages together only through these (or the entry that is both)."""
+    text = (ROOT / "core" / "run.py").read_text()
+    for stage, names in {"convert": ("convert_and_bake",), "light": ("run_light", "write_light"),
+                         "adapt": ("adapt_and_bake",), "compose": ("compose_to_folder",)}.items():
+        assert all(f"{name}(" in text for name in names), stage
+    for old in ("estimate_light(", "write_light_stage(", "write_compose_outputs("):
+        assert old not in text

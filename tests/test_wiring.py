@@ -90,7 +90,7 @@ def test_a_batch_convert_job_keeps_constant_channels_as_numbers(inputs):
 def test_the_light_critic_scores_the_asset_itself(inputs, monkeypatch):
     """run_pipeline once gave the light stage no asset: its critic scored the default grey sphere."""
     import scenefit.core.guidance.models as models
-    import scenefit.core.lighting as lighting
+    import scenefit.core.lighting.stage as lighting
 
     seen = {}
 
@@ -116,7 +116,7 @@ def test_a_batch_light_job_lights_the_photo_as_scenefit_light_does(inputs, monke
     """A batch job's light stage once lit every photo through the default camera (60 deg, -10 deg pitch)
     while `scenefit light` estimated the photo's own (here EXIF's 90 deg). Both now read the photo, the
     placement and the camera through core/lighting/stage.py and write the same report."""
-    import scenefit.core.lighting as lighting
+    import scenefit.core.lighting.stage as lighting
     from scenefit.workers.batch import run_job_stages
 
     from test_camera import _jpeg_with_exif
@@ -149,7 +149,7 @@ def test_a_batch_light_job_chooses_the_critic_as_scenefit_light_does(inputs, mon
     """With the SD2 weights on the machine `scenefit light` refines the scales with the diffusion critic;
     a batch light job always took none. Both now decide 'auto' in core/lighting/stage.critic_choice."""
     import scenefit.core.guidance.models as models
-    import scenefit.core.lighting as lighting
+    import scenefit.core.lighting.stage as lighting
     from scenefit.workers.batch import run_job_stages
 
     class Stop(Exception):

@@ -273,8 +273,7 @@ def _load_asset(job: Job):
 
 
 def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
-    from ..core.lighting import estimate_light
-    from ..core.lighting.stage import critic_choice, light_inputs, write_light_stage
+    from ..core.lighting.stage import critic_choice, light_inputs, run_light, write_light
     from ..core.pipeline import convert_and_bake
     from ..core.presets import stage_config
 
@@ -292,9 +291,7 @@ def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
         overrides = dict(job.overrides.get("light", {}))
         critic = critic_choice(overrides.pop("critic_type", "auto"), job.models)
         config = stage_config("light", job.preset, critic_type=critic.choice, models=job.models, **overrides)
-        result = estimate_light(inputs.photo, inputs.pixel, config, photo_camera=inputs.camera,
-                                photo_info=inputs.info, progress=progress, cancel=cancel)
-        reports["light"] = write_light_stage(result, config, out / "light", inputs)
+        reports["light"] = write_light(run_light(inputs, config, progress, cancel), out / "light")
     return _relative_outputs(reports, out)
 
 

@@ -14,7 +14,8 @@ Modes (`mode_type`):
 config.py       AdaptConfig and StageSpec (paper defaults), the modes' settings, the stage schedule
 sampling.py     every random choice of one view of one step
 global_views.py the asset rendered through the photo camera where compose places it, and its shadow
-system.py       AdaptSystem: build / step / finish; adapt_texture and adapt_and_bake
+system.py       AdaptSystem: build / step / finish; adapt_texture (the stage's run), write_adapt, and
+                adapt_and_bake (both, the asset's UVs checked first)
 checkpoint.py   save and resume
 distributed.py  torch.distributed: views spread over ranks, gradients summed
 """
@@ -23,11 +24,11 @@ from .config import (GENERATE_STAGES, MODE_SETTINGS, MODE_TYPES, SCENE_STAGES, A
                      stage_at)
 from .distributed import init_distributed
 from .sampling import sample_camera, sample_view, spherical_gaussian_environment, view_suffix
-from .system import AdaptInputs, AdaptResult, AdaptSystem, adapt_and_bake, adapt_texture
+from .system import AdaptInputs, AdaptResult, AdaptSystem, adapt_and_bake, adapt_texture, write_adapt
 
 __all__ = [
     "CHECKPOINT_FILE", "GENERATE_STAGES", "MODE_SETTINGS", "MODE_TYPES", "SCENE_STAGES", "AdaptConfig", "AdaptInputs",
     "AdaptResult", "AdaptSystem", "StageSpec", "adapt_and_bake", "adapt_texture", "edit_prompt", "init_distributed",
     "load_checkpoint", "sample_camera", "sample_view", "save_checkpoint", "spherical_gaussian_environment",
-    "stage_at", "view_suffix",
+    "stage_at", "view_suffix", "write_adapt",
 ]

@@ -92,6 +92,11 @@ class AdaptResult:
     resumed_from: int = 0
     decisions: dict[str, Decision] = field(default_factory=dict)
     peak_memory_mb: float | None = None
+    # for write_adapt, set by adapt_and_bake: the config, the asset's own UV raster the maps are baked
+    # in, and what the UV check decided
+    config: AdaptConfig | None = None
+    bake_raster: UVRaster | None = None
+    uv_report: dict = field(default_factory=dict)
 
     def seconds_per_iteration(self) -> dict[str, float]:
         n = max(1, self.iterations - self.resumed_from)
@@ -461,7 +466,6 @@ def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfi
     from ..mesh import normalize_to_unit_sphere
     from ..materials import mesh_raster
     from ..surface_layout import adapting_view
-    from ..texture.bake import bake_maps
 
     out_dir = Path(out_dir)
     join_process_group()  # under torchrun: this rank's GPU is chosen before the models load
@@ -479,17 +483,25 @@ def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfi
     result = adapt_texture(inputs, config, progress=progress, cancel=cancel, checkpoint_dir=out_dir / "checkpoint",
                            models=models)
     check_cancel(cancel)
-    paths = {}
-    if rank_world()[0] == 0:  # one writer in a distributed run; maps/ in the asset's own UVs, as ever
-        paths = bake_maps(result.texture, raster.position, raster.border, raster.fill_index, out_dir / "maps")
+    result.config, result.bake_raster, result.uv_report = config, raster, uv_report
+    return result, write_adapt(result, out_dir)
+
+
+def write_adapt(result: AdaptResult, folder: str | Path) -> dict:
+    """The adapted texture baked into folder/maps in the asset's own UVs (on rank 0 only of a distributed
+    run: one writer); returns the stage's report (its outputs empty on the other ranks)."""
+    from ..texture.bake import bake_maps
+
+    raster, paths = result.bake_raster, {}
+    if rank_world()[0] == 0:
+        paths = bake_maps(result.texture, raster.position, raster.border, raster.fill_index, Path(folder) / "maps")
     per_it = result.seconds_per_iteration()
-    report = {
-        "stage": "adapt", "config": config.to_dict(), "schedule": config.schedule(),
-        "decisions": decisions_to_dict(result.decisions), "uv_layout": uv_report,
+    return {
+        "stage": "adapt", "config": result.config.to_dict(), "schedule": result.config.schedule(),
+        "decisions": decisions_to_dict(result.decisions), "uv_layout": result.uv_report,
         "iterations": result.iterations, "resumed_from": result.resumed_from, "seconds": round(result.seconds, 3),
         "seconds_per_iteration": {k: round(v, 4) for k, v in per_it.items()},
         "peak_memory_mb": None if result.peak_memory_mb is None else round(result.peak_memory_mb, 1),
         "last_metrics": result.history[-1] if result.history else {},
         "outputs": {k: str(v) for k, v in paths.items()},
     }
-    return result, report

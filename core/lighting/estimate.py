@@ -106,6 +106,8 @@ class LightResult:
     decisions: dict = field(default_factory=dict)
     optimisation: OptimiseResult | None = None
     seconds: float = 0.0
+    config: LightConfig | None = None     # set by the stage (lighting/stage.run_light), for its report
+    photo_info: dict | None = None        # what load_photo found, for the report
 
 
 # -- photos ----------------------------------------------------------------------------------------

@@ -1,16 +1,17 @@
-"""The light stage from a photo file, as `scenefit light` and a batch job run it: one reading of the
-photo, the placement and the photo's camera, and one writing of the stage's files and report.
+"""The light stage from a photo file, as `scenefit light`, a batch job, Blender's Estimate Light and
+the pipeline run it: one reading of the photo, the placement and the photo's camera, and one writing of
+the stage's files and report.
 
     inputs = light_inputs(photo_path, at, fspy, camera_overrides)   # photo, pixel, camera, its record
-    result = estimate_light(inputs.photo, inputs.pixel, config, photo_camera=inputs.camera, ...)
-    report = write_light_stage(result, config, folder, inputs)        # light.exr, previews, report.json
+    result = run_light(inputs, config, progress, cancel)             # estimate_light on them
+    report = write_light(result, folder)                             # light.exr, previews, report.json
 
 (A batch job's light stage once lit every photo through the default camera while `scenefit light`
-used the photo's own: the copies had drifted. The whole pipeline, core/run.py, reads its camera the
-same way through photo_camera_estimate, and writes its stage record itself.)
+used the photo's own: the copies had drifted.)
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,7 +20,8 @@ import numpy as np
 from ..decision import Decision
 from ..scene.camera import PhotoCamera
 from ..scene.placement import Placement
-from .estimate import LightConfig, LightResult, light_report, load_photo, write_light_outputs
+from ..progress import ProgressCallback
+from .estimate import LightConfig, LightResult, estimate_light, light_report, load_photo, write_light_outputs
 
 
 @dataclass(frozen=True)
@@ -59,14 +61,24 @@ def light_inputs(photo_path: str | Path, at, fspy: str | Path | None = None,
     return LightInputs(photo, info, pixel, estimate.photo_camera(width=w, height=h), estimate.to_dict())
 
 
-def write_light_stage(result: LightResult, config: LightConfig, folder: Path, inputs: LightInputs,
-                      extra: dict | None = None) -> dict:
+def run_light(inputs: LightInputs, config: LightConfig, progress: ProgressCallback | None = None,
+              cancel: threading.Event | None = None, models=None, asset: dict | None = None) -> LightResult:
+    """The light stage: estimate_light on the inputs' photo, placement and camera. models: where loaded
+    diffusion models come from (estimate_light); asset: {"mesh", "maps"} for the diffusion critic to
+    render the asset itself (default: a grey sphere)."""
+    result = estimate_light(inputs.photo, inputs.pixel, config, photo_camera=inputs.camera, photo_info=inputs.info,
+                            progress=progress, cancel=cancel, models=models, **(asset or {}))
+    result.decisions["camera"] = inputs.camera_record
+    result.config, result.photo_info = config, inputs.info
+    return result
+
+
+def write_light(result: LightResult, folder: str | Path, extra: dict | None = None) -> dict:
     """light.exr and its previews in `folder`, and report.json (the photo's facts, `extra` over it)."""
     from ..pipeline import write_report
 
-    result.decisions["camera"] = inputs.camera_record
-    report = light_report(result, config, write_light_outputs(result, folder))
-    report["photo"] = inputs.info
+    report = light_report(result, result.config, write_light_outputs(result, folder))
+    report["photo"] = result.photo_info
     report.update(extra or {})
     write_report(Path(folder) / "report.json", report)
     return report
