@@ -159,7 +159,14 @@ def load_asset_file(path: str | Path, object_name: str | None = None) -> tuple[M
 
 def load_asset_materials(path: str | Path, object_name: str | None = None) -> AssetMaterials:
     """The asset's mesh in world space with every material its faces use: every mesh of the file, or
-    the named node and the meshes under it."""
+    the named node and the meshes under it; an asset folder (read without Blender) as its one material."""
+    from ..core.asset_io import is_asset_folder, load_asset_folder
+    from ..core.materials import Material
+
+    if is_asset_folder(path):
+        mesh, maps = load_asset_folder(path)
+        return AssetMaterials(mesh=mesh, materials=(Material(name=mesh.name, maps=maps,
+                                                             read=(f"asset folder '{path}'",)),))
     import bpy
 
     with loaded_asset(path, object_name) as (meshes, scene):

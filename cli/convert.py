@@ -3,8 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import (add_asset_args, add_output_args, add_preset_args, load_asset_materials, output, positive_int,
-                      progress)
+from .options import add_asset_args, add_output_args, add_preset_args, output, positive_int, progress
 
 
 def print_material_report(asset) -> None:
@@ -19,6 +18,7 @@ def print_material_report(asset) -> None:
 
 
 def run(args) -> int:
+    from ..blender_io.asset_file import load_asset_materials
     from ..core.asset_io import save_asset_folder
     from ..core.presets import stage_config
     from ..core.pipeline import convert_and_bake, environment_info, write_report

@@ -101,20 +101,6 @@ def load_asset(path: str, object_name: str | None = None):
     return load(path, object_name)
 
 
-def load_asset_materials(path: str, object_name: str | None = None):
-    """core.materials.AssetMaterials: every material of the asset, with what was read and dropped."""
-    from ..core.asset_io import is_asset_folder, load_asset_folder
-    from ..core.materials import AssetMaterials, Material
-
-    if is_asset_folder(path):
-        mesh, maps = load_asset_folder(path)
-        return AssetMaterials(mesh=mesh, materials=(Material(name=mesh.name, maps=maps,
-                                                             read=(f"asset folder '{path}'",)),))
-    from ..blender_io.asset_file import load_asset_materials as load_file
-
-    return load_file(path, object_name)
-
-
 def progress(args):
     from ..core.progress import TerminalProgress
 
