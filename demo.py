@@ -15,19 +15,21 @@ from pathlib import Path
 
 import numpy as np
 
-from .core.asset_io import is_asset_folder, load_asset_folder
-from .core.compose import ComposeInputs, compose_to_folder, light_camera
-from .core.imageio import read_image, write_image
-from .core.lighting import load_photo
-from .core.photo import develop_photo, perspective_view, studiolight_path
-from .core.pipeline import (constant_environment, contact_sheet, environment_info, load_environment,
-                            write_report)
-from .core.presets import stage_config
-from .core.progress import ProgressCallback, emit
-from .core.run import RunConfig, run_pipeline
+from .core.data.asset_io import is_asset_folder, load_asset_folder
+from .core.stages.compose import ComposeInputs, compose_to_folder, light_camera
+from .core.data.imageio import read_image, write_image
+from .core.stages.light import load_photo
+from .core.render.photo import develop_photo, perspective_view, studiolight_path
+from .core.base.report import write_report
+from .core.render.backend import environment_info
+from .core.render.environment import constant_environment, load_environment
+from .core.texture.views import contact_sheet
+from .core.pipeline.presets import stage_config
+from .core.base.progress import ProgressCallback, emit
+from .core.pipeline.run import RunConfig, run_pipeline
 from .core.scene.camera import PhotoCamera
 from .core.scene.placement import Placement
-from .core.surface_layout import texture_view
+from .core.texture.surface_layout import texture_view
 from .core.texture.bake import load_neural_texture
 
 DEMO_STUDIOLIGHT = "interior"
@@ -61,7 +63,7 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     out = Path(out)
     # Texture adaptation needs Stable Diffusion 2: "sd2" insists (a missing model stops the demo here,
     # before any work), "auto" uses it when its weights are on this machine, "none" skips it.
-    from .core.errors import InputError
+    from .core.base.errors import InputError
     from .core.guidance import ModelConfig, locate_models
 
     if guidance not in ("auto", "sd2", "none"):

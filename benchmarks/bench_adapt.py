@@ -17,12 +17,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from scenefit.core.adapt import AdaptConfig, AdaptInputs, StageSpec, adapt_texture
+from scenefit.core.stages.adapt import AdaptConfig, AdaptInputs, StageSpec, adapt_texture
 from scenefit.core.guidance import ModelConfig
-from scenefit.core.presets import stage_config
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.pipeline.presets import stage_config
+from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.scene.placement import Placement
-from scenefit.core.texture import NeuralTexture, rasterize_uv
+from scenefit.core.data.uv_raster import rasterize_uv
+from scenefit.core.texture import NeuralTexture
 from scenefit.devtools.tiny_models import SD2_UNET, build_tiny_pair, build_tiny_sd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -112,8 +113,8 @@ def sd2_row(models: Path, preset: str, dtype_type: str, cache: bool) -> dict:
     `models`/sd2-base and sd2-inpaint): step 0 run twice, the first with the view's constant work
     computed (cold), the second reusing it when `cache` (warm); seconds by phase per step and the
     process's peak resident memory. Meant for a process of its own (peak memory is the process's)."""
-    from scenefit.core.adapt import AdaptSystem
-    from scenefit.core.adapt.system import _peak_memory_mb
+    from scenefit.core.stages.adapt import AdaptSystem
+    from scenefit.core.stages.adapt.system import _peak_memory_mb
 
     config = stage_config("adapt", preset, prompt="a mossy sphere in a swamp", checkpoint_every=0, preview_every=0,
                           models=ModelConfig(base_model=str(models / "sd2-base"),

@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from scenefit.core.asset_io import save_asset_folder
+from scenefit.core.data.asset_io import save_asset_folder
 from scenefit.workers.batch import InProcessDispatcher, run_batch
-from scenefit.core.imageio import write_image
+from scenefit.core.data.imageio import write_image
 from scenefit.workers.jobs import load_jobs
-from scenefit.core.maps import PBRMaps
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.primitives import uv_sphere
 
 # The paper's adapt stage (appendix): 4000 iterations, 4 views per step, one view per GPU.
 PAPER_ITERATIONS, PAPER_VIEWS_PER_STEP = 4000, 4

@@ -25,9 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from scenefit.core.imageio import read_image, write_image
-from scenefit.core.photo import develop_photo, perspective_view
-from scenefit.core.photo_camera import estimate_photo_camera
+from scenefit.core.data.imageio import read_image, write_image
+from scenefit.core.render.photo import develop_photo, perspective_view
+from scenefit.core.stages.camera import estimate_photo_camera
 from scenefit.core.scene.camera import PhotoCamera
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -92,7 +92,7 @@ def markdown(rows: list[dict], splits: dict, load: str, seconds: float, seed: in
           "each view is upsampled 2-4.5x and its edges are soft), with known field of view 40-90 deg, pitch -25 to "
           "+10 deg and roll -5 to +5 deg; `estimate_photo_camera` on each 8-bit PNG (no EXIF). Error in degrees, "
           "all views (whatever source each field came from), and over the views whose field came from the lines.",
-          "", f"Seed {seed}" + (" (the views core/photo_camera.py's thresholds were set on)" if seed == SEED else
+          "", f"Seed {seed}" + (" (the views core/stages/camera.py's thresholds were set on)" if seed == SEED else
                                 " (held out for the thresholds; the lens prior's two widths were picked among six "
                                 "on both seeds' views)") + f"; {seconds:.0f} s in all; "
                                                                                  f"load: `{load}`", "",

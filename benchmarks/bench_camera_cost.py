@@ -19,13 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
-from scenefit.core.asset_io import load_asset_folder
-from scenefit.core.compose import ComposeInputs, compose
-from scenefit.core.convert import target_stack
-from scenefit.core.imageio import read_image
-from scenefit.core.lighting import estimate_light
-from scenefit.core.photo import develop_photo, perspective_view
-from scenefit.core.presets import stage_config
+from scenefit.core.data.asset_io import load_asset_folder
+from scenefit.core.stages.compose import ComposeInputs, compose
+from scenefit.core.stages.convert import target_stack
+from scenefit.core.data.imageio import read_image
+from scenefit.core.stages.light import estimate_light
+from scenefit.core.render.photo import develop_photo, perspective_view
+from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.scene.camera import PhotoCamera
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -1,7 +1,7 @@
 """Noise in the compose stage's final render: error against a high-sample reference at equal time.
 
 The bundled example (Suzanne, its own maps) stands in a 256² photo under Blender's CC0 `city` map (a
-sun and a sky), rendered by the compose stage's own object pass (core/compose.py) at 1..256 samples
+sun and a sky), rendered by the compose stage's own object pass (core/stages/compose.py) at 1..256 samples
 per pixel with each of Mitsuba's samplers, raw and denoised by Intel Open Image Denoise with the
 albedo and normal AOVs. Error: RMSE in display sRGB over the pixels the reference covers, against
 an independent-sampler render at REFERENCE_SPP. Writes benchmarks/results/compose.md, compose.json
@@ -17,13 +17,13 @@ from pathlib import Path
 
 import numpy as np
 
-from scenefit.core.asset_io import load_asset_folder
-from scenefit.core.compose import ComposeConfig, ComposeInputs, build_compose
-from scenefit.core.convert import target_stack
-from scenefit.core.denoise import denoise
-from scenefit.core.imageio import linear_to_srgb
-from scenefit.core.photo import studiolight_path
-from scenefit.core.pipeline import load_environment
+from scenefit.core.data.asset_io import load_asset_folder
+from scenefit.core.stages.compose import ComposeConfig, ComposeInputs, build_compose
+from scenefit.core.stages.convert import target_stack
+from scenefit.core.render.denoise import denoise
+from scenefit.core.data.imageio import linear_to_srgb
+from scenefit.core.render.photo import studiolight_path
+from scenefit.core.render.environment import load_environment
 from scenefit.core.scene.camera import PhotoCamera
 
 RESULTS = Path(__file__).resolve().parent / "results"

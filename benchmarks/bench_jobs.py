@@ -13,10 +13,10 @@ import tempfile
 OUT = tempfile.mkdtemp(prefix="scenefit-bench-jobs-")
 
 def job(progress):
-    from scenefit.core.primitives import uv_sphere
-    from scenefit.core.maps import PBRMaps
-    from scenefit.core.presets import stage_config
-    from scenefit.core.pipeline import convert_and_bake
+    from scenefit.core.data.primitives import uv_sphere
+    from scenefit.core.data.maps import PBRMaps
+    from scenefit.core.pipeline.presets import stage_config
+    from scenefit.core.stages.convert import convert_and_bake
     mesh = uv_sphere(segments=24, rings=12)
     rng = np.random.default_rng(0)
     maps = PBRMaps(base_color=rng.uniform(0.1, 0.9, (64, 64, 3)).astype(np.float32), roughness=0.5, metallic=0.0)

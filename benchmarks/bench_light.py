@@ -7,7 +7,7 @@ automatic one (the table shows its call and score). Development maps: studio, in
 held-out maps (never used to set a number): courtyard, night, sunrise, sunset. Methods:
 - constant: a uniform environment of the photo's mean linear colour;
 - paper: the LDR panorama with the paper's inverse-tone-mapping prior (prior_type "inverse_tonemap");
-- cues: the default weight-free estimate (core/lighting/cues.py: exposure, surface energy, lobe);
+- cues: the default weight-free estimate (core/stages/light/cues.py: exposure, surface energy, lobe);
 - cues without one cue at a time (development maps): how much each cue moves the estimate;
 - reference (one view per development map): the scales optimised by the apparatus with the reference
   critic, for the paper's "effectiveness of light estimation" curve.
@@ -31,14 +31,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from scenefit.core.imageio import read_image, srgb_to_linear
-from scenefit.core.lighting import estimate_light
-from scenefit.core.lighting.cues import CueConfig
-from scenefit.core.lighting.estimate import default_object
-from scenefit.core.lighting.hdr import ApparatusScene, hdr_from_scales, tonemap_preview
-from scenefit.core.lighting.measure import SphereProbe, angular_error_deg, compare_maps, object_mse
-from scenefit.core.photo import camera_exposure, develop_photo, perspective_view, studiolight_path
-from scenefit.core.presets import stage_config
+from scenefit.core.data.imageio import read_image, srgb_to_linear
+from scenefit.core.stages.light import estimate_light
+from scenefit.core.stages.light.cues import CueConfig
+from scenefit.core.stages.light.estimate import default_object
+from scenefit.core.stages.light.hdr import ApparatusScene, hdr_from_scales, tonemap_preview
+from scenefit.core.stages.light.measure import SphereProbe, angular_error_deg, compare_maps, object_mse
+from scenefit.core.render.photo import camera_exposure, develop_photo, perspective_view, studiolight_path
+from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.scene.camera import PhotoCamera
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -274,7 +274,7 @@ def metered_exposure(radiance: np.ndarray, metering: str) -> float:
 
 def real_views(hdr: np.ndarray) -> list[tuple[str, float]]:
     """Toward and away from the map's dominant light (its azimuth), as (label, camera yaw in degrees)."""
-    from scenefit.core.lighting.measure import dominant_direction
+    from scenefit.core.stages.light.measure import dominant_direction
 
     d = dominant_direction(resize(hdr, REAL_MAP))
     yaw = math.degrees(math.atan2(d[1], d[0]))
@@ -283,7 +283,7 @@ def real_views(hdr: np.ndarray) -> list[tuple[str, float]]:
 
 def sun_hint(truth: np.ndarray, camera: PhotoCamera) -> tuple[float, float]:
     """The true dominant light as --sun AZ,EL: azimuth from the camera's view (right positive), elevation."""
-    from scenefit.core.lighting.measure import dominant_direction
+    from scenefit.core.stages.light.measure import dominant_direction
 
     d = dominant_direction(truth)
     az = (camera.yaw_deg - math.degrees(math.atan2(d[1], d[0])) + 180.0) % 360.0 - 180.0
@@ -291,7 +291,7 @@ def sun_hint(truth: np.ndarray, camera: PhotoCamera) -> tuple[float, float]:
 
 
 def score_methods(estimates: dict[str, np.ndarray], truth: np.ndarray, forward: np.ndarray) -> dict:
-    from scenefit.core.lighting.measure import PROBE_MATERIALS, probe_geometry, probe_scores, render_probe
+    from scenefit.core.stages.light.measure import PROBE_MATERIALS, probe_geometry, probe_scores, render_probe
 
     mask = probe_geometry(forward)[0]
     truths = {m: render_probe(truth, m, forward) for m in PROBE_MATERIALS}
@@ -493,7 +493,7 @@ def real_report(rows: list[dict], configs: dict, seconds: float, load: str) -> s
             f"(given to the stage), pitch {REAL_PITCH:g} deg (the stage's default), 8-bit sRGB, auto-exposed by median "
             f"and by log-average luminance. Truth: the map at {REAL_MAP[0]}x{REAL_MAP[1]} in the photo's exposure. "
             f"Spheres (mirror, matte silver GGX roughness {0.33}, diffuse albedo 0.8) seen from the photo's side, "
-            f"64x64, by direct integration of the map (core/lighting/measure.py `render_probe`). si-RMSE, RMSE and "
+            f"64x64, by direct integration of the map (core/stages/light/measure.py `render_probe`). si-RMSE, RMSE and "
             f"the mean per-pixel RGB angular error over the sphere, linear and StyleLight-tone-mapped (gamma 2.4, "
             f"99th percentile -> 0.99). Baselines: constant = the photo's mean linear colour everywhere; wrapped = "
             f"the linear photo stretched over the whole map. Estimate: preset balanced, no critic (no weights), "

@@ -31,8 +31,8 @@ GOALS = {"draft": 30.0, "balanced": 120.0}   # seconds (issue 23)
 
 
 def twelve_megapixels(path: Path, hdri: str = "vestibule_1k") -> Path:
-    from scenefit.core.imageio import read_image, write_image
-    from scenefit.core.photo import develop_photo, perspective_view
+    from scenefit.core.data.imageio import read_image, write_image
+    from scenefit.core.render.photo import develop_photo, perspective_view
     from scenefit.core.scene.camera import PhotoCamera
 
     hdr = read_image(CORPUS / "hdri" / f"{hdri}.hdr")[..., :3]

@@ -31,11 +31,12 @@ def measure(path: Path) -> dict:
     import numpy as np
 
     from scenefit.blender_io.asset_file import load_asset_materials
-    from scenefit.core.camera import Camera
-    from scenefit.core.convert import ConvertConfig, convert_materials
-    from scenefit.core.mesh import normalize_to_unit_sphere
-    from scenefit.core.render import AssetRenderer
-    from scenefit.core.surface_layout import new_layout, texture_view, uv_sharing
+    from scenefit.core.render.orbit_camera import Camera
+    from scenefit.core.pipeline.preset_tables import texture_preset
+    from scenefit.core.stages.convert import ConvertConfig, convert_materials
+    from scenefit.core.data.mesh import normalize_to_unit_sphere
+    from scenefit.core.render.renderer import AssetRenderer
+    from scenefit.core.texture.surface_layout import new_layout, texture_view, uv_sharing
 
     asset = load_asset_materials(path)
     mesh, _ = asset.fitting_view()
@@ -43,7 +44,7 @@ def measure(path: Path) -> dict:
     sharing = uv_sharing(mesh)
     row = {"faces": int(len(mesh.faces)), "materials": len(asset.materials), **sharing.report(),
            "re_maps": sharing.needs_new_layout(), "sharing_seconds": round(time.perf_counter() - started, 2)}
-    texture = convert_materials(asset, ConvertConfig(texture_preset="draft")).texture
+    texture = convert_materials(asset, ConvertConfig(texture=texture_preset("draft"))).texture
     normalized, _ = normalize_to_unit_sphere(mesh)
     layout = new_layout(normalized, texture.config.resolution, sharing)
     row.update(resolution=texture.config.resolution, xatlas_seconds=round(layout.seconds, 2))

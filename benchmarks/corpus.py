@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenefit.core.gltf_meshopt import read_gltf
+from scenefit.core.data.gltf_meshopt import read_gltf
 
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = ROOT.parent / "shared" / "corpus"
@@ -143,7 +143,7 @@ def kept_and_lost(source: Path, baked: Path) -> tuple[list[str], list[str]]:
 
 def asset_bytes(path: Path) -> int:
     """The asset's size on disk: for a .gltf its whole folder's referenced files."""
-    from scenefit.core.asset_files import asset_files
+    from scenefit.core.data.asset_files import asset_files
 
     return sum(p.stat().st_size for p in asset_files(path))
 
@@ -198,8 +198,8 @@ def status(row: dict) -> str:
 
 def photo_from(hdri: str, path: Path) -> Path:
     """A 640x480, 60° view of a real HDR panorama, auto-exposed and 8-bit, as a camera would take it."""
-    from scenefit.core.imageio import read_image, write_image
-    from scenefit.core.photo import develop_photo, perspective_view
+    from scenefit.core.data.imageio import read_image, write_image
+    from scenefit.core.render.photo import develop_photo, perspective_view
     from scenefit.core.scene.camera import PhotoCamera
 
     hdr = read_image(CORPUS / "hdri" / f"{hdri}.hdr")[..., :3]
@@ -222,8 +222,8 @@ def one_run(path: Path, hdri: str, work: Path, timeout: float) -> dict:
 
 
 def contact_sheet(runs: list[dict], path: Path) -> None:
-    from scenefit.core.imageio import read_image, write_image
-    from scenefit.core.pipeline import contact_sheet as sheet
+    from scenefit.core.data.imageio import read_image, write_image
+    from scenefit.core.texture.views import contact_sheet as sheet
 
     rows = {}
     for run in runs:

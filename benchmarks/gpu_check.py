@@ -40,7 +40,7 @@ def build_models(folder: Path, dry_run: bool) -> tuple[Path, Path]:
 
 def measure(base: Path, inpaint: Path, preset: str, dry_run: bool) -> dict:
     """One preset's seconds per iteration by phase and peak memory (after a warm-up iteration)."""
-    from scenefit.core.presets import stage_config
+    from scenefit.core.pipeline.presets import stage_config
 
     config = stage_config("adapt", preset, prompt="x")
     stages, resolution, iterations, warmup = config.stages, config.model_resolution, ITERATIONS, 1
@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         print("gpu-check: torch sees no CUDA GPU on this machine; run it where one is lent, or --dry-run here.",
               file=sys.stderr)
         return 2
-    from scenefit.core.backend import init_mitsuba
+    from scenefit.core.render.backend import init_mitsuba
 
     with tempfile.TemporaryDirectory(prefix="scenefit-gpu-check-") as tmp:
         folder = Path(args.models) if args.models else Path(tmp)

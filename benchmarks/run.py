@@ -22,18 +22,18 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from scenefit.core.asset_io import load_asset_folder
-from scenefit.core.camera import Camera
-from scenefit.core.convert import target_stack
-from scenefit.core.presets import PRESET_NAMES, stage_config
-from scenefit.core.mesh import normalize_to_unit_sphere
-from scenefit.core.pipeline import environment_info
-from scenefit.core.primitives import uv_sphere
-from scenefit.core.render import AssetRenderer
+from scenefit.core.data.asset_io import load_asset_folder
+from scenefit.core.render.orbit_camera import Camera
+from scenefit.core.stages.convert import target_stack
+from scenefit.core.pipeline.presets import PRESET_NAMES, stage_config
+from scenefit.core.data.mesh import normalize_to_unit_sphere
+from scenefit.core.render.backend import environment_info
+from scenefit.core.data.primitives import uv_sphere
+from scenefit.core.render.renderer import AssetRenderer
 from scenefit.core.texture.fit_direct import fit_direct, masked_psnr
 from scenefit.core.texture.fit_inverse import fit_inverse_rendering, studio_environment
 from scenefit.core.texture.neural_texture import NeuralTexture
-from scenefit.core.texture.uv_raster import rasterize_uv
+from scenefit.core.data.uv_raster import rasterize_uv
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

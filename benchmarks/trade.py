@@ -42,7 +42,7 @@ PRELUDE = ("import os, resource, json, time, torch; peak_mb = lambda: resource.g
            "torch.set_num_threads(int(os.environ.get('SCENEFIT_BENCH_THREADS', torch.get_num_threads())))\n")
 
 BASELINE = """
-import scenefit.core.run, scenefit.core.lighting, scenefit.core.compose
+import scenefit.core.pipeline.run, scenefit.core.stages.light, scenefit.core.stages.compose
 print("RESULT", json.dumps({"peak_mb": peak_mb()}))
 """
 
@@ -50,8 +50,8 @@ print("RESULT", json.dumps({"peak_mb": peak_mb()}))
 # camera meters; the truth is the map in the photo's exposure.
 PHOTOS = """
 import numpy as np, cv2
-from scenefit.core.imageio import read_image
-from scenefit.core.photo import camera_exposure, develop_photo, perspective_view, studiolight_path
+from scenefit.core.data.imageio import read_image
+from scenefit.core.render.photo import camera_exposure, develop_photo, perspective_view, studiolight_path
 from scenefit.core.scene.camera import PhotoCamera
 def development_photo(name, yaw):
     hdr = read_image(studiolight_path(name))[..., :3]
@@ -64,9 +64,9 @@ def resized(envmap, height):
 """
 
 CONVERT = """
-from scenefit.core.asset_io import load_asset_folder
-from scenefit.core.convert import convert_asset
-from scenefit.core.presets import stage_config
+from scenefit.core.data.asset_io import load_asset_folder
+from scenefit.core.stages.convert import convert_asset
+from scenefit.core.pipeline.presets import stage_config
 mesh, maps = load_asset_folder(ASSET)
 config = stage_config("convert", PRESET, init_type="fit", resolution=RESOLUTION,   # the paper's fit, per preset
                       iterations=max(5, round(stage_config("convert", PRESET).iterations * FRACTION)))
@@ -78,10 +78,10 @@ print("RESULT", json.dumps({"seconds": time.perf_counter() - t, "psnr_db": resul
 
 LIGHT = PHOTOS + """
 from dataclasses import replace
-from scenefit.core.lighting import estimate_light
-from scenefit.core.lighting.depth import DepthConfig
-from scenefit.core.lighting.measure import SphereProbe, compare_maps
-from scenefit.core.presets import stage_config
+from scenefit.core.stages.light import estimate_light
+from scenefit.core.stages.light.depth import DepthConfig
+from scenefit.core.stages.light.measure import SphereProbe, compare_maps
+from scenefit.core.pipeline.presets import stage_config
 config = stage_config("light", PRESET, critic_type="none", depth=DepthConfig(depth_type="geometric"))
 views = [(name, yaw) for name in MAPS for yaw in YAWS]
 camera, photo, _ = development_photo(*views[0])
@@ -116,11 +116,11 @@ print("RESULT", json.dumps({"seconds": seconds / len(views), "first_call_s": fir
 
 COMPOSE = PHOTOS + """
 from dataclasses import replace
-from scenefit.core.asset_io import load_asset_folder
-from scenefit.core.compose import ComposeInputs, compose
-from scenefit.core.convert import target_stack
-from scenefit.core.imageio import linear_to_srgb
-from scenefit.core.presets import stage_config
+from scenefit.core.data.asset_io import load_asset_folder
+from scenefit.core.stages.compose import ComposeInputs, compose
+from scenefit.core.stages.convert import target_stack
+from scenefit.core.data.imageio import linear_to_srgb
+from scenefit.core.pipeline.presets import stage_config
 camera, photo, hdr = development_photo("city", 90.0)
 mesh, maps = load_asset_folder(ASSET)
 inputs = ComposeInputs(mesh, target_stack(maps, 512), photo, (160.0, 200.0), resized(hdr, 128), camera)
@@ -148,13 +148,13 @@ print("RESULT", json.dumps({**row, "peak_mb": peak_mb()}))
 
 RUN = PHOTOS + """
 from dataclasses import replace
-from scenefit.core.asset_io import load_asset_folder
-from scenefit.core.compose import ComposeInputs, compose
-from scenefit.core.convert import target_stack
-from scenefit.core.imageio import read_image, write_image
-from scenefit.core.lighting.measure import SphereProbe, compare_maps
-from scenefit.core.presets import stage_config
-from scenefit.core.run import RunConfig, run_pipeline
+from scenefit.core.data.asset_io import load_asset_folder
+from scenefit.core.stages.compose import ComposeInputs, compose
+from scenefit.core.stages.convert import target_stack
+from scenefit.core.data.imageio import read_image, write_image
+from scenefit.core.stages.light.measure import SphereProbe, compare_maps
+from scenefit.core.pipeline.presets import stage_config
+from scenefit.core.pipeline.run import RunConfig, run_pipeline
 camera, photo, hdr = development_photo("city", 90.0)
 photo_path = write_image(OUT + "/photo.png", photo)
 mesh, maps = load_asset_folder(ASSET)

@@ -14,13 +14,13 @@ import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..core.asset_io import check_asset_path
-from ..core.errors import InputError
-from ..core.gltf_meshopt import importable
-from ..core.maps import PBRMaps
-from ..core.materials import AssetMaterials
-from ..core.mesh import Mesh
-from ..core.quiet import native_output_captured
+from ..core.data.asset_io import check_asset_path
+from ..core.base.errors import InputError
+from ..core.data.gltf_meshopt import importable
+from ..core.data.maps import PBRMaps
+from ..core.data.materials import AssetMaterials
+from ..core.data.mesh import Mesh
+from ..core.base.quiet import native_output_captured
 from .fbx_ascii import binary_copy, is_ascii_fbx
 from .material import read_object_materials
 from .scene_asset import read_scene_materials
@@ -146,7 +146,7 @@ def _asset_node_names(scene) -> list[str]:
 
 def load_asset(path: str | Path, object_name: str | None = None) -> tuple[Mesh, PBRMaps]:
     """(Mesh, PBRMaps) from an asset folder (read without Blender) or from a file Blender reads."""
-    from ..core.asset_io import is_asset_folder, load_asset_folder
+    from ..core.data.asset_io import is_asset_folder, load_asset_folder
 
     return load_asset_folder(path) if is_asset_folder(path) else load_asset_file(path, object_name)
 
@@ -160,8 +160,8 @@ def load_asset_file(path: str | Path, object_name: str | None = None) -> tuple[M
 def load_asset_materials(path: str | Path, object_name: str | None = None) -> AssetMaterials:
     """The asset's mesh in world space with every material its faces use: every mesh of the file, or
     the named node and the meshes under it; an asset folder (read without Blender) as its one material."""
-    from ..core.asset_io import is_asset_folder, load_asset_folder
-    from ..core.materials import Material
+    from ..core.data.asset_io import is_asset_folder, load_asset_folder
+    from ..core.data.materials import Material
 
     if is_asset_folder(path):
         mesh, maps = load_asset_folder(path)

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import InputError
-from ..core.imageio import CHECK_SIDE, read_image, stored_orientation
+from ..core.base.errors import InputError
+from ..core.data.imageio import CHECK_SIDE, read_image, stored_orientation
 from ..core.scene.asset_pose import camera_for_placement
 from ..core.scene.camera import PHOTO_YAW_DEG, PhotoCamera, camera_pose
 from .world import world_controls

@@ -1,4 +1,4 @@
-"""core/compose.py's scene rebuilt in Blender for Cycles, to cross-check the Mitsuba composite: the
+"""core/stages/compose.py's scene rebuilt in Blender for Cycles, to cross-check the Mitsuba composite: the
 photo camera, the light map as a new World, the placed asset, a floor and a transparent film
 (tests/test_compose_cycles.py compares the two). The artist-facing set-up (camera around the
 asset, photo behind, shadow catcher) is blender_io/compose.py.
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.mesh import Mesh
+from ..core.data.mesh import Mesh
 from ..core.scene.camera import CAMERA_HEIGHT, PhotoCamera
 from .compose import camera_rotation, new_plane, transparent_cycles
 from .material import write_result_material

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import InputError
+from ..core.base.errors import InputError
 
 BINARY_MAGIC = b"Kaydara FBX Binary  \x00"
 _TOKEN = re.compile(r"""

@@ -18,15 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import InputError
-from ..core.game_bake import BakedMaterial
-from ..core.gltf_ktx2 import check_ktx2_output, ktx2_glb
-from ..core.gltf_meshopt import encoded_glb
-from ..core.gltf_output import GltfOutput, output_like_input, skinned_meshes_moved_to_root
-from ..core.imageio import srgb_to_linear, write_image
-from ..core.maps import resize_channels
-from ..core.quiet import native_output_captured
-from ..core.texture.uv_raster import sample_image
+from ..core.base.errors import InputError
+from ..core.stages.bake.game_bake import BakedMaterial
+from ..core.stages.bake.gltf_ktx2 import check_ktx2_output, ktx2_glb
+from ..core.data.gltf_meshopt import encoded_glb
+from ..core.stages.bake.gltf_output import GltfOutput, output_like_input, skinned_meshes_moved_to_root
+from ..core.data.imageio import srgb_to_linear, write_image
+from ..core.data.maps import resize_channels
+from ..core.base.quiet import native_output_captured
+from ..core.data.uv_raster import sample_image
 from .material import EXTENSION_OF_WRAP, image_pixels_linear, material_wrap, principled_bsdf
 from .node_values import source
 
@@ -230,7 +230,7 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
     unless `replace` (Blender's file browser has asked; the command line has --replace). Returns the
     written paths.
     """
-    from ..core.asset_files import refuse_overwriting, refuse_replacing
+    from ..core.data.asset_files import refuse_overwriting, refuse_replacing
 
     import addon_utils
     import bpy
@@ -335,7 +335,7 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
     Known bpy 5.0.1 crash: once the exporter has run on the temporary scene and the scene is
     removed, the next glTF import in the same process segfaults. `scenefit bake` is a process of
     its own; long-lived callers should run it as a subprocess (or use bake_copy_to_gltf)."""
-    from ..core.game_bake import bake_game_maps, bake_shapes, materials_to_remap
+    from ..core.stages.bake.game_bake import bake_game_maps, bake_shapes, materials_to_remap
     from ..core.texture.bake import load_neural_texture
     import bpy
 

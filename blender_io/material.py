@@ -6,12 +6,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import InputError
-from ..core.imageio import check_decodes, srgb_to_linear
-from ..core.maps import PBRMaps
-from ..core.materials import AssetMaterials, Material
-from ..core.mesh import Mesh
-from ..core.quiet import native_output_captured
+from ..core.base.errors import InputError
+from ..core.data.imageio import check_decodes, srgb_to_linear
+from ..core.data.maps import PBRMaps
+from ..core.data.materials import AssetMaterials, Material
+from ..core.data.mesh import Mesh
+from ..core.base.quiet import native_output_captured
 from .mesh import mesh_from_object
 from .node_values import NotAnImageChain, socket_value, source
 from .procedural_bake import bake_socket
@@ -117,7 +117,7 @@ def _read_input(bsdf, name: str, kind: str, material, obj, slot: int, read: list
     return np.clip(value, 0.0, 1.0) if isinstance(value, np.ndarray) else float(np.clip(value, 0.0, 1.0))
 
 
-# Blender's Image Texture extension -> how glTF's exporter writes the sampler (core.texture.uv_raster.WRAP_MODES).
+# Blender's Image Texture extension -> how glTF's exporter writes the sampler (core.data.uv_raster.WRAP_MODES).
 _WRAP_OF_EXTENSION = {"REPEAT": "repeat", "MIRROR": "mirror", "EXTEND": "clamp", "CLIP": "clamp"}
 EXTENSION_OF_WRAP = {"repeat": "REPEAT", "mirror": "MIRROR", "clamp": "EXTEND"}
 

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.errors import InputError
-from ..core.mesh import Mesh
+from ..core.base.errors import InputError
+from ..core.data.mesh import Mesh
 
 _GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
 

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.errors import InputError
-from ..core.maps import resize_channels
+from ..core.base.errors import InputError
+from ..core.data.maps import resize_channels
 
 # Blender's colour -> float conversion for the default (Rec.709) OCIO configuration.
 REC709_LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)

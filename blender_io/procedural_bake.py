@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.errors import InputError
-from ..core.quiet import native_output_captured
+from ..core.base.errors import InputError
+from ..core.base.quiet import native_output_captured
 from .interrupts import interrupt_held
 
 # Samples per texel: the emission of a procedural chain needs no light paths, only anti-aliasing.
@@ -25,7 +25,7 @@ def bake_socket(obj, slot: int, socket, size: int, pixels_of,
     `obj`'s slot `slot`), over that slot's faces in the mesh's active UV layout.
 
     Blender bakes only UVs inside [0, 1]; faces whose UVs tile past it (wrap "repeat" or "mirror",
-    see core.texture.uv_raster) are baked once per copy of the image they reach, through a second
+    see core.data.uv_raster) are baked once per copy of the image they reach, through a second
     UV map that moves that copy onto [0, 1] while the chain still reads the mesh's own UVs."""
     import bmesh
     import bpy
@@ -119,7 +119,7 @@ def _image_copies(mesh, wrap: tuple[str, str]) -> list[tuple[int, int]]:
 def _bake_copies(bpy, mesh, image, copies: list[tuple[int, int]], wrap: tuple[str, str], pixels_of) -> np.ndarray:
     """Bake each copy of the image in turn into `image` (margin 0, so no copy paints over another's
     texels), then extend the baked texels into the rest as Blender's EXTEND margin would."""
-    from ..core.texture.uv_raster import seam_fill_index
+    from ..core.data.uv_raster import seam_fill_index
 
     own = mesh.uv_layers.active.name
     mesh.uv_layers.new(name="SceneFit bake copy")

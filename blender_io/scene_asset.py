@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.errors import InputError
-from ..core.materials import AssetMaterials
-from ..core.mesh import Mesh
+from ..core.base.errors import InputError
+from ..core.data.materials import AssetMaterials
+from ..core.data.mesh import Mesh
 from .material import object_mesh_and_slots, read_material
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import InputError
+from ..core.base.errors import InputError
 from ..core.scene.asset_pose import SceneView, asset_in_view
 
 TAG = "scenefit"   # SceneFit's own objects carry it (blender_io/compose.py); its camera is SceneFit's to move

@@ -11,9 +11,9 @@ import contextlib
 import io
 import sys
 
-from ..core.errors import Cancelled, SceneFitError
-from ..core.os_errors import os_error_sentence, with_out_paths
-from ..core.output_folder import interrupted_message
+from ..core.base.errors import Cancelled, SceneFitError
+from ..core.base.os_errors import os_error_sentence, with_out_paths
+from ..core.base.output_folder import interrupted_message
 from . import adapt, bake, camera, batch, compose, convert, demo, export, light, prompt, render, run
 
 # The order `scenefit --help` lists them in.
@@ -67,7 +67,7 @@ def _check_inputs(args) -> None:
     """The asset path checked before a command loads torch or Blender (seconds), so a mistyped path is
     refused at once; the rest of each command's inputs are checked where they are read."""
     if getattr(args, "asset", None) and not getattr(args, "dry_run", False):
-        from ..core.asset_io import check_asset_path
+        from ..core.data.asset_io import check_asset_path
 
         check_asset_path(args.asset)
 

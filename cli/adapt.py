@@ -15,8 +15,8 @@ PROMPT_PLACEHOLDER = "<the prompt: --prompt, or written from --object-prompt and
 
 def resolve_config(args, prompt: str, instruction: str):
     """The AdaptConfig the arguments ask for: the preset for the mode, then the options given."""
-    from ..core.adapt import StageSpec
-    from ..core.presets import stage_config
+    from ..core.stages.adapt import StageSpec
+    from ..core.pipeline.presets import stage_config
 
     overrides = {k: v for k, v in (("iterations", args.iterations), ("seed", args.seed), ("elevation", args.elevation),
                                    ("views_per_step", args.views_per_step), ("global_crops", args.global_crops),
@@ -50,9 +50,10 @@ def run(args) -> int:
 def _adapt(args, out: Path) -> int:
     import numpy as np
 
-    from ..core.adapt import adapt_and_bake
-    from ..core.imageio import linear_to_srgb, read_color_image
-    from ..core.pipeline import environment_info, write_report
+    from ..core.stages.adapt import adapt_and_bake
+    from ..core.data.imageio import linear_to_srgb, read_color_image
+    from ..core.base.report import write_report
+    from ..core.render.backend import environment_info
     from ..core.texture.bake import load_neural_texture
 
     prompt, instruction, written = scene_conditional_prompt(args, args.mode)
@@ -66,7 +67,7 @@ def _adapt(args, out: Path) -> int:
     env = environment(args)[0] if args.envmap else None
     camera = None
     if photo is not None and args.envmap:  # the camera the light stage estimated this map with
-        from ..core.compose import light_camera
+        from ..core.stages.compose import light_camera
 
         camera = light_camera(args.envmap, {}, photo.shape[1], photo.shape[0])[0]
     result, report = adapt_and_bake(mesh, texture, config, out, photo=photo, placement=where,

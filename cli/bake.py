@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..core.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TEXTURE_FORMATS
+from ..core.stages.bake.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TEXTURE_FORMATS
 from .options import add_asset_args
 
 
@@ -11,12 +11,12 @@ def run(args) -> int:
     import json
 
     from ..blender_io.gltf_export import bake_asset_file
-    from ..core.asset_files import asset_files, refuse_overwriting, refuse_replacing
-    from ..core.asset_io import is_asset_folder
-    from ..core.errors import InputError
-    from ..core.game_bake import check_texture_size
-    from ..core.gltf_ktx2 import check_ktx2_output
-    from ..core.gltf_output import output_like_input
+    from ..core.data.asset_files import asset_files, refuse_overwriting, refuse_replacing
+    from ..core.data.asset_io import is_asset_folder
+    from ..core.base.errors import InputError
+    from ..core.stages.bake.game_bake import check_texture_size
+    from ..core.stages.bake.gltf_ktx2 import check_ktx2_output
+    from ..core.stages.bake.gltf_output import output_like_input
 
     if is_asset_folder(args.asset):
         raise InputError(f"'{args.asset}' is a SceneFit asset folder; scenefit bake rewrites the asset's own file "

@@ -63,7 +63,7 @@ class EventLines:
         event = dict(event)
         preview = event.pop("preview", None)
         if preview is not None:
-            from ..core.imageio import write_image
+            from ..core.data.imageio import write_image
 
             self.previews += 1
             path = f"{tempfile.gettempdir()}/scenefit-preview-{__import__('os').getpid()}-{self.previews % 4}.png"

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 
 def run(args) -> int:
-    from ..core.photo_camera import estimate_photo_camera
+    from ..core.stages.camera import estimate_photo_camera
 
     estimate = estimate_photo_camera(args.photo, args.fspy)
     if args.overlay:
@@ -24,14 +24,14 @@ def run(args) -> int:
 
 
 def write_overlay(photo: str, estimate, path: str) -> None:
-    """The photo with the estimate's lines and horizon drawn over it (core/camera_overlay.py), as a new file."""
+    """The photo with the estimate's lines and horizon drawn over it (core/stages/camera_overlay.py), as a new file."""
     from pathlib import Path
 
     import numpy as np
 
-    from ..core.camera_overlay import camera_overlay
-    from ..core.errors import InputError
-    from ..core.imageio import linear_to_srgb, read_color_image, write_image
+    from ..core.stages.camera_overlay import camera_overlay
+    from ..core.base.errors import InputError
+    from ..core.data.imageio import linear_to_srgb, read_color_image, write_image
 
     out = Path(path)
     if out.exists() or out.is_symlink():

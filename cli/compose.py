@@ -8,15 +8,16 @@ from .options import (PRESETS, add_asset_args, add_old_photo_elevation_arg, add_
 
 
 def run(args) -> int:
-    from ..core.compose import ComposeInputs, compose_to_folder, light_camera
-    from ..core.convert import asset_stack
-    from ..core.lighting import load_photo
-    from ..core.pipeline import environment_info, load_environment
+    from ..core.stages.compose import ComposeInputs, compose_to_folder, light_camera
+    from ..core.stages.convert import asset_stack
+    from ..core.stages.light import load_photo
+    from ..core.render.backend import environment_info
+    from ..core.render.environment import load_environment
     from ..core.scene.placement import Placement
-    from ..core.surface_layout import texture_view
+    from ..core.texture.surface_layout import texture_view
     from ..core.texture.bake import load_neural_texture
 
-    from ..core.presets import stage_config
+    from ..core.pipeline.presets import stage_config
 
     config = stage_config("compose", args.preset, size=args.object_size, shadow_type=args.shadow, spp=args.spp,
                             sampler_type=args.sampler, denoiser_type=args.denoiser, exposure=args.exposure)
@@ -46,7 +47,7 @@ def run(args) -> int:
 
 
 def add_parser(sub) -> None:
-    from ..core.compose import SAMPLER_TYPES, SHADOW_TYPES
+    from ..core.stages.compose import SAMPLER_TYPES, SHADOW_TYPES
     from ..core.scene.placement import DEFAULT_OBJECT_SIZE
 
     p = sub.add_parser("compose", help="render the asset into the photo under the estimated light, with its shadow")

@@ -19,11 +19,13 @@ def print_material_report(asset) -> None:
 
 def run(args) -> int:
     from ..blender_io.asset_file import load_asset_materials
-    from ..core.asset_io import save_asset_folder
-    from ..core.presets import stage_config
-    from ..core.pipeline import convert_and_bake, environment_info, write_report
+    from ..core.data.asset_io import save_asset_folder
+    from ..core.pipeline.presets import stage_config
+    from ..core.base.report import write_report
+    from ..core.render.backend import environment_info
+    from ..core.stages.convert import convert_and_bake
 
-    # (a fitting method or iterations imply --init fit: core/presets.py stage_config)
+    # (a fitting method or iterations imply --init fit: core/pipeline/presets.py stage_config)
     overrides = {k: v for k, v in (("init_type", args.init), ("method_type", args.method), ("iterations", args.iterations),
                                    ("resolution", args.resolution), ("seed", args.seed),
                                    ("screen_px", args.screen_px)) if v is not None}

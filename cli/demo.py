@@ -26,7 +26,7 @@ def run(args) -> int:
     if args.replace and previous.is_dir() and [p.name for p in previous.iterdir()] == ["input"]:
         # Only the demo's own inputs, put there to be reused: they are copied into the new run below,
         # so the folder may be replaced like an earlier demo run.
-        from ..core.output_folder import write_marker
+        from ..core.base.output_folder import write_marker
 
         write_marker(previous)
     with output(args) as out:

@@ -8,8 +8,8 @@ from .options import (add_asset_args, add_lighting_args, add_orbit_camera_args, 
 
 
 def run(args) -> int:
-    from ..core.camera import Camera
-    from ..core.export import export_mitsuba_scene
+    from ..core.render.orbit_camera import Camera
+    from ..core.render.export import export_mitsuba_scene
 
     camera = Camera(azimuth_deg=args.azimuth, elevation_deg=args.elevation, width=args.size, height=args.size)
     with output(args) as out:

@@ -27,8 +27,8 @@ def sun_angles(text: str) -> tuple[float, float]:
 
 def resolve_config(args, critic: str):
     """The LightConfig the arguments ask for: the preset, then the options given."""
-    from ..core.lighting.depth import DEFAULT_DEPTH_MODEL, DepthConfig
-    from ..core.presets import stage_config
+    from ..core.stages.light.depth import DEFAULT_DEPTH_MODEL, DepthConfig
+    from ..core.pipeline.presets import stage_config
 
     models = model_config(args)
     # The depth model follows the same --offline / --cache-dir as the diffusion models.
@@ -52,7 +52,7 @@ def print_strict_json(config: dict) -> int:
     """--dry-run: the resolved configuration as strict JSON (an infinite distance threshold is null)."""
     import json
 
-    from ..core.atomic import strict_json
+    from ..core.base.atomic import strict_json
 
     plain = json.loads(json.dumps(config, default=str))   # objects as their text, as print_config did
     print(json.dumps(strict_json(plain), indent=2, allow_nan=False))
@@ -71,8 +71,8 @@ def run(args) -> int:
 
 
 def _light(args, out: Path) -> int:
-    from ..core.lighting.stage import critic_choice, light_inputs, run_light, write_light
-    from ..core.pipeline import environment_info
+    from ..core.stages.light.stage import critic_choice, light_inputs, run_light, write_light
+    from ..core.render.backend import environment_info
 
     critic = critic_choice(args.critic, model_config(args))
     config = resolve_config(args, critic.choice)
@@ -94,7 +94,7 @@ def _light(args, out: Path) -> int:
 
 def shadow_sun(points: list[str], camera, info: dict, hw: tuple[int, int]) -> tuple[float, float]:
     """--sun-from-shadow FOOT TOP TIP as --sun's (azimuth, elevation), through the photo's camera."""
-    from ..core.lighting.shadow_hint import sun_from_shadow
+    from ..core.stages.light.shadow_hint import sun_from_shadow
     from ..core.scene.placement import Placement
 
     foot, top, tip = (Placement.parse(p, (info["size"][0], info["size"][1])).pixel(hw) for p in points)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from ..core.presets import PRESET_NAMES as PRESETS
+from ..core.pipeline.presets import PRESET_NAMES as PRESETS
 
 
 # -- option types: a bad value is refused by argparse (one line, exit 2) before any work ---------------
@@ -20,8 +20,8 @@ def positive_int(text: str) -> int:
 
 
 def render_side(text: str) -> int:
-    """An image side in pixels, at most what SceneFit renders (core/limits.py says why)."""
-    from ..core.limits import MAX_RENDER_SIDE
+    """An image side in pixels, at most what SceneFit renders (core/base/limits.py says why)."""
+    from ..core.base.limits import MAX_RENDER_SIDE
 
     value = positive_int(text)
     if value > MAX_RENDER_SIDE:
@@ -56,7 +56,7 @@ def positive_float(text: str) -> float:
 
 def placement_point(text: str) -> tuple[float, float]:
     """--at X,Y: where the object stands (every command; core/scene/placement.py parse_point says what is taken)."""
-    from ..core.errors import InputError
+    from ..core.base.errors import InputError
     from ..core.scene.placement import parse_point
 
     try:
@@ -67,7 +67,7 @@ def placement_point(text: str) -> tuple[float, float]:
 
 def add_output_args(p: argparse.ArgumentParser, default: str | None = None, help: str = "output folder",
                     required: bool = True) -> None:
-    """--out and --replace: the run's folder is written whole (see core/output_folder.py). `required`
+    """--out and --replace: the run's folder is written whole (see core/base/output_folder.py). `required`
     False: the command checks it itself (its --dry-run needs none)."""
     if default is None:
         p.add_argument("--out", required=required, help=help)
@@ -88,7 +88,7 @@ def input_paths(args) -> list[str]:
 
 def output(args, resume: bool = False, reuse: bool = False):
     """The run's output folder as a context manager yielding the folder to write into."""
-    from ..core.output_folder import output_folder
+    from ..core.base.output_folder import output_folder
 
     args.resumable = resume
     return output_folder(args.out, replace=args.replace, resume=resume, inputs=input_paths(args), reuse=reuse)
@@ -102,15 +102,15 @@ def load_asset(path: str, object_name: str | None = None):
 
 
 def progress(args):
-    from ..core.progress import TerminalProgress
+    from ..core.base.progress import TerminalProgress
 
     return None if getattr(args, "quiet", False) else TerminalProgress()
 
 
 def environment(args):
     """(environment map, label) from --envmap, --studiolight or --ambient."""
-    from ..core.photo import studiolight_path
-    from ..core.pipeline import constant_environment, load_environment
+    from ..core.render.photo import studiolight_path
+    from ..core.render.environment import constant_environment, load_environment
 
     if getattr(args, "envmap", None):
         return load_environment(args.envmap), f"environment map {args.envmap}"
@@ -155,7 +155,7 @@ def model_config(args):
 
 def add_preset_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", choices=PRESETS, default="balanced",
-                   help="draft / balanced / final (the paper's values); core/presets.py says what each changes")
+                   help="draft / balanced / final (the paper's values); core/pipeline/presets.py says what each changes")
 
 
 def add_elevation_arg(p: argparse.ArgumentParser, default: float | None = None) -> None:
@@ -174,7 +174,7 @@ def add_orbit_camera_args(p: argparse.ArgumentParser, size: int, spp: int) -> No
 
 
 def add_photo_camera_args(p: argparse.ArgumentParser) -> None:
-    """The photo's camera (core/photo_camera.py): estimated from fSpy, EXIF or the photo's lines unless
+    """The photo's camera (core/stages/camera.py): estimated from fSpy, EXIF or the photo's lines unless
     given; each value given wins over the estimate (`scenefit camera` shows what is found)."""
     p.add_argument("--fspy", help="an fSpy project of the photo: its solved camera is used")
     p.add_argument("--fov", type=positive_float, help="the photo's horizontal field of view, degrees (default: estimated)")
@@ -234,7 +234,7 @@ def print_config(config: dict) -> int:
 
 def require(args, *names: str) -> None:
     """Options a command needs unless it is a --dry-run: one sentence naming the missing ones."""
-    from ..core.errors import InputError
+    from ..core.base.errors import InputError
 
     missing = [n for n in names if not getattr(args, n.lstrip("-").replace("-", "_"), None)]
     if missing:
@@ -260,7 +260,7 @@ def write_prompt_from_args(args, object_prompt: str, scene_prompt: str, mode_typ
     """A PromptResult from the prompt-service options (a template one when offline)."""
     from pathlib import Path
 
-    from ..core.prompting import PromptRequest, resolve_service, write_prompt
+    from ..core.guidance.prompting import PromptRequest, resolve_service, write_prompt
 
     request = PromptRequest(object_prompt=object_prompt or "", scene_prompt=scene_prompt or "", mode_type=mode_type,
                             photo=photo or "", follow_up=follow_up or "")

@@ -15,7 +15,7 @@ def run(args) -> int:
     if args.report:
         from pathlib import Path
 
-        from ..core.atomic import write_json_atomic
+        from ..core.base.atomic import write_json_atomic
 
         write_json_atomic(Path(args.report), report)
     # The prompt alone on stdout (for scripts); how it was made on stderr.

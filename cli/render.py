@@ -12,10 +12,10 @@ def run(args) -> int:
 
     import torch
 
-    from ..core.convert import asset_stack
-    from ..core.limits import check_render_size
-    from ..core.mesh import normalize_to_unit_sphere
-    from ..core.surface_layout import texture_view
+    from ..core.stages.convert import asset_stack
+    from ..core.base.limits import check_render_size
+    from ..core.data.mesh import normalize_to_unit_sphere
+    from ..core.texture.surface_layout import texture_view
     from ..core.texture.bake import load_neural_texture
 
     # Sizes and inputs are refused before the output folder is made or anything is rendered.
@@ -35,9 +35,11 @@ def run(args) -> int:
 
 
 def _render(args, out: Path, mesh, normalized, maps, stack, label: str) -> int:
-    from ..core.camera import orbit_cameras
-    from ..core.imageio import write_image
-    from ..core.pipeline import environment_info, render_views, tonemap_srgb, write_report
+    from ..core.render.orbit_camera import orbit_cameras
+    from ..core.data.imageio import write_image
+    from ..core.base.report import write_report
+    from ..core.render.backend import environment_info
+    from ..core.texture.views import render_views, tonemap_srgb
 
     env, env_label = environment(args)
     cameras = orbit_cameras(args.views, args.elevation, fov_multiplier=1.1, size=args.size)

@@ -12,7 +12,7 @@ from .options import (add_asset_args, add_model_args, add_output_args, add_photo
 def run_config(args):
     """(RunConfig, prompt record or None): the prompt is --prompt, else written from --object-prompt
     and --scene-prompt (and the photo, for a vision model)."""
-    from ..core.run import RunConfig
+    from ..core.pipeline.run import RunConfig
 
     prompt, _, written = scene_conditional_prompt(args, "scene")
     camera = {k: v for k, v in (("fov_deg", args.fov), ("pitch_deg", args.pitch), ("roll_deg", args.roll))
@@ -24,8 +24,8 @@ def run_config(args):
 
 
 def game_bake(args):
-    """(bake function or None, why not) for the last stage (core/bake_process.py)."""
-    from ..core.bake_process import asset_file_bake
+    """(bake function or None, why not) for the last stage (core/stages/bake/process.py)."""
+    from ..core.stages.bake.process import asset_file_bake
 
     if args.no_bake:
         return None, "--no-bake was given"
@@ -34,11 +34,11 @@ def game_bake(args):
 
 def read_asset(args) -> tuple:
     """(mesh, maps, key, how it was read): the run folder's copy of an earlier run's read of the same
-    files (core/asset_read_cache.py), else the asset itself (a file through Blender)."""
+    files (core/data/asset_read_cache.py), else the asset itself (a file through Blender)."""
     import time
 
-    from ..core.asset_read_cache import load_read, read_key
-    from ..core.output_folder import is_run_folder
+    from ..core.data.asset_read_cache import load_read, read_key
+    from ..core.base.output_folder import is_run_folder
 
     start = time.perf_counter()
     key = read_key(args.asset, args.object)
@@ -53,9 +53,9 @@ def read_asset(args) -> tuple:
 
 
 def run(args) -> int:
-    from ..core.asset_read_cache import save_read
-    from ..core.pipeline import write_report
-    from ..core.run import run_pipeline
+    from ..core.data.asset_read_cache import save_read
+    from ..core.base.report import write_report
+    from ..core.pipeline.run import run_pipeline
 
     config, written = run_config(args)
     mesh, maps, key, how = read_asset(args)
@@ -77,7 +77,7 @@ def run(args) -> int:
 
 
 def add_parser(sub) -> None:
-    from ..core.compose import SHADOW_TYPES
+    from ..core.stages.compose import SHADOW_TYPES
     from ..core.scene.placement import DEFAULT_OBJECT_SIZE
 
     p = sub.add_parser("run", help="convert, light, adapt, compose and bake in one go (resumable)")

@@ -8,8 +8,8 @@ import numpy as np
 
 from ..blender_io.material import image_pixels_linear
 from ..blender_io.mesh import mesh_from_object
-from ..core.asset_io import save_asset_folder
-from ..core.maps import PBRMaps
+from ..core.data.asset_io import save_asset_folder
+from ..core.data.maps import PBRMaps
 
 EXAMPLE_SIZE = 512
 

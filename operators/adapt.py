@@ -7,7 +7,7 @@ import bpy
 from bpy.props import IntProperty
 
 from ..blender_io import mesh_from_object
-from ..core.errors import InputError
+from ..core.base.errors import InputError
 from . import work
 from .common import OnMesh, model_settings, photo_path, photo_view, run_folder
 from .jobs import JobOperator
@@ -40,7 +40,7 @@ def gather_adapt(op, context, texture: str) -> dict:
 def adapt_seconds_here(context, iterations: int | None = None) -> float | None:
     """The projected seconds of an adaptation at the panel's preset when it would run in this Blender on a
     CPU with the diffusion models present (panels/quality.py's measurement); None otherwise."""
-    from ..core.errors import SceneFitError
+    from ..core.base.errors import SceneFitError
     from ..core.guidance.models import locate_models
     from ..panels.quality import adapt_projection
 

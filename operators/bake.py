@@ -13,10 +13,10 @@ import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 
 from ..blender_io.gltf_export import FORMATS, bake_copies_to_gltf, normal_mapped
-from ..core.errors import InputError
-from ..core.gltf_ktx2 import check_ktx2_output
-from ..core.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TEXTURE_FORMATS, GltfOutput
-from ..core.pipeline import write_report
+from ..core.base.errors import InputError
+from ..core.stages.bake.gltf_ktx2 import check_ktx2_output
+from ..core.stages.bake.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TEXTURE_FORMATS, GltfOutput
+from ..core.base.report import write_report
 from . import work
 from .common import OnMesh, asset_layout, run_folder
 from .jobs import JobOperator
@@ -125,7 +125,7 @@ def new_uv_map(context, layout, texture) -> tuple[frozenset, object, dict]:
     `scenefit bake` does; nothing otherwise. Made on copies, so the artist's meshes keep their UVs."""
     from ..blender_io.material import material_wrap
     from ..blender_io.uv_unwrap import unwrapped_copies
-    from ..core.game_bake import materials_to_remap
+    from ..core.stages.bake.game_bake import materials_to_remap
     from ..core.texture.bake import load_neural_texture
 
     loaded = load_neural_texture(texture)

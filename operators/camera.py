@@ -8,7 +8,7 @@ from pathlib import Path
 import bpy
 
 from ..blender_io.compose import TAG, ensure_photo_camera, load_photo_image, object_base
-from ..core.errors import InputError, SceneFitError
+from ..core.base.errors import InputError, SceneFitError
 from ..core.scene.asset_pose import camera_for_placement
 from .common import artist_camera, keep_image, photo_path, relative_if_saved, run_folder
 from .work import written_whole
@@ -25,7 +25,7 @@ class SCENEFIT_OT_match_camera(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        from ..core.photo_camera import estimate_photo_camera
+        from ..core.stages.camera import estimate_photo_camera
 
         settings = context.scene.scenefit
         try:
@@ -75,8 +75,8 @@ class SCENEFIT_OT_match_camera(bpy.types.Operator):
 
 
 def _write_overlay(estimate, folder: Path) -> str:
-    from ..core.camera_overlay import camera_overlay
-    from ..core.imageio import write_image
+    from ..core.stages.camera_overlay import camera_overlay
+    from ..core.data.imageio import write_image
 
     (folder / "camera.json").write_text(estimate.to_json(indent=2))
     return str(write_image(folder / "lines.png", camera_overlay(estimate)))

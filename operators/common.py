@@ -12,8 +12,8 @@ from pathlib import Path
 import bpy
 
 from ..blender_io import maps_from_material
-from ..core.errors import InputError
-from ..core.materials import AssetMaterials
+from ..core.base.errors import InputError
+from ..core.data.materials import AssetMaterials
 
 ADDON_PACKAGE = __package__.rpartition(".")[0]
 TAG = "scenefit"   # what every datablock SceneFit makes carries (operators/results.py)
@@ -222,7 +222,7 @@ def artist_camera(context, photo: Path):
     """(camera object, why) when the scene's active camera is the artist's and shows the photo (matched
     with the fSpy importer or by eye): SceneFit then composes through it. (None, "") otherwise."""
     from ..blender_io.scene_camera import matched_scene_camera
-    from ..core.imageio import upright_size
+    from ..core.data.imageio import upright_size
 
     size = upright_size(photo)
     return matched_scene_camera(context.scene, photo, size) if size else (None, "")
@@ -242,7 +242,7 @@ def photo_view(context, photo: Path, obj=None) -> dict:
     camera, why = artist_camera(context, photo)
     if camera is not None:
         from ..blender_io.scene_camera import horizontal_fov_deg, scene_view
-        from ..core.imageio import upright_size
+        from ..core.data.imageio import upright_size
 
         size = upright_size(photo)
         if obj is not None:
@@ -270,8 +270,8 @@ def photo_view(context, photo: Path, obj=None) -> dict:
 def composite_camera(context, photo: Path, view: dict):
     """The PhotoCamera the Cycles set-up uses when no job hands one back: the view's, else the camera the
     World's light map was estimated with (its report.json), else the estimate from the photo."""
-    from ..core.compose import light_camera
-    from ..core.photo_camera import photo_camera_estimate
+    from ..core.stages.compose import light_camera
+    from ..core.stages.camera import photo_camera_estimate
     from ..core.scene.camera import PhotoCamera
 
     if view["camera"] is not None:
@@ -309,7 +309,7 @@ def model_cache(context=None) -> str | None:
 def model_settings(context=None):
     """(ModelConfig, DepthConfig) from the preferences: hub ids or folders, cache, offline, device."""
     from ..core.guidance import ModelConfig
-    from ..core.lighting.depth import DepthConfig
+    from ..core.stages.light.depth import DepthConfig
 
     prefs = preferences(context)
     cache, local_only = model_cache(context), offline(context)
@@ -354,7 +354,7 @@ def run_folder(context, stage: str, name: str = "") -> Path:
 
     Only its path: the run writes beside it and swaps it in whole (core.output_folder), so a
     cancelled or failed run leaves no folder behind."""
-    from ..core.output_folder import check_output_folder, staging_path
+    from ..core.base.output_folder import check_output_folder, staging_path
 
     root = output_root(context).resolve()
     for forbidden in _forbidden_roots():

@@ -7,7 +7,7 @@ import bpy
 from bpy.props import BoolProperty, IntProperty
 
 from ..blender_io.compose import setup_composite
-from ..core.errors import SceneFitError
+from ..core.base.errors import SceneFitError
 from .common import OnMesh, composite_camera, photo_path, photo_view, run_folder
 from .results import apply_composite_image
 from .work import written_whole

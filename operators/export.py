@@ -9,7 +9,7 @@ import bpy
 
 from ..blender_io import mesh_from_object
 from ..blender_io.compose import CAMERA_NAME
-from ..core.errors import SceneFitError
+from ..core.base.errors import SceneFitError
 from .common import OnMesh, artist_camera, check_dependencies, gather_asset, photo_path, run_folder
 from .work import written_whole
 
@@ -19,7 +19,7 @@ def photo_look_at(context):
     photo; None when neither is set up."""
     from mathutils import Vector
 
-    from ..core.export import LookAt
+    from ..core.render.export import LookAt
 
     cam = bpy.data.objects.get(CAMERA_NAME)
     if cam is None or cam.type != "CAMERA" or "scenefit" not in cam:
@@ -57,9 +57,9 @@ class SCENEFIT_OT_export_mitsuba(OnMesh, bpy.types.Operator):
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        from ..core.camera import Camera
-        from ..core.export import export_mitsuba_scene  # Mitsuba starts only when asked for
-        from ..core.pipeline import load_environment
+        from ..core.render.orbit_camera import Camera
+        from ..core.render.export import export_mitsuba_scene  # Mitsuba starts only when asked for
+        from ..core.render.environment import load_environment
 
         settings = context.scene.scenefit
         try:

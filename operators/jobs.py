@@ -16,8 +16,8 @@ from bpy.app.handlers import persistent
 from bpy.props import BoolProperty, FloatProperty, PointerProperty, StringProperty
 
 from ..workers import background
-from ..core.errors import SceneFitError
-from ..core.progress import TerminalProgress
+from ..core.base.errors import SceneFitError
+from ..core.base.progress import TerminalProgress
 from .common import check_dependencies
 
 TIMER_SECONDS = 0.25

@@ -12,7 +12,7 @@ from bpy.props import FloatProperty
 from ..blender_io.compose import CAMERA_NAME, ensure_photo_camera, load_photo_image
 from ..blender_io.placement import CANCEL, CLICK, classify_event, frame_rect, placement_from_click, \
     region_from_placement
-from ..core.errors import InputError, SceneFitError
+from ..core.base.errors import InputError, SceneFitError
 from .common import artist_camera, composite_camera, photo_path, photo_view
 
 _draw_handle = None

@@ -12,7 +12,7 @@ import threading
 
 import bpy
 
-from ..core.errors import SceneFitError
+from ..core.base.errors import SceneFitError
 from .common import needs_setting, preferences
 
 # Adapt's edit mode wants an instruction; the other modes a description.
@@ -22,7 +22,7 @@ PROMPT_MODE = {"edit": "instruct"}
 def gather_prompt_job(context) -> dict:
     """Everything the worker needs, read from bpy on the main thread: the request, the service
     (None when no endpoint is set) and the offline switches."""
-    from ..core.prompting import PromptRequest, resolve_service
+    from ..core.guidance.prompting import PromptRequest, resolve_service
 
     settings = context.scene.scenefit
     prefs = preferences(context)
@@ -40,7 +40,7 @@ def gather_prompt_job(context) -> dict:
 
 def run_prompt_job(job: dict):
     """The one place the operator calls core (worker thread: no bpy here)."""
-    from ..core.prompting import write_prompt
+    from ..core.guidance.prompting import write_prompt
 
     return write_prompt(job["request"], job["service"], offline=job["offline"], online_access=job["online_access"])
 

@@ -9,7 +9,7 @@ import bpy
 from bpy.props import (CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
                        PointerProperty, StringProperty)
 
-from ..core.presets import PRESET_DESCRIPTIONS, PRESET_NAMES
+from ..core.pipeline.presets import PRESET_DESCRIPTIONS, PRESET_NAMES
 from ..core.scene.camera import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG
 from ..core.scene.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
 

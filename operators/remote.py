@@ -14,7 +14,7 @@ from urllib.parse import urlparse
 
 import bpy
 
-from ..core.errors import InputError
+from ..core.base.errors import InputError
 from .common import model_settings, preferences, run_folder, scene_asset
 from .results import apply_result_material
 

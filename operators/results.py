@@ -13,7 +13,7 @@ from bpy.props import EnumProperty
 
 from ..blender_io import write_result_material
 from ..blender_io.world import assign_world, world_from_hdr
-from ..core.errors import InputError
+from ..core.base.errors import InputError
 from .common import keep_image, needs_setting, relative_if_saved
 
 TAG = "scenefit"

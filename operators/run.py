@@ -6,7 +6,7 @@ import bpy
 from bpy.props import EnumProperty
 
 from ..blender_io.compose import setup_composite
-from ..core.errors import SceneFitError
+from ..core.base.errors import SceneFitError
 from ..core.scene.camera import PhotoCamera
 from . import work
 from .adapt import adapt_seconds_here
@@ -35,7 +35,7 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         settings = context.scene.scenefit
         photo, layout = scene_layout(self, context, "Run All fits the asset into the photo; use Convert and "
                                                     "Adapt for the other modes")
-        mesh, maps = layout.read(context).fitting_view()   # several materials: their atlas (core/materials.py)
+        mesh, maps = layout.read(context).fitting_view()   # several materials: their atlas (core/data/materials.py)
         guidance, why_no_adapt = self.guidance, ""
         if not settings.prompt.strip() and guidance == "auto":
             guidance, why_no_adapt = "none", "the Style section has no prompt"

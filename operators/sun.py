@@ -1,5 +1,5 @@
 """Pick Sun: three clicks in the photo — the foot of something upright on the floor, its top, the tip of
-its shadow — give the sun's direction through the photo's camera (core/lighting/shadow_hint.py). The
+its shadow — give the sun's direction through the photo's camera (core/stages/light/shadow_hint.py). The
 Scene section's Sun becomes "As set here" with that azimuth and elevation, which the light stage then
 centres its unseen light on (as `scenefit light --sun`). With EXEC_DEFAULT the three points are the
 operator's properties (fractions of the photo, y from the top).
@@ -12,7 +12,7 @@ from dataclasses import replace
 import bpy
 from bpy.props import FloatVectorProperty
 
-from ..core.errors import InputError, SceneFitError
+from ..core.base.errors import InputError, SceneFitError
 from .common import artist_camera, composite_camera, photo_path, photo_view
 from .placement import PhotoClicks
 
@@ -25,8 +25,8 @@ ASK = {"foot": "Click the foot of something upright on the floor (a post, a pers
 def sun_from_points(context, points: dict) -> tuple[float, float]:
     """(azimuth, elevation) in degrees from the three points (fractions of the photo), through the camera
     SceneFit composes with (the artist's when it shows the photo, else the panel's or the estimate)."""
-    from ..core.imageio import upright_size
-    from ..core.lighting.shadow_hint import sun_from_shadow
+    from ..core.data.imageio import upright_size
+    from ..core.stages.light.shadow_hint import sun_from_shadow
 
     photo = photo_path(context)
     view = photo_view(context, photo)

@@ -9,14 +9,14 @@ from __future__ import annotations
 import threading
 from pathlib import Path
 
-from ..core.progress import ProgressCallback
+from ..core.base.progress import ProgressCallback
 
 
 def written_whole(out: str, write) -> dict:
     """Run `write(folder)` into the hidden sibling of `out` and swap it in whole when it returns
     (core.output_folder: a cancelled or failed run leaves nothing); the paths it returns are moved
     along to `out`."""
-    from ..core.output_folder import output_folder
+    from ..core.base.output_folder import output_folder
 
     with output_folder(out) as staging:
         result = write(staging)
@@ -36,10 +36,11 @@ def _moved(value, old: str, new: str):
 
 def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
     """Fit the neural texture to the asset's maps; bake base colour, roughness, metallic into data['out']."""
-    from ..core.pipeline import convert_and_bake, write_report
-    from ..core.presets import stage_config
+    from ..core.base.report import write_report
+    from ..core.stages.convert import convert_and_bake
+    from ..core.pipeline.presets import stage_config
 
-    # An iteration count asks for the fit (core/presets.py); else the asset's maps are the exact start.
+    # An iteration count asks for the fit (core/pipeline/presets.py); else the asset's maps are the exact start.
     overrides = {"iterations": int(data["iterations"])} if data.get("iterations") else {}
 
     def write(out: Path) -> dict:
@@ -63,15 +64,15 @@ def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> 
 
 def view_camera(photo: str, view: dict, width: int, height: int):
     """(PhotoCamera, its record) for the photo as operators/common.photo_view decided: the artist's
-    camera or the panel's values, else the estimate from the photo (core/photo_camera.py)."""
-    from ..core.photo_camera import photo_camera_estimate
+    camera or the panel's values, else the estimate from the photo (core/stages/camera.py)."""
+    from ..core.stages.camera import photo_camera_estimate
 
     estimate = photo_camera_estimate(photo, None, view["camera"], *camera_source(view))
     return estimate.photo_camera(width=width, height=height), estimate.to_dict()
 
 
 def camera_source(view: dict) -> tuple[str, str]:
-    """(source, why) of a view's camera values for the camera's record (core/photo_camera.py)."""
+    """(source, why) of a view's camera values for the camera's record (core/stages/camera.py)."""
     if view["camera_source"] == "blender":
         return "blender", "; ".join(view["notes"])
     return "user", "given by the user"   # the panel's values, as the command line's --fov/--pitch/--roll
@@ -86,9 +87,9 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
     """Photo + placement -> light.exr (Blender's equirectangular convention) in data['out']."""
     from dataclasses import replace
 
-    from ..core.lighting import load_photo
-    from ..core.lighting.stage import LightInputs, critic_choice, run_light, write_light
-    from ..core.presets import stage_config
+    from ..core.stages.light import load_photo
+    from ..core.stages.light.stage import LightInputs, critic_choice, run_light, write_light
+    from ..core.pipeline.presets import stage_config
     from ..core.scene.placement import Placement
 
     photo, info = load_photo(data["photo"])
@@ -127,11 +128,12 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
 
     from dataclasses import replace
 
-    from ..core.adapt import StageSpec, adapt_and_bake
-    from ..core.compose import light_camera
-    from ..core.imageio import linear_to_srgb, read_color_image
-    from ..core.pipeline import load_environment, write_report
-    from ..core.presets import stage_config
+    from ..core.stages.adapt import StageSpec, adapt_and_bake
+    from ..core.stages.compose import light_camera
+    from ..core.data.imageio import linear_to_srgb, read_color_image
+    from ..core.base.report import write_report
+    from ..core.render.environment import load_environment
+    from ..core.pipeline.presets import stage_config
     from ..core.scene.placement import Placement
     from ..core.texture.bake import load_neural_texture
 
@@ -174,7 +176,7 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
 
 def run_config(data: dict):
     """Run All's RunConfig from the operator's data: the panel's settings and the photo's view."""
-    from ..core.run import RunConfig
+    from ..core.pipeline.run import RunConfig
 
     view = data["view"]
     source, why = camera_source(view)
@@ -192,8 +194,8 @@ def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:
     data['materials']: operators.common.AssetLayout.bake_data()."""
     import numpy as np
 
-    from ..core.game_bake import bake_game_maps as bake, default_texture_size
-    from ..core.imageio import write_image
+    from ..core.stages.bake.game_bake import bake_game_maps as bake, default_texture_size
+    from ..core.data.imageio import write_image
     from ..core.texture.bake import load_neural_texture
 
     info = data["materials"]
@@ -216,8 +218,8 @@ def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:
 def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
     """The command line's pipeline (core.run.run_pipeline: convert -> light -> adapt -> compose; the
     game bake is Bake Asset's, on the main thread) into data['out']; returns what Blender applies."""
-    from ..core.pipeline import write_report
-    from ..core.run import run_pipeline
+    from ..core.base.report import write_report
+    from ..core.pipeline.run import run_pipeline
 
     def write(folder: Path) -> dict:
         config = run_config(data)
@@ -251,8 +253,8 @@ def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Eve
     from dataclasses import replace
 
     from ..blender_io.uv_unwrap import NEW_UV_MAP
-    from ..core.game_bake import bake_game_maps as bake, bake_shapes
-    from ..core.progress import emit
+    from ..core.stages.bake.game_bake import bake_game_maps as bake, bake_shapes
+    from ..core.base.progress import emit
     from ..core.texture.bake import load_neural_texture
 
     texture = load_neural_texture(data["texture"])

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import bpy
 
-from ..core.errors import SceneFitError
+from ..core.base.errors import SceneFitError
 from ..operators.common import artist_camera, dependency_sentence, missing_modules
 from .quality import BENCH_MACHINE, EXPECTED_SECONDS, expected_line
 

@@ -19,7 +19,7 @@ EXPECTED_SECONDS: dict[str, dict[str, float | None]] = {
 # Adapt with random-weight models of Stable Diffusion 2's size on the same CPU (bf16, each view's constant
 # work cached): seconds per iteration once the step's views have been met. None: not measured.
 ADAPT_SECONDS_PER_ITERATION: dict[str, float | None] = {"draft": 40.0, "balanced": 181.5, "final": 403.5}
-ADAPT_ITERATIONS = {"draft": 300, "balanced": 1500, "final": 4000}   # the presets' (core/preset_tables.py)
+ADAPT_ITERATIONS = {"draft": 300, "balanced": 1500, "final": 4000}   # the presets' (core/pipeline/preset_tables.py)
 # Local work projected longer than this asks before it starts (and offers the worker environment).
 LONG_LOCAL_SECONDS = 3600.0
 

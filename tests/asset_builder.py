@@ -184,7 +184,7 @@ def build_assets(folder: str | Path) -> dict[str, str]:
 def write_obj(folder, mesh, texture_rgb) -> str:
     """An OBJ + MTL + PNG as a modelling tool writes them (nothing here is SceneFit's own format)."""
     folder.mkdir(parents=True, exist_ok=True)
-    from scenefit.core.imageio import write_image
+    from scenefit.core.data.imageio import write_image
 
     write_image(folder / "albedo.png", texture_rgb)
     (folder / "ball.mtl").write_text("newmtl Ball\nKd 1 1 1\nNs 250\nmap_Kd albedo.png\n")

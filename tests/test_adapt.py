@@ -7,15 +7,16 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.adapt import (GENERATE_STAGES, SCENE_STAGES, AdaptConfig, AdaptInputs, AdaptSystem, StageSpec,
+from scenefit.core.stages.adapt import (GENERATE_STAGES, SCENE_STAGES, AdaptConfig, AdaptInputs, AdaptSystem, StageSpec,
                                  adapt_texture, edit_prompt, sample_camera, sample_view,
                                  spherical_gaussian_environment, stage_at, view_suffix)
-from scenefit.core.errors import Cancelled, InputError, ModelMissingError
+from scenefit.core.base.errors import Cancelled, InputError, ModelMissingError
 from scenefit.core.guidance import CriticConfig, ModelConfig
-from scenefit.core.presets import stage_config
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.pipeline.presets import stage_config
+from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.scene.placement import Placement
-from scenefit.core.texture import NeuralTexture, rasterize_uv
+from scenefit.core.data.uv_raster import rasterize_uv
+from scenefit.core.texture import NeuralTexture
 from scenefit.devtools.tiny_models import build_tiny_pair
 
 TINY_STAGES = (StageSpec(0.5, 16, 2, (30, 990)), StageSpec(0.5, 32, 2, (500, 990)))
@@ -256,9 +257,9 @@ def test_config_validation_and_helpers():
 
 def test_cli_adapt_and_demo_guidance(tiny_models, asset, tmp_path, monkeypatch, capsys):
     from scenefit.cli import main
-    from scenefit.core.asset_io import save_asset_folder
-    from scenefit.core.imageio import write_image
-    from scenefit.core.maps import PBRMaps
+    from scenefit.core.data.asset_io import save_asset_folder
+    from scenefit.core.data.imageio import write_image
+    from scenefit.core.data.maps import PBRMaps
     from scenefit.core.texture import save_neural_texture
 
     mesh, raster, texture, photo = asset
@@ -299,7 +300,7 @@ def _cost_config(tiny_models, dtype_type: str = "fp32", **overrides) -> AdaptCon
 
 
 def test_the_view_bank_is_fixed_by_the_seed_and_spans_the_papers_azimuths(tiny_models):
-    from scenefit.core.adapt.sampling import draw_view_bank
+    from scenefit.core.stages.adapt.sampling import draw_view_bank
 
     config, box = _cost_config(tiny_models, views=24, view_variants=2), (20.0, 10.0, 16.0)
     bank = draw_view_bank(config, (48, 64), box)

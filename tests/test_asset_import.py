@@ -200,7 +200,7 @@ PALETTE_FIT = ("--preset", "draft", "--iterations", "300", "--resolution", "16",
 
 def _derived_assets(assets: Path, folder: Path) -> dict[str, Path]:
     """The inputs made from the built ones by editing their glTF (no Blender needed)."""
-    from scenefit.core.gltf_meshopt import encoded_glb, read_gltf, write_glb
+    from scenefit.core.data.gltf_meshopt import encoded_glb, read_gltf, write_glb
 
     document, chunk = read_gltf(assets / "skinned.glb")   # the skinned mesh moved to the scene's root
     nodes = document["nodes"]

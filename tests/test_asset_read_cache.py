@@ -1,15 +1,15 @@
-"""A run folder keeps what Blender read from a glTF or OBJ asset (core/asset_read_cache.py): the same
+"""A run folder keeps what Blender read from a glTF or OBJ asset (core/data/asset_read_cache.py): the same
 arrays come back under the same key, and any change to the files, the object or the reader's code is
 another key."""
 from __future__ import annotations
 
 import numpy as np
 
-from scenefit.core.asset_read_cache import CACHE_FILE, load_read, read_key, save_read
-from scenefit.core.maps import PBRMaps
-from scenefit.core.mesh import Mesh
-from scenefit.core.primitives import uv_sphere
-from scenefit.core.run import asset_digest
+from scenefit.core.data.asset_read_cache import CACHE_FILE, load_read, read_key, save_read
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.mesh import Mesh
+from scenefit.core.data.primitives import uv_sphere
+from scenefit.core.pipeline.run import asset_digest
 
 
 def two_material_asset() -> tuple[Mesh, PBRMaps]:
@@ -55,25 +55,26 @@ def test_the_key_changes_with_every_file_the_asset_reads_and_the_object(tmp_path
 
 def test_the_key_follows_every_module_the_reader_reaches(tmp_path):
     """The reader's code in the key is the import graph from Blender's reader, not a hand-kept list
-    (which had missed core/texture/uv_raster.py and core/asset_io.py): on a small tree, modules reached
+    (which had missed the UV rasteriser and the asset path checks): on a small tree, modules reached
     at module level, in a function, relatively and through a package's __init__ are in; the rest out."""
-    from scenefit.core.asset_read_cache import READER
-    from scenefit.core.source_graph import ROOT, reachable_sources
+    from scenefit.core.data.asset_read_cache import READER
+    from scenefit.core.base.source_graph import ROOT, reachable_sources
 
     files = {
         "blender_io/__init__.py": "",
-        "blender_io/asset_file.py": "from ..core import mesh\n\ndef read():\n    from ..core.texture.uv_raster import r\n",
-        "core/__init__.py": "", "core/mesh.py": "import numpy\n", "core/texture/__init__.py": "",
-        "core/texture/uv_raster.py": "from ..errors import E\n", "core/errors.py": "",
-        "core/compose.py": "from .mesh import Mesh\n", "cli/__init__.py": "from ..blender_io import asset_file\n",
+        "blender_io/asset_file.py": "from ..core.data import mesh\n\ndef read():\n    from ..core.data.uv_raster import r\n",
+        "core/__init__.py": "", "core/data/__init__.py": "", "core/data/mesh.py": "import numpy\n",
+        "core/data/uv_raster.py": "from ..base.errors import E\n", "core/base/__init__.py": "", "core/base/errors.py": "",
+        "core/stages/__init__.py": "", "core/stages/compose.py": "from ..data.mesh import Mesh\n",
+        "cli/__init__.py": "from ..blender_io import asset_file\n",
     }
     for name, text in files.items():
         (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / name).write_text(text)
     got = {str(p.relative_to(tmp_path)) for p in reachable_sources("blender_io.asset_file", root=tmp_path)}
-    assert got == {"blender_io/__init__.py", "blender_io/asset_file.py", "core/__init__.py", "core/mesh.py",
-                   "core/texture/__init__.py", "core/texture/uv_raster.py", "core/errors.py"}
+    assert got == {"blender_io/__init__.py", "blender_io/asset_file.py", "core/__init__.py", "core/data/__init__.py",
+                   "core/data/mesh.py", "core/data/uv_raster.py", "core/base/__init__.py", "core/base/errors.py"}
     # and on the project itself
     real = {str(p.relative_to(ROOT)) for p in reachable_sources(READER)}
-    assert {"blender_io/asset_file.py", "blender_io/fbx_ascii.py", "core/gltf_meshopt.py", "core/mesh.py",
-            "core/texture/uv_raster.py"} <= real and "core/compose.py" not in real and "cli/run.py" not in real
+    assert {"blender_io/asset_file.py", "blender_io/fbx_ascii.py", "core/data/gltf_meshopt.py", "core/data/mesh.py",
+            "core/data/uv_raster.py"} <= real and "core/stages/compose.py" not in real and "cli/run.py" not in real

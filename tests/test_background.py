@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from scenefit.workers import background as jobs
-from scenefit.core.errors import InputError
-from scenefit.core.progress import emit
+from scenefit.core.base.errors import InputError
+from scenefit.core.base.progress import emit
 
 
 def _poll_until(job, done, timeout=10.0):

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from scenefit.cli import main
-from scenefit.core.asset_io import save_asset_folder
+from scenefit.core.data.asset_io import save_asset_folder
 from scenefit.workers.batch import InProcessDispatcher, JobWorker, run_batch
-from scenefit.core.errors import InputError
-from scenefit.core.imageio import read_image, write_image
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.imageio import read_image, write_image
 from scenefit.workers.jobs import load_jobs
-from scenefit.core.maps import PBRMaps
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.primitives import uv_sphere
 
 JOBS = """
 [batch]
@@ -225,7 +225,7 @@ def test_remote_job_streams_progress_cancels_and_returns_its_folder(in_process, 
     import threading
     from dataclasses import replace
 
-    from scenefit.core.errors import Cancelled
+    from scenefit.core.base.errors import Cancelled
     from scenefit.workers.remote import run_remote
 
     jobs_path, reference, _ = in_process
@@ -254,7 +254,7 @@ def _sum_over_ranks(value_per_rank: float) -> tuple[int, int, float, int]:
     run_on_ranks sets (torchrun's), and sum a gradient over the ranks as a step does."""
     import torch
 
-    from scenefit.core.adapt.distributed import join_process_group, sum_gradients
+    from scenefit.core.stages.adapt.distributed import join_process_group, sum_gradients
 
     rank, world, why = join_process_group()
     weight = torch.nn.Parameter(torch.zeros(1))
@@ -274,7 +274,7 @@ def test_ray_launches_a_torch_distributed_group_on_one_node(local_ray):
 
 def test_work_remotely_takes_the_add_ons_plain_data(tmp_path):
     """The add-on's background job hands arrays and a worker address; the folder comes back."""
-    from scenefit.core.asset_io import load_asset_folder
+    from scenefit.core.data.asset_io import load_asset_folder
     from scenefit.workers.remote import work_remotely
 
     make_inputs(tmp_path / "in")

@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from scenefit.core.asset_io import load_asset_folder
+from scenefit.core.data.asset_io import load_asset_folder
 
 pytestmark = pytest.mark.blender
 
@@ -13,7 +13,7 @@ import json, sys
 import numpy as np
 import bpy
 from scenefit.blender_io import maps_from_material, mesh_from_object, write_result_material
-from scenefit.core.errors import InputError
+from scenefit.core.base.errors import InputError
 
 bpy.ops.wm.read_factory_settings(use_empty=True)
 out = {}
@@ -91,7 +91,7 @@ print("JSON" + json.dumps(out))
 
 @pytest.fixture(scope="module")
 def extracted(run_py, tmp_path_factory):
-    from scenefit.core.imageio import write_image
+    from scenefit.core.data.imageio import write_image
 
     png = tmp_path_factory.mktemp("result") / "base_color.png"
     write_image(png, np.full((4, 4, 3), 0.5, np.float32))
@@ -172,7 +172,7 @@ def test_operators_take_the_material_the_faces_use_and_refuse_several_in_one_sen
     proc = run_py("""
         import json
         import bpy
-        from scenefit.core.errors import InputError
+        from scenefit.core.base.errors import InputError
         from scenefit.operators.common import one_material_object
 
         bpy.ops.wm.read_factory_settings(use_empty=True)

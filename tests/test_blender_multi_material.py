@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from conftest import PythonSession, extension_and_models, fill_in
 
-from scenefit.core.imageio import read_image
+from scenefit.core.data.imageio import read_image
 
 pytestmark = pytest.mark.blender
 
@@ -36,7 +36,7 @@ tmp, zip_path = Path(TMP), ZIP
 MODULE = "bl_ext.user_default.scenefit"
 bpy.ops.extensions.package_install_files(repo="user_default", filepath=zip_path, enable_on_install=True)
 bpy.context.preferences.addons[MODULE].preferences.offline = True
-imageio = import_module(MODULE + ".core.imageio")
+imageio = import_module(MODULE + ".core.data.imageio")
 imageio.write_image(tmp / "photo.png", np.random.default_rng(1).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32))
 COLOURS = COLOURS_HERE
 
@@ -185,11 +185,11 @@ ball.select_set(True)
 bpy.context.view_layer.objects.active = ball
 import torch
 common = import_module(MODULE + ".operators.common")
-convert = import_module(MODULE + ".core.convert")
-layouts = import_module(MODULE + ".core.surface_layout")
+convert = import_module(MODULE + ".core.stages.convert")
+layouts = import_module(MODULE + ".core.texture.surface_layout")
 saving = import_module(MODULE + ".core.texture.bake")
 asset = common.asset_layout(bpy.context).read(bpy.context)
-texture = convert.convert_materials(asset, convert.ConvertConfig(texture_preset="draft", resolution=32)).texture
+texture = convert.convert_materials(asset, convert.ConvertConfig(texture=import_module(MODULE + ".core.pipeline.presets").stage_config("texture", "draft"), resolution=32)).texture
 view, layout, why = layouts.adapting_view(texture, asset.fitting_view()[0])
 out["layout"] = why
 texture.layout = layout

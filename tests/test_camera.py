@@ -8,9 +8,9 @@ import struct
 import numpy as np
 import pytest
 
-from scenefit.core.errors import InputError
-from scenefit.core.imageio import write_image
-from scenefit.core.photo_camera import estimate_photo_camera, sensor_width_mm
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.imageio import write_image
+from scenefit.core.stages.camera import estimate_photo_camera, sensor_width_mm
 from scenefit.core.scene.camera import PhotoCamera
 from scenefit.core.scene.frame import look_frame
 
@@ -237,7 +237,7 @@ def test_theta_votes_equal_every_segment_scored_in_every_bin():
     """The coarse search adds each segment only to the theta bins its kernel reaches; scored directly in
     all 45 bins (max of the vertical and horizontal kernels, weighted) the table is the same, for segments
     anywhere, along the horizon (slope near 0: nearly every bin) and through the image centre."""
-    from scenefit.core import photo_camera as pc
+    import scenefit.core.stages.camera as pc
 
     rng = np.random.default_rng(3)
     ends = rng.uniform(-1.0, 1.0, (60, 4))
@@ -270,7 +270,7 @@ def test_a_segments_residual_is_its_angle_in_the_image_even_far_off_a_wide_lens_
     """Known answers from plain 2D geometry: the angle, in the photo, between a segment and the line from
     its midpoint to the vanishing point. On the sphere that angle shrinks far off the axis of a wide
     lens, which once made every tolerance wider there and the fit prefer 120-170 deg lenses."""
-    from scenefit.core import photo_camera as pc
+    import scenefit.core.stages.camera as pc
 
     focal = pc.focal_from_fov(150.0)
     rng = np.random.default_rng(5)
@@ -310,7 +310,7 @@ def test_the_lens_posterior_at_its_extremes(monkeypatch):
     """Known answers: a lens holding all the likelihood is the median, exactly (its bin's middle, not
     half a step off); two equal neighbours (no prior) put it on their shared edge; no information gives
     the prior's median, the default 60 deg, with its one-sigma interval of log focal length."""
-    from scenefit.core import photo_camera as pc
+    import scenefit.core.stages.camera as pc
 
     focals = np.geomspace(pc.focal_from_fov(120.0), pc.focal_from_fov(20.0), 21)
     fovs = [pc.fov_from_focal(f) for f in focals]
@@ -347,7 +347,7 @@ def test_a_room_under_clutter_keeps_the_default_lens_and_says_so(tmp_path):
         cv2.line(img, a, b, (0.1, 0.1, 0.1), 2, cv2.LINE_AA, shift=4)
     write_image(tmp_path / "cluttered.png", img)
     est = estimate_photo_camera(tmp_path / "cluttered.png")
-    from scenefit.core.photo_camera import LENS_MIN_INLIER_SHARE, MIN_INLIER_SHARE
+    from scenefit.core.stages.camera import LENS_MIN_INLIER_SHARE, MIN_INLIER_SHARE
     assert MIN_INLIER_SHARE <= est.lines["inlier_share"] < LENS_MIN_INLIER_SHARE   # the case meant
     assert (est.fov_deg, est.fov_source, est.fov_confidence) == (60.0, "default", 0.0)
     assert any("explain too little of the photo" in note for note in est.notes)

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from scenefit.cli import main
-from scenefit.core.asset_io import save_asset_folder
-from scenefit.core.imageio import write_image
-from scenefit.core.maps import PBRMaps
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.data.asset_io import save_asset_folder
+from scenefit.core.data.imageio import write_image
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.primitives import uv_sphere
 
 
 @pytest.fixture
@@ -42,7 +42,7 @@ def test_a_photo_without_lines_keeps_the_default_camera_and_says_so(tmp_path, in
 
 
 def test_the_users_pitch_roll_and_fov_win_and_reach_compose(tmp_path, inputs, monkeypatch):
-    import scenefit.core.compose as compose
+    import scenefit.core.stages.compose as compose
 
     seen = {}
     real = compose.compose_to_folder

@@ -7,14 +7,14 @@ import json
 import numpy as np
 import pytest
 
-from scenefit.core.asset_io import save_asset_folder
-from scenefit.core.compose import ComposeConfig, ComposeInputs, compose
-from scenefit.core.errors import InputError
-from scenefit.core.imageio import read_image, write_image
-from scenefit.core.maps import PBRMaps
-from scenefit.core.mesh import Mesh, normalize_to_unit_sphere
-from scenefit.core.pipeline import sun_environment
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.data.asset_io import save_asset_folder
+from scenefit.core.stages.compose import ComposeConfig, ComposeInputs, compose
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.imageio import read_image, write_image
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.mesh import Mesh, normalize_to_unit_sphere
+from scenefit.core.render.environment import sun_environment
+from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.scene.asset_pose import place_asset
 from scenefit.core.scene.camera import PhotoCamera, horizon_row
 
@@ -206,7 +206,7 @@ def test_cli_compose_keeps_a_photo_larger_than_the_light_stages_copy_at_its_size
 
 
 def test_compose_presets_are_the_one_preset_table_and_unset_options_keep_them():
-    from scenefit.core.presets import stage_config
+    from scenefit.core.pipeline.presets import stage_config
 
     draft, final = stage_config("compose", "draft"), stage_config("compose", "final", size=0.5, spp=None)
     assert draft.noise_target > final.noise_target and draft.max_spp < final.max_spp
@@ -218,7 +218,7 @@ def test_compose_presets_are_the_one_preset_table_and_unset_options_keep_them():
 def test_without_pyoidn_auto_composes_raw_and_says_why_while_oidn_is_refused(monkeypatch):
     """linux-arm64 has no pyoidn wheel: the default (auto) composes the raw render and the report says
     why; asking for oidn there is one sentence."""
-    import scenefit.core.compose as compose_module
+    import scenefit.core.stages.compose as compose_module
 
     monkeypatch.setattr(compose_module, "oidn_available", lambda: (False, "pyoidn is not installed"))
     result = run(sun_environment([1.0, 0.2, 0.8]), spp=4)

@@ -6,10 +6,11 @@ import json
 
 import numpy as np
 
-from scenefit.core.compose import ComposeConfig, ComposeInputs, build_compose
-from scenefit.core.imageio import linear_to_srgb, read_image, srgb_to_linear, write_image
-from scenefit.core.pipeline import image_psnr, sun_environment
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.stages.compose import ComposeConfig, ComposeInputs, build_compose
+from scenefit.core.data.imageio import linear_to_srgb, read_image, srgb_to_linear, write_image
+from scenefit.core.render.environment import sun_environment
+from scenefit.core.texture.views import image_psnr
+from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.scene.camera import PhotoCamera
 
 CAMERA = PhotoCamera(yaw_deg=90.0, pitch_deg=-20.0, fov_deg=60.0, width=128, height=96)
@@ -44,7 +45,7 @@ def test_mitsuba_composite_matches_cycles(tmp_path, run_py):
         addon_utils.enable('cycles')
         bpy.ops.wm.read_factory_settings(use_empty=True)
         from scenefit.blender_io.cycles_crosscheck import composite_scene, render_passes
-        from scenefit.core.mesh import Mesh
+        from scenefit.core.data.mesh import Mesh
         from scenefit.core.scene.camera import PhotoCamera
         d = np.load({str(tmp_path / 'placed.npz')!r})
         mesh = Mesh.from_arrays(d['positions'], d['faces'], d['uvs'], d['normals'])

@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenefit.core.compose import (COMPOSE_MAX_SIDE, PILOT_MAX_SIDE, ComposeConfig, ComposeInputs, compose,
+from scenefit.core.stages.compose import (COMPOSE_MAX_SIDE, PILOT_MAX_SIDE, ComposeConfig, ComposeInputs, compose,
                                    pilot_view)
-from scenefit.core.errors import InputError
-from scenefit.core.imageio import write_image
-from scenefit.core.lighting import load_photo
-from scenefit.core.pipeline import sun_environment
-from scenefit.core.presets import stage_config
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.imageio import write_image
+from scenefit.core.stages.light import load_photo
+from scenefit.core.render.environment import sun_environment
+from scenefit.core.pipeline.presets import stage_config
+from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.scene.camera import PhotoCamera
 
 
@@ -28,7 +28,7 @@ def test_the_pilot_sees_the_whole_box_with_fewer_larger_pixels():
 def test_a_pilot_with_larger_pixels_chooses_the_samples_the_full_pilot_would():
     """Noise per pixel barely depends on the pixel's size: a pilot at an eighth of the resolution picks
     about the sample count a full-resolution pilot picks."""
-    import scenefit.core.compose as module
+    import scenefit.core.stages.compose as module
 
     camera = PhotoCamera(yaw_deg=90.0, pitch_deg=-20.0, fov_deg=60.0, width=320, height=240)
     env = sun_environment([0.6, 0.3, 0.8], sun_radiance=20.0, sun_radius_deg=10.0)

@@ -11,17 +11,17 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.asset_io import load_asset_folder, save_asset_folder
-from scenefit.core.convert import ConvertConfig, choose_resolution, convert_asset
-from scenefit.core.presets import stage_config
-from scenefit.core.errors import InputError
-from scenefit.core.imageio import read_image
-from scenefit.core.maps import PBRMaps
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.data.asset_io import load_asset_folder, save_asset_folder
+from scenefit.core.stages.convert import ConvertConfig, choose_resolution, convert_asset
+from scenefit.core.pipeline.presets import stage_config
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.imageio import read_image
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.texture.bake import load_neural_texture
 from scenefit.core.texture.fit_direct import encode_for_metric
-from scenefit.core.texture.uv_raster import rasterize_uv
-from scenefit.core.mesh import normalize_to_unit_sphere
+from scenefit.core.data.uv_raster import rasterize_uv
+from scenefit.core.data.mesh import normalize_to_unit_sphere
 
 from conftest import scenefit_here
 

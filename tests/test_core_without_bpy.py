@@ -10,7 +10,7 @@ def test_every_core_module_imports_without_bpy(run_py):
         "scenefit." + ".".join(p.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
         for p in (ROOT / "core").rglob("*.py")
     )
-    assert "scenefit.core.mesh" in modules and len(modules) > 5
+    assert "scenefit.core.data.mesh" in modules and len(modules) > 5
     proc = run_py(f"""
         import importlib, json, sys
 

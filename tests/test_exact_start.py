@@ -7,16 +7,17 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.convert import EXACT_PSNR_DB, ConvertConfig, convert_asset
-from scenefit.core.errors import InputError
-from scenefit.core.game_bake import bake_game_maps
-from scenefit.core.imageio import linear_to_srgb
-from scenefit.core.maps import PBRMaps
-from scenefit.core.mesh import normalize_to_unit_sphere
-from scenefit.core.primitives import uv_sphere
-from scenefit.core.surface_layout import texture_view
+from scenefit.core.pipeline.preset_tables import texture_preset
+from scenefit.core.stages.convert import EXACT_PSNR_DB, ConvertConfig, convert_asset
+from scenefit.core.base.errors import InputError
+from scenefit.core.stages.bake.game_bake import bake_game_maps
+from scenefit.core.data.imageio import linear_to_srgb
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.mesh import normalize_to_unit_sphere
+from scenefit.core.data.primitives import uv_sphere
+from scenefit.core.texture.surface_layout import texture_view
 from scenefit.core.texture.bake import bake_maps, load_neural_texture
-from scenefit.core.texture.uv_raster import rasterize_uv
+from scenefit.core.data.uv_raster import rasterize_uv
 
 
 def asset_maps(size: int = 32) -> PBRMaps:
@@ -28,7 +29,7 @@ def asset_maps(size: int = 32) -> PBRMaps:
 
 
 def exact(mesh, maps, **kw):
-    return convert_asset(mesh, maps, ConvertConfig(init_type="exact", texture_preset="draft", resolution=32, **kw))
+    return convert_asset(mesh, maps, ConvertConfig(init_type="exact", texture=texture_preset("draft"), resolution=32, **kw))
 
 
 def test_the_exact_start_is_the_asset_and_fits_nothing():
@@ -96,7 +97,7 @@ def test_roughness_below_the_renderers_floor_is_held_at_the_floor():
 def test_asking_for_fitting_settings_asks_for_the_fit():
     """Every entry point (command line, operator, remote, batch overrides) reads `iterations` or a
     method as the paper's fit, and nothing of that kind as the exact start."""
-    from scenefit.core.presets import stage_config
+    from scenefit.core.pipeline.presets import stage_config
 
     assert stage_config("convert", "draft").init_type == "exact"
     assert stage_config("convert", "draft", iterations=5).init_type == "fit"
@@ -107,7 +108,7 @@ def test_asking_for_fitting_settings_asks_for_the_fit():
 def test_a_non_square_image_bakes_at_its_own_shape():
     """A 128x32 strip bakes as a 128x32 image (it baked 128², four times the texels, stretched), texel
     for texel the asset's own when nothing is adapted; --max-texture halves both sides together."""
-    from scenefit.core.game_bake import own_texture_shape
+    from scenefit.core.stages.bake.game_bake import own_texture_shape
 
     rng = np.random.default_rng(5)
     strip = PBRMaps(rng.uniform(0.05, 0.95, (32, 128, 3)).astype(np.float32), 0.5, 0.0)

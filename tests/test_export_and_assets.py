@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.asset_io import load_asset_folder, save_asset_folder
-from scenefit.core.camera import Camera
-from scenefit.core.errors import InputError
-from scenefit.core.export import export_mitsuba_scene
-from scenefit.core.imageio import linear_to_srgb, read_image, srgb_to_linear
-from scenefit.core.maps import PBRMaps
-from scenefit.core.photo import develop_photo, perspective_view, studiolight_path
-from scenefit.core.primitives import uv_sphere
-from scenefit.core.render import AssetRenderer, SceneOptions
+from scenefit.core.data.asset_io import load_asset_folder, save_asset_folder
+from scenefit.core.render.orbit_camera import Camera
+from scenefit.core.base.errors import InputError
+from scenefit.core.render.export import export_mitsuba_scene
+from scenefit.core.data.imageio import linear_to_srgb, read_image, srgb_to_linear
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.render.photo import develop_photo, perspective_view, studiolight_path
+from scenefit.core.data.primitives import uv_sphere
+from scenefit.core.render.renderer import AssetRenderer, SceneOptions
 from scenefit.core.scene.camera import PhotoCamera
 from scenefit.core.scene.frame import blender_direction_to_equirect_uv
 
@@ -62,7 +62,7 @@ def test_exported_scene_renders_alone_like_the_live_scene(tmp_path):
 
 
 def test_export_keeps_the_assets_size_and_frames_it_like_the_normalised_render(tmp_path):
-    from scenefit.core.mesh import Mesh
+    from scenefit.core.data.mesh import Mesh
     import mitsuba as mi
 
     small = uv_sphere(radius=0.5)
@@ -116,7 +116,7 @@ def test_several_materials_export_as_shapes_that_each_read_their_own_maps_wrappe
     """Three materials whose UVs tile about 3.8 times, each wrapped its own way: the exported scene, loaded
     by Mitsuba alone, shows each material's own texels where an atlas would reach into its neighbour's."""
     import mitsuba as mi
-    from scenefit.core.export import LookAt
+    from scenefit.core.render.export import LookAt
     from test_render_materials import banded_plane, expected_albedo
 
     asset = banded_plane([("repeat", "repeat"), ("mirror", "mirror"), ("clamp", "clamp")])

@@ -11,7 +11,7 @@ import json
 import pytest
 
 from scenefit.blender_io.fbx_ascii import binary_copy, parse_ascii_fbx
-from scenefit.core.errors import InputError
+from scenefit.core.base.errors import InputError
 
 SAME_ASSET = r"""
 import base64, json, sys

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.errors import InputError
-from scenefit.core.game_bake import check_texture_size
-from scenefit.core.maps import PBRMaps, resize_channels
+from scenefit.core.base.errors import InputError
+from scenefit.core.stages.bake.game_bake import check_texture_size
+from scenefit.core.data.maps import PBRMaps, resize_channels
 
 from conftest import scenefit_here
 
@@ -37,8 +37,8 @@ import bpy
 sys.path.insert(0, "tests")
 from asset_builder import build_assets
 from scenefit.cli import main
-from scenefit.core.game_bake import bake_game_maps
-from scenefit.core.imageio import linear_to_srgb
+from scenefit.core.stages.bake.game_bake import bake_game_maps
+from scenefit.core.data.imageio import linear_to_srgb
 from scenefit.core.texture.bake import load_neural_texture
 from scenefit.blender_io.asset_file import load_asset_materials, loaded_asset
 from scenefit.blender_io.gltf_export import constant_channels
@@ -194,10 +194,10 @@ def test_rendering_uses_the_normal_map_where_it_is_not_flat(pipeline):
     it on the bumpy half of the UV square (u < 0.5) and match on the flat half."""
     import mitsuba as mi
 
-    from scenefit.core.asset_io import load_asset_folder
-    from scenefit.core.camera import Camera
-    from scenefit.core.mesh import normalize_to_unit_sphere
-    from scenefit.core.render import AssetRenderer, SceneOptions
+    from scenefit.core.data.asset_io import load_asset_folder
+    from scenefit.core.render.orbit_camera import Camera
+    from scenefit.core.data.mesh import normalize_to_unit_sphere
+    from scenefit.core.render.renderer import AssetRenderer, SceneOptions
 
     folder = Path(pipeline["runs"]["textured"]["baked_file"]).parent / "convert" / "asset"
     mesh, maps = load_asset_folder(folder)
@@ -304,8 +304,8 @@ import numpy as np
 import bpy
 from scenefit.blender_io.gltf_export import bake_copy_to_gltf
 from scenefit.blender_io.material import object_mesh_and_slots
-from scenefit.core.game_bake import bake_game_maps
-from scenefit.core.presets import stage_config
+from scenefit.core.stages.bake.game_bake import bake_game_maps
+from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.texture.neural_texture import NeuralTexture
 
 bpy.ops.wm.read_factory_settings(use_empty=True)

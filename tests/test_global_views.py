@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.adapt.global_views import GlobalScene, turn_for_azimuth
-from scenefit.core.compose import ComposeConfig, ComposeInputs, compose
+from scenefit.core.stages.adapt.global_views import GlobalScene, turn_for_azimuth
+from scenefit.core.stages.compose import ComposeConfig, ComposeInputs, compose
 from scenefit.core.guidance.views import global_view
-from scenefit.core.mesh import normalize_to_unit_sphere
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.data.mesh import normalize_to_unit_sphere
+from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.scene.asset_pose import envmap_in_object_frame, place_asset
 from scenefit.core.scene.camera import PhotoCamera
 from scenefit.core.scene.frame import blender_direction_to_equirect_uv, equirect_directions

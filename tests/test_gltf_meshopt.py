@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenefit.core.gltf_meshopt import decoded_glb, encoded_glb, importable, read_gltf, uses_meshopt, write_glb
+from scenefit.core.data.gltf_meshopt import decoded_glb, encoded_glb, importable, read_gltf, uses_meshopt, write_glb
 
 
 def plain_glb(path: Path) -> Path:
@@ -63,7 +63,7 @@ def test_a_plain_file_is_imported_as_it_is(tmp_path):
 
 
 def test_meshopt_data_that_does_not_decode_is_one_sentence(tmp_path):
-    from scenefit.core.errors import InputError
+    from scenefit.core.base.errors import InputError
 
     packed = encoded_glb(plain_glb(tmp_path / "plain.glb"), tmp_path / "packed.glb")
     document, chunk = read_gltf(packed)

@@ -1,11 +1,11 @@
-"""How `scenefit bake` writes its glTF by default: like the input (core.gltf_output)."""
+"""How `scenefit bake` writes its glTF by default: like the input (core.stages.bake.gltf_output)."""
 from __future__ import annotations
 
 import pytest
 
-from scenefit.core.errors import InputError
-from scenefit.core.gltf_meshopt import write_glb
-from scenefit.core.gltf_output import GltfOutput, output_like_input
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.gltf_meshopt import write_glb
+from scenefit.core.stages.bake.gltf_output import GltfOutput, output_like_input
 
 
 def test_the_output_is_compressed_textured_and_given_tangents_as_the_input(tmp_path):

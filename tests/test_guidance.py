@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from scenefit.core.errors import InputError, ModelMissingError
+from scenefit.core.base.errors import InputError, ModelMissingError
 from scenefit.core.guidance import (CriticConfig, LoraCritic, ModelConfig, ReferenceInjector, ScoreCritic,
                                     camera_condition, load_guidance_models, locate_models, models_available)
 from scenefit.core.scene.placement import Placement

@@ -4,7 +4,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-from scenefit.core.source_graph import PACKAGES, ROOT, module_imports as imports, project_modules as modules
+from scenefit.core.base.source_graph import PACKAGES, ROOT, module_imports as imports, project_modules as modules
 
 # What core/ may never import, at any level: Blender, what talks to Blender, and the layers above it.
 ABOVE_CORE = ("bpy", "bmesh", "mathutils", "addon_utils", "blender_io", "operators", "panels", "cli", "workers")
@@ -17,16 +17,47 @@ def test_core_never_imports_blender_or_the_layers_above_it():
     assert bad == []
 
 
+# core/'s layers, bottom up (docs/architecture.md): a module imports its own layer and those below it.
+LAYERS = ("core.base", "core.data", "core.scene", "core.render", "core.texture", "core.guidance", "core.stages",
+          "core.pipeline")
+
+
+def layer_of(name: str) -> int | None:
+    return next((i for i, layer in enumerate(LAYERS) if name == layer or name.startswith(layer + ".")), None)
+
+
+def upward_imports(root: Path = ROOT) -> list[tuple[str, str]]:
+    known = modules(root)
+    return sorted((name, target) for name, path in known.items() if layer_of(name) is not None
+                  for target in imports(name, path, known)
+                  if target in known and (layer_of(target) or -1) > layer_of(name))
+
+
+def test_each_layer_of_core_imports_only_the_layers_below_it():
+    """No foundation reaches a stage, no stage reads the presets (a config holds resolved values)."""
+    assert upward_imports() == []
+    assert [name for name in modules() if name.startswith("core.") and layer_of(name) is None] == []
+
+
+def test_the_layer_check_sees_an_upward_import(tmp_path):
+    for name, text in {"core/__init__.py": "", "core/base/__init__.py": "", "core/stages/__init__.py": "",
+                       "core/base/errors.py": "def f():\n    from ..stages.light import x\n",
+                       "core/stages/light.py": "from ..base.errors import E\n"}.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    assert upward_imports(tmp_path) == [("core.base.errors", "core.stages.light")]
+
+
 def test_the_import_graph_finds_known_edges():
     """So the tests above and below can fail: the graph sees a module-level and a function-level import."""
     known = modules()
-    assert "core.output_folder" in imports("workers.batch", known["workers.batch"], known)
+    assert "core.base.output_folder" in imports("workers.batch", known["workers.batch"], known)
     assert "blender_io.asset_file" in imports("workers.batch", known["workers.batch"], known)   # in a function
 
 
 def test_no_import_circle_anywhere():
-    """core.compose <-> lighting <-> guidance was one (the photo camera now lives in core/scene/), and
-    core.presets <-> convert / adapt.config another (the tables are data in core/preset_tables.py)."""
+    """core.stages.compose <-> lighting <-> guidance was one (the photo camera now lives in core/scene/), and
+    core.pipeline.presets <-> convert / adapt.config another (the tables are data in core/pipeline/preset_tables.py)."""
     known = modules()
     graph = {name: {t for t in imports(name, path, known) if t in known and not name.startswith(t + ".")}
              for name, path in known.items()}
@@ -64,12 +95,12 @@ def test_no_function_in_core_is_over_80_lines():
 
 def test_the_length_check_sees_a_long_function():
     # run_pipeline is well over ten lines, so a limit of ten must flag it.
-    assert any("run_pipeline" in f for f in long_functions(ROOT / "core" / "run.py", 10))
+    assert any("run_pipeline" in f for f in long_functions(ROOT / "core" / "pipeline" / "run.py", 10))
 
 
 # The scene's geometry (docs/architecture.md, core/scene/): every stage and blender_io read it, and it
 # reads only core's foundations, so it can never pull a stage (or Blender) in.
-SCENE_MAY_IMPORT = ("core.scene.", "core.errors", "core.mesh")
+SCENE_MAY_IMPORT = ("core.scene.", "core.base.errors", "core.data.mesh")
 
 
 def test_the_scenes_geometry_imports_no_stage():
@@ -105,11 +136,11 @@ def test_the_scenes_concepts_are_defined_once_in_core_scene():
 
 
 # Each stage: run(inputs, config, progress, cancel) -> Result and write(result, folder) -> report (the
-# game bake is a child `scenefit bake` process, core/bake_process.py, and keeps that process's shape).
-STAGE_SHAPES = {"convert": ("core/pipeline.py", "run_convert", "write_convert"),
-                "light": ("core/lighting/stage.py", "run_light", "write_light"),
-                "adapt": ("core/adapt/system.py", "adapt_texture", "write_adapt"),
-                "compose": ("core/compose.py", "compose", "write_compose")}
+# game bake is a child `scenefit bake` process, core/stages/bake/process.py, and keeps that process's shape).
+STAGE_SHAPES = {"convert": ("core/stages/convert.py", "run_convert", "write_convert"),
+                "light": ("core/stages/light/stage.py", "run_light", "write_light"),
+                "adapt": ("core/stages/adapt/system.py", "adapt_texture", "write_adapt"),
+                "compose": ("core/stages/compose.py", "compose", "write_compose")}
 
 
 def function_args(path: Path, name: str) -> list[tuple[str, str]]:
@@ -130,8 +161,8 @@ def test_every_stage_has_one_shape_run_then_write():
 
 
 def test_the_pipeline_runs_each_stage_through_its_shape():
-    """core/run.py strings the stages together only through these (or the entry that is both)."""
-    text = (ROOT / "core" / "run.py").read_text()
+    """core/pipeline/run.py strings the stages together only through these (or the entry that is both)."""
+    text = (ROOT / "core" / "pipeline" / "run.py").read_text()
     for stage, names in {"convert": ("convert_and_bake",), "light": ("run_light", "write_light"),
                          "adapt": ("adapt_and_bake",), "compose": ("compose_to_folder",)}.items():
         assert all(f"{name}(" in text for name in names), stage

@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from scenefit.core.imageio import srgb_to_linear
-from scenefit.core.lighting import estimate_light
-from scenefit.core.lighting.cues import exposure_clip_scale
-from scenefit.core.lighting.depth import DepthConfig
-from scenefit.core.photo import camera_exposure, develop_photo
-from scenefit.core.presets import stage_config
+from scenefit.core.data.imageio import srgb_to_linear
+from scenefit.core.stages.light import estimate_light
+from scenefit.core.stages.light.cues import exposure_clip_scale
+from scenefit.core.stages.light.depth import DepthConfig
+from scenefit.core.render.photo import camera_exposure, develop_photo
+from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.scene.camera import PhotoCamera
 
 OLD_CAP = 1e5          # the clipped scale's former cap, which two real indoor views reached
@@ -84,7 +84,7 @@ def test_draft_and_balanced_agree_on_the_same_photo():
 def test_the_mean_bound_scales_an_overclaiming_light_down():
     # A photo whose clipped area is a large share (the exposure cue trusted) but a cue too bright
     # for its surfaces: the map's mean is held at 4x the implied mean.
-    from scenefit.core.lighting.cues import CueConfig, bound_scales, solid_angles
+    from scenefit.core.stages.light.cues import CueConfig, bound_scales, solid_angles
 
     h = 16
     ldr = np.full((h, 2 * h, 3), 0.5, np.float32)
@@ -102,7 +102,7 @@ def test_the_mean_bound_scales_an_overclaiming_light_down():
 
 
 def test_weak_evidence_leans_the_map_towards_the_flat_environment():
-    from scenefit.core.lighting.hdr import hdr_from_scales
+    from scenefit.core.stages.light.hdr import hdr_from_scales
 
     photo = _photo(_room())
     result = _estimate(photo)

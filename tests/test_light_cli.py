@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from scenefit.core.imageio import write_image
+from scenefit.core.data.imageio import write_image
 
 
 def _strict(text: str):
@@ -44,9 +44,9 @@ def test_quiet_is_one_rule_for_every_command_and_keeps_what_was_asked_for(tmp_pa
     """convert --quiet printed its per-material lines and summary; now --quiet prints nothing on stdout in
     every command, while an output asked for (--dry-run's JSON) still comes."""
     from scenefit.cli import main
-    from scenefit.core.asset_io import save_asset_folder
-    from scenefit.core.maps import PBRMaps
-    from scenefit.core.primitives import uv_sphere
+    from scenefit.core.data.asset_io import save_asset_folder
+    from scenefit.core.data.maps import PBRMaps
+    from scenefit.core.data.primitives import uv_sphere
 
     asset = save_asset_folder(uv_sphere(0.5, 12, 6), PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0),
                               tmp_path / "asset")
@@ -62,7 +62,7 @@ def test_quiet_is_one_rule_for_every_command_and_keeps_what_was_asked_for(tmp_pa
 def test_an_absent_depth_model_is_looked_for_once_per_process(tmp_path, monkeypatch):
     import time
 
-    from scenefit.core.lighting import depth
+    from scenefit.core.stages.light import depth
     from scenefit.core.scene.camera import PhotoCamera
     from scenefit.core.scene.floor import place_on_floor
 
@@ -89,9 +89,9 @@ def test_an_absent_depth_model_is_looked_for_once_per_process(tmp_path, monkeypa
 
 
 def _evenly_lit_estimate(sun_deg):
-    from scenefit.core.lighting import estimate_light
-    from scenefit.core.lighting.depth import DepthConfig
-    from scenefit.core.presets import stage_config
+    from scenefit.core.stages.light import estimate_light
+    from scenefit.core.stages.light.depth import DepthConfig
+    from scenefit.core.pipeline.presets import stage_config
     from scenefit.core.scene.camera import PhotoCamera
 
     photo = np.full((48, 64, 3), 0.45, np.float32)
@@ -104,7 +104,7 @@ def _evenly_lit_estimate(sun_deg):
 @pytest.mark.parametrize("sun, expected", [((90.0, 30.0), (1.0, 0.0)), ((-90.0, 30.0), (-1.0, 0.0)),
                                            ((180.0, 20.0), (0.0, -1.0))])
 def test_the_artists_sun_is_the_dominant_light(sun, expected):
-    from scenefit.core.lighting.measure import dominant_direction
+    from scenefit.core.stages.light.measure import dominant_direction
 
     result = _evenly_lit_estimate(sun)
     direction = np.array(result.decisions["cues"]["unseen"]["direction"])

@@ -6,13 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from scenefit.core.imageio import srgb_to_linear
-from scenefit.core.lighting import estimate_light
-from scenefit.core.lighting.cues import CueConfig, build_cues, exposure_clip_scale
-from scenefit.core.lighting.hdr import is_dark_environment
-from scenefit.core.lighting.measure import dominant_direction
-from scenefit.core.photo import develop_photo
-from scenefit.core.presets import stage_config
+from scenefit.core.data.imageio import srgb_to_linear
+from scenefit.core.stages.light import estimate_light
+from scenefit.core.stages.light.cues import CueConfig, build_cues, exposure_clip_scale
+from scenefit.core.stages.light.hdr import is_dark_environment
+from scenefit.core.stages.light.measure import dominant_direction
+from scenefit.core.render.photo import develop_photo
+from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.scene.camera import PhotoCamera
 from scenefit.core.scene.frame import equirect_directions
 
@@ -66,7 +66,7 @@ def test_energy_cue_lights_the_unseen_upper_hemisphere_to_explain_the_surfaces()
     # The unseen light sits behind the camera (-Y) and above the horizon; the map's dominant light is there.
     direction = np.array(cues.report["unseen"]["direction"])
     assert direction[1] < -0.1 and direction[2] > 0.5
-    from scenefit.core.lighting.hdr import hdr_from_scales
+    from scenefit.core.stages.light.hdr import hdr_from_scales
 
     hdr = hdr_from_scales(cues.ldr, cues.regions, cues.scales)
     # (the measure weights texels by solid angle, which pulls a near-zenith lobe a little towards the horizon)
@@ -92,7 +92,7 @@ def test_a_single_area_light_indoors_is_found_where_it_is_and_as_bright_as_the_m
 
 
 def _geometric():
-    from scenefit.core.lighting.depth import DepthConfig
+    from scenefit.core.stages.light.depth import DepthConfig
 
     return DepthConfig(depth_type="geometric")
 
@@ -121,8 +121,8 @@ DEVELOPMENT = {"studio": "indoor", "interior": "indoor", "city": "outdoor", "for
 
 @pytest.fixture(scope="module")
 def development_photos():
-    from scenefit.core.imageio import read_image
-    from scenefit.core.photo import perspective_view, studiolight_path
+    from scenefit.core.data.imageio import read_image
+    from scenefit.core.render.photo import perspective_view, studiolight_path
 
     photos = []
     for name, truth in DEVELOPMENT.items():
@@ -135,7 +135,7 @@ def development_photos():
 
 
 def test_auto_scene_type_is_right_on_every_development_photo(development_photos):
-    from scenefit.core.lighting.scene_type import scene_type_cue
+    from scenefit.core.stages.light.scene_type import scene_type_cue
 
     wrong = [(name, yaw, pitch, cue["score"]) for name, yaw, pitch, truth, photo in development_photos
              if (cue := scene_type_cue(photo.astype(np.float32)))["scene_type"] != truth]
@@ -148,12 +148,12 @@ def test_auto_scene_type_is_right_on_every_development_photo(development_photos)
 
 
 def test_an_ambiguous_photo_is_called_unsure_and_the_report_says_so():
-    from scenefit.core.lighting.scene_type import SKY_RATIO_AT, scene_type_cue
+    from scenefit.core.stages.light.scene_type import SKY_RATIO_AT, scene_type_cue
 
     # Smooth, no clutter; the top eighth exactly SKY_RATIO_AT times brighter than the bottom: score 1.
     linear = np.full((80, 64, 3), 0.1, np.float32)
     linear[:10] = 0.1 * SKY_RATIO_AT
-    from scenefit.core.imageio import linear_to_srgb
+    from scenefit.core.data.imageio import linear_to_srgb
 
     photo = linear_to_srgb(linear)
     cue = scene_type_cue(photo)

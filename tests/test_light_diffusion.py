@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.errors import ModelMissingError
+from scenefit.core.base.errors import ModelMissingError
 from scenefit.core.guidance import ModelConfig, load_guidance_models
 from scenefit.core.guidance.lora import ADAPTER
-from scenefit.core.imageio import write_image
-from scenefit.core.lighting import estimate as estimate_module
-from scenefit.core.lighting.diffusion_critic import DiffusionCriticConfig, DiffusionLightCritic
-from scenefit.core.lighting.estimate import LightConfig, estimate_light
+from scenefit.core.data.imageio import write_image
+from scenefit.core.stages.light import estimate as estimate_module
+from scenefit.core.stages.light.diffusion_critic import DiffusionCriticConfig, DiffusionLightCritic
+from scenefit.core.stages.light.estimate import LightConfig, estimate_light
 from scenefit.devtools.tiny_models import build_tiny_sd
-from scenefit.core.lighting.hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, CriticRequest, OptimiseConfig,
+from scenefit.core.stages.light.hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, CriticRequest, OptimiseConfig,
                                         optimise_scales)
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.scene.frame import equirect_directions
 
 
@@ -110,9 +110,9 @@ def _optimal_denoiser(score, target_latents):
 
 @pytest.mark.parametrize("start", [2.0, 32.0])
 def test_diffusion_steps_move_the_scale_toward_the_truth(tiny_base, start):
-    from scenefit.core.imageio import srgb_to_linear
-    from scenefit.core.lighting.diffusion_critic import tonemap_srgb_torch
-    from scenefit.core.lighting.hdr import compose_hdr
+    from scenefit.core.data.imageio import srgb_to_linear
+    from scenefit.core.stages.light.diffusion_critic import tonemap_srgb_torch
+    from scenefit.core.stages.light.hdr import compose_hdr
 
     scene = _sphere_only_scene()
     ldr, regions = _bright_spot()
@@ -143,8 +143,8 @@ def test_diffusion_steps_move_the_scale_toward_the_truth(tiny_base, start):
 
 def test_composited_views_hold_the_photo_around_the_apparatus_and_pass_gradients_to_the_light(tiny_base):
     from scenefit.core.guidance.views import paste_layer, photo_crop
-    from scenefit.core.imageio import srgb_to_linear
-    from scenefit.core.lighting.hdr import compose_hdr, per_view_losses
+    from scenefit.core.data.imageio import srgb_to_linear
+    from scenefit.core.stages.light.hdr import compose_hdr, per_view_losses
 
     scene = _scene()
     critic, prompts = _critic(tiny_base, scene)
@@ -182,8 +182,8 @@ def test_composited_views_hold_the_photo_around_the_apparatus_and_pass_gradients
 
 
 def test_the_light_vector_describes_the_map_and_conditions_eps_psi(tiny_base):
-    from scenefit.core.imageio import srgb_to_linear
-    from scenefit.core.lighting.hdr import LightVector
+    from scenefit.core.data.imageio import srgb_to_linear
+    from scenefit.core.stages.light.hdr import LightVector
 
     ldr, regions = _bright_spot()
     vector = LightVector(torch.from_numpy(srgb_to_linear(ldr)), {k: torch.from_numpy(v) for k, v in regions.items()})
@@ -276,8 +276,8 @@ def _seam_jump(ldr, rows):
 
 
 def test_outpainting_keeps_the_photo_and_paints_the_rest(tiny_base, tiny_inpaint):
-    from scenefit.core.lighting.outpaint import OutpaintConfig, outpaint_panorama
-    from scenefit.core.lighting.panorama import outdoor_panorama
+    from scenefit.core.stages.light.outpaint import OutpaintConfig, outpaint_panorama
+    from scenefit.core.stages.light.panorama import outdoor_panorama
     from scenefit.core.scene.camera import PhotoCamera
 
     models = load_guidance_models(ModelConfig(base_model=str(tiny_base), inpaint_model=str(tiny_inpaint)),
@@ -320,7 +320,7 @@ def _row_interpolating_painter(models, image, paint, config, generator):
 
 @pytest.mark.parametrize("band", [0.125, 0.0])
 def test_the_wrap_seam_is_painted_again_across_u_0(monkeypatch, band):
-    from scenefit.core.lighting import outpaint as outpaint_module
+    from scenefit.core.stages.light import outpaint as outpaint_module
 
     monkeypatch.setattr(outpaint_module, "inpaint", _row_interpolating_painter)
     ldr = np.zeros((32, 64, 3), np.float32)
@@ -340,7 +340,7 @@ def test_the_wrap_seam_is_painted_again_across_u_0(monkeypatch, band):
 def test_outdoor_completion_falls_back_to_the_prior_without_weights(tmp_path, monkeypatch):
     empty = tmp_path / "empty-cache"
     empty.mkdir()
-    from scenefit.core.lighting.outpaint import OutpaintConfig
+    from scenefit.core.stages.light.outpaint import OutpaintConfig
 
     models = ModelConfig(cache_dir=str(empty), local_files_only=True)
     config = LightConfig(scene_type="outdoor", map_height=16, models=models)
@@ -356,7 +356,7 @@ def test_outdoor_completion_falls_back_to_the_prior_without_weights(tmp_path, mo
 
 
 def test_estimate_light_outpaints_an_outdoor_map_with_the_model(tiny_base, tiny_inpaint):
-    from scenefit.core.lighting.outpaint import OutpaintConfig
+    from scenefit.core.stages.light.outpaint import OutpaintConfig
 
     config = LightConfig(scene_type="outdoor", map_height=32,
                          models=ModelConfig(base_model=str(tiny_base), inpaint_model=str(tiny_inpaint)),
@@ -368,7 +368,7 @@ def test_estimate_light_outpaints_an_outdoor_map_with_the_model(tiny_base, tiny_
 
 
 def test_fp16_models_give_finite_float32_gradients_and_outpaint(tiny_base, tiny_inpaint):
-    from scenefit.core.lighting.outpaint import OutpaintConfig, outpaint_panorama
+    from scenefit.core.stages.light.outpaint import OutpaintConfig, outpaint_panorama
 
     models = load_guidance_models(ModelConfig(base_model=str(tiny_base), inpaint_model=str(tiny_inpaint),
                                               dtype_type="fp16"), need_inpaint=True)

@@ -6,12 +6,12 @@ import math
 import numpy as np
 import pytest
 
-from scenefit.core.lighting import estimate_light
-from scenefit.core.lighting.cues import LOBE_ELEVATION_DEG, photo_bright_side
-from scenefit.core.lighting.depth import DepthConfig
-from scenefit.core.lighting.measure import dominant_direction
-from scenefit.core.photo import develop_photo
-from scenefit.core.presets import stage_config
+from scenefit.core.stages.light import estimate_light
+from scenefit.core.stages.light.cues import LOBE_ELEVATION_DEG, photo_bright_side
+from scenefit.core.stages.light.depth import DepthConfig
+from scenefit.core.stages.light.measure import dominant_direction
+from scenefit.core.render.photo import develop_photo
+from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.scene.camera import PhotoCamera
 
 

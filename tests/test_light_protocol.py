@@ -1,10 +1,10 @@
-"""The field's sphere protocol (core/lighting/measure.py) on maps with known answers."""
+"""The field's sphere protocol (core/stages/light/measure.py) on maps with known answers."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from scenefit.core.lighting.measure import (DIFFUSE_ALBEDO, SILVER_F0, probe_geometry, probe_scores, render_probe,
+from scenefit.core.stages.light.measure import (DIFFUSE_ALBEDO, SILVER_F0, probe_geometry, probe_scores, render_probe,
                                             rgb_angular_error_deg, si_rmse, stylelight_tonemap)
 from scenefit.core.scene.frame import blender_direction_to_equirect_uv
 

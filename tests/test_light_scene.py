@@ -4,11 +4,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenefit.core.imageio import linear_to_srgb
-from scenefit.core.lighting import estimate_light
-from scenefit.core.lighting.depth import DepthConfig
-from scenefit.core.lighting.scene_type import SKY_RATIO_AT, UNSURE_HIGH, UNSURE_LOW, scene_type_cue
-from scenefit.core.presets import stage_config
+from scenefit.core.data.imageio import linear_to_srgb
+from scenefit.core.stages.light import estimate_light
+from scenefit.core.stages.light.depth import DepthConfig
+from scenefit.core.stages.light.scene_type import SKY_RATIO_AT, UNSURE_HIGH, UNSURE_LOW, scene_type_cue
+from scenefit.core.pipeline.presets import stage_config
 
 
 def _photo_at_score(score: float) -> np.ndarray:

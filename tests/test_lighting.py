@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.errors import InputError, ModelMissingError
-from scenefit.core.imageio import read_image, write_image
-from scenefit.core.lighting import estimate_light, load_photo
-from scenefit.core.lighting.depth import DepthConfig, estimate_ray_distance
-from scenefit.core.presets import stage_config
-from scenefit.core.lighting.hdr import (ApparatusConfig, ApparatusScene, CriticRequest, OptimiseConfig, compose_hdr,
+from scenefit.core.base.errors import InputError, ModelMissingError
+from scenefit.core.data.imageio import read_image, write_image
+from scenefit.core.stages.light import estimate_light, load_photo
+from scenefit.core.stages.light.depth import DepthConfig, estimate_ray_distance
+from scenefit.core.pipeline.presets import stage_config
+from scenefit.core.stages.light.hdr import (ApparatusConfig, ApparatusScene, CriticRequest, OptimiseConfig, compose_hdr,
                                         is_dark_environment, light_prompt, optimise_scales, prior_scales)
-from scenefit.core.lighting.panorama import fill_panorama, indoor_panorama
-from scenefit.core.lighting.reference_critic import ReferenceCritic
-from scenefit.core.lighting.regions import RegionThresholds, bright_regions
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.stages.light.panorama import fill_panorama, indoor_panorama
+from scenefit.core.stages.light.reference_critic import ReferenceCritic
+from scenefit.core.stages.light.regions import RegionThresholds, bright_regions
+from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.scene.camera import PhotoCamera
 from scenefit.core.scene.floor import ORIGIN_LIFT, place_on_floor
 from scenefit.core.scene.frame import equirect_directions
@@ -157,7 +157,7 @@ def bright_spot_ldr(shape=(16, 32)):
 def test_scales_stay_finite_and_gradients_point_home_at_extremes(scale):
     scene = small_scene()
     ldr, regions = bright_spot_ldr()
-    from scenefit.core.imageio import srgb_to_linear
+    from scenefit.core.data.imageio import srgb_to_linear
 
     ldr_lin = torch.from_numpy(srgb_to_linear(ldr))
     masks = {k: torch.from_numpy(v) for k, v in regions.items()}
@@ -192,7 +192,7 @@ def test_reference_critic_pulls_the_scale_towards_the_truth():
 
 
 def read_linear(ldr):
-    from scenefit.core.imageio import srgb_to_linear
+    from scenefit.core.data.imageio import srgb_to_linear
 
     return srgb_to_linear(ldr)
 

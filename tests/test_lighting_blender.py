@@ -6,10 +6,10 @@ import json
 import numpy as np
 import torch
 
-from scenefit.core.camera import Camera
-from scenefit.core.imageio import read_image, write_image
-from scenefit.core.primitives import uv_sphere
-from scenefit.core.render import AssetRenderer
+from scenefit.core.render.orbit_camera import Camera
+from scenefit.core.data.imageio import read_image, write_image
+from scenefit.core.data.primitives import uv_sphere
+from scenefit.core.render.renderer import AssetRenderer
 from scenefit.core.scene.frame import equirect_directions
 
 SIZE = 32

@@ -5,16 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenefit.core.convert import convert_materials
-from scenefit.core.presets import stage_config
-from scenefit.core.errors import InputError
-from scenefit.core.game_bake import bake_game_maps
-from scenefit.core.imageio import linear_to_srgb
-from scenefit.core.maps import PBRMaps
-from scenefit.core.materials import AssetMaterials, Material, atlas_mesh, material_submesh
-from scenefit.core.mesh import Mesh, normalize_to_unit_sphere
-from scenefit.core.texture.uv_raster import rasterize_uv
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.stages.convert import convert_materials
+from scenefit.core.pipeline.presets import stage_config
+from scenefit.core.base.errors import InputError
+from scenefit.core.stages.bake.game_bake import bake_game_maps
+from scenefit.core.data.imageio import linear_to_srgb
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.materials import AssetMaterials, Material, atlas_mesh, material_submesh
+from scenefit.core.data.mesh import Mesh, normalize_to_unit_sphere
+from scenefit.core.data.uv_raster import rasterize_uv
+from scenefit.core.data.primitives import uv_sphere
 
 RED, BLUE = (0.8, 0.1, 0.05), (0.05, 0.2, 0.9)
 
@@ -68,7 +68,7 @@ def test_one_texture_fits_both_materials_and_bakes_back_per_material():
 
 
 def test_a_constant_channel_bakes_to_the_assets_value_unless_adaptation_moved_it():
-    from scenefit.core.game_bake import CONSTANT_SCATTER, _channel
+    from scenefit.core.stages.bake.game_bake import CONSTANT_SCATTER, _channel
 
     rng = np.random.default_rng(0)
     mask = np.ones((16, 16), bool)

@@ -90,9 +90,9 @@ import bpy, addon_utils, mathutils
 from scenefit.blender_io.asset_file import load_asset_file
 from scenefit.blender_io.compose import transparent_cycles
 from scenefit.blender_io.cycles_crosscheck import photo_camera_object
-from scenefit.core.compose import ComposeConfig, ComposeInputs, build_compose
-from scenefit.core.mesh import normalize_to_unit_sphere
-from scenefit.core.pipeline import sun_environment
+from scenefit.core.stages.compose import ComposeConfig, ComposeInputs, build_compose
+from scenefit.core.data.mesh import normalize_to_unit_sphere
+from scenefit.core.render.environment import sun_environment
 from scenefit.core.scene.asset_pose import placement_transform
 from scenefit.core.scene.camera import PhotoCamera
 
@@ -139,7 +139,7 @@ print("DONE")
 def test_a_rotated_and_a_mirrored_node_composite_as_cycles_renders_the_imported_file(tmp_path, run_py):
     """Issue 23: the pipeline's composite of a file with a rotated and a mirrored node shows the asset
     where and as Cycles shows Blender's own import of that file (silhouette IoU >= 0.95)."""
-    from scenefit.core.imageio import read_image
+    from scenefit.core.data.imageio import read_image
 
     run_py(CHECK.replace("FOLDER", repr(str(tmp_path))), timeout=600)   # writes upright.glb and mirrored.glb
     run_py(COMPOSE_CHECK.replace("FOLDER", repr(str(tmp_path))), timeout=600)

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from conftest import PythonSession, extension_and_models, fill_in
 
-from scenefit.core.imageio import read_image
+from scenefit.core.data.imageio import read_image
 
 pytestmark = pytest.mark.blender
 
@@ -41,7 +41,7 @@ jobs = import_module(MODULE + ".workers.background")
 work = import_module(MODULE + ".operators.work")
 common = import_module(MODULE + ".operators.common")
 results = import_module(MODULE + ".operators.results")
-imageio = import_module(MODULE + ".core.imageio")
+imageio = import_module(MODULE + ".core.data.imageio")
 
 def make_scene():
     bpy.ops.wm.read_homefile(use_empty=True)  # (factory settings would disable the extension)
@@ -165,12 +165,12 @@ except RuntimeError as error:
     out["bake_refused"] = str(error)
 # The maps Bake Asset wrote, recomputed from the same texture and mesh (deterministic), for the re-import check.
 gltf_export = import_module(MODULE + ".blender_io.gltf_export")
-game_bake = import_module(MODULE + ".core.game_bake")
+game_bake = import_module(MODULE + ".core.stages.bake.game_bake")
 texture = import_module(MODULE + ".core.texture.bake").load_neural_texture(bpy.path.abspath(bpy.context.scene.scenefit.texture_path))
 mesh_b, _ = import_module(MODULE + ".blender_io.material").object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())
 # (each material at its own images' shape, from the artist's maps behind the result in the slot)
 own = import_module(MODULE + ".operators.common").asset_layout(bpy.context).own_maps(bpy.context)["own_maps"]
-out["bake_shape"] = list(game_bake.own_texture_shape(own[0], import_module(MODULE + ".core.gltf_output").DEFAULT_MAX_TEXTURE))
+out["bake_shape"] = list(game_bake.own_texture_shape(own[0], import_module(MODULE + ".core.stages.bake.gltf_output").DEFAULT_MAX_TEXTURE))
 (expected,) = game_bake.bake_game_maps(texture, mesh_b, [obj.active_material.name], [tuple(out["bake_shape"])],
                                        [gltf_export.constant_channels(obj.active_material)], None, own)
 np.savez(tmp / "expected_bake.npz", base_color=expected.base_color, roughness=np.asarray(expected.roughness),
@@ -430,7 +430,7 @@ def test_bake_asset_writes_valid_gltf_that_reads_back(blender, operated, validat
         import json
         import numpy as np
         from scenefit.blender_io.asset_file import load_asset_materials
-        from scenefit.core.imageio import linear_to_srgb
+        from scenefit.core.data.imageio import linear_to_srgb
         want = np.load({str(tmp / "expected_bake.npz")!r})
         (material,) = load_asset_materials({glb!r}).materials
         err = {{"name": material.name, "shape": list(material.maps.base_color.shape[:2]),

@@ -15,12 +15,12 @@ import pytest
 import torch
 
 from scenefit.cli import main
-from scenefit.core.asset_io import save_asset_folder
-from scenefit.core.errors import InputError
-from scenefit.core.imageio import write_image
-from scenefit.core.maps import PBRMaps
-from scenefit.core.output_folder import MARKER, _FolderLock, is_run_folder, output_folder, staging_path
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.data.asset_io import save_asset_folder
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.imageio import write_image
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.base.output_folder import MARKER, _FolderLock, is_run_folder, output_folder, staging_path
+from scenefit.core.data.primitives import uv_sphere
 
 CONVERT_FAST = ("--preset", "draft", "--iterations", "2", "--resolution", "16", "--quiet")
 RUN_FAST = ("--preset", "draft", "--guidance", "none", "--spp", "2", "--quiet")
@@ -187,7 +187,7 @@ def test_bake_refuses_to_replace_an_earlier_bake_unless_asked(tmp_path, capsys):
 
 
 def test_the_files_a_gltf_asset_is_made_of_are_known(tmp_path):
-    from scenefit.core.asset_files import asset_files
+    from scenefit.core.data.asset_files import asset_files
 
     (tmp_path / "tex").mkdir()
     for name in ("mesh.bin", "tex/Material_base_color.png", "unrelated.png"):
@@ -215,8 +215,8 @@ class _Payload:
 
 
 def test_a_planted_checkpoint_or_texture_runs_nothing(tmp_path):
-    from scenefit.core.adapt.checkpoint import load_checkpoint
-    from scenefit.core.adapt.config import AdaptConfig
+    from scenefit.core.stages.adapt.checkpoint import load_checkpoint
+    from scenefit.core.stages.adapt.config import AdaptConfig
     from scenefit.core.texture.bake import load_neural_texture
 
     proof = tmp_path / "code_ran"
@@ -233,8 +233,8 @@ def test_a_planted_checkpoint_or_texture_runs_nothing(tmp_path):
 
 def test_a_real_checkpoint_still_loads_as_data(tmp_path):
     """weights_only loading keeps what a checkpoint holds: tensors, optimiser state, history."""
-    from scenefit.core.adapt.checkpoint import load_checkpoint, save_checkpoint
-    from scenefit.core.adapt.config import AdaptConfig
+    from scenefit.core.stages.adapt.checkpoint import load_checkpoint, save_checkpoint
+    from scenefit.core.stages.adapt.config import AdaptConfig
     from scenefit.core.texture.neural_texture import NeuralTexture, NeuralTextureConfig
 
     config = AdaptConfig(prompt="x")
@@ -274,7 +274,7 @@ def test_run_refuses_a_folder_of_the_users_and_a_second_writer(tmp_path, project
 
 KILLED_RUN = """
 import os, signal, sys
-import scenefit.core.compose as compose
+import scenefit.core.stages.compose as compose
 from scenefit.cli import main
 
 def killed(*_, **__):
@@ -379,7 +379,7 @@ def test_a_gltf_bake_beside_the_asset_never_writes_over_its_own_images(tmp_path,
     run_py(GLTF_WITH_LOOKALIKE.replace("FOLDER", repr(str(tmp_path))).replace("CONVERT_FAST", repr(CONVERT_FAST)),
            timeout=600)
     asset = tmp_path / "ball.gltf"
-    from scenefit.core.asset_files import asset_files
+    from scenefit.core.data.asset_files import asset_files
 
     assert tmp_path.resolve() / "Ball_base_color.png" in asset_files(asset)
     before = snapshot(tmp_path / "conv") | {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}

@@ -8,7 +8,7 @@ import pytest
 
 from scenefit.blender_io.placement import (CANCEL, CLICK, PASS, classify_event, frame_rect,
                                            placement_from_click, region_from_placement)
-from scenefit.core.errors import InputError
+from scenefit.core.base.errors import InputError
 from scenefit.core.scene.asset_pose import asset_in_view, camera_for_placement
 from scenefit.core.scene.camera import PhotoCamera
 
@@ -84,8 +84,8 @@ def _turn(deg: float) -> np.ndarray:
 def test_the_pipeline_composes_the_asset_as_the_artists_camera_shows_it(yaw, pitch, roll, object_yaw):
     """asset_in_view turns an artist's arrangement (their camera, the asset where they put it) into the
     placement, size and turn core's place_asset takes: every vertex lands on the same photo pixel."""
-    from scenefit.core.mesh import Mesh, normalize_to_unit_sphere
-    from scenefit.core.primitives import uv_sphere
+    from scenefit.core.data.mesh import Mesh, normalize_to_unit_sphere
+    from scenefit.core.data.primitives import uv_sphere
     from scenefit.core.scene.asset_pose import place_asset, placed_mesh
     from scenefit.core.scene.camera import camera_origin
 
@@ -142,7 +142,7 @@ def test_adapts_projected_time_is_the_sd2_bench_measurement():
     (benchmarks/results/adapt_sd2.json: the cached bf16 rows, warm step) and the presets' iterations."""
     import importlib.util
 
-    from scenefit.core.presets import stage_config
+    from scenefit.core.pipeline.presets import stage_config
 
     root = Path(__file__).resolve().parent.parent
     spec = importlib.util.spec_from_file_location("quality", root / "panels" / "quality.py")
@@ -175,7 +175,7 @@ def test_blender_shows_a_sideways_stored_photo_upright_like_the_pipeline(tmp_pat
         import json
         import bpy, numpy as np
         from scenefit.blender_io.compose import ensure_photo_camera, load_photo_image
-        from scenefit.core.lighting import load_photo
+        from scenefit.core.stages.light import load_photo
 
         bpy.ops.wm.read_factory_settings(use_empty=True)
         image = load_photo_image({str(photo)!r})

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from chat_server import ChatServer, Reply
 
-from scenefit.core.errors import InputError, PromptServiceError
-from scenefit.core.prompting import (ANALYSIS_STEP, DESCRIBE_STEP, INSTRUCT_STEP, PromptRequest, ServiceConfig,
+from scenefit.core.base.errors import InputError, PromptServiceError
+from scenefit.core.guidance.prompting import (ANALYSIS_STEP, DESCRIBE_STEP, INSTRUCT_STEP, PromptRequest, ServiceConfig,
                                      count_words, problems, repair, resolve_service, shorten, split_answer,
                                      template_prompt, write_prompt)
 
@@ -219,7 +219,7 @@ def test_cli_prompt_online_offline_and_errors(server, tmp_path, capsys):
 
 
 def test_photo_is_sent_to_a_vision_model_only(server, cache, tmp_path):
-    from scenefit.core.imageio import write_image
+    from scenefit.core.data.imageio import write_image
 
     photo = tmp_path / "swamp.png"
     write_image(photo, np.random.default_rng(0).uniform(0, 1, (40, 60, 3)).astype(np.float32))
@@ -291,11 +291,11 @@ def test_adapt_writes_its_prompt_from_object_and_scene(server, tmp_path, capsys)
     the prompt the critics get (edit mode: its instruction), and the report keeps the analysis."""
     from scenefit.cli import build_parser, main
     from scenefit.cli.options import scene_conditional_prompt
-    from scenefit.core.asset_io import save_asset_folder
+    from scenefit.core.data.asset_io import save_asset_folder
     from scenefit.devtools.tiny_models import build_tiny_pair
-    from scenefit.core.maps import PBRMaps
-    from scenefit.core.primitives import uv_sphere
-    from scenefit.core.presets import stage_config
+    from scenefit.core.data.maps import PBRMaps
+    from scenefit.core.data.primitives import uv_sphere
+    from scenefit.core.pipeline.presets import stage_config
     from scenefit.core.texture import NeuralTexture, save_neural_texture
 
     common = ["--prompt-cache", str(tmp_path / "c"), "--config", str(tmp_path / "none.toml"),

@@ -25,7 +25,7 @@ prefs.base_model, prefs.inpaint_model, prefs.offline = str(Path(tiny) / "sd2-bas
 jobs = import_module(MODULE + ".workers.background")
 jobs_ui = import_module(MODULE + ".operators.jobs")
 remote = import_module(MODULE + ".operators.remote")
-imageio = import_module(MODULE + ".core.imageio")
+imageio = import_module(MODULE + ".core.data.imageio")
 out = {}
 
 # Preferences: where jobs run; a cluster elsewhere is network access, refused while online access is off.

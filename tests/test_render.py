@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.camera import Camera, fov_from_multiplier, whole_object_multiplier
-from scenefit.core.errors import InputError
-from scenefit.core.mesh import Mesh, normalize_to_unit_sphere
-from scenefit.core.primitives import grid_plane, uv_sphere
-from scenefit.core.render import AssetRenderer, SceneOptions, SphereSpec
+from scenefit.core.render.orbit_camera import Camera, fov_from_multiplier, whole_object_multiplier
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.mesh import Mesh, normalize_to_unit_sphere
+from scenefit.core.data.primitives import grid_plane, uv_sphere
+from scenefit.core.render.renderer import AssetRenderer, SceneOptions, SphereSpec
 from scenefit.core.scene.frame import blender_direction_to_equirect_uv, equirect_directions, look_frame
 
 TEX = (32, 32)
@@ -216,7 +216,7 @@ def test_bad_environment_map_is_rejected():
 
 
 def test_render_albedo_is_the_base_colour_where_the_asset_is_hit_and_nothing_elsewhere():
-    from scenefit.core.backend import init_mitsuba
+    from scenefit.core.render.backend import init_mitsuba
 
     init_mitsuba()
     maps = np.zeros((8, 8, 5), np.float32)

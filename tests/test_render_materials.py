@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.backend import init_mitsuba
-from scenefit.core.maps import PBRMaps
-from scenefit.core.materials import AssetMaterials, Material
-from scenefit.core.mesh import Mesh
-from scenefit.core.primitives import grid_plane
-from scenefit.core.render import AssetRenderer
+from scenefit.core.render.backend import init_mitsuba
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.materials import AssetMaterials, Material
+from scenefit.core.data.mesh import Mesh
+from scenefit.core.data.primitives import grid_plane
+from scenefit.core.render.renderer import AssetRenderer
 
 TEXELS = 8                      # each material's own base colour is TEXELS² random colours
 UV_SCALE, UV_OFFSET = 3.8, -0.9  # own UVs run from -0.9 to 2.9 across the plane: tiles in both directions
@@ -88,7 +88,7 @@ def rendered_by_renderer(asset: AssetMaterials):
     mesh, maps = asset.fitting_view()
     renderer = AssetRenderer(mesh, maps.resolution, np.ones((8, 16, 3), np.float32))
     stack = torch.from_numpy(maps.stacked())
-    from scenefit.core.camera import Camera
+    from scenefit.core.render.orbit_camera import Camera
 
     # A render sets the maps into the scene, which the AOV pass then reads.
     renderer.render(Camera(width=8, height=8), stack[..., :3], stack[..., 3:4], stack[..., 4:5],
@@ -99,7 +99,7 @@ def rendered_by_renderer(asset: AssetMaterials):
 def rendered_by_compose(asset: AssetMaterials):
     import mitsuba as mi
 
-    from scenefit.core.compose import _scene
+    from scenefit.core.stages.compose import _scene
 
     mesh, maps = asset.fitting_view()
     return _scene(mi, np.ones((8, 16, 3), np.float32), mesh, maps.stacked(), black=False, floor_albedo=None)
@@ -136,8 +136,8 @@ def test_gradients_reach_every_materials_texels_and_only_theirs():
     """An adapt-like step: the maps are one atlas tensor; each material's BSDF renders a slice of it, so the
     loss's gradient reaches every material's cell (through a mirrored-and-doubled one too) and no empty cell,
     and a step down it brings the render closer to the target."""
-    from scenefit.core.camera import Camera
-    from scenefit.core.materials import atlas_slices
+    from scenefit.core.render.orbit_camera import Camera
+    from scenefit.core.data.materials import atlas_slices
 
     asset = banded_plane([("repeat", "repeat"), ("mirror", "repeat"), ("clamp", "clamp")], seed=5)
     mesh, maps = asset.fitting_view()

@@ -11,19 +11,19 @@ import numpy as np
 import pytest
 
 from scenefit.cli import main
-from scenefit.core.asset_io import load_asset_folder, save_asset_folder
-from scenefit.core.atomic import TEMP_MARK
-from scenefit.core.errors import InputError
-from scenefit.core.imageio import read_image, write_image
-from scenefit.core.maps import PBRMaps
-from scenefit.core.output_folder import MARKER, _FolderLock, output_folder, staging_path, write_marker
+from scenefit.core.data.asset_io import load_asset_folder, save_asset_folder
+from scenefit.core.base.atomic import TEMP_MARK
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.imageio import read_image, write_image
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.base.output_folder import MARKER, _FolderLock, output_folder, staging_path, write_marker
 
 
 def files(folder: Path) -> list[str]:
     """What a folder holds, without SceneFit's marker."""
     return sorted(p.name for p in folder.iterdir() if p.name != MARKER)
-from scenefit.core.pipeline import write_report
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.base.report import write_report
+from scenefit.core.data.primitives import uv_sphere
 
 
 def small_maps(size: int = 16, metallic=0.0) -> PBRMaps:
@@ -331,7 +331,7 @@ def test_a_phone_photo_stored_sideways_is_read_upright(tmp_path):
     is the upright photo's horizontal one."""
     import OpenImageIO as oiio
 
-    from scenefit.core.lighting import load_photo
+    from scenefit.core.stages.light import load_photo
 
     stored = np.full((40, 60, 3), 0.2, np.float32)
     stored[:8, :8] = 1.0                                # a white block in the stored top-left corner

@@ -7,10 +7,10 @@ import sys
 
 import numpy as np
 
-from scenefit.core.asset_io import save_asset_folder
-from scenefit.core.imageio import read_image, write_image
-from scenefit.core.maps import PBRMaps
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.data.asset_io import save_asset_folder
+from scenefit.core.data.imageio import read_image, write_image
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.primitives import uv_sphere
 
 from asset_builder import write_obj
 from conftest import scenefit_here
@@ -89,9 +89,9 @@ def test_run_on_an_asset_file_bakes_a_game_asset_and_reuses_it(tmp_path):
 
 
 def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monkeypatch, capsys):
-    import scenefit.core.compose as compose
+    import scenefit.core.stages.compose as compose
     from scenefit.cli import main
-    from scenefit.core.output_folder import staging_path
+    from scenefit.core.base.output_folder import staging_path
 
     maps = PBRMaps(np.full((64, 64, 3), 0.5, np.float32), 0.5, 0.0)
     asset = save_asset_folder(uv_sphere(0.5, 12, 6), maps, tmp_path / "asset")
@@ -136,7 +136,7 @@ def _sphere_and_photo(tmp_path):
 
 def _bake_running(script: str, started: list):
     """A GameBake whose process is `script` (python), so the test sees when it starts and whether it lives."""
-    from scenefit.core.bake_process import BakeProcess
+    from scenefit.core.stages.bake.process import BakeProcess
 
     def bake(texture, folder, cancel=None):
         folder.mkdir(parents=True, exist_ok=True)
@@ -155,8 +155,8 @@ def test_the_game_bake_runs_beside_light_and_compose_and_a_cancel_stops_it(tmp_p
 
     import pytest
 
-    from scenefit.core.errors import Cancelled
-    from scenefit.core.run import RunConfig, run_pipeline
+    from scenefit.core.base.errors import Cancelled
+    from scenefit.core.pipeline.run import RunConfig, run_pipeline
 
     mesh, maps, photo = _sphere_and_photo(tmp_path)
     started, cancel, seen = [], threading.Event(), []
@@ -177,8 +177,8 @@ def test_the_game_bake_runs_beside_light_and_compose_and_a_cancel_stops_it(tmp_p
 
 
 def test_a_failed_game_bake_fails_the_run_in_one_sentence(tmp_path):
-    from scenefit.core.errors import SceneFitError
-    from scenefit.core.run import RunConfig, run_pipeline
+    from scenefit.core.base.errors import SceneFitError
+    from scenefit.core.pipeline.run import RunConfig, run_pipeline
 
     import pytest
 

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from scenefit.cli import main
-from scenefit.core.asset_io import load_asset_folder, save_asset_folder
-from scenefit.core.errors import InputError
-from scenefit.core.imageio import check_decodes, read_image, write_image
-from scenefit.core.maps import PBRMaps
-from scenefit.core.mesh import Mesh
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.data.asset_io import load_asset_folder, save_asset_folder
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.imageio import check_decodes, read_image, write_image
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.mesh import Mesh
+from scenefit.core.data.primitives import uv_sphere
 
 CONVERT_FAST = ("--preset", "draft", "--iterations", "2", "--resolution", "16", "--quiet")
 LIGHT_FAST = ("--at", "0.5,0.8", "--critic", "none", "--depth", "geometric", "--outpaint", "prior", "--quiet")
@@ -200,7 +200,7 @@ def test_render_size_has_an_upper_bound_said_in_one_sentence(tmp_path, capsys):
 
 def test_a_long_thin_texture_is_rendered_at_its_own_size_not_squared(tmp_path, monkeypatch, capsys):
     """A 16384x16 base colour (1 MB) squared to 16384² made a 5 GB stack (21 GB peak for 16 pixels)."""
-    import scenefit.core.pipeline as pipeline
+    import scenefit.core.texture.views as views
 
     asset = small_asset(tmp_path / "asset", size=(16, 16384))
     seen = {}
@@ -209,14 +209,14 @@ def test_a_long_thin_texture_is_rendered_at_its_own_size_not_squared(tmp_path, m
         seen.update({name: tuple(stack.shape) for name, stack in stacks.items()})
         return {name: [np.zeros((c.height, c.width, 3), np.float32) for c in cameras] for name in stacks}
 
-    monkeypatch.setattr(pipeline, "render_views", render_views)
+    monkeypatch.setattr(views, "render_views", render_views)
     assert cli("render", str(asset), "--out", str(tmp_path / "out"), "--size", "16", "--views", "1",
                "--quiet") == 0, capsys.readouterr().err
     assert seen == {"asset maps": (16, 16384, 5)}
 
 
 def test_a_texture_too_large_for_memory_is_refused_before_any_work(tmp_path, monkeypatch, capsys):
-    import scenefit.core.limits as limits
+    import scenefit.core.base.limits as limits
 
     asset = small_asset(tmp_path / "asset", size=(256, 256))
     monkeypatch.setattr(limits, "physical_memory", lambda: 8 * 2**20)   # a machine of 8 MB
@@ -295,7 +295,7 @@ def test_a_full_disk_during_run_is_one_sentence(tmp_path, monkeypatch, capsys):
 
 
 def test_os_error_sentences_name_the_users_path_and_what_to_do(tmp_path):
-    from scenefit.core.os_errors import os_error_sentence, with_out_paths
+    from scenefit.core.base.os_errors import os_error_sentence, with_out_paths
 
     out = tmp_path / "out"
     temp = tmp_path / ".out.partial" / "maps" / ".roughness.png.k3j2.scenefit-tmp.png"

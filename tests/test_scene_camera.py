@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from scenefit.core.imageio import read_image, write_image
+from scenefit.core.data.imageio import read_image, write_image
 
 pytestmark = pytest.mark.blender
 
@@ -112,7 +112,7 @@ def test_run_all_composes_through_the_artists_matched_camera(run_py, tmp_path):
 
 def test_camera_overlay_draws_the_lines_found_and_never_writes_over_a_file(tmp_path, capsys):
     from scenefit.cli import main
-    from scenefit.core.photo_camera import estimate_photo_camera
+    from scenefit.core.stages.camera import estimate_photo_camera
     from scenefit.core.scene.camera import PhotoCamera
     from test_camera import _box_room
 

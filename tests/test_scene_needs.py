@@ -6,12 +6,13 @@ import json
 import numpy as np
 import pytest
 
-from scenefit.core.convert import ConvertConfig, choose_resolution
-from scenefit.core.presets import stage_config
-from scenefit.core.maps import PBRMaps
-from scenefit.core.pipeline import convert_and_bake, write_report
-from scenefit.core.primitives import uv_sphere
-from scenefit.core.scene_needs import constant_channels, envmap_height_for, texture_size_for_screen
+from scenefit.core.stages.convert import ConvertConfig, choose_resolution
+from scenefit.core.pipeline.presets import stage_config
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.base.report import write_report
+from scenefit.core.stages.convert import convert_and_bake
+from scenefit.core.data.primitives import uv_sphere
+from scenefit.core.data.scene_needs import constant_channels, envmap_height_for, texture_size_for_screen
 
 
 def base(size: int = 16) -> np.ndarray:
@@ -68,7 +69,7 @@ def test_the_glossiest_part_of_a_map_decides():
 def test_constants_of_several_materials_are_judged_on_each_materials_own_texels():
     """Every material's roughness exactly 1 is the constant 1, not 'varies 0 to 1' (the atlas's empty
     background once counted); differing values are a map and the reason names each."""
-    from scenefit.core.scene_needs import material_constant_channels
+    from scenefit.core.data.scene_needs import material_constant_channels
 
     a = PBRMaps(np.full((8, 8, 3), 0.5, np.float32), 1.0, 0.0)
     b = PBRMaps(np.full((16, 16, 3), 0.2, np.float32), np.ones((16, 16), np.float32), 0.0)

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from scenefit.cli import main
-from scenefit.core.errors import InputError
-from scenefit.core.imageio import write_image
-from scenefit.core.lighting.estimate import sun_direction
-from scenefit.core.lighting.shadow_hint import sun_from_shadow
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.imageio import write_image
+from scenefit.core.stages.light.estimate import sun_direction
+from scenefit.core.stages.light.shadow_hint import sun_from_shadow
 from scenefit.core.scene.camera import CAMERA_HEIGHT, PhotoCamera
 
 CAMERA = PhotoCamera(yaw_deg=90.0, pitch_deg=-15.0, fov_deg=60.0, width=640, height=480, roll_deg=2.0)

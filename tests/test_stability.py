@@ -19,17 +19,17 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.camera import Camera
-from scenefit.core.convert import convert_asset
-from scenefit.core.errors import InputError
-from scenefit.core.imageio import write_image
-from scenefit.core.lighting import estimate_light, load_photo
-from scenefit.core.lighting.depth import DepthConfig
-from scenefit.core.maps import PBRMaps
-from scenefit.core.mesh import Mesh
-from scenefit.core.presets import stage_config
-from scenefit.core.primitives import uv_sphere
-from scenefit.core.render import AssetRenderer
+from scenefit.core.render.orbit_camera import Camera
+from scenefit.core.stages.convert import convert_asset
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.imageio import write_image
+from scenefit.core.stages.light import estimate_light, load_photo
+from scenefit.core.stages.light.depth import DepthConfig
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.mesh import Mesh
+from scenefit.core.pipeline.presets import stage_config
+from scenefit.core.data.primitives import uv_sphere
+from scenefit.core.render.renderer import AssetRenderer
 
 TEX = (16, 16)
 GEOMETRIC = DepthConfig(depth_type="geometric")
@@ -140,9 +140,9 @@ def test_a_1x1_photo_is_a_clear_error(tmp_path):
 
 LIGHT_PEAK = textwrap.dedent("""
     import json, sys
-    from scenefit.core.lighting import estimate_light, load_photo
-    from scenefit.core.lighting.depth import DepthConfig
-    from scenefit.core.presets import stage_config
+    from scenefit.core.stages.light import estimate_light, load_photo
+    from scenefit.core.stages.light.depth import DepthConfig
+    from scenefit.core.pipeline.presets import stage_config
     config = stage_config("light", "draft", depth=DepthConfig(depth_type="geometric"))
     estimate_light(load_photo(sys.argv[2])[0], (8.0, 10.0), config)    # imports and caches, on a small photo
     def status_mb(key):
@@ -178,7 +178,7 @@ def test_an_8000x6000_photo_costs_the_light_stage_what_its_working_size_costs(tm
     reduces at a time: not one full-size copy (8000x6000x3 float32 = 576 MB; it used to peak at 5.1 GB)."""
     import cv2
 
-    from scenefit.core.lighting.estimate import PHOTO_WORKING_SIDE
+    from scenefit.core.stages.light.estimate import PHOTO_WORKING_SIDE
 
     big = np.full((6000, 8000, 3), 90, np.uint8)
     big[:400] = 250
@@ -243,7 +243,7 @@ def test_a_tiny_1e6_spot_in_an_exr_photo_is_kept(tmp_path):
 def test_grazing_and_straight_down_photo_cameras_compose_finite(pitch):
     """A photo camera a half degree below the horizon (the object one row under it, seen edge-on on a
     floor that is nearly a line) and one looking straight down both give a finite composite."""
-    from scenefit.core.compose import ComposeInputs, compose
+    from scenefit.core.stages.compose import ComposeInputs, compose
     from scenefit.core.scene.camera import PhotoCamera, horizon_row
 
     camera = PhotoCamera(yaw_deg=90.0, pitch_deg=pitch, fov_deg=60.0, width=32, height=24)

@@ -7,14 +7,15 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.backend import init_mitsuba
-from scenefit.core.convert import ConvertConfig, convert_asset, convert_materials
-from scenefit.core.errors import InputError
-from scenefit.core.maps import PBRMaps
-from scenefit.core.mesh import Mesh, normalize_to_unit_sphere
-from scenefit.core.primitives import uv_sphere
-from scenefit.core.render import AssetRenderer
-from scenefit.core.surface_layout import (SHARED_LIMIT, adapting_view, new_layout, own_uvs_at, texture_view,
+from scenefit.core.pipeline.preset_tables import texture_preset
+from scenefit.core.render.backend import init_mitsuba
+from scenefit.core.stages.convert import ConvertConfig, convert_asset, convert_materials
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.mesh import Mesh, normalize_to_unit_sphere
+from scenefit.core.data.primitives import uv_sphere
+from scenefit.core.render.renderer import AssetRenderer
+from scenefit.core.texture.surface_layout import (SHARED_LIMIT, adapting_view, new_layout, own_uvs_at, texture_view,
                                           uv_sharing)
 from scenefit.core.texture.bake import load_neural_texture, save_neural_texture
 
@@ -51,9 +52,9 @@ def test_sharing_is_measured_for_mirrors_repeats_and_palettes():
 
 
 def test_an_exact_start_keeps_the_asset_uvs_and_a_shared_layout_gets_new_ones():
-    plain = convert_asset(sphere(), smooth_maps(), ConvertConfig(texture_preset="draft", resolution=64))
+    plain = convert_asset(sphere(), smooth_maps(), ConvertConfig(texture=texture_preset("draft"), resolution=64))
     assert adapting_view(plain.texture, plain.mesh)[0] is None
-    shared = convert_asset(mirrored(sphere()), smooth_maps(), ConvertConfig(texture_preset="draft", resolution=64))
+    shared = convert_asset(mirrored(sphere()), smooth_maps(), ConvertConfig(texture=texture_preset("draft"), resolution=64))
     view, layout, report = adapting_view(shared.texture, shared.mesh)
     assert report["uv_layout"] == "new (xatlas)" and report["shared_surface"] > 0.4 and "xatlas" in report["why"]
     corners = view.mesh.uvs[view.mesh.faces]
@@ -68,14 +69,14 @@ def test_the_asset_reads_the_same_through_the_new_layout_as_through_its_own_uvs(
     xatlas's layout renders (albedo) what each material's own sampler reads at the same point."""
     init_mitsuba()
     asset = banded_plane([("repeat", "repeat"), ("mirror", "mirror"), ("clamp", "clamp")])
-    result = convert_materials(asset, ConvertConfig(texture_preset="draft", resolution=128))
+    result = convert_materials(asset, ConvertConfig(texture=texture_preset("draft"), resolution=128))
     mesh, _ = asset.fitting_view()
     layout = new_layout(normalize_to_unit_sphere(mesh)[0], result.texture.config.resolution, uv_sharing(mesh))
     view = texture_view(result.texture, mesh, layout)
     assert view.mesh is not mesh and not view.mesh.atlas
     stack = torch.from_numpy(view.stack(result.texture))
     renderer = AssetRenderer(view.mesh, tuple(stack.shape[:2]), np.ones((8, 16, 3), np.float32))
-    from scenefit.core.camera import Camera
+    from scenefit.core.render.orbit_camera import Camera
 
     renderer.render(Camera(width=8, height=8), stack[..., :3], stack[..., 3:4], stack[..., 4:5],
                     torch.ones(8, 16, 3), spp=1)
@@ -89,7 +90,7 @@ def test_the_asset_reads_the_same_through_the_new_layout_as_through_its_own_uvs(
 
 
 def test_a_learned_residual_differs_between_mirrored_halves_only_in_the_new_layout():
-    result = convert_asset(mirrored(sphere()), smooth_maps(), ConvertConfig(texture_preset="draft", resolution=64))
+    result = convert_asset(mirrored(sphere()), smooth_maps(), ConvertConfig(texture=texture_preset("draft"), resolution=64))
     texture = result.texture
     with torch.no_grad():   # a residual that varies over the surface, as adaptation learns one
         generator = torch.Generator().manual_seed(0)
@@ -117,7 +118,7 @@ def test_a_learned_residual_differs_between_mirrored_halves_only_in_the_new_layo
 
 def test_the_layout_is_saved_with_the_texture_and_read_for_the_same_asset_only(tmp_path):
     mesh = mirrored(sphere())
-    result = convert_asset(mesh, smooth_maps(), ConvertConfig(texture_preset="draft", resolution=64))
+    result = convert_asset(mesh, smooth_maps(), ConvertConfig(texture=texture_preset("draft"), resolution=64))
     view, layout, _ = adapting_view(result.texture, result.mesh)
     result.texture.layout = layout
     again = load_neural_texture(save_neural_texture(result.texture, tmp_path / "texture.pt"))
@@ -140,13 +141,13 @@ def tiny_models(tmp_path_factory):
 def test_adaptation_works_in_the_new_layout_and_saves_it(tiny_models, tmp_path):
     """adapt_and_bake on mirrored UVs: the report says why it re-mapped, the saved texture carries the
     layout, and maps/ stay in the asset's own UVs."""
-    from scenefit.core.adapt import AdaptConfig, StageSpec, adapt_and_bake
+    from scenefit.core.stages.adapt import AdaptConfig, StageSpec, adapt_and_bake
     from scenefit.core.guidance import ModelConfig
     from scenefit.core.scene.placement import Placement
-    from scenefit.core.texture.uv_raster import rasterize_uv
+    from scenefit.core.data.uv_raster import rasterize_uv
 
     mesh = mirrored(uv_sphere(0.5, 16, 8))
-    texture = convert_asset(mesh, smooth_maps(32), ConvertConfig(texture_preset="draft", resolution=32)).texture
+    texture = convert_asset(mesh, smooth_maps(32), ConvertConfig(texture=texture_preset("draft"), resolution=32)).texture
     base, inpaint = tiny_models
     config = AdaptConfig(prompt="a mossy sphere", iterations=3, model_resolution=32, views=4, views_per_step=1,
                          stages=(StageSpec(1.0, 16, 2, (30, 990)),), lr_texture=5e-2, views_type="local",
@@ -156,7 +157,7 @@ def test_adaptation_works_in_the_new_layout_and_saves_it(tiny_models, tmp_path):
     assert report["uv_layout"]["uv_layout"] == "new (xatlas)" and report["uv_layout"]["shared_surface"] > 0.4
     saved = load_neural_texture(report["outputs"]["weights"])
     assert saved.layout is not None and not saved.residual_is_zero() and texture.layout is None
-    from scenefit.core.imageio import read_image
+    from scenefit.core.data.imageio import read_image
 
     own = rasterize_uv(normalize_to_unit_sphere(mesh)[0], 32)
     assert read_image(report["outputs"]["base_color"]).shape[:2] == own.resolution
@@ -165,13 +166,13 @@ def test_adaptation_works_in_the_new_layout_and_saves_it(tiny_models, tmp_path):
 
 
 def test_an_unwrapper_that_fails_leaves_adaptation_in_the_asset_uvs_and_says_why(monkeypatch):
-    import scenefit.core.surface_layout as surface_layout
+    import scenefit.core.texture.surface_layout as surface_layout
 
     def failing(*_, **__):
         raise RuntimeError("xatlas: no charts")
 
     monkeypatch.setattr(surface_layout, "new_layout", failing)
-    shared = convert_asset(mirrored(sphere()), smooth_maps(), ConvertConfig(texture_preset="draft", resolution=64))
+    shared = convert_asset(mirrored(sphere()), smooth_maps(), ConvertConfig(texture=texture_preset("draft"), resolution=64))
     view, layout, report = adapting_view(shared.texture, shared.mesh)
     assert view is None and layout is None and report["uv_layout"] == "own"
     assert "no new layout could be made (xatlas: no charts)" in report["why"] and report["shared_surface"] > 0.4

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenefit.core.gltf_meshopt import read_gltf
+from scenefit.core.data.gltf_meshopt import read_gltf
 
 from conftest import built_and_converted, run_python, scenefit_process
 
@@ -52,7 +52,7 @@ bpy.ops.export_scene.gltf(filepath=str(folder / "mirrored.glb"), export_format="
 ADAPTED = r"""
 import torch
 from scenefit.blender_io.asset_file import load_asset_materials
-from scenefit.core.surface_layout import adapting_view
+from scenefit.core.texture.surface_layout import adapting_view
 from scenefit.core.texture.bake import load_neural_texture, save_neural_texture
 texture = load_neural_texture(TEXTURE)
 mesh, _ = load_asset_materials(ASSET).fitting_view()

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import torch
 
-from scenefit.core.errors import Cancelled, InputError
-from scenefit.core.imageio import linear_to_srgb, read_image
-from scenefit.core.mesh import Mesh
-from scenefit.core.presets import stage_config
+from scenefit.core.base.errors import Cancelled, InputError
+from scenefit.core.data.imageio import linear_to_srgb, read_image
+from scenefit.core.data.mesh import Mesh
+from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.texture.fit_direct import fit_direct
 from scenefit.core.texture import (
     HashGrid3D,
@@ -21,9 +21,8 @@ from scenefit.core.texture import (
     bake_maps,
     load_neural_texture,
     masked_psnr,
-    rasterize_uv,
-    seam_fill_index,
 )
+from scenefit.core.data.uv_raster import rasterize_uv, seam_fill_index
 
 SMALL = NeuralTextureConfig(resolution=64, n_levels=6, log2_table=14, base_resolution=4, finest_resolution=128, hidden=32)
 

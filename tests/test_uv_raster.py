@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenefit.core.errors import InputError
-from scenefit.core.mesh import Mesh
-from scenefit.core.primitives import uv_sphere
-from scenefit.core.texture.uv_raster import _barycentric, _nearest_covered, rasterize_uv, seam_fill_index
+from scenefit.core.base.errors import InputError
+from scenefit.core.data.mesh import Mesh
+from scenefit.core.data.primitives import uv_sphere
+from scenefit.core.data.uv_raster import _barycentric, _nearest_covered, rasterize_uv, seam_fill_index
 
 ROOT = Path(__file__).resolve().parent.parent
 WRAPS = (("clamp", "clamp"), ("repeat", "repeat"), ("mirror", "mirror"), ("repeat", "mirror"), ("clamp", "repeat"))
@@ -156,7 +156,7 @@ def test_mirrored_copy_reads_the_image_backwards():
 def test_any_chunk_size_gives_the_same_raster(monkeypatch, chunk):
     """Spans longer than a chunk, triangles whose rows straddle chunks, texels held by a triangle of an
     earlier chunk: the result does not depend on how the work was cut."""
-    import scenefit.core.texture.uv_raster as uv_raster
+    import scenefit.core.data.uv_raster as uv_raster
 
     monkeypatch.setattr(uv_raster, "CHUNK", chunk)
     for wrap in (("clamp", "clamp"), ("mirror", "repeat")):
@@ -170,8 +170,8 @@ import numpy as np
 # A rasteriser that asks for what the UV layout rather than the texture and mesh sizes call for fails
 # here at once instead of taking the machine's memory (the one-pass version needed 36 MiB per triangle).
 resource.setrlimit(resource.RLIMIT_AS, (4 << 30, 4 << 30))
-from scenefit.core.mesh import Mesh
-from scenefit.core.texture.uv_raster import rasterize_uv
+from scenefit.core.data.mesh import Mesh
+from scenefit.core.data.uv_raster import rasterize_uv
 
 n = TRIANGLES
 rng = np.random.default_rng(0)
@@ -206,7 +206,7 @@ def test_triangles_each_spanning_the_whole_square_stay_within_a_memory_bound(run
 def test_each_material_of_the_atlas_wraps_in_its_own_cell_as_bake_rasterises_it():
     """convert's atlas raster holds, in each material's cell, exactly what `scenefit bake` rasterises for
     that material in its own UVs (so the two agree), with face numbers of the whole mesh."""
-    from scenefit.core.materials import atlas_mesh, atlas_raster, atlas_slices, material_submesh
+    from scenefit.core.data.materials import atlas_mesh, atlas_raster, atlas_slices, material_submesh
 
     sphere = tiled_sphere()
     index = (sphere.positions[sphere.faces].mean(axis=1)[:, 2] > 0).astype(np.int32)  # upper half: material 1

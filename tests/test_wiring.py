@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 import torch
 
-import scenefit.core.run as run_module
+import scenefit.core.pipeline.run as run_module
 from scenefit.cli import build_parser, main
-from scenefit.core.asset_io import save_asset_folder
-from scenefit.core.imageio import write_image
-from scenefit.core.maps import PBRMaps
-from scenefit.core.primitives import uv_sphere
+from scenefit.core.data.asset_io import save_asset_folder
+from scenefit.core.data.imageio import write_image
+from scenefit.core.data.maps import PBRMaps
+from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.scene.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
 from scenefit.workers.jobs import load_jobs
 
@@ -90,7 +90,7 @@ def test_a_batch_convert_job_keeps_constant_channels_as_numbers(inputs):
 def test_the_light_critic_scores_the_asset_itself(inputs, monkeypatch):
     """run_pipeline once gave the light stage no asset: its critic scored the default grey sphere."""
     import scenefit.core.guidance.models as models
-    import scenefit.core.lighting.stage as lighting
+    import scenefit.core.stages.light.stage as lighting
 
     seen = {}
 
@@ -115,8 +115,8 @@ def test_the_light_critic_scores_the_asset_itself(inputs, monkeypatch):
 def test_a_batch_light_job_lights_the_photo_as_scenefit_light_does(inputs, monkeypatch):
     """A batch job's light stage once lit every photo through the default camera (60 deg, -10 deg pitch)
     while `scenefit light` estimated the photo's own (here EXIF's 90 deg). Both now read the photo, the
-    placement and the camera through core/lighting/stage.py and write the same report."""
-    import scenefit.core.lighting.stage as lighting
+    placement and the camera through core/stages/light/stage.py and write the same report."""
+    import scenefit.core.stages.light.stage as lighting
     from scenefit.workers.batch import run_job_stages
 
     from test_camera import _jpeg_with_exif
@@ -147,9 +147,9 @@ def test_a_batch_light_job_lights_the_photo_as_scenefit_light_does(inputs, monke
 
 def test_a_batch_light_job_chooses_the_critic_as_scenefit_light_does(inputs, monkeypatch):
     """With the SD2 weights on the machine `scenefit light` refines the scales with the diffusion critic;
-    a batch light job always took none. Both now decide 'auto' in core/lighting/stage.critic_choice."""
+    a batch light job always took none. Both now decide 'auto' in core/stages/light/stage.critic_choice."""
     import scenefit.core.guidance.models as models
-    import scenefit.core.lighting.stage as lighting
+    import scenefit.core.stages.light.stage as lighting
     from scenefit.workers.batch import run_job_stages
 
     class Stop(Exception):
@@ -185,13 +185,38 @@ def test_the_command_line_and_the_panel_share_one_set_of_defaults():
         defaults = {a.dest: a.default for a in sub[command]._actions}
         assert defaults["object_size"] == DEFAULT_OBJECT_SIZE
     # The panel's properties name the same constants (read from the source: registering them needs bpy).
-    source = (Path(run_module.__file__).parents[1] / "operators" / "properties.py").read_text()
+    source = (Path(run_module.__file__).parents[2] / "operators" / "properties.py").read_text()
     settings = next(node for node in ast.walk(ast.parse(source))
                     if isinstance(node, ast.ClassDef) and node.name == "SceneFitSettings")
     default_of = {node.target.id: next((k.value for k in node.annotation.keywords if k.arg == "default"), None)
                   for node in settings.body if isinstance(node, ast.AnnAssign) and isinstance(node.annotation, ast.Call)}
     assert ast.unparse(default_of["placement"]) == "DEFAULT_AT"
     assert ast.unparse(default_of["size"]) == "DEFAULT_OBJECT_SIZE"
+
+
+def test_every_stage_config_defaults_to_the_balanced_preset_or_says_why_not():
+    """A config built with no arguments (a test, a script, a stage called directly) is the balanced
+    preset's; texture, light and adapt keep the paper's values as defaults, and their docstrings say so.
+    A stage config holds resolved values: convert's and adapt's texture is a NeuralTextureConfig."""
+    from dataclasses import replace
+
+    from scenefit.core.pipeline.presets import stage_config
+    from scenefit.core.stages.adapt.config import AdaptConfig
+    from scenefit.core.stages.compose import ComposeConfig
+    from scenefit.core.stages.convert import ConvertConfig
+    from scenefit.core.stages.light.estimate import LightConfig
+    from scenefit.core.texture.neural_texture import BALANCED_TEXTURE, NeuralTextureConfig
+
+    assert ConvertConfig() == stage_config("convert", "balanced")
+    assert ComposeConfig() == stage_config("compose", "balanced")
+    assert BALANCED_TEXTURE == stage_config("texture", "balanced")
+    assert AdaptConfig(prompt="moss").texture == BALANCED_TEXTURE
+    assert stage_config("convert", "draft").texture == stage_config("texture", "draft") != BALANCED_TEXTURE
+    for config in (NeuralTextureConfig(), LightConfig(), AdaptConfig(prompt="moss")):
+        assert "paper" in type(config).__doc__
+    assert NeuralTextureConfig() == stage_config("texture", "final")
+    assert AdaptConfig(prompt="moss") == replace(stage_config("adapt", "final", prompt="moss"), texture=BALANCED_TEXTURE)
+    assert LightConfig().optimise == stage_config("light", "final").optimise
 
 
 def test_elevation_is_the_orbit_angle_and_pitch_the_photo_cameras():
@@ -236,7 +261,7 @@ def test_run_all_in_blender_and_the_command_line_give_the_pipeline_the_same_sett
 
 def test_a_remote_job_from_blender_runs_the_pipeline_as_a_batch_job_does(inputs, monkeypatch):
     """workers/remote.work_remotely packs the add-on's data into a Job; its worker runs the batch's path."""
-    from scenefit.core.asset_io import load_asset_folder
+    from scenefit.core.data.asset_io import load_asset_folder
     from scenefit.workers import remote
     from scenefit.workers.batch import run_pipeline_for_job
 

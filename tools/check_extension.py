@@ -44,7 +44,7 @@ report["enabled"] = module in bpy.context.preferences.addons
 report["install_s"] = round(time.perf_counter() - t, 1)
 common = __import__(module + ".operators.common", fromlist=["missing_modules"])
 report["missing_modules"] = common.missing_modules()
-report["oidn"] = __import__(module + ".core.denoise", fromlist=["oidn_available"]).oidn_available()
+report["oidn"] = __import__(module + ".core.render.denoise", fromlist=["oidn_available"]).oidn_available()
 bpy.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16)
 obj = bpy.context.active_object
 image = bpy.data.images.new("color", 64, 64)

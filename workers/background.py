@@ -30,8 +30,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..core.errors import Cancelled, InputError, SceneFitError
-from ..core.progress import ProgressEvent, check_cancel
+from ..core.base.errors import Cancelled, InputError, SceneFitError
+from ..core.base.progress import ProgressEvent, check_cancel
 
 # work(data, progress, cancel) -> result; progress(ProgressEvent) also raises Cancelled once cancel is set.
 Work = Callable[[Any, Callable[[ProgressEvent], None], threading.Event], Any]
@@ -208,7 +208,7 @@ class Job:
         except SceneFitError as error:
             self._events.put(("error", (str(error), "")))
         except OSError as error:   # disk full, read-only, a path in the way: a sentence, as on the command line
-            from ..core.os_errors import os_error_sentence
+            from ..core.base.os_errors import os_error_sentence
 
             out = self._data.get("out") if isinstance(self._data, dict) else None
             self._events.put(("error", (os_error_sentence(error, out), traceback.format_exc())))

@@ -27,10 +27,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
-from ..core.atomic import write_json_atomic, write_text_atomic
-from ..core.errors import InputError, SceneFitError
+from ..core.base.atomic import write_json_atomic, write_text_atomic
+from ..core.base.errors import InputError, SceneFitError
 from .jobs import BatchSettings, Job, JobsFile, with_user_paths
-from ..core.output_folder import check_output_folder, check_subfolder, folder_in_place, install_folder
+from ..core.base.output_folder import check_output_folder, check_subfolder, folder_in_place, install_folder
 
 REPORT = "report.json"
 # A job's unpacked inputs and its output, in the system's temp folder: scenefit-job-<pid>-XXXX. A worker
@@ -168,7 +168,7 @@ def run_plain(worker: JobWorker, job: dict, inputs: bytes, progress_sink=None) -
     "outputs"} or {"error", "kind"}). What a caller whose copy of SceneFit has another package name
     (the Blender add-on: bl_ext.<repo>.scenefit) exchanges with a worker, since neither side can
     unpickle the other's classes."""
-    from ..core.errors import Cancelled
+    from ..core.base.errors import Cancelled
 
     try:
         result = worker.run(JobPayload(Job.from_dict(job), inputs), progress_sink)
@@ -234,7 +234,7 @@ def worker_info(jobs_run: int, model_loads: int) -> dict:
 def run_job_stages(job: Job, out: Path, progress=None, cancel=None, models=None) -> dict:
     """Run the job's stages into `out`; returns each stage's report.
 
-    A job that composes runs `scenefit run`'s pipeline (core/run.py, adapt included when its stages
+    A job that composes runs `scenefit run`'s pipeline (core/pipeline/run.py, adapt included when its stages
     list it); a job of convert and/or light alone runs those stage functions. `models`: the worker's
     ModelCache (None: the pipeline loads what it needs for this job alone).
     """
@@ -244,10 +244,10 @@ def run_job_stages(job: Job, out: Path, progress=None, cancel=None, models=None)
 
 
 def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models=None) -> dict:
-    """The job through core/run.py's run_pipeline: adapt when listed (and its weights are found)."""
-    from ..core.run import RunConfig, run_pipeline
+    """The job through core/pipeline/run.py's run_pipeline: adapt when listed (and its weights are found)."""
+    from ..core.pipeline.run import RunConfig, run_pipeline
 
-    from ..core.bake_process import asset_file_bake
+    from ..core.stages.bake.process import asset_file_bake
 
     mesh, maps = _load_asset(job)
     config = RunConfig(preset=job.preset, prompt=job.prompt, guidance_type="auto" if "adapt" in job.stages else "none",
@@ -273,9 +273,9 @@ def _load_asset(job: Job):
 
 
 def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
-    from ..core.lighting.stage import critic_choice, light_inputs, run_light, write_light
-    from ..core.pipeline import convert_and_bake
-    from ..core.presets import stage_config
+    from ..core.stages.light.stage import critic_choice, light_inputs, run_light, write_light
+    from ..core.stages.convert import convert_and_bake
+    from ..core.pipeline.presets import stage_config
 
     if "adapt" in job.stages:
         raise InputError(f"Job '{job.name}': stage adapt runs inside the whole pipeline in a batch; "
@@ -404,7 +404,7 @@ def run_batch(jobs: JobsFile, out_dir: str | Path, dispatcher: Dispatcher | None
               on_event: EventCallback | None = None, redo: bool = False) -> list[JobOutcome]:
     """Run every job not yet done; write the per-job folders, summary.json/.md and the contact sheet.
 
-    The folder follows every command's contract (core/output_folder.py): locked while the batch runs,
+    The folder follows every command's contract (core/base/output_folder.py): locked while the batch runs,
     never a folder holding an input or files SceneFit did not write; each job's folder is swapped in
     whole. redo: run the jobs done by an earlier batch again (`--replace`)."""
     check_batch(jobs, out_dir)
@@ -504,7 +504,7 @@ def write_summary(out_dir: Path, outcomes: list[JobOutcome], jobs: JobsFile) -> 
     write_text_atomic(out_dir / SUMMARY_MD, text)
     sheet = contact_sheet_image(out_dir, [o.name for o in outcomes if o.status in ("done", "skipped")])
     if sheet is not None:
-        from ..core.imageio import write_image
+        from ..core.data.imageio import write_image
 
         write_image(out_dir / CONTACT_SHEET, sheet)
 
@@ -514,7 +514,7 @@ def contact_sheet_image(out_dir: Path, names: list[str], cell: int = 192, column
     import cv2
     import numpy as np
 
-    from ..core.imageio import read_image
+    from ..core.data.imageio import read_image
 
     cells = []
     for name in names:

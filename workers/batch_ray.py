@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 from .batch import Dispatcher, JobPayload, JobWorker, job_threads
-from ..core.errors import InputError
+from ..core.base.errors import InputError
 from .jobs import BatchSettings
 
 

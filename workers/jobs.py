@@ -38,7 +38,7 @@ import tomllib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
-from ..core.errors import InputError
+from ..core.base.errors import InputError
 from ..core.guidance.models import ModelConfig
 
 STAGE_TYPES = ("convert", "light", "adapt", "compose", "bake")   # pipeline order

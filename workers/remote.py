@@ -19,11 +19,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ..core import errors
+from ..core.base import errors
 from .batch import make_payload, unpack
-from ..core.output_folder import install_folder
+from ..core.base.output_folder import install_folder
 from .batch_ray import connect, import_ray, job_resources
-from ..core.errors import Cancelled, SceneFitError
+from ..core.base.errors import Cancelled, SceneFitError
 from .jobs import BatchSettings, Job
 
 # What the worker environment imports SceneFit as (a pip install of it).
@@ -151,7 +151,7 @@ def run_remote(job: Job, out_dir: str | Path, address: str = "auto", settings: B
     """
     import time
 
-    from ..core.progress import ProgressEvent
+    from ..core.base.progress import ProgressEvent
 
     with open_worker(job, address, settings) as remote:
         asked_to_cancel = False
@@ -280,7 +280,7 @@ def _toml(value) -> str:
 def _read_preview(path: str):
     import numpy as np
 
-    from ..core.imageio import read_image
+    from ..core.data.imageio import read_image
 
     try:
         return (np.clip(read_image(path)[..., :3], 0.0, 1.0) * 255).round().astype(np.uint8)
@@ -297,7 +297,7 @@ def work_remotely(data: dict, progress=None, cancel=None) -> dict:
     """
     import tempfile
 
-    from ..core.asset_io import save_asset_folder
+    from ..core.data.asset_io import save_asset_folder
     from .jobs import STAGE_TYPES
 
     with tempfile.TemporaryDirectory(prefix="scenefit-asset-") as tmp:

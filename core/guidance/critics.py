@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ..errors import InputError, check_choice
+from ..base.errors import InputError, check_choice
 from .injection import Layout, ReferenceInjector
 from .lora import LoraCritic
 from .weighting import WEIGHTING_TYPES, add_noise, alphas_cumprod, guard_gradient, timestep_weight

@@ -14,7 +14,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import InputError, ModelMissingError
+from ..base.errors import InputError, ModelMissingError
 
 DEFAULT_BASE_MODEL = "stabilityai/stable-diffusion-2-base"
 DEFAULT_INPAINT_MODEL = "stabilityai/stable-diffusion-2-inpainting"

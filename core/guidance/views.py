@@ -1,6 +1,6 @@
 """What the critics look at: the local view (object on a solid colour) and the global views (object
 composited into the photo by compose's rule with its shadow, cropped at several scales; the asset
-layer comes from core/adapt/global_views.py), plus the inpainting input.
+layer comes from core/stages/adapt/global_views.py), plus the inpainting input.
 
 Images are torch (1, 3, H, W) display sRGB in [0, 1]; the object arrives as the renderer's linear,
 premultiplied radiance (background 0, see SceneOptions.hide_emitters) and its alpha.
@@ -11,7 +11,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..errors import InputError
+from ..base.errors import InputError
 from ..scene.mattes import composite_linear
 
 GREY = (0.5, 0.5, 0.5)

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import torch
 
-from ..errors import InputError
+from ..base.errors import InputError
 
 WEIGHTING_TYPES = ("sds", "uniform")          # w_t = 1 - ᾱ_t (DreamFusion) or 1
 ANNEAL_TYPES = ("linear", "none")             # timestep window moving from high to low noise, or fixed

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
-from ..mesh import Mesh, vertex_normals
+from ..base.errors import InputError
+from ..data.mesh import Mesh, vertex_normals
 from .camera import CAMERA_HEIGHT, PhotoCamera, camera_origin, camera_pose, pixel_ray
 from .floor import place_on_floor
 from .frame import rotation_z

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
+from ..base.errors import InputError
 from .camera import CAMERA_HEIGHT, PhotoCamera, pixel_ray
 
 

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ..errors import InputError
+from ..base.errors import InputError
 
 
 WORLD_UP = (0.0, 0.0, 1.0)

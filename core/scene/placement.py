@@ -5,14 +5,14 @@ photo, as fractions of its width and height (values above 1 are read as pixels);
 the fraction of the photo's height the asset spans. The light stage casts its floor ray through the
 centre (core/scene/floor.py `place_on_floor`); the compose stage stands the asset on the floor
 there (core/scene/asset_pose.py `place_asset`), and the adapt stage's global views are that composite
-(core/adapt/global_views.py).
+(core/stages/adapt/global_views.py).
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
-from ..errors import InputError
+from ..base.errors import InputError
 
 
 # The one default of every entry point (the command line, the Blender panel, batch jobs, adapt's

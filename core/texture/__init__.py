@@ -1,13 +1,13 @@
-"""The neural texture: UV-space position map, hash-grid + MLP appearance model, direct fit, bake.
+"""The neural texture: hash-grid + MLP appearance model, direct fit, bake (its UV-space position map C is
+core/data/uv_raster.py).
 
-rasterize_uv(mesh, H) -> UVRaster           the paper's position map C and coverage
 NeuralTexture(config)                         3D point -> base colour, roughness, metallic
 fit_direct.fit_direct(texture, C, mask, ...)  regression in texture space (asset has a UV texture)
 bake_maps(texture, C, border, fill, out_dir)  PNG maps + texture.pt; load_neural_texture() resumes
 
-Each name is imported from its module when first asked for: the UV rasteriser is numpy alone, and a
-module that needs only it (materials, render, compose, hence `scenefit --help` and the refusals the
-command line makes before any work) does not wait the ~2 s that importing torch takes. The function
+Each name is imported from its module when first asked for, so a module that needs one light part
+(hence `scenefit --help` and the refusals the command line makes before any work) does not wait the
+~2 s that importing torch takes. The function
 fit_direct is imported from its module of the same name: once that module is loaded, the package's
 attribute `fit_direct` is the module (Python sets it), so the package cannot hand out the function.
 """
@@ -21,7 +21,6 @@ _MODULE_OF = {
     "HashGrid3D": "hashgrid",
     "CHANNELS": "neural_texture", "NeuralTexture": "neural_texture", "NeuralTextureConfig": "neural_texture",
     "TexelPlan": "neural_texture", "split_channels": "neural_texture",
-    "UVRaster": "uv_raster", "rasterize_uv": "uv_raster", "seam_fill_index": "uv_raster",
 }
 __all__ = sorted(_MODULE_OF)
 

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..atomic import write_bytes_atomic
-from ..errors import InputError
-from ..imageio import linear_to_srgb, write_image
+from ..base.atomic import write_bytes_atomic
+from ..base.errors import InputError
+from ..data.imageio import linear_to_srgb, write_image
 from .neural_texture import NeuralTexture, NeuralTextureConfig
 
 WEIGHTS_FORMAT = "scenefit.neural_texture"
@@ -97,7 +97,7 @@ def load_neural_texture(path: str | os.PathLike, device: str | torch.device = "c
     except RuntimeError as error:
         raise InputError(f"The weights in '{path}' do not match their config: {error}") from error
     if payload.get("layout") is not None:
-        from ..surface_layout import SurfaceLayout
+        from .surface_layout import SurfaceLayout
 
         try:
             texture.layout = SurfaceLayout.from_payload(payload["layout"])

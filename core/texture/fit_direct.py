@@ -21,9 +21,9 @@ from typing import Callable
 import numpy as np
 import torch
 
-from ..errors import Cancelled, InputError
+from ..base.errors import Cancelled, InputError
 from .neural_texture import NeuralTexture
-from .uv_raster import seam_fill_index
+from ..data.uv_raster import seam_fill_index
 
 ProgressFn = Callable[[int, float, float], None]
 

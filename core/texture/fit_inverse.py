@@ -17,10 +17,10 @@ from typing import Callable, Iterable
 import numpy as np
 import torch
 
-from ..camera import Camera
-from ..mesh import Mesh
-from ..progress import ProgressCallback, check_cancel, emit
-from ..render import AssetRenderer, SceneOptions
+from ..render.orbit_camera import Camera
+from ..data.mesh import Mesh
+from ..base.progress import ProgressCallback, check_cancel, emit
+from ..render.renderer import AssetRenderer, SceneOptions
 from ..scene.frame import equirect_directions
 from .neural_texture import split_channels
 

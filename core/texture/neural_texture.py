@@ -17,8 +17,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
-from ..errors import InputError
-from ..mesh import NORMALIZED_RADIUS
+from ..base.errors import InputError
+from ..data.mesh import NORMALIZED_RADIUS
 from .hashgrid import EncodingPlan, HashGrid3D
 
 CHANNELS = ("base_r", "base_g", "base_b", "roughness", "metallic")
@@ -26,7 +26,7 @@ CHANNELS = ("base_r", "base_g", "base_b", "roughness", "metallic")
 
 @dataclass(frozen=True)
 class NeuralTextureConfig:
-    """Shape of the neural texture. Defaults follow the paper / Instant-NGP; core/presets.py has faster ones.
+    """Shape of the neural texture. Defaults follow the paper / Instant-NGP; core/pipeline/presets.py has faster ones.
 
     resolution: texture map size (H = W) the position map is rasterised and the maps are baked at.
     n_levels, n_features, log2_table, base_resolution, finest_resolution: the hash grid (Instant-NGP
@@ -96,6 +96,11 @@ class NeuralTextureConfig:
             raise InputError(f"Neural texture config has unknown fields {unknown}; was it saved by a newer SceneFit?")
         return NeuralTextureConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
 
+
+
+# The balanced preset's hash grid (core/pipeline/preset_tables.py, "texture"): what a stage config that
+# makes a texture holds by default, as every stage's default is balanced (tests/test_wiring.py pins it).
+BALANCED_TEXTURE = NeuralTextureConfig(n_levels=12, log2_table=18, finest_resolution=1024)
 
 
 @dataclass(eq=False)

@@ -1,0 +1,96 @@
+"""Which files on disk an asset file is made of (the file, its buffers and images, its material
+library): the files an output must never overwrite. Read as data (JSON and text lines), never run."""
+from __future__ import annotations
+
+import json
+import os
+import struct
+from pathlib import Path
+from urllib.parse import unquote
+
+from ..base.errors import InputError
+
+
+def asset_files(path: str | os.PathLike) -> list[Path]:
+    """The asset file and the files it refers to that exist, resolved (a folder: every file in it)."""
+    path = Path(path)
+    if path.is_dir():
+        return sorted(p.resolve() for p in path.rglob("*") if p.is_file())
+    found = [path]
+    suffix = path.suffix.lower()
+    if suffix in (".gltf", ".glb"):
+        found += [path.parent / unquote(uri) for uri in _gltf_uris(path)]
+    elif suffix == ".obj":
+        for library in _obj_libraries(path):
+            found.append(library)
+            found += _mtl_maps(library)
+    return sorted({p.resolve() for p in found if p.is_file()})
+
+
+def _gltf_json(path: Path) -> dict:
+    data = path.read_bytes()
+    if data[:4] == b"glTF" and len(data) >= 20:
+        length, kind = struct.unpack_from("<II", data, 12)
+        data = data[20:20 + length] if kind == 0x4E4F534A else b"{}"   # the JSON chunk
+    try:
+        return json.loads(data)
+    except ValueError:
+        return {}
+
+
+def _gltf_uris(path: Path) -> list[str]:
+    document = _gltf_json(path)
+    entries = [*document.get("buffers", []), *document.get("images", [])]
+    return [e["uri"] for e in entries
+            if isinstance(e, dict) and isinstance(e.get("uri"), str) and not e["uri"].startswith("data:")]
+
+
+def _obj_libraries(path: Path) -> list[Path]:
+    libraries = []
+    with open(path, errors="replace") as f:
+        for line in f:
+            if line.startswith("mtllib "):
+                libraries += [path.parent / name for name in line.split()[1:]]
+    return libraries
+
+
+def _mtl_maps(library: Path) -> list[Path]:
+    if not library.is_file():
+        return []
+    maps = []
+    with open(library, errors="replace") as f:
+        for line in f:
+            words = line.split()
+            if words and (words[0].startswith("map_") or words[0] in ("bump", "disp", "norm")):
+                maps.append(library.parent / words[-1])
+    return maps
+
+
+def refuse_overwriting(targets: list[Path], protected: list[Path], what: str = "the output") -> None:
+    """One sentence, before anything is written, when a file about to be written is one of `protected`
+    (compared by resolved path and by inode, so links and other spellings of the same file count)."""
+    keys = {_identity(p) for p in protected} - {None}
+    names = {Path(p).resolve() for p in protected}
+    for target in targets:
+        target = Path(target)
+        if target.resolve() in names or _identity(target) in keys:
+            raise InputError(f"Writing {what} would overwrite '{target}', which is one of the inputs; choose "
+                             "another output path or folder (SceneFit never writes over its inputs).")
+
+
+def refuse_replacing(targets: list[Path], option: str = "--replace") -> None:
+    """One sentence when a file about to be written already exists: an earlier run's output (or
+    anything else the user keeps there) is replaced only when asked for with `option`."""
+    existing = [Path(t) for t in targets if Path(t).exists()]
+    if existing:
+        more = f" (and {len(existing) - 1} more file{'s' if len(existing) > 2 else ''} it would write)" if len(existing) > 1 else ""
+        raise InputError(f"'{existing[0]}' already exists{more}; give {option} to write over it, or choose another "
+                         "output path.")
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    try:
+        stat = os.stat(path)
+    except OSError:
+        return None
+    return stat.st_dev, stat.st_ino

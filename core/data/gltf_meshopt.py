@@ -1,0 +1,208 @@
+"""EXT_meshopt_compression decoded before import: Blender 5.0's glTF importer has no meshopt
+decoder and refuses such files, which the Khronos validator accepts. The file is rewritten as a
+plain GLB (every bufferView decoded with meshoptimizer's own decoder, PyPI `meshopt`; external
+buffers and images embedded) in a temporary folder, and that copy is imported."""
+from __future__ import annotations
+
+import base64
+import json
+import struct
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+from urllib.parse import unquote
+
+import numpy as np
+
+from ..base.errors import InputError
+
+EXTENSION = "EXT_meshopt_compression"
+_MIME = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".webp": "image/webp",
+         ".ktx2": "image/ktx2"}
+
+
+def read_gltf(path: Path) -> tuple[dict, bytes | None]:
+    """(the JSON, the GLB's BIN chunk or None) of a .glb or .gltf file."""
+    data = path.read_bytes()
+    if data[:4] != b"glTF":
+        return json.loads(data), None
+    length = struct.unpack_from("<I", data, 12)[0]
+    document = json.loads(data[20:20 + length])
+    rest = data[20 + length:]
+    return document, (rest[8:8 + struct.unpack_from("<I", rest, 0)[0]] if len(rest) >= 8 else None)
+
+
+def uses_meshopt(path: Path) -> bool:
+    if path.suffix.lower() not in (".gltf", ".glb"):
+        return False
+    try:
+        document, _ = read_gltf(path)
+    except (ValueError, struct.error, UnicodeDecodeError):
+        return False  # not readable as glTF: the importer says why
+    return EXTENSION in document.get("extensionsUsed", [])
+
+
+def _uri_bytes(uri: str, folder: Path) -> bytes:
+    if uri.startswith("data:"):
+        return base64.b64decode(uri.split(",", 1)[1])
+    return (folder / unquote(uri)).read_bytes()
+
+
+def _buffers(document: dict, chunk: bytes | None, folder: Path) -> list[bytes | None]:
+    """Each buffer's bytes; None for a meshopt fallback buffer that holds nothing."""
+    found = []
+    for index, buffer in enumerate(document.get("buffers", [])):
+        if "uri" in buffer:
+            found.append(_uri_bytes(buffer["uri"], folder))
+        elif index == 0 and chunk is not None:
+            found.append(chunk)
+        else:
+            found.append(None)
+    return found
+
+
+def _decoded_view(view: dict, buffers: list[bytes | None]) -> bytes:
+    """The bufferView's plain bytes, decoded where it is compressed."""
+    import meshopt
+
+    packed = view.get("extensions", {}).get(EXTENSION)
+    if packed is None:
+        source = buffers[view["buffer"]]
+        if source is None:
+            raise InputError(f"A bufferView of the file points into an empty fallback buffer {view['buffer']}; "
+                             f"give the file with its {EXTENSION} data.")
+        start = view.get("byteOffset", 0)
+        return source[start:start + view["byteLength"]]
+    source = buffers[packed["buffer"]]
+    start = packed.get("byteOffset", 0)
+    count, stride, mode = packed["count"], packed["byteStride"], packed.get("mode", "ATTRIBUTES")
+    rows = meshopt.decode_gltf_buffer(bytes(source[start:start + packed["byteLength"]]), count, stride, mode,
+                                      packed.get("filter", "NONE"))
+    rows = np.asarray(rows)
+    if mode != "ATTRIBUTES":  # indices come back as integers, stored at the view's stride
+        rows = rows.astype(f"<u{stride}")
+    return rows.tobytes()
+
+
+def decoded_glb(path: Path, out: Path) -> Path:
+    """`path` (a .glb or .gltf using EXT_meshopt_compression) written to `out` as a plain GLB."""
+    document, chunk = read_gltf(path)
+    buffers = _buffers(document, chunk, path.parent)
+    blob = bytearray()
+
+    def append(data: bytes) -> tuple[int, int]:
+        blob.extend(b"\0" * (-len(blob) % 4))  # every accessor's component fits a 4-byte alignment
+        blob.extend(data)
+        return len(blob) - len(data), len(data)
+
+    for view in document.get("bufferViews", []):
+        offset, length = append(_decoded_view(view, buffers))
+        extensions = {k: v for k, v in view.pop("extensions", {}).items() if k != EXTENSION}
+        view.update({"buffer": 0, "byteOffset": offset, "byteLength": length}, **({"extensions": extensions}
+                                                                               if extensions else {}))
+    for image in document.get("images", []):
+        if "uri" in image:  # embedded, so the copy needs no files beside it
+            uri = image.pop("uri")
+            document.setdefault("bufferViews", []).append(dict(zip(("buffer", "byteOffset", "byteLength"),
+                                                                   (0, *append(_uri_bytes(uri, path.parent))))))
+            image["bufferView"] = len(document["bufferViews"]) - 1
+            image.setdefault("mimeType", _MIME.get(Path(unquote(uri)).suffix.lower(), "image/png"))
+    document["buffers"] = [{"byteLength": len(blob)}]
+    for key in ("extensionsUsed", "extensionsRequired"):
+        kept = [name for name in document.get(key, []) if name != EXTENSION]
+        document.pop(key, None)
+        if kept:
+            document[key] = kept
+    write_glb(out, document, bytes(blob))
+    return out
+
+
+def write_glb(out: Path, document: dict, blob: bytes) -> None:
+    text = json.dumps(document, separators=(",", ":")).encode()
+    text += b" " * (-len(text) % 4)
+    blob += b"\0" * (-len(blob) % 4)
+    total = 12 + 8 + len(text) + (8 + len(blob) if blob else 0)
+    parts = [b"glTF", struct.pack("<II", 2, total), struct.pack("<I", len(text)), b"JSON", text]
+    if blob:
+        parts += [struct.pack("<I", len(blob)), b"BIN\0", blob]
+    out.write_bytes(b"".join(parts))
+
+
+@contextmanager
+def importable(path: Path):
+    """`path`, or while the block runs a decoded copy of it when it uses EXT_meshopt_compression."""
+    if not uses_meshopt(path):
+        yield path
+        return
+    try:
+        import meshopt  # noqa: F401  (meshoptimizer's decoder)
+    except ImportError:
+        raise InputError(f"'{path.name}' uses {EXTENSION}, whose decoder (PyPI 'meshopt') is not installed; "
+                         "run `make setup` or `pip install -r requirements.txt`.") from None
+    with tempfile.TemporaryDirectory(prefix="scenefit-meshopt-") as folder:
+        try:
+            copy = decoded_glb(path, Path(folder) / f"{path.stem}.glb")
+        except (KeyError, IndexError, ValueError, RuntimeError, OSError) as error:
+            raise InputError(f"The {EXTENSION} data of '{path.name}' does not decode ({error}); check the file "
+                             "with the Khronos glTF validator.") from None
+        yield copy
+
+
+_COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+_TYPE_COUNT = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_ELEMENT_ARRAY_BUFFER = 34963
+
+
+def _element_sizes(document: dict) -> dict[int, int]:
+    """bufferView -> the bytes of one element of the accessors reading it (views no accessor reads,
+    images, are left out)."""
+    sizes = {}
+    for accessor in document.get("accessors", []):
+        if "bufferView" in accessor:
+            sizes[accessor["bufferView"]] = _COMPONENT_BYTES[accessor["componentType"]] * \
+                _TYPE_COUNT[accessor["type"]]
+    return sizes
+
+
+def _packed(data: bytes, view: dict, size: int) -> tuple[bytes, dict] | None:
+    """The view's bytes as EXT_meshopt_compression stores them and the extension's fields, or None
+    where the codec cannot take it (a stride not a multiple of 4, a partial row)."""
+    import meshopt
+
+    stride = view.get("byteStride", size)
+    if view.get("target") == _ELEMENT_ARRAY_BUFFER and stride in (2, 4) and len(data) % (3 * stride) == 0:
+        mode, rows = "TRIANGLES", np.frombuffer(data, f"<u{stride}").astype(np.uint32)
+    elif stride % 4 == 0 and stride <= 256 and len(data) % stride == 0 and view.get("target") != _ELEMENT_ARRAY_BUFFER:
+        mode, rows = "ATTRIBUTES", np.frombuffer(data, np.uint8).reshape(-1, stride)
+    else:
+        return None
+    return meshopt.encode_gltf_buffer(rows, mode), {"byteStride": stride, "count": len(data) // stride, "mode": mode}
+
+
+def encoded_glb(source: Path, out: Path) -> Path:
+    """A plain GLB `source` written to `out` with its vertex and index data EXT_meshopt_compression-
+    compressed, in gltfpack's layout: the compressed bytes in the BIN chunk, and a fallback buffer
+    holding nothing (so the extension is required). Images stay as they are."""
+    document, chunk = read_gltf(source)
+    sizes = _element_sizes(document)
+    blob, fallback = bytearray(), 0
+    for index, view in enumerate(document.get("bufferViews", [])):
+        data = chunk[view.get("byteOffset", 0):][:view["byteLength"]]
+        blob.extend(b"\0" * (-len(blob) % 4))
+        packed = _packed(data, view, sizes[index]) if index in sizes else None
+        if packed is None:
+            view.update(buffer=0, byteOffset=len(blob))
+            blob.extend(data)
+            continue
+        view["extensions"] = {**view.get("extensions", {}), EXTENSION: {
+            "buffer": 0, "byteOffset": len(blob), "byteLength": len(packed[0]), **packed[1]}}
+        fallback += -fallback % 4
+        view.update(buffer=1, byteOffset=fallback)
+        fallback += view["byteLength"]
+        blob.extend(packed[0])
+    document["buffers"] = [{"byteLength": len(blob)},
+                           {"byteLength": max(fallback, 1), "extensions": {EXTENSION: {"fallback": True}}}]
+    for key in ("extensionsUsed", "extensionsRequired"):
+        document[key] = sorted(set(document.get(key, [])) | {EXTENSION})
+    write_glb(out, document, bytes(blob))
+    return out

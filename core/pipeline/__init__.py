@@ -1,0 +1,1 @@
+"""Presets resolved into stage configs, and the one runner that strings the stages together."""

@@ -1,0 +1,462 @@
+"""The whole pipeline for one asset and one photo: convert -> light -> adapt -> compose -> bake.
+
+    report = run_pipeline(mesh, maps, photo_path, placement, out_dir, RunConfig(...), progress, cancel)
+
+Each stage writes into its own folder under out_dir and, last, a `stage.json` holding its key: a
+digest of its settings, of the inputs it reads and of the keys of the stages it depends on. A later
+run whose key for a stage matches a finished stage.json (and whose listed outputs still exist)
+reuses that stage and says so; anything else runs it again, and with it every stage after it.
+Stages hand data to each other only through their files, so a reused stage and a fresh one look
+the same downstream. Plain data in (arrays, paths, a frozen config), a report dict out: the Ray
+batch runner calls this function as it is.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import threading
+import time
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+from ..base.atomic import write_json_atomic
+# GameBake: bake(texture.pt, stage folder, cancel) -> the started bake of the asset's own file; its wait()
+# gives the report with "outputs". It needs Blender, which core/ never imports: bake_process runs it as a
+# child process, so it runs while the run composes.
+from ..stages.bake.process import GameBake
+from ..base.errors import InputError
+from ..guidance.models import GuidanceModels, ModelCache, ModelConfig
+from ..data.maps import PBRMaps
+from ..data.mesh import Mesh
+from ..base.progress import ProgressCallback, check_cancel, emit
+from ..scene.camera import PhotoCamera
+from ..scene.placement import DEFAULT_OBJECT_SIZE
+
+GUIDANCE_TYPES = ("auto", "sd2", "none")
+STAGES = ("convert", "light", "adapt", "compose", "bake")
+STAGE_FILE = "stage.json"
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    preset: str = "balanced"                  # draft | balanced | final, for every stage
+    prompt: str = ""                          # adapt: what the asset should become in this scene
+    guidance_type: str = "auto"               # adapt (and the light critic): sd2 | none | auto (sd2 when found)
+    size: float = DEFAULT_OBJECT_SIZE         # compose: fraction of the photo's height the asset spans (--object-size)
+    shadow_type: str = "ratio"
+    compose_spp: int | None = None
+    photo_camera: PhotoCamera | None = None   # None: the photo's camera as estimated (core/stages/camera.py)
+    fspy: str | None = None                   # an fSpy project of the photo: its solved camera is used
+    camera_overrides: dict = field(default_factory=dict)   # {"fov_deg"|"pitch_deg"|"roll_deg": value} over the estimate
+    camera_source: str = "user"               # where camera_overrides come from: "user", or "blender" (the scene camera)
+    camera_why: str = "given by the user"     # ... said in the report's camera notes
+    turn_deg: float = 0.0                     # compose: the asset turned about Z after facing the camera
+    models: ModelConfig = field(default_factory=ModelConfig)
+    # Settings over the preset's, per stage ("convert", "light", "adapt", "compose"), as the stage's config takes them:
+    # quick looks, tests and benchmarks (e.g. {"adapt": {"iterations": 4}}). Part of each stage's key.
+    stage_overrides: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.preset not in ("draft", "balanced", "final"):
+            raise InputError(f"preset must be draft, balanced or final, got {self.preset!r}.")
+        if self.guidance_type not in GUIDANCE_TYPES:
+            raise InputError(f"guidance_type must be one of {', '.join(GUIDANCE_TYPES)}, got {self.guidance_type!r}.")
+        wrong = sorted(set(self.camera_overrides) - {"fov_deg", "pitch_deg", "roll_deg"})
+        if wrong:
+            raise InputError(f"camera_overrides takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
+        unknown = sorted(set(self.stage_overrides) - {"convert", "light", "adapt", "compose"})
+        if unknown:
+            raise InputError(f"stage_overrides names unknown stage {unknown[0]!r}; it takes convert, light, adapt "
+                             f"and compose.")
+
+    def overrides(self, stage: str) -> dict:
+        return dict(self.stage_overrides.get(stage, {}))
+
+
+def _digest(*parts) -> str:
+    h = hashlib.sha256()
+    for part in parts:
+        if isinstance(part, np.ndarray):
+            h.update(str((part.dtype, part.shape)).encode())
+            h.update(np.ascontiguousarray(part).tobytes())
+        elif isinstance(part, (bytes, bytearray)):
+            h.update(part)
+        else:
+            h.update(json.dumps(part, sort_keys=True, default=str).encode())
+    return h.hexdigest()[:16]
+
+
+def asset_digest(mesh: Mesh, maps: PBRMaps) -> str:
+    stack = maps.stacked()
+    return _digest(mesh.positions, mesh.faces, mesh.uvs, mesh.normals if mesh.normals is not None else b"", stack)
+
+
+class StageRunner:
+    """Runs or reuses one stage at a time, and keeps the run's report."""
+
+    def __init__(self, out: Path, progress: ProgressCallback | None, cancel: threading.Event | None) -> None:
+        self.out, self.progress, self.cancel = out, progress, cancel
+        self.stages: dict[str, dict] = {}
+        self.fresh = False   # once a stage runs, every later stage runs too
+
+    def run(self, name: str, key: str, work: Callable[[Path], dict]) -> dict:
+        """Reuse the stage, or do `work(folder) -> report` and record it."""
+        def begin(folder: Path) -> Callable[[], dict]:
+            report = work(folder)
+            return lambda: report
+
+        return self.start(name, key, begin)()
+
+    def start(self, name: str, key: str, begin: Callable[[Path], Callable[[], dict]],
+              later_stages_follow: bool = True) -> Callable[[], dict]:
+        """Reuse the stage, or `begin(folder)` its work, which returns a function that waits for its report.
+        Returns a function that waits, records the stage and gives its report. `later_stages_follow`
+        False: a stage started ahead of others (the bake, while compose runs) does not make them run."""
+        check_cancel(self.cancel)
+        folder = self.out / name
+        record = folder / STAGE_FILE
+        index = STAGES.index(name)
+        if not self.fresh and record.is_file():
+            try:
+                saved = json.loads(record.read_text())
+            except json.JSONDecodeError:
+                saved = {}
+            report = dict(saved.get("report") or {})
+            report["outputs"] = _absolute_outputs(report.get("outputs", {}), folder)
+            if saved.get("key") == key and all(Path(p).exists() for p in _paths(report["outputs"])):
+                emit(self.progress, "run", index + 1, len(STAGES), f"{name}: reused (same settings and inputs)")
+                self.stages[name] = {"status": "reused", "key": key, "seconds": 0.0, "report": report}
+                return lambda: report
+        self.fresh = self.fresh or later_stages_follow
+        emit(self.progress, "run", index, len(STAGES), f"{name}: running")
+        t0 = time.perf_counter()
+        record.unlink(missing_ok=True)  # a stage half redone is not a finished stage
+        wait = begin(folder)
+
+        def finish() -> dict:
+            report = wait()
+            seconds = time.perf_counter() - t0
+            # Outputs are kept relative to the stage's folder: the run's folder may be moved (Blender swaps
+            # it into place, a batch worker sends it home) and a later run must still find them.
+            from ..base.report import relative_paths
+
+            write_json_atomic(record, {"key": key, "report": dict(report, outputs=relative_paths(
+                report.get("outputs", {}), folder))})
+            self.stages[name] = {"status": "ran", "key": key, "seconds": round(seconds, 3), "report": report}
+            emit(self.progress, "run", index + 1, len(STAGES), f"{name}: done in {seconds:.1f} s")
+            return report
+
+        return finish
+
+    def skip(self, name: str, status: str, why: str) -> None:
+        self.stages[name] = {"status": status, "why": why}
+        emit(self.progress, "run", STAGES.index(name) + 1, len(STAGES), f"{name}: {status}")
+
+
+def _absolute_outputs(outputs, folder: Path):
+    """A stage.json's outputs (kept relative to the stage's folder) as paths from here."""
+    if isinstance(outputs, dict):
+        return {k: _absolute_outputs(v, folder) for k, v in outputs.items()}
+    return str(folder / outputs) if isinstance(outputs, str) else outputs
+
+
+def _paths(outputs) -> list[str]:
+    if isinstance(outputs, dict):
+        return [p for v in outputs.values() for p in _paths(v)]
+    return [outputs] if isinstance(outputs, str) else []
+
+
+def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, out_dir: str | Path,
+                 config: RunConfig = RunConfig(), progress: ProgressCallback | None = None,
+                 cancel: threading.Event | None = None, bake: GameBake | None = None,
+                 bake_skipped_why: str = "no game bake was asked for", models: ModelCache | None = None) -> dict:
+    """Convert the asset, estimate the photo's light, adapt the texture (when the SD2 weights exist),
+    compose the asset into the photo, and bake (when `bake` is given); returns the run's report (also
+    out_dir/report.json).
+
+    placement: (x, y) as fractions of the photo's width and height (both <= 1) or pixels, or "X,Y".
+    models: the loaded diffusion models to use (a ModelCache: a batch worker keeps one for its life,
+    so its jobs load them once); default a cache for this run, so light and adapt share one load.
+    This is the one place the stages are strung together: the command line, batch jobs, remote
+    workers, the Blender operators and the demo all call it.
+    """
+    run = PipelineRun(mesh, maps, photo_path, placement, out_dir, config, progress, cancel, models)  # 1. inputs
+    run.convert()                         # 2. the asset's maps -> neural texture
+    with run.baking(bake, bake_skipped_why):  # 6. the texture written into the asset's own file (glTF): a process
+        run.light()                       # 3.    of its own, from when the texture is final (after 2, or after 4)
+        run.adapt()                       # 4. the texture adapted to the scene (only with the SD2 weights)
+        run.compose()                     # 5. the texture in the photo under the estimated light
+    return run.finish()                   # 7. report.json
+
+
+def guidance_found(config: RunConfig) -> tuple[bool, str]:
+    """Whether adapt (and the diffusion light critic) run, and why: the one place `--guidance` is decided."""
+    from ..guidance.models import locate_models, models_available
+
+    if config.guidance_type == "sd2":
+        locate_models(config.models, need_inpaint=True)   # missing weights: a clear error before any work
+        return True, "asked for (--guidance sd2)"
+    if config.guidance_type == "auto":
+        return models_available(config.models)
+    return False, "guidance none"
+
+
+class PipelineRun:
+    """One run's shared state: the checked inputs, each stage's key, the runner that reuses stages."""
+
+    def __init__(self, mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, out_dir: str | Path,
+                 config: RunConfig, progress: ProgressCallback | None, cancel: threading.Event | None,
+                 models: ModelCache | None) -> None:
+        from ..stages.light import load_photo
+        from ..data.mesh import normalize_to_unit_sphere
+        from ..scene.placement import Placement
+
+        self.started = time.perf_counter()
+        self.mesh, self.maps, self.config, self.progress, self.cancel = mesh, maps, config, progress, cancel
+        self.out = Path(out_dir).resolve()   # stage.json lists absolute outputs, whatever the working folder
+        self.photo_path = Path(photo_path)
+        # Everything that can be wrong with the inputs is found before any work.
+        self.photo, self.photo_info = load_photo(self.photo_path)
+        h, w = self.photo.shape[:2]
+        self.placement = Placement.parse(placement, tuple(self.photo_info["size"]))   # pixels of the photo as stored
+        self.placement_px = self.placement.pixel((h, w))                              # ... in the light stage's copy
+        if config.fspy is not None and config.photo_camera is None:
+            from ..stages.camera import read_fspy
+
+            read_fspy(config.fspy)   # a broken fSpy file is one sentence before any work
+        self.found, self.where = guidance_found(config)
+        self.cache = models if models is not None else ModelCache()
+        self.asset_key = asset_digest(mesh, maps)
+        self.photo_key = _digest(self.photo_path.read_bytes())
+        self.normalized, _ = normalize_to_unit_sphere(mesh)
+        self.runner = StageRunner(self.out, progress, cancel)
+        self.texture_path = self.light_path = None
+        self.keys: dict[str, str] = {}
+        self.texture_final: Callable[[], None] = lambda: None   # what waits for the final texture (the bake)
+
+    def stage_config(self, stage: str, **values):
+        """The preset's config for `stage` with `values`, then the run's own overrides for it."""
+        from .presets import stage_config
+
+        return stage_config(stage, self.config.preset, **{**values, **self.config.overrides(stage)})
+
+    def convert(self) -> None:
+        from ..stages.convert import convert_and_bake
+        from ..texture.bake import WEIGHTS_FILE
+
+        # Only what the scene needs: no more texels than the composite shows of the asset (the photo's
+        # stored height, not the light stage's working copy, is what the composite is made at).
+        screen_px = max(1, round(self.config.size * self.photo_info["size"][1]))
+        config = self.stage_config("convert", screen_px=screen_px)
+        self.keys["convert"] = _digest("convert", asdict(config), self.asset_key)
+
+        def convert(folder: Path) -> dict:
+            return convert_and_bake(self.mesh, self.maps, folder / "maps", config, progress=self.progress,
+                                    cancel=self.cancel)[1]
+
+        self.runner.run("convert", self.keys["convert"], convert)
+        self.texture_path = self.out / "convert" / "maps" / WEIGHTS_FILE
+        self.upstream = self.keys["convert"]
+
+    def light_config(self):
+        """The light stage's config: the map as sharp as the asset's glossiest reflections, capped by the preset."""
+        from dataclasses import replace
+
+        from .presets import stage_config
+        from ..data.scene_needs import envmap_height_for
+        from ..data.uv_raster import rasterize_uv
+
+        # (the coverage mask only picks which roughness texels count: 1024² is plenty, never the
+        # texture's long side squared, which for a 16384x16 map is 16384²)
+        raster = rasterize_uv(self.normalized, min(max(self.maps.resolution), 1024))
+        height = envmap_height_for(self.maps, raster.mask)
+        preset_height = stage_config("light", self.config.preset).map_height
+        if height.choice > preset_height:
+            height = replace(height, choice=preset_height,
+                             reason=f"{height.reason}; capped at the {self.config.preset} preset's {preset_height} rows")
+        config = self.stage_config("light", critic_type="diffusion" if self.found else "none",
+                                   models=self.config.models, map_height=height.choice)
+        if self.config.guidance_type == "none":  # no diffusion model at all: the sky/ground prior completes outdoors
+            config = replace(config, outpaint=replace(config.outpaint, completion_type="prior"))
+        return config, height
+
+    def light(self) -> None:
+        from ..stages.light.stage import LightInputs, run_light, write_light
+        from ..data.scene_needs import report as needs_report
+        from ..texture.surface_layout import texture_view
+        from ..texture.bake import load_neural_texture
+
+        config, envmap_height = self.light_config()
+        # The diffusion critic scores renders of the asset itself (as converted), not a stand-in sphere.
+        critic_sees_asset = config.critic_type == "diffusion"
+        given = self.config.photo_camera
+        camera_key = asdict(given) if given else ["estimated", _digest(Path(self.config.fspy).read_bytes())
+                                                  if self.config.fspy else None, self.config.camera_overrides,
+                                                  self.config.camera_source]
+        self.keys["light"] = _digest("light", asdict(config), self.photo_key, self.placement_px, camera_key,
+                                     self.keys["convert"] if critic_sees_asset else None)
+
+        def light(folder: Path) -> dict:
+            camera, estimate = self.photo_camera()
+            asset = {}
+            if critic_sees_asset:
+                texture = load_neural_texture(self.texture_path)
+                stack = texture_view(texture, self.normalized).stack(texture)   # convert's: the own UVs
+                asset = {"mesh": self.mesh, "maps": torch.as_tensor(stack)}
+            inputs = LightInputs(self.photo, self.photo_info, self.placement_px, camera, estimate)
+            result = run_light(inputs, config, self.progress, self.cancel,
+                               models=_WithInpaint(self.cache) if self.found else self.cache, asset=asset)
+            result.decisions["envmap_height"] = needs_report(envmap_height)
+            return write_light(result, folder)
+
+        self.runner.run("light", self.keys["light"], light)
+        self.light_path = self.out / "light" / "light.exr"
+
+    def photo_camera(self) -> tuple[PhotoCamera, dict]:
+        """The photo's camera for the light stage (whose report hands it to adapt and compose) and
+        where it came from: the caller's, else the estimate (fSpy, EXIF, the photo's lines, or the
+        defaults, each field saying which) with the user's values over it."""
+        h, w = self.photo.shape[:2]
+        if self.config.photo_camera is not None:
+            return replace(self.config.photo_camera, width=w, height=h), {"source": "given by the caller"}
+        from ..stages.camera import photo_camera_estimate
+
+        estimate = photo_camera_estimate(self.photo_path, self.config.fspy, self.config.camera_overrides,
+                                         self.config.camera_source, self.config.camera_why)
+        return estimate.photo_camera(width=w, height=h), estimate.to_dict()
+
+    def adapt(self) -> None:
+        from ..stages.adapt import adapt_and_bake
+        from ..stages.compose import light_camera
+        from ..scene.placement import Placement
+        from ..texture.bake import WEIGHTS_FILE, load_neural_texture
+
+        if not self.found:
+            self.runner.skip("adapt", "skipped", f"Stable Diffusion 2 weights are not on this machine, so the "
+                             f"converted texture is composed as it is ({self.where})"
+                             if self.config.guidance_type == "auto" else self.where)
+            return
+        prompt = self.config.prompt or f"a {self.mesh.name} in this scene, photo"
+        config = self.stage_config("adapt", mode_type="scene", prompt=prompt, models=self.config.models)
+        # The global views are the compose stage's composite: same point, size and camera as compose below.
+        h, w = self.photo.shape[:2]
+        placement = Placement((self.placement_px[0] / w, self.placement_px[1] / h), min(1.0, self.config.size))
+        self.keys["adapt"] = _digest("adapt", config.to_dict(), self.keys["convert"], self.photo_key,
+                                     asdict(placement), self.keys["light"])
+        texture_path = self.texture_path
+
+        def adapt(folder: Path) -> dict:
+            camera, _ = light_camera(self.light_path, self.photo_info, w, h)
+            return adapt_and_bake(self.mesh, load_neural_texture(texture_path), config, folder, photo=self.photo,
+                                  placement=placement, photo_camera=camera, progress=self.progress,
+                                  cancel=self.cancel, models=self.cache.get(config.models, True))[1]
+
+        self.runner.run("adapt", self.keys["adapt"], adapt)
+        self.texture_path, self.upstream = self.out / "adapt" / "maps" / WEIGHTS_FILE, self.keys["adapt"]
+        self.texture_final()
+
+    def compose(self) -> None:
+        from ..stages.compose import ComposeInputs, compose_to_folder, light_camera
+        from ..stages.light import load_photo
+        from ..render.environment import load_environment
+        from ..texture.surface_layout import texture_view
+        from ..texture.bake import load_neural_texture
+
+        config = self.stage_config("compose", size=self.config.size, shadow_type=self.config.shadow_type,
+                                   spp=self.config.compose_spp)
+        self.keys["compose"] = _digest("compose", asdict(config), self.upstream, self.keys["light"], self.photo_key,
+                                       self.placement_px, self.config.turn_deg)
+        texture_path, light_path = self.texture_path, self.light_path
+
+        def compose(folder: Path) -> dict:
+            texture = load_neural_texture(texture_path)
+            view = texture_view(texture, self.mesh)   # adaptation's new UV layout, when it made one
+            full, _ = load_photo(self.photo_path, max_side=config.max_side)   # at the photo's size, up to max_side
+            fh, fw = full.shape[:2]
+            camera, camera_from = light_camera(light_path, self.photo_info, fw, fh)
+            inputs = ComposeInputs(view.mesh, view.stack(texture), full, self.placement.pixel((fh, fw)),
+                                   load_environment(light_path), camera, turn_deg=self.config.turn_deg)
+            extra = {"inputs": {"texture": str(texture_path), "light": str(light_path), "camera_from": camera_from,
+                                "uv_layout": view.report["uv_layout"]}}
+            return compose_to_folder(inputs, config, folder, extra, progress=self.progress, cancel=self.cancel)
+
+        self.runner.run("compose", self.keys["compose"], compose)
+
+    @contextmanager
+    def baking(self, bake: GameBake | None, skipped_why: str):
+        """The game bake around the stages after convert: started once the texture is final (at once
+        without adaptation, else when adapt calls texture_final), waited for after the block, and
+        stopped if the block fails (a cancel, a refusal), so no bake outlives its run."""
+        if bake is None:
+            self.runner.skip("bake", "skipped", skipped_why)
+            yield
+            return
+        started: list = []   # the bake's process, once begun
+        finishes: list = []  # the runner's wait for it
+
+        def start() -> None:
+            if finishes:
+                return
+            texture = self.texture_path
+
+            def begin(folder: Path) -> Callable[[], dict]:
+                started.append(bake(texture, folder, self.cancel))
+                return started[0].wait
+
+            finishes.append(self.runner.start("bake", _digest("bake", self.upstream, self.asset_key), begin,
+                                              later_stages_follow=False))
+
+        self.texture_final = start
+        try:
+            if not self.found:
+                start()
+            yield
+            start()
+        except BaseException:
+            for process in started:
+                process.stop()
+            raise
+        finally:
+            self.texture_final = lambda: None
+        finishes[0]()
+
+    def finish(self) -> dict:
+        from dataclasses import replace
+
+        from ..base.report import write_report
+        from ..render.backend import environment_info
+
+        stages = {name: self.runner.stages[name] for name in STAGES if name in self.runner.stages}
+        report = {
+            "stage": "run",
+            "config": _plain(replace(self.config, models=self.config.models)),
+            "inputs": {"asset": self.mesh.name, "asset_digest": self.asset_key, "photo": self.photo_info,
+                       "photo_digest": self.photo_key, "placement_px": list(self.placement_px)},
+            "stages": stages,
+            "composite": str(self.out / "compose" / "composite.png"),
+            "reused": [name for name, s in stages.items() if s["status"] == "reused"],
+            "environment": environment_info(),
+            "seconds_total": round(time.perf_counter() - self.started, 3),
+        }
+        write_report(self.out / "report.json", report)   # paths relative to the run's folder, which is swapped in
+        return report
+
+
+class _WithInpaint:
+    """The cache as the light stage sees it when adapt follows: it asks for the inpainting UNet too,
+    so light and adapt share one loaded model set."""
+
+    def __init__(self, cache: ModelCache) -> None:
+        self.cache = cache
+
+    def get(self, config: ModelConfig, need_inpaint: bool) -> GuidanceModels:
+        return self.cache.get(config, True)
+
+
+def _plain(config: RunConfig) -> dict:
+    return json.loads(json.dumps(asdict(config), default=str))

@@ -1,0 +1,1 @@
+"""The stages, one module or package each: camera, convert, light, adapt, compose, bake."""

@@ -1,0 +1,213 @@
+"""The adapt stage's settings: one frozen dataclass whose defaults are the paper's complete setup (m).
+
+Where a value comes from (appendix "Texture Adaptation" and "Scene-Agnostic Texture Generation"):
+- scene / edit: 512 px renders, 128 spp, t in [500, 990] for all 4000 iterations, annealed from
+  high to low noise; constant lr 1e-3 (texture MLP) and 1e-4 (LoRA); 4 views per step (the
+  paper's 4 GPUs, one view each); 24 azimuths at the user's elevation; λ_FOV in [1.0, 1.21].
+- generate: the coarse-to-fine schedule (20% at 256 px, 64 spp, t in [30, 990]; then 512 px,
+  128 spp, t in [500, 990]); 72 views over elevations {20, 30, 45}; λ_FOV in [0.6, 1.21].
+The paper does not say how many global-view crops it scores per view; we take 2 (see README).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+from ..compose import SHADOW_TYPES
+from ...base.errors import InputError
+from ...guidance.critics import CriticConfig
+from ...guidance.models import ModelConfig
+from ...guidance.weighting import ANNEAL_TYPES, NORMAL_WEIGHT_TYPES
+from ...texture.neural_texture import BALANCED_TEXTURE, NeuralTextureConfig
+
+MODE_TYPES = ("scene", "generate", "edit")
+VIEWS_TYPES = ("local+global", "local")
+LIGHT_TYPES = ("ambient", "envmap", "random")
+
+
+@dataclass(frozen=True)
+class StageSpec:
+    """One stage of the schedule: its share of the iterations, render size, samples per pixel, t range."""
+
+    fraction: float
+    render_size: int
+    spp: int
+    t_range: tuple[int, int]
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.fraction <= 1.0:
+            raise InputError(f"A stage's fraction must be in (0, 1], got {self.fraction}.")
+        if self.render_size < 8 or self.spp < 1:
+            raise InputError(f"A stage needs render_size >= 8 and spp >= 1, got {self.render_size}, {self.spp}.")
+        lo, hi = self.t_range
+        if not 0 <= lo <= hi <= 999:
+            raise InputError(f"A stage's timestep range must satisfy 0 <= lo <= hi <= 999, got {self.t_range}.")
+        object.__setattr__(self, "t_range", (int(lo), int(hi)))
+
+
+# Setup (m) and editing (c): one stage, 512 px, 128 spp, t in [500, 990] throughout.
+SCENE_STAGES = (StageSpec(1.0, 512, 128, (500, 990)),)
+# Setup (a), scene-agnostic generation: coarse 20% then fine 80%.
+GENERATE_STAGES = (StageSpec(0.2, 256, 64, (30, 990)), StageSpec(0.8, 512, 128, (500, 990)))
+
+
+@dataclass(frozen=True)
+class AdaptConfig:
+    """Settings of the adapt stage; defaults are the paper's setup (m) (core/pipeline/presets.py has faster ones).
+
+    prompt: the appearance description the critics are conditioned on (the paper's GPT-written,
+    scene-conditional prompt); for "edit" it may be left empty and is then made from object_prompt
+    and instruction. views: number of azimuths sampled around the object (24; 72 for "generate").
+    views_per_step: views whose gradients are averaged in one step (spread over the ranks of
+    torch.distributed when there are several, else rendered in turn on one device).
+    global_crops: global views (crops of the photo at several scales) scored per view.
+    view_variants: scene and edit modes draw from a fixed bank of views x view_variants views (each
+    with its λ_FOV, background and crops), so what depends only on a view is computed once.
+    shadow_type / shadow_spp: the global views' shadow, made by the compose stage's floor passes.
+    """
+
+    mode_type: str = "scene"
+    prompt: str = ""
+    negative_prompt: str = ""
+    object_prompt: str = ""
+    instruction: str = ""
+    critic: CriticConfig = field(default_factory=CriticConfig)
+    views_type: str = "local+global"
+    models: ModelConfig = field(default_factory=ModelConfig)
+    iterations: int = 4000
+    stages: tuple[StageSpec, ...] = SCENE_STAGES
+    model_resolution: int = 512
+    lr_texture: float = 1e-3
+    lr_lora: float = 1e-4
+    lora_rank: int = 4
+    condition_dropout: float = 0.1
+    views: int = 24
+    views_per_step: int = 4
+    view_variants: int = 2                        # fixed views per azimuth (sampling.draw_view_bank)
+    elevation: float = 15.0
+    elevation_choices: tuple[float, ...] = ()     # "generate": (20, 30, 45) with small perturbations
+    fov_range: tuple[float, float] = (1.0, 1.21)
+    background_random_p: float = 0.5
+    global_crops: int = 2
+    shadow_type: str = "ratio"                    # the global views' shadow (core/stages/compose.py SHADOW_TYPES)
+    shadow_spp: int = 32                          # samples per pixel of its floor passes (once per turn)
+    light_type: str = "ambient"
+    ambient: float = 1.0
+    light_random_p: float = 0.0                   # "random": chance of a spherical-Gaussian light
+    normal_weight_type: str = "cosine"
+    timestep_anneal_type: str = "linear"
+    max_depth: int = 3
+    texture: NeuralTextureConfig = BALANCED_TEXTURE   # "generate": the fresh texture (resolution: the raster's)
+    seed: int = 0
+    preview_every: int = 50
+    checkpoint_every: int = 200
+
+    def __post_init__(self) -> None:
+        def need(ok: bool, message: str) -> None:
+            if not ok:
+                raise InputError(f"Adapt settings: {message}")
+
+        need(self.mode_type in MODE_TYPES, f"mode_type must be one of {MODE_TYPES}, got {self.mode_type!r}.")
+        need(self.views_type in VIEWS_TYPES, f"views_type must be one of {VIEWS_TYPES}, got {self.views_type!r}.")
+        need(self.light_type in LIGHT_TYPES, f"light_type must be one of {LIGHT_TYPES}, got {self.light_type!r}.")
+        need(self.timestep_anneal_type in ANNEAL_TYPES, f"timestep_anneal_type must be one of {ANNEAL_TYPES}.")
+        need(self.normal_weight_type in NORMAL_WEIGHT_TYPES, f"normal_weight_type must be one of {NORMAL_WEIGHT_TYPES}.")
+        if self.mode_type == "edit":
+            need(bool(self.prompt.strip()) or (bool(self.object_prompt.strip()) and bool(self.instruction.strip())),
+                 "mode 'edit' needs a prompt, or an object prompt and an instruction.")
+        else:
+            need(bool(self.prompt.strip()), f"mode '{self.mode_type}' needs a prompt describing the appearance.")
+        need(self.mode_type == "scene" or self.views_type == "local",
+             f"mode '{self.mode_type}' has no photo; use views_type 'local'.")
+        need(self.iterations >= 1, f"iterations must be at least 1, got {self.iterations}.")
+        stages = tuple(s if isinstance(s, StageSpec) else StageSpec(*s) for s in self.stages)
+        object.__setattr__(self, "stages", stages)
+        need(len(stages) >= 1 and abs(sum(s.fraction for s in stages) - 1.0) < 1e-6,
+             f"stage fractions must add up to 1, got {[s.fraction for s in stages]}.")
+        need(self.model_resolution >= 8 and self.model_resolution % 8 == 0,
+             f"model_resolution must be a multiple of 8, got {self.model_resolution}.")
+        need(self.lr_texture > 0 and self.lr_lora > 0, "learning rates must be positive.")
+        need(self.lora_rank >= 1, f"lora_rank must be at least 1, got {self.lora_rank}.")
+        need(0.0 <= self.condition_dropout <= 1.0, "condition_dropout must be in [0, 1].")
+        need(self.views >= 1, f"views must be at least 1, got {self.views}.")
+        need(self.view_variants >= 1, f"view_variants must be at least 1, got {self.view_variants}.")
+        need(self.views_per_step >= 1, f"views_per_step must be at least 1, got {self.views_per_step}.")
+        need(-90.0 < self.elevation < 90.0 and all(-90.0 < e < 90.0 for e in self.elevation_choices),
+             "elevations must be strictly between -90 and 90 degrees.")
+        lo, hi = self.fov_range
+        need(0.0 < lo <= hi, f"fov_range must satisfy 0 < min <= max, got {self.fov_range}.")
+        need(0.0 <= self.background_random_p <= 1.0 and 0.0 <= self.light_random_p <= 1.0,
+             "probabilities must be in [0, 1].")
+        need(self.global_crops >= 1, "global_crops must be at least 1.")
+        need(self.shadow_type in SHADOW_TYPES, f"shadow_type must be one of {SHADOW_TYPES}, got {self.shadow_type!r}.")
+        need(self.shadow_spp >= 1, f"shadow_spp must be at least 1, got {self.shadow_spp}.")
+        need(self.ambient > 0, "ambient radiance must be positive.")
+        need(self.max_depth >= 2, "max_depth must be at least 2.")
+        need(self.preview_every >= 0 and self.checkpoint_every >= 0, "preview/checkpoint intervals must be >= 0.")
+        need(isinstance(self.texture, NeuralTextureConfig),
+             f"texture must be a NeuralTextureConfig, got {type(self.texture).__name__}.")
+
+    @property
+    def effective_prompt(self) -> str:
+        return self.prompt.strip() or edit_prompt(self.object_prompt, self.instruction)
+
+    @property
+    def uses_reference(self) -> bool:
+        return self.mode_type in ("scene", "edit") and self.critic.reference_type == "inject"
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def schedule(self) -> list[dict]:
+        """Per stage, what one step of it does (what `scenefit adapt --dry-run` shows)."""
+        return [{"fraction": s.fraction, "iterations": stage_iterations(self, i), "t_range": list(s.t_range),
+                 "t_anneal": self.timestep_anneal_type, "render_size": s.render_size, "spp": s.spp,
+                 "views_per_step": self.views_per_step,
+                 "global_crops": self.global_crops if self.views_type == "local+global" else 0}
+                for i, s in enumerate(self.stages)]
+
+
+def edit_prompt(object_prompt: str, instruction: str) -> str:
+    """The appendix's manual combination: "a leather sofa" + "add dust to the sofa" -> "a leather sofa, with dust to the sofa".
+
+    "add X" becomes "with X"; "make it X" becomes "X"; other instructions are appended as they are.
+    """
+    obj, ins = object_prompt.strip().rstrip("."), instruction.strip().rstrip(".")
+    lower = ins.lower()
+    if lower.startswith("add "):
+        ins = "with " + ins[4:]
+    elif lower.startswith("make it "):
+        ins = ins[8:]
+    return f"{obj}, {ins}" if obj else ins
+
+
+# Mode-specific settings from the appendix, applied before a preset's and the user's overrides.
+MODE_SETTINGS: dict[str, dict] = {
+    "scene": {},
+    "generate": {"views": 72, "elevation_choices": (20.0, 30.0, 45.0), "fov_range": (0.6, 1.21),
+                 "views_type": "local", "stages": GENERATE_STAGES,
+                 "critic": CriticConfig(lambda_end=0.9, reference_type="none")},
+    "edit": {"views_type": "local", "critic": CriticConfig(lambda_end=1.0, reference_type="inject")},
+}
+
+
+def stage_bounds(config: AdaptConfig) -> list[int]:
+    """The first iteration of each stage, then `iterations`."""
+    edges, edge = [0], 0.0
+    for stage in config.stages:
+        edge += stage.fraction
+        edges.append(min(config.iterations, round(edge * config.iterations)))
+    edges[-1] = config.iterations
+    return edges
+
+
+def stage_iterations(config: AdaptConfig, index: int) -> int:
+    edges = stage_bounds(config)
+    return edges[index + 1] - edges[index]
+
+
+def stage_at(config: AdaptConfig, iteration: int) -> StageSpec:
+    edges = stage_bounds(config)
+    for stage, end in zip(config.stages, edges[1:]):
+        if iteration < end:
+            return stage
+    return config.stages[-1]

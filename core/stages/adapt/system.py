@@ -1,0 +1,506 @@
+"""The adapt stage as a small system: build (models, texture, renderer, critics, resume), step (one
+optimisation step over `views_per_step` views), finish (the result and its decisions).
+
+One view of a step (core/stages/adapt/sampling.py draws its camera, light, background, t and noise; scene
+and edit modes pick it from a fixed bank whose constant work, core/stages/adapt/constants.py, is done once):
+  render the texture (Mitsuba, differentiable) -> local view (object on a solid colour) and global
+  views (the asset rendered through the photo camera where compose places it, with compose's shadow
+  matte and compositing rule, crops at several scales; core/stages/adapt/global_views.py) -> per image:
+  VAE encode -> critic (UNet passes; local and global weighed equally) -> backward through the VAE
+  (one image's encoder graph held at a time) -> then backward through the renderer into the texture,
+  scaled by 1 / views_per_step -> ε_ψ's LoRA loss on the local latents (same weight).
+After the step's views (and the ranks' shares, summed by torch.distributed): one Adam step on the
+texture and one on ε_ψ.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ...base.decision import Decision, decisions_to_dict
+from ...base.errors import InputError
+from ...guidance.critics import ScoreCritic
+from ...guidance.injection import ReferenceInjector
+from ...guidance.lora import LoraCritic, camera_condition
+from ...guidance.models import GuidanceModels, load_guidance_models, locate_models
+from ...guidance.views import global_view, local_view
+from ...data.mesh import Mesh
+from ...base.progress import ProgressCallback, check_cancel, emit
+from ...render.renderer import AssetRenderer, SceneOptions
+from ...scene.camera import PhotoCamera, photo_camera_for
+from ...scene.placement import Placement
+from ...texture.neural_texture import NeuralTexture, split_channels
+from ...data.uv_raster import UVRaster
+from .checkpoint import CHECKPOINT_FILE, load_checkpoint, save_checkpoint
+from .config import AdaptConfig
+from .constants import ConstantWork, ViewConstants, bank_box
+from .distributed import join_process_group, rank_world, sum_gradients, views_of_rank
+from .global_views import GlobalRender, GlobalScene
+from .sampling import ViewSample, draw_view_bank, sample_view, uses_view_bank
+
+PHASES = ("constants", "render", "vae", "unet", "vae_backward", "render_backward", "lora", "step")
+
+
+@dataclass
+class AdaptInputs:
+    """What the stage works on. mesh: normalised (radius 0.5); raster: its UV raster at the texture's
+    resolution; texture: the converted neural texture (None only for "generate"); photo: sRGB float
+    (H, W, 3) in [0, 1] and placement ("scene"); envmap: (He, 2He, 3) linear ("envmap" light);
+    photo_camera: the light stage's camera for the photo (None: the light stage's default for it);
+    base_logit: the texture's base for `raster` when it is not the texture's own layout, and `layout`
+    that layout (core.surface_layout: the asset's UVs share texels, so adaptation works in new ones)."""
+
+    mesh: Mesh
+    raster: UVRaster
+    texture: NeuralTexture | None = None
+    photo: np.ndarray | None = None
+    placement: Placement | None = None
+    envmap: np.ndarray | None = None
+    photo_camera: PhotoCamera | None = None
+    base_logit: torch.Tensor | None = None
+    layout: object | None = None
+
+    def validate(self, config: AdaptConfig) -> None:
+        if config.mode_type != "generate" and self.texture is None:
+            raise InputError(f"Mode '{config.mode_type}' adapts an existing texture; convert the asset first.")
+        if config.views_type == "local+global":
+            if self.photo is None or self.placement is None:
+                raise InputError("Scene-conditional adaptation needs the photo and where the object goes in it.")
+            photo = np.asarray(self.photo)
+            if photo.ndim != 3 or photo.shape[2] != 3 or min(photo.shape[:2]) < 8:
+                raise InputError(f"The photo must be an RGB image of at least 8x8 pixels, got {photo.shape}.")
+        if config.light_type == "envmap" and self.envmap is None:
+            raise InputError("light_type 'envmap' needs an environment map (e.g. the estimated HDR map).")
+        if self.texture is not None and self.texture.config.resolution != self.raster.resolution[0]:
+            raise InputError(f"The texture is {self.texture.config.resolution}² but the UV raster is "
+                             f"{self.raster.resolution[0]}²; rasterise at the texture's resolution.")
+
+
+@dataclass
+class AdaptResult:
+    texture: NeuralTexture
+    iterations: int
+    seconds: float
+    history: list[dict]
+    timings: dict[str, float]           # seconds summed over the iterations run here, per phase
+    resumed_from: int = 0
+    decisions: dict[str, Decision] = field(default_factory=dict)
+    peak_memory_mb: float | None = None
+    # for write_adapt, set by adapt_and_bake: the config, the asset's own UV raster the maps are baked
+    # in, and what the UV check decided
+    config: AdaptConfig | None = None
+    bake_raster: UVRaster | None = None
+    uv_report: dict = field(default_factory=dict)
+
+    def seconds_per_iteration(self) -> dict[str, float]:
+        n = max(1, self.iterations - self.resumed_from)
+        return {k: v / n for k, v in self.timings.items()}
+
+
+class _Timer:
+    """Seconds per phase, summed; waits for the GPU so a phase is charged its own kernels."""
+
+    def __init__(self, device) -> None:
+        self.totals: dict[str, float] = {}
+        self.cuda = getattr(device, "type", "") == "cuda"
+        self.last = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        if self.cuda:
+            torch.cuda.synchronize()
+        now = time.perf_counter()
+        self.totals[name] = self.totals.get(name, 0.0) + now - self.last
+        self.last = now
+
+    def restart(self) -> None:
+        self.last = time.perf_counter()
+
+
+@dataclass
+class _Critics:
+    local: ScoreCritic
+    glob: ScoreCritic | None
+    lora: LoraCritic | None
+    injector: ReferenceInjector | None
+
+
+class AdaptSystem:
+    """Holds everything a step needs; built once by `build`, stepped, then `finish`ed."""
+
+    def __init__(self, inputs: AdaptInputs, config: AdaptConfig, models: GuidanceModels, texture: NeuralTexture,
+                 renderer: AssetRenderer, critics: _Critics, rank: int, world: Decision,
+                 checkpoint_path: Path | None, cache_constants: bool = True) -> None:
+        self.inputs, self.config, self.models = inputs, config, models
+        self.texture, self.renderer, self.critics = texture, renderer, critics
+        self.rank, self.world = rank, world
+        self.device = models.device
+        raster = inputs.raster
+        self.plan = texture.plan(raster.position, raster.border, raster.fill_index)
+        self.base_logit = None if inputs.base_logit is None else inputs.base_logit.to(self.device)
+        with torch.no_grad():  # the starting texture: the reference, and the global views' fixed coverage
+            self.start_stack = texture.texture_from_plan(self.plan, self.base_logit).detach()
+        self.reference_stack = self.start_stack if config.uses_reference else None
+        self.base_env = torch.from_numpy(np.ascontiguousarray(renderer_environment(inputs, config)))
+        self.photo = None if inputs.photo is None else np.clip(np.asarray(inputs.photo, np.float32), 0.0, 1.0)
+        self.global_scene = None
+        if config.views_type == "local+global":
+            self.global_scene = _global_scene(inputs, config, self.photo, np.asarray(self.base_env))
+        self.latent_res = config.model_resolution // models.vae_scale_factor
+        self.bank = draw_view_bank(config, *bank_box(self)) if uses_view_bank(config) else None
+        self.constants = ConstantWork(self, cache_constants)
+        self.uncond = models.embed(config.negative_prompt)
+        self.optimizer = torch.optim.Adam(texture.parameters(), lr=config.lr_texture)
+        self.my_views = views_of_rank(config.views_per_step, rank, world.choice)
+        self.checkpoint_path = checkpoint_path
+        self.history: list[dict] = []
+        self.start = 0
+        self.last_image: torch.Tensor | None = None
+        self.timer = _Timer(self.device)
+        self.started = time.perf_counter()
+
+    # -- build -------------------------------------------------------------------------------------
+
+    @classmethod
+    def build(cls, inputs: AdaptInputs, config: AdaptConfig, models: GuidanceModels | None = None,
+              checkpoint_dir: str | Path | None = None, cache_constants: bool = True) -> "AdaptSystem":
+        """Validate, find and load the models (a missing one fails here, before any work), copy the
+        texture, set up the renderer and critics, and resume from `checkpoint_dir` when it holds one.
+        cache_constants False recomputes each view's constant work every step (for comparison)."""
+        inputs.validate(config)
+        # Join torchrun's group first: it picks this rank's GPU, where the models must then go.
+        rank, _, world = join_process_group()
+        need_inpaint = config.views_type == "local+global"
+        if models is None:
+            paths = locate_models(config.models, need_inpaint)
+            models = load_guidance_models(config.models, need_inpaint, paths)
+        elif need_inpaint and models.inpaint_unet is None:
+            raise InputError("Global views need the inpainting model; load the models with need_inpaint=True.")
+        _embed_prompts(models, config)
+        texture = _working_texture(inputs, config).to(models.device)
+        resolution = inputs.raster.resolution[0]
+        renderer = AssetRenderer(inputs.mesh, (resolution, resolution), renderer_environment(inputs, config),
+                                 SceneOptions(max_depth=config.max_depth, hide_emitters=True))
+        checkpoint_path = Path(checkpoint_dir) / CHECKPOINT_FILE if checkpoint_dir is not None else None
+        system = cls(inputs, config, models, texture, renderer, _build_critics(models, config), rank,
+                     world, checkpoint_path, cache_constants)
+        system.resume()
+        if models.device.type == "cuda":
+            torch.cuda.reset_peak_memory_stats()
+        return system
+
+    def resume(self) -> None:
+        payload = load_checkpoint(self.checkpoint_path, self.config) if self.checkpoint_path is not None else None
+        if payload is None:
+            return
+        self.texture.load_state_dict(payload["texture"])
+        self.optimizer.load_state_dict(payload["optimizer"])
+        if self.critics.lora is not None and payload["lora"] is not None:
+            self.critics.lora.load_state_dict(payload["lora"])
+        self.history, self.start = list(payload["history"]), int(payload["iteration"])
+
+    # -- step --------------------------------------------------------------------------------------
+
+    def step(self, iteration: int) -> dict:
+        """One optimisation step: this rank's views, gradients summed over ranks, Adam on texture and ε_ψ."""
+        self.timer.restart()
+        self.optimizer.zero_grad(set_to_none=True)
+        per_view = [self.train_view(self.sample(iteration, j)) for j in self.my_views]
+        params = list(self.texture.parameters())
+        for p in params:
+            if p.grad is not None:
+                p.grad.nan_to_num_(0.0, 0.0, 0.0)
+        sum_gradients(params)
+        self.optimizer.step()
+        if self.critics.lora is not None:
+            sum_gradients(self.critics.lora.parameters())
+            self.critics.lora.step()
+        self.timer.lap("step")
+        metrics = _mean_metrics(per_view)
+        self.history.append(metrics)
+        return metrics
+
+    def sample(self, iteration: int, index: int) -> ViewSample:
+        return sample_view(self.config, iteration, index, self.latent_res, self.inputs.envmap, *bank_box(self),
+                           self.bank)
+
+    def train_view(self, view: ViewSample) -> dict:
+        """Render, score and back-propagate one view (its loss weighted 1 / views_per_step); returns its metrics."""
+        weight = 1.0 / self.config.views_per_step
+        env = self.base_env if view.envmap is None else torch.from_numpy(view.envmap)
+        constants = self.constants.get(view, env)
+        self.timer.lap("constants")
+        maps = split_channels(self.texture.texture_from_plan(self.plan, self.base_logit))
+        out = self.renderer.render(view.camera, *maps, env, spp=view.stage.spp, seed=view.render_seed)
+        rendered = [torch.cat([out.rgb, out.alpha], dim=-1)]
+        placed = None
+        if view.crops:
+            placed = self.global_scene.render(*maps, env, view.camera.azimuth_deg, view.stage.render_size,
+                                              view.stage.spp, view.render_seed + 1)
+            rendered.append(torch.cat([placed.rgb, placed.alpha], dim=-1))
+        self.timer.lap("render")
+        # Gradients stop at the leaves, so the two halves of backward can be timed.
+        leaves = [r.detach().to(self.device).requires_grad_(True) for r in rendered]
+        share = 0.5 * weight if view.crops else weight   # local and global weighed equally
+        image, latents, metrics = self._local(view, leaves[0], constants, share)
+        if view.crops:
+            self._global(view, leaves[1], placed, constants, share, metrics)
+        grads = [torch.nan_to_num(leaf.grad if leaf.grad is not None else torch.zeros_like(leaf),
+                                  nan=0.0, posinf=0.0, neginf=0.0).to(r.device) for leaf, r in zip(leaves, rendered)]
+        torch.autograd.backward(rendered, grads)  # one pass through the texture for both renders
+        self.timer.lap("render_backward")
+        if self.critics.lora is not None:
+            # ε_ψ learns the current renderings (its LoRA loss on the detached local latents).
+            metrics["lora_loss"] = self.critics.lora.learn(
+                latents, self.models.embed(view.prompt), self._condition(view), view.rng, view.generator,
+                self.critics.local.alpha_bar, self.critics.local.prediction_type, weight)
+            self.timer.lap("lora")
+        if view.index == self.my_views[0]:
+            self.last_image = image.detach()
+        metrics.update({"t": view.t, "lambda": round(view.lam, 4), "stage_size": view.stage.render_size})
+        return metrics
+
+    def _condition(self, view: ViewSample) -> torch.Tensor:
+        return camera_condition(view.camera.origin, view.camera.forward, view.light)
+
+    def _local(self, view: ViewSample, leaf: torch.Tensor, constants: ViewConstants, share: float):
+        """The local view encoded, scored (ε_φ with the reference injected, ε_ψ) and back-propagated to
+        its leaf at `share` of the step; its encoder graph is freed before the next image's is built."""
+        image = local_view(leaf[..., 0:3], leaf[..., 3:4], view.background, self.config.model_resolution)
+        latents = self.models.encode(image)
+        self.timer.lap("vae")
+        local = self.critics.local(latents, view.t, view.noise.to(self.device), self.models.embed(view.prompt),
+                                   self.uncond, lam=view.lam, condition=self._condition(view),
+                                   reference_latents=constants.reference_latents, weight_map=constants.weight_map)
+        self.timer.lap("unet")
+        (local.loss * share).backward()
+        self.timer.lap("vae_backward")
+        metrics = {"local_grad_norm": local.metrics["grad_norm"], "nonfinite": local.metrics["nonfinite"]}
+        return image, latents.detach(), metrics
+
+    def _global(self, view: ViewSample, leaf: torch.Tensor, placed: GlobalRender, constants: ViewConstants,
+                share: float, metrics: dict) -> None:
+        """Each crop of the asset in the photo encoded, scored by the inpainting critic (its mask and
+        masked-photo latents from the constants) and back-propagated at `share` / crops."""
+        norms = []
+        for crop, (mask, masked_latents) in zip(view.crops, constants.crops):
+            g_image, _ = global_view(leaf[..., 0:3], leaf[..., 3:4], placed.rect, self.photo, placed.matte, crop,
+                                     self.config.model_resolution)
+            g_latents = self.models.encode(g_image)
+            self.timer.lap("vae")
+            g = self.critics.glob(g_latents, view.t, view.noise.to(self.device), self.models.embed(view.prompt),
+                                  self.uncond, extra=(mask, masked_latents))
+            self.timer.lap("unet")
+            (g.loss * (share / len(view.crops))).backward()
+            self.timer.lap("vae_backward")
+            norms.append(g.metrics["grad_norm"])
+            metrics["nonfinite"] += g.metrics["nonfinite"]
+        metrics["global_grad_norm"] = float(np.mean(norms))
+
+    # -- reporting and finish ------------------------------------------------------------------------
+
+    def after_step(self, iteration: int, metrics: dict, progress: ProgressCallback | None) -> None:
+        """Progress (with a preview now and then) and the checkpoint, on rank 0."""
+        if self.rank != 0:
+            return
+        config, done = self.config, iteration + 1
+        preview = None
+        if config.preview_every and (done % config.preview_every == 0 or done == config.iterations):
+            image = self.last_image[0].permute(1, 2, 0).clamp(0, 1).cpu().numpy()
+            preview = (image * 255).round().astype(np.uint8)
+        emit(progress, "adapt", done, config.iterations,
+             f"{config.mode_type}: {metrics['stage_size']} px, t={metrics['t']}", metrics, preview)
+        if self.checkpoint_path is not None and config.checkpoint_every and (
+                done % config.checkpoint_every == 0 or done == config.iterations):
+            save_checkpoint(self.checkpoint_path, done, config, self.texture, self.optimizer, self.critics.lora,
+                            self.history)
+
+    def finish(self) -> AdaptResult:
+        return AdaptResult(texture=self.texture, iterations=self.config.iterations,
+                           seconds=time.perf_counter() - self.started, history=self.history,
+                           timings=dict(self.timer.totals), resumed_from=self.start, decisions=self.decisions(),
+                           peak_memory_mb=_peak_memory_mb(self.device))
+
+    def decisions(self) -> dict[str, Decision]:
+        config, world = self.config, self.world.choice
+        mine = len(self.my_views)
+        injected = 0 if self.critics.injector is None else len(self.critics.injector.injected)
+        return {
+            "mode": Decision(config.mode_type, "the adapt mode asked for"),
+            "prompt": Decision(config.effective_prompt, "the prompt given" if config.prompt.strip() else
+                               "the object prompt and the instruction combined (appendix, editing)"),
+            "critic": Decision(config.critic.critic_type, "VSD with a LoRA ε_ψ (the paper)"
+                               if config.critic.critic_type == "vsd" else "SDS (no ε_ψ), as configured"),
+            "views": Decision(config.views_type, "local and global views (setup (m))" if config.views_type ==
+                              "local+global" else "local views only (no photo)"),
+            "reference_injection": Decision(injected, f"the reference's keys and values injected into {injected} "
+                                            "attention layers" if injected else "no reference injection"),
+            "world_size": self.world,
+            "constant_work": Decision(
+                {"cached": self.constants.cache, "bank": len(self.bank or ()), "computed": self.constants.misses,
+                 "reused": self.constants.hits},
+                "reference latents, normal weights, crop masks and masked-photo latents computed once per view of "
+                "the fixed bank" if self.constants.cache and self.bank else "recomputed every step"),
+            "views_per_step": Decision(config.views_per_step,
+                                       f"{mine} view(s) rendered in turn on this rank, gradients averaged"
+                                       + (f" over {world} ranks" if world > 1 else "")),
+            "models": Decision({k: str(v) for k, v in self.models.paths.items()}, "where the weights were found"),
+            "device": Decision(str(self.device), f"{str(self.models.dtype).replace('torch.', '')} UNet"),
+        }
+
+
+def _global_scene(inputs: AdaptInputs, config: AdaptConfig, photo: np.ndarray, envmap: np.ndarray) -> GlobalScene:
+    """The photo, its camera (the light stage's) and the asset placed in it, for the global views."""
+    h, w = photo.shape[:2]
+    camera = inputs.photo_camera or photo_camera_for({}, w, h)[0]
+    azimuths = [360.0 * k / config.views for k in range(config.views)]  # sample_camera's choices
+    return GlobalScene(inputs.mesh, inputs.raster.resolution, photo, inputs.placement, camera, envmap, azimuths,
+                       config.max_depth, config.shadow_type, config.shadow_spp, config.seed)
+
+
+def renderer_environment(inputs: AdaptInputs, config: AdaptConfig) -> np.ndarray:
+    """The map the renderer starts with: the user's (light_type "envmap") or the constant ambient one."""
+    if config.light_type == "envmap":
+        return np.asarray(inputs.envmap, np.float32)
+    return np.full((16, 32, 3), config.ambient, np.float32)
+
+
+def _embed_prompts(models: GuidanceModels, config: AdaptConfig) -> None:
+    """Every prompt the run will use, embedded once; the text encoder is released afterwards."""
+    prompt = config.effective_prompt
+    prompts = ([f"{prompt}, {v}" for v in ("front view", "side view", "back view")]
+               if config.mode_type == "generate" else [prompt])
+    for p in prompts + [config.negative_prompt]:
+        models.embed(p)
+    models.release_text_encoder()
+
+
+def _working_texture(inputs: AdaptInputs, config: AdaptConfig) -> NeuralTexture:
+    """A copy of the input texture (left as it was), or a fresh one for "generate"."""
+    if inputs.texture is None:
+        return NeuralTexture(replace(config.texture, resolution=inputs.raster.resolution[0]),
+                             seed=config.seed)
+    texture = NeuralTexture(inputs.texture.config, seed=None)
+    texture.load_state_dict(inputs.texture.state_dict())
+    texture.layout = inputs.layout if inputs.layout is not None else inputs.texture.layout
+    return texture
+
+
+def _build_critics(models: GuidanceModels, config: AdaptConfig) -> _Critics:
+    lora = None
+    if config.critic.critic_type == "vsd":
+        lora = LoraCritic(models.unet, rank=config.lora_rank, lr=config.lr_lora,
+                          condition_dropout=config.condition_dropout, seed=config.seed)
+    injector = ReferenceInjector(models.unet, config.critic.injection_fraction) if config.uses_reference else None
+    local = ScoreCritic(models.unet, models.scheduler, config.critic, lora=lora, injector=injector)
+    glob = None
+    if config.views_type == "local+global":
+        glob = ScoreCritic(models.inpaint_unet, models.scheduler,
+                           replace(config.critic, critic_type="sds", reference_type="none"))
+    return _Critics(local, glob, lora, injector)
+
+
+def _mean_metrics(per_view: list[dict]) -> dict:
+    """One history entry: numbers averaged over the views (t listed per view, nonfinite summed)."""
+    out: dict = {"t": [m["t"] for m in per_view]}
+    for key in per_view[0]:
+        if key == "t":
+            continue
+        values = [m[key] for m in per_view if key in m]
+        if key == "nonfinite":
+            out[key] = int(sum(values))
+        elif key in ("lambda", "stage_size"):
+            out[key] = values[0]
+        else:
+            out[key] = round(float(np.mean(values)), 6)
+    if len(out["t"]) == 1:
+        out["t"] = out["t"][0]
+    return out
+
+
+def _peak_memory_mb(device) -> float | None:
+    if device.type == "cuda":
+        return torch.cuda.max_memory_allocated() / 2**20
+    try:
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    except (ImportError, OSError):
+        return None
+
+
+def adapt_texture(inputs: AdaptInputs, config: AdaptConfig, progress: ProgressCallback | None = None,
+                  cancel: threading.Event | None = None, checkpoint_dir: str | Path | None = None,
+                  models: GuidanceModels | None = None, cache_constants: bool = True) -> AdaptResult:
+    """Run the adapt stage; returns a new NeuralTexture (the input texture is left as it was).
+
+    Models are located (and a missing one reported) before any work. With `checkpoint_dir`, a
+    checkpoint is written every `checkpoint_every` iterations and a run with the same settings
+    resumes from it.
+    """
+    system = AdaptSystem.build(inputs, config, models, checkpoint_dir, cache_constants)
+    for iteration in range(system.start, config.iterations):
+        check_cancel(cancel)
+        metrics = system.step(iteration)
+        system.after_step(iteration, metrics, progress)
+    return system.finish()
+
+
+def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfig, out_dir: str | Path,
+                   photo: np.ndarray | None = None, placement: Placement | None = None,
+                   envmap: np.ndarray | None = None, resolution: int | None = None,
+                   photo_camera: PhotoCamera | None = None, progress: ProgressCallback | None = None, cancel: threading.Event | None = None,
+                   models: GuidanceModels | None = None) -> tuple[AdaptResult, dict]:
+    """Adapt (or, for "generate", make) the asset's texture and bake it into out_dir/maps.
+
+    mesh is the asset as given (normalised here); photo_camera: the light stage's camera for the photo
+    (None: its default for the photo); checkpoints go to out_dir/checkpoint so that
+    running the same command again resumes. Returns the result and a report dict (on ranks other
+    than 0 of a distributed run nothing is written and the report's outputs are empty).
+    """
+    from ...data.mesh import normalize_to_unit_sphere
+    from ...data.materials import mesh_raster
+    from ...texture.surface_layout import adapting_view
+
+    out_dir = Path(out_dir)
+    join_process_group()  # under torchrun: this rank's GPU is chosen before the models load
+    if models is None:  # missing weights stop the run here, before any work
+        models = load_guidance_models(config.models, config.views_type == "local+global")
+    normalized, _ = normalize_to_unit_sphere(mesh)
+    res = texture.config.resolution if texture is not None else int(resolution or config.texture.resolution)
+    raster = mesh_raster(normalized, res)   # each material's own cell and wrap mode, as the renderer reads them
+    # Where the asset's UVs share texels the result could not differ per surface: a new layout.
+    emit(progress, "adapt", 0, config.iterations, "checking whether the UVs give every surface its own texels")
+    view, layout, uv_report = adapting_view(texture, normalized)
+    inputs = AdaptInputs(mesh=view.mesh if view else normalized, raster=view.raster if view else raster,
+                         texture=texture, photo=photo, placement=placement, envmap=envmap,
+                         photo_camera=photo_camera, base_logit=view.base_logit if view else None, layout=layout)
+    result = adapt_texture(inputs, config, progress=progress, cancel=cancel, checkpoint_dir=out_dir / "checkpoint",
+                           models=models)
+    check_cancel(cancel)
+    result.config, result.bake_raster, result.uv_report = config, raster, uv_report
+    return result, write_adapt(result, out_dir)
+
+
+def write_adapt(result: AdaptResult, folder: str | Path) -> dict:
+    """The adapted texture baked into folder/maps in the asset's own UVs (on rank 0 only of a distributed
+    run: one writer); returns the stage's report (its outputs empty on the other ranks)."""
+    from ...texture.bake import bake_maps
+
+    raster, paths = result.bake_raster, {}
+    if rank_world()[0] == 0:
+        paths = bake_maps(result.texture, raster.position, raster.border, raster.fill_index, Path(folder) / "maps")
+    per_it = result.seconds_per_iteration()
+    return {
+        "stage": "adapt", "config": result.config.to_dict(), "schedule": result.config.schedule(),
+        "decisions": decisions_to_dict(result.decisions), "uv_layout": result.uv_report,
+        "iterations": result.iterations, "resumed_from": result.resumed_from, "seconds": round(result.seconds, 3),
+        "seconds_per_iteration": {k: round(v, 4) for k, v in per_it.items()},
+        "peak_memory_mb": None if result.peak_memory_mb is None else round(result.peak_memory_mb, 1),
+        "last_metrics": result.history[-1] if result.history else {},
+        "outputs": {k: str(v) for k, v in paths.items()},
+    }

@@ -1,0 +1,128 @@
+"""How `scenefit bake` writes its glTF: compression, texture format, the cap on texture size and
+tangents. By default the output is compressed as the input is and its textures are in the input's
+format, and it carries tangents where the input has them (a glTF without them leaves them to its
+clients, which generate MikkTSpace ones; blender_io.gltf_export adds them for normal-mapped materials
+of other kinds of file). Skinned meshes stay root nodes where the
+input had them so, and always for inputs of other kinds (FBX, .blend): Blender parents a skinned mesh
+to its armature, and glTF ignores a skinned mesh node's transform, so a parent only earns the
+validator's NODE_SKINNED_MESH_NON_ROOT warning."""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from ...base.errors import InputError
+
+COMPRESSIONS = ("none", "draco", "meshopt")
+TEXTURE_FORMATS = ("png", "jpeg", "webp", "ktx2")
+DEFAULT_MAX_TEXTURE = 2048
+_COMPRESSION_OF_EXTENSION = {"KHR_draco_mesh_compression": "draco", "EXT_meshopt_compression": "meshopt"}
+_FORMAT_OF_MIME = {"image/png": "png", "image/jpeg": "jpeg", "image/webp": "webp", "image/ktx2": "ktx2"}
+_FORMAT_OF_SUFFIX = {".png": "png", ".jpg": "jpeg", ".jpeg": "jpeg", ".webp": "webp", ".ktx2": "ktx2"}
+
+
+@dataclass(frozen=True)
+class GltfOutput:
+    compress: str = "none"
+    textures: str = "png"
+    max_texture: int = DEFAULT_MAX_TEXTURE
+    tangents: bool = False
+    skins_at_root: bool = False
+    normals: bool = True              # False where the input had none: glTF then shades flat, as it did
+
+    def __post_init__(self) -> None:
+        if self.compress not in COMPRESSIONS:
+            raise InputError(f"--compress must be one of {', '.join(COMPRESSIONS)}, got '{self.compress}'.")
+        if self.textures not in TEXTURE_FORMATS:
+            raise InputError(f"--textures must be one of {', '.join(TEXTURE_FORMATS)}, got '{self.textures}'.")
+        size = self.max_texture
+        if not isinstance(size, int) or size < 4 or size > 8192 or size & (size - 1):
+            raise InputError(f"--max-texture must be a power of two between 4 and 8192, got {size}.")
+
+    def report(self) -> dict:
+        return {"compress": self.compress, "textures": self.textures, "max_texture": self.max_texture,
+                "tangents": self.tangents, "skins_at_root": self.skins_at_root, "normals": self.normals}
+
+
+def _document(path: Path) -> dict:
+    from ...data.gltf_meshopt import read_gltf
+
+    if path.suffix.lower() not in (".gltf", ".glb"):
+        return {}
+    try:
+        return read_gltf(path)[0]
+    except (OSError, ValueError, UnicodeDecodeError):
+        return {}
+
+
+def _image_format(image: dict) -> str | None:
+    if image.get("mimeType") in _FORMAT_OF_MIME:
+        return _FORMAT_OF_MIME[image["mimeType"]]
+    return _FORMAT_OF_SUFFIX.get(Path(str(image.get("uri", ""))).suffix.lower())
+
+
+def output_like_input(asset: str | Path, compress: str | None = None, textures: str | None = None,
+                      max_texture: int | None = None) -> GltfOutput:
+    """The output settings: each one given, else as the input file has it (a non-glTF input: none,
+    png). Tangents where the input has them (and, for inputs that are not glTF, where a loaded material
+    has a normal map: blender_io.gltf_export)."""
+    document = _document(Path(asset))
+    used = document.get("extensionsUsed", [])
+    if compress is None:
+        compress = next((c for e, c in _COMPRESSION_OF_EXTENSION.items() if e in used), "none")
+    if textures is None:
+        formats = [_image_format(image) for image in document.get("images", [])]
+        textures = max(set(formats) - {None}, key=formats.count, default="png")
+    attributes = [set(primitive.get("attributes", {})) for mesh in document.get("meshes", [])
+                  for primitive in mesh.get("primitives", [])]
+    tangents = any("TANGENT" in names for names in attributes)
+    normals = not attributes or tangents or any("NORMAL" in names for names in attributes)
+    # A glTF's skinned meshes stay where it had them; another kind of file has no say, so they go to the
+    # root, where glTF wants them (the validator warns NODE_SKINNED_MESH_NON_ROOT under Blender's armature).
+    at_root = _skinned_meshes_at_root(document) if Path(asset).suffix.lower() in (".gltf", ".glb") else True
+    return GltfOutput(compress, textures, DEFAULT_MAX_TEXTURE if max_texture is None else max_texture, tangents,
+                      at_root, normals)
+
+
+def _parents(document: dict) -> dict[int, int]:
+    return {child: index for index, node in enumerate(document.get("nodes", [])) for child in node.get("children", [])}
+
+
+def _skinned_meshes_at_root(document: dict) -> bool:
+    """Whether the input has skinned meshes and every one of them is a root node."""
+    skinned = [index for index, node in enumerate(document.get("nodes", [])) if "skin" in node]
+    parents = _parents(document)
+    return bool(skinned) and not any(index in parents for index in skinned)
+
+
+def move_skinned_meshes_to_root(document: dict) -> int:
+    """Detach every skinned mesh node from its parent and make it a root of the scenes its parent was
+    in (its transform is ignored by glTF, so nothing moves). Returns how many were moved."""
+    nodes, parents = document.get("nodes", []), _parents(document)
+    moved = [index for index, node in enumerate(nodes) if "skin" in node and index in parents]
+    for index in moved:
+        parent = nodes[parents[index]]
+        parent["children"].remove(index)
+        if not parent["children"]:
+            del parent["children"]
+        top = parents[index]
+        while top in parents:
+            top = parents[top]
+        for scene in document.get("scenes", []):
+            if top in scene.get("nodes", []):
+                scene["nodes"].append(index)
+    return len(moved)
+
+
+def skinned_meshes_moved_to_root(path: Path) -> int:
+    """move_skinned_meshes_to_root on the .glb or .gltf file at `path`, rewritten in place if any moved."""
+    from ...data.gltf_meshopt import read_gltf, write_glb
+
+    document, chunk = read_gltf(path)
+    moved = move_skinned_meshes_to_root(document)
+    if moved and chunk is None:
+        path.write_text(json.dumps(document, indent=2))
+    elif moved:
+        write_glb(path, document, chunk)
+    return moved

@@ -1,0 +1,552 @@
+"""The light stage: photo + placement -> LDR panorama -> bright regions -> HDR scales -> HDR map.
+
+    estimate_light(photo_srgb, placement_px, config) -> LightResult
+
+Every run ends with an HDR map: the inverse-tone-mapping prior sets the scales, and a critic (the
+reference critic against a known map, or a diffusion critic from core/guidance) refines them when
+one is given. `write_light_outputs` writes light.exr (float32 EXR, linear), light_ldr.png,
+light_preview.png (tone-mapped) and returns the report's fields.
+"""
+from __future__ import annotations
+
+import copy
+import functools
+import math
+import threading
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ...base.decision import Decision
+from ...base.errors import InputError, ModelMissingError, check_choice
+from ...guidance.models import ModelConfig
+from ...data.imageio import linear_to_srgb, read_image, srgb_to_linear, write_image
+from ...data.mesh import Mesh, normalize_to_unit_sphere
+from ...render.photo import camera_exposure
+from ...data.primitives import uv_sphere
+from ...base.progress import ProgressCallback, check_cancel, emit
+from ...scene.camera import DEFAULT_PITCH_DEG, PhotoCamera
+from .cues import CueConfig, build_cues
+from .depth import DepthConfig, estimate_ray_distance
+from .diffusion_critic import DiffusionCriticConfig
+from .outpaint import OutpaintConfig
+from .hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, Critic, OptimiseConfig, OptimiseResult,
+                  hdr_from_scales, is_dark_environment, light_prompt, optimise_scales, prior_scales, tonemap_preview,
+                  DEFAULT_L_WHITE)
+from ...scene.floor import place_on_floor
+from .panorama import Panorama, indoor_panorama, outdoor_panorama
+from .regions import RegionThresholds, bright_regions
+from .scene_type import scene_type_cue
+
+# The panorama is built (and its lights found) at least this tall, whatever map size is asked for; a
+# smaller map is area-averaged from it, which keeps every light's energy. A lamp smaller than a texel
+# survives at any height because a clipped highlight wins its texel in the splat (panorama.splat), so
+# draft's 64 rows are built at 64: at 128 it did balanced's work for a coarser map (benchmarks: same
+# seconds, same error). tests/test_stability.py finds a 1.5 deg lamp and a 2 px 1e6 spot at every preset.
+MIN_WORKING_HEIGHT = 64
+SCENE_TYPES = ("auto", "indoor", "outdoor")
+CRITIC_TYPES = ("none", "reference", "diffusion")
+PRIOR_TYPES = ("cues", "inverse_tonemap")   # cues: cues.py (default); inverse_tonemap: the paper's prior
+
+
+@dataclass(frozen=True)
+class LightConfig:
+    """The light stage's settings. Defaults are the balanced preset's (map size, apparatus renders),
+    except the critic's optimisation, which keeps the paper's 2000 iterations at lr 0.01 (it runs only
+    with a critic, i.e. with the SD2 weights; core/pipeline/preset_tables.py has shorter ones)."""
+
+    scene_type: str = "auto"
+    fov_deg: float | None = None              # horizontal; None: the photo's metadata, else DEFAULT_FOV_DEG
+    camera_pitch_deg: float = DEFAULT_PITCH_DEG   # the photo camera looks this far up (negative: down)
+    # The artist's dominant light (--sun AZ,EL), degrees: azimuth from the photo's view direction,
+    # positive to the camera's right (clockwise seen from above), elevation above the horizon.
+    sun_deg: tuple[float, float] | None = None
+    map_height: int = 128                     # the map is map_height x 2 map_height
+    depth: DepthConfig = DepthConfig()
+    thresholds: RegionThresholds = RegionThresholds()
+    prior_type: str = "cues"
+    cues: CueConfig = CueConfig()
+    l_white: float = DEFAULT_L_WHITE
+    critic_type: str = "none"
+    apparatus: ApparatusConfig = ApparatusConfig()
+    optimise: OptimiseConfig = OptimiseConfig()
+    object_prompt: str = "a 3D object"
+    tint: str | None = None                   # e.g. "in blue tint", appended to both prompts
+    models: ModelConfig = ModelConfig()       # SD2 for critic_type "diffusion" (core/guidance/models.py)
+    diffusion: DiffusionCriticConfig = DiffusionCriticConfig()
+    outpaint: OutpaintConfig = OutpaintConfig()   # outdoor completion: SD2 inpainting or the sky/ground prior
+
+    def __post_init__(self) -> None:
+        check_choice("scene_type", self.scene_type, SCENE_TYPES)
+        check_choice("critic_type", self.critic_type, CRITIC_TYPES)
+        check_choice("prior_type", self.prior_type, PRIOR_TYPES)
+        if self.fov_deg is not None and not 1.0 <= self.fov_deg <= 170.0:
+            raise InputError(f"The photo's field of view must be between 1 and 170 degrees, got {self.fov_deg}.")
+        if not -89.0 <= self.camera_pitch_deg <= 89.0:
+            raise InputError(f"The photo camera's pitch must be within +-89 degrees (where it looks above the "
+                             f"horizon; negative looks down), got {self.camera_pitch_deg:g}; give another --pitch.")
+        if self.sun_deg is not None and (len(self.sun_deg) != 2 or not all(map(math.isfinite, self.sun_deg))
+                                         or not -90.0 <= self.sun_deg[1] <= 90.0):
+            raise InputError(f"The sun direction must be two finite angles AZ,EL with the elevation within +-90 "
+                             f"degrees, got {self.sun_deg}; give it as --sun 30,45.")
+        if not 8 <= self.map_height <= 4096:
+            raise InputError(f"map_height must be between 8 and 4096, got {self.map_height}.")
+        if not self.l_white > 1.0:
+            raise InputError(f"l_white must be above 1, got {self.l_white}.")
+
+
+@dataclass
+class LightResult:
+    ldr: np.ndarray                       # (H, 2H, 3) sRGB-encoded LDR panorama
+    hdr: np.ndarray                       # (H, 2H, 3) linear HDR map, photo exposure units
+    regions: dict[str, np.ndarray]
+    scales: dict[str, float]
+    prior_scales: dict[str, float]
+    panorama: Panorama
+    photo_camera: PhotoCamera
+    decisions: dict = field(default_factory=dict)
+    optimisation: OptimiseResult | None = None
+    seconds: float = 0.0
+    config: LightConfig | None = None     # set by the stage (lighting/stage.run_light), for its report
+    photo_info: dict | None = None        # what load_photo found, for the report
+
+
+# -- photos ----------------------------------------------------------------------------------------
+# Nothing in the light stage looks at a photo more closely than this: the panorama splats at most
+# 768 px on the long side, the depth model sees 518, the critics 512. Larger photos are reduced while
+# they are read (an 8000x6000 photo peaked at 5.1 GB to make a 64x128 map).
+PHOTO_WORKING_SIDE = 1024
+
+
+def load_photo(path: str | Path, max_side: int | None = PHOTO_WORKING_SIDE) -> tuple[np.ndarray, dict]:
+    """A photo as sRGB-encoded float32 RGB in [0, 1], and what was decided reading it.
+
+    Photos longer than `max_side` are area-reduced by a whole factor while read (linear radiance
+    for EXR/HDR, so a small bright light keeps its energy); the report gives both sizes.
+
+    8/16-bit files are taken as stored (sRGB). Float files (EXR/HDR) hold linear radiance: they are
+    exposed as a camera meters (log-average luminance -> 0.18), clipped and sRGB-encoded, so every
+    photo reaches the panorama as the LDR image a camera would have stored. Photos are turned
+    upright as their EXIF Orientation says (a phone's portrait photo is stored sideways), so `--at`
+    and the composite refer to the photo as every viewer shows it.
+    """
+    path = Path(path)
+    try:
+        stat = path.stat()
+        key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+    except OSError:
+        key = None   # read_image says what is wrong with it
+    if key is None or max_side is None or max_side > PHOTO_WORKING_SIDE:   # (a full-size copy is read once a run)
+        return _decoded_photo(path, max_side)
+    rgb, info = _decoded_photo_once(key, path, max_side)
+    return rgb.copy(), copy.deepcopy(info)
+
+
+@functools.lru_cache(maxsize=2)
+def _decoded_photo_once(key: tuple, path: Path, max_side: int | None) -> tuple[np.ndarray, dict]:
+    """A run reads its photo at the light stage's size several times (inputs, camera, light): once
+    decoded here while the file stays the same (`key`: its path, time and size). Two such copies at
+    most (about 9 MB each) stay in a long-lived process such as Blender."""
+    return _decoded_photo(path, max_side)
+
+
+def _decoded_photo(path: Path, max_side: int | None) -> tuple[np.ndarray, dict]:
+    pixels = read_image(path, max_side=max_side, upright=True)
+    if pixels.shape[2] == 1:
+        pixels = np.repeat(pixels, 3, axis=2)
+    elif pixels.shape[2] == 2:
+        pixels = np.repeat(pixels[..., :1], 3, axis=2)
+    rgb = np.ascontiguousarray(pixels[..., :3], np.float32)
+    h, w = rgb.shape[:2]
+    info: dict = {"path": str(path), "size": _metadata(path).get("size", [w, h])}
+    # Messages give the size as stored (a 1x10000 photo is read as 1x1000; the user never saw that).
+    stored_w, stored_h = info["size"]
+    if min(stored_w, stored_h) < 2:
+        raise InputError(f"The photo '{path}' is {stored_w}x{stored_h}; it needs at least 2x2 pixels.")
+    if min(h, w) < 2:
+        raise InputError(f"The photo '{path}' is {stored_w}x{stored_h}, too thin for the light stage (it reduces "
+                         f"photos to at most {max_side} px on the long side, which leaves {w}x{h}); crop it to a "
+                         f"less extreme shape.")
+    if info["size"] != [w, h]:
+        info["working_size"] = {"size": [w, h], "why": f"reduced while read: the light stage needs at most "
+                                                      f"{max_side} px on the long side"}
+    if path.suffix.lower() in (".exr", ".hdr"):
+        rgb = np.nan_to_num(np.maximum(rgb, 0.0), nan=0.0, posinf=0.0)
+        exposure = camera_exposure(rgb)
+        info["decoded"] = f"linear HDR exposed by x{exposure:.4g} (log-average luminance -> 0.18), clipped, sRGB-encoded"
+        rgb = linear_to_srgb(np.clip(rgb * exposure, 0.0, 1.0))
+    else:
+        info["decoded"] = "sRGB as stored"
+        rgb = np.clip(rgb, 0.0, 1.0)
+    focal35 = _metadata(path).get("focal35")
+    if focal35:
+        # The 35 mm equivalent is defined on the diagonal (43.27 mm); the width's share of it gives the
+        # horizontal view of any aspect ratio, upright portrait photos included.
+        film_width = 43.27 * w / np.hypot(w, h)
+        info["fov_from_metadata_deg"] = round(float(np.degrees(2 * np.arctan(film_width / (2 * float(focal35))))), 3)
+    return rgb, info
+
+
+def _metadata(path: Path) -> dict:
+    """The photo's upright size (EXIF Orientation 5-8 swap width and height) and 35 mm focal length."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return {}
+    try:
+        spec = inp.spec()
+        size = [spec.width, spec.height]
+        if spec.get_int_attribute("Orientation", 1) >= 5:
+            size.reverse()
+        return {"size": size, "focal35": spec.getattribute("Exif:FocalLengthIn35mmFilm")}
+    finally:
+        inp.close()
+
+
+def default_photo_camera(config: LightConfig, photo_info: dict, width: int, height: int) -> tuple[PhotoCamera, dict]:
+    """The camera the light stage assumes for a photo when none is given: core/scene/camera.py's, with the
+    config's field of view and pitch (the one definition of the frame and the defaults)."""
+    from ...scene.camera import photo_camera_for
+
+    return photo_camera_for(photo_info, width, height, config.fov_deg, config.camera_pitch_deg)
+
+
+def sun_direction(sun_deg: tuple[float, float] | None, camera: PhotoCamera) -> np.ndarray | None:
+    """The world unit vector of LightConfig.sun_deg: azimuth from the camera's view, positive to its right."""
+    if sun_deg is None:
+        return None
+    az, el = (math.radians(a) for a in sun_deg)
+    yaw = math.radians(camera.yaw_deg) - az
+    return np.array([math.cos(el) * math.cos(yaw), math.cos(el) * math.sin(yaw), math.sin(el)])
+
+
+def default_object() -> tuple[Mesh, torch.Tensor]:
+    """When no asset is given: a mid-grey, medium-rough sphere of the normalised radius."""
+    maps = torch.cat([torch.full((8, 8, 3), 0.5), torch.full((8, 8, 1), 0.5), torch.zeros(8, 8, 1)], dim=-1)
+    return uv_sphere(radius=0.5, segments=32, rings=16), maps
+
+
+# -- the stage -------------------------------------------------------------------------------------
+def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], config: LightConfig = LightConfig(),
+                   photo_camera: PhotoCamera | None = None, mesh: Mesh | None = None, maps: torch.Tensor | None = None,
+                   critic: Critic | None = None, reference_envmap: np.ndarray | None = None,
+                   photo_info: dict | None = None, progress: ProgressCallback | None = None,
+                   cancel: threading.Event | None = None, on_iteration=None, models=None) -> LightResult:
+    """Estimate an HDR environment map from a photo (sRGB-encoded float RGB) and the object's placement.
+
+    photo_camera: the photo's orientation and FOV in the world (default: looking along +Y, the
+    composition's azimuth 0, pitched by config.camera_pitch_deg). mesh/maps: the object with its fixed
+    appearance ((H, W, 5) base colour, roughness, metallic); default a grey sphere. critic: used when
+    config.critic_type == "diffusion"; reference_envmap: the true map (photo exposure units) for "reference".
+    models: where loaded diffusion models come from, `models.get(model_config, need_inpaint)` (a
+    guidance.models.ModelCache, so a worker loads them once for all its jobs); default: loaded here.
+    """
+    t0 = time.perf_counter()
+    # The diffusion models are found before any work (a missing one is a clear error).
+    outpainting = _choose_completion(config)
+    want_outpaint = outpainting.choice == "sd2"
+    hedged = _hedge_unsure_scene(photo_srgb, placement_px, config, want_outpaint, photo_camera, photo_info, progress,
+                                 cancel)
+    if hedged is not None:
+        return hedged
+    model_paths = None
+    if (config.critic_type == "diffusion" and critic is None) or want_outpaint:
+        model_paths = _locate_light_models(config.models, want_outpaint)
+    loaded: dict = {}
+
+    def guidance_models():
+        if "models" not in loaded:
+            from ...guidance.models import load_guidance_models
+
+            loaded["models"] = (models.get(config.models, want_outpaint) if models is not None else
+                                load_guidance_models(config.models, need_inpaint=want_outpaint, paths=model_paths))
+        return loaded["models"]
+
+    photo = np.clip(np.asarray(photo_srgb, np.float32)[..., :3], 0.0, 1.0)
+    h, w = photo.shape[:2]
+    info = dict(photo_info or {})
+    decisions: dict = {}
+    if photo_camera is None:
+        photo_camera, decisions["fov"] = default_photo_camera(config, info, w, h)
+    elif (photo_camera.width, photo_camera.height) != (w, h):
+        photo_camera = replace(photo_camera, width=w, height=h)
+    decisions["photo_camera"] = asdict(photo_camera)
+
+    scene_type = _scene_type(photo, config, decisions)
+    emit(progress, "light", 0, max(config.optimise.iterations, 1), f"{scene_type} panorama")
+
+    work_height = max(config.map_height, MIN_WORKING_HEIGHT)
+    pano = _panorama(photo, photo_camera, placement_px, scene_type, work_height, config, outpainting,
+                     guidance_models, decisions)
+    check_cancel(cancel)
+
+    ldr, regions, prior, prompts = _prior(photo, pano, scene_type, photo_camera, config, decisions)
+
+    # Optimise the scales with a critic, when there is one.
+    scales, optimisation = _critic_scales(config, critic, reference_envmap, mesh, maps, photo, photo_camera,
+                                          placement_px, ldr, regions, prior, prompts, guidance_models, decisions,
+                                          progress, cancel, on_iteration)
+    hdr = _shrink_to_flat(hdr_from_scales(ldr, regions, scales), photo, decisions, optimisation is None)
+    if work_height > config.map_height:
+        hdr, ldr = (_area_resize(m, config.map_height) for m in (hdr, ldr))
+        regions = {name: _area_resize(mask.astype(np.float32), config.map_height) > 0 for name, mask in regions.items()}
+    emit(progress, "light", max(config.optimise.iterations, 1), max(config.optimise.iterations, 1), "HDR map ready")
+    return LightResult(ldr, hdr, regions, scales, prior, pano, photo_camera, decisions, optimisation,
+                       time.perf_counter() - t0)
+
+
+def _shrink_to_flat(hdr: np.ndarray, photo: np.ndarray, decisions: dict, prior_only: bool) -> np.ndarray:
+    """Where the evidence is weak the map leans towards the flat environment (the photo's mean linear
+    colour everywhere): hdr c + flat (1 - c), c the cues' confidence. Not after a critic: its scales
+    are evidence of their own. On the corpus's real views this won 1 more of 48 on diffuse si-RMSE."""
+    confidence = decisions.get("cues", {}).get("confidence")
+    if not prior_only or confidence is None or confidence >= 1.0:
+        return hdr
+    flat = srgb_to_linear(photo).reshape(-1, 3).mean(axis=0).astype(np.float32)
+    decisions["shrink"] = {"towards": "the flat environment (the photo's mean linear colour)",
+                           "flat_rgb": np.round(flat, 5).tolist(), "weight": round(1.0 - confidence, 4)}
+    return (confidence * hdr + (1.0 - confidence) * flat).astype(np.float32)
+
+
+def _scene_type(photo: np.ndarray, config: LightConfig, decisions: dict) -> str:
+    """Indoor or outdoor: the user's, else the automatic call (an unsure one says so)."""
+    cue = scene_type_cue(photo)
+    scene_type = cue["scene_type"] if config.scene_type == "auto" else config.scene_type
+    decisions["scene_type"] = {"chosen": scene_type, "by": "auto" if config.scene_type == "auto" else "user", "auto": cue}
+    if config.scene_type == "auto" and cue["unsure"]:
+        decisions["scene_type"]["note"] = (f"unsure (score {cue['score']:.2f}, near 1): chose {scene_type}; "
+                                           "--scene indoor|outdoor decides")
+    return scene_type
+
+
+def _panorama(photo: np.ndarray, photo_camera: PhotoCamera, placement_px: tuple[float, float], scene_type: str,
+              work_height: int, config: LightConfig, outpainting: Decision, guidance_models,
+              decisions: dict) -> Panorama:
+    """The LDR panorama at the working height: the photo unwrapped around the object (indoors, with
+    depth) or warped into the sky and completed (outdoors)."""
+    decisions["map_height"] = {"output": config.map_height, "working": work_height, "why": (
+        "lights are found at the working size and the map is area-averaged to the output size (energy kept)"
+        if work_height > config.map_height else "built at the output size")}
+    placement = place_on_floor(photo_camera, placement_px)
+    decisions["placement"] = {"pixel": list(placement.pixel), "object_position": np.round(placement.object_position, 4).tolist(),
+                              "lifted_below_horizon": placement.clamped}
+    if scene_type == "indoor":
+        depth = estimate_ray_distance(photo, photo_camera, placement, config.depth)
+        decisions["depth"] = {"method": depth.method, **depth.detail}
+        pano = indoor_panorama(photo, depth.ray_distance, photo_camera, placement, work_height)
+    else:
+        outpaint = None
+        if outpainting.choice == "sd2":
+            from .outpaint import outpaint_panorama
+
+            def outpaint(ldr, seen):
+                return outpaint_panorama(ldr, seen, guidance_models(), config.outpaint)
+        pano = outdoor_panorama(photo, photo_camera, work_height, outpaint=outpaint)
+        decisions["outpainting"] = {"asked": config.outpaint.completion_type, "used": outpainting.choice == "sd2",
+                                    "why": outpainting.reason, "completion": pano.decisions["completion"]}
+    decisions["panorama"] = pano.decisions
+    return pano
+
+
+def _prior(photo: np.ndarray, pano: Panorama, scene_type: str, photo_camera: PhotoCamera, config: LightConfig,
+           decisions: dict) -> tuple[np.ndarray, dict, dict, tuple[str, ...]]:
+    """Bright regions, their prior scales (the cues or the inverse tone curve) and the critic's prompts."""
+    ldr = pano.ldr
+    regions = bright_regions(ldr, pano.distance, scene_type, config.thresholds)
+    if config.sun_deg is not None:
+        decisions["sun"] = {"deg": list(config.sun_deg), "used": config.prior_type == "cues",
+                            "frame": "azimuth from the photo's view, positive to its right; elevation up"}
+    if config.prior_type == "cues":
+        cues = build_cues(photo, ldr, pano.unseen, regions, config.thresholds, config.cues, camera=photo_camera,
+                          sun=sun_direction(config.sun_deg, photo_camera))
+        ldr, regions, prior = cues.ldr, cues.regions, cues.scales
+        decisions["cues"] = cues.report
+    else:
+        prior = prior_scales(ldr, regions, config.l_white)
+    decisions["regions"] = {name: round(float(mask.mean()), 5) for name, mask in regions.items()}
+    decisions["prior"] = {"type": config.prior_type, "l_white": config.l_white,
+                          "scales": {k: round(v, 5) for k, v in prior.items()}}
+    prior_hdr = hdr_from_scales(ldr, regions, prior)
+    dark, dark_info = is_dark_environment(prior_hdr, regions)
+    prompts = tuple(light_prompt(config.object_prompt, dark, config.tint) for _ in config.apparatus.object_azimuths) \
+        + (light_prompt(SPHERE_PROMPT, dark, config.tint),)
+    decisions["prompt"] = {"dark_environment": dark_info, "sphere": prompts[-1], "object": prompts[0],
+                           "evaluated_on": "the prior's HDR map"}
+
+    return ldr, regions, prior, prompts
+
+
+def _critic_scales(config: LightConfig, critic, reference_envmap, mesh, maps, photo: np.ndarray,
+                   photo_camera: PhotoCamera, placement_px: tuple[float, float], ldr: np.ndarray, regions: dict,
+                   prior: dict, prompts: tuple[str, ...], guidance_models, decisions: dict, progress, cancel,
+                   on_iteration) -> tuple[dict, OptimiseResult | None]:
+    """The scales: the prior's, or optimised by rendering the apparatus for the chosen critic."""
+    scales, optimisation = dict(prior), None
+    use_critic, chosen = _choose_critic(config, critic, reference_envmap, regions)
+    decisions["critic"] = {"type": config.critic_type, "used": chosen.choice != "none", "why": chosen.reason}
+    if chosen.choice != "none":
+        if mesh is None or maps is None:
+            mesh, maps = default_object()
+            decisions["object"] = "default grey sphere (no asset given)"
+        else:
+            mesh, _ = normalize_to_unit_sphere(mesh)
+            decisions["object"] = f"the asset '{mesh.name}' with its own maps"
+        scene = ApparatusScene(mesh, maps, ldr.shape[:2], config.apparatus,
+                               photo_azimuth_deg=photo_camera.yaw_deg - 90.0)
+        if config.critic_type == "reference":
+            from .reference_critic import ReferenceCritic
+
+            use_critic = ReferenceCritic.from_true_map(scene, _fit_map(reference_envmap, ldr.shape[:2]))
+        elif use_critic is None:   # diffusion, with the models located above
+            from .diffusion_critic import DiffusionLightCritic
+
+            models = guidance_models()
+            # Where the object stands in the photo: its foot at the placement, `object_size` of the photo tall.
+            side = config.diffusion.object_size * photo.shape[0]
+            object_box = (placement_px[0] - side / 2, placement_px[1] - side, side)
+            use_critic = DiffusionLightCritic(models, scene.cameras, prompts, config.diffusion, photo=photo,
+                                              squares=scene.photo_squares(object_box))
+            models.release_text_encoder()
+            decisions["critic"].update({"models": {k: str(v) for k, v in models.paths.items()},
+                                        "device": str(models.device), "dtype": str(models.dtype).replace("torch.", ""),
+                                        **{k: v for k, v in asdict(config.diffusion).items()}})
+        optimisation = optimise_scales(scene, ldr, regions, prior, use_critic, prompts, config.optimise,
+                                       progress=progress, cancel=cancel, on_iteration=on_iteration)
+        scales = {k: math.exp(v) for k, v in optimisation.log_scales.items()}
+        decisions["optimisation"] = {"iterations": config.optimise.iterations, "lr": config.optimise.lr,
+                                     "final_loss": optimisation.loss_history[-1] if optimisation.loss_history else None,
+                                     "seconds": round(optimisation.seconds, 3)}
+    return scales, optimisation
+
+
+def _hedge_unsure_scene(photo_srgb: np.ndarray, placement_px: tuple[float, float], config: LightConfig,
+                        want_outpaint: bool, photo_camera: PhotoCamera | None, photo_info: dict | None,
+                        progress: ProgressCallback | None, cancel: threading.Event | None) -> LightResult | None:
+    """An unsure automatic indoor/outdoor call is handled as unsure: both maps are built and averaged
+    (on real views a wrong call cost more than the average of both does). Only where both are cheap:
+    no critic and no outpainting model (their scales and completions belong to one scene type)."""
+    if config.scene_type != "auto" or config.critic_type != "none" or want_outpaint:
+        return None
+    cue = scene_type_cue(np.clip(np.asarray(photo_srgb, np.float32)[..., :3], 0.0, 1.0))
+    if not cue["unsure"]:
+        return None
+    t0 = time.perf_counter()
+    both = {kind: estimate_light(photo_srgb, placement_px, replace(config, scene_type=kind), photo_camera=photo_camera,
+                                 photo_info=photo_info, progress=progress, cancel=cancel)
+            for kind in ("indoor", "outdoor")}
+    result = both[cue["scene_type"]]
+    result.hdr = (0.5 * (both["indoor"].hdr + both["outdoor"].hdr)).astype(np.float32)
+    result.decisions.setdefault("depth", both["indoor"].decisions.get("depth"))
+    result.decisions["scene_type"] = {
+        "chosen": cue["scene_type"], "unsure": True, "by": "auto", "auto": cue,
+        "note": f"unsure (score {cue['score']:.2f}): the map is the mean of the indoor and outdoor estimates; "
+                f"--scene indoor|outdoor decides", "scales": {k: r.scales for k, r in both.items()}}
+    if "cues" in result.decisions:
+        # Half the map rests on a scene type that is likely wrong.
+        result.decisions["cues"]["confidence"] = round(0.5 * (result.decisions["cues"].get("confidence") or 1.0), 3)
+    result.seconds = time.perf_counter() - t0
+    return result
+
+
+def _area_resize(image: np.ndarray, height: int) -> np.ndarray:
+    """Area-average a latitude-longitude map down to `height` rows (the mean radiance per texel is kept)."""
+    import cv2
+
+    return cv2.resize(np.ascontiguousarray(image, np.float32), (2 * height, height), interpolation=cv2.INTER_AREA)
+
+
+def _fit_map(envmap: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    import cv2
+
+    envmap = np.ascontiguousarray(envmap[..., :3], np.float32)
+    if envmap.shape[:2] != tuple(shape):
+        envmap = cv2.resize(envmap, (shape[1], shape[0]), interpolation=cv2.INTER_AREA)
+    return envmap
+
+
+def _choose_critic(config: LightConfig, critic, reference_envmap, regions) -> tuple[Critic | None, Decision]:
+    """Which critic optimises the scales: "none", "reference" or "diffusion" (a given critic counts as diffusion)."""
+    if not regions:
+        return None, Decision("none", "no bright region, so no scale to optimise")
+    if config.critic_type == "none":
+        return None, Decision("none", f"critic_type 'none': the {config.prior_type} prior sets the scales")
+    if config.critic_type == "reference":
+        if reference_envmap is None:
+            raise InputError("critic_type 'reference' needs the true map (reference_envmap).")
+        return None, Decision("reference", "pixel loss against renders under the true map")
+    if critic is None:
+        return None, Decision("diffusion", "diffusion critic (VSD with Stable Diffusion 2 base, core/guidance)")
+    return critic, Decision("diffusion", "diffusion critic (given by the caller)")
+
+
+def _locate_light_models(models: ModelConfig, need_inpaint: bool) -> dict:
+    from ...guidance.models import locate_models
+
+    try:
+        return locate_models(models, need_inpaint=need_inpaint)
+    except ModelMissingError as error:
+        raise ModelMissingError(f"{error} For light estimation, `scenefit light --critic none` (critic_type "
+                                f"'none') sets the scales by the inverse-tone-mapping prior instead, and "
+                                f"`--outpaint prior` completes an outdoor map without the model.") from None
+
+
+def _choose_completion(config: LightConfig) -> Decision:
+    """How an outdoor map's unseen part is completed: "sd2" (inpainting model) or "prior", before any work."""
+    kind = config.outpaint.completion_type
+    if config.scene_type == "indoor":
+        return Decision("prior", "indoor scene: no outpainting")
+    if kind == "prior":
+        return Decision("prior", "completion_type 'prior': the sky/ground prior completes the map")
+    if kind == "sd2":
+        return Decision("sd2", "completion_type 'sd2'")
+    from ...guidance.models import models_available
+
+    found, where = models_available(config.models, need_inpaint=True)
+    if found:
+        return Decision("sd2", f"auto: Stable Diffusion 2 inpainting found ({where})")
+    return Decision("prior", "auto: Stable Diffusion 2 inpainting is not on this machine, so the sky/ground prior "
+                             "completes the map")
+
+
+def write_light_outputs(result: LightResult, out_dir: str | Path) -> dict[str, str]:
+    """light.exr (float32 linear HDR), light_ldr.png (the LDR panorama), light_preview.png (tone-mapped)."""
+    out = Path(out_dir)
+    paths = {
+        "hdr_exr": write_image(out / "light.exr", result.hdr, dtype="float"),
+        "ldr_png": write_image(out / "light_ldr.png", result.ldr),
+        "preview_png": write_image(out / "light_preview.png", tonemap_preview(result.hdr)),
+    }
+    return {k: str(v) for k, v in paths.items()}
+
+
+def _json_safe(value):
+    """inf/nan as strings, so report.json stays strict JSON."""
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    return value
+
+
+def light_report(result: LightResult, config: LightConfig, outputs: dict[str, str]) -> dict:
+    return _json_safe({
+        "stage": "light",
+        "config": asdict(config),
+        "decisions": result.decisions,
+        "scales": {k: round(v, 6) for k, v in result.scales.items()},
+        "prior_scales": {k: round(v, 6) for k, v in result.prior_scales.items()},
+        "map_size": [int(result.hdr.shape[1]), int(result.hdr.shape[0])],
+        "hdr_max": float(result.hdr.max()),
+        # 0..1: how much of the map rests on evidence rather than on the flat environment it shrank to.
+        "confidence": result.decisions.get("cues", {}).get("confidence"),
+        "seconds": round(result.seconds, 3),
+        "outputs": outputs,
+        "convention": "latitude-longitude, Blender's equirectangular Environment Texture (top row = +Z, "
+                      "u = 0.5 - atan2(y, x) / 2pi, centre column +X); load with blender_io.world.world_from_hdr",
+    })

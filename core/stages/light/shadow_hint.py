@@ -1,0 +1,50 @@
+"""The sun's direction from a shadow the artist points at: three points in the photo, the foot of
+something standing on the floor, its top (straight above the foot) and the tip of its shadow.
+
+With the photo's camera and the floor known (the camera CAMERA_HEIGHT above it), the foot and the tip
+are floor points; the top is the point of its pixel's ray straight above the foot; the sun lies along
+tip -> top. The answer is in `--sun`'s terms: azimuth from the camera's view, positive to its right,
+and elevation above the horizon (core/stages/light/estimate.py:sun_direction is the inverse).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...base.errors import InputError
+from ...scene.camera import CAMERA_HEIGHT, PhotoCamera, pixel_ray
+
+
+def floor_point(camera: PhotoCamera, pixel: tuple[float, float], what: str) -> np.ndarray:
+    """Where the pixel's ray meets the floor; one sentence when it does not (at or above the horizon)."""
+    ray = pixel_ray(camera, *pixel)
+    if ray[2] >= -1e-6:
+        raise InputError(f"The {what} ({pixel[0]:.0f}, {pixel[1]:.0f}) is at or above the horizon of this camera, "
+                         "so it is not on the floor; pick it on the ground, or check the camera's pitch.")
+    origin = np.array([0.0, 0.0, CAMERA_HEIGHT])
+    return origin + ray * (CAMERA_HEIGHT / -ray[2])
+
+
+def sun_from_shadow(camera: PhotoCamera, foot: tuple[float, float], top: tuple[float, float],
+                    tip: tuple[float, float]) -> tuple[float, float]:
+    """(azimuth, elevation) in degrees of the sun casting the shadow; points are photo pixels (x right,
+    y down) of the caster's foot, its top and the shadow's tip."""
+    origin = np.array([0.0, 0.0, CAMERA_HEIGHT])
+    base, end = floor_point(camera, foot, "foot"), floor_point(camera, tip, "shadow's tip")
+    ray = pixel_ray(camera, *top)
+    # The top is on its ray, straight above the foot: the ray's point nearest the foot's vertical.
+    across = (base - origin)[:2]
+    t = float(ray[:2] @ across / max(float(ray[:2] @ ray[:2]), 1e-12))
+    above = origin + t * ray
+    if t <= 0 or above[2] <= 1e-6:
+        raise InputError("The top you picked is not above the foot (its ray meets the foot's vertical at or below "
+                         "the floor); pick the caster's top, then its foot on the ground, then the shadow's tip.")
+    if np.linalg.norm(above[:2] - base[:2]) > 0.25 * max(above[2], 1e-6):
+        raise InputError("The top you picked is not straight above the foot in this camera's view; pick the top "
+                         "and the foot of one upright thing (a post, a person, a table leg's corner).")
+    direction = above - end
+    direction /= np.linalg.norm(direction)
+    azimuth = camera.yaw_deg - math.degrees(math.atan2(direction[1], direction[0]))
+    elevation = math.degrees(math.asin(float(np.clip(direction[2], -1.0, 1.0))))
+    return (azimuth + 180.0) % 360.0 - 180.0, elevation

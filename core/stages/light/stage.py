@@ -1,0 +1,84 @@
+"""The light stage from a photo file, as `scenefit light`, a batch job, Blender's Estimate Light and
+the pipeline run it: one reading of the photo, the placement and the photo's camera, and one writing of
+the stage's files and report.
+
+    inputs = light_inputs(photo_path, at, fspy, camera_overrides)   # photo, pixel, camera, its record
+    result = run_light(inputs, config, progress, cancel)             # estimate_light on them
+    report = write_light(result, folder)                             # light.exr, previews, report.json
+
+(A batch job's light stage once lit every photo through the default camera while `scenefit light`
+used the photo's own: the copies had drifted.)
+"""
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ...base.decision import Decision
+from ...scene.camera import PhotoCamera
+from ...scene.placement import Placement
+from ...base.progress import ProgressCallback
+from .estimate import LightConfig, LightResult, estimate_light, light_report, load_photo, write_light_outputs
+
+
+@dataclass(frozen=True)
+class LightInputs:
+    photo: np.ndarray          # (h, w, 3) sRGB in [0, 1], the light stage's working copy
+    info: dict                 # what load_photo found: the stored size, orientation, metadata
+    pixel: tuple[float, float]  # the placement in the working copy's pixels
+    camera: PhotoCamera        # the photo's camera at the working copy's size
+    camera_record: dict        # where each of its values came from (the report's decisions.camera)
+
+
+def critic_choice(asked: str, models) -> Decision:
+    """The light critic for `asked` ("auto", "diffusion" or "none"): auto is the diffusion critic when the
+    SD2 base weights are on this machine (never a download), else none. `scenefit light`, Blender's
+    Estimate Light and a batch light job decide it here; the whole pipeline follows its run's guidance
+    (core.run.guidance_found), which also needs the inpainting weights."""
+    from ...guidance.models import models_available
+
+    if asked != "auto":
+        return Decision(asked, "the user's choice")
+    found, where = models_available(models, need_inpaint=False)
+    if found:
+        return Decision("diffusion", f"Stable Diffusion 2 found ({where})")
+    return Decision("none", "Stable Diffusion 2 weights are not on this machine, so the prior sets the scales")
+
+
+def light_inputs(photo_path: str | Path, at, fspy: str | Path | None = None,
+                 camera_overrides: dict | None = None) -> LightInputs:
+    """The photo read once, the placement `at` ("X,Y" or a pair: fractions, or pixels of the photo as
+    stored) and the photo's camera as `scenefit camera` finds it, with `camera_overrides` over it."""
+    from ..camera import photo_camera_estimate
+
+    photo, info = load_photo(photo_path)
+    h, w = photo.shape[:2]
+    pixel = Placement.parse(at, tuple(info["size"])).pixel((h, w))
+    estimate = photo_camera_estimate(photo_path, fspy, camera_overrides)
+    return LightInputs(photo, info, pixel, estimate.photo_camera(width=w, height=h), estimate.to_dict())
+
+
+def run_light(inputs: LightInputs, config: LightConfig, progress: ProgressCallback | None = None,
+              cancel: threading.Event | None = None, models=None, asset: dict | None = None) -> LightResult:
+    """The light stage: estimate_light on the inputs' photo, placement and camera. models: where loaded
+    diffusion models come from (estimate_light); asset: {"mesh", "maps"} for the diffusion critic to
+    render the asset itself (default: a grey sphere)."""
+    result = estimate_light(inputs.photo, inputs.pixel, config, photo_camera=inputs.camera, photo_info=inputs.info,
+                            progress=progress, cancel=cancel, models=models, **(asset or {}))
+    result.decisions["camera"] = inputs.camera_record
+    result.config, result.photo_info = config, inputs.info
+    return result
+
+
+def write_light(result: LightResult, folder: str | Path, extra: dict | None = None) -> dict:
+    """light.exr and its previews in `folder`, and report.json (the photo's facts, `extra` over it)."""
+    from ...base.report import write_report
+
+    report = light_report(result, result.config, write_light_outputs(result, folder))
+    report["photo"] = result.photo_info
+    report.update(extra or {})
+    write_report(Path(folder) / "report.json", report)
+    return report
