@@ -57,5 +57,5 @@ fi
 # The optional extra for batches on Ray (`scenefit[ray]`), so the tests run the Ray path too.
 "${PIP[@]}" install -q -r requirements-ray.txt
 "${PIP[@]}" install -q --no-deps -e .
-"$VENV/bin/python" -c 'import scenefit.core.mesh' || die "the editable install of scenefit does not import."
+"$VENV/bin/python" -c 'import scenefit.core.data.mesh' || die "the editable install of scenefit does not import."
 echo "Set-up done."
