@@ -463,9 +463,10 @@ def before_lines(rows: list[dict], path: Path) -> list[str]:
         mine = [r for r in rows if r["metering"] == metering]
         w = real_wins(mine)
         matte = float(np.median([_metric(r, "estimate", "matte", "si_rmse") for r in mine]))
+        toned = float(np.median([_metric(r, "estimate", "matte", "si_rmse", "tonemapped") for r in mine]))
         lines.append(f"- {metering}: diffuse si-RMSE beats the constant on {w['si']} of {w['views']}, absolute diffuse "
                      f"RMSE on {w['rmse']}, both on {w['both']}; map mean 4x off on {w['mean_off_4x']} (worst "
-                     f"{w['worst_mean_ratio']:.3g}x); matte si-RMSE median {matte:.3g}.")
+                     f"{w['worst_mean_ratio']:.3g}x); matte si-RMSE median {matte:.3g} ({toned:.3g} tone-mapped).")
     return lines
 
 

@@ -164,3 +164,26 @@ def test_an_ambiguous_photo_is_called_unsure_and_the_report_says_so():
     # A clearly dark, smooth room is indoor and sure.
     room = linear_to_srgb(np.full((80, 64, 3), 0.05, np.float32))
     assert scene_type_cue(room)["scene_type"] == "indoor" and not scene_type_cue(room)["unsure"]
+
+
+# -- what counts as clipped ------------------------------------------------------------------------
+@pytest.mark.parametrize("painted", [False, True])
+def test_only_clipped_texels_the_photo_or_a_model_made_take_the_exposure_scale(painted):
+    # The unseen sky is filled with a clipped colour (as the sky prior's zenith often is): a fill the camera
+    # never measured is part of the unseen light, at the mean the surfaces call for; lights a model painted
+    # there stay lights (their own "clipped" region).
+    s_linear = 0.2
+    photo = np.full((12, 16, 3), float(np.round(255 * (1.055 * s_linear ** (1 / 2.4) - 0.055)) / 255), np.float32)
+    ldr, unseen = _uniform_map(float(photo[0, 0, 0]))
+    upper = equirect_directions(*unseen.shape)[..., 2] > 0
+    ldr[unseen & upper] = 1.0
+    config = CueConfig(albedo=0.25)
+    cues = build_cues(photo, ldr, unseen, {"far": unseen & upper}, config=config, painted_unseen=painted)
+    assert ("clipped" in cues.scales) == painted
+    if not painted:
+        assert np.array_equal(cues.regions["unseen"], unseen & upper)
+        hdr = srgb_to_linear(cues.ldr)[cues.regions["unseen"]].mean(axis=-1) * cues.scales["unseen"]
+        solid = np.sin(np.pi * (np.arange(16) + 0.5) / 16)[:, None] * np.ones((1, 32))
+        mean = np.average(hdr, weights=solid[cues.regions["unseen"]])
+        assert mean == pytest.approx(s_linear * (2 / config.albedo - 1), rel=0.03)
+

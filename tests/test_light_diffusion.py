@@ -290,6 +290,8 @@ def test_outpainting_keeps_the_photo_and_paints_the_rest(tiny_base, tiny_inpaint
     assert pano.ldr.shape == (32, 64, 3) and np.isfinite(pano.ldr).all()
     assert pano.ldr.min() >= 0 and pano.ldr.max() <= 1
     assert "outpainted" in pano.decisions["completion"] and "prior" in prior.decisions["completion"]
+    # Only a model's painting counts as lights drawn in the unseen part (the cues keep its clipped texels).
+    assert pano.painted and not prior.painted
     # The photo's region is the photo: equal to the prior path wherever its feather does not reach.
     import cv2
 

@@ -362,7 +362,7 @@ def _prior(photo: np.ndarray, pano: Panorama, scene_type: str, photo_camera: Pho
                             "frame": "azimuth from the photo's view, positive to its right; elevation up"}
     if config.prior_type == "cues":
         cues = build_cues(photo, ldr, pano.unseen, regions, config.thresholds, config.cues, camera=photo_camera,
-                          sun=sun_direction(config.sun_deg, photo_camera))
+                          sun=sun_direction(config.sun_deg, photo_camera), painted_unseen=pano.painted)
         ldr, regions, prior = cues.ldr, cues.regions, cues.scales
         decisions["cues"] = cues.report
     else:

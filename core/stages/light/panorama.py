@@ -42,6 +42,7 @@ class Panorama:
     inpainted: np.ndarray         # (H, W) bool: hole filled by cv2.inpaint
     unseen: np.ndarray            # (H, W) bool: outside what the photo saw -> mean colour / sky-ground prior
     decisions: dict = field(default_factory=dict)
+    painted: bool = False         # the unseen part was painted by a model: its bright texels are lights it drew
 
 
 HIGHLIGHT_LEVEL = 0.95             # clipped (the far-light threshold tau_f)
@@ -252,7 +253,7 @@ def outdoor_panorama(photo: np.ndarray, camera: PhotoCamera, height: int = 128,
         "scene_type": "outdoor",
         "seen_fraction": round(float(inside.mean()), 4),
         "completion": completion,
-    })
+    }, painted=outpaint is not None)
 
 
 def sky_ground_prior(warped: np.ndarray, inside: np.ndarray) -> np.ndarray:
