@@ -87,8 +87,15 @@ def _light(args, out: Path) -> int:
     result.decisions["critic"]["choice"] = {"asked": args.critic, "chosen": critic.choice, "why": critic.reason}
     write_light(result, out, {"environment": environment_info()})
     depth_used = result.decisions.get("depth", {}).get("method", "none (outdoor)")
-    print(f"light: {result.decisions['scene_type']['chosen']} scene, depth {depth_used}, scales "
-          f"{ {k: round(v, 3) for k, v in result.scales.items()} } -> {Path(args.out) / 'light.exr'}")
+    scene = result.decisions["scene_type"]
+    per_type = scene.get("scales") if isinstance(scene.get("scales"), dict) else {}
+    if {"indoor", "outdoor"} <= set(per_type):   # an unsure call: the map blends both, so say so
+        said = (f"indoor or outdoor (unsure, score {scene['auto']['score']:.2f}; the map is their mean, "
+                f"--scene decides), scales " + ", ".join(f"{kind} { {k: round(v, 3) for k, v in per_type[kind].items()} }"
+                                                         for kind in ("indoor", "outdoor")))
+    else:
+        said = f"{scene['chosen']} scene, scales { {k: round(v, 3) for k, v in result.scales.items()} }"
+    print(f"light: {said}, depth {depth_used} -> {Path(args.out) / 'light.exr'}")
     return 0
 
 

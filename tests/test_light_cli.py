@@ -128,3 +128,22 @@ def test_sun_on_the_command_line(capsys):
     for bad in ("45", "north,10", "10,95"):
         assert main(["light", "--dry-run", "--sun", bad]) == 2
         assert "give e.g. --sun 30,45" in capsys.readouterr().err
+
+
+def test_the_summary_line_does_not_claim_a_scene_type_it_was_unsure_of(tmp_path, capsys):
+    from scenefit.cli import main
+    from scenefit.core.data.imageio import linear_to_srgb
+    from scenefit.core.stages.light.scene_type import SKY_RATIO_AT
+
+    # Smooth, the top eighth SKY_RATIO_AT times brighter than the bottom: the scene-type score is 1 (unsure).
+    linear = np.full((80, 64, 3), 0.1, np.float32)
+    linear[:10] = 0.1 * SKY_RATIO_AT
+    write_image(tmp_path / "photo.png", linear_to_srgb(linear))
+    common = ["light", "--photo", str(tmp_path / "photo.png"), "--at", "0.5,0.85", "--preset", "draft",
+              "--depth", "geometric", "--critic", "none", "--outpaint", "prior"]
+    assert main(common + ["--out", str(tmp_path / "auto")]) == 0
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    assert "unsure" in line and "indoor {" in line and "outdoor {" in line, line
+    assert main(common + ["--out", str(tmp_path / "told"), "--scene", "outdoor"]) == 0
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    assert line.startswith("light: outdoor scene, scales {") and "unsure" not in line, line
