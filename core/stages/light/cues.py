@@ -128,12 +128,9 @@ def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regi
     # A fill's clipped texels (the sky prior's zenith is the photo's brightest sky, often 1.0) are not
     # lights the photo clipped: counted as such, they took the exposure cue's scale over up to 45% of
     # the map (blouberg away: mean 5.8x too bright).
-    hidden = unseen & upper
-    measured = np.ones((h, w), bool)      # where a clipped texel is a light the photo (or the model) clipped
-    if painted_unseen:
-        hidden &= intensity(ldr) < config.clipped_level
-    else:
-        measured = ~unseen
+    stored = intensity(ldr)
+    hidden = unseen & upper & (stored < config.clipped_level) if painted_unseen else unseen & upper
+    measured = np.ones((h, w), bool) if painted_unseen else ~unseen   # where a clipped texel is a light
     regions = {k: m & ~hidden for k, m in regions.items()}
     regions = {k: m for k, m in regions.items() if m.any()}
     scales: dict[str, float] = {}
@@ -142,7 +139,6 @@ def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regi
     # Clipped texels: the exposure cue gives their geometric-mean radiance; unclipped texels keep theirs.
     clip_scale, clip_info = exposure_clip_scale(photo_srgb, config.clipped_level, config.key)
     report["exposure"] = clip_info
-    stored = intensity(ldr)
     clipped_all = np.zeros((h, w), bool)
     for name, mask in regions.items():
         clipped = mask & measured & (stored >= config.clipped_level)
