@@ -17,7 +17,7 @@ help:
 	@echo "make test       set up on first use, run the tests (all of them: what CI runs)"
 	@echo "make test-quick the tests without those marked slow (multi-process, worker environments)"
 	@echo "make bench      speed and accuracy table (benchmarks/run.py)"
-	@echo "make gpu-check  on a CUDA machine: SD2-sized random models, adapt's final preset, benchmarks/results/gpu.md"
+	@echo "make gpu-check  on a CUDA machine: SD2-sized random models, each preset's adapt iterations, benchmarks/results/gpu.md"
 	@echo "make corpus     every real asset in ../shared/corpus through convert -> bake -> glTF validator"
 	@echo "                (benchmarks/results/corpus.md; installs npm's gltf-validator into .venv/node)"
 	@echo "make extension PLATFORM=linux-x64|linux-arm64|windows-x64|macos-arm64|macos-x64"
@@ -52,7 +52,7 @@ bench: setup
 corpus: setup
 	$(PY) benchmarks/corpus.py
 
-# On a machine with a CUDA GPU: SD2-sized random models, the final preset's adapt iterations, gpu.md.
+# On a machine with a CUDA GPU: SD2-sized random models, each preset's adapt iterations, gpu.md (3 min on an H200).
 gpu-check: setup
 	$(PY) benchmarks/gpu_check.py
 

@@ -99,11 +99,32 @@ def cpu_sd2_jobs(overhead: float) -> str:
             if parts else "")
 
 
+def gpu_check_rows() -> list[dict]:
+    """The per-view step at the paper's settings from `make gpu-check` (results/gpu.json, SD2 size on one
+    GPU, the final preset's 4 views rendered in turn): with one view per GPU each rank does one view's
+    work, so (step - constant work - Adam) / views + Adam. Empty when no GPU has run the check."""
+    path = Path(__file__).resolve().parent / "results" / "gpu.json"
+    if not path.is_file():
+        return []
+    data = json.loads(path.read_text())
+    if data["machine"].get("dry_run"):
+        return []
+    rows = []
+    for r in data["rows"]:
+        if r["preset"] == "final":
+            adam = r["phases"]["step"]
+            per_view = (r["iteration_s"] - r["phases"]["constants"] - adam) / r["views_per_step"] + adam
+            rows.append({"setup": f"SD2 size on one {data['machine']['device']} ([gpu.md](gpu.md): final, "
+                                  f"{r['iteration_s']:.2f} s for {r['views_per_step']} views in turn)",
+                         "iteration_s": per_view})
+    return rows
+
+
 def paper_estimate(adapt_rows: list[dict], batch_rows: list[dict], gpus=(4, 8, 32)) -> dict:
     """Jobs per hour at the paper's settings on N GPUs: 4 GPUs per job (one view each), N/4 jobs at once,
     each 4000 iterations of the per-view iteration cost the adapt bench measured (the SD2-sized row on
-    CUDA when there is one), plus the batch overhead per job measured here."""
-    gpu_rows = [r for r in adapt_rows if "SD2" in r.get("setup", "")]
+    CUDA when there is one, else `make gpu-check`'s), plus the batch overhead per job measured here."""
+    gpu_rows = [r for r in adapt_rows if "SD2" in r.get("setup", "")] or gpu_check_rows()
     overhead = 0.0
     local = next((r for r in batch_rows if r["setup"].startswith("in-process")), None)
     if local is not None:
@@ -119,7 +140,7 @@ def paper_estimate(adapt_rows: list[dict], batch_rows: list[dict], gpus=(4, 8, 3
     per_gpus = {n: (n // PAPER_VIEWS_PER_STEP) * 3600.0 / job_s for n in gpus}
     text = (f"Paper settings ({PAPER_ITERATIONS} iterations, {PAPER_VIEWS_PER_STEP} views per step, one per GPU) "
             f"from the measured {t:.3f} s per iteration ({gpu_rows[0]['setup']}): {job_s / 3600:.2f} h per job; "
-            + ", ".join(f"{n} GPUs: {v:.2f} jobs/hour" for n, v in per_gpus.items()) + ".")
+            + ", ".join(f"{n} GPUs: {v:.2f} jobs/hour" for n, v in per_gpus.items()) + "." + cpu_sd2_jobs(overhead))
     return {"iteration_s": t, "overhead_s": overhead, "per_gpus": per_gpus, "text": text}
 
 

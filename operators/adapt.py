@@ -1,6 +1,8 @@
 """Adapt: restyle the converted texture to fit the photo (or from a prompt), as a background job."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from pathlib import Path
 
 import bpy
@@ -12,6 +14,9 @@ from . import work
 from .common import OnMesh, model_settings, photo_path, photo_view, run_folder
 from .jobs import JobOperator
 from .results import apply_result_material
+
+if TYPE_CHECKING:
+    from ..panels.quality import LocalWork
 
 
 def gather_adapt(op, context, texture: str) -> dict:
@@ -37,21 +42,25 @@ def gather_adapt(op, context, texture: str) -> dict:
         "render_size": op.render_size, "out": str(run_folder(context, "adapt", obj.name))}
 
 
-def adapt_seconds_here(context, iterations: int | None = None) -> float | None:
-    """The projected seconds of an adaptation at the panel's preset when it would run in this Blender on a
-    CPU with the diffusion models present (panels/quality.py's measurement); None otherwise."""
+def adapt_seconds_here(context, iterations: int | None = None) -> LocalWork | None:
+    """The projected work of an adaptation at the panel's preset when it would run in this Blender with the
+    diffusion models present (panels/quality.py's measurements: the bench CPU, or an H200 when torch
+    works on CUDA here); None otherwise."""
     from ..core.base.errors import SceneFitError
     from ..core.guidance.models import locate_models
-    from ..panels.quality import adapt_projection
+    from ..panels.quality import LocalWork, adapt_projection
 
     models, _ = model_settings(context)
     try:
-        if models.device().type != "cpu":
-            return None
+        device = models.device().type
+        if device not in ("cpu", "cuda"):
+            return None   # measured on neither
+        on_gpu = device == "cuda"
         locate_models(models, need_inpaint=context.scene.scenefit.mode == "scene")
     except (SceneFitError, ImportError):
         return None   # no models (the job says so at its start) or no torch (the dependency check does)
-    return adapt_projection(context.scene.scenefit.preset, iterations)
+    seconds = adapt_projection(context.scene.scenefit.preset, iterations, gpu=on_gpu)
+    return None if seconds is None else LocalWork(seconds, on_gpu)
 
 
 class SCENEFIT_OT_adapt(OnMesh, JobOperator):
@@ -76,7 +85,7 @@ class SCENEFIT_OT_adapt(OnMesh, JobOperator):
                 raise InputError("Adapt starts from the converted texture; run Convert on this asset first.")
         return work.adapt, gather_adapt(self, context, texture)
 
-    def long_local_work(self, context) -> float | None:
+    def long_local_work(self, context) -> LocalWork | None:
         return adapt_seconds_here(context, self.iterations or None)
 
     def apply(self, context, result) -> str:

@@ -10,6 +10,8 @@ Runtime state lives on the WindowManager (never saved into the .blend); the live
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import bpy
 import numpy as np
 from bpy.app.handlers import persistent
@@ -19,6 +21,9 @@ from ..workers import background
 from ..core.base.errors import SceneFitError
 from ..core.base.progress import TerminalProgress
 from .common import check_dependencies
+
+if TYPE_CHECKING:
+    from ..panels.quality import LocalWork
 
 TIMER_SECONDS = 0.25
 _previews = None  # bpy.utils.previews collection, made on register
@@ -78,12 +83,12 @@ def redraw(context) -> None:
                 area.tag_redraw()
 
 
-def long_work_warning(context, label: str, seconds: float | None, runs_remotely: bool) -> str | None:
+def long_work_warning(context, label: str, work: LocalWork | None, runs_remotely: bool) -> str | None:
     """One sentence when a job would run here for longer than LONG_LOCAL_SECONDS; None when it is short,
     unknown, or goes to the worker environment the preferences name."""
-    from ..panels.quality import LONG_LOCAL_SECONDS, duration_text
+    from ..panels.quality import LONG_LOCAL_SECONDS
 
-    if seconds is None or seconds < LONG_LOCAL_SECONDS:
+    if work is None or work.seconds < LONG_LOCAL_SECONDS:
         return None
     if runs_remotely:
         from .remote import worker_address
@@ -93,9 +98,11 @@ def long_work_warning(context, label: str, seconds: float | None, runs_remotely:
                 return None
         except SceneFitError:
             pass   # a worker set up wrongly: the job's start says so
-    return (f"{label} would run on this CPU for about {duration_text(seconds)} (measured with models of Stable "
-            "Diffusion 2's size on a 2-core CPU); a GPU, or a worker environment set in the add-on's preferences "
-            "(Jobs), runs it far sooner.")
+    if work.on_gpu:
+        return (f"{label} would run {work.where()}; a worker environment with more GPUs, set in the add-on's "
+                "preferences (Jobs), runs it sooner.")
+    return (f"{label} would run {work.where()}; a GPU, or a worker environment set in the add-on's "
+            "preferences (Jobs), runs it far sooner.")
 
 
 class JobOperator(bpy.types.Operator):
@@ -127,8 +134,8 @@ class JobOperator(bpy.types.Operator):
                 return remote_work(self, context, address)
         return self.prepare(context)
 
-    def long_local_work(self, context) -> float | None:
-        """Projected seconds of work this job does when it runs here on a CPU (None: short, or unknown)."""
+    def long_local_work(self, context) -> LocalWork | None:
+        """Projected work this job does when it runs here (None: short, or unknown)."""
         return None
 
     def long_work_warning(self, context) -> str | None:

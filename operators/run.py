@@ -2,6 +2,8 @@
 applied in Blender: the new material, the World, the composite set up for Cycles and its image."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import bpy
 from bpy.props import EnumProperty
 
@@ -13,6 +15,9 @@ from .adapt import adapt_seconds_here
 from .common import OnMesh, model_settings, photo_path, photo_view, run_folder, scene_layout
 from .jobs import JobOperator
 from .results import apply_composite_image, apply_layout_results, apply_result_world, result_targets
+
+if TYPE_CHECKING:
+    from ..panels.quality import LocalWork
 
 GUIDANCE = (("auto", "Auto", "Adapt with Stable Diffusion 2 when its weights are on this machine"),
             ("sd2", "Stable Diffusion 2", "Adapt; fail when the weights are missing"),
@@ -51,7 +56,7 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
                           "materials": layout.bake_data() if len(layout.materials) > 1 else None,
                           "out": str(run_folder(context, "run", layout.name))}
 
-    def long_local_work(self, context) -> float | None:
+    def long_local_work(self, context) -> LocalWork | None:
         if self.guidance == "none" or (self.guidance == "auto" and not context.scene.scenefit.prompt.strip()):
             return None   # no adaptation: the rest takes seconds
         return adapt_seconds_here(context)

@@ -4,8 +4,10 @@ whole `scenefit run` on the bundled example in a 320x240 photo, seconds per stag
 benchmarks/ is not shipped in the extension, so the numbers are copied here; tests/test_placement.py
 checks them against trade_run.json so they cannot drift from the measurement silently. None: not
 measured on that machine. Adapt's time is projected from its seconds per iteration with models of
-Stable Diffusion 2's size (benchmarks/results/adapt_sd2.json, checked there too): on a CPU it is hours.
+Stable Diffusion 2's size: on the bench CPU (benchmarks/results/adapt_sd2.json) it is hours to days, on
+one H200 (benchmarks/results/gpu.json, `make gpu-check`) minutes to hours; both are checked there too.
 """
+from dataclasses import dataclass
 
 BENCH_MACHINE = "2-core AMD EPYC, no GPU"
 
@@ -20,13 +22,30 @@ EXPECTED_SECONDS: dict[str, dict[str, float | None]] = {
 # work cached): seconds per iteration once the step's views have been met. None: not measured.
 ADAPT_SECONDS_PER_ITERATION: dict[str, float | None] = {"draft": 40.0, "balanced": 181.5, "final": 403.5}
 ADAPT_ITERATIONS = {"draft": 300, "balanced": 1500, "final": 4000}   # the presets' (core/pipeline/preset_tables.py)
+# The same on one GPU (`make gpu-check`: fp16, Mitsuba cuda_ad_rgb), the step without its constant work.
+GPU_BENCH_MACHINE = "one NVIDIA H200"
+ADAPT_GPU_SECONDS_PER_ITERATION: dict[str, float | None] = {"draft": 0.856, "balanced": 1.885, "final": 4.96}
 # Local work projected longer than this asks before it starts (and offers the worker environment).
 LONG_LOCAL_SECONDS = 3600.0
 
 
-def adapt_projection(preset: str, iterations: int | None = None) -> float | None:
-    """Seconds an adaptation at `preset` (and `iterations`, else the preset's) takes on the bench CPU."""
-    per_iteration = ADAPT_SECONDS_PER_ITERATION.get(preset)
+@dataclass(frozen=True)
+class LocalWork:
+    """Projected seconds of a job that would run in this Blender, and the measurement they come from."""
+    seconds: float
+    on_gpu: bool
+
+    def where(self) -> str:
+        return (f"on this GPU for about {duration_text(self.seconds)} (measured on {GPU_BENCH_MACHINE} with "
+                "models of Stable Diffusion 2's size; smaller GPUs take longer)" if self.on_gpu else
+                f"on this CPU for about {duration_text(self.seconds)} (measured with models of Stable "
+                "Diffusion 2's size on a 2-core CPU)")
+
+
+def adapt_projection(preset: str, iterations: int | None = None, gpu: bool = False) -> float | None:
+    """Seconds an adaptation at `preset` (and `iterations`, else the preset's) takes on the bench CPU, or
+    on the bench GPU."""
+    per_iteration = (ADAPT_GPU_SECONDS_PER_ITERATION if gpu else ADAPT_SECONDS_PER_ITERATION).get(preset)
     if per_iteration is None:
         return None
     return per_iteration * (iterations or ADAPT_ITERATIONS[preset])
@@ -44,9 +63,10 @@ def duration_text(seconds: float) -> str:
 
 def expected_line(stage: str, preset: str) -> str:
     if stage == "adapt":
-        seconds = adapt_projection(preset)
-        return "adapt: not measured yet" if seconds is None else \
-            f"adapt: about {duration_text(seconds)} on a CPU (SD2 size; a GPU: far less)"
+        cpu, gpu = adapt_projection(preset), adapt_projection(preset, gpu=True)
+        if cpu is None or gpu is None:
+            return "adapt: not measured yet"
+        return f"adapt: about {duration_text(cpu)} on a CPU, {duration_text(gpu)} on an H200 (SD2 size)"
     seconds = EXPECTED_SECONDS.get(stage, {}).get(preset)
     if seconds is None:
         return f"{stage}: not measured yet"

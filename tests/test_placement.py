@@ -155,6 +155,17 @@ def test_adapts_projected_time_is_the_sd2_bench_measurement():
         iterations = stage_config("adapt", preset, prompt="a test").iterations
         assert quality.ADAPT_ITERATIONS[preset] == iterations
     assert quality.adapt_projection("draft", 10) == pytest.approx(10 * quality.ADAPT_SECONDS_PER_ITERATION["draft"])
+    # On a GPU: `make gpu-check`'s rows (one H200), the step without the per-view constant work it still
+    # held while the views came up.
+    gpu = json.loads((root / "benchmarks/results/gpu.json").read_text())
+    assert not gpu["machine"]["dry_run"] and gpu["machine"]["device"] in quality.GPU_BENCH_MACHINE
+    steady = {row["preset"]: row["iteration_s"] - row["phases"]["constants"] for row in gpu["rows"]}
+    assert set(steady) == set(quality.ADAPT_GPU_SECONDS_PER_ITERATION)
+    for preset, seconds in quality.ADAPT_GPU_SECONDS_PER_ITERATION.items():
+        assert seconds == pytest.approx(steady[preset], abs=0.01)
+        assert quality.adapt_projection(preset, gpu=True) < quality.adapt_projection(preset) / 20
+    where = quality.LocalWork(quality.adapt_projection("final", gpu=True), on_gpu=True).where()
+    assert where.startswith("on this GPU for about 5.5 h") and "H200" in where, where
     assert [quality.duration_text(s) for s in (30, 600, 12000, 4 * 86400)] == ["30 s", "10 min", "3.3 h", "4.0 days"]
 
 

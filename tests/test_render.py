@@ -68,6 +68,26 @@ def test_gradients_reach_maps_and_environment():
     assert base.grad.sum() > 0 and env.grad.sum() > 0
 
 
+def test_each_variant_takes_torch_tensors_from_its_own_device():
+    """dr.wrap hands CUDA tensors to Dr.Jit's CUDA backend and CPU ones to LLVM; the renderer moves its
+    inputs to its variant's side (the first GPU run failed on a CPU environment map beside a CUDA texture)."""
+    from scenefit.core.render.backend import Backend
+
+    assert Backend("cuda_ad_rgb", "", None).torch_device == "cuda"
+    assert Backend("llvm_ad_rgb", "", None).torch_device == "cpu"
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
+def test_maps_on_the_gpu_and_a_map_of_light_on_the_cpu_render_together():
+    renderer = AssetRenderer(uv_sphere(), TEX, constant_env(1.0))
+    base, rough, metal = (t.cuda().requires_grad_(True) for t in constant_maps())
+    env = torch.tensor(constant_env(1.0))
+    out = renderer.render(Camera(width=16, height=16), base, rough, metal, env, spp=4, seed=0)
+    assert out.rgb.device == base.device
+    out.rgb.mean().backward()
+    assert base.grad is not None and base.grad.abs().sum() > 0
+
+
 def test_a_second_render_before_backward_is_refused_not_silently_wrong():
     renderer = AssetRenderer(uv_sphere(), TEX, constant_env(1.0))
     base = constant_maps()[0].clone().requires_grad_(True)

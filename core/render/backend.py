@@ -31,6 +31,12 @@ class Backend:
     reason: str
     llvm_library: str | None
 
+    @property
+    def torch_device(self) -> str:
+        """Where torch tensors must live to cross `dr.wrap`: it maps CUDA tensors to Dr.Jit's CUDA
+        backend and CPU tensors to its LLVM one, and the two cannot mix in one scene."""
+        return "cuda" if self.variant.startswith("cuda") else "cpu"
+
 
 _active: Backend | None = None
 

@@ -384,11 +384,14 @@ class AssetRenderer:
         sensor = self._sensor(camera)
         self._sensor_by_index = {0: sensor}
         # Each part's own texels (torch slices, so gradients reach the maps given).
-        texels = {shape_id: [part.texels(m) for m in maps] for shape_id, part in self.parts.items()}
-        image = self._render_fn()(texels, pad_envmap(envmap.float()), 0, int(spp), int(seed))
+        # Moved to the renderer's backend (an environment map on the CPU beside a texture on the GPU must
+        # not reach a CUDA scene as an LLVM array), and the image back to where the maps are.
+        device = self.backend.torch_device
+        texels = {shape_id: [part.texels(m).to(device) for m in maps] for shape_id, part in self.parts.items()}
+        image = self._render_fn()(texels, pad_envmap(envmap.float()).to(device), 0, int(spp), int(seed))
+        image = image.to(device=maps[0].device, dtype=torch.float32)
         if image.requires_grad:
             self._track_pending(image)
-        image = image.to(torch.float32)
         return RenderOutput(rgb=image[..., :3], alpha=image[..., 3:4], seconds=time.perf_counter() - t0)
 
     # Mitsuba's backward replays the render from the scene's *current* state (camera, maps, light), so a
