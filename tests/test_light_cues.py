@@ -187,3 +187,22 @@ def test_only_clipped_texels_the_photo_or_a_model_made_take_the_exposure_scale(p
         mean = np.average(hdr, weights=solid[cues.regions["unseen"]])
         assert mean == pytest.approx(s_linear * (2 / config.albedo - 1), rel=0.03)
 
+
+
+def test_a_clipped_floor_is_a_lit_surface_not_a_light():
+    # A studio: the lamp and the white floor around the object both clip. The exposure cue's power is the
+    # lamp's: clipped texels below the horizon (the floor the object stands on, seen all around it once
+    # unwrapped) keep their stored level instead of spreading the lamp's scale around the object.
+    photo = np.full((12, 16, 3), 0.25, np.float32)   # darker than mid-grey: the clipped pixels hold the rest
+    photo[:2, 6:10] = 1.0      # the lamp
+    photo[9:, :] = 1.0         # the floor
+    ldr, unseen = _uniform_map(0.25)
+    dirs = equirect_directions(*unseen.shape)
+    lamp = ~unseen & (dirs[..., 2] > 0.3)
+    floor = dirs[..., 2] < -0.2
+    ldr[lamp | floor] = 1.0
+    unseen &= ~floor
+    cues = build_cues(photo, ldr, unseen, {"near": lamp | floor})
+    assert cues.scales["clipped"] > 2.0
+    assert np.array_equal(cues.regions["clipped"], lamp)
+    assert np.array_equal(cues.regions["near"], floor) and cues.scales["near"] == 1.0
