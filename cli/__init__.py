@@ -10,6 +10,7 @@ import argparse
 import contextlib
 import io
 import sys
+from pathlib import Path
 
 from ..core.base.errors import Cancelled, SceneFitError
 from ..core.base.os_errors import os_error_sentence, with_out_paths
@@ -67,8 +68,12 @@ def _check_inputs(args) -> None:
     """The asset path checked before a command loads torch or Blender (seconds), so a mistyped path is
     refused at once; the rest of each command's inputs are checked where they are read."""
     if getattr(args, "asset", None) and not getattr(args, "dry_run", False):
-        from ..core.data.asset_io import check_asset_path
+        from ..core.data.asset_io import check_asset_path, resolve_asset_path
 
+        asset = resolve_asset_path(args.asset)
+        if asset != Path(args.asset):   # a folder holding one glTF/FBX/...: that file, said once
+            print(f"scenefit: {args.asset} holds one asset file; using {asset.name}", file=sys.stderr)
+            args.asset = str(asset)
         check_asset_path(args.asset)
 
 

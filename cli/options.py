@@ -123,7 +123,8 @@ def environment(args):
 def add_asset_args(p: argparse.ArgumentParser, optional: bool = False) -> None:
     """The asset argument; `optional` for commands whose --dry-run needs none."""
     p.add_argument("asset", nargs="?" if optional else None,
-                   help="a SceneFit asset folder (mesh.npz + maps) or a .blend/.glb/.gltf/.obj/.fbx file")
+                   help="a SceneFit asset folder (mesh.npz + maps), a .blend/.glb/.gltf/.obj/.fbx file, or the folder "
+                        "a downloaded asset came in (its one such file)")
     p.add_argument("--object", help="the object (a mesh, or a node such as an empty) to take from the asset "
                                     "file, with every mesh under it (default: every mesh object of the file, as "
                                     "one asset)")

@@ -42,7 +42,10 @@ class SCENEFIT_OT_estimate_light(JobOperator):
 
     def apply(self, context, result) -> str:
         world = apply_result_world(context, result["hdr"])
-        return f"Light estimated ({result['scene_type']} scene): World '{world.name}'"
+        kind = result["scene_type"]
+        # An unsure call blended both estimates: say so, and that the panel's Scene type decides.
+        said = kind[:-1] + ", Scene type decides)" if kind.startswith("indoor or outdoor") else f"{kind} scene"
+        return f"Light estimated, {said}: World '{world.name}'"
 
 
 classes = (SCENEFIT_OT_estimate_light,)

@@ -88,6 +88,7 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
     from dataclasses import replace
 
     from ..core.stages.light import load_photo
+    from ..core.stages.light.scene_type import scene_type_words
     from ..core.stages.light.stage import LightInputs, critic_choice, run_light, write_light
     from ..core.pipeline.presets import stage_config
     from ..core.scene.placement import Placement
@@ -116,7 +117,7 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
         report = write_light(result, out)
         return {"hdr": str(report["outputs"]["hdr_exr"]), "preview": str(report["outputs"]["preview_png"]),
                 "report": str(out / "report.json"),
-                "scene_type": result.decisions.get("scene_type", {}).get("chosen", ""),
+                "scene_type": scene_type_words(result.decisions.get("scene_type", {})),
                 "camera": camera_values(result.photo_camera)}
 
     return written_whole(data["out"], write)

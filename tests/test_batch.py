@@ -107,6 +107,18 @@ def test_jobs_file_paths_defaults_and_order(tmp_path):
     assert jobs.settings.retries == 1 and jobs.settings.num_gpus == "auto"
 
 
+def test_a_job_may_name_the_folder_a_gltf_came_in(tmp_path):
+    path = make_inputs(tmp_path)
+    (tmp_path / "Fox").mkdir()
+    (tmp_path / "Fox" / "Fox.glb").write_bytes(b"glTF")
+    (tmp_path / "Fox" / "LICENSE.md").write_text("CC-BY")
+    path.write_text(path.read_text().replace('asset = "ball"\nseed', 'asset = "Fox"\nseed'))
+    assert load_jobs(path).jobs[1].asset == (tmp_path / "Fox" / "Fox.glb").resolve()
+    (tmp_path / "Fox" / "Fox.gltf").write_text("{}")
+    with pytest.raises(InputError, match="holds 2 asset files"):
+        load_jobs(path)
+
+
 @pytest.mark.parametrize("change, message", [
     (lambda t: t.replace('asset = "ball"\nseed', 'asset = "nothing"\nseed'), "the asset"),
     (lambda t: t.replace('name = "b"', 'name = "a"'), "two jobs are named 'a'"),

@@ -132,3 +132,38 @@ def test_several_materials_export_as_shapes_that_each_read_their_own_maps_wrappe
     assert len(error) > 3000
     # 8-bit sRGB images: a few thousandths; a neighbour's texels or another wrap mode: tenths.
     assert np.quantile(error, 0.99) < 0.02, np.quantile(error, [0.5, 0.99])
+
+
+def test_a_downloaded_gltf_folder_means_its_one_gltf(tmp_path):
+    from scenefit.core.data.asset_io import resolve_asset_path
+
+    folder = tmp_path / "ToyCar"
+    folder.mkdir()
+    for name in ("ToyCar.gltf", "ToyCar.bin", "ToyCar_basecolor.png", "SOURCE_README.md"):
+        (folder / name).write_bytes(b"x")
+    assert resolve_asset_path(folder) == folder / "ToyCar.gltf"
+    (folder / "ToyCar.glb").write_bytes(b"x")
+    with pytest.raises(InputError, match="holds 2 asset files \\(ToyCar.glb, ToyCar.gltf\\); give the one"):
+        resolve_asset_path(folder)
+    converted = save_asset_folder(uv_sphere(segments=8, rings=4), striped_maps(), tmp_path / "asset")
+    (converted / "extra.glb").write_bytes(b"x")
+    assert resolve_asset_path(converted) == converted           # an asset folder is itself
+    assert resolve_asset_path(tmp_path / "empty") == tmp_path / "empty"
+
+
+def test_the_command_line_takes_the_folder_a_gltf_came_in(tmp_path, monkeypatch, capsys):
+    import scenefit.cli.render as render_command
+    from scenefit.cli import main
+
+    folder = tmp_path / "Fox"
+    folder.mkdir()
+    (folder / "Fox.glb").write_bytes(b"glTF")
+    (folder / "SOURCE_LICENSE.md").write_text("CC-BY")
+    seen = []
+    monkeypatch.setattr(render_command, "run", lambda args: seen.append(args.asset) or 0)
+    assert main(["render", str(folder), "--out", str(tmp_path / "out")]) == 0
+    assert seen == [str(folder / "Fox.glb")]
+    assert "using Fox.glb" in capsys.readouterr().err
+    (tmp_path / "nothing").mkdir()
+    assert main(["render", str(tmp_path / "nothing"), "--out", str(tmp_path / "out")]) == 2
+    assert "not a SceneFit asset folder" in capsys.readouterr().err and len(seen) == 1

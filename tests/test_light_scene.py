@@ -7,7 +7,7 @@ import pytest
 from scenefit.core.data.imageio import linear_to_srgb
 from scenefit.core.stages.light import estimate_light
 from scenefit.core.stages.light.depth import DepthConfig
-from scenefit.core.stages.light.scene_type import SKY_RATIO_AT, UNSURE_HIGH, UNSURE_LOW, scene_type_cue
+from scenefit.core.stages.light.scene_type import SKY_RATIO_AT, UNSURE_HIGH, UNSURE_LOW, scene_type_cue, scene_type_words
 from scenefit.core.pipeline.presets import stage_config
 
 
@@ -35,6 +35,8 @@ def test_scores_near_the_threshold_are_unsure_and_the_map_is_the_mean_of_both(sc
     assert not np.allclose(both[0], both[1])          # the hedge matters on this photo
     assert np.allclose(result.hdr, 0.5 * (both[0] + both[1]), rtol=1e-5, atol=1e-6)
     assert result.decisions["cues"]["confidence"] <= 0.5
+    # What the command line and Blender say: both types, never the one the blend was not.
+    assert scene_type_words(decision) == f"indoor or outdoor (unsure, score {cue['score']:.2f}; the map is their mean)"
 
 
 @pytest.mark.parametrize("score", [0.0, 2.5])
@@ -45,3 +47,4 @@ def test_clear_calls_are_not_hedged(score):
     assert "unsure" not in result.decisions["scene_type"]
     kind = result.decisions["scene_type"]["chosen"]
     assert np.array_equal(result.hdr, estimate_light(photo, (32.0, 70.0), _config(kind)).hdr)
+    assert scene_type_words(result.decisions["scene_type"]) == kind

@@ -259,7 +259,15 @@ def _parse_job(entry: dict, index: int, path: Path) -> Job:
     if not asset.exists():
         raise InputError(f"{where}: the asset '{asset}' does not exist.")
     if asset.is_dir() and not (asset / _ASSET_FOLDER_FILE).is_file():
-        raise InputError(f"{where}: the folder '{asset}' is not a SceneFit asset folder (it has no mesh.npz).")
+        from ..core.data.asset_io import resolve_asset_path   # a folder holding one glTF/FBX/...: that file
+
+        try:
+            asset = resolve_asset_path(asset)
+        except InputError as error:
+            raise InputError(f"{where}: {error}") from None
+        if asset.is_dir():
+            raise InputError(f"{where}: the folder '{asset}' is not a SceneFit asset folder (it has no mesh.npz) "
+                             "and holds no file Blender reads.")
     obj = entry.get("object")
     if obj is not None and (not isinstance(obj, str) or not obj):
         raise InputError(f"{where}: object must name an object in the asset file, got {obj!r}.")

@@ -55,6 +55,19 @@ def is_asset_folder(path: str | Path) -> bool:
     return path.is_dir() and (path / "mesh.npz").is_file()
 
 
+def resolve_asset_path(path: str | Path) -> Path:
+    """`path`, or the one file Blender reads in a folder that is not an asset folder (a downloaded glTF
+    beside its .bin and textures); a folder holding several such files is refused, naming them."""
+    path = Path(path)
+    if not path.is_dir() or is_asset_folder(path):
+        return path
+    found = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in ASSET_FILE_SUFFIXES)
+    if len(found) > 1:
+        raise InputError(f"'{path}' holds {len(found)} asset files ({', '.join(p.name for p in found[:4])}"
+                         f"{', ...' if len(found) > 4 else ''}); give the one to use.")
+    return found[0] if found else path
+
+
 def check_asset_path(path: str | Path) -> None:
     """InputError (one sentence) unless `path` is an asset folder or a non-empty file of a kind Blender
     reads: checked before Blender or torch is loaded, so a mistyped path is refused at once."""

@@ -53,3 +53,13 @@ def scene_type_cue(photo_srgb: np.ndarray) -> dict:
             "sky_ratio": round(sky_ratio, 4),
             "rule": f"outdoor when max(clutter / {CLUTTER_AT}, log(sky ratio) / log({SKY_RATIO_AT})) >= 1; "
                     f"unsure within [{UNSURE_LOW}, {UNSURE_HIGH}]"}
+
+
+def scene_type_words(decision: dict) -> str:
+    """What the light stage's `scene_type` decision says in words: "indoor", "outdoor", or, when an
+    unsure call blended the two estimates, both (a reader must not take the blend for one of them)."""
+    scales = decision.get("scales")
+    if isinstance(scales, dict) and {"indoor", "outdoor"} <= set(scales):
+        return f"indoor or outdoor (unsure, score {decision['auto']['score']:.2f}; the map is their mean)"
+    return str(decision.get("chosen", ""))
+
