@@ -4,8 +4,9 @@ Builds Stable Diffusion 2-sized random-weight models on the machine (devtools/ti
 SD2_SIZED: the 865M UNet, the 8x VAE, a ViT-H-sized text encoder; text-to-image and inpainting, in
 the hub's layout), loads them through the real loading code (folders as `--base-model DIR --inpaint-model DIR`
 take them), runs each preset's adapt iterations on CUDA (fp16, Mitsuba's cuda_ad_rgb; final first) and
-writes seconds per iteration by phase and peak VRAM to benchmarks/results/gpu.md (and gpu.json). On one
-H200 the whole check took about 3 minutes (models built in 50 s).
+writes seconds per iteration by phase and peak VRAM to benchmarks/results/gpu.md (and gpu.json); then
+the light stage's diffusion critic per preset (`scenefit light --critic diffusion`). On one H200 the
+adapt part took about 3 minutes (models built in 50 s); the light part has not run on a GPU yet.
 
 `--dry-run` is the same code path with the tiny models on the CPU, one iteration, one view, small
 renders: the test suite runs it, so the check works the first time a GPU is there.
@@ -55,7 +56,46 @@ def measure(base: Path, inpaint: Path, preset: str, dry_run: bool) -> dict:
             "seconds": round(time.perf_counter() - started, 1), **row}
 
 
-def markdown(rows: list[dict], machine: dict) -> str:
+def measure_light(base: Path, inpaint: Path, preset: str, dry_run: bool, folder: Path) -> dict:
+    """`scenefit light --critic diffusion` at `preset` on a made-up outdoor photo (the corpus does not
+    travel to a lent machine): seconds per critic iteration from its report, after a one-iteration run
+    that compiles the kernels, and peak memory."""
+    import resource
+
+    import numpy as np
+
+    from scenefit.cli import main as scenefit
+    from scenefit.core.data.imageio import write_image
+
+    photo = folder / "photo.png"
+    if not photo.is_file():   # a sky brightening upwards over a darker, textured ground
+        y = np.linspace(0.0, 1.0, 240)[:, None, None]
+        sky = np.concatenate([0.55 - 0.3 * y, 0.65 - 0.3 * y, 0.9 - 0.2 * y], axis=2) * np.ones((1, 320, 1))
+        ground = np.random.default_rng(0).uniform(0.15, 0.35, (240, 320, 1)) * np.array([0.8, 0.9, 0.6])
+        write_image(photo, np.where(y < 0.45, sky, ground).astype(np.float32))
+    iterations = 1 if dry_run else ITERATIONS
+
+    def light(n: int, out: Path) -> dict:
+        args = ["light", "--photo", str(photo), "--at", "0.5,0.75", "--out", str(out), "--replace", "--preset", preset,
+                "--scene", "outdoor", "--critic", "diffusion", "--iterations", str(n), "--outpaint", "prior",
+                "--base-model", str(base), "--inpaint-model", str(inpaint), "--offline", "--quiet"]
+        if scenefit(args + (["--model-resolution", "32"] if dry_run else [])) != 0:
+            raise RuntimeError(f"scenefit light failed at {preset}")
+        return json.loads((out / "report.json").read_text())
+
+    if not dry_run:
+        light(1, folder / "light-warmup")
+    if torch.cuda.is_available():
+        torch.cuda.reset_peak_memory_stats()
+    report = light(iterations, folder / f"light-{preset}")
+    peak = (torch.cuda.max_memory_allocated() if torch.cuda.is_available() and not dry_run
+            else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024) / 2 ** 20
+    optimisation = report["decisions"]["optimisation"]
+    return {"preset": preset, "iterations": iterations, "per_iteration_s": optimisation["seconds"] / iterations,
+            "critic": report["decisions"]["critic"].get("dtype", "?"), "peak_memory_mb": peak}
+
+
+def markdown(rows: list[dict], machine: dict, light_rows: list[dict] | None = None) -> str:
     head = "| preset | render px / spp | views / step | " + " | ".join(t for t, _ in PHASES) + \
            " | s / iteration | peak memory MB |"
     lines = ["# `make gpu-check` (benchmarks/gpu_check.py)", "", " ".join(__doc__.split("\n\n")[1].split()), "",
@@ -67,6 +107,12 @@ def markdown(rows: list[dict], machine: dict) -> str:
         lines.append(f"| {r['preset']} | {r['render_size']} / {r['spp']} | {r['views_per_step']} | "
                      + " | ".join(f"{r['phases'][k]:.3f}" for _, k in PHASES)
                      + f" | {r['iteration_s']:.3f} | {r['peak_memory_mb'] or 0:.0f} |")
+    if light_rows:
+        lines += ["", "The light stage's diffusion critic with the same models (`scenefit light --critic diffusion`, "
+                  "a made-up outdoor photo, after a one-iteration warm-up run):", "",
+                  "| preset | s per critic iteration | models' dtype | peak memory MB |", "|---|---|---|---|"]
+        lines += [f"| {r['preset']} | {r['per_iteration_s']:.3f} | {r['critic']} | {r['peak_memory_mb']:.0f} |"
+                  for r in light_rows]
     lines += ["", "Peak memory: torch.cuda.max_memory_allocated on the GPU (Dr.Jit's own CUDA allocations for "
               "the scene and its renders are not in it); the process's resident set on the CPU. Seconds per "
               "iteration: the mean of the measured iterations after a warm-up one, so each preset's constant "
@@ -79,6 +125,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dry-run", action="store_true", help="tiny models on the CPU, one iteration")
     parser.add_argument("--presets", default="final,draft,balanced", help="comma-separated presets")
+    parser.add_argument("--light-presets", default="draft,balanced,final",
+                        help="the light critic's presets, after adapt's ('' for none)")
     parser.add_argument("--models", help="a folder to build the models in and keep (default: a temporary one)")
     parser.add_argument("--out", default=str(RESULTS))
     args = parser.parse_args(argv)
@@ -100,12 +148,21 @@ def main(argv: list[str] | None = None) -> int:
         base, inpaint = build_models(folder, args.dry_run)
         machine["model_build_s"] = round(time.perf_counter() - started, 1)
         print(f"gpu-check: models built in {machine['model_build_s']} s", flush=True)
+        light_rows: list[dict] = []
+
+        def write() -> None:   # after each row: a lease that ends mid-run still leaves what was measured
+            (out / "gpu.md").write_text(markdown(rows, machine, light_rows))
+            (out / "gpu.json").write_text(json.dumps({"machine": machine, "rows": rows, "light_rows": light_rows},
+                                                     indent=1, default=str) + "\n")
+
         for preset in args.presets.split(","):
             rows.append(measure(base, inpaint, preset, args.dry_run))
-            # Written after each preset: a lease that ends mid-run still leaves the presets measured so far.
-            (out / "gpu.md").write_text(markdown(rows, machine))
-            (out / "gpu.json").write_text(json.dumps({"machine": machine, "rows": rows}, indent=1, default=str) + "\n")
-            print(f"gpu-check: {preset} done ({rows[-1]['seconds']} s)", flush=True)
+            write()
+            print(f"gpu-check: adapt {preset} done ({rows[-1]['seconds']} s)", flush=True)
+        for preset in args.light_presets.split(",") if args.light_presets else ():
+            light_rows.append(measure_light(base, inpaint, preset, args.dry_run, folder))
+            write()
+            print(f"gpu-check: light {preset} done ({light_rows[-1]['per_iteration_s']:.2f} s per iteration)", flush=True)
     print((out / "gpu.md").read_text())
     return 0
 

@@ -33,8 +33,12 @@ def test_the_dry_run_measures_every_preset_with_tiny_models(tmp_path):
         assert math.isfinite(row["iteration_s"]) and row["iteration_s"] > 0
         assert {"constants", "render", "vae", "unet", "vae_backward", "step"} <= set(row["phases"])
         assert row["phases"]["unet"] > 0 and row["peak_memory_mb"] > 0
+    assert [row["preset"] for row in data["light_rows"]] == ["draft", "balanced", "final"]
+    for row in data["light_rows"]:
+        assert row["iterations"] == 1 and math.isfinite(row["per_iteration_s"]) and row["per_iteration_s"] > 0
     table = (tmp_path / "gpu.md").read_text()
     assert "| final |" in table and "| balanced |" in table and "DRY RUN" in table
+    assert "s per critic iteration" in table
 
 
 def test_the_paper_estimate_takes_one_view_per_gpu_from_the_gpu_check():
