@@ -71,7 +71,7 @@ def run(args) -> int:
 
 
 def _light(args, out: Path) -> int:
-    from ..core.stages.light.scene_type import scene_type_words
+    from ..core.stages.light.scene_type import is_blended, scene_type_words
     from ..core.stages.light.stage import critic_choice, light_inputs, run_light, write_light
     from ..core.render.backend import environment_info
 
@@ -89,13 +89,12 @@ def _light(args, out: Path) -> int:
     write_light(result, out, {"environment": environment_info()})
     depth_used = result.decisions.get("depth", {}).get("method", "none (outdoor)")
     scene = result.decisions["scene_type"]
-    words = scene_type_words(scene)
-    if words.startswith("indoor or outdoor"):   # an unsure call: the map blends both, so say so
-        said = (words[:-1] + ", --scene decides), scales "
+    if is_blended(scene):   # an unsure call: the map blends both, so say so, with both types' scales
+        said = (scene_type_words(scene, "--scene") + ", scales "
                 + ", ".join(f"{kind} { {k: round(v, 3) for k, v in scene['scales'][kind].items()} }"
                             for kind in ("indoor", "outdoor")))
     else:
-        said = f"{words} scene, scales { {k: round(v, 3) for k, v in result.scales.items()} }"
+        said = f"{scene_type_words(scene)} scene, scales { {k: round(v, 3) for k, v in result.scales.items()} }"
     print(f"light: {said}, depth {depth_used} -> {Path(args.out) / 'light.exr'}")
     return 0
 

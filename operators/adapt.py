@@ -1,9 +1,8 @@
 """Adapt: restyle the converted texture to fit the photo (or from a prompt), as a background job."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import bpy
 from bpy.props import IntProperty

@@ -42,9 +42,7 @@ class SCENEFIT_OT_estimate_light(JobOperator):
 
     def apply(self, context, result) -> str:
         world = apply_result_world(context, result["hdr"])
-        kind = result["scene_type"]
-        # An unsure call blended both estimates: say so, and that the panel's Scene type decides.
-        said = kind[:-1] + ", Scene type decides)" if kind.startswith("indoor or outdoor") else f"{kind} scene"
+        said = result["scene_type"] if result.get("scene_type_blended") else f"{result['scene_type']} scene"
         return f"Light estimated, {said}: World '{world.name}'"
 
 

@@ -88,7 +88,7 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
     from dataclasses import replace
 
     from ..core.stages.light import load_photo
-    from ..core.stages.light.scene_type import scene_type_words
+    from ..core.stages.light.scene_type import is_blended, scene_type_words
     from ..core.stages.light.stage import LightInputs, critic_choice, run_light, write_light
     from ..core.pipeline.presets import stage_config
     from ..core.scene.placement import Placement
@@ -115,9 +115,10 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
 
     def write(out: Path) -> dict:
         report = write_light(result, out)
+        scene = result.decisions.get("scene_type", {})
         return {"hdr": str(report["outputs"]["hdr_exr"]), "preview": str(report["outputs"]["preview_png"]),
                 "report": str(out / "report.json"),
-                "scene_type": scene_type_words(result.decisions.get("scene_type", {})),
+                "scene_type": scene_type_words(scene, "Scene type"), "scene_type_blended": is_blended(scene),
                 "camera": camera_values(result.photo_camera)}
 
     return written_whole(data["out"], write)

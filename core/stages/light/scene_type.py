@@ -55,11 +55,17 @@ def scene_type_cue(photo_srgb: np.ndarray) -> dict:
                     f"unsure within [{UNSURE_LOW}, {UNSURE_HIGH}]"}
 
 
-def scene_type_words(decision: dict) -> str:
-    """What the light stage's `scene_type` decision says in words: "indoor", "outdoor", or, when an
-    unsure call blended the two estimates, both (a reader must not take the blend for one of them)."""
+def is_blended(decision: dict) -> bool:
+    """True when an unsure call made the map the mean of the indoor and the outdoor estimates."""
     scales = decision.get("scales")
-    if isinstance(scales, dict) and {"indoor", "outdoor"} <= set(scales):
-        return f"indoor or outdoor (unsure, score {decision['auto']['score']:.2f}; the map is their mean)"
-    return str(decision.get("chosen", ""))
+    return isinstance(scales, dict) and {"indoor", "outdoor"} <= set(scales)
 
+
+def scene_type_words(decision: dict, decider: str = "") -> str:
+    """What the light stage's `scene_type` decision says in words: "indoor", "outdoor", or, when an
+    unsure call blended the two estimates, both (a reader must not take the blend for one of them),
+    with `decider` (the setting that settles it) named when given."""
+    if not is_blended(decision):
+        return str(decision.get("chosen", ""))
+    settle = f", {decider} decides" if decider else ""
+    return f"indoor or outdoor (unsure, score {decision['auto']['score']:.2f}; the map is their mean{settle})"
