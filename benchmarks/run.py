@@ -185,7 +185,6 @@ def block_sections(renders: list[dict], textures: list[dict]) -> list[str]:
                              ("s / iteration", "forward_backward_s", ".3f")]), ""]
 
 
-CORPUS = Path(__file__).resolve().parents[2] / "shared" / "corpus"
 CORPUS_PARTS = {"camera", "speed", "start", "uv_layout"}   # parts that read the corpus
 PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "batch", "samplers", "study", "camera",
          "speed", "start", "uv_layout", "sd2")
@@ -220,6 +219,8 @@ def main() -> int:
     sections: list[str] = []
     # The corpus lives beside the checkout (../shared/corpus); a clone elsewhere has none, and its benches
     # then had nothing to measure and stopped the whole run after the light study.
+    from corpus import CORPUS   # the corpus bench's location of it, beside the checkout
+
     missing = sorted(parts & CORPUS_PARTS) if not CORPUS.is_dir() else []
     if missing:
         log(f"no corpus at {CORPUS}: skipping {', '.join(missing)} (they measure its real assets and maps)")
