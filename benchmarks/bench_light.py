@@ -440,6 +440,11 @@ def real_main(argv: list[str]) -> int:
                         help="also the draft preset's scales optimised by the reference critic against the true map "
                              "(a perfect critic: the most the paper's regions and scales can reach; ~40 s a view)")
     args = parser.parse_args(argv)
+    missing = [f"{name}_1k.hdr" for name in REAL_MAPS if not (args.corpus / f"{name}_1k.hdr").is_file()]
+    if missing:
+        print(f"bench_light --real: {args.corpus} lacks {len(missing)} of the {len(REAL_MAPS)} corpus maps "
+              f"(first: {missing[0]}); pass --corpus with the folder that holds them.", file=sys.stderr)
+        return 2
     args.out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     configs = {"estimate": stage_config("light", "balanced", critic_type="none")}
