@@ -13,14 +13,14 @@ BENCH_MACHINE = "2-core AMD EPYC, no GPU"
 
 # stage -> preset -> seconds for the bundled example (Suzanne) in a 320x240 photo
 EXPECTED_SECONDS: dict[str, dict[str, float | None]] = {
-    "convert": {"draft": 6.397, "balanced": 23.81, "final": 152.077},
-    "light": {"draft": 0.036, "balanced": 0.034, "final": 0.033},
-    "compose": {"draft": 1.275, "balanced": 4.968, "final": 7.293},
+    "convert": {"draft": 0.082, "balanced": 0.112, "final": 0.24},
+    "light": {"draft": 0.031, "balanced": 0.032, "final": 0.03},
+    "compose": {"draft": 3.248, "balanced": 3.609, "final": 4.144},
 }
 
 # Adapt with random-weight models of Stable Diffusion 2's size on the same CPU (bf16, each view's constant
 # work cached): seconds per iteration once the step's views have been met. None: not measured.
-ADAPT_SECONDS_PER_ITERATION: dict[str, float | None] = {"draft": 40.0, "balanced": 181.5, "final": 403.5}
+ADAPT_SECONDS_PER_ITERATION: dict[str, float | None] = {"draft": 63.47, "balanced": 143.78, "final": 403.5}
 ADAPT_ITERATIONS = {"draft": 300, "balanced": 1500, "final": 4000}   # the presets' (core/pipeline/preset_tables.py)
 # The same on one GPU (`make gpu-check`: fp16, Mitsuba cuda_ad_rgb), the step without its constant work.
 GPU_BENCH_MACHINE = "one NVIDIA H200"
