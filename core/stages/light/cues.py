@@ -57,7 +57,8 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
 @dataclass(frozen=True)
 class CueConfig:
     # Mean albedo of the photo's surfaces (energy cue). 0.4: at 0.25 the unseen light was ~2x too bright
-    # on the corpus's real views (map mean 4x off on 15 of 48 photos, 11 at 0.4).
+    # on the corpus's real views (map mean 4x off on 15 of 48 photos, 11 at 0.4). 0.25 for outdoor photos
+    # only suits Blender's city and forest but loses on the real views and 3 of 4 held-out maps (README).
     albedo: float = 0.4
     albedo_range: tuple[float, float] = (0.15, 0.5)   # reported as the bound on the unseen light
     lobe_sharpness: float = 4.0        # cos^k lobe of the unseen light around its centroid direction
