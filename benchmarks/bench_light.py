@@ -311,7 +311,7 @@ def real_estimates(photo: np.ndarray, camera: PhotoCamera, truth: np.ndarray, co
                  "wrapped": resize(linear, REAL_MAP)}
     info = {}
     for label, config in configs.items():
-        if label == "reference":
+        if label in ("reference", "ceiling"):
             continue
         t = time.perf_counter()
         result = estimate_light(photo, placement, config, photo_camera=camera)
@@ -344,6 +344,9 @@ def run_real_view(name: str, truth_type: str, hdr: np.ndarray, side: str, yaw: f
     truth = resize(hdr, REAL_MAP) * exposure
     estimates, info = real_estimates(photo, camera, truth, configs)
     forward = np.array([math.cos(math.radians(yaw)), math.sin(math.radians(yaw)), 0.0])
+    if "ceiling" in configs:
+        estimates["ceiling"], info["ceiling"] = ceiling_estimate(photo, camera, truth, truth_type, forward,
+                                                                 configs["ceiling"])
     row = {"map": name, "truth_type": truth_type, "side": side, "yaw": yaw, "metering": metering,
            "auto_right": info.get("scene") == truth_type or (info.get("auto", {}).get("unsure", False)),
            **info, "metrics": score_methods(estimates, truth, forward)}
@@ -353,12 +356,29 @@ def run_real_view(name: str, truth_type: str, hdr: np.ndarray, side: str, yaw: f
     return row, {"photo": photo, "truth": truth, **estimates}
 
 
+def ceiling_estimate(photo: np.ndarray, camera: PhotoCamera, truth: np.ndarray, truth_type: str,
+                     forward: np.ndarray, config) -> tuple[np.ndarray, dict]:
+    """The estimate's own panorama and regions (the true scene type given) with the scales fitted to
+    the true map's diffuse sphere: what the paper's parametrisation can reach (see light_ceiling.py)."""
+    from light_ceiling import ceiling_map, fitted_scales, region_bases
+
+    torch.manual_seed(0)
+    placement = (REAL_PHOTO[0] / 2, REAL_PHOTO[1] * 5 / 6)
+    result = estimate_light(photo, placement, replace(config, scene_type=truth_type), photo_camera=camera)
+    rest, bases = region_bases(result.ldr, result.regions)
+    rest, bases = resize(rest, REAL_MAP), {k: resize(b, REAL_MAP) for k, b in bases.items()}
+    scales = fitted_scales(rest, bases, truth, forward, result.scales)
+    return ceiling_map(rest, bases, scales), {"cue_scales": {k: round(v, 4) for k, v in result.scales.items()},
+                                              "fitted_scales": {k: round(v, 4) for k, v in scales.items()}}
+
+
 def _metric(row: dict, method: str, material: str, key: str, form: str = "linear") -> float:
     return row["metrics"][method][material][form][key]
 
 
 def real_summary(rows: list[dict]) -> list[str]:
-    methods = [m for m in ("estimate", "draft", "hint", "reference", "constant", "wrapped") if m in rows[0]["metrics"]]
+    methods = [m for m in ("estimate", "draft", "hint", "reference", "ceiling", "constant", "wrapped")
+               if m in rows[0]["metrics"]]
     lines = ["| method | " + " | ".join(f"{mat} {k}" for mat in HEADLINE for k in ("si-RMSE", "ang.")) +
              " | diffuse si-RMSE (tone-mapped) | diffuse RMSE | matte si-RMSE (tone-mapped) |",
              "|" + "---|" * (2 * len(HEADLINE) + 4)]
@@ -388,6 +408,9 @@ def real_per_view(rows: list[dict]) -> list[str]:
     with_reference = any("reference" in r["metrics"] for r in rows)
     if with_reference:
         head += ["reference diffuse si / RMSE", "reference mean / true"]
+    with_ceiling = any("ceiling" in r["metrics"] for r in rows)
+    if with_ceiling:
+        head += ["ceiling diffuse si / RMSE", "ceiling scales (cues' → fitted)"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         m = r["metrics"]
@@ -404,6 +427,11 @@ def real_per_view(rows: list[dict]) -> list[str]:
         if with_reference:
             cells += [f"{_metric(r, 'reference', 'diffuse', 'si_rmse'):.3g} / {_metric(r, 'reference', 'diffuse', 'rmse'):.3g}",
                       f"{m['reference']['mean_ratio']:.3g}"] if "reference" in m else ["", ""]
+        if with_ceiling:
+            fitted = r.get("ceiling", {})
+            cells += [f"{_metric(r, 'ceiling', 'diffuse', 'si_rmse'):.3g} / {_metric(r, 'ceiling', 'diffuse', 'rmse'):.3g}",
+                      ", ".join(f"{k} {fitted['cue_scales'].get(k, float('nan')):.3g} → {v:.3g}"
+                                for k, v in fitted.get("fitted_scales", {}).items())] if "ceiling" in m else ["", ""]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
 
@@ -414,13 +442,14 @@ def plot_real(rows: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    fig, axes = plt.subplots(1, 3, figsize=(18, 4.5))
     x = np.arange(len(rows))
     panels = (("diffuse", "si_rmse", "linear", "diffuse sphere si-RMSE / the constant's"),
+              ("diffuse", "rmse", "linear", "diffuse sphere RMSE / the constant's"),
               ("matte", "si_rmse", "tonemapped", "matte-silver si-RMSE (tone-mapped) / the constant's"))
     for ax, (material, key, form, title) in zip(axes, panels):
         base = np.array([_metric(r, "constant", material, key, form) for r in rows])
-        for method, marker in (("estimate", "o"), ("wrapped", "^"), ("hint", "s")):
+        for method, marker in (("estimate", "o"), ("wrapped", "^"), ("hint", "s"), ("reference", "v"), ("ceiling", "D")):
             if method in rows[0]["metrics"]:
                 ratio = np.array([_metric(r, method, material, key, form) for r in rows]) / np.maximum(base, 1e-12)
                 ax.plot(x, ratio, marker, label=method, alpha=0.8)
@@ -446,6 +475,10 @@ def real_main(argv: list[str]) -> int:
                         help="also the draft preset's scales optimised by the reference critic against the true map "
                              "(a perfect critic: the most the paper's regions and scales can reach; ~50 s a view), "
                              "written to light_real_reference.md/.json/.png")
+    parser.add_argument("--ceiling", action="store_true",
+                        help="also the balanced estimate's regions with scales fitted to the true map's diffuse sphere "
+                             "(what the paper's parametrisation can reach, the scene type given; ~2 s a view), "
+                             "written to light_real_ceiling.md/.json/.png")
     args = parser.parse_args(argv)
     missing = [f"{name}_1k.hdr" for name in REAL_MAPS if not (args.corpus / f"{name}_1k.hdr").is_file()]
     if missing:
@@ -459,6 +492,8 @@ def real_main(argv: list[str]) -> int:
         configs["draft"] = stage_config("light", "draft", critic_type="none")
     if args.reference:
         configs["reference"] = stage_config("light", "draft", critic_type="reference")
+    if args.ceiling:
+        configs["ceiling"] = stage_config("light", "balanced", critic_type="none")
     rows = []
     for name, truth_type in REAL_MAPS.items():
         hdr = np.ascontiguousarray(read_image(args.corpus / f"{name}_1k.hdr")[..., :3], np.float32)
@@ -476,7 +511,7 @@ def real_main(argv: list[str]) -> int:
     if args.before:
         text += "\n" + "\n".join(before_lines(json.loads(args.before.read_text())["rows"], args.before)) + "\n"
     # A perfect critic's run is a study of its own (about 25 min more): it keeps the plain run's files.
-    stem = "light_real_reference" if args.reference else "light_real"
+    stem = "light_real_ceiling" if args.ceiling else "light_real_reference" if args.reference else "light_real"
     (args.out / f"{stem}.md").write_text(text)
     (args.out / f"{stem}.json").write_text(json.dumps({"rows": rows, "load": load, "seconds": time.perf_counter() - started},
                                                       indent=1, default=float))
@@ -516,6 +551,13 @@ def real_report(rows: list[dict], configs: dict, seconds: float, load: str) -> s
             lines.append(f"The draft preset's scales optimised by the reference critic against the true map (a perfect "
                          f"critic): {ref['si']} / {ref['rmse']} / {ref['both']}; map mean 4x off on {ref['mean_off_4x']} "
                          f"(worst {ref['worst_mean_ratio']:.3g}x).")
+        if "ceiling" in mine[0]["metrics"]:
+            c = real_wins(mine, "ceiling")
+            matte = lambda m: float(np.median([_metric(r, m, "matte", "si_rmse") for r in mine]))
+            lines.append(f"The balanced estimate's regions with scales fitted to the true map's diffuse sphere (the "
+                         f"scene type given; light_ceiling.py): {c['si']} / {c['rmse']} / {c['both']}; map mean 4x off "
+                         f"on {c['mean_off_4x']} (worst {c['worst_mean_ratio']:.3g}x); matte si-RMSE median "
+                         f"{matte('ceiling'):.3g} against the constant's {matte('constant'):.3g}.")
         if "draft" in mine[0]["metrics"]:
             d = real_wins(mine, "draft")
             lines.append(f"Draft preset (64-row map): {d['si']} / {d['rmse']} / {d['both']}; worst mean {d['worst_mean_ratio']:.3g}x.")

@@ -185,9 +185,9 @@ def block_sections(renders: list[dict], textures: list[dict]) -> list[str]:
                              ("s / iteration", "forward_backward_s", ".3f")]), ""]
 
 
-CORPUS_PARTS = {"camera", "speed", "start", "uv_layout"}   # parts that read the corpus
+CORPUS_PARTS = {"camera", "speed", "start", "uv_layout", "light_real"}   # parts that read the corpus
 PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "batch", "samplers", "study", "camera",
-         "speed", "start", "uv_layout", "sd2")
+         "speed", "start", "uv_layout", "light_real", "sd2")
 TITLES = {"convert": "Convert", "light": "Light", "compose": "Compose", "adapt": "Adapt (tiny models)",
           "run": "End to end: `scenefit run`"}
 
@@ -316,12 +316,17 @@ def main() -> int:
         ("speed", ["bench_real_speed.py"], "real_speed", 3, "`scenefit run` on real 2k assets and a 12 MP photo"),
         ("start", ["bench_start.py"], "start", 2, "The exact start against the paper's fit (`--init fit`), real assets"),
         ("uv_layout", ["bench_uv_layout.py"], "uv_layout", 3, "Adaptation's new UV layout where real assets' UVs share texels"),
+        ("light_real", ["bench_light.py", "--real"], "light_real", 3,
+         "Light from real photos: the field's protocol on the corpus's 12 HDR panoramas"),
+        ("light_real", ["bench_light.py", "--real", "--ceiling", "--no-draft"], "light_real_ceiling", 3,
+         "What the paper's light parametrisation can reach on those views (scales fitted to the truth)"),
         ("sd2", ["bench_adapt.py", "--sd2-bench"], "adapt_sd2", 2, "Adapt at SD2's size on this CPU (random weights)"))
     for part, command, stem, before, title in separate:
         if part in parts and not args.quick:
             subprocess.run([sys.executable, str(Path(__file__).with_name(command[0])), *command[1:]], check=True)
             log(f"{stem} done")
-            table = (RESULTS / f"{stem}.md").read_text().split("\n\n", before)[-1].strip()
+            # (a per-view table stays in its own file)
+            table = (RESULTS / f"{stem}.md").read_text().split("\n\n", before)[-1].split("## Per view")[0].strip()
             sections += [f"## {title}", "", f"[{stem}.md]({stem}.md):", "", table, ""]
 
     total = time.perf_counter() - started
