@@ -258,6 +258,7 @@ REAL_MAPS = {"autoshop_01": "indoor", "circus_arena": "indoor", "studio_small_05
              "st_peters_square_night": "outdoor", "phalzer_forest_01": "outdoor", "blouberg_sunrise_2": "outdoor"}
 REAL_PHOTO = (640, 480)
 REAL_PITCH = -10.0          # the light stage's default camera pitch, so the estimate is told only the fov
+REAL_PLACEMENT = (REAL_PHOTO[0] / 2, REAL_PHOTO[1] * 5 / 6)   # the object's foot: centred, low in the frame
 REAL_MAP = (128, 256)       # truth and estimate are compared at the protocol's map size
 METERINGS = ("median", "log-average")
 REAL_METHODS = ("estimate", "constant", "wrapped")
@@ -306,7 +307,7 @@ def real_estimates(photo: np.ndarray, camera: PhotoCamera, truth: np.ndarray, co
     """The light stage's maps for one photo (each config, plus the true direction as a hint where the
     stage takes one) and the two baselines."""
     linear = srgb_to_linear(photo)
-    placement = (REAL_PHOTO[0] / 2, REAL_PHOTO[1] * 5 / 6)
+    placement = REAL_PLACEMENT
     estimates = {"constant": np.broadcast_to(linear.reshape(-1, 3).mean(0), (*REAL_MAP, 3)).astype(np.float32),
                  "wrapped": resize(linear, REAL_MAP)}
     info = {}
@@ -363,8 +364,7 @@ def ceiling_estimate(photo: np.ndarray, camera: PhotoCamera, truth: np.ndarray, 
     from light_ceiling import ceiling_map, fitted_scales, region_bases
 
     torch.manual_seed(0)
-    placement = (REAL_PHOTO[0] / 2, REAL_PHOTO[1] * 5 / 6)
-    result = estimate_light(photo, placement, replace(config, scene_type=truth_type), photo_camera=camera)
+    result = estimate_light(photo, REAL_PLACEMENT, replace(config, scene_type=truth_type), photo_camera=camera)
     rest, bases = region_bases(result.ldr, result.regions)
     rest, bases = resize(rest, REAL_MAP), {k: resize(b, REAL_MAP) for k, b in bases.items()}
     scales = fitted_scales(rest, bases, truth, forward, result.scales)
