@@ -485,7 +485,6 @@ def real_main(argv: list[str]) -> int:
         print(f"bench_light --real: {args.corpus} lacks {len(missing)} of the {len(REAL_MAPS)} corpus maps "
               f"(first: {missing[0]}); pass --corpus with the folder that holds them.", file=sys.stderr)
         return 2
-    args.out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     configs = {"estimate": stage_config("light", "balanced", critic_type="none")}
     if not args.no_draft:
@@ -511,6 +510,7 @@ def real_main(argv: list[str]) -> int:
     if args.before:
         text += "\n" + "\n".join(before_lines(json.loads(args.before.read_text())["rows"], args.before)) + "\n"
     # A perfect critic's run is a study of its own (about 25 min more): it keeps the plain run's files.
+    args.out.mkdir(parents=True, exist_ok=True)   # only now: an interrupted run leaves nothing behind
     stem = "light_real_ceiling" if args.ceiling else "light_real_reference" if args.reference else "light_real"
     (args.out / f"{stem}.md").write_text(text)
     (args.out / f"{stem}.json").write_text(json.dumps({"rows": rows, "load": load, "seconds": time.perf_counter() - started},
@@ -582,4 +582,8 @@ def real_report(rows: list[dict], configs: dict, seconds: float, load: str) -> s
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:
+        print("bench_light: interrupted (its results are written only when a run ends).", file=sys.stderr)
+        sys.exit(130)

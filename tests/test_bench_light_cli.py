@@ -21,3 +21,35 @@ def test_a_folder_without_the_maps_gets_one_sentence_and_exit_2(tmp_path):
     assert len(lines) == 1 and "Traceback" not in proc.stderr
     assert str(tmp_path) in lines[0] and "11 of the 12" in lines[0]
     assert not out.exists()
+
+
+def test_ctrl_c_half_way_gets_one_sentence_and_leaves_no_results(tmp_path):
+    """Interrupted after its first view, the real protocol says so in one sentence, exits 130 and
+    leaves no results folder (its files are written only when the run ends)."""
+    import signal
+
+    import numpy as np
+
+    from scenefit.core.data.imageio import write_image
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_light import REAL_MAPS
+
+    corpus = tmp_path / "hdri"
+    sky = np.ones((16, 32, 3), np.float32)
+    sky[:4, 10:12] = 50.0                                  # a small bright light, so the views have a direction
+    for name in REAL_MAPS:
+        write_image(corpus / f"{name}_1k.hdr", sky)
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, str(ROOT / "benchmarks" / "bench_light.py"), "--real", "--no-draft",
+                             "--corpus", str(corpus), "--out", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=ROOT, env=dict(os.environ, PYTHONWARNINGS="ignore"))
+    first = proc.stdout.readline()                         # the first view is done: the run is under way
+    assert "wins" in first, proc.stderr.read()[-2000:] if proc.poll() is not None else first
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 130, err[-2000:]
+    lines = err.strip().splitlines()
+    assert lines[-1] == "bench_light: interrupted (its results are written only when a run ends)."
+    assert "Traceback" not in err
+    assert not out.exists()
