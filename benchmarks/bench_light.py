@@ -292,14 +292,15 @@ def sun_hint(truth: np.ndarray, camera: PhotoCamera) -> tuple[float, float]:
 
 
 def score_methods(estimates: dict[str, np.ndarray], truth: np.ndarray, forward: np.ndarray) -> dict:
-    from scenefit.core.stages.light.measure import PROBE_MATERIALS, probe_geometry, probe_scores, render_probe
+    from scenefit.core.stages.light.measure import (PROBE_MATERIALS, mean_radiance, probe_geometry, probe_scores,
+                                                    render_probe)
 
     mask = probe_geometry(forward)[0]
     truths = {m: render_probe(truth, m, forward) for m in PROBE_MATERIALS}
     out = {}
     for method, env in estimates.items():
         out[method] = {m: probe_scores(render_probe(env, m, forward), truths[m], mask) for m in PROBE_MATERIALS}
-        out[method]["mean_ratio"] = float(env.mean() / max(float(truth.mean()), 1e-12))
+        out[method]["mean_ratio"] = mean_radiance(env) / max(mean_radiance(truth), 1e-12)
     return out
 
 

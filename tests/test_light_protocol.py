@@ -51,3 +51,15 @@ def test_scores_are_scale_invariant_where_they_say_so():
     # StyleLight's tone map puts the sphere's 99th percentile (after the 1/2.4 power) at 0.99.
     mapped = stylelight_tonemap(truth, mask)
     assert np.percentile(mapped[mask], 99) == pytest.approx(0.99, abs=0.01) and mapped.max() <= 1.0
+
+
+def test_mean_radiance_weights_texels_by_their_solid_angle():
+    from scenefit.core.stages.light.measure import mean_radiance
+    from scenefit.core.scene.frame import equirect_directions
+
+    assert mean_radiance(np.full((32, 64, 3), 0.7, np.float32)) == pytest.approx(0.7, rel=1e-6)
+    # |z| averages to 1/2 over the sphere; an unweighted texel mean gives about 2/pi, the poles over-counted.
+    z = np.abs(equirect_directions(256, 512)[..., 2])
+    env = np.repeat(z[..., None], 3, axis=-1)
+    assert mean_radiance(env) == pytest.approx(0.5, rel=1e-3)
+    assert env.mean() == pytest.approx(2 / np.pi, rel=1e-2)

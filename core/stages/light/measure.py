@@ -49,6 +49,15 @@ def dominant_direction(envmap: np.ndarray, blur_fraction: float = 1 / 32) -> np.
     return equirect_directions(h, w)[r, c]
 
 
+def mean_radiance(envmap: np.ndarray) -> float:
+    """The map's mean radiance over the sphere (texels weighted by their solid angle, channels averaged):
+    a plain texel mean over-counts the poles, where an equirectangular map's rows are shortest."""
+    h = envmap.shape[0]
+    weight = np.sin(np.pi * (np.arange(h) + 0.5) / h)[:, None]
+    level = np.asarray(envmap, np.float64).mean(axis=-1)
+    return float((level * weight).sum() / (weight.sum() * envmap.shape[1]))
+
+
 def angular_error_deg(estimate: np.ndarray, truth: np.ndarray) -> float:
     a, b = dominant_direction(estimate), dominant_direction(truth)
     return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
