@@ -206,3 +206,28 @@ def test_a_clipped_floor_is_a_lit_surface_not_a_light():
     assert cues.scales["clipped"] > 2.0
     assert np.array_equal(cues.regions["clipped"], lamp)
     assert np.array_equal(cues.regions["near"], floor) and cues.scales["near"] == 1.0
+
+
+@pytest.mark.parametrize("sun", [None, np.array([0.0, -0.8, 0.6])])
+def test_the_artists_sun_narrows_the_unseen_lobe_and_keeps_its_energy(sun):
+    # A known direction need not hedge: the unseen light becomes cos^8 over 0.05 instead of cos^4 over 0.25,
+    # with the same mean radiance (what the surfaces call for).
+    s_linear = 0.2
+    photo = np.full((12, 16, 3), float(np.round(255 * (1.055 * s_linear ** (1 / 2.4) - 0.055)) / 255), np.float32)
+    ldr, unseen = _uniform_map(float(photo[0, 0, 0]), h=32)
+    config = CueConfig()
+    cues = build_cues(photo, ldr, unseen, {}, config=config, sun=sun)
+    hidden = cues.regions["unseen"]
+    shade = (srgb_to_linear(cues.ldr) / srgb_to_linear(ldr)).mean(axis=-1)[hidden]
+    direction = np.array(cues.report["unseen"]["direction"])
+    floor, sharpness = (config.lobe_floor, config.lobe_sharpness) if sun is None else \
+        (config.sun_lobe_floor, config.sun_lobe_sharpness)
+    lobe = np.maximum(equirect_directions(32, 64)[hidden] @ direction, 0.0) ** sharpness
+    assert np.allclose(shade, floor + (1 - floor) * lobe, atol=2e-4)
+    assert cues.report["unseen"]["lobe"] == {"floor": floor, "sharpness": sharpness}
+    if sun is not None:
+        assert direction @ sun > 0.999
+        assert shade.min() == pytest.approx(config.sun_lobe_floor, abs=1e-3)
+    solid = np.sin(np.pi * (np.arange(32) + 0.5) / 32)[:, None] * np.ones((1, 64))
+    mean = np.average(srgb_to_linear(cues.ldr).mean(axis=-1)[hidden] * cues.scales["unseen"], weights=solid[hidden])
+    assert mean == pytest.approx(s_linear * (2 / config.albedo - 1), rel=0.03)
