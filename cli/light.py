@@ -95,7 +95,11 @@ def _light(args, out: Path) -> int:
                             for kind in ("indoor", "outdoor")))
     else:
         said = f"{scene_type_words(scene)} scene, scales { {k: round(v, 3) for k, v in result.scales.items()} }"
-    print(f"light: {said}, depth {depth_used} -> {Path(args.out) / 'light.exr'}")
+    sun = result.decisions.get("sun")
+    # The guess (behind the camera, towards the photo's bright side) is where a hint helps most (README).
+    direction = f"sun {sun['deg'][0]:g},{sun['deg'][1]:g} as given" if sun else \
+        "light direction guessed (--sun AZ,EL or --sun-from-shadow sets it)"
+    print(f"light: {said}, {direction}, depth {depth_used} -> {Path(args.out) / 'light.exr'}")
     return 0
 
 

@@ -24,7 +24,8 @@ CAMERA_SOURCES = (
     ("panel", "As set here", "The field of view, pitch and roll below"),
 )
 SUN_SOURCES = (
-    ("estimate", "From the photo", "The light stage finds the dominant light from the photo"),
+    ("estimate", "From the photo", "Guessed from the photo: behind the camera, turned towards its brighter side "
+                                   "(set it, or Pick Sun from a shadow, for a truer light)"),
     ("set", "As set here", "The azimuth and elevation below (Pick Sun sets them from a shadow in the photo)"),
 )
 MODES = (

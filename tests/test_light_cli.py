@@ -144,6 +144,10 @@ def test_the_summary_line_does_not_claim_a_scene_type_it_was_unsure_of(tmp_path,
     assert main(common + ["--out", str(tmp_path / "auto")]) == 0
     line = capsys.readouterr().out.strip().splitlines()[-1]
     assert "unsure" in line and "indoor {" in line and "outdoor {" in line, line
+    assert "light direction guessed (--sun AZ,EL" in line, line
     assert main(common + ["--out", str(tmp_path / "told"), "--scene", "outdoor"]) == 0
     line = capsys.readouterr().out.strip().splitlines()[-1]
     assert line.startswith("light: outdoor scene, scales {") and "unsure" not in line, line
+    assert main(common + ["--out", str(tmp_path / "sun"), "--sun", "30,45"]) == 0
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    assert "sun 30,45 as given" in line and "guessed" not in line, line
