@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import re
 import sys
 from pathlib import Path
 
@@ -40,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     try:
-        args = build_parser().parse_args(argv)
+        args = build_parser().parse_args(_joined_negative_pairs(sys.argv[1:] if argv is None else list(argv)))
     except SystemExit as stop:  # argparse refused an option (exit 2) or printed --help (exit 0)
         return stop.code if isinstance(stop.code, int) else 2
     try:
@@ -62,6 +63,22 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as error:   # a full disk, a read-only folder, a file in the way: a sentence, not a traceback
         print(f"scenefit: error: {os_error_sentence(error, getattr(args, 'out', None))}", file=sys.stderr)
         return 2
+
+
+# argparse reads "-30,45" as an option (only a plain number may start with "-"), so `--sun -30,45`, a sun
+# on the left, was refused; an X,Y pair after an option that takes one is joined to it as --sun=-30,45.
+_PAIR_OPTIONS = ("--sun",)
+_NEGATIVE_PAIR = re.compile(r"-\d*\.?\d+(e[+-]?\d+)?,-?\d*\.?\d+(e[+-]?\d+)?", re.IGNORECASE)
+
+
+def _joined_negative_pairs(argv: list[str]) -> list[str]:
+    out: list[str] = []
+    for arg in argv:
+        if out and out[-1] in _PAIR_OPTIONS and _NEGATIVE_PAIR.fullmatch(arg):
+            out[-1] = f"{out[-1]}={arg}"
+        else:
+            out.append(arg)
+    return out
 
 
 def _check_inputs(args) -> None:

@@ -5,24 +5,8 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 from .options import (add_dry_run_arg, add_model_args, add_old_photo_elevation_arg, add_output_args,
-                      add_photo_camera_args, add_placement_args, add_preset_args, model_config, output, photo_pitch,
-                      positive_int, progress, require)
-
-
-def sun_angles(text: str) -> tuple[float, float]:
-    """--sun AZ,EL: two angles in degrees, the elevation within +-90."""
-    import argparse
-    import math
-
-    try:
-        az, el = (float(part) for part in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--sun takes two angles in degrees as AZ,EL, got '{text}'; "
-                                         f"give e.g. --sun 30,45.") from None
-    if not (math.isfinite(az) and math.isfinite(el) and -90.0 <= el <= 90.0):
-        raise argparse.ArgumentTypeError(f"--sun's elevation must be within +-90 degrees (and both angles "
-                                         f"finite), got '{text}'; give e.g. --sun 30,45.")
-    return az, el
+                      add_photo_camera_args, add_placement_args, add_preset_args, add_sun_args, model_config, output,
+                      photo_pitch, positive_int, progress, require)
 
 
 def resolve_config(args, critic: str):
@@ -72,6 +56,7 @@ def run(args) -> int:
 
 def _light(args, out: Path) -> int:
     from ..core.stages.light.scene_type import is_blended, scene_type_words
+    from ..core.stages.light.shadow_hint import sun_from_shadow_points
     from ..core.stages.light.stage import critic_choice, light_inputs, run_light, write_light
     from ..core.render.backend import environment_info
 
@@ -80,8 +65,8 @@ def _light(args, out: Path) -> int:
     inputs = light_inputs(args.photo, args.at, args.fspy, {"fov_deg": args.fov, "pitch_deg": photo_pitch(args),
                                                            "roll_deg": args.roll})
     if args.sun_from_shadow:
-        config = replace(config, sun_deg=shadow_sun(args.sun_from_shadow, inputs.camera, inputs.info,
-                                                    inputs.photo.shape[:2]))
+        config = replace(config, sun_deg=sun_from_shadow_points(args.sun_from_shadow, inputs.camera,
+                                                                tuple(inputs.info["size"]), inputs.photo.shape[:2]))
     result = run_light(inputs, config, progress(args))
     if args.sun_from_shadow:
         result.decisions["sun"]["from"] = "the shadow given by --sun-from-shadow (foot, top, tip)"
@@ -103,15 +88,6 @@ def _light(args, out: Path) -> int:
     return 0
 
 
-def shadow_sun(points: list[str], camera, info: dict, hw: tuple[int, int]) -> tuple[float, float]:
-    """--sun-from-shadow FOOT TOP TIP as --sun's (azimuth, elevation), through the photo's camera."""
-    from ..core.stages.light.shadow_hint import sun_from_shadow
-    from ..core.scene.placement import Placement
-
-    foot, top, tip = (Placement.parse(p, (info["size"][0], info["size"][1])).pixel(hw) for p in points)
-    return sun_from_shadow(camera, foot, top, tip)
-
-
 def add_parser(sub) -> None:
     p = sub.add_parser("light", help="estimate an HDR environment map from a photo and the object's placement")
     p.add_argument("--photo", help="the scene photo (JPEG/PNG/EXR, any size)")
@@ -121,14 +97,7 @@ def add_parser(sub) -> None:
     p.add_argument("--scene", choices=("auto", "indoor", "outdoor"), help="scene type (default: auto)")
     add_photo_camera_args(p)
     add_old_photo_elevation_arg(p)
-    sun = p.add_mutually_exclusive_group()
-    sun.add_argument("--sun", type=sun_angles, metavar="AZ,EL",
-                     help="the dominant light's direction in degrees: azimuth from the photo's view direction, "
-                          "positive to the right (90: from the right, 180: from behind the camera), elevation above "
-                          "the horizon; the unseen light is centred there")
-    sun.add_argument("--sun-from-shadow", nargs=3, metavar=("FOOT", "TOP", "TIP"),
-                     help="the sun from a shadow in the photo: the foot of something upright on the floor, its top, "
-                          "and the tip of its shadow, each X,Y as --at takes it")
+    add_sun_args(p)
     p.add_argument("--depth", choices=("auto", "model", "geometric"), default="auto",
                    help="auto: the depth model if it is on this machine, else the geometric room")
     p.add_argument("--depth-model", help="hub id or local folder of a transformers depth model")

@@ -185,6 +185,31 @@ def add_photo_camera_args(p: argparse.ArgumentParser) -> None:
                                                      "axis, degrees (default: estimated)")
 
 
+def sun_angles(text: str) -> tuple[float, float]:
+    """--sun AZ,EL: two angles in degrees, the elevation within +-90."""
+    try:
+        az, el = (float(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--sun takes two angles in degrees as AZ,EL, got '{text}'; "
+                                         f"give e.g. --sun 30,45.") from None
+    if not (math.isfinite(az) and math.isfinite(el) and -90.0 <= el <= 90.0):
+        raise argparse.ArgumentTypeError(f"--sun's elevation must be within +-90 degrees (and both angles "
+                                         f"finite), got '{text}'; give e.g. --sun 30,45.")
+    return az, el
+
+
+def add_sun_args(p: argparse.ArgumentParser) -> None:
+    """The artist's dominant light (core/stages/light/cues.py trusts it: a narrower lobe than the guess's)."""
+    sun = p.add_mutually_exclusive_group()
+    sun.add_argument("--sun", type=sun_angles, metavar="AZ,EL",
+                     help="the dominant light's direction in degrees: azimuth from the photo's view direction, "
+                          "positive to the right (90: from the right, 180: from behind the camera), elevation above "
+                          "the horizon; the unseen light is centred there (default: guessed from the photo)")
+    sun.add_argument("--sun-from-shadow", nargs=3, metavar=("FOOT", "TOP", "TIP"),
+                     help="the sun from a shadow in the photo: the foot of something upright on the floor, its top, "
+                          "and the tip of its shadow, each X,Y as --at takes it")
+
+
 def photo_pitch(args) -> float | None:
     """--pitch, or the old --elevation of light and compose (how far the camera looks down: -pitch)."""
     if getattr(args, "pitch", None) is not None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .options import (add_asset_args, add_model_args, add_output_args, add_photo_camera_args, add_placement_args,
-                      add_preset_args,
+                      add_preset_args, add_sun_args,
                       add_prompt_service_args, load_asset, model_config, output, progress,
                       scene_conditional_prompt)
 
@@ -19,7 +19,8 @@ def run_config(args):
               if v is not None}
     config = RunConfig(preset=args.preset, prompt=prompt, guidance_type=args.guidance,
                        size=args.object_size, shadow_type=args.shadow, compose_spp=args.spp, models=model_config(args),
-                       fspy=args.fspy, camera_overrides=camera)
+                       fspy=args.fspy, camera_overrides=camera, sun_deg=args.sun,
+                       sun_shadow=tuple(args.sun_from_shadow) if args.sun_from_shadow else None)
     return config, written
 
 
@@ -97,6 +98,7 @@ def add_parser(sub) -> None:
     p.add_argument("--spp", type=int, help="compose: samples per pixel (default: from the preset's noise target)")
     p.add_argument("--no-bake", action="store_true", help="skip the game bake (a .glb of the asset with its new texture)")
     add_photo_camera_args(p)
+    add_sun_args(p)
     add_model_args(p)
     add_prompt_service_args(p, prefix="prompt-")
     p.set_defaults(func=run, by_stage=True)  # an interrupt keeps the finished stages (see the message)

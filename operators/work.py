@@ -186,7 +186,7 @@ def run_config(data: dict):
                      size=view["size"], camera_overrides=dict(view["camera"] or {}), camera_source=source,
                      camera_why=why,
                      turn_deg=view["turn_deg"], models=data["models"],
-                     stage_overrides={"light": {"sun_deg": tuple(view["sun_deg"])}} if view.get("sun_deg") else {})
+                     sun_deg=tuple(view["sun_deg"]) if view.get("sun_deg") else None)
 
 
 def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:

@@ -101,3 +101,39 @@ def test_pick_sun_in_blender_sets_the_light_stages_sun(run_py, tmp_path):
     source, azimuth, elevation = out["sun"]
     assert source == "set" and (azimuth, elevation) == (pytest.approx(-50.0, abs=0.01), pytest.approx(30.0, abs=0.01))
     assert out["decision"]["deg"] == [pytest.approx(-50.0, abs=0.01), pytest.approx(30.0, abs=0.01)]
+
+
+def test_scenefit_run_takes_the_sun_as_angles_or_as_a_shadow(tmp_path, capsys):
+    """The whole pipeline takes the artist's sun as `scenefit light` does; the light stage's report says
+    where it came from, and a second run with the same sun reuses the light stage."""
+    from scenefit.core.data.asset_io import save_asset_folder
+    from scenefit.core.data.maps import PBRMaps
+    from scenefit.core.data.primitives import uv_sphere
+
+    asset = save_asset_folder(uv_sphere(0.5, 12, 6), PBRMaps(np.full((8, 8, 3), 0.5, np.float32), 0.6, 0.0),
+                              tmp_path / "asset")
+    photo = write_image(tmp_path / "yard.png", np.broadcast_to(np.linspace(0.9, 0.3, 48)[:, None, None],
+                                                               (48, 64, 3)).astype(np.float32))
+    camera = PhotoCamera(pitch_deg=-15.0, fov_deg=60.0, width=64, height=48)
+    points = [f"{x / 64:.6f},{y / 48:.6f}" for x, y in shadow_pixels((-140.0, 40.0), foot=(0.3, 5.0), camera=camera)]
+    common = ["run", str(asset), "--photo", str(photo), "--at", "0.5,0.8", "--fov", "60", "--pitch", "-15",
+              "--roll", "0", "--preset", "draft", "--guidance", "none", "--spp", "2", "--no-bake", "--quiet"]
+
+    def light_report(out):
+        return json.loads((out / "report.json").read_text())["stages"]["light"]
+
+    assert main(common + ["--sun-from-shadow", *points, "--out", str(tmp_path / "shadow")]) == 0
+    sun = light_report(tmp_path / "shadow")["report"]["decisions"]["sun"]
+    assert sun["deg"] == [pytest.approx(-140.0, abs=0.05), pytest.approx(40.0, abs=0.05)] and "shadow" in sun["from"]
+    assert main(common + ["--sun", "30,45", "--out", str(tmp_path / "angles")]) == 0
+    assert light_report(tmp_path / "angles")["report"]["decisions"]["sun"]["deg"] == [30.0, 45.0]
+    assert main(common + ["--sun", "30,45", "--out", str(tmp_path / "angles")]) == 0
+    assert light_report(tmp_path / "angles")["status"] == "reused"
+    assert main(common + ["--sun", "-30,45", "--out", str(tmp_path / "angles")]) == 0
+    assert light_report(tmp_path / "angles")["status"] == "ran"
+    capsys.readouterr()
+    # Both at once, or a point that is not one: one sentence, exit 2, nothing written.
+    assert main(common + ["--sun", "10,20", "--sun-from-shadow", *points, "--out", str(tmp_path / "both")]) == 2
+    assert main(common + ["--sun-from-shadow", "0.5", *points[1:], "--out", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and not (tmp_path / "both").exists() and not (tmp_path / "bad").exists()

@@ -248,14 +248,16 @@ def test_run_all_in_blender_and_the_command_line_give_the_pipeline_the_same_sett
 
     recorder = Recorder()
     monkeypatch.setattr(run_module, "run_pipeline", recorder)
-    for camera in ([], ["--fov", "50", "--pitch", "-14", "--roll", "2"]):
+    for camera in ([], ["--fov", "50", "--pitch", "-14", "--roll", "2"], ["--sun", "-30,45"]):
         assert main(["run", str(inputs["obj"]), "--photo", str(inputs["photo"]), "--at", "{},{}".format(*DEFAULT_AT),
-                     "--out", str(inputs["root"] / f"cli{len(camera)}"), "--preset", "draft", "--guidance", "none",
-                     "--quiet", *camera]) == 0
-    estimated, given = (call["config"] for call in recorder.calls)
+                     "--out", str(inputs["root"] / f"cli{len(recorder.calls)}"), "--preset", "draft", "--guidance",
+                     "none", "--quiet", *camera]) == 0
+    estimated, given, sun = (call["config"] for call in recorder.calls)
     data = {"preset": "draft", "prompt": "", "guidance": "none", "models": ModelConfig()}
     assert run_config({**data, "view": _panel_view()}) == estimated
     assert run_config({**data, "view": _panel_view({"fov_deg": 50.0, "pitch_deg": -14.0, "roll_deg": 2.0})}) == given
+    # Pick Sun's (azimuth, elevation) reaches the pipeline as --sun's does.
+    assert run_config({**data, "view": {**_panel_view(), "sun_deg": (-30.0, 45.0)}}) == sun and sun.sun_deg
     assert recorder.calls[0]["placement"] == DEFAULT_AT
 
 

@@ -56,6 +56,10 @@ class RunConfig:
     camera_source: str = "user"               # where camera_overrides come from: "user", or "blender" (the scene camera)
     camera_why: str = "given by the user"     # ... said in the report's camera notes
     turn_deg: float = 0.0                     # compose: the asset turned about Z after facing the camera
+    # The artist's dominant light (light stage): (azimuth, elevation) in degrees as --sun takes it, or a shadow's
+    # FOOT, TOP, TIP (each as --at takes a point) that gives it through the photo's camera; None: guessed.
+    sun_deg: tuple[float, float] | None = None
+    sun_shadow: tuple[str, str, str] | None = None
     models: ModelConfig = field(default_factory=ModelConfig)
     # Settings over the preset's, per stage ("convert", "light", "adapt", "compose"), as the stage's config takes them:
     # quick looks, tests and benchmarks (e.g. {"adapt": {"iterations": 4}}). Part of each stage's key.
@@ -69,6 +73,8 @@ class RunConfig:
         wrong = sorted(set(self.camera_overrides) - {"fov_deg", "pitch_deg", "roll_deg"})
         if wrong:
             raise InputError(f"camera_overrides takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
+        if self.sun_deg is not None and self.sun_shadow is not None:
+            raise InputError("Give the sun as an azimuth and elevation or as a shadow's three points, not both.")
         unknown = sorted(set(self.stage_overrides) - {"convert", "light", "adapt", "compose"})
         if unknown:
             raise InputError(f"stage_overrides names unknown stage {unknown[0]!r}; it takes convert, light, adapt "
@@ -225,6 +231,9 @@ class PipelineRun:
         h, w = self.photo.shape[:2]
         self.placement = Placement.parse(placement, tuple(self.photo_info["size"]))   # pixels of the photo as stored
         self.placement_px = self.placement.pixel((h, w))                              # ... in the light stage's copy
+        if config.sun_shadow is not None:   # a malformed point is one sentence before any work
+            for point, name in zip(config.sun_shadow, ("foot", "top", "tip")):
+                Placement.parse(point, tuple(self.photo_info["size"]), what=f"The shadow's {name}")
         if config.fspy is not None and config.photo_camera is None:
             from ..stages.camera import read_fspy
 
@@ -279,8 +288,9 @@ class PipelineRun:
         if height.choice > preset_height:
             height = replace(height, choice=preset_height,
                              reason=f"{height.reason}; capped at the {self.config.preset} preset's {preset_height} rows")
+        sun = {"sun_deg": tuple(self.config.sun_deg)} if self.config.sun_deg is not None else {}
         config = self.stage_config("light", critic_type="diffusion" if self.found else "none",
-                                   models=self.config.models, map_height=height.choice)
+                                   models=self.config.models, map_height=height.choice, **sun)
         if self.config.guidance_type == "none":  # no diffusion model at all: the sky/ground prior completes outdoors
             config = replace(config, outpaint=replace(config.outpaint, completion_type="prior"))
         return config, height
@@ -299,19 +309,29 @@ class PipelineRun:
                                                   if self.config.fspy else None, self.config.camera_overrides,
                                                   self.config.camera_source]
         self.keys["light"] = _digest("light", asdict(config), self.photo_key, self.placement_px, camera_key,
-                                     self.keys["convert"] if critic_sees_asset else None)
+                                     self.keys["convert"] if critic_sees_asset else None,
+                                     *([self.config.sun_shadow] if self.config.sun_shadow else []))
 
         def light(folder: Path) -> dict:
             camera, estimate = self.photo_camera()
+            stage_config = config
+            if self.config.sun_shadow is not None:   # the shadow's points need the camera
+                from ..stages.light.shadow_hint import sun_from_shadow_points
+
+                stage_config = replace(config, sun_deg=sun_from_shadow_points(
+                    self.config.sun_shadow, camera, tuple(self.photo_info["size"]), self.photo.shape[:2]))
             asset = {}
             if critic_sees_asset:
                 texture = load_neural_texture(self.texture_path)
                 stack = texture_view(texture, self.normalized).stack(texture)   # convert's: the own UVs
                 asset = {"mesh": self.mesh, "maps": torch.as_tensor(stack)}
             inputs = LightInputs(self.photo, self.photo_info, self.placement_px, camera, estimate)
-            result = run_light(inputs, config, self.progress, self.cancel,
+            result = run_light(inputs, stage_config, self.progress, self.cancel,
                                models=_WithInpaint(self.cache) if self.found else self.cache, asset=asset)
             result.decisions["envmap_height"] = needs_report(envmap_height)
+            if self.config.sun_shadow is not None:
+                result.decisions["sun"]["from"] = "the shadow's foot, top and tip given (" + \
+                    ", ".join(self.config.sun_shadow) + ")"
             return write_light(result, folder)
 
         self.runner.run("light", self.keys["light"], light)

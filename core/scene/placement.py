@@ -39,14 +39,15 @@ class Placement:
         object.__setattr__(self, "center", (float(x), float(y)))
 
     @classmethod
-    def parse(cls, at: str | tuple[float, float], photo_wh: tuple[int, int], size: float = DEFAULT_OBJECT_SIZE) -> "Placement":
+    def parse(cls, at: str | tuple[float, float], photo_wh: tuple[int, int], size: float = DEFAULT_OBJECT_SIZE,
+              what: str = "--at") -> "Placement":
         """From `X,Y` (or a pair): fractions of the width and height when both are <= 1, pixels of the
-        photo as stored (photo_wh, upright) when both are > 1."""
-        x, y = parse_point(at)
+        photo as stored (photo_wh, upright) when both are > 1. `what` names the point in errors."""
+        x, y = parse_point(at, what)
         width, height = photo_wh
         if x > 1.0:
             if not (x <= width and y <= height):
-                raise InputError(f"The placement ({x:g}, {y:g}) lies outside the {width}x{height} photo.")
+                raise InputError(f"{what} ({x:g}, {y:g}) lies outside the {width}x{height} photo.")
             x, y = x / width, y / height
         return cls((x, y), size)
 
@@ -56,18 +57,18 @@ class Placement:
         return self.center[0] * w, self.center[1] * h
 
 
-def parse_point(at: str | tuple[float, float]) -> tuple[float, float]:
+def parse_point(at: str | tuple[float, float], what: str = "--at") -> tuple[float, float]:
     """`--at X,Y` checked on its own (the photo's size checks the rest): two finite, non-negative numbers,
     both fractions (<= 1) or both pixels (> 1). A mix such as 1.5,0.5 is a typo more often than a
     pixel on the photo's top edge, so it is refused rather than guessed."""
     try:
         x, y = (float(v) for v in (at.split(",") if isinstance(at, str) else at))
     except (TypeError, ValueError):
-        raise InputError(f"--at takes X,Y (fractions of the photo's width and height, e.g. 0.5,0.7, or pixels), "
+        raise InputError(f"{what} takes X,Y (fractions of the photo's width and height, e.g. 0.5,0.7, or pixels), "
                          f"got {at!r}.") from None
     if not (math.isfinite(x) and math.isfinite(y) and x >= 0.0 and y >= 0.0):
-        raise InputError(f"--at takes two finite, non-negative numbers, got {at!r}.")
+        raise InputError(f"{what} takes two finite, non-negative numbers, got {at!r}.")
     if (x <= 1.0) != (y <= 1.0):
-        raise InputError(f"--at {x:g},{y:g} mixes a fraction and a pixel position; give both as fractions of the "
+        raise InputError(f"{what} {x:g},{y:g} mixes a fraction and a pixel position; give both as fractions of the "
                          f"photo's width and height (0 to 1) or both in pixels.")
     return x, y

@@ -14,6 +14,7 @@ import numpy as np
 
 from ...base.errors import InputError
 from ...scene.camera import CAMERA_HEIGHT, PhotoCamera, pixel_ray
+from ...scene.placement import Placement
 
 
 def floor_point(camera: PhotoCamera, pixel: tuple[float, float], what: str) -> np.ndarray:
@@ -48,3 +49,14 @@ def sun_from_shadow(camera: PhotoCamera, foot: tuple[float, float], top: tuple[f
     azimuth = camera.yaw_deg - math.degrees(math.atan2(direction[1], direction[0]))
     elevation = math.degrees(math.asin(float(np.clip(direction[2], -1.0, 1.0))))
     return (azimuth + 180.0) % 360.0 - 180.0, elevation
+
+
+def sun_from_shadow_points(points, camera: PhotoCamera, photo_wh: tuple[int, int],
+                           hw: tuple[int, int]) -> tuple[float, float]:
+    """`sun_from_shadow` for FOOT, TOP, TIP given as `--at` takes a point (fractions, or pixels of the
+    photo as stored, `photo_wh`), through `camera`, the camera of the photo's working copy of size `hw`."""
+    if len(points) != 3:
+        raise InputError(f"The sun from a shadow takes three points (foot, top, tip), got {len(points)}.")
+    foot, top, tip = (Placement.parse(point, photo_wh, what=f"The shadow's {name}").pixel(hw)
+                      for point, name in zip(points, ("foot", "top", "tip")))
+    return sun_from_shadow(camera, foot, top, tip)
