@@ -15,7 +15,7 @@ from urllib.parse import urlparse
 import bpy
 
 from ..core.base.errors import InputError
-from .common import model_settings, preferences, run_folder, scene_asset
+from .common import model_settings, photo_view, preferences, run_folder, scene_asset
 from .results import apply_result_material
 
 # What the worker runs for each operator: the whole pipeline (adapt needs convert and the light).
@@ -70,10 +70,15 @@ def remote_work(op, context, address: str) -> tuple:
     # Where the results go (Run's apply): the object's active slot, as for one material ever.
     op._layout = {"objects": [obj.name], "slots": [[(obj.name, obj.active_material_index)]], "wraps": None,
                   "name": obj.name}
+    # How the photo is seen, as Run All here sees it (operators/common.photo_view): the artist's camera or the
+    # panel's values, where the asset stands, and the artist's sun.
+    from .work import job_view
+
     return work_remotely, {
-        "mesh": mesh, "maps": maps, "photo": str(photo), "at": tuple(settings.placement), "worker": address,
+        "mesh": mesh, "maps": maps, "photo": str(photo), "worker": address,
         "out": str(folder.parent), "name": folder.name, "preset": settings.preset,
-        "stages": REMOTE_STAGES, "prompt": settings.prompt, "models": models, "overrides": quick_overrides(op)}
+        "stages": REMOTE_STAGES, "prompt": settings.prompt, "models": models, "overrides": quick_overrides(op),
+        **job_view(photo_view(context, photo, obj))}
 
 
 def quick_overrides(op) -> dict:

@@ -78,6 +78,18 @@ def camera_source(view: dict) -> tuple[str, str]:
     return "user", "given by the user"   # the panel's values, as the command line's --fov/--pitch/--roll
 
 
+def job_view(view: dict) -> dict:
+    """The view as a Job (workers/jobs.py) carries it, so a remote Run All sees the photo as a local one."""
+    source, why = camera_source(view)
+    from ..workers.jobs import CAMERA_KEYS
+
+    names = {ours: its for its, ours in CAMERA_KEYS.items()}
+    return {"at": tuple(view["placement"]), "object_size": view["size"],
+            "camera": {names[k]: v for k, v in (view["camera"] or {}).items()},
+            "camera_source": source, "camera_why": why, "turn": view["turn_deg"],
+            "sun": tuple(view["sun_deg"]) if view.get("sun_deg") else None}
+
+
 def camera_values(camera) -> dict:
     """What the Cycles set-up takes from the camera a job used."""
     return {"fov_deg": camera.fov_deg, "pitch_deg": camera.pitch_deg, "roll_deg": camera.roll_deg}

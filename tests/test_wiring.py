@@ -19,7 +19,8 @@ from scenefit.core.data.imageio import write_image
 from scenefit.core.data.maps import PBRMaps
 from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.scene.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
-from scenefit.workers.jobs import load_jobs
+from scenefit.core.base.errors import InputError
+from scenefit.workers.jobs import Job, load_jobs
 
 from asset_builder import write_obj
 
@@ -73,6 +74,60 @@ def test_the_command_line_and_a_batch_job_give_the_pipeline_the_same_settings(in
     cli_call, batch_call = recorder.calls
     assert cli_call == batch_call
     assert cli_call["bake"] is True            # both bake the asset's own file
+
+
+def test_a_jobs_file_says_how_the_photo_is_seen_as_the_command_line_does(inputs, monkeypatch):
+    """object_size, camera and sun in a [[job]] reach the pipeline as --object-size, --fov/--pitch/--roll and --sun
+    do (jobs could not say them: every batch job had the default size and an estimated camera)."""
+    from scenefit.workers.batch import run_pipeline_for_job
+
+    recorder = Recorder()
+    monkeypatch.setattr(run_module, "run_pipeline", recorder)
+    assert main(["run", str(inputs["folder"]), "--photo", str(inputs["photo"]), "--at", "0.5,0.6", "--out",
+                 str(inputs["root"] / "cli"), "--preset", "draft", "--guidance", "none", "--quiet", "--object-size",
+                 "0.45", "--fov", "50", "--pitch", "-14", "--roll", "2", "--sun", "-30,45"]) == 0
+    path = _jobs(inputs["root"], inputs["folder"], inputs["photo"], ["convert", "light", "compose"])
+    path.write_text(path.read_text() + "object_size = 0.45\ncamera = { fov = 50, pitch = -14, roll = 2 }\n"
+                                       "sun = [-30, 45]\n")
+    run_pipeline_for_job(load_jobs(path).jobs[0], inputs["root"] / "batch")
+    cli_call, batch_call = recorder.calls
+    assert cli_call == batch_call and cli_call["config"].sun_deg == (-30.0, 45.0)
+    assert cli_call["config"].size == 0.45 and cli_call["config"].camera_overrides["pitch_deg"] == -14.0
+    for bad, says in (("object_size = 1.5", "object_size"), ("camera = { fov = 50, yaw = 3 }", "camera"),
+                      ("sun = [10, 95]", "sun"), ("turn = \"left\"", "turn")):
+        path.write_text(_jobs(inputs["root"], inputs["folder"], inputs["photo"], ["light"]).read_text() + bad + "\n")
+        with pytest.raises(InputError, match=f"job 'job': {says}"):
+            load_jobs(path)
+
+
+def test_a_remote_run_all_sees_the_photo_as_a_local_one(inputs, monkeypatch):
+    """Run All in a worker environment once sent only the panel's placement: the scene camera, the panel's
+    camera values, the asset's size and turn and Pick Sun's sun were dropped."""
+    from scenefit.core.data.asset_io import load_asset_folder
+    from scenefit.core.guidance import ModelConfig
+    from scenefit.operators.work import job_view, run_config
+    from scenefit.workers import remote
+    from scenefit.workers.batch import run_pipeline_for_job
+
+    jobs = []
+    def run_remote(job, *args, **kwargs):   # the worker's job, its asset kept past the packing's temporary folder
+        jobs.append(dataclasses.replace(job, asset=shutil.copytree(job.asset, inputs["root"] / "sent")))
+        return inputs["root"], {}
+
+    monkeypatch.setattr(remote, "run_remote", run_remote)
+    recorder = Recorder()
+    monkeypatch.setattr(run_module, "run_pipeline", recorder)
+    view = {"camera": {"fov_deg": 41.0, "pitch_deg": -9.0, "roll_deg": 1.5}, "camera_source": "blender",
+            "scene_camera": "Camera", "placement": (0.4, 0.7), "size": 0.55, "turn_deg": 20.0,
+            "notes": ["the scene camera 'Camera' is used as it is"], "sun_deg": (-30.0, 45.0)}
+    mesh, maps = load_asset_folder(inputs["folder"])
+    remote.work_remotely({"mesh": mesh, "maps": maps, "photo": str(inputs["photo"]), "worker": "auto",
+                          "out": str(inputs["root"] / "remote"), "preset": "draft", "prompt": "",
+                          "stages": ["convert", "light", "compose"], **job_view(view)})
+    run_pipeline_for_job(Job.from_dict(jobs[0].to_dict()), inputs["root"] / "worker")
+    local = run_config({"preset": "draft", "prompt": "", "guidance": "none", "models": ModelConfig(), "view": view})
+    remote_call = recorder.calls[0]
+    assert remote_call["config"] == local and remote_call["placement"] == (0.4, 0.7)
 
 
 def test_a_batch_convert_job_keeps_constant_channels_as_numbers(inputs):

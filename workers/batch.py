@@ -29,7 +29,7 @@ from typing import Callable
 
 from ..core.base.atomic import write_json_atomic, write_text_atomic
 from ..core.base.errors import InputError, SceneFitError
-from .jobs import BatchSettings, Job, JobsFile, with_user_paths
+from .jobs import CAMERA_KEYS, BatchSettings, Job, JobsFile, with_user_paths
 from ..core.base.output_folder import check_output_folder, check_subfolder, folder_in_place, install_folder
 
 REPORT = "report.json"
@@ -250,8 +250,11 @@ def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models
     from ..core.stages.bake.process import asset_file_bake
 
     mesh, maps = _load_asset(job)
+    view = {} if job.object_size is None else {"size": job.object_size}
     config = RunConfig(preset=job.preset, prompt=job.prompt, guidance_type="auto" if "adapt" in job.stages else "none",
-                       models=job.models, stage_overrides=_stage_overrides(job))
+                       models=job.models, stage_overrides=_stage_overrides(job), camera_overrides=job_camera(job),
+                       camera_source=job.camera_source, camera_why=job.camera_why, turn_deg=job.turn,
+                       sun_deg=job.sun, **view)
     bake, why_not = asset_file_bake(job.asset, job.object) if "bake" in job.stages else (None, "the job's stages "
                                                                                          "do not list bake")
     return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel, models=models,
@@ -264,6 +267,11 @@ def _stage_overrides(job: Job) -> dict:
     if job.seed is not None:
         overrides.setdefault("convert", {}).setdefault("seed", job.seed)
     return overrides
+
+
+def job_camera(job: Job) -> dict:
+    """The job's camera values as the pipeline's camera_overrides take them."""
+    return {CAMERA_KEYS[k]: v for k, v in job.camera.items()}
 
 
 def _load_asset(job: Job):
@@ -287,8 +295,8 @@ def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
                                                  stage_config("convert", job.preset, **_stage_overrides(job).get(
                                                      "convert", {})), progress, cancel)
     if "light" in job.stages:   # as `scenefit light` lights it: the photo's own camera, the same files
-        inputs = light_inputs(job.photo, job.at)
-        overrides = dict(job.overrides.get("light", {}))
+        inputs = light_inputs(job.photo, job.at, None, job_camera(job))
+        overrides = {**({"sun_deg": job.sun} if job.sun is not None else {}), **job.overrides.get("light", {})}
         critic = critic_choice(overrides.pop("critic_type", "auto"), job.models)
         config = stage_config("light", job.preset, critic_type=critic.choice, models=job.models, **overrides)
         reports["light"] = write_light(run_light(inputs, config, progress, cancel), out / "light")

@@ -26,12 +26,17 @@
     prompt = "a leather sofa, soggy and stained with mud"   # optional prompts
     seed = 0                      # optional
     overrides = { adapt = { iterations = 50 } }   # optional: stage settings over the preset's
+    object_size = 0.3             # optional: the asset's height as a fraction of the photo's (compose)
+    camera = { fov = 50, pitch = -14, roll = 2 }  # optional, degrees: over the camera found from the photo
+    sun = [-30, 45]               # optional: the dominant light's azimuth and elevation, as --sun takes them
+    turn = 0                      # optional: degrees the asset turns about its up axis after facing the camera
 
 Relative paths are relative to the jobs file. Everything is checked when the file is read, and a
 problem is one sentence naming the job and the key.
 """
 from __future__ import annotations
 
+import math
 import os
 import re
 import tomllib
@@ -70,11 +75,19 @@ class Job:
     seed: int | None = None
     models: ModelConfig = field(default_factory=ModelConfig)   # the file's [models] table
     overrides: dict = field(default_factory=dict)   # {"convert"|"light"|"adapt": {setting: value}}
+    # Where the asset stands and how the photo is seen, as `scenefit run`'s options and Run All's panel say it:
+    object_size: float | None = None                # None: the default (DEFAULT_OBJECT_SIZE)
+    camera: dict = field(default_factory=dict)      # {"fov"|"pitch"|"roll": degrees} over the estimate
+    camera_source: str = "user"                     # "blender": the values are the artist's scene camera's (a
+    camera_why: str = "given by the user"           # remote Run All), and camera_why says how they were read
+    sun: tuple[float, float] | None = None          # the artist's dominant light (azimuth, elevation), degrees
+    turn: float = 0.0
 
     def to_dict(self) -> dict:
         d = asdict(self)
         d.update(asset=str(self.asset), photo=None if self.photo is None else str(self.photo),
-                 stages=list(self.stages), at=None if self.at is None else list(self.at))
+                 stages=list(self.stages), at=None if self.at is None else list(self.at),
+                 sun=None if self.sun is None else list(self.sun))
         return d
 
     @classmethod
@@ -83,7 +96,8 @@ class Job:
         values = dict(d)
         values.update(asset=Path(d["asset"]), photo=None if d.get("photo") is None else Path(d["photo"]),
                       stages=tuple(d["stages"]), at=None if d.get("at") is None else tuple(d["at"]),
-                      models=ModelConfig(**d.get("models", {})), overrides=dict(d.get("overrides", {})))
+                      models=ModelConfig(**d.get("models", {})), overrides=dict(d.get("overrides", {})),
+                      sun=None if d.get("sun") is None else tuple(d["sun"]), camera=dict(d.get("camera", {})))
         return cls(**values)
 
 
@@ -105,7 +119,9 @@ class JobsFile:
     settings: BatchSettings = field(default_factory=BatchSettings)
 
 
-JOB_KEYS = ("name", "asset", "object", "photo", "at", "preset", "stages", "mode", *PROMPT_KEYS, "seed", "overrides")
+JOB_KEYS = ("name", "asset", "object", "photo", "at", "preset", "stages", "mode", *PROMPT_KEYS, "seed", "overrides",
+            "object_size", "camera", "camera_source", "camera_why", "sun", "turn")
+CAMERA_KEYS = {"fov": "fov_deg", "pitch": "pitch_deg", "roll": "roll_deg"}   # a job's names -> the pipeline's
 MODEL_KEYS = ("base_model", "inpaint_model", "cache_dir", "local_files_only", "device_type", "dtype_type",
               "attention_slicing", "vae_slicing", "vae_tiling", "channels_last", "cpu_offload")
 OVERRIDE_STAGES = ("convert", "light", "adapt", "compose")
@@ -301,7 +317,43 @@ def _parse_job(entry: dict, index: int, path: Path) -> Job:
         raise InputError(f"{where}: seed must be a whole number >= 0, got {seed!r}.")
     overrides = _parse_overrides(entry.get("overrides", {}), where)
     return Job(name=name, asset=asset, stages=stages, preset=preset, photo=photo, at=at, object=obj, mode=mode,
-               seed=seed, overrides=overrides, **prompts)
+               seed=seed, overrides=overrides, **prompts, **_parse_view(entry, where))
+
+
+def _parse_view(entry: dict, where: str) -> dict:
+    """object_size, camera (and where its values come from), sun and turn: how the job sees the photo,
+    checked as `scenefit run` checks them."""
+    view: dict = {}
+    size = entry.get("object_size")
+    if size is not None:
+        if not (_is_number(size) and 0.0 < size <= 1.0):
+            raise InputError(f"{where}: object_size must be a fraction of the photo's height in (0, 1], got {size!r}.")
+        view["object_size"] = float(size)
+    camera = entry.get("camera", {})
+    if not isinstance(camera, dict) or set(camera) - set(CAMERA_KEYS) \
+            or not all(_is_number(v) and math.isfinite(v) for v in camera.values()):
+        raise InputError(f"{where}: camera must be a table of fov, pitch and roll in degrees, e.g. "
+                         f"{{ fov = 50, pitch = -14 }}, got {camera!r}.")
+    if "fov" in camera and not 0.0 < camera["fov"] < 180.0:
+        raise InputError(f"{where}: camera fov must be within (0, 180) degrees, got {camera['fov']!r}.")
+    view["camera"] = {k: float(v) for k, v in camera.items()}
+    source, why = entry.get("camera_source", "user"), entry.get("camera_why", "given by the user")
+    if source not in ("user", "blender") or not isinstance(why, str):
+        raise InputError(f"{where}: camera_source must be 'user' or 'blender' and camera_why a string, got "
+                         f"{source!r} and {why!r}.")
+    view.update(camera_source=source, camera_why=why)
+    sun = entry.get("sun")
+    if sun is not None:
+        if not (isinstance(sun, list) and len(sun) == 2 and all(_is_number(v) and math.isfinite(v) for v in sun)
+                and -90.0 <= sun[1] <= 90.0):
+            raise InputError(f"{where}: sun must be [azimuth, elevation] in degrees (elevation within +-90), "
+                             f"e.g. [-30, 45], got {sun!r}.")
+        view["sun"] = (float(sun[0]), float(sun[1]))
+    turn = entry.get("turn", 0.0)
+    if not (_is_number(turn) and math.isfinite(turn)):
+        raise InputError(f"{where}: turn must be degrees, got {turn!r}.")
+    view["turn"] = float(turn)
+    return view
 
 
 def _resolve(text: str, jobs_path: Path) -> Path:
