@@ -11,13 +11,12 @@ from .options import (add_dry_run_arg, add_model_args, add_old_photo_elevation_a
 
 def resolve_config(args, critic: str):
     """The LightConfig the arguments ask for: the preset, then the options given."""
-    from ..core.stages.light.depth import DEFAULT_DEPTH_MODEL, DepthConfig
+    from ..core.stages.light.depth import depth_config_for
     from ..core.pipeline.presets import stage_config
 
     models = model_config(args)
     # The depth model follows the same --offline / --cache-dir as the diffusion models.
-    depth = DepthConfig(depth_type=args.depth, model=args.depth_model or DEFAULT_DEPTH_MODEL,
-                        cache_dir=models.cache_dir, local_files_only=True if args.offline else None)
+    depth = depth_config_for(models, args.depth, args.depth_model)
     overrides = {k: v for k, v in (("scene_type", args.scene), ("fov_deg", args.fov), ("tint", args.tint),
                                    ("sun_deg", args.sun),
                                    ("camera_pitch_deg", photo_pitch(args)))

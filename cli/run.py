@@ -20,7 +20,8 @@ def run_config(args):
     config = RunConfig(preset=args.preset, prompt=prompt, guidance_type=args.guidance,
                        size=args.object_size, shadow_type=args.shadow, compose_spp=args.spp, models=model_config(args),
                        fspy=args.fspy, camera_overrides=camera, sun_deg=args.sun,
-                       sun_shadow=tuple(args.sun_from_shadow) if args.sun_from_shadow else None)
+                       sun_shadow=tuple(args.sun_from_shadow) if args.sun_from_shadow else None,
+                       scene_type=args.scene)
     return config, written
 
 
@@ -97,6 +98,8 @@ def add_parser(sub) -> None:
     p.add_argument("--shadow", choices=SHADOW_TYPES, default="ratio")
     p.add_argument("--spp", type=int, help="compose: samples per pixel (default: from the preset's noise target)")
     p.add_argument("--no-bake", action="store_true", help="skip the game bake (a .glb of the asset with its new texture)")
+    p.add_argument("--scene", choices=("auto", "indoor", "outdoor"), default="auto",
+                   help="the photo's scene type for the light stage (default: decided from the photo)")
     add_photo_camera_args(p)
     add_sun_args(p)
     add_model_args(p)

@@ -309,7 +309,7 @@ def model_cache(context=None) -> str | None:
 def model_settings(context=None):
     """(ModelConfig, DepthConfig) from the preferences: hub ids or folders, cache, offline, device."""
     from ..core.guidance import ModelConfig
-    from ..core.stages.light.depth import DepthConfig
+    from ..core.stages.light.depth import depth_config_for
 
     prefs = preferences(context)
     cache, local_only = model_cache(context), offline(context)
@@ -318,10 +318,7 @@ def model_settings(context=None):
     if prefs is not None:
         kwargs = {"base_model": prefs.base_model, "inpaint_model": prefs.inpaint_model}
     models = ModelConfig(cache_dir=cache, local_files_only=local_only, device_type=device, **kwargs)
-    depth_kwargs = {"model": prefs.depth_model} if prefs is not None and prefs.depth_model else {}
-    depth = DepthConfig(depth_type="auto", cache_dir=cache, local_files_only=local_only,
-                        device="cuda" if device == "cuda" else "cpu", **depth_kwargs)
-    return models, depth
+    return models, depth_config_for(models, model=prefs.depth_model if prefs is not None else None)
 
 
 # -- where results go --------------------------------------------------------------------------------

@@ -78,7 +78,7 @@ def remote_work(op, context, address: str) -> tuple:
         "mesh": mesh, "maps": maps, "photo": str(photo), "worker": address,
         "out": str(folder.parent), "name": folder.name, "preset": settings.preset,
         "stages": REMOTE_STAGES, "prompt": settings.prompt, "models": models, "overrides": quick_overrides(op),
-        **job_view(photo_view(context, photo, obj))}
+        "scene": settings.scene_type, **job_view(photo_view(context, photo, obj))}
 
 
 def quick_overrides(op) -> dict:

@@ -198,7 +198,8 @@ def run_config(data: dict):
                      size=view["size"], camera_overrides=dict(view["camera"] or {}), camera_source=source,
                      camera_why=why,
                      turn_deg=view["turn_deg"], models=data["models"],
-                     sun_deg=tuple(view["sun_deg"]) if view.get("sun_deg") else None)
+                     sun_deg=tuple(view["sun_deg"]) if view.get("sun_deg") else None,
+                     scene_type=data.get("scene_type", "auto"), depth_model=data.get("depth_model"))
 
 
 def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:

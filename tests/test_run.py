@@ -190,3 +190,25 @@ def test_a_failed_game_bake_fails_the_run_in_one_sentence(tmp_path):
     # the stages that finished are recorded; the bake is not
     assert (tmp_path / "run" / "compose" / "stage.json").is_file()
     assert not (tmp_path / "run" / "bake" / "stage.json").exists()
+
+
+def test_run_gives_the_light_stage_the_scene_type_and_the_models_cache(tmp_path):
+    """`scenefit run` once had no --scene (Run All dropped the panel's Scene type) and looked for the depth
+    model outside --cache-dir / --offline, which `scenefit light` follows."""
+    from scenefit.cli import main
+
+    maps = PBRMaps(np.full((8, 8, 3), 0.5, np.float32), 0.6, 0.0)
+    asset = save_asset_folder(uv_sphere(0.5, 12, 6), maps, tmp_path / "asset")
+    photo = write_image(tmp_path / "photo.png", np.broadcast_to(np.linspace(0.9, 0.3, 48)[:, None, None],
+                                                                (48, 64, 3)).astype(np.float32))
+    cache = tmp_path / "hub"
+    cache.mkdir()
+    for scene in ("indoor", "outdoor"):
+        out = tmp_path / scene
+        assert main(["run", str(asset), "--photo", str(photo), "--at", "0.5,0.8", "--out", str(out), "--preset",
+                     "draft", "--guidance", "none", "--spp", "2", "--no-bake", "--quiet", "--scene", scene,
+                     "--cache-dir", str(cache), "--offline"]) == 0
+        light = json.loads((out / "report.json").read_text())["stages"]["light"]["report"]
+        assert light["decisions"]["scene_type"]["chosen"] == scene
+        depth = light["config"]["depth"]
+        assert depth["cache_dir"] == str(cache) and depth["local_files_only"] is True

@@ -85,16 +85,17 @@ def test_a_jobs_file_says_how_the_photo_is_seen_as_the_command_line_does(inputs,
     monkeypatch.setattr(run_module, "run_pipeline", recorder)
     assert main(["run", str(inputs["folder"]), "--photo", str(inputs["photo"]), "--at", "0.5,0.6", "--out",
                  str(inputs["root"] / "cli"), "--preset", "draft", "--guidance", "none", "--quiet", "--object-size",
-                 "0.45", "--fov", "50", "--pitch", "-14", "--roll", "2", "--sun", "-30,45"]) == 0
+                 "0.45", "--fov", "50", "--pitch", "-14", "--roll", "2", "--sun", "-30,45", "--scene", "indoor"]) == 0
     path = _jobs(inputs["root"], inputs["folder"], inputs["photo"], ["convert", "light", "compose"])
     path.write_text(path.read_text() + "object_size = 0.45\ncamera = { fov = 50, pitch = -14, roll = 2 }\n"
-                                       "sun = [-30, 45]\n")
+                                       "sun = [-30, 45]\nscene = \"indoor\"\n")
     run_pipeline_for_job(load_jobs(path).jobs[0], inputs["root"] / "batch")
     cli_call, batch_call = recorder.calls
     assert cli_call == batch_call and cli_call["config"].sun_deg == (-30.0, 45.0)
     assert cli_call["config"].size == 0.45 and cli_call["config"].camera_overrides["pitch_deg"] == -14.0
+    assert cli_call["config"].scene_type == "indoor"
     for bad, says in (("object_size = 1.5", "object_size"), ("camera = { fov = 50, yaw = 3 }", "camera"),
-                      ("sun = [10, 95]", "sun"), ("turn = \"left\"", "turn")):
+                      ("sun = [10, 95]", "sun"), ("turn = \"left\"", "turn"), ("scene = \"cave\"", "scene")):
         path.write_text(_jobs(inputs["root"], inputs["folder"], inputs["photo"], ["light"]).read_text() + bad + "\n")
         with pytest.raises(InputError, match=f"job 'job': {says}"):
             load_jobs(path)
@@ -123,11 +124,13 @@ def test_a_remote_run_all_sees_the_photo_as_a_local_one(inputs, monkeypatch):
     mesh, maps = load_asset_folder(inputs["folder"])
     remote.work_remotely({"mesh": mesh, "maps": maps, "photo": str(inputs["photo"]), "worker": "auto",
                           "out": str(inputs["root"] / "remote"), "preset": "draft", "prompt": "",
-                          "stages": ["convert", "light", "compose"], **job_view(view)})
+                          "stages": ["convert", "light", "compose"], "scene": "outdoor", **job_view(view)})
     run_pipeline_for_job(Job.from_dict(jobs[0].to_dict()), inputs["root"] / "worker")
-    local = run_config({"preset": "draft", "prompt": "", "guidance": "none", "models": ModelConfig(), "view": view})
+    local = run_config({"preset": "draft", "prompt": "", "guidance": "none", "models": ModelConfig(), "view": view,
+                        "scene_type": "outdoor"})
     remote_call = recorder.calls[0]
     assert remote_call["config"] == local and remote_call["placement"] == (0.4, 0.7)
+    assert local.scene_type == "outdoor" and local.sun_deg == (-30.0, 45.0) and local.camera_source == "blender"
 
 
 def test_a_batch_convert_job_keeps_constant_channels_as_numbers(inputs):

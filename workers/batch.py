@@ -254,7 +254,7 @@ def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models
     config = RunConfig(preset=job.preset, prompt=job.prompt, guidance_type="auto" if "adapt" in job.stages else "none",
                        models=job.models, stage_overrides=_stage_overrides(job), camera_overrides=job_camera(job),
                        camera_source=job.camera_source, camera_why=job.camera_why, turn_deg=job.turn,
-                       sun_deg=job.sun, **view)
+                       sun_deg=job.sun, scene_type=job.scene, **view)
     bake, why_not = asset_file_bake(job.asset, job.object) if "bake" in job.stages else (None, "the job's stages "
                                                                                          "do not list bake")
     return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel, models=models,
@@ -296,7 +296,8 @@ def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
                                                      "convert", {})), progress, cancel)
     if "light" in job.stages:   # as `scenefit light` lights it: the photo's own camera, the same files
         inputs = light_inputs(job.photo, job.at, None, job_camera(job))
-        overrides = {**({"sun_deg": job.sun} if job.sun is not None else {}), **job.overrides.get("light", {})}
+        overrides = {"scene_type": job.scene, **({"sun_deg": job.sun} if job.sun is not None else {}),
+                     **job.overrides.get("light", {})}
         critic = critic_choice(overrides.pop("critic_type", "auto"), job.models)
         config = stage_config("light", job.preset, critic_type=critic.choice, models=job.models, **overrides)
         reports["light"] = write_light(run_light(inputs, config, progress, cancel), out / "light")

@@ -29,6 +29,7 @@
     object_size = 0.3             # optional: the asset's height as a fraction of the photo's (compose)
     camera = { fov = 50, pitch = -14, roll = 2 }  # optional, degrees: over the camera found from the photo
     sun = [-30, 45]               # optional: the dominant light's azimuth and elevation, as --sun takes them
+    scene = "indoor"              # optional: the light stage's scene type, as --scene (default: "auto")
     turn = 0                      # optional: degrees the asset turns about its up axis after facing the camera
 
 Relative paths are relative to the jobs file. Everything is checked when the file is read, and a
@@ -81,6 +82,7 @@ class Job:
     camera_source: str = "user"                     # "blender": the values are the artist's scene camera's (a
     camera_why: str = "given by the user"           # remote Run All), and camera_why says how they were read
     sun: tuple[float, float] | None = None          # the artist's dominant light (azimuth, elevation), degrees
+    scene: str = "auto"                             # the light stage's scene type: auto | indoor | outdoor
     turn: float = 0.0
 
     def to_dict(self) -> dict:
@@ -120,7 +122,7 @@ class JobsFile:
 
 
 JOB_KEYS = ("name", "asset", "object", "photo", "at", "preset", "stages", "mode", *PROMPT_KEYS, "seed", "overrides",
-            "object_size", "camera", "camera_source", "camera_why", "sun", "turn")
+            "object_size", "camera", "camera_source", "camera_why", "sun", "scene", "turn")
 CAMERA_KEYS = {"fov": "fov_deg", "pitch": "pitch_deg", "roll": "roll_deg"}   # a job's names -> the pipeline's
 MODEL_KEYS = ("base_model", "inpaint_model", "cache_dir", "local_files_only", "device_type", "dtype_type",
               "attention_slicing", "vae_slicing", "vae_tiling", "channels_last", "cpu_offload")
@@ -321,7 +323,7 @@ def _parse_job(entry: dict, index: int, path: Path) -> Job:
 
 
 def _parse_view(entry: dict, where: str) -> dict:
-    """object_size, camera (and where its values come from), sun and turn: how the job sees the photo,
+    """object_size, camera (and where its values come from), sun, scene and turn: how the job sees the photo,
     checked as `scenefit run` checks them."""
     view: dict = {}
     size = entry.get("object_size")
@@ -349,6 +351,10 @@ def _parse_view(entry: dict, where: str) -> dict:
             raise InputError(f"{where}: sun must be [azimuth, elevation] in degrees (elevation within +-90), "
                              f"e.g. [-30, 45], got {sun!r}.")
         view["sun"] = (float(sun[0]), float(sun[1]))
+    scene = entry.get("scene", "auto")
+    if scene not in ("auto", "indoor", "outdoor"):
+        raise InputError(f"{where}: scene must be auto, indoor or outdoor, got {scene!r}.")
+    view["scene"] = scene
     turn = entry.get("turn", 0.0)
     if not (_is_number(turn) and math.isfinite(turn)):
         raise InputError(f"{where}: turn must be degrees, got {turn!r}.")

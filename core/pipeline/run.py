@@ -60,6 +60,9 @@ class RunConfig:
     # FOOT, TOP, TIP (each as --at takes a point) that gives it through the photo's camera; None: guessed.
     sun_deg: tuple[float, float] | None = None
     sun_shadow: tuple[str, str, str] | None = None
+    scene_type: str = "auto"                  # light: indoor | outdoor | auto (decided from the photo, or unsure)
+    depth_model: str | None = None            # light: hub id or folder of the depth model (None: the default),
+                                              # looked for where `models` are (their cache and offline switch)
     models: ModelConfig = field(default_factory=ModelConfig)
     # Settings over the preset's, per stage ("convert", "light", "adapt", "compose"), as the stage's config takes them:
     # quick looks, tests and benchmarks (e.g. {"adapt": {"iterations": 4}}). Part of each stage's key.
@@ -288,9 +291,12 @@ class PipelineRun:
         if height.choice > preset_height:
             height = replace(height, choice=preset_height,
                              reason=f"{height.reason}; capped at the {self.config.preset} preset's {preset_height} rows")
+        from ..stages.light.depth import depth_config_for
+
         sun = {"sun_deg": tuple(self.config.sun_deg)} if self.config.sun_deg is not None else {}
         config = self.stage_config("light", critic_type="diffusion" if self.found else "none",
-                                   models=self.config.models, map_height=height.choice, **sun)
+                                   models=self.config.models, map_height=height.choice, scene_type=self.config.scene_type,
+                                   depth=depth_config_for(self.config.models, model=self.config.depth_model), **sun)
         if self.config.guidance_type == "none":  # no diffusion model at all: the sky/ground prior completes outdoors
             config = replace(config, outpaint=replace(config.outpaint, completion_type="prior"))
         return config, height

@@ -44,6 +44,14 @@ class DepthConfig:
             raise InputError(f"depth_type must be one of {', '.join(DEPTH_TYPES)}, got {self.depth_type!r}.")
 
 
+def depth_config_for(models, depth_type: str = "auto", model: str | None = None) -> DepthConfig:
+    """The depth model looked for where the diffusion models are (`models`, a ModelConfig): the same cache,
+    offline switch and device, so every entry point finds it alike."""
+    return DepthConfig(depth_type=depth_type, model=model or DEFAULT_DEPTH_MODEL, cache_dir=models.cache_dir,
+                       local_files_only=True if models.local_files_only else None,
+                       device="cuda" if models.device_type == "cuda" else "cpu")
+
+
 @dataclass
 class DepthResult:
     ray_distance: np.ndarray      # (h, w) distance along each pixel's ray, camera height = 1
