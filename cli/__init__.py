@@ -88,8 +88,9 @@ def _check_inputs(args) -> None:
         from ..core.data.asset_io import check_asset_path, resolve_asset_path
 
         asset = resolve_asset_path(args.asset)
-        if asset != Path(args.asset):   # a folder holding one glTF/FBX/...: that file, said once
-            print(f"scenefit: {args.asset} holds one asset file; using {asset.name}", file=sys.stderr)
+        if asset != Path(args.asset):   # a folder holding one glTF/FBX/...: that file, said once (not under --quiet)
+            if not getattr(args, "quiet", False):
+                print(f"scenefit: {args.asset} holds one asset file; using {asset.name}", file=sys.stderr)
             args.asset = str(asset)
         check_asset_path(args.asset)
 

@@ -344,3 +344,15 @@ def test_a_remote_job_from_blender_runs_the_pipeline_as_a_batch_job_does(inputs,
     run_pipeline_for_job(local, inputs["root"] / "from-jobs-file")
     from_blender, from_file = recorder.calls
     assert from_blender == from_file
+
+
+def test_quiet_keeps_the_asset_folders_file_to_itself(inputs, monkeypatch, capsys):
+    """A folder holding one asset file is said once on stderr, and not at all under --quiet (it was)."""
+    monkeypatch.setattr(run_module, "run_pipeline", Recorder())
+    folder = inputs["obj"].parent
+    common = ["run", str(folder), "--photo", str(inputs["photo"]), "--at", "0.5,0.6", "--preset", "draft",
+              "--guidance", "none", "--no-bake"]
+    assert main(common + ["--out", str(inputs["root"] / "said")]) == 0
+    assert f"using {inputs['obj'].name}" in capsys.readouterr().err
+    assert main(common + ["--out", str(inputs["root"] / "quiet"), "--quiet"]) == 0
+    assert capsys.readouterr().err == ""
