@@ -191,6 +191,16 @@ def test_cli_bad_jobs_file_exits_2(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+def test_a_ray_address_ray_cannot_read_is_one_sentence(tmp_path, capsys):
+    """`--ray none` (meaning: not on Ray) was Ray's ValueError traceback."""
+    pytest.importorskip("ray")
+    jobs = make_inputs(tmp_path)
+    assert main(["batch", str(jobs), "--out", str(tmp_path / "out"), "--ray", "none"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("scenefit: error: --ray none: not a Ray cluster address") and "Traceback" not in str(err)
+    assert "leave --ray out" in err[-1] and not (tmp_path / "out").exists()
+
+
 @pytest.mark.slow   # a local Ray cluster
 def test_ray_batch_retries_resumes_and_matches_in_process(in_process, local_ray, tmp_path):
     from scenefit.workers.batch_ray import RayDispatcher

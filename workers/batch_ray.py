@@ -42,6 +42,9 @@ def connect(mode: str, **init_options) -> bool:
         ray.init(address=address, include_dashboard=False, log_to_driver=False, **init_options)
     except ConnectionError as error:
         raise InputError(f"Cannot reach the Ray cluster at '{mode}': {error}.") from None
+    except ValueError:   # Ray's own "Invalid address format" (e.g. --ray none), a traceback before
+        raise InputError(f"--ray {mode}: not a Ray cluster address; give auto, local, HOST:PORT or "
+                         f"ray://HOST:PORT, or leave --ray out to run the jobs in this process.") from None
     return True
 
 
