@@ -277,6 +277,9 @@ bpy.context.scene.scenefit.prompt = ""  # Run All: convert, light, the composite
 bpy.context.scene.scenefit.camera_from = "panel"            # the panel's camera reaches the Mitsuba composite
 bpy.context.scene.scenefit.fov = math.radians(50.0)
 bpy.context.scene.scenefit.pitch = math.radians(-14.0)
+bpy.context.scene.scenefit.scene_type = "outdoor"          # the Scene section's type and sun reach the light stage
+bpy.context.scene.scenefit.sun_from = "set"
+bpy.context.scene.scenefit.sun_azimuth, bpy.context.scene.scenefit.sun_elevation = math.radians(-40.0), math.radians(30.0)
 with timed("run_all"):
     ops = [bpy.ops.scenefit.run()]
 out["unsaved_ops"] = [sorted(o) for o in ops]
@@ -494,6 +497,10 @@ def test_run_all_is_the_command_lines_pipeline_and_shows_the_composite(unsaved):
     camera = stages["light"]["report"]["decisions"]["photo_camera"]
     assert camera["fov_deg"] == pytest.approx(50.0) and camera["pitch_deg"] == pytest.approx(-14.0)
     assert stages["compose"]["report"]["camera"]["fov_deg"] == pytest.approx(50.0)
+    # The Scene section's Scene type (Run All once dropped it) and Sun.
+    decisions = stages["light"]["report"]["decisions"]
+    assert decisions["scene_type"]["chosen"] == "outdoor"
+    assert decisions["sun"]["deg"] == [pytest.approx(-40.0), pytest.approx(30.0)]
     # written beside and swapped in whole: nothing but the run's folder is left
     assert len(out["run_folder_siblings"]) == 1 and out["run_folder_siblings"][0].startswith("run-")
 
