@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
 # argparse reads "-30,45" as an option (only a plain number may start with "-"), so `--sun -30,45`, a sun
 # on the left, was refused; an X,Y pair after an option that takes one is joined to it as --sun=-30,45.
 _PAIR_OPTIONS = ("--sun",)
-_NEGATIVE_PAIR = re.compile(r"-\d*\.?\d+(e[+-]?\d+)?,-?\d*\.?\d+(e[+-]?\d+)?", re.IGNORECASE)
+_NEGATIVE_PAIR = re.compile(r"-[^,\s]*,\S*")   # sun_angles judges the numbers
 
 
 def _joined_negative_pairs(argv: list[str]) -> list[str]:

@@ -26,7 +26,7 @@ def run(args) -> int:
             dispatcher = InProcessDispatcher(jobs.settings, progress_sink=EventLines() if args.events else None)
             where = "in this process"
         else:
-            started_ray = connect(mode)
+            started_ray = connect(mode, where_else=", or leave --ray out to run the jobs in this process")
             dispatcher = RayDispatcher(jobs.settings, len(jobs.jobs))
             where = f"on Ray ({dispatcher.workers} worker(s), each {dispatcher.options})"
         say("batch", f"{len(jobs.jobs)} job(s) from {jobs.path} {where}")

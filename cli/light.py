@@ -81,8 +81,8 @@ def _light(args, out: Path) -> int:
         said = f"{scene_type_words(scene)} scene, scales { {k: round(v, 3) for k, v in result.scales.items()} }"
     sun = result.decisions.get("sun")
     # The guess (behind the camera, towards the photo's bright side) is where a hint helps most (README).
-    direction = f"sun {sun['deg'][0]:g},{sun['deg'][1]:g} as given" if sun else \
-        "light direction guessed (--sun AZ,EL or --sun-from-shadow sets it)"
+    direction = "light direction guessed (--sun AZ,EL or --sun-from-shadow sets it)" if not sun else \
+        f"sun {sun['deg'][0]:g},{sun['deg'][1]:g} as given" + ("" if sun["used"] else " (unused by this prior)")
     print(f"light: {said}, {direction}, depth {depth_used} -> {Path(args.out) / 'light.exr'}")
     return 0
 

@@ -306,6 +306,12 @@ def model_cache(context=None) -> str | None:
         return None
 
 
+def depth_model_preference(context=None) -> str | None:
+    """The preferences' depth model (hub id or folder), None for the default: what a run's RunConfig/Job takes."""
+    prefs = preferences(context)
+    return (prefs.depth_model or None) if prefs is not None else None
+
+
 def model_settings(context=None):
     """(ModelConfig, DepthConfig) from the preferences: hub ids or folders, cache, offline, device."""
     from ..core.guidance import ModelConfig

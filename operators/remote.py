@@ -15,7 +15,7 @@ from urllib.parse import urlparse
 import bpy
 
 from ..core.base.errors import InputError
-from .common import model_settings, photo_view, preferences, run_folder, scene_asset
+from .common import depth_model_preference, model_settings, photo_view, preferences, run_folder, scene_asset
 from .results import apply_result_material
 
 # What the worker runs for each operator: the whole pipeline (adapt needs convert and the light).
@@ -78,7 +78,8 @@ def remote_work(op, context, address: str) -> tuple:
         "mesh": mesh, "maps": maps, "photo": str(photo), "worker": address,
         "out": str(folder.parent), "name": folder.name, "preset": settings.preset,
         "stages": REMOTE_STAGES, "prompt": settings.prompt, "models": models, "overrides": quick_overrides(op),
-        "scene": settings.scene_type, **job_view(photo_view(context, photo, obj))}
+        "scene": settings.scene_type, "depth_model": depth_model_preference(context),
+        **job_view(photo_view(context, photo, obj))}
 
 
 def quick_overrides(op) -> dict:

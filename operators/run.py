@@ -12,7 +12,7 @@ from ..core.base.errors import SceneFitError
 from ..core.scene.camera import PhotoCamera
 from . import work
 from .adapt import adapt_seconds_here
-from .common import OnMesh, model_settings, photo_path, photo_view, preferences, run_folder, scene_layout
+from .common import OnMesh, depth_model_preference, model_settings, photo_path, photo_view, run_folder, scene_layout
 from .jobs import JobOperator
 from .results import apply_composite_image, apply_layout_results, apply_result_world, result_targets
 
@@ -47,14 +47,13 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         # The artist's camera when it shows the photo, else the panel's or the estimate; the Cycles set-up
         # takes the camera the run used, so both composites agree.
         view = photo_view(context, photo, [bpy.data.objects[name] for name in layout.objects])
-        prefs = preferences(context)
         self._scene_camera = view["scene_camera"]
         self._layout = result_targets(layout)
         return work.run, {"mesh": mesh, "maps": maps, "photo": str(photo), "view": view,
                           "preset": settings.preset, "prompt": settings.prompt, "guidance": guidance,
                           "why_no_adapt": why_no_adapt, "models": model_settings(context)[0],
                           "scene_type": settings.scene_type,
-                          "depth_model": (prefs.depth_model or None) if prefs is not None else None,
+                          "depth_model": depth_model_preference(context),
                           # several materials: each baked in its own UVs for its slots
                           "materials": layout.bake_data() if len(layout.materials) > 1 else None,
                           "out": str(run_folder(context, "run", layout.name))}

@@ -197,7 +197,7 @@ def test_a_ray_address_ray_cannot_read_is_one_sentence(tmp_path, capsys):
     jobs = make_inputs(tmp_path)
     assert main(["batch", str(jobs), "--out", str(tmp_path / "out"), "--ray", "none"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith("scenefit: error: --ray none: not a Ray cluster address") and "Traceback" not in str(err)
+    assert err[-1].startswith("scenefit: error: 'none' is not a Ray cluster address") and "Traceback" not in str(err)
     assert "leave --ray out" in err[-1] and not (tmp_path / "out").exists()
 
 

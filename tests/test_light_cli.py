@@ -126,9 +126,12 @@ def test_sun_on_the_command_line(capsys):
     assert main(["light", "--dry-run", "--sun", "45,-10"]) == 0
     assert _strict(capsys.readouterr().out)["config"]["sun_deg"] == [45.0, -10.0]
     # A sun on the left (negative azimuth) is a value, not an option argparse does not know.
-    for given in (["--sun", "-45,10"], ["--sun=-45,10"], ["--sun", "-4.5e1,10"]):
+    for given in (["--sun", "-45,10"], ["--sun=-45,10"], ["--sun", "-4.5e1,10"], ["--sun", "-45,+10"],
+                  ["--sun", "-45.,10"]):
         assert main(["light", "--dry-run", *given]) == 0
         assert _strict(capsys.readouterr().out)["config"]["sun_deg"] == [-45.0, 10.0]
+    assert main(["light", "--dry-run", "--sun", "-inf,10"]) == 2   # judged by --sun, not refused as an option
+    assert "give e.g. --sun 30,45" in capsys.readouterr().err
     for bad in ("45", "north,10", "10,95"):
         assert main(["light", "--dry-run", "--sun", bad]) == 2
         assert "give e.g. --sun 30,45" in capsys.readouterr().err

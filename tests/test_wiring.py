@@ -124,13 +124,47 @@ def test_a_remote_run_all_sees_the_photo_as_a_local_one(inputs, monkeypatch):
     mesh, maps = load_asset_folder(inputs["folder"])
     remote.work_remotely({"mesh": mesh, "maps": maps, "photo": str(inputs["photo"]), "worker": "auto",
                           "out": str(inputs["root"] / "remote"), "preset": "draft", "prompt": "",
-                          "stages": ["convert", "light", "compose"], "scene": "outdoor", **job_view(view)})
+                          "stages": ["convert", "light", "compose"], "scene": "outdoor", "depth_model": "my/depth",
+                          **job_view(view)})
     run_pipeline_for_job(Job.from_dict(jobs[0].to_dict()), inputs["root"] / "worker")
     local = run_config({"preset": "draft", "prompt": "", "guidance": "none", "models": ModelConfig(), "view": view,
-                        "scene_type": "outdoor"})
+                        "scene_type": "outdoor", "depth_model": "my/depth"})
     remote_call = recorder.calls[0]
     assert remote_call["config"] == local and remote_call["placement"] == (0.4, 0.7)
     assert local.scene_type == "outdoor" and local.sun_deg == (-30.0, 45.0) and local.camera_source == "blender"
+    assert local.depth_model == "my/depth"
+
+
+def test_a_light_only_job_looks_for_the_depth_model_where_a_whole_run_does(inputs):
+    """A job of light alone once took the default depth settings, ignoring the file's [models] cache and
+    offline switch that the same job with compose (the pipeline) follows; a depth override keeps them."""
+    from scenefit.workers.batch import run_job_stages
+
+    path = _jobs(inputs["root"], inputs["folder"], inputs["photo"], ["light"])
+    cache = inputs["root"] / "hub"
+    cache.mkdir()
+    path.write_text(f'[models]\ncache_dir = "{cache}"\nlocal_files_only = true\n\n' + path.read_text()
+                    + 'depth_model = "my/depth"\nscene = "indoor"\noverrides = { light = { depth = { depth_type = '
+                      '"geometric" } } }\n')
+    out = inputs["root"] / "out"
+    out.mkdir()
+    light = run_job_stages(load_jobs(path).jobs[0], out)["light"]
+    depth = light["config"]["depth"]
+    assert (depth["cache_dir"], depth["local_files_only"], depth["model"]) == (str(cache), True, "my/depth")
+    assert depth["depth_type"] == "geometric" and light["decisions"]["scene_type"]["chosen"] == "indoor"
+
+
+def test_an_override_table_changes_only_what_it_names():
+    from scenefit.core.pipeline.presets import with_overrides
+    from scenefit.core.pipeline.run import RunConfig
+    from scenefit.core.stages.light.depth import DepthConfig
+
+    given = {"depth": DepthConfig(cache_dir="/hub", local_files_only=True), "scene_type": "auto"}
+    merged = with_overrides(given, {"depth": {"model": "x/y"}, "scene_type": "indoor"})
+    assert merged["depth"] == DepthConfig(model="x/y", cache_dir="/hub", local_files_only=True)
+    assert merged["scene_type"] == "indoor" and given["depth"].model != "x/y"   # the given settings unchanged
+    with pytest.raises(InputError, match="three points"):
+        RunConfig(sun_shadow=("0.5,0.9", "0.5,0.5"))
 
 
 def test_a_batch_convert_job_keeps_constant_channels_as_numbers(inputs):

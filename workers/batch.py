@@ -254,7 +254,7 @@ def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models
     config = RunConfig(preset=job.preset, prompt=job.prompt, guidance_type="auto" if "adapt" in job.stages else "none",
                        models=job.models, stage_overrides=_stage_overrides(job), camera_overrides=job_camera(job),
                        camera_source=job.camera_source, camera_why=job.camera_why, turn_deg=job.turn,
-                       sun_deg=job.sun, scene_type=job.scene, **view)
+                       sun_deg=job.sun, scene_type=job.scene, depth_model=job.depth_model, **view)
     bake, why_not = asset_file_bake(job.asset, job.object) if "bake" in job.stages else (None, "the job's stages "
                                                                                          "do not list bake")
     return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel, models=models,
@@ -283,7 +283,8 @@ def _load_asset(job: Job):
 def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
     from ..core.stages.light.stage import critic_choice, light_inputs, run_light, write_light
     from ..core.stages.convert import convert_and_bake
-    from ..core.pipeline.presets import stage_config
+    from ..core.pipeline.presets import stage_config, with_overrides
+    from ..core.stages.light.depth import depth_config_for
 
     if "adapt" in job.stages:
         raise InputError(f"Job '{job.name}': stage adapt runs inside the whole pipeline in a batch; "
@@ -295,11 +296,13 @@ def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
                                                  stage_config("convert", job.preset, **_stage_overrides(job).get(
                                                      "convert", {})), progress, cancel)
     if "light" in job.stages:   # as `scenefit light` lights it: the photo's own camera, the same files
-        inputs = light_inputs(job.photo, job.at, None, job_camera(job))
-        overrides = {"scene_type": job.scene, **({"sun_deg": job.sun} if job.sun is not None else {}),
-                     **job.overrides.get("light", {})}
+        inputs = light_inputs(job.photo, job.at, None, job_camera(job), job.camera_source, job.camera_why)
+        # (what run_pipeline's light stage would be given, the job's own overrides over it)
+        values = {"scene_type": job.scene, "models": job.models, "sun_deg": job.sun,
+                  "depth": depth_config_for(job.models, model=job.depth_model)}
+        overrides = dict(job.overrides.get("light", {}))
         critic = critic_choice(overrides.pop("critic_type", "auto"), job.models)
-        config = stage_config("light", job.preset, critic_type=critic.choice, models=job.models, **overrides)
+        config = stage_config("light", job.preset, critic_type=critic.choice, **with_overrides(values, overrides))
         reports["light"] = write_light(run_light(inputs, config, progress, cancel), out / "light")
     return _relative_outputs(reports, out)
 

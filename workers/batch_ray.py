@@ -30,10 +30,11 @@ def ray_available() -> bool:
     return True
 
 
-def connect(mode: str, **init_options) -> bool:
+def connect(mode: str, where_else: str = "", **init_options) -> bool:
     """Join or start Ray: "auto" (a running cluster, else a local one), "local" (always a new local
     one) or a cluster address ("ray://head:10001", "head:6379"). Returns True when this call started
-    the connection (and so should shut it down)."""
+    the connection (and so should shut it down). where_else: the caller's other choice, for the
+    sentence an unreadable address gets."""
     ray = import_ray()
     if ray.is_initialized():
         return False
@@ -42,9 +43,11 @@ def connect(mode: str, **init_options) -> bool:
         ray.init(address=address, include_dashboard=False, log_to_driver=False, **init_options)
     except ConnectionError as error:
         raise InputError(f"Cannot reach the Ray cluster at '{mode}': {error}.") from None
-    except ValueError:   # Ray's own "Invalid address format" (e.g. --ray none), a traceback before
-        raise InputError(f"--ray {mode}: not a Ray cluster address; give auto, local, HOST:PORT or "
-                         f"ray://HOST:PORT, or leave --ray out to run the jobs in this process.") from None
+    except ValueError as error:   # Ray's own "Invalid address format" (e.g. --ray none), a traceback before
+        if "address" not in str(error).lower():
+            raise
+        raise InputError(f"'{mode}' is not a Ray cluster address; give auto, local, HOST:PORT or "
+                         f"ray://HOST:PORT{where_else}.") from None
     return True
 
 

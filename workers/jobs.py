@@ -30,6 +30,7 @@
     camera = { fov = 50, pitch = -14, roll = 2 }  # optional, degrees: over the camera found from the photo
     sun = [-30, 45]               # optional: the dominant light's azimuth and elevation, as --sun takes them
     scene = "indoor"              # optional: the light stage's scene type, as --scene (default: "auto")
+    depth_model = "depth-anything/Depth-Anything-V2-Small-hf"   # optional: the light stage's depth model
     turn = 0                      # optional: degrees the asset turns about its up axis after facing the camera
 
 Relative paths are relative to the jobs file. Everything is checked when the file is read, and a
@@ -83,6 +84,7 @@ class Job:
     camera_why: str = "given by the user"           # remote Run All), and camera_why says how they were read
     sun: tuple[float, float] | None = None          # the artist's dominant light (azimuth, elevation), degrees
     scene: str = "auto"                             # the light stage's scene type: auto | indoor | outdoor
+    depth_model: str | None = None                  # the light stage's depth model (hub id or folder; None: default)
     turn: float = 0.0
 
     def to_dict(self) -> dict:
@@ -122,7 +124,7 @@ class JobsFile:
 
 
 JOB_KEYS = ("name", "asset", "object", "photo", "at", "preset", "stages", "mode", *PROMPT_KEYS, "seed", "overrides",
-            "object_size", "camera", "camera_source", "camera_why", "sun", "scene", "turn")
+            "object_size", "camera", "camera_source", "camera_why", "sun", "scene", "depth_model", "turn")
 CAMERA_KEYS = {"fov": "fov_deg", "pitch": "pitch_deg", "roll": "roll_deg"}   # a job's names -> the pipeline's
 MODEL_KEYS = ("base_model", "inpaint_model", "cache_dir", "local_files_only", "device_type", "dtype_type",
               "attention_slicing", "vae_slicing", "vae_tiling", "channels_last", "cpu_offload")
@@ -355,6 +357,11 @@ def _parse_view(entry: dict, where: str) -> dict:
     if scene not in ("auto", "indoor", "outdoor"):
         raise InputError(f"{where}: scene must be auto, indoor or outdoor, got {scene!r}.")
     view["scene"] = scene
+    depth_model = entry.get("depth_model")
+    if depth_model is not None:
+        if not isinstance(depth_model, str) or not depth_model.strip():
+            raise InputError(f"{where}: depth_model must be a hub id or a folder, got {depth_model!r}.")
+        view["depth_model"] = depth_model
     turn = entry.get("turn", 0.0)
     if not (_is_number(turn) and math.isfinite(turn)):
         raise InputError(f"{where}: turn must be degrees, got {turn!r}.")

@@ -14,6 +14,18 @@ from ..base.errors import InputError
 from .preset_tables import PRESET_DESCRIPTIONS, PRESET_NAMES, STAGES, TABLES, texture_preset  # noqa: F401
 
 
+def with_overrides(values: dict, overrides: dict) -> dict:
+    """`values` (a stage config's settings) with `overrides` over them; an override table over a settings
+    object changes only what it names ({"depth": {"model": ...}} keeps the given DepthConfig's cache)."""
+    from dataclasses import is_dataclass, replace
+
+    merged = dict(values)
+    for name, override in overrides.items():
+        ours = merged.get(name)
+        merged[name] = replace(ours, **override) if isinstance(override, dict) and is_dataclass(ours) else override
+    return merged
+
+
 def stage_config(stage: str, name: str, **overrides):
     """The config of `stage` ("texture", "convert", "light", "adapt", "compose") at preset `name`, then
     `overrides`; an override that is None is left to the preset (a command-line option not given).

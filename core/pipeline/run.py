@@ -78,6 +78,8 @@ class RunConfig:
             raise InputError(f"camera_overrides takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
         if self.sun_deg is not None and self.sun_shadow is not None:
             raise InputError("Give the sun as an azimuth and elevation or as a shadow's three points, not both.")
+        if self.sun_shadow is not None and len(self.sun_shadow) != 3:
+            raise InputError(f"The sun from a shadow takes three points (foot, top, tip), got {len(self.sun_shadow)}.")
         unknown = sorted(set(self.stage_overrides) - {"convert", "light", "adapt", "compose"})
         if unknown:
             raise InputError(f"stage_overrides names unknown stage {unknown[0]!r}; it takes convert, light, adapt "
@@ -253,9 +255,9 @@ class PipelineRun:
 
     def stage_config(self, stage: str, **values):
         """The preset's config for `stage` with `values`, then the run's own overrides for it."""
-        from .presets import stage_config
+        from .presets import stage_config, with_overrides
 
-        return stage_config(stage, self.config.preset, **{**values, **self.config.overrides(stage)})
+        return stage_config(stage, self.config.preset, **with_overrides(values, self.config.overrides(stage)))
 
     def convert(self) -> None:
         from ..stages.convert import convert_and_bake

@@ -47,7 +47,8 @@ class Placement:
         width, height = photo_wh
         if x > 1.0:
             if not (x <= width and y <= height):
-                raise InputError(f"{what} ({x:g}, {y:g}) lies outside the {width}x{height} photo.")
+                said = "The placement" if what == "--at" else what
+                raise InputError(f"{said} ({x:g}, {y:g}) lies outside the {width}x{height} photo.")
             x, y = x / width, y / height
         return cls((x, y), size)
 

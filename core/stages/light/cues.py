@@ -67,7 +67,7 @@ class CueConfig:
     # The artist's sun (--sun, the shadow pick) is a known direction, not a guess to hedge: its lobe is
     # narrower and its floor lower. Hinted, on the corpus's 24 real views, the matte sphere's si-RMSE
     # median falls to 22% / 30% below the constant's (median / log-average metering) from 14% / 16% with
-    # the guess's lobe; unhinted, the same lobe loses 3 of 14 both-wins (README, light on real photos).
+    # the guess's lobe; unhinted, the same lobe loses 2-3 of 13-14 both-wins (README, light on real photos).
     sun_lobe_floor: float = 0.05
     sun_lobe_sharpness: float = 8.0
     mean_bound: float = 4.0            # the map's mean radiance stays within this factor of the photo's mean

@@ -17,6 +17,7 @@ from ...render.orbit_camera import Camera
 from ...data.primitives import uv_sphere
 from ...render.renderer import AssetRenderer
 from ...scene.frame import equirect_directions
+from .cues import solid_angles
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
 MATERIALS = {"diffuse": (0.8, 1.0, 0.0), "glossy": (0.9, 0.15, 1.0)}   # base colour, roughness, metallic
@@ -52,10 +53,9 @@ def dominant_direction(envmap: np.ndarray, blur_fraction: float = 1 / 32) -> np.
 def mean_radiance(envmap: np.ndarray) -> float:
     """The map's mean radiance over the sphere (texels weighted by their solid angle, channels averaged):
     a plain texel mean over-counts the poles, where an equirectangular map's rows are shortest."""
-    h = envmap.shape[0]
-    weight = np.sin(np.pi * (np.arange(h) + 0.5) / h)[:, None]
+    weight = solid_angles(*envmap.shape[:2]) * np.ones((1, envmap.shape[1]))
     level = np.asarray(envmap, np.float64).mean(axis=-1)
-    return float((level * weight).sum() / (weight.sum() * envmap.shape[1]))
+    return float((level * weight).sum() / weight.sum())
 
 
 def angular_error_deg(estimate: np.ndarray, truth: np.ndarray) -> float:
@@ -159,7 +159,7 @@ def _lobe_integral(envmap: np.ndarray, axes: np.ndarray, weight) -> np.ndarray:
 
     h, w = envmap.shape[:2]
     dirs = equirect_directions(h, w).reshape(-1, 3).astype(np.float32)
-    omega = (np.sin(np.pi * (np.arange(h) + 0.5) / h) * (np.pi / h) * (2 * np.pi / w)).astype(np.float32)
+    omega = solid_angles(h, w)[:, 0].astype(np.float32)
     radiance = (envmap.reshape(h, w, -1) * omega[:, None, None]).reshape(-1, envmap.shape[2]).astype(np.float32)
     omega_flat = np.repeat(omega, w)
     out = np.empty((len(axes), envmap.shape[2]), np.float64)

@@ -49,15 +49,17 @@ def critic_choice(asked: str, models) -> Decision:
 
 
 def light_inputs(photo_path: str | Path, at, fspy: str | Path | None = None,
-                 camera_overrides: dict | None = None) -> LightInputs:
+                 camera_overrides: dict | None = None, camera_source: str = "user",
+                 camera_why: str = "given by the user") -> LightInputs:
     """The photo read once, the placement `at` ("X,Y" or a pair: fractions, or pixels of the photo as
-    stored) and the photo's camera as `scenefit camera` finds it, with `camera_overrides` over it."""
+    stored) and the photo's camera as `scenefit camera` finds it, with `camera_overrides` (from
+    `camera_source`, said as `camera_why`) over it."""
     from ..camera import photo_camera_estimate
 
     photo, info = load_photo(photo_path)
     h, w = photo.shape[:2]
     pixel = Placement.parse(at, tuple(info["size"])).pixel((h, w))
-    estimate = photo_camera_estimate(photo_path, fspy, camera_overrides)
+    estimate = photo_camera_estimate(photo_path, fspy, camera_overrides, camera_source, camera_why)
     return LightInputs(photo, info, pixel, estimate.photo_camera(width=w, height=h), estimate.to_dict())
 
 
