@@ -26,7 +26,8 @@ CAMERA_SOURCES = (
 SUN_SOURCES = (
     ("estimate", "From the photo", "Guessed from the photo: behind the camera, turned towards its brighter side "
                                    "(set it, or Pick Sun from a shadow, for a truer light)"),
-    ("set", "As set here", "The azimuth and elevation below (Pick Sun sets them from a shadow in the photo)"),
+    ("set", "As set here", "The azimuth and elevation below (Pick Sun sets them from a shadow in the photo, "
+                           "Sun from Light from a Sun light turned until its shadows match the photo's)"),
 )
 MODES = (
     ("scene", "Scene", "Restyle the asset so it fits the photo (the prompt describes how it should look there)"),

@@ -2,7 +2,8 @@
 its shadow — give the sun's direction through the photo's camera (core/stages/light/shadow_hint.py). The
 Scene section's Sun becomes "As set here" with that azimuth and elevation, which the light stage then
 centres its unseen light on (as `scenefit light --sun`). With EXEC_DEFAULT the three points are the
-operator's properties (fractions of the photo, y from the top).
+operator's properties (fractions of the photo, y from the top). Sun from Light does the same from a Sun
+light the artist turned until its shadows on the asset match the photo's.
 """
 from __future__ import annotations
 
@@ -56,11 +57,7 @@ class SCENEFIT_OT_pick_sun(PhotoClicks, bpy.types.Operator):
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        settings = context.scene.scenefit
-        settings.sun_azimuth, settings.sun_elevation = math.radians(azimuth), math.radians(elevation)
-        settings.sun_from = "set"
-        self.report({"INFO"}, f"Sun from the shadow: azimuth {azimuth:.0f}°, elevation {elevation:.0f}°")
-        return {"FINISHED"}
+        return set_sun(self, context, azimuth, elevation, "the shadow")
 
     def invoke(self, context, event):
         self._points = {}
@@ -76,15 +73,64 @@ class SCENEFIT_OT_pick_sun(PhotoClicks, bpy.types.Operator):
         return self.execute(context)
 
 
-def _check_camera(context) -> None:
-    """Clicks need the photo behind the scene camera: SceneFit's, or the artist's that shows it."""
+def set_sun(op, context, azimuth: float, elevation: float, source: str) -> set[str]:
+    """The Scene section's Sun "As set here" at (azimuth, elevation) degrees, said in the status bar."""
+    settings = context.scene.scenefit
+    settings.sun_azimuth, settings.sun_elevation = math.radians(azimuth), math.radians(elevation)
+    settings.sun_from = "set"
+    op.report({"INFO"}, f"Sun from {source}: azimuth {azimuth:.0f}°, elevation {elevation:.0f}°")
+    return {"FINISHED"}
+
+
+def _check_camera(context, why: str = "Pick Sun clicks in the photo seen through the camera") -> None:
+    """The photo behind the scene camera: SceneFit's, or the artist's that shows it."""
     photo = photo_path(context)
     camera = context.scene.camera
     if camera is None or ("scenefit" not in camera and artist_camera(context, photo)[0] is None):
-        raise InputError("Pick Sun clicks in the photo seen through the camera: set it up first (Match Camera or "
-                         "Pick Placement), or make the camera that shows the photo active.")
+        raise InputError(f"{why}: set it up first (Match Camera or Pick Placement), or make the camera that shows "
+                         "the photo active.")
 
 
-classes = (SCENEFIT_OT_pick_sun,)
+def sun_lamp(context):
+    """The Sun light the artist aimed: the active object when it is one, else the scene's only Sun light."""
+    obj = context.active_object
+    if obj is not None and obj.type == "LIGHT" and obj.data.type == "SUN":
+        return obj
+    suns = [o for o in context.scene.objects if o.type == "LIGHT" and o.data.type == "SUN"]
+    if len(suns) != 1:
+        raise InputError("Select the Sun light whose shadows match the photo's" + (
+            f" (the scene has {len(suns)})." if suns else "; add one (Add > Light > Sun) and turn it until they do."))
+    return suns[0]
+
+
+class SCENEFIT_OT_sun_from_lamp(bpy.types.Operator):
+    """Take the sun's direction from a Sun light turned until its shadows match the photo's (the selected Sun
+    light, or the scene's only one), seen from the camera that shows the photo"""
+
+    bl_idname = "scenefit.sun_from_lamp"
+    bl_label = "Sun from Light"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        from mathutils import Vector
+
+        from ..core.stages.light.shadow_hint import sun_deg_from_direction
+
+        try:
+            _check_camera(context, "The sun's azimuth is measured from the camera that shows the photo")
+            lamp = sun_lamp(context)
+            towards = lamp.matrix_world.to_3x3() @ Vector((0.0, 0.0, 1.0))   # a Sun light shines along its -Z
+            forward = context.scene.camera.matrix_world.to_3x3() @ Vector((0.0, 0.0, -1.0))
+            azimuth, elevation = sun_deg_from_direction(tuple(towards), tuple(forward))
+            if elevation <= 0.0:
+                raise InputError(f"The Sun light '{lamp.name}' shines from {elevation:.0f}° below the horizon; turn "
+                                 "it to shine down onto the scene.")
+        except SceneFitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        return set_sun(self, context, azimuth, elevation, f"'{lamp.name}'")
+
+
+classes = (SCENEFIT_OT_pick_sun, SCENEFIT_OT_sun_from_lamp)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

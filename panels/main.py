@@ -94,7 +94,8 @@ class SCENEFIT_PT_scene(_Subsection, bpy.types.Panel):
         col.prop(settings, "scene_type")
         draw_camera(settings, context, self.layout.column(align=True))
         draw_choice(self.layout.column(align=True), settings, "sun_from", "Sun", "scenefit.pick_sun", "LIGHT_SUN",
-                    ("sun_azimuth", "sun_elevation") if settings.sun_from == "set" else ())
+                    ("sun_azimuth", "sun_elevation") if settings.sun_from == "set" else (),
+                    more=(("scenefit.sun_from_lamp", "OUTLINER_OB_LIGHT"),))
 
 
 def draw_camera(settings, context, col) -> None:
@@ -113,11 +114,13 @@ def draw_camera(settings, context, col) -> None:
                 ("fov", "pitch", "roll") if settings.camera_from == "panel" else ())
 
 
-def draw_choice(col, settings, choice: str, label: str, operator: str, icon: str, values: tuple[str, ...]) -> None:
-    """A source choice with the button that finds it, then the values it leaves to set by hand."""
+def draw_choice(col, settings, choice: str, label: str, operator: str, icon: str, values: tuple[str, ...],
+                more: tuple[tuple[str, str], ...] = ()) -> None:
+    """A source choice with the buttons that find it, then the values it leaves to set by hand."""
     row = col.row(align=True)
     row.prop(settings, choice, text=label)
-    row.operator(operator, text="", icon=icon)
+    for name, symbol in ((operator, icon), *more):
+        row.operator(name, text="", icon=symbol)
     for name in values:
         col.prop(settings, name)
 

@@ -137,3 +137,69 @@ def test_scenefit_run_takes_the_sun_as_angles_or_as_a_shadow(tmp_path, capsys):
     assert main(common + ["--sun-from-shadow", "0.5", *points[1:], "--out", str(tmp_path / "bad")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and not (tmp_path / "both").exists() and not (tmp_path / "bad").exists()
+
+
+@pytest.mark.parametrize("yaw, pitch", [(90.0, -15.0), (-30.0, 5.0), (200.0, -40.0)])
+@pytest.mark.parametrize("sun", [(40.0, 35.0), (-120.0, 20.0), (180.0, 8.0), (0.0, 89.0), (-90.0, -10.0)])
+def test_a_direction_towards_the_sun_gives_back_its_angles(sun, yaw, pitch):
+    from scenefit.core.stages.light.shadow_hint import sun_deg_from_direction
+
+    camera = PhotoCamera(yaw_deg=yaw, pitch_deg=pitch, fov_deg=60.0)
+    az, el = sun_deg_from_direction(sun_direction(sun, camera), camera.basis()[0])
+    assert ((az - sun[0] + 180.0) % 360.0 - 180.0, el) == (pytest.approx(0.0, abs=1e-9), pytest.approx(sun[1]))
+    with pytest.raises(InputError, match="straight up or down"):
+        sun_deg_from_direction(sun_direction(sun, camera), (0.0, 0.0, -1.0))
+
+
+@pytest.mark.blender
+def test_sun_from_light_reads_a_sun_lights_direction_from_the_photos_camera(run_py, tmp_path):
+    """A Sun light turned until its shadows match the photo's gives the Scene section's sun: its azimuth from
+    the camera that shows the photo, its elevation; one sentence without a camera or with two Sun lights."""
+    photo = write_image(tmp_path / "yard.png", np.full((48, 64, 3), 0.5, np.float32))
+    proc = run_py(f"""
+        import json, math
+        import bpy, addon_utils
+        from mathutils import Euler, Vector
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        addon_utils.enable("scenefit", default_set=True)
+        settings = bpy.context.scene.scenefit
+        settings.photo_path = {str(photo)!r}
+        out = {{}}
+        def sun(name):
+            light = bpy.data.objects.new(name, bpy.data.lights.new(name, "SUN"))
+            bpy.context.scene.collection.objects.link(light)
+            return light
+        def call():   # an operator that reports an error raises it here, as RuntimeError
+            try:
+                return list(bpy.ops.scenefit.sun_from_lamp())
+            except RuntimeError as error:
+                return ["CANCELLED", str(error)]
+        lamp = sun("Key")
+        bpy.context.view_layer.objects.active = lamp
+        out["no_camera"] = call()
+        camera = bpy.data.objects.new("SceneFit Camera", bpy.data.cameras.new("SceneFit Camera"))
+        camera["scenefit"] = True
+        bpy.context.scene.collection.objects.link(camera)
+        bpy.context.scene.camera = camera
+        camera.rotation_euler = Euler((math.radians(80.0), 0.0, math.radians(-90.0)))   # looks along +X, 10 deg down
+        # Towards the sun: 30 deg to the right of the view (-Y when looking along +X), 40 deg up.
+        az, el = math.radians(30.0), math.radians(40.0)
+        towards = Vector((math.cos(el) * math.cos(az), -math.cos(el) * math.sin(az), math.sin(el)))
+        lamp.rotation_mode = "QUATERNION"
+        lamp.rotation_quaternion = Vector((0.0, 0.0, 1.0)).rotation_difference(towards)
+        out["ops"] = call()
+        out["sun"] = [settings.sun_from, math.degrees(settings.sun_azimuth), math.degrees(settings.sun_elevation)]
+        lamp.rotation_quaternion = Vector((0.0, 0.0, 1.0)).rotation_difference(Vector((0.3, 0.2, -0.5)))
+        out["below"] = call()
+        bpy.context.view_layer.objects.active = camera
+        sun("Fill")
+        out["two"] = call()
+        print("JSON" + json.dumps(out))
+    """)
+    out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    assert out["no_camera"][0] == "CANCELLED" and "camera that shows the photo" in out["no_camera"][1]
+    assert out["ops"] == ["FINISHED"]
+    source, azimuth, elevation = out["sun"]
+    assert source == "set" and (azimuth, elevation) == (pytest.approx(30.0, abs=1e-3), pytest.approx(40.0, abs=1e-3))
+    assert out["below"][0] == "CANCELLED" and "below the horizon" in out["below"][1]
+    assert out["two"][0] == "CANCELLED" and "the scene has 2" in out["two"][1]

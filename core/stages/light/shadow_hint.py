@@ -60,3 +60,19 @@ def sun_from_shadow_points(points, camera: PhotoCamera, photo_wh: tuple[int, int
     foot, top, tip = (Placement.parse(point, photo_wh, what=f"The shadow's {name}").pixel(hw)
                       for point, name in zip(points, ("foot", "top", "tip")))
     return sun_from_shadow(camera, foot, top, tip)
+
+
+def sun_deg_from_direction(toward_sun, forward) -> tuple[float, float]:
+    """--sun's (azimuth, elevation) in degrees of a world direction towards the sun, for a camera looking
+    along `forward` (Z up; its pitch and roll do not matter): the inverse of estimate.sun_direction. A Sun
+    light in Blender gives it (its local +Z), with the camera that shows the photo."""
+    d = np.asarray(toward_sun, np.float64)
+    d = d / max(float(np.linalg.norm(d)), 1e-12)
+    f = np.array([forward[0], forward[1], 0.0], np.float64)
+    if np.linalg.norm(f) < 1e-6:
+        raise InputError("The camera looks straight up or down, so the sun's azimuth from its view is undefined; "
+                         "tilt it towards the horizon.")
+    f /= np.linalg.norm(f)
+    right = np.array([f[1], -f[0], 0.0])
+    azimuth = math.degrees(math.atan2(float(d @ right), float(d @ f)))
+    return azimuth, math.degrees(math.asin(float(np.clip(d[2], -1.0, 1.0))))
