@@ -403,6 +403,19 @@ def real_wins(rows: list[dict], method: str = "estimate") -> dict:
             "mean_off_4x": sum(not 0.25 <= q <= 4.0 for q in ratio), "worst_mean_ratio": max(max(ratio), 1 / min(ratio))}
 
 
+def confidence_line(rows: list[dict]) -> str:
+    """What the report's confidence says about winning: both-wins among the views at full confidence and
+    below it (a view below is shrunk towards the flat environment, so it is nearer the constant)."""
+    def both(r):
+        return all(_metric(r, "estimate", "diffuse", k) < _metric(r, "constant", "diffuse", k) for k in ("si_rmse", "rmse"))
+
+    sure = [both(r) for r in rows if (r.get("confidence") or 0.0) >= 1.0]
+    unsure = [both(r) for r in rows if (r.get("confidence") or 0.0) < 1.0]
+    return (f"The report's confidence: the estimate beats the constant on both on {sum(sure)} of the {len(sure)} views "
+            f"at confidence 1 and on {sum(unsure)} of the {len(unsure)} below it (it measures the exposure cue's "
+            f"evidence, not the map's accuracy).")
+
+
 def real_per_view(rows: list[dict]) -> list[str]:
     head = ["map", "view", "metering", "scene (auto)", "conf.", "est / const diffuse si", "est / const diffuse RMSE",
             "est / const matte si", "mirror si", "mean / true", "light dir err (deg)", "hint dir err", "draft diffuse RMSE"]
@@ -563,7 +576,8 @@ def real_report(rows: list[dict], configs: dict, seconds: float, load: str) -> s
             d = real_wins(mine, "draft")
             lines.append(f"Draft preset (64-row map): {d['si']} / {d['rmse']} / {d['both']}; worst mean {d['worst_mean_ratio']:.3g}x.")
         scene = sum(r["auto_right"] for r in mine)
-        lines += [f"Scene type right (or reported unsure) on {scene} of {len(mine)}.", "", "Medians over the views:", ""]
+        lines += [f"Scene type right (or reported unsure) on {scene} of {len(mine)}.", confidence_line(mine), "",
+                  "Medians over the views:", ""]
         blocks += lines + real_summary(mine) + [""]
     head = [f"# Light estimation on real captured HDR maps (the field's protocol)", "",
             f"{len(REAL_MAPS)} Poly Haven maps from `../shared/corpus/hdri/` (development data, not shipped), two views each "

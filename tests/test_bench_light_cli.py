@@ -53,3 +53,18 @@ def test_ctrl_c_half_way_gets_one_sentence_and_leaves_no_results(tmp_path):
     assert lines[-1] == "bench_light: interrupted (its results are written only when a run ends)."
     assert "Traceback" not in err
     assert not out.exists()
+
+
+def test_the_confidence_line_counts_wins_on_both_at_and_below_full_confidence():
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_light import confidence_line
+
+    def row(confidence, si, rmse):   # the estimate's diffuse si-RMSE and RMSE; the constant's are 1 and 1
+        metrics = {m: {"diffuse": {"linear": {"si_rmse": v[0], "rmse": v[1]}}}
+                   for m, v in (("estimate", (si, rmse)), ("constant", (1.0, 1.0)))}
+        return {"confidence": confidence, "metrics": metrics}
+
+    rows = [row(1.0, 0.5, 0.5), row(1.0, 0.5, 2.0), row(1.0, 2.0, 0.5), row(0.5, 0.5, 0.5), row(0.25, 0.9, 0.9),
+            row(None, 0.5, 0.5)]
+    line = confidence_line(rows)
+    assert "on both on 1 of the 3 views at confidence 1 and on 3 of the 3 below it" in line, line
