@@ -56,7 +56,7 @@ def run(args) -> int:
 def _light(args, out: Path) -> int:
     from ..core.stages.light.scene_type import is_blended, scene_type_words
     from ..core.stages.light.shadow_hint import sun_from_shadow_points
-    from ..core.stages.light.stage import critic_choice, light_inputs, run_light, write_light
+    from ..core.stages.light.stage import critic_choice, light_inputs, run_light, sun_words, write_light
     from ..core.render.backend import environment_info
 
     critic = critic_choice(args.critic, model_config(args))
@@ -79,10 +79,7 @@ def _light(args, out: Path) -> int:
                             for kind in ("indoor", "outdoor")))
     else:
         said = f"{scene_type_words(scene)} scene, scales { {k: round(v, 3) for k, v in result.scales.items()} }"
-    sun = result.decisions.get("sun")
-    # The guess (behind the camera, towards the photo's bright side) is where a hint helps most (README).
-    direction = "light direction guessed (--sun AZ,EL or --sun-from-shadow sets it)" if not sun else \
-        f"sun {sun['deg'][0]:g},{sun['deg'][1]:g} as given" + ("" if sun["used"] else " (unused by this prior)")
+    direction = sun_words(result.decisions, "--sun AZ,EL or --sun-from-shadow")
     print(f"light: {said}, {direction}, depth {depth_used} -> {Path(args.out) / 'light.exr'}")
     return 0
 

@@ -43,7 +43,7 @@ class SCENEFIT_OT_estimate_light(JobOperator):
     def apply(self, context, result) -> str:
         world = apply_result_world(context, result["hdr"])
         said = result["scene_type"] if result.get("scene_type_blended") else f"{result['scene_type']} scene"
-        return f"Light estimated, {said}: World '{world.name}'"
+        return f"Light estimated, {said}, {result['sun']}: World '{world.name}'"
 
 
 classes = (SCENEFIT_OT_estimate_light,)

@@ -101,7 +101,7 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
 
     from ..core.stages.light import load_photo
     from ..core.stages.light.scene_type import is_blended, scene_type_words
-    from ..core.stages.light.stage import LightInputs, critic_choice, run_light, write_light
+    from ..core.stages.light.stage import LightInputs, critic_choice, run_light, sun_words, write_light
     from ..core.pipeline.presets import stage_config
     from ..core.scene.placement import Placement
 
@@ -131,6 +131,7 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
         return {"hdr": str(report["outputs"]["hdr_exr"]), "preview": str(report["outputs"]["preview_png"]),
                 "report": str(out / "report.json"),
                 "scene_type": scene_type_words(scene, "Scene type"), "scene_type_blended": is_blended(scene),
+                "sun": sun_words(result.decisions, "Pick Sun or Sun from Light"),
                 "camera": camera_values(result.photo_camera)}
 
     return written_whole(data["out"], write)

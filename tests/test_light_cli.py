@@ -158,3 +158,11 @@ def test_the_summary_line_does_not_claim_a_scene_type_it_was_unsure_of(tmp_path,
     assert main(common + ["--out", str(tmp_path / "sun"), "--sun", "30,45"]) == 0
     line = capsys.readouterr().out.strip().splitlines()[-1]
     assert "sun 30,45 as given" in line and "guessed" not in line, line
+
+
+def test_the_sun_in_a_summary_says_guessed_given_or_unused():
+    from scenefit.core.stages.light.stage import sun_words
+
+    assert sun_words({}, "Pick Sun") == "light direction guessed (Pick Sun sets it)"
+    assert sun_words({"sun": {"deg": [30.0, 45.5], "used": True}}, "x") == "sun 30,45.5 as given"
+    assert sun_words({"sun": {"deg": [30.0, 45.0], "used": False}}, "x").endswith("(unused by this prior)")

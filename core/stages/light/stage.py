@@ -84,3 +84,12 @@ def write_light(result: LightResult, folder: str | Path, extra: dict | None = No
     report.update(extra or {})
     write_report(Path(folder) / "report.json", report)
     return report
+
+
+def sun_words(decisions: dict, setter: str) -> str:
+    """The light's direction in a few words for a summary: the artist's sun as given, or a guess that
+    `setter` (the flags or buttons that set it) would make truer (README: 22-30% lower matte error)."""
+    sun = decisions.get("sun")
+    if not sun:
+        return f"light direction guessed ({setter} sets it)"
+    return f"sun {sun['deg'][0]:g},{sun['deg'][1]:g} as given" + ("" if sun.get("used", True) else " (unused by this prior)")
