@@ -73,8 +73,13 @@ def run(args) -> int:
         if written is not None:
             report["prompt_writing"] = written.to_report()
         write_report(staging / "report.json", report)
+    from ..core.stages.light.stage import sun_words
+
     summary = ", ".join(f"{name} {stage['status']}" for name, stage in report["stages"].items())
-    print(f"run done in {report['seconds_total']:.1f} s ({summary}) -> {Path(args.out) / 'compose' / 'composite.png'}")
+    decisions = report["stages"].get("light", {}).get("report", {}).get("decisions")
+    light = f"; {sun_words(decisions, '--sun AZ,EL or --sun-from-shadow')}" if decisions else ""
+    print(f"run done in {report['seconds_total']:.1f} s ({summary}{light}) -> "
+          f"{Path(args.out) / 'compose' / 'composite.png'}")
     return 0
 
 

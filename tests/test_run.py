@@ -192,7 +192,7 @@ def test_a_failed_game_bake_fails_the_run_in_one_sentence(tmp_path):
     assert not (tmp_path / "run" / "bake" / "stage.json").exists()
 
 
-def test_run_gives_the_light_stage_the_scene_type_and_the_models_cache(tmp_path):
+def test_run_gives_the_light_stage_the_scene_type_and_the_models_cache(tmp_path, capsys):
     """`scenefit run` once had no --scene (Run All dropped the panel's Scene type) and looked for the depth
     model outside --cache-dir / --offline, which `scenefit light` follows."""
     from scenefit.cli import main
@@ -212,3 +212,10 @@ def test_run_gives_the_light_stage_the_scene_type_and_the_models_cache(tmp_path)
         assert light["decisions"]["scene_type"]["chosen"] == scene
         depth = light["config"]["depth"]
         assert depth["cache_dir"] == str(cache) and depth["local_files_only"] is True
+    # Again into the same folder, every stage reused: the summary says the light's direction was guessed.
+    capsys.readouterr()
+    assert main(["run", str(asset), "--photo", str(photo), "--at", "0.5,0.8", "--out", str(tmp_path / "outdoor"),
+                 "--preset", "draft", "--guidance", "none", "--spp", "2", "--no-bake", "--scene", "outdoor",
+                 "--cache-dir", str(cache), "--offline"]) == 0
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    assert "light reused" in line and "light direction guessed (--sun AZ,EL or --sun-from-shadow sets it)" in line
