@@ -322,11 +322,11 @@ class PipelineRun:
 
         def light(folder: Path) -> dict:
             camera, estimate = self.photo_camera()
-            stage_config = config
+            with_sun = config
             if self.config.sun_shadow is not None:   # the shadow's points need the camera
                 from ..stages.light.shadow_hint import sun_from_shadow_points
 
-                stage_config = replace(config, sun_deg=sun_from_shadow_points(
+                with_sun = replace(config, sun_deg=sun_from_shadow_points(
                     self.config.sun_shadow, camera, tuple(self.photo_info["size"]), self.photo.shape[:2]))
             asset = {}
             if critic_sees_asset:
@@ -334,7 +334,7 @@ class PipelineRun:
                 stack = texture_view(texture, self.normalized).stack(texture)   # convert's: the own UVs
                 asset = {"mesh": self.mesh, "maps": torch.as_tensor(stack)}
             inputs = LightInputs(self.photo, self.photo_info, self.placement_px, camera, estimate)
-            result = run_light(inputs, stage_config, self.progress, self.cancel,
+            result = run_light(inputs, with_sun, self.progress, self.cancel,
                                models=_WithInpaint(self.cache) if self.found else self.cache, asset=asset)
             result.decisions["envmap_height"] = needs_report(envmap_height)
             if self.config.sun_shadow is not None:
