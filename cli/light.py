@@ -5,8 +5,8 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 from .options import (add_dry_run_arg, add_model_args, add_old_photo_elevation_arg, add_output_args,
-                      add_photo_camera_args, add_placement_args, add_preset_args, add_sun_args, model_config, output,
-                      photo_pitch, positive_int, progress, require)
+                      add_photo_camera_args, add_placement_args, add_preset_args, add_scene_arg, add_sun_args,
+                      model_config, output, photo_pitch, positive_int, progress, require)
 
 
 def resolve_config(args, critic: str):
@@ -90,7 +90,7 @@ def add_parser(sub) -> None:
     add_placement_args(p, required=False)
     add_output_args(p, help="output folder: light.exr, light_preview.png, report.json", required=False)
     add_preset_args(p)
-    p.add_argument("--scene", choices=("auto", "indoor", "outdoor"), help="scene type (default: auto)")
+    add_scene_arg(p)
     add_photo_camera_args(p)
     add_old_photo_elevation_arg(p)
     add_sun_args(p)

@@ -198,6 +198,11 @@ def sun_angles(text: str) -> tuple[float, float]:
     return az, el
 
 
+def add_scene_arg(p: argparse.ArgumentParser, default: str | None = None) -> None:
+    p.add_argument("--scene", choices=("auto", "indoor", "outdoor"), default=default,
+                   help="the photo's scene type for the light stage (default: decided from the photo)")
+
+
 def add_sun_args(p: argparse.ArgumentParser) -> None:
     """The artist's dominant light (core/stages/light/cues.py trusts it: a narrower lobe than the guess's)."""
     sun = p.add_mutually_exclusive_group()

@@ -4,7 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .options import (add_asset_args, add_model_args, add_output_args, add_photo_camera_args, add_placement_args,
-                      add_preset_args, add_sun_args,
+                      add_preset_args, add_scene_arg, add_sun_args,
                       add_prompt_service_args, load_asset, model_config, output, progress,
                       scene_conditional_prompt)
 
@@ -58,6 +58,7 @@ def run(args) -> int:
     from ..core.data.asset_read_cache import save_read
     from ..core.base.report import write_report
     from ..core.pipeline.run import run_pipeline
+    from ..core.stages.light.stage import sun_words
 
     config, written = run_config(args)
     mesh, maps, key, how = read_asset(args)
@@ -73,8 +74,6 @@ def run(args) -> int:
         if written is not None:
             report["prompt_writing"] = written.to_report()
         write_report(staging / "report.json", report)
-    from ..core.stages.light.stage import sun_words
-
     summary = ", ".join(f"{name} {stage['status']}" for name, stage in report["stages"].items())
     decisions = report["stages"].get("light", {}).get("report", {}).get("decisions")
     light = f"; {sun_words(decisions, '--sun AZ,EL or --sun-from-shadow')}" if decisions else ""
@@ -103,8 +102,7 @@ def add_parser(sub) -> None:
     p.add_argument("--shadow", choices=SHADOW_TYPES, default="ratio")
     p.add_argument("--spp", type=int, help="compose: samples per pixel (default: from the preset's noise target)")
     p.add_argument("--no-bake", action="store_true", help="skip the game bake (a .glb of the asset with its new texture)")
-    p.add_argument("--scene", choices=("auto", "indoor", "outdoor"), default="auto",
-                   help="the photo's scene type for the light stage (default: decided from the photo)")
+    add_scene_arg(p, default="auto")
     add_photo_camera_args(p)
     add_sun_args(p)
     add_model_args(p)

@@ -245,16 +245,12 @@ def run_job_stages(job: Job, out: Path, progress=None, cancel=None, models=None)
 
 def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models=None) -> dict:
     """The job through core/pipeline/run.py's run_pipeline: adapt when listed (and its weights are found)."""
-    from ..core.pipeline.run import RunConfig, run_pipeline
+    from ..core.pipeline.run import run_pipeline
 
     from ..core.stages.bake.process import asset_file_bake
 
     mesh, maps = _load_asset(job)
-    view = {} if job.object_size is None else {"size": job.object_size}
-    config = RunConfig(preset=job.preset, prompt=job.prompt, guidance_type="auto" if "adapt" in job.stages else "none",
-                       models=job.models, stage_overrides=_stage_overrides(job), camera_overrides=job_camera(job),
-                       camera_source=job.camera_source, camera_why=job.camera_why, turn_deg=job.turn,
-                       sun_deg=job.sun, scene_type=job.scene, depth_model=job.depth_model, **view)
+    config = job_run_config(job)
     bake, why_not = asset_file_bake(job.asset, job.object) if "bake" in job.stages else (None, "the job's stages "
                                                                                          "do not list bake")
     return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel, models=models,
@@ -269,9 +265,16 @@ def _stage_overrides(job: Job) -> dict:
     return overrides
 
 
-def job_camera(job: Job) -> dict:
-    """The job's camera values as the pipeline's camera_overrides take them."""
-    return {CAMERA_KEYS[k]: v for k, v in job.camera.items()}
+def job_run_config(job: Job):
+    """The job's settings as the pipeline takes them (core/pipeline/run.RunConfig), as `scenefit run` gives them."""
+    from ..core.pipeline.run import RunConfig
+
+    view = {} if job.object_size is None else {"size": job.object_size}
+    return RunConfig(preset=job.preset, prompt=job.prompt, guidance_type="auto" if "adapt" in job.stages else "none",
+                     models=job.models, stage_overrides=_stage_overrides(job),
+                     camera_overrides={CAMERA_KEYS[k]: v for k, v in job.camera.items()},
+                     camera_source=job.camera_source, camera_why=job.camera_why, turn_deg=job.turn,
+                     sun_deg=job.sun, scene_type=job.scene, depth_model=job.depth_model, **view)
 
 
 def _load_asset(job: Job):
@@ -284,7 +287,7 @@ def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
     from ..core.stages.light.stage import critic_choice, light_inputs, run_light, write_light
     from ..core.stages.convert import convert_and_bake
     from ..core.pipeline.presets import stage_config, with_overrides
-    from ..core.stages.light.depth import depth_config_for
+    from ..core.pipeline.run import light_settings
 
     if "adapt" in job.stages:
         raise InputError(f"Job '{job.name}': stage adapt runs inside the whole pipeline in a batch; "
@@ -296,13 +299,13 @@ def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
                                                  stage_config("convert", job.preset, **_stage_overrides(job).get(
                                                      "convert", {})), progress, cancel)
     if "light" in job.stages:   # as `scenefit light` lights it: the photo's own camera, the same files
-        inputs = light_inputs(job.photo, job.at, None, job_camera(job), job.camera_source, job.camera_why)
+        run = job_run_config(job)
+        inputs = light_inputs(job.photo, job.at, None, run.camera_overrides, run.camera_source, run.camera_why)
         # (what run_pipeline's light stage would be given, the job's own overrides over it)
-        values = {"scene_type": job.scene, "models": job.models, "sun_deg": job.sun,
-                  "depth": depth_config_for(job.models, model=job.depth_model)}
         overrides = dict(job.overrides.get("light", {}))
         critic = critic_choice(overrides.pop("critic_type", "auto"), job.models)
-        config = stage_config("light", job.preset, critic_type=critic.choice, **with_overrides(values, overrides))
+        config = stage_config("light", job.preset, critic_type=critic.choice,
+                              **with_overrides(light_settings(run), overrides))
         reports["light"] = write_light(run_light(inputs, config, progress, cancel), out / "light")
     return _relative_outputs(reports, out)
 

@@ -78,8 +78,10 @@ class RunConfig:
             raise InputError(f"camera_overrides takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
         if self.sun_deg is not None and self.sun_shadow is not None:
             raise InputError("Give the sun as an azimuth and elevation or as a shadow's three points, not both.")
-        if self.sun_shadow is not None and len(self.sun_shadow) != 3:
-            raise InputError(f"The sun from a shadow takes three points (foot, top, tip), got {len(self.sun_shadow)}.")
+        if self.sun_shadow is not None:
+            from ..stages.light.shadow_hint import check_point_count
+
+            check_point_count(self.sun_shadow)
         unknown = sorted(set(self.stage_overrides) - {"convert", "light", "adapt", "compose"})
         if unknown:
             raise InputError(f"stage_overrides names unknown stage {unknown[0]!r}; it takes convert, light, adapt "
@@ -87,6 +89,15 @@ class RunConfig:
 
     def overrides(self, stage: str) -> dict:
         return dict(self.stage_overrides.get(stage, {}))
+
+
+def light_settings(config: RunConfig) -> dict:
+    """What a run's config gives the light stage's (the sun, the scene type, the models and where the depth
+    model is looked for): the pipeline's light stage and a batch job of light alone take the same."""
+    from ..stages.light.depth import depth_config_for
+
+    return {"sun_deg": None if config.sun_deg is None else tuple(config.sun_deg), "scene_type": config.scene_type,
+            "models": config.models, "depth": depth_config_for(config.models, model=config.depth_model)}
 
 
 def _digest(*parts) -> str:
@@ -237,8 +248,9 @@ class PipelineRun:
         self.placement = Placement.parse(placement, tuple(self.photo_info["size"]))   # pixels of the photo as stored
         self.placement_px = self.placement.pixel((h, w))                              # ... in the light stage's copy
         if config.sun_shadow is not None:   # a malformed point is one sentence before any work
-            for point, name in zip(config.sun_shadow, ("foot", "top", "tip")):
-                Placement.parse(point, tuple(self.photo_info["size"]), what=f"The shadow's {name}")
+            from ..stages.light.shadow_hint import shadow_pixels
+
+            shadow_pixels(config.sun_shadow, tuple(self.photo_info["size"]), (h, w))
         if config.fspy is not None and config.photo_camera is None:
             from ..stages.camera import read_fspy
 
@@ -293,12 +305,8 @@ class PipelineRun:
         if height.choice > preset_height:
             height = replace(height, choice=preset_height,
                              reason=f"{height.reason}; capped at the {self.config.preset} preset's {preset_height} rows")
-        from ..stages.light.depth import depth_config_for
-
-        sun = {"sun_deg": tuple(self.config.sun_deg)} if self.config.sun_deg is not None else {}
         config = self.stage_config("light", critic_type="diffusion" if self.found else "none",
-                                   models=self.config.models, map_height=height.choice, scene_type=self.config.scene_type,
-                                   depth=depth_config_for(self.config.models, model=self.config.depth_model), **sun)
+                                   map_height=height.choice, **light_settings(self.config))
         if self.config.guidance_type == "none":  # no diffusion model at all: the sky/ground prior completes outdoors
             config = replace(config, outpaint=replace(config.outpaint, completion_type="prior"))
         return config, height

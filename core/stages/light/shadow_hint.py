@@ -44,22 +44,30 @@ def sun_from_shadow(camera: PhotoCamera, foot: tuple[float, float], top: tuple[f
     if np.linalg.norm(above[:2] - base[:2]) > 0.25 * max(above[2], 1e-6):
         raise InputError("The top you picked is not straight above the foot in this camera's view; pick the top "
                          "and the foot of one upright thing (a post, a person, a table leg's corner).")
-    direction = above - end
-    direction /= np.linalg.norm(direction)
-    azimuth = camera.yaw_deg - math.degrees(math.atan2(direction[1], direction[0]))
-    elevation = math.degrees(math.asin(float(np.clip(direction[2], -1.0, 1.0))))
-    return (azimuth + 180.0) % 360.0 - 180.0, elevation
+    return sun_deg_from_direction(above - end, camera.basis()[0])
+
+
+SHADOW_POINTS = ("foot", "top", "tip")
+
+
+def check_point_count(points) -> None:
+    if len(points) != len(SHADOW_POINTS):
+        raise InputError(f"The sun from a shadow takes three points (foot, top, tip), got {len(points)}.")
+
+
+def shadow_pixels(points, photo_wh: tuple[int, int], hw: tuple[int, int]) -> list[tuple[float, float]]:
+    """FOOT, TOP, TIP given as `--at` takes a point (fractions, or pixels of the photo as stored,
+    `photo_wh`) as pixels of the photo's working copy of size `hw`; one sentence for a bad point."""
+    check_point_count(points)
+    return [Placement.parse(point, photo_wh, what=f"The shadow's {name}").pixel(hw)
+            for point, name in zip(points, SHADOW_POINTS)]
 
 
 def sun_from_shadow_points(points, camera: PhotoCamera, photo_wh: tuple[int, int],
                            hw: tuple[int, int]) -> tuple[float, float]:
-    """`sun_from_shadow` for FOOT, TOP, TIP given as `--at` takes a point (fractions, or pixels of the
-    photo as stored, `photo_wh`), through `camera`, the camera of the photo's working copy of size `hw`."""
-    if len(points) != 3:
-        raise InputError(f"The sun from a shadow takes three points (foot, top, tip), got {len(points)}.")
-    foot, top, tip = (Placement.parse(point, photo_wh, what=f"The shadow's {name}").pixel(hw)
-                      for point, name in zip(points, ("foot", "top", "tip")))
-    return sun_from_shadow(camera, foot, top, tip)
+    """`sun_from_shadow` for the points as `shadow_pixels` takes them, through `camera`, the camera of
+    the photo's working copy."""
+    return sun_from_shadow(camera, *shadow_pixels(points, photo_wh, hw))
 
 
 def sun_deg_from_direction(toward_sun, forward) -> tuple[float, float]:
