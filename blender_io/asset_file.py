@@ -12,6 +12,7 @@ from __future__ import annotations
 import re
 import tempfile
 from contextlib import contextmanager
+from typing import Callable
 from pathlib import Path
 
 from ..core.data.asset_io import check_asset_path
@@ -93,15 +94,73 @@ def _temporary_data(bpy):
 
 
 def _import_into(bpy, scene, path: Path, suffix: str) -> None:
+    """Blender's importer for `suffix` reading `path` into `scene`; scene None: into the context's
+    scene and active collection, as File > Import does."""
     module, op = IMPORTERS[suffix]
     if module == "import_scene":
         import addon_utils
 
         addon_utils.enable("io_scene_gltf2" if "gltf" in suffix or suffix == ".glb" else "io_scene_fbx",
                            default_set=False)
+    importer = getattr(getattr(bpy.ops, module), op)
+    if scene is None:
+        importer(filepath=str(path))
+        return
     with bpy.context.temp_override(scene=scene, view_layer=scene.view_layers[0],
                                    collection=scene.collection):
-        getattr(getattr(bpy.ops, module), op)(filepath=str(path))
+        importer(filepath=str(path))
+
+
+def _read_or_sentence(path: Path, read: Callable[[], None]) -> None:
+    """`read()` (Blender importing or appending `path` or its readable copy) with its chatter kept off the
+    terminal; a failure is one sentence (InputError) naming `path`."""
+    suffix = path.suffix.lower()
+    # Blender's importers print to the terminal and raise RuntimeError on a broken file: their
+    # chatter is kept off the user's terminal and serves as the error's reason.
+    with native_output_captured() as chatter:
+        try:
+            read()
+            return
+        except (RuntimeError, ValueError, OSError, UnicodeDecodeError) as error:
+            failure = error
+    reason = _blender_reason(failure) or chatter.last_line() or "Blender could not read it"
+    missing = re.search(r"Extension (\S+) is not available", reason)
+    if missing:  # a valid file: Blender's importer lacks what it requires
+        raise InputError(f"Asset file '{path}' requires the glTF extension {missing.group(1)}, which "
+                         "Blender's importer does not read; write it without that extension (gltf-transform "
+                         "or gltfpack can) and give that file.") from None
+    raise InputError(f"Asset file '{path}' cannot be read ({reason}); check that it is a valid "
+                     f"'{suffix}' file, or export it again.") from None
+
+
+# What Import Asset reads: the files Blender's importers read, meshopt glTF and ASCII FBX included.
+IMPORTABLE_SUFFIXES = tuple(IMPORTERS)
+
+
+def import_into_open_scene(path: str | Path) -> list:
+    """The objects of the asset file `path`, imported into the open scene's active collection as
+    File > Import does (selected, one of them active), including what Blender's own importers refuse:
+    a meshopt-compressed glTF is decoded and an ASCII FBX written as binary first. Images the import
+    read from such a temporary copy are packed into the .blend, so they outlive the copy. Nothing
+    that was there before is changed; a file that cannot be read is one sentence (InputError)."""
+    import bpy
+
+    path = Path(path)
+    check_asset_path(path)
+    suffix = path.suffix.lower()
+    if path.is_dir() or suffix not in IMPORTERS:
+        raise InputError(f"Import Asset reads {', '.join(IMPORTABLE_SUFFIXES)} files, not '{path.name}'; "
+                         "use File > Append for a .blend file.")
+    before = set(bpy.data.objects)
+    images_before = set(bpy.data.images)
+    with _readable(path) as readable:
+        _read_or_sentence(path, lambda: _import_into(bpy, None, readable, readable.suffix.lower()))
+        if readable != path:   # read from a temporary copy, gone after this block
+            for image in set(bpy.data.images) - images_before:
+                if image.packed_file is None and image.source == "FILE" and \
+                        Path(bpy.path.abspath(image.filepath)).is_file():
+                    image.pack()
+    return sorted((o for o in bpy.data.objects if o not in before), key=lambda o: o.name)
 
 
 @contextmanager
@@ -191,28 +250,11 @@ def loaded_asset(path: str | Path, object_name: str | None = None):
     check_asset_path(path)
     if path.is_dir():   # an asset folder is read without Blender (core.asset_io), never imported
         raise InputError(f"'{path}' is a SceneFit asset folder, not a file Blender reads.")
-    suffix = path.suffix.lower()
     with _temporary_data(bpy) as scene, _readable(path) as readable:
-        # Blender's importers print to the terminal and raise RuntimeError on a broken file: their
-        # chatter is kept off the user's terminal and serves as the error's reason.
-        with native_output_captured() as chatter:
-            try:
-                if suffix == ".blend":
-                    _append_blend(bpy, scene, path, object_name)
-                else:
-                    _import_into(bpy, scene, readable, readable.suffix.lower())
-                failure = None
-            except (RuntimeError, ValueError, OSError, UnicodeDecodeError) as error:
-                failure = error
-        if failure is not None:
-            reason = _blender_reason(failure) or chatter.last_line() or "Blender could not read it"
-            missing = re.search(r"Extension (\S+) is not available", reason)
-            if missing:  # a valid file: Blender's importer lacks what it requires
-                raise InputError(f"Asset file '{path}' requires the glTF extension {missing.group(1)}, which "
-                                 "Blender's importer does not read; write it without that extension (gltf-transform "
-                                 "or gltfpack can) and give that file.") from None
-            raise InputError(f"Asset file '{path}' cannot be read ({reason}); check that it is a valid "
-                             f"'{suffix}' file, or export it again.") from None
+        if path.suffix.lower() == ".blend":
+            _read_or_sentence(path, lambda: _append_blend(bpy, scene, path, object_name))
+        else:
+            _read_or_sentence(path, lambda: _import_into(bpy, scene, readable, readable.suffix.lower()))
         meshes = asset_meshes(scene, object_name, path)
         with bpy.context.temp_override(scene=scene, view_layer=scene.view_layers[0]):
             yield meshes, scene

@@ -64,9 +64,13 @@ class SCENEFIT_PT_asset(_Subsection, bpy.types.Panel):
         layout = self.layout
         obj = context.active_object
         if obj is None or obj.type != "MESH":
-            layout.label(text="Select a mesh object.", icon="INFO")
+            row = layout.row()
+            row.label(text="Select a mesh object.", icon="INFO")
+            row.operator("scenefit.import_asset", text="", icon="IMPORT")
             return
-        layout.label(text=obj.name, icon="OBJECT_DATA")
+        row = layout.row()
+        row.label(text=obj.name, icon="OBJECT_DATA")
+        row.operator("scenefit.import_asset", text="", icon="IMPORT")
         try:
             found, dropped = material_summary(obj.active_material)
         except SceneFitError as error:

@@ -505,6 +505,66 @@ def test_run_all_is_the_command_lines_pipeline_and_shows_the_composite(unsaved):
     assert len(out["run_folder_siblings"]) == 1 and out["run_folder_siblings"][0].startswith("run-")
 
 
+
+# Import Asset: a meshopt-compressed GLB (Blender's glTF importer refuses it) into an artist's scene.
+IMPORT = r"""
+bpy.ops.wm.read_homefile(use_empty=True)
+bpy.ops.mesh.primitive_plane_add()
+plane = bpy.context.object
+plane.name = "Painted"
+image = bpy.data.images.new("paint", 8, 8)
+image.pixels.foreach_set(np.random.default_rng(4).uniform(0, 1, 8 * 8 * 4).astype(np.float32))
+mat = bpy.data.materials.new("Paint")
+tex = mat.node_tree.nodes.new("ShaderNodeTexImage"); tex.image = image
+mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+plane.data.materials.append(mat)
+bpy.ops.export_scene.gltf(filepath=str(tmp / "plain.glb"), export_format="GLB")
+meshopt = import_module(MODULE + ".core.data.gltf_meshopt")
+packed = meshopt.encoded_glb(tmp / "plain.glb", tmp / "packed.glb")
+(tmp / "broken.glb").write_bytes(b"glTF not really")
+bpy.ops.wm.read_homefile(use_empty=True)
+bpy.ops.mesh.primitive_cube_add()
+mine = bpy.context.object
+mine.name = "MyCube"
+try:
+    bpy.ops.import_scene.gltf(filepath=str(packed))
+    out["blender_importer"] = "read it"
+except RuntimeError as error:
+    out["blender_importer"] = str(error).splitlines()[-1]
+out["objects_after_refusal"] = sorted(o.name for o in bpy.data.objects)
+out["import"] = sorted(bpy.ops.scenefit.import_asset(filepath=str(packed)))
+new = [o for o in bpy.data.objects if o.name != "MyCube"]
+out["imported"] = sorted(o.name for o in new)
+out["active"] = bpy.context.view_layer.objects.active.name
+out["selected"] = sorted(o.name for o in bpy.context.selected_objects)
+out["mine"] = [list(mine.location), len(mine.data.vertices), mine.name]
+images = [i for i in bpy.data.images if i.name not in ("Render Result", "Viewer Node")]
+out["images"] = [(i.packed_file is not None, list(i.size)) for i in images]
+try:
+    bpy.ops.scenefit.import_asset(filepath=str(tmp / "broken.glb"))
+    out["broken"] = "imported"
+except RuntimeError as error:
+    out["broken"] = str(error)
+out["after_broken"] = sorted(o.name for o in bpy.data.objects)
+menu = bpy.types.TOPBAR_MT_file_import._dyn_ui_initialize()
+out["in_file_import"] = any(getattr(f, "__module__", "").endswith("operators.import_asset") for f in menu)
+"""
+
+
+def test_import_asset_reads_a_file_blenders_importer_refuses_into_the_artists_scene(blender):
+    out = step(blender, IMPORT)
+    assert "EXT_meshopt_compression" in out["blender_importer"]   # why the operator exists
+    assert out["objects_after_refusal"] == ["MyCube"]
+    assert out["import"] == ["FINISHED"] and out["imported"] == ["Painted"]
+    assert out["active"] == "Painted" and out["selected"] == ["Painted"]
+    assert out["mine"] == [[0.0, 0.0, 0.0], 8, "MyCube"]   # the artist's object as it was
+    # the image came from a decoded copy in a temporary folder: packed, so it outlives the copy
+    assert out["images"] == [[True, [8, 8]]]
+    assert out["broken"].startswith("Error: Asset file '") and "broken.glb' cannot be read" in out["broken"]
+    assert out["broken"].rstrip().count("\n") == 0 and "Traceback" not in out["broken"]
+    assert out["after_broken"] == ["MyCube", "Painted"]
+    assert out["in_file_import"]
+
 def test_missing_dependencies_are_one_sentence(blender):
     out = step(blender, MISSING)   # the module's last test: it disables the add-on
     reported, sentence = out["missing"]
