@@ -394,6 +394,23 @@ def bake_copy_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_fil
     return bake_copies_to_gltf([obj], baked, [[(obj, slot)] for slot in slots], out_file, file_format, output)
 
 
+def rigs_of(objects: list) -> list:
+    """The armatures that deform or carry `objects` (an Armature modifier's object, an armature above
+    them): exported beside the copies, a character keeps its skeleton, skin and animations (without
+    them the exporter applies the pose and writes a still mesh). The copies keep the originals' parent
+    and modifiers, so they are skinned to the same, unchanged armature."""
+    rigs: list = []
+    for obj in objects:
+        found = [m.object for m in obj.modifiers if m.type == "ARMATURE" and m.object is not None]
+        parent = obj.parent
+        while parent is not None:
+            if parent.type == "ARMATURE":
+                found.append(parent)
+            parent = parent.parent
+        rigs += [rig for rig in found if rig not in rigs]
+    return rigs
+
+
 def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[list[tuple]], out_file: str | Path,
                         file_format: str = "glb", output: GltfOutput = GltfOutput(), replace: bool = False,
                         new_uvs: dict | None = None) -> dict:
@@ -437,8 +454,8 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
             original.name = f"{name}~scenefit"
             renamed.append((original, name))
             duplicate.name = name
-        report = bake_materials_to_gltf(materials, baked, out_file, file_format, list(copies.values()),
-                                        output=output, replace=replace)
+        report = bake_materials_to_gltf(materials, baked, out_file, file_format,
+                                        list(copies.values()) + rigs_of(objects), output=output, replace=replace)
     finally:
         # (a SceneFit result material's own image nodes are also named "SceneFit …": keep those)
         images = set(bpy.data.images) - images_before

@@ -77,8 +77,10 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
             check_ktx2_output(self.file_format)
         texture = texture_file(context)
         layout = asset_layout(context)   # the selected objects, or the active one with all its materials
+        # A rigged asset's skinned meshes go to the root, where glTF wants them (Blender's exporter puts them
+        # under the armature: the validator's NODE_SKINNED_MESH_NON_ROOT); a scene has no input file to follow.
         self._output = GltfOutput(self.compress, self.textures, self.max_texture,
-                                  tangents=any(normal_mapped(m) for m in layout.materials))
+                                  tangents=any(normal_mapped(m) for m in layout.materials), skins_at_root=True)
         if self.filepath:
             out_file = Path(bpy.path.abspath(self.filepath))
             if out_file.suffix.lower() != f".{self.file_format}":

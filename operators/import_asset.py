@@ -31,9 +31,11 @@ class SCENEFIT_OT_import_asset(bpy.types.Operator, ImportHelper):
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        meshes = [o for o in objects if o.type == "MESH"]
+        # Importers leave a rig (glTF) or the artist's object (FBX) active: the Asset section shows the new
+        # asset, a mesh in view (not the glTF importer's hidden bone shapes) and selected where one is.
+        shown = [o for o in objects if o.type == "MESH" and o.visible_get()]
+        meshes = [o for o in shown if o.select_get()] or shown
         if meshes and context.view_layer.objects.active not in meshes:
-            # (the FBX importer leaves the active object as it was) the Asset section shows the new asset
             context.view_layer.objects.active = meshes[0]
         self.report({"INFO"}, f"Imported '{path.name}': {len(objects)} object(s), {len(meshes)} with a mesh")
         return {"FINISHED"}

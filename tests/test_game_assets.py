@@ -340,6 +340,72 @@ def test_baking_inside_a_users_session_changes_nothing_of_theirs(run_py, tmp_pat
     assert [n["name"] for n in exported["nodes"]] == ["Mine"]
 
 
+
+RIGGED = r"""
+import json
+import bpy
+from scenefit.blender_io.gltf_export import bake_copy_to_gltf
+from scenefit.blender_io.material import object_mesh_and_slots
+from scenefit.core.stages.bake.game_bake import bake_game_maps
+from scenefit.core.stages.bake.gltf_output import GltfOutput
+from scenefit.core.pipeline.presets import stage_config
+from scenefit.core.texture.neural_texture import NeuralTexture
+
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.object.armature_add()
+rig = bpy.context.object
+rig.name = "Rig"
+bpy.ops.object.mode_set(mode="EDIT")
+lower = rig.data.edit_bones[0]
+lower.name, lower.head, lower.tail = "Lower", (0, 0, 0), (0, 0, 1)
+upper = rig.data.edit_bones.new("Upper")
+upper.head, upper.tail, upper.parent = (0, 0, 1), (0, 0, 2), lower
+bpy.ops.object.mode_set(mode="OBJECT")
+bpy.ops.mesh.primitive_cylinder_add(vertices=8, depth=2, location=(0, 0, 1))
+body = bpy.context.object
+body.name = "Body"
+body.data.materials.append(bpy.data.materials.new("Skin"))
+for name, low in (("Lower", True), ("Upper", False)):
+    group = body.vertex_groups.new(name=name)
+    group.add([v.index for v in body.data.vertices if (v.co.z < 0) == low], 1.0, "REPLACE")
+body.modifiers.new("Armature", "ARMATURE").object = rig
+body.parent = rig
+rig.animation_data_create()
+bone = rig.pose.bones["Upper"]
+for frame, angle in ((1, 0.0), (20, 0.8)):
+    bone.rotation_mode = "XYZ"
+    bone.rotation_euler = (angle, 0.0, 0.0)
+    bone.keyframe_insert("rotation_euler", frame=frame)
+rig.animation_data.action.name = "Bend"
+def state():
+    return (sorted(o.name for o in bpy.data.objects), sorted(m.name for m in bpy.data.meshes),
+            sorted(a.name for a in bpy.data.actions), body.parent.name, [m.type for m in body.modifiers],
+            sorted(g.name for g in body.vertex_groups), len(rig.data.bones))
+before = state()
+mesh, slots = object_mesh_and_slots(body, bpy.context.evaluated_depsgraph_get())
+baked = bake_game_maps(NeuralTexture(stage_config("texture", "draft", resolution=16), seed=1), mesh, ["Skin"], 16)
+# Bake Asset's setting: skinned meshes at the root, where glTF wants them (the operator's GltfOutput)
+report = bake_copy_to_gltf(body, baked, slots, OUT, "glb", GltfOutput(skins_at_root=True))
+print("JSON" + json.dumps({"same": before == state(), "files": report["files"]}))
+"""
+
+
+def test_a_rigged_object_baked_in_a_users_session_keeps_its_skeleton_skin_and_animation(run_py, tmp_path, validator):
+    out = tmp_path / "rigged.glb"
+    proc = run_py(RIGGED.replace("OUT", repr(str(out))))
+    result = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
+    assert result["same"] and result["files"] == [str(out)]
+    exported = gltf_json(str(out))
+    names = [n.get("name") for n in exported["nodes"]]
+    assert {"Rig", "Body", "Lower", "Upper"} <= set(names)   # the armature came along (a still mesh before)
+    assert len(exported.get("skins", [])) == 1
+    assert sorted(names[j] for j in exported["skins"][0]["joints"]) == ["Lower", "Upper"]
+    skinned = [i for i, n in enumerate(exported["nodes"]) if "skin" in n]
+    assert [names[i] for i in skinned] == ["Body"] and skinned[0] in exported["scenes"][0]["nodes"]
+    issues = validator(str(out))["issues"]
+    assert issues["numErrors"] == 0 and "NODE_SKINNED_MESH_NON_ROOT" not in {m["code"] for m in issues["messages"]}
+    assert [a["name"] for a in exported.get("animations", [])] == ["Bend"]
+
 def test_bake_refuses_an_asset_folder_in_one_sentence(tmp_path, example_asset):
     proc = scenefit_here("bake", str(example_asset), "--texture", "t.pt", "--out", str(tmp_path / "x.glb"))
     assert proc.returncode == 2 and "asset folder" in proc.stderr and "Traceback" not in proc.stderr
