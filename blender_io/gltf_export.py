@@ -394,21 +394,23 @@ def bake_copy_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_fil
     return bake_copies_to_gltf([obj], baked, [[(obj, slot)] for slot in slots], out_file, file_format, output)
 
 
-def rigs_of(objects: list) -> list:
-    """The armatures that deform or carry `objects` (an Armature modifier's object, an armature above
-    them): exported beside the copies, a character keeps its skeleton, skin and animations (without
-    them the exporter applies the pose and writes a still mesh). The copies keep the originals' parent
-    and modifiers, so they are skinned to the same, unchanged armature."""
-    rigs: list = []
+def carriers_of(objects: list) -> list:
+    """What carries `objects` and is not one of them: every object above them that is not a mesh (the
+    file's root and group nodes, an armature) and the armatures that deform them. Exported beside the
+    copies, an asset keeps its node tree, its transforms and the animations on those nodes, and a
+    character its skeleton and skin (without the armature the exporter applies the pose and writes a
+    still mesh). They are exported as they are, never changed; a mesh above the asset that is not part
+    of it stays out (its baked maps would be missing)."""
+    carriers: list = []
     for obj in objects:
         found = [m.object for m in obj.modifiers if m.type == "ARMATURE" and m.object is not None]
         parent = obj.parent
         while parent is not None:
-            if parent.type == "ARMATURE":
+            if parent.type != "MESH":
                 found.append(parent)
             parent = parent.parent
-        rigs += [rig for rig in found if rig not in rigs]
-    return rigs
+        carriers += [o for o in found if o not in carriers and o not in objects]
+    return carriers
 
 
 def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[list[tuple]], out_file: str | Path,
@@ -437,6 +439,9 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
             scene.collection.objects.link(copy)
             if new_uvs and obj.name in new_uvs:
                 add_uv_map(copy, new_uvs[obj.name])
+        for copy in copies.values():   # a wheel under the truck's body hangs under the body's copy
+            if copy.parent is not None and copy.parent.name in copies:
+                copy.parent = copies[copy.parent.name]   # (the parent inverse, copied, stays as it was)
         materials = []
         for pairs in slots:
             for obj, slot in pairs:
@@ -455,7 +460,7 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
             renamed.append((original, name))
             duplicate.name = name
         report = bake_materials_to_gltf(materials, baked, out_file, file_format,
-                                        list(copies.values()) + rigs_of(objects), output=output, replace=replace)
+                                        list(copies.values()) + carriers_of(objects), output=output, replace=replace)
     finally:
         # (a SceneFit result material's own image nodes are also named "SceneFit …": keep those)
         images = set(bpy.data.images) - images_before

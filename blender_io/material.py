@@ -104,7 +104,7 @@ def _read_input(bsdf, name: str, kind: str, material, obj, slot: int, read: list
     try:
         value = socket_value(bsdf.inputs[name], kind, trail, image_pixels_linear)
     except NotAnImageChain as why:
-        pixels = bake_socket(obj, slot, bsdf.inputs[name], bake_size, image_pixels_linear, wrap)
+        pixels = bake_socket(obj, slot, bsdf.inputs[name], bake_size, image_pixels_linear, wrap, material)
         read.append(f"{name} <- procedural setup ({why}) baked by Cycles to {bake_size}² "
                     f"(Blender's bake, emission pass)")
         value = pixels if kind == "color" else pixels[..., 0].copy()

@@ -20,9 +20,11 @@ MAX_COPIES = 64
 
 
 def bake_socket(obj, slot: int, socket, size: int, pixels_of,
-                wrap: tuple[str, str] = ("repeat", "repeat")) -> np.ndarray:
-    """(size, size, 3) linear values of what drives `socket` (an input of a node in the material of
-    `obj`'s slot `slot`), over that slot's faces in the mesh's active UV layout.
+                wrap: tuple[str, str] = ("repeat", "repeat"), material=None) -> np.ndarray:
+    """(size, size, 3) linear values of what drives `socket` (an input of a node in `material`, by
+    default the material of `obj`'s slot `slot`), over that slot's faces in the mesh's active UV layout.
+    `material` differs from the slot's where the slot holds a SceneFit result and the artist's material
+    it replaced is read (Bake Asset after Run All).
 
     Blender bakes only UVs inside [0, 1]; faces whose UVs tile past it (wrap "repeat" or "mirror",
     see core.data.uv_raster) are baked once per copy of the image they reach, through a second
@@ -33,7 +35,7 @@ def bake_socket(obj, slot: int, socket, size: int, pixels_of,
     if obj is None:
         raise InputError(f"'{socket.node.name}' drives {socket.name} through a procedural node setup, and "
                          "without its object it cannot be baked; bake it to an image first.")
-    material = obj.material_slots[slot].material
+    material = material or obj.material_slots[slot].material
     scene = bpy.context.scene
     if not hasattr(scene, "cycles"):
         import addon_utils

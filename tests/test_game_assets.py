@@ -278,9 +278,16 @@ before = (sorted(n.name for n in nodes), len(bpy.data.objects), len(bpy.data.mat
 material = read_material(mat, plane, 0)
 after = (sorted(n.name for n in nodes), len(bpy.data.objects), len(bpy.data.materials), len(bpy.data.images),
          len(bpy.data.meshes), bpy.context.scene.render.engine)
+# The slot now holds another material (a SceneFit result after Run All): Bake Asset reads the artist's
+# material it replaced, whose chain is baked, not the slot's (which once failed: IndexError).
+result = bpy.data.materials.new("Result")
+result.node_tree.nodes["Principled BSDF"].inputs["Roughness"].default_value = 0.9
+plane.material_slots[0].material = result
+replaced = read_material(mat, plane, 0)
 print("JSON" + json.dumps({
     "base": material.maps.base_color.tolist(), "grey": np.linspace(0.2, 0.8, 16).reshape(4, 4)[::-1].tolist(),
     "rough": np.asarray(material.maps.roughness).tolist(), "read": material.read, "same": before == after,
+    "rough_replaced": np.asarray(replaced.maps.roughness).tolist(),
     "selection": [o.name for o in bpy.context.view_layer.objects if o.select_get()],
     "active": bpy.context.view_layer.objects.active.name}))
 """
@@ -293,6 +300,7 @@ def test_factor_nodes_are_read_and_procedural_chains_baked_by_cycles(run_py):
     np.testing.assert_allclose(base, grey[..., None] * np.array([0.5, 0.25, 1.0]), atol=1e-6)
     rough = np.array(out["rough"])
     assert rough.shape == (4, 4) and np.allclose(rough, 0.5, atol=1e-3)  # a plane covers the whole UV square
+    assert np.allclose(out["rough_replaced"], 0.5, atol=1e-3)   # the material read, not the slot's
     read = " | ".join(out["read"])
     assert "times factor (0.5, 0.25, 1)" in read and "baked by Cycles" in read
     assert out["same"] and out["selection"] == ["Other"] and out["active"] == "Other"
@@ -330,12 +338,17 @@ print("JSON" + json.dumps({"same": before == state(), "files": report["files"]})
 """
 
 
-def test_baking_inside_a_users_session_changes_nothing_of_theirs(run_py, tmp_path):
-    out = tmp_path / "mine.glb"
-    proc = run_py(IN_SESSION.replace("OUT", repr(str(out))))
+def baked_in_session(run_py, script: str, out: Path) -> dict:
+    """The glTF JSON `script` (a Blender session baking into OUT) wrote to `out`, after checking that the
+    session's own data was left as it was and that `out` alone was written."""
+    proc = run_py(script.replace("OUT", repr(str(out))))
     result = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
     assert result["same"] and result["files"] == [str(out)]
-    exported = gltf_json(str(out))
+    return gltf_json(str(out))
+
+
+def test_baking_inside_a_users_session_changes_nothing_of_theirs(run_py, tmp_path):
+    exported = baked_in_session(run_py, IN_SESSION, tmp_path / "mine.glb")
     assert sorted(m["name"] for m in exported["materials"]) == ["Blue", "Red"]
     assert [n["name"] for n in exported["nodes"]] == ["Mine"]
 
@@ -392,10 +405,7 @@ print("JSON" + json.dumps({"same": before == state(), "files": report["files"]})
 
 def test_a_rigged_object_baked_in_a_users_session_keeps_its_skeleton_skin_and_animation(run_py, tmp_path, validator):
     out = tmp_path / "rigged.glb"
-    proc = run_py(RIGGED.replace("OUT", repr(str(out))))
-    result = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
-    assert result["same"] and result["files"] == [str(out)]
-    exported = gltf_json(str(out))
+    exported = baked_in_session(run_py, RIGGED, out)
     names = [n.get("name") for n in exported["nodes"]]
     assert {"Rig", "Body", "Lower", "Upper"} <= set(names)   # the armature came along (a still mesh before)
     assert len(exported.get("skins", [])) == 1
@@ -405,6 +415,60 @@ def test_a_rigged_object_baked_in_a_users_session_keeps_its_skeleton_skin_and_an
     issues = validator(str(out))["issues"]
     assert issues["numErrors"] == 0 and "NODE_SKINNED_MESH_NON_ROOT" not in {m["code"] for m in issues["messages"]}
     assert [a["name"] for a in exported.get("animations", [])] == ["Bend"]
+
+
+TREE = r"""
+import json
+import bpy
+from scenefit.blender_io.gltf_export import bake_copies_to_gltf
+from scenefit.blender_io.scene_asset import scene_mesh
+from scenefit.core.stages.bake.game_bake import bake_game_maps
+from scenefit.core.pipeline.presets import stage_config
+from scenefit.core.texture.neural_texture import NeuralTexture
+
+bpy.ops.wm.read_factory_settings(use_empty=True)
+root = bpy.data.objects.new("Root", None)
+bpy.context.scene.collection.objects.link(root)
+root.scale = (2.0, 2.0, 2.0)
+paint = bpy.data.materials.new("Paint")
+parts = {}
+for name, location in (("Body", (0, 0, 1)), ("Wheel", (1, 0, 0))):
+    bpy.ops.mesh.primitive_cube_add(location=location)
+    parts[name] = bpy.context.object
+    parts[name].name = name
+    parts[name].data.materials.append(paint)
+parts["Body"].parent = root
+parts["Wheel"].parent = parts["Body"]
+parts["Wheel"].animation_data_create()
+for frame, angle in ((1, 0.0), (10, 1.5)):
+    parts["Wheel"].rotation_euler = (0.0, angle, 0.0)
+    parts["Wheel"].keyframe_insert("rotation_euler", frame=frame)
+bpy.context.scene.frame_set(1)
+before = [(o.name, o.parent.name if o.parent else None, [round(v, 5) for v in o.matrix_world.translation])
+          for o in bpy.data.objects]
+objects = [parts["Body"], parts["Wheel"]]
+asset = scene_mesh(objects, bpy.context.evaluated_depsgraph_get(), "Body")
+baked = bake_game_maps(NeuralTexture(stage_config("texture", "draft", resolution=16), seed=1), asset.mesh, ["Paint"], 16)
+report = bake_copies_to_gltf(objects, baked, [[(parts["Body"], 0), (parts["Wheel"], 0)]], OUT, "glb")
+after = [(o.name, o.parent.name if o.parent else None, [round(v, 5) for v in o.matrix_world.translation])
+         for o in bpy.data.objects]
+print("JSON" + json.dumps({"same": before == after, "files": report["files"]}))
+"""
+
+
+def test_a_baked_selection_keeps_the_node_tree_above_and_between_its_parts(run_py, tmp_path):
+    out = tmp_path / "tree.glb"
+    exported = baked_in_session(run_py, TREE, out)
+    nodes = exported["nodes"]
+    names = [n.get("name") for n in nodes]
+    children = {names[i]: sorted(names[c] for c in n.get("children", [])) for i, n in enumerate(nodes)}
+    # Root (the file's group node, not a mesh) carried along, the wheel still under the body (before: three roots)
+    assert children == {"Root": ["Body"], "Body": ["Wheel"], "Wheel": []}
+    assert [names[i] for i in exported["scenes"][0]["nodes"]] == ["Root"]
+    assert nodes[names.index("Root")]["scale"] == [2.0, 2.0, 2.0]
+    # the wheel's own turn is an animation of its node, kept
+    channels = [(names[c["target"]["node"]], c["target"]["path"]) for a in exported["animations"] for c in a["channels"]]
+    assert ("Wheel", "rotation") in channels
 
 def test_bake_refuses_an_asset_folder_in_one_sentence(tmp_path, example_asset):
     proc = scenefit_here("bake", str(example_asset), "--texture", "t.pt", "--out", str(tmp_path / "x.glb"))
