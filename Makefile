@@ -19,7 +19,8 @@ help:
 	@echo "make bench      speed and accuracy table (benchmarks/run.py)"
 	@echo "make gpu-check  on a CUDA machine: SD2-sized random models, each preset's adapt iterations, benchmarks/results/gpu.md"
 	@echo "make corpus     every real asset in ../shared/corpus through convert -> bake -> glTF validator"
-	@echo "                (benchmarks/results/corpus.md; installs npm's gltf-validator into .venv/node)"
+	@echo "                (benchmarks/results/corpus.md; installs npm's gltf-validator into .venv/node), and through"
+	@echo "                the Blender extension: Import Asset -> Run All -> Bake Asset (corpus_blender.md)"
 	@echo "make extension PLATFORM=linux-x64|linux-arm64|windows-x64|macos-arm64|macos-x64"
 	@echo "                download runtime wheels, list them in the manifest, build dist/*.zip"
 	@echo "make extension-nowheels   pure-Python zip without wheels (what the install test uses)"
@@ -51,6 +52,7 @@ bench: setup
 
 corpus: setup
 	$(PY) benchmarks/corpus.py
+	$(PY) benchmarks/corpus_blender.py
 
 # On a machine with a CUDA GPU: SD2-sized random models, each preset's adapt iterations, gpu.md (3 min on an H200).
 gpu-check: setup

@@ -123,7 +123,7 @@ def test_bad_inputs_are_sentences():
                  uvs=np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.5]], np.float32))
     normalized, _ = normalize_to_unit_sphere(plane)
     for size in (0.3, 0.05):
-        with pytest.raises(InputError, match="80 times as wide as it is tall.*--object"):
+        with pytest.raises(InputError, match="80 times as wide as it is tall.*--object NAME, or select only it in Blender"):
             place_asset(normalized, PhotoCamera(yaw_deg=90.0, pitch_deg=-10.0, fov_deg=60.0, width=64, height=48),
                         (32.0, 36.0), size)
 

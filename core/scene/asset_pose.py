@@ -63,11 +63,13 @@ FLAT_RATIO = 20.0
 
 def _behind_the_camera(size: float, extent: np.ndarray) -> str:
     ratio = float(max(extent[0], extent[1]) / max(extent[2], 1e-9))
+    # Said to the command line and to Blender alike: each names its own setting.
     if ratio >= FLAT_RATIO:
-        return (f"The asset is {ratio:.0f} times as wide as it is tall (a ground plane?): at --object-size {size:g} it "
-                "would reach behind the camera, and only a tiny one fits; give the object to place with --object.")
-    return (f"At --object-size {size:g} the asset would reach behind the camera; pick a smaller size or a point "
-            "further away.")
+        return (f"The asset is {ratio:.0f} times as wide as it is tall (a ground plane?): at size {size:g} (--object-size, "
+                "Blender's Size) it would reach behind the camera, and only a tiny one fits; place the object alone "
+                "(--object NAME, or select only it in Blender).")
+    return (f"At size {size:g} (--object-size, Blender's Size) the asset would reach behind the camera; pick a smaller "
+            "size or a point further away.")
 
 
 def place_asset(normalized: Mesh, camera: PhotoCamera, pixel: tuple[float, float], size: float,
