@@ -289,17 +289,28 @@ def ensure_node_tools() -> None:
             subprocess.run(["npm", "install", "--silent", "--prefix", str(NODE_MODULES.parent), package], check=True)
 
 
+def corpus_ready(program: str) -> bool:
+    """The corpus is there (else one sentence) and the node tools are installed."""
+    if not CORPUS.is_dir():
+        print(f"{program}: no corpus at {CORPUS}", file=sys.stderr)
+        return False
+    ensure_node_tools()
+    return True
+
+
+def load_average() -> list[str]:
+    return open("/proc/loadavg").read().split()[:3] if Path("/proc/loadavg").exists() else ["?"]
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", nargs="*", help="asset folder names to run (default: all)")
     parser.add_argument("--no-run", action="store_true", help="skip the scenefit run part")
     parser.add_argument("--timeout", type=float, default=900, help="seconds per command")
     args = parser.parse_args()
-    if not CORPUS.is_dir():
-        print(f"corpus: no corpus at {CORPUS}", file=sys.stderr)
+    if not corpus_ready("corpus"):
         return 2
-    ensure_node_tools()
-    load = open("/proc/loadavg").read().split()[:3] if Path("/proc/loadavg").exists() else ["?"]
+    load = load_average()
     rows, runs = [], []
     with tempfile.TemporaryDirectory(prefix="scenefit-corpus-") as tmp:
         for path in corpus_assets():
@@ -314,7 +325,7 @@ def main() -> int:
                 print(f"  run: exit {run['rc']} in {run['seconds']} s", flush=True)
         RESULTS.mkdir(parents=True, exist_ok=True)
         contact_sheet(runs, RESULTS / "corpus_sheet.png")
-    end = open("/proc/loadavg").read().split()[:3] if Path("/proc/loadavg").exists() else ["?"]
+    end = load_average()
     measured = f"{' '.join(load)} (at the end {' '.join(end)})"
     if args.only and (RESULTS / "corpus.json").is_file():   # the other assets' rows stay as last measured
         rows, runs, measured = _merged(json.loads((RESULTS / "corpus.json").read_text()), rows, runs, measured)

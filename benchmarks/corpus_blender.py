@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from corpus import CORPUS, RESULTS, RUN_ON, ROOT, corpus_assets, ensure_node_tools, kept_and_lost, photo_from, \
+from corpus import RESULTS, RUN_ON, ROOT, corpus_assets, corpus_ready, kept_and_lost, load_average, photo_from, \
     validate
 
 DEFAULT_PHOTO = "autoshop_01_1k"   # an indoor photo for the assets RUN_ON gives none
@@ -145,14 +145,12 @@ def main() -> int:
     parser.add_argument("--only", nargs="*", help="asset folder names to run (prints their rows, writes nothing)")
     parser.add_argument("--timeout", type=float, default=900, help="seconds per asset")
     args = parser.parse_args()
-    if not CORPUS.is_dir():
-        print(f"corpus_blender: no corpus at {CORPUS}", file=sys.stderr)
+    if not corpus_ready("corpus_blender"):
         return 2
-    ensure_node_tools()
     sys.path.insert(0, str(ROOT / "tools"))
     import build_extension
 
-    load = " ".join(open("/proc/loadavg").read().split()[:3]) if Path("/proc/loadavg").exists() else "?"
+    load = " ".join(load_average())
     rows = []
     with tempfile.TemporaryDirectory(prefix="scenefit-corpus-blender-") as tmp:
         zip_path = build_extension.build_without_wheels(Path(tmp) / "scenefit.zip")
@@ -170,7 +168,7 @@ def main() -> int:
         if not args.only:
             RESULTS.mkdir(parents=True, exist_ok=True)
             contact_sheet(rows, RESULTS / "corpus_blender_sheet.png")
-    end = " ".join(open("/proc/loadavg").read().split()[:3]) if Path("/proc/loadavg").exists() else "?"
+    end = " ".join(load_average())
     if args.only:
         print(json.dumps(rows, indent=2))
         return 0
