@@ -415,13 +415,15 @@ def carriers_of(objects: list) -> list:
 
 def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[list[tuple]], out_file: str | Path,
                         file_format: str = "glb", output: GltfOutput = GltfOutput(), replace: bool = False,
-                        new_uvs: dict | None = None) -> dict:
+                        new_uvs: dict | None = None, sources: list | None = None) -> dict:
     """Objects of the user's session written as one asset: a copy of each object, its mesh and its materials
     gets the maps (`baked[i]` into the material in each (object, slot number) pair of `slots[i]`) and the
     copies alone are exported, then removed. The copies carry the originals' names while the exporter runs
     (the originals are renamed meanwhile and renamed back after), so the file names its objects and
     materials as the user does. Nothing of the user's is changed. `new_uvs`: per object name, the UVs per loop
-    of the new UV map that materials baked per surface read (blender_io.uv_unwrap.unwrapped_copies)."""
+    of the new UV map that materials baked per surface read (blender_io.uv_unwrap.unwrapped_copies).
+    `sources[i]`: the material the slots of `slots[i]` are exported from (default: the one they hold;
+    Bake Asset: the artist's material a SceneFit result replaced)."""
     import bpy
 
     from .uv_unwrap import add_uv_map
@@ -443,16 +445,15 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
             if copy.parent is not None and copy.parent.name in copies:
                 copy.parent = copies[copy.parent.name]   # (the parent inverse, copied, stays as it was)
         materials = []
-        for pairs in slots:
+        for index, pairs in enumerate(slots):
             for obj, slot in pairs:
-                material = obj.material_slots[slot].material
+                material = sources[index] if sources else obj.material_slots[slot].material
                 if material.name not in material_copies:
                     material_copies[material.name] = material.copy()
                 copy = copies[obj.name]
                 copy.material_slots[slot].link = obj.material_slots[slot].link
                 copy.material_slots[slot].material = material_copies[material.name]
-            obj, slot = pairs[0]
-            materials.append(material_copies[obj.material_slots[slot].material.name])
+            materials.append(copy.material_slots[slot].material)
         for original, duplicate in [*[(bpy.data.objects[n], c) for n, c in copies.items()],
                                     *[(bpy.data.materials[n], c) for n, c in material_copies.items()]]:
             name = original.name

@@ -77,10 +77,11 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
             check_ktx2_output(self.file_format)
         texture = texture_file(context)
         layout = asset_layout(context)   # the selected objects, or the active one with all its materials
+        artists = layout.artists(context)   # what is exported: the artist's materials with the baked maps
         # A rigged asset's skinned meshes go to the root, where glTF wants them (Blender's exporter puts them
         # under the armature: the validator's NODE_SKINNED_MESH_NON_ROOT); a scene has no input file to follow.
         self._output = GltfOutput(self.compress, self.textures, self.max_texture,
-                                  tangents=any(normal_mapped(m) for m in layout.materials), skins_at_root=True)
+                                  tangents=any(normal_mapped(m) for m in artists), skins_at_root=True)
         if self.filepath:
             out_file = Path(bpy.path.abspath(self.filepath))
             if out_file.suffix.lower() != f".{self.file_format}":
@@ -90,8 +91,10 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
             self._folder = run_folder(context, "bake", layout.name)
             out_file = Path(f"{bpy.path.clean_name(layout.name)}.{self.file_format}")
         self._objects, self._slots, self._out_file = layout.objects, layout.slots, out_file
+        self._sources = [m.name for m in artists]
         remap, remapped, self._new_uvs = new_uv_map(context, layout, texture)
-        return work.bake_game_maps, dict(layout.bake_data(), **layout.own_maps(context), texture=str(texture),
+        return work.bake_game_maps, dict(layout.bake_data(artists), **layout.own_maps(context, artists),
+                                         texture=str(texture),
                                          size=self.texture_size, max_size=self.max_texture, remap=remap,
                                          remapped=remapped)
 
@@ -103,13 +106,17 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         slots = [[(bpy.data.objects[name], number) for name, number in pairs] for pairs in self._slots]
         if any(number >= len(obj.material_slots) for pairs in slots for obj, number in pairs):
             raise InputError("A material slot of the asset was removed while SceneFit baked it; bake again.")
+        gone = [name for name in self._sources if name not in bpy.data.materials]
+        if gone:
+            raise InputError(f"The material '{gone[0]}' was deleted or renamed while SceneFit baked it; bake again.")
+        sources = [bpy.data.materials[name] for name in self._sources]
         shown = objects[0].name if len(objects) == 1 else f"{len(objects)} objects ({', '.join(self._objects)})"
 
         def export(folder: Path | None) -> dict:
             out_file = self._out_file if folder is None else folder / self._out_file
             # A chosen file is written over as Blender's own exporters do; a run folder is new.
             report = bake_copies_to_gltf(objects, result["baked"], slots, out_file, self.file_format, self._output,
-                                         replace=True, new_uvs=self._new_uvs)
+                                         replace=True, new_uvs=self._new_uvs, sources=sources)
             report.update({"object": objects[0].name if len(objects) == 1 else None, "objects": list(self._objects),
                            "format": self.file_format, "texture_size": result["size"], "file": str(out_file)})
             if folder is not None:

@@ -90,31 +90,38 @@ class AssetLayout:
         return AssetMaterials(mesh=self.mesh, materials=tuple(
             read_material(m, obj, pairs[0][1]) for m, obj, pairs in zip(self.materials, users, self.slots)))
 
-    def bake_data(self) -> dict:
-        """What core.game_bake needs to bake each material in its own UVs (plain data, for a job)."""
+    def bake_data(self, materials: list | None = None) -> dict:
+        """What core.game_bake needs to bake each material in its own UVs (plain data, for a job), read from
+        `materials` (default: what the slots hold; Bake Asset: the artist's, `artists`)."""
         from ..blender_io.gltf_export import constant_channels
         from ..blender_io.material import material_wrap
 
-        return {"mesh": self.mesh, "names": [m.name for m in self.materials],
-                "constants": [constant_channels(m) for m in self.materials],
-                "wraps": [material_wrap(m) for m in self.materials]}
+        materials = materials or self.materials
+        return {"mesh": self.mesh, "names": [m.name for m in materials],
+                "constants": [constant_channels(m) for m in materials],
+                "wraps": [material_wrap(m) for m in materials]}
 
-    def own_maps(self, context) -> dict:
-        """Each material's own maps, which the game bake takes its shape and base from (plain data). A
-        slot that holds a SceneFit result is read through the artist's material it replaced: the result's
-        images are the texture's working copy, not the asset's; `results[i]` says so (its baked maps are
-        then always written anew, never kept as 'unchanged')."""
-        from ..blender_io.material import read_material
-
+    def artists(self, context) -> list:
+        """Each material as the artist made it: where its slots hold a SceneFit result, the material that
+        result replaced. The result is a preview of the texture (three maps on a new Principled BSDF); the
+        game asset is the artist's material with the baked maps in place of its own, keeping its normal
+        map, emission, alpha, vertex colours and glTF extensions, as `scenefit bake` keeps the file's."""
         originals = {(e.asset_object.name, e.slot): e.original for e in context.scene.scenefit.result_slots
                      if e.asset_object is not None and e.original is not None}
-        own, results = [], []
-        for material, pairs in zip(self.materials, self.slots):
-            name, number = pairs[0]
-            artists = originals.get((name, number)) if TAG in material else None
-            own.append(read_material(artists or material, bpy.data.objects[name], number).maps)
-            results.append(TAG in material)
-        return {"own_maps": own, "results": results}
+        return [(originals.get(pairs[0]) if TAG in material else None) or material
+                for material, pairs in zip(self.materials, self.slots)]
+
+    def own_maps(self, context, artists: list | None = None) -> dict:
+        """Each material's own maps, which the game bake takes its shape and base from (plain data), read
+        from the artist's material (`artists`): the result's images are the texture's working copy, not
+        the asset's; `results[i]` says the slots hold a result (its baked maps are then always written anew,
+        never kept as 'unchanged')."""
+        from ..blender_io.material import read_material
+
+        artists = artists or self.artists(context)
+        own = [read_material(artist, bpy.data.objects[pairs[0][0]], pairs[0][1]).maps
+               for artist, pairs in zip(artists, self.slots)]
+        return {"own_maps": own, "results": [TAG in material for material in self.materials]}
 
 
 def asset_objects(context) -> list:

@@ -169,13 +169,16 @@ game_bake = import_module(MODULE + ".core.stages.bake.game_bake")
 texture = import_module(MODULE + ".core.texture.bake").load_neural_texture(bpy.path.abspath(bpy.context.scene.scenefit.texture_path))
 mesh_b, _ = import_module(MODULE + ".blender_io.material").object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())
 # (each material at its own images' shape, from the artist's maps behind the result in the slot)
-own = import_module(MODULE + ".operators.common").asset_layout(bpy.context).own_maps(bpy.context)["own_maps"]
+layout = import_module(MODULE + ".operators.common").asset_layout(bpy.context)
+own = layout.own_maps(bpy.context)["own_maps"]
 out["bake_shape"] = list(game_bake.own_texture_shape(own[0], import_module(MODULE + ".core.stages.bake.gltf_output").DEFAULT_MAX_TEXTURE))
-(expected,) = game_bake.bake_game_maps(texture, mesh_b, [obj.active_material.name], [tuple(out["bake_shape"])],
-                                       [gltf_export.constant_channels(obj.active_material)], None, own)
+# The file holds the artist's material (the slot holds SceneFit's preview of the texture) with the baked maps.
+(artist,) = layout.artists(bpy.context)
+(expected,) = game_bake.bake_game_maps(texture, mesh_b, [artist.name], [tuple(out["bake_shape"])],
+                                       [gltf_export.constant_channels(artist)], None, own)
 np.savez(tmp / "expected_bake.npz", base_color=expected.base_color, roughness=np.asarray(expected.roughness),
          metallic=np.asarray(expected.metallic))
-out["bake_material"] = obj.active_material.name
+out["bake_material"] = [artist.name, obj.active_material.name]
 out["bake_folders"] = sorted(str(p.relative_to(tmp)) for p in set((tmp / "scenefit").glob("*/bake-*")) - bake_folders)
 out["bake_files"] = sorted(str(p) for p in tmp.rglob("*.gl*"))
 out["timings"] = dict(timings)
@@ -423,8 +426,10 @@ def test_bake_asset_writes_valid_gltf_that_reads_back(blender, operated, validat
     assert gltf == str(tmp / "chosen" / "asset.gltf")
     chosen = json.loads(Path(gltf).read_text())  # Compression Draco, Textures JPEG
     assert "KHR_draco_mesh_compression" in chosen["extensionsUsed"]
-    assert {image.get("mimeType", Path(image.get("uri", "")).suffix) for image in chosen["images"]} <= \
-        {"image/jpeg", ".jpg"}, chosen["images"]
+    kinds = {image["name"]: image.get("mimeType", Path(image.get("uri", "")).suffix) for image in chosen["images"]}
+    assert kinds["AssetMaterial_metallic_roughness"] in ("image/jpeg", ".jpg"), kinds
+    # the base colour carries the artist's alpha (their material links it), which JPEG cannot hold: PNG
+    assert kinds["AssetMaterial_base_color"] in ("image/png", ".png"), kinds
     for path in (glb, gltf):
         report = validator(path)
         assert report["issues"]["numErrors"] == 0, report["issues"]["messages"]
@@ -444,7 +449,8 @@ def test_bake_asset_writes_valid_gltf_that_reads_back(blender, operated, validat
         print("JSON" + json.dumps(err))
     """)
     err = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
-    assert err["name"] == out["bake_material"]
+    artist, in_slot = out["bake_material"]
+    assert err["name"] == artist == "AssetMaterial" and in_slot != artist   # the artist's, not SceneFit's preview
     assert err["base_color"] <= 1.0 and err["roughness"] <= 1.0 and err["metallic"] <= 1.0, err
     assert err["shape"] == out["bake_shape"], (err, out["bake_shape"])
 
