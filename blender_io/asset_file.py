@@ -135,11 +135,24 @@ def _read_or_sentence(path: Path, read: Callable[[], None]) -> None:
 
 # What Import Asset reads: the files Blender's importers read, meshopt glTF and ASCII FBX included.
 IMPORTABLE_SUFFIXES = tuple(IMPORTERS)
+# The custom property Import Asset leaves on each object it brought: the file it came from, so Bake
+# Asset can write the game asset as that file was written (compression, texture format, tangents).
+SOURCE_PROPERTY = "scenefit_source_file"
+
+
+def imported_from(objects: list) -> Path | None:
+    """The file Import Asset read the first of `objects` that has one from, if it is still there."""
+    for obj in objects:
+        source = obj.get(SOURCE_PROPERTY)
+        if isinstance(source, str) and Path(source).is_file():
+            return Path(source)
+    return None
 
 
 def import_into_open_scene(path: str | Path) -> list:
     """The objects of the asset file `path`, imported into the open scene's active collection as
-    File > Import does (selected, one of them active), including what Blender's own importers refuse:
+    File > Import does (selected, one of them active; each marked with SOURCE_PROPERTY), including what
+    Blender's own importers refuse:
     a meshopt-compressed glTF is decoded and an ASCII FBX written as binary first. Images the import
     read from such a temporary copy are packed into the .blend, so they outlive the copy. Nothing
     that was there before is changed; a file that cannot be read is one sentence (InputError)."""
@@ -160,7 +173,10 @@ def import_into_open_scene(path: str | Path) -> list:
                 if image.packed_file is None and image.source == "FILE" and \
                         Path(bpy.path.abspath(image.filepath)).is_file():
                     image.pack()
-    return sorted((o for o in bpy.data.objects if o not in before), key=lambda o: o.name)
+    objects = sorted((o for o in bpy.data.objects if o not in before), key=lambda o: o.name)
+    for obj in objects:
+        obj[SOURCE_PROPERTY] = str(path.resolve())
+    return objects
 
 
 @contextmanager

@@ -12,6 +12,7 @@ from pathlib import Path
 import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 
+from ..blender_io.asset_file import imported_from
 from ..blender_io.gltf_export import FORMATS, bake_copies_to_gltf, normal_mapped
 from ..core.base.errors import InputError
 from ..core.stages.bake.gltf_ktx2 import check_ktx2_output
@@ -25,14 +26,40 @@ from .properties import PATH
 FORMAT_ITEMS = (("glb", "glTF Binary (.glb)", "One file holding the mesh, materials and images"),
                 ("gltf", "glTF Separate (.gltf)", "JSON, a .bin and the images beside it"))
 assert {key for key, *_ in FORMAT_ITEMS} == set(FORMATS)
-COMPRESS_ITEMS = (("none", "None", "Plain mesh data"),
+AS_IMPORTED = "imported"
+COMPRESS_ITEMS = ((AS_IMPORTED, "As imported", "As the file Import Asset read the asset from (None for objects made "
+                                               "or imported otherwise; None for meshopt in a .gltf)"),
+                  ("none", "None", "Plain mesh data"),
                   ("draco", "Draco", "KHR_draco_mesh_compression, by Blender's exporter"),
                   ("meshopt", "meshopt", "EXT_meshopt_compression, by meshoptimizer's encoder (.glb only)"))
-TEXTURE_ITEMS = (("png", "PNG", "Lossless"), ("jpeg", "JPEG", "Smaller, lossy (images with alpha stay PNG)"),
+TEXTURE_ITEMS = ((AS_IMPORTED, "As imported", "As the file Import Asset read the asset from (PNG for objects made "
+                                              "or imported otherwise; PNG for KTX2 in a .gltf)"),
+                 ("png", "PNG", "Lossless"), ("jpeg", "JPEG", "Smaller, lossy (images with alpha stay PNG)"),
                  ("webp", "WebP", "Smaller; needs an engine that reads EXT_texture_webp"),
                  ("ktx2", "KTX2", "GPU-compressed (KHR_texture_basisu: ETC1S colour, UASTC data; .glb only; "
                                   "needs Basis Universal's basisu)"))
-assert [k for k, *_ in COMPRESS_ITEMS] == list(COMPRESSIONS) and [k for k, *_ in TEXTURE_ITEMS] == list(TEXTURE_FORMATS)
+assert [k for k, *_ in COMPRESS_ITEMS[1:]] == list(COMPRESSIONS) and \
+    [k for k, *_ in TEXTURE_ITEMS[1:]] == list(TEXTURE_FORMATS)
+
+
+def bake_output(compress: str, textures: str, max_texture: int, file_format: str, source: Path | None,
+                normal_maps: bool) -> GltfOutput:
+    """Bake Asset's output: compression and texture format as chosen, or As imported: as the file `source`
+    was written (scenefit bake's default), within what `file_format` holds (meshopt and KTX2: .glb only);
+    tangents where that file had them or a material has a normal map; skinned meshes at the root, where
+    glTF wants them (Blender's exporter puts them under the armature: NODE_SKINNED_MESH_NON_ROOT).
+    One sentence (InputError) for a setting that cannot be written, before any work."""
+    from ..core.stages.bake.gltf_output import output_like_input
+
+    like = output_like_input(source) if source is not None else GltfOutput()
+    if compress == AS_IMPORTED:
+        compress = like.compress if like.compress != "meshopt" or file_format == "glb" else "none"
+    if textures == AS_IMPORTED:
+        textures = like.textures if like.textures != "ktx2" or file_format == "glb" else "png"
+    if textures == "ktx2":
+        check_ktx2_output(file_format)
+    return GltfOutput(compress, textures, max_texture, tangents=like.tangents or normal_maps, skins_at_root=True,
+                      normals=like.normals)
 
 
 def texture_file(context) -> Path:
@@ -58,8 +85,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
     texture_size: IntProperty(name="Texture size", default=0, min=0, max=8192, options={"SKIP_SAVE"},
                               description="Pixels per side (a power of two) for every material; 0: each "
                                           "material's own images' size")
-    compress: EnumProperty(name="Compression", items=COMPRESS_ITEMS, default="none")
-    textures: EnumProperty(name="Textures", items=TEXTURE_ITEMS, default="png")
+    compress: EnumProperty(name="Compression", items=COMPRESS_ITEMS, default=AS_IMPORTED)
+    textures: EnumProperty(name="Textures", items=TEXTURE_ITEMS, default=AS_IMPORTED)
     max_texture: IntProperty(name="Max texture", default=DEFAULT_MAX_TEXTURE, min=4, max=8192,
                              description="Largest baked texture side, a power of two")
 
@@ -72,16 +99,12 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         if size and (size < 4 or size & (size - 1)):
             raise InputError(f"Texture size must be a power of two from 4 to 8192 (or 0 for each material's own "
                              f"images' size), got {size}.")
-        GltfOutput(self.compress, self.textures, self.max_texture)  # a bad setting is one sentence before any work
-        if self.textures == "ktx2":
-            check_ktx2_output(self.file_format)
         texture = texture_file(context)
         layout = asset_layout(context)   # the selected objects, or the active one with all its materials
         artists = layout.artists(context)   # what is exported: the artist's materials with the baked maps
-        # A rigged asset's skinned meshes go to the root, where glTF wants them (Blender's exporter puts them
-        # under the armature: the validator's NODE_SKINNED_MESH_NON_ROOT); a scene has no input file to follow.
-        self._output = GltfOutput(self.compress, self.textures, self.max_texture,
-                                  tangents=any(normal_mapped(m) for m in artists), skins_at_root=True)
+        self._output = bake_output(self.compress, self.textures, self.max_texture, self.file_format,
+                                   imported_from([bpy.data.objects[n] for n in layout.objects]),
+                                   any(normal_mapped(m) for m in artists))
         if self.filepath:
             out_file = Path(bpy.path.abspath(self.filepath))
             if out_file.suffix.lower() != f".{self.file_format}":

@@ -554,6 +554,16 @@ except RuntimeError as error:
 out["after_broken"] = sorted(o.name for o in bpy.data.objects)
 menu = bpy.types.TOPBAR_MT_file_import._dyn_ui_initialize()
 out["in_file_import"] = any(getattr(f, "__module__", "").endswith("operators.import_asset") for f in menu)
+# Bake Asset writes it as the file was written (Compression and Textures default to As imported)
+painted = bpy.data.objects["Painted"]
+out["source"] = painted.get("scenefit_source_file")
+bpy.ops.object.select_all(action="DESELECT")
+painted.select_set(True)
+bpy.context.view_layer.objects.active = painted
+bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "imported.blend"))
+out["import_convert"] = sorted(bpy.ops.scenefit.convert(iterations=5))
+out["import_bake"] = sorted(bpy.ops.scenefit.bake_asset(filepath=str(tmp / "imported_bake" / "painted.glb")))
+out["import_bake_extensions"] = meshopt.read_gltf(tmp / "imported_bake" / "painted.glb")[0].get("extensionsUsed", [])
 """
 
 
@@ -570,6 +580,9 @@ def test_import_asset_reads_a_file_blenders_importer_refuses_into_the_artists_sc
     assert out["broken"].rstrip().count("\n") == 0 and "Traceback" not in out["broken"]
     assert out["after_broken"] == ["MyCube", "Painted"]
     assert out["in_file_import"]
+    assert out["source"] == str((blender.tmp / "packed.glb").resolve())
+    assert out["import_convert"] == out["import_bake"] == ["FINISHED"]
+    assert "EXT_meshopt_compression" in out["import_bake_extensions"]   # as imported (else plain: "none")
 
 def test_missing_dependencies_are_one_sentence(blender):
     out = step(blender, MISSING)   # the module's last test: it disables the add-on
