@@ -112,16 +112,14 @@ class AssetLayout:
                 for material, pairs in zip(self.materials, self.slots)]
 
     def own_maps(self, context, artists: list | None = None) -> dict:
-        """Each material's own maps, which the game bake takes its shape and base from (plain data), read
-        from the artist's material (`artists`): the result's images are the texture's working copy, not
-        the asset's; `results[i]` says the slots hold a result (its baked maps are then always written anew,
-        never kept as 'unchanged')."""
+        """Each material's own maps, which the game bake takes its shape and base from and compares its maps
+        with (plain data), read from the artist's material (`artists`): a result's images are the texture's
+        working copy, not the asset's."""
         from ..blender_io.material import read_material
 
         artists = artists or self.artists(context)
-        own = [read_material(artist, bpy.data.objects[pairs[0][0]], pairs[0][1]).maps
-               for artist, pairs in zip(artists, self.slots)]
-        return {"own_maps": own, "results": [TAG in material for material in self.materials]}
+        return {"own_maps": [read_material(artist, bpy.data.objects[pairs[0][0]], pairs[0][1]).maps
+                             for artist, pairs in zip(artists, self.slots)]}
 
 
 def asset_objects(context) -> list:

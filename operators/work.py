@@ -265,9 +265,10 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
 
 def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
     """The neural texture baked per material for glTF: at data['size']² for all, or (0) each at its own
-    images' shape from its own maps (data['own_maps']), within data['max_size'], as `scenefit bake` does."""
-    from dataclasses import replace
-
+    images' shape from its own maps (data['own_maps']), within data['max_size'], as `scenefit bake` does.
+    A channel whose baked map is what the artist's material already gives keeps that material's nodes
+    (BakedMaterial.unchanged), also where the slot holds a SceneFit result: the file is written from the
+    artist's material (operators/common.AssetLayout.artists)."""
     from ..blender_io.uv_unwrap import NEW_UV_MAP
     from ..core.stages.bake.game_bake import bake_game_maps as bake, bake_shapes
     from ..core.base.progress import emit
@@ -281,7 +282,5 @@ def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Eve
     baked = bake(texture, data["mesh"], list(data["names"]), shapes, [dict(c) for c in data["constants"]],
                  [tuple(w) for w in data.get("wraps", ())] or None, own, data.get("remapped"),
                  data.get("remap", frozenset()), NEW_UV_MAP)
-    # a slot holding a SceneFit result keeps no nodes of its own: its maps are written anew
-    baked = [replace(b, unchanged=frozenset()) if result else b for b, result in zip(baked, data["results"])]
     emit(progress, "bake", 1, 1, "maps ready")
     return {"baked": baked, "size": max(max(b.base_color.shape[:2]) for b in baked)}

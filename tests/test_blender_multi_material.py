@@ -316,9 +316,10 @@ def check_glb(path: Path, tmp: Path, validator, expected: dict[str, str]) -> dic
     assert set(found) - {"_meshes", "_nodes", "_sizes"} == names, found
     for original in names:
         assert np.allclose(found[original], COLOURS[original], atol=0.03), (original, found)
-    # Each at its own image's shape (the artist's 24x12, sides rounded up to powers of two: 32x16), read
-    # through the result material in the slot, as `scenefit bake` does; it was the texture's square atlas cell
-    assert set(map(tuple, found["_sizes"].values())) == {(16, 32)}, found["_sizes"]
+    # Each is the artist's own 24x12 image: its baked map is what the material already gave (one colour,
+    # reproduced), so the artist's nodes and image are kept (BakedMaterial.unchanged), as `scenefit bake`
+    # keeps a file's; it was once the texture's square atlas cell, then a resampled 32x16 copy
+    assert set(map(tuple, found["_sizes"].values())) == {(12, 24)}, found["_sizes"]
     return found
 
 
