@@ -101,7 +101,7 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
                              f"images' size), got {size}.")
         texture = texture_file(context)
         layout = asset_layout(context)   # the selected objects, or the active one with all its materials
-        artists = layout.artists(context)   # what is exported: the artist's materials with the baked maps
+        artists = layout.artists   # what is exported: the artist's materials with the baked maps
         self._output = bake_output(self.compress, self.textures, self.max_texture, self.file_format,
                                    imported_from([bpy.data.objects[n] for n in layout.objects]),
                                    any(normal_mapped(m) for m in artists))
@@ -116,7 +116,7 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         self._objects, self._slots, self._out_file = layout.objects, layout.slots, out_file
         self._sources = [m.name for m in artists]
         remap, remapped, self._new_uvs = new_uv_map(context, layout, texture)
-        return work.bake_game_maps, dict(layout.bake_data(artists), **layout.own_maps(context, artists),
+        return work.bake_game_maps, dict(layout.bake_data(), **layout.own_maps(),
                                          texture=str(texture),
                                          size=self.texture_size, max_size=self.max_texture, remap=remap,
                                          remapped=remapped)

@@ -74,6 +74,8 @@ class AssetLayout:
     object is wherever it is moved; world space for several, as an asset file's scene is read).
     materials: the material datablocks, one per material of the asset.
     slots: slots[i] = the (object name, slot number) pairs that hold materials[i] (a result replaces them all).
+    artists: each material as the artist made it: materials[i], or where its slots hold a SceneFit result,
+    the material that result replaced (`artists_materials`). What SceneFit reads and bakes into.
     """
 
     name: str
@@ -81,45 +83,45 @@ class AssetLayout:
     mesh: object
     materials: list
     slots: list[list[tuple[str, int]]]
+    artists: list
 
     def read(self, context) -> AssetMaterials:
-        """Every material's maps and what was read (procedural chains are baked over their own faces)."""
+        """Every material's maps as the artist made it, and what was read (procedural chains are baked over
+        their own faces): Run All and Convert again restyle the asset, not SceneFit's last result."""
         from ..blender_io.material import read_material
 
         users = [bpy.data.objects[pairs[0][0]] for pairs in self.slots]
         return AssetMaterials(mesh=self.mesh, materials=tuple(
-            read_material(m, obj, pairs[0][1]) for m, obj, pairs in zip(self.materials, users, self.slots)))
+            read_material(m, obj, pairs[0][1]) for m, obj, pairs in zip(self.artists, users, self.slots)))
 
-    def bake_data(self, materials: list | None = None) -> dict:
-        """What core.game_bake needs to bake each material in its own UVs (plain data, for a job), read from
-        `materials` (default: what the slots hold; Bake Asset: the artist's, `artists`)."""
+    def bake_data(self) -> dict:
+        """What core.game_bake needs to bake each (artist's) material in its own UVs (plain data, for a job)."""
         from ..blender_io.gltf_export import constant_channels
         from ..blender_io.material import material_wrap
 
-        materials = materials or self.materials
-        return {"mesh": self.mesh, "names": [m.name for m in materials],
-                "constants": [constant_channels(m) for m in materials],
-                "wraps": [material_wrap(m) for m in materials]}
+        return {"mesh": self.mesh, "names": [m.name for m in self.artists],
+                "constants": [constant_channels(m) for m in self.artists],
+                "wraps": [material_wrap(m) for m in self.artists]}
 
-    def artists(self, context) -> list:
-        """Each material as the artist made it: where its slots hold a SceneFit result, the material that
-        result replaced. The result is a preview of the texture (three maps on a new Principled BSDF); the
-        game asset is the artist's material with the baked maps in place of its own, keeping its normal
-        map, emission, alpha, vertex colours and glTF extensions, as `scenefit bake` keeps the file's."""
-        originals = {(e.asset_object.name, e.slot): e.original for e in context.scene.scenefit.result_slots
-                     if e.asset_object is not None and e.original is not None}
-        return [(originals.get(pairs[0]) if TAG in material else None) or material
-                for material, pairs in zip(self.materials, self.slots)]
-
-    def own_maps(self, context, artists: list | None = None) -> dict:
-        """Each material's own maps, which the game bake takes its shape and base from and compares its maps
-        with (plain data), read from the artist's material (`artists`): a result's images are the texture's
-        working copy, not the asset's."""
+    def own_maps(self) -> dict:
+        """Each artist's material's own maps, which the game bake takes its shape and base from and compares
+        its maps with (plain data): a result's images are the texture's working copy, not the asset's."""
         from ..blender_io.material import read_material
 
-        artists = artists or self.artists(context)
         return {"own_maps": [read_material(artist, bpy.data.objects[pairs[0][0]], pairs[0][1]).maps
-                             for artist, pairs in zip(artists, self.slots)]}
+                             for artist, pairs in zip(self.artists, self.slots)]}
+
+
+def artists_materials(context, materials: list, slots: list[list[tuple[str, int]]]) -> list:
+    """Each material as the artist made it: where its slots hold a SceneFit result, the material that result
+    replaced. The result is a preview of the texture (three maps on a new Principled BSDF): the asset is the
+    artist's material, read again by Run All and Convert, and written by Bake Asset with the baked maps in
+    place of its own, keeping its normal map, emission, alpha and glTF extensions, as `scenefit bake`
+    keeps a file's."""
+    originals = {(e.asset_object.name, e.slot): e.original for e in context.scene.scenefit.result_slots
+                 if e.asset_object is not None and e.original is not None}
+    return [(originals.get(pairs[0]) if TAG in material else None) or material
+            for material, pairs in zip(materials, slots)]
 
 
 def asset_objects(context) -> list:
@@ -147,8 +149,8 @@ def asset_layout(context) -> AssetLayout:
     if len(objects) == 1:
         obj = objects[0]
         mesh, used = object_mesh_and_slots(obj, depsgraph)
-        return AssetLayout(name, [obj.name], mesh, [obj.material_slots[s].material for s in used],
-                           [[(obj.name, s)] for s in used])
+        materials, slots = [obj.material_slots[s].material for s in used], [[(obj.name, s)] for s in used]
+        return AssetLayout(name, [obj.name], mesh, materials, slots, artists_materials(context, materials, slots))
     try:
         scene = scene_mesh(objects, depsgraph, name, strict=True)
     except InputError as error:
@@ -159,7 +161,9 @@ def asset_layout(context) -> AssetLayout:
         for number, slot in enumerate(obj.material_slots):
             if slot.material is not None and slot.material.name in index:
                 slots[index[slot.material.name]].append((obj.name, number))
-    return AssetLayout(name, [o.name for o in objects], scene.mesh, list(scene.materials), slots)
+    materials = list(scene.materials)
+    return AssetLayout(name, [o.name for o in objects], scene.mesh, materials, slots,
+                       artists_materials(context, materials, slots))
 
 
 def gather_asset(context):

@@ -170,10 +170,10 @@ texture = import_module(MODULE + ".core.texture.bake").load_neural_texture(bpy.p
 mesh_b, _ = import_module(MODULE + ".blender_io.material").object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())
 # (each material at its own images' shape, from the artist's maps behind the result in the slot)
 layout = import_module(MODULE + ".operators.common").asset_layout(bpy.context)
-own = layout.own_maps(bpy.context)["own_maps"]
+own = layout.own_maps()["own_maps"]
 out["bake_shape"] = list(game_bake.own_texture_shape(own[0], import_module(MODULE + ".core.stages.bake.gltf_output").DEFAULT_MAX_TEXTURE))
 # The file holds the artist's material (the slot holds SceneFit's preview of the texture) with the baked maps.
-(artist,) = layout.artists(bpy.context)
+(artist,) = layout.artists
 (expected,) = game_bake.bake_game_maps(texture, mesh_b, [artist.name], [tuple(out["bake_shape"])],
                                        [gltf_export.constant_channels(artist)], None, own)
 np.savez(tmp / "expected_bake.npz", base_color=expected.base_color, roughness=np.asarray(expected.roughness),
