@@ -105,17 +105,32 @@ def status(row: dict) -> str:
     return f"{errors} validator errors" if errors else "ok"
 
 
+SHEET_COLUMNS = 4
+
+
 def contact_sheet(rows: list[dict], path: Path) -> None:
+    """The composites as a grid, SHEET_COLUMNS to a row, each captioned with its asset and photo."""
     import cv2
+    import numpy as np
 
     from scenefit.core.data.imageio import read_image, write_image
     from scenefit.core.texture.views import contact_sheet as sheet
 
-    shown = {f"{r['asset']} in {r['photo']}": [cv2.resize(read_image(r["composite"])[..., :3], (320, 240),
-                                                            interpolation=cv2.INTER_AREA)]
-             for r in rows if r.get("composite") and Path(r["composite"]).is_file()}
-    if shown:
-        write_image(path, sheet(shown))
+    tiles = []
+    for r in rows:
+        if r.get("composite") and Path(r["composite"]).is_file():
+            tile = np.ascontiguousarray(cv2.resize(read_image(r["composite"])[..., :3], (320, 240),
+                                                   interpolation=cv2.INTER_AREA), np.float32)
+            tile[-20:] = 0.12
+            cv2.putText(tile, f"{r['asset']} / {r['photo'].removesuffix('_1k')}"[:44], (5, 234),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.38, (0.95, 0.95, 0.95), 1, cv2.LINE_AA)
+            tiles.append(tile)
+    if not tiles:
+        return
+    tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % SHEET_COLUMNS)
+    grid = {f"{k + 1}-{min(k + SHEET_COLUMNS, len(rows))}": tiles[k:k + SHEET_COLUMNS]
+            for k in range(0, len(tiles), SHEET_COLUMNS)}
+    write_image(path, sheet(grid))
 
 
 def markdown(rows: list[dict], measured: str) -> str:
@@ -125,7 +140,9 @@ def markdown(rows: list[dict], measured: str) -> str:
              f"{measured}. A fresh Blender per asset, the extension installed from its zip, an object of the "
              "artist's own in the scene; the asset's visible meshes selected as one asset; preset draft, no prompt "
              f"(adapt skipped); photos as `scenefit run`'s part of corpus.md. **{ok} of {len(rows)}** pass (every "
-             "step finished, 0 validator errors, the artist's object as it was). Composites in "
+             "step finished, 0 validator errors, the artist's object as it was). Bake Asset writes the selection "
+             "and what carries it, so cameras and lights beside it in the file are not in the bake (`scenefit "
+             "bake` writes the whole file); \"kept / lost\" counts them. Composites in "
              "[corpus_blender_sheet.png](corpus_blender_sheet.png).\n",
              "| asset | file | status | objects | import s | Run All s | Bake Asset s | validator errors / warnings | "
              "kept | lost | message |", "|---|---|---|---|---|---|---|---|---|---|---|"]
