@@ -15,8 +15,9 @@ from urllib.parse import urlparse
 import bpy
 
 from ..core.base.errors import InputError
-from .common import depth_model_preference, model_settings, photo_view, preferences, run_folder, scene_asset
-from .results import apply_result_material
+from .common import (depth_model_preference, model_settings, photo_view, preferences, run_folder, scene_asset,
+                     scene_layout)
+from .results import apply_result_material, result_targets
 
 # What the worker runs for each operator: the whole pipeline (adapt needs convert and the light).
 REMOTE_STAGES = ("convert", "light", "adapt", "compose")
@@ -53,33 +54,57 @@ def is_local_address(address: str) -> bool:
 
 
 def remote_work(op, context, address: str) -> tuple:
-    """(work function, plain data) that run the whole pipeline for the active object in the worker
-    environment at `address`; the operator's quick-look settings travel as stage overrides."""
+    """(work function, plain data) that run the whole pipeline in the worker environment at `address`; the
+    operator's quick-look settings travel as stage overrides. Run All takes what a local Run All takes
+    (every material of the active object, or the selected objects as one asset: their atlas travels, and
+    each material's maps are baked here from the texture that comes back); Adapt the active object's
+    one material, as a local Adapt does."""
     from ..workers.remote import work_remotely
 
     settings = context.scene.scenefit
-    photo, obj, mesh, maps = scene_asset(op, context, "A worker environment runs the pipeline that fits the asset "
-                                                      "into a photo; other modes run in this Blender")
+    refusal = "A worker environment runs the pipeline that fits the asset into a photo; other modes run in this Blender"
+    materials = None
+    if op.job_name == "run":
+        photo, layout = scene_layout(op, context, refusal)
+        mesh, maps = layout.read(context).fitting_view()   # several materials: their atlas, as a local Run All
+        op._layout = result_targets(layout)   # where the results go (Run's apply): every slot of the asset
+        objects, name = [bpy.data.objects[n] for n in layout.objects], layout.name
+        materials = layout.bake_data() if len(layout.materials) > 1 else None
+    else:
+        photo, obj, mesh, maps = scene_asset(op, context, refusal)
+        op._layout = {"objects": [obj.name], "slots": [[(obj.name, obj.active_material_index)]], "wraps": None,
+                      "name": obj.name}
+        objects, name = [obj], obj.name
     models, _ = model_settings(context)
     from dataclasses import replace
 
     # The worker finds the models in its own cache and on its own device.
     models = replace(models, cache_dir=None, device_type="auto")
     # The job's folder comes back whole as this run's new folder (nothing of it while it runs or if cancelled).
-    folder = run_folder(context, op.job_name, obj.name)
-    # Where the results go (Run's apply): the object's active slot, as for one material ever.
-    op._layout = {"objects": [obj.name], "slots": [[(obj.name, obj.active_material_index)]], "wraps": None,
-                  "name": obj.name}
+    folder = run_folder(context, op.job_name, name)
     # How the photo is seen, as Run All here sees it (operators/common.photo_view): the artist's camera or the
     # panel's values, where the asset stands, and the artist's sun.
     from .work import job_view
 
-    return work_remotely, {
+    return (work_remotely if materials is None else work_remotely_per_material), {
         "mesh": mesh, "maps": maps, "photo": str(photo), "worker": address,
         "out": str(folder.parent), "name": folder.name, "preset": settings.preset,
         "stages": REMOTE_STAGES, "prompt": settings.prompt, "models": models, "overrides": quick_overrides(op),
-        "scene": settings.scene_type, "depth_model": depth_model_preference(context),
-        **job_view(photo_view(context, photo, obj))}
+        "scene": settings.scene_type, "depth_model": depth_model_preference(context), "materials": materials,
+        **job_view(photo_view(context, photo, objects))}
+
+
+def work_remotely_per_material(data: dict, progress=None, cancel=None) -> dict:
+    """work_remotely for an asset of several materials: the worker fits their atlas; each material's maps
+    are then baked here from the texture that came back, in its own UVs (operators.work.material_results,
+    as after a local Run All), into the run folder's materials/."""
+    from ..workers.remote import work_remotely
+    from .work import material_results
+
+    result = work_remotely(data, progress, cancel)
+    texture = run_result(result["folder"], result["report"])["texture"]
+    result["material_maps"] = material_results(data, texture, Path(result["folder"]) / "materials")
+    return result
 
 
 def quick_overrides(op) -> dict:
@@ -129,7 +154,7 @@ def run_result(folder: str | Path, report: dict) -> dict:
 def apply_remote(op, context, result: dict) -> str:
     """Main thread: the worker's results as new datablocks (the artist's own are kept); a Run's are
     applied by Run's own apply, as after a local run."""
-    shaped = run_result(result["folder"], result["report"])
+    shaped = dict(run_result(result["folder"], result["report"]), material_maps=result.get("material_maps", []))
     done = f"Done on the worker ({result['report'].get('seconds', 0):.0f} s): "
     if op.job_name == "run":
         return done + op.apply(context, shaped).removeprefix("Done: ")

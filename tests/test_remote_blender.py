@@ -41,9 +41,13 @@ ray.init(num_cpus=2, object_store_memory=80 * 2**20, include_dashboard=False, lo
 bpy.ops.wm.read_homefile(use_empty=True)
 bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)
 obj = bpy.context.active_object
-mat = bpy.data.materials.new("AssetMaterial")
-mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.6, 0.3, 0.2, 1.0)
-obj.data.materials.append(mat)
+# Two materials (the upper and lower half), as real assets have several: Run All on a worker takes them all
+for name, colour in (("AssetMaterial", (0.6, 0.3, 0.2, 1.0)), ("Trim", (0.1, 0.3, 0.7, 1.0))):
+    mat = bpy.data.materials.new(name)
+    mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = colour
+    obj.data.materials.append(mat)
+for poly in obj.data.polygons:
+    poly.material_index = int(poly.center.z < 0)
 imageio.write_image(tmp / "photo.png", np.random.default_rng(1).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32))
 s = bpy.context.scene.scenefit
 s.preset, s.photo_path, s.prompt, s.placement = "draft", str(tmp / "photo.png"), "a mossy ball", (0.5, 0.8)
@@ -56,7 +60,7 @@ op = SimpleNamespace(job_name=Run.job_name, runs_remotely=Run.runs_remotely, ite
 op.apply = lambda context, result: Run.apply(op, context, result)
 t0 = time.perf_counter()
 work, data = Run.job_work(op, bpy.context)
-out["handed_off"] = [work.__module__, op._remote]
+out["handed_off"] = [work.__module__, work.__name__, op._remote]
 data["overrides"]["adapt"].update(preview_every=1)   # a preview at every step
 job = jobs.start_job(jobs.Job("run", work, data))
 seen, previews = [], 0
@@ -74,9 +78,9 @@ out["run"] = {"status": state.status, "error": state.error, "stages": sorted({s 
               "seconds": round(time.perf_counter() - t0, 1)}
 if state.status == "done":
     out["run_message"] = Run.apply_result(op, bpy.context, state.result)   # main thread, as _finish does
-    out["run_material"] = [obj.active_material.name, obj.active_material.get("scenefit"),
-                           sorted(n.image.filepath for n in obj.active_material.node_tree.nodes
-                                  if n.type == "TEX_IMAGE" and n.image)]
+    out["run_materials"] = [[slot.material.name, slot.material.get("scenefit"),
+                             sorted(n.image.filepath for n in slot.material.node_tree.nodes
+                                    if n.type == "TEX_IMAGE" and n.image)] for slot in obj.material_slots]
     out["run_world"] = [bpy.context.scene.world.name if bpy.context.scene.world else None]
     composite = bpy.data.images.get("SceneFit Composite")   # applied as after a local Run All
     out["run_composite"] = list(composite.size) if composite else None
@@ -114,7 +118,8 @@ def handed_off(tmp_path_factory):
 def test_preferences_choose_the_worker_and_respect_online_access(handed_off):
     _, out = handed_off
     assert out["address"] == "local"
-    assert out["handed_off"] == ["bl_ext.user_default.scenefit.workers.remote", True]   # Run's job_work chose Ray
+    # Run's job_work chose Ray (for two materials: the worker's run, then each material's maps baked here)
+    assert out["handed_off"] == ["bl_ext.user_default.scenefit.operators.remote", "work_remotely_per_material", True]
     online, message = out["offline_refusal"]
     assert online is False and "online access is off" in message and "gpu-head.example" in message
 
@@ -133,10 +138,14 @@ def test_run_on_ray_streams_progress_and_previews_and_applies_the_results(handed
     assert report["status"] == "done" and report["worker"]["pid"] != 0
     assert {name: report["stages"]["run"]["stages"][name]["status"] for name in ("convert", "light", "adapt")} == \
         {"convert": "ran", "light": "ran", "adapt": "ran"}
-    name, tag, images = out["run_material"]
-    assert tag == "adapt" and name != "AssetMaterial"
-    assert images and all(p.startswith("//scenefit/Sphere/run-") for p in images)   # next to the .blend, relative
-    assert all((tmp / p[2:]).is_file() for p in images)
+    # Both slots got a result, each with its own material's maps baked here from the texture that came back
+    # (the worker fitted their atlas; a remote Run All once refused an object with two materials)
+    (name, tag, images), (trim_name, trim_tag, trim_images) = out["run_materials"]
+    assert tag == trim_tag == "adapt" and name != "AssetMaterial" and trim_name != "Trim" and name != trim_name
+    for paths in (images, trim_images):
+        assert paths and all(p.startswith("//scenefit/Sphere/run-") and "/materials/" in p for p in paths)
+        assert all((tmp / p[2:]).is_file() for p in paths)   # next to the .blend, relative
+    assert set(images).isdisjoint(trim_images)
     assert out["run_world"][0] == "SceneFit Light" and out["user_material_kept"]
     assert out["run_composite"] is not None and min(out["run_composite"]) > 0
 
