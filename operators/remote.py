@@ -80,6 +80,8 @@ def remote_work(op, context, address: str) -> tuple:
 
     # The worker finds the models in its own cache and on its own device.
     models = replace(models, cache_dir=None, device_type="auto")
+    check_models_reach_the_worker(address, {"base model": models.base_model, "inpainting model": models.inpaint_model,
+                                            "depth model": depth_model_preference(context)})
     # The job's folder comes back whole as this run's new folder (nothing of it while it runs or if cancelled).
     folder = run_folder(context, op.job_name, name)
     # How the photo is seen, as Run All here sees it (operators/common.photo_view): the artist's camera or the
@@ -92,6 +94,19 @@ def remote_work(op, context, address: str) -> tuple:
         "stages": REMOTE_STAGES, "prompt": settings.prompt, "models": models, "overrides": quick_overrides(op),
         "scene": settings.scene_type, "depth_model": depth_model_preference(context), "materials": materials,
         **job_view(photo_view(context, photo, objects))}
+
+
+def check_models_reach_the_worker(address: str, models: dict[str, str | None]) -> None:
+    """One sentence (InputError) where a model the preferences give as a folder on this machine would be
+    sent to a Ray cluster on another host, which cannot read it (a hub id is found in the worker's own
+    cache; a cluster or an install on this machine reads the folder)."""
+    if Path(address).is_file() or is_local_address(address):   # another install's Python, or this machine
+        return
+    for what, value in models.items():
+        if value and Path(bpy.path.abspath(value)).expanduser().is_dir():
+            raise InputError(f"The {what} is a folder on this machine ('{value}'), which the Ray cluster at "
+                             f"'{address}' cannot read; give its hub id in the add-on preferences (Models), "
+                             "or run jobs in this Blender.")
 
 
 def work_remotely_per_material(data: dict, progress=None, cancel=None) -> dict:

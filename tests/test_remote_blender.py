@@ -36,6 +36,15 @@ except Exception as error:
     out["offline_refusal"] = [bpy.app.online_access, str(error)]
 prefs.ray_address = "local"
 out["address"] = remote.worker_address(bpy.context)
+# A model given as a folder here cannot travel to a cluster on another host; a hub id can, and this
+# machine's cluster reads the folder.
+far, folder = "ray://gpu-head.example:10001", str(Path(tiny) / "sd2-base")
+try:
+    remote.check_models_reach_the_worker(far, {"base model": folder})
+except Exception as error:
+    out["folder_refusal"] = str(error)
+remote.check_models_reach_the_worker(far, {"base model": "stabilityai/stable-diffusion-2-base", "depth model": None})
+remote.check_models_reach_the_worker("local", {"base model": folder})
 ray.init(num_cpus=2, object_store_memory=80 * 2**20, include_dashboard=False, log_to_driver=False)
 
 bpy.ops.wm.read_homefile(use_empty=True)
@@ -120,6 +129,8 @@ def test_preferences_choose_the_worker_and_respect_online_access(handed_off):
     assert out["address"] == "local"
     # Run's job_work chose Ray (for two materials: the worker's run, then each material's maps baked here)
     assert out["handed_off"] == ["bl_ext.user_default.scenefit.operators.remote", "work_remotely_per_material", True]
+    assert out["folder_refusal"].startswith("The base model is a folder on this machine") and \
+        "gpu-head.example" in out["folder_refusal"] and out["folder_refusal"].count(". ") == 0
     online, message = out["offline_refusal"]
     assert online is False and "online access is off" in message and "gpu-head.example" in message
 
