@@ -10,9 +10,9 @@ from bpy.props import IntProperty
 from ..blender_io import mesh_from_object
 from ..core.base.errors import InputError
 from . import work
-from .common import OnMesh, model_settings, photo_path, photo_view, run_folder
+from .common import OnMesh, asset_layout, model_settings, photo_path, photo_view, run_folder
 from .jobs import JobOperator
-from .results import apply_result_material
+from .results import apply_layout_results, apply_result_material, result_targets
 
 if TYPE_CHECKING:
     from ..panels.quality import LocalWork
@@ -22,14 +22,25 @@ def gather_adapt(op, context, texture: str) -> dict:
     """Adapt's plain inputs from the scene settings; `op` gives iterations / model_resolution / render_size."""
     settings = context.scene.scenefit
     obj = context.active_object
-    mesh = mesh_from_object(obj, context.evaluated_depsgraph_get())
+    # An asset of several materials or objects was converted as their atlas (Convert, Run All): adapt that
+    # same mesh, and bake each material's maps for its slots after; one material (or a texture generated
+    # from a prompt, perhaps on an object without any) as ever, on the active object.
+    layout = asset_layout(context) if settings.mode != "generate" else None
+    several = layout is not None and (len(layout.materials) > 1 or len(layout.objects) > 1)
+    if several:
+        mesh = layout.read(context).fitting_view()[0]
+        objects, op._layout = [bpy.data.objects[n] for n in layout.objects], result_targets(layout)
+    else:
+        mesh = mesh_from_object(obj, context.evaluated_depsgraph_get())
+        objects, op._layout = obj, None
     photo = str(photo_path(context)) if settings.mode == "scene" and settings.photo_path else ""
     light = bpy.path.abspath(settings.light_path) if settings.light_path else ""
     x, y = settings.placement
-    view = photo_view(context, Path(photo), obj) if photo else None
+    view = photo_view(context, Path(photo), objects) if photo else None
     models, _ = model_settings(context)
-    op._object_name = obj.name
+    op._object_name = layout.name if several else obj.name
     return {
+        "materials": layout.bake_data() if several else None,
         "mesh": mesh, "texture": texture, "mode": settings.mode, "prompt": settings.prompt,
         "object_prompt": settings.object_prompt, "instruction": settings.instruction, "photo": photo,
         # Where the asset stands and its height, as the light and compose stages read them; the photo's
@@ -88,8 +99,12 @@ class SCENEFIT_OT_adapt(OnMesh, JobOperator):
         return adapt_seconds_here(context, self.iterations or None)
 
     def apply(self, context, result) -> str:
-        mat = apply_result_material(context, self._object_name, result, "adapt")
-        return f"Adapted ({result['iterations']} iterations): material '{mat.name}'"
+        if getattr(self, "_layout", None):
+            mats = apply_layout_results(context, self._layout, result, "adapt")
+        else:
+            mats = [apply_result_material(context, self._object_name, result, "adapt")]
+        return (f"Adapted ({result['iterations']} iterations): material{'s' if len(mats) > 1 else ''} "
+                f"{', '.join(repr(m.name) for m in mats)}")
 
 
 classes = (SCENEFIT_OT_adapt,)

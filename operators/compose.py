@@ -8,7 +8,7 @@ from bpy.props import BoolProperty, IntProperty
 
 from ..blender_io.compose import setup_composite
 from ..core.base.errors import SceneFitError
-from .common import OnMesh, composite_camera, photo_path, photo_view, run_folder
+from .common import OnMesh, asset_objects, composite_camera, photo_path, photo_view, run_folder
 from .results import apply_composite_image
 from .work import written_whole
 
@@ -28,12 +28,13 @@ class SCENEFIT_OT_compose(OnMesh, bpy.types.Operator):
 
     def execute(self, context):
         settings = context.scene.scenefit
-        obj = context.active_object
         try:
+            # the asset as Run All takes it: the selected objects, or the active one
+            objects = asset_objects(context)
             photo = photo_path(context)
-            view = photo_view(context, photo, obj)
+            view = photo_view(context, photo, objects)
             scene_camera = bpy.data.objects.get(view["scene_camera"]) if view["scene_camera"] else None
-            made = setup_composite(context, obj, photo, tuple(settings.placement), settings.size,
+            made = setup_composite(context, objects, photo, tuple(settings.placement), settings.size,
                                    composite_camera(context, photo, view), scene_camera=scene_camera)
             if settings.result_world is not None:
                 context.scene.world = settings.result_world
@@ -48,7 +49,8 @@ class SCENEFIT_OT_compose(OnMesh, bpy.types.Operator):
             bpy.ops.render.render("INVOKE_DEFAULT")
             return {"FINISHED"}
         try:
-            folder = run_folder(context, "compose", obj.name)
+            active = context.active_object
+            folder = run_folder(context, "compose", (active if active in objects else objects[0]).name)
             out = written_whole(str(folder), lambda staging: {"composite": self._render(context, staging)})["composite"]
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))

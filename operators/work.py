@@ -182,9 +182,12 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
         result, report = adapt_and_bake(data["mesh"], texture, config, out, photo=photo, placement=placement,
                                         envmap=envmap, photo_camera=camera, progress=progress, cancel=cancel)
         write_report(out / "report.json", report)
+        # several materials: each one's maps from the adapted texture, in its own UVs, for its slots
+        per_material = material_results(data, report["outputs"]["weights"], out / "materials") \
+            if data.get("materials") else []
         return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
                 "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
-                "iterations": result.iterations}
+                "iterations": result.iterations, "material_maps": per_material}
 
     return written_whole(data["out"], write)
 

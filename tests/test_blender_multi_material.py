@@ -35,7 +35,9 @@ import bpy
 tmp, zip_path = Path(TMP), ZIP
 MODULE = "bl_ext.user_default.scenefit"
 bpy.ops.extensions.package_install_files(repo="user_default", filepath=zip_path, enable_on_install=True)
-bpy.context.preferences.addons[MODULE].preferences.offline = True
+prefs = bpy.context.preferences.addons[MODULE].preferences
+prefs.offline = True
+prefs.base_model, prefs.inpaint_model = str(Path(TINY) / "sd2-base"), str(Path(TINY) / "sd2-inpaint")
 imageio = import_module(MODULE + ".core.data.imageio")
 imageio.write_image(tmp / "photo.png", np.random.default_rng(1).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32))
 COLOURS = COLOURS_HERE
@@ -164,6 +166,12 @@ bpy.context.view_layer.objects.active = ball
 originals = ["Red", "Blue", "Yellow"]
 before = artists(originals + ["Grey"])
 out.update(operate(["Box", "Ball"], originals, tmp / "selection.glb"))
+# Compose (set up only) takes the selection as Run All did: the camera Run All placed around both stays put
+camera = bpy.data.objects["SceneFit Camera"]
+placed = [round(v, 5) for v in camera.location]
+box.select_set(True); ball.select_set(True); bpy.context.view_layer.objects.active = ball
+out["compose"] = sorted(bpy.ops.scenefit.compose(render=False))
+out["camera_moved"] = [placed, [round(v, 5) for v in camera.location]]
 out["artists"] = artists(originals + ["Grey"])
 out["artists_before"] = before
 out["bystander"] = [s.material.name for s in bystander.material_slots]
@@ -222,6 +230,19 @@ out["convert"].append(sorted(bpy.ops.scenefit.convert()))
 out["results"] = results(["Cube"])
 out["revert"] = sorted(bpy.ops.scenefit.use_result(target="MATERIAL", which="ORIGINAL"))
 out["reverted"] = slots(["Cube"])
+"""
+
+# Adapt after Convert on three materials: the atlas Convert fitted is adapted and every slot gets its material's
+# maps (it once adapted the active object's own mesh and put one result in slot 0 only).
+ADAPT = r"""
+new_scene()
+bpy.ops.mesh.primitive_cube_add()
+split_faces(bpy.context.active_object, ["Red", "Green", "Blue"], lambda poly: poly.index % 3)
+s = bpy.context.scene.scenefit
+s.preset, s.photo_path, s.prompt, s.placement = "draft", str(tmp / "photo.png"), "a mossy cube", (0.5, 0.8)
+out["convert"] = sorted(bpy.ops.scenefit.convert(iterations=5))
+out["adapt"] = sorted(bpy.ops.scenefit.adapt(iterations=2, model_resolution=32, render_size=16))
+out["results"] = results(["Cube"])
 """
 
 # What cannot work is one sentence: faces on an empty slot, in an object and in a selection.
@@ -351,6 +372,7 @@ def test_a_selection_of_two_objects_through_run_all_and_bake_asset(blender, vali
     check_slots(out, expected)
     check_switch(out, expected)
     assert out["bystander"] == ["Grey"]   # not selected: not part of the asset
+    assert out["compose"] == ["FINISHED"] and out["camera_moved"][0] == out["camera_moved"][1]
     assert out["artists"] == out["artists_before"]
     assert out["bake_left_session_as_it_was"]
     found = check_glb(blender.tmp / "selection.glb", blender.tmp, validator, expected)
@@ -366,6 +388,16 @@ def test_convert_takes_every_material_too(blender):
         assert tag == "convert" and name == f"{original} SceneFit convert.001", out["results"][key]
         assert np.allclose(colour, COLOURS[original], atol=0.03), (key, colour)
     assert out["reverted"] == {"Cube": ["Red", "Green", "Blue"]}
+
+
+def test_adapt_restyles_every_material_of_the_asset(blender):
+    out = step(blender, ADAPT)
+    assert out["convert"] == out["adapt"] == ["FINISHED"]
+    got = out["results"]
+    for key, original in {"Cube/0": "Red", "Cube/1": "Green", "Cube/2": "Blue"}.items():
+        name, tag, _, _ = got[key]
+        assert tag == "adapt" and name.startswith(f"{original} SceneFit adapt"), got[key]
+    assert len({got[k][0] for k in got}) == 3   # one result per material, each with its own maps
 
 
 def test_what_cannot_be_textured_is_one_sentence(blender):
