@@ -184,18 +184,6 @@ def scene_layout(op, context, refusal: str):
     return photo, layout
 
 
-def scene_asset(op, context, refusal: str):
-    """(photo, object, mesh, maps) for a job that fits the active object into the photo (mode Scene);
-    `refusal` ends the one sentence said in another mode. Remembers the object's name on `op`."""
-    settings = context.scene.scenefit
-    if settings.mode != "scene":
-        raise InputError(f"{refusal} (mode Scene); mode '{settings.mode}' does not.")
-    photo = photo_path(context)
-    obj, mesh, maps = gather_asset(context)
-    op._object_name = obj.name
-    return photo, obj, mesh, maps
-
-
 class OnMesh:
     """Operator mixin: available when the active object is a mesh (what every stage works on)."""
 

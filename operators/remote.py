@@ -15,9 +15,8 @@ from urllib.parse import urlparse
 import bpy
 
 from ..core.base.errors import InputError
-from .common import (depth_model_preference, model_settings, photo_view, preferences, run_folder, scene_asset,
-                     scene_layout)
-from .results import apply_result_material, result_targets
+from .common import depth_model_preference, model_settings, photo_view, preferences, run_folder, scene_layout
+from .results import apply_layout_results, result_targets
 
 # What the worker runs for each operator: the whole pipeline (adapt needs convert and the light).
 REMOTE_STAGES = ("convert", "light", "adapt", "compose")
@@ -55,26 +54,18 @@ def is_local_address(address: str) -> bool:
 
 def remote_work(op, context, address: str) -> tuple:
     """(work function, plain data) that run the whole pipeline in the worker environment at `address`; the
-    operator's quick-look settings travel as stage overrides. Run All takes what a local Run All takes
-    (every material of the active object, or the selected objects as one asset: their atlas travels, and
-    each material's maps are baked here from the texture that comes back); Adapt the active object's
-    one material, as a local Adapt does."""
+    operator's quick-look settings travel as stage overrides. Run All and Adapt take what they take here:
+    every material of the active object, or the selected objects as one asset (their atlas travels, and
+    each material's maps are baked here from the texture that comes back)."""
     from ..workers.remote import work_remotely
 
     settings = context.scene.scenefit
-    refusal = "A worker environment runs the pipeline that fits the asset into a photo; other modes run in this Blender"
-    materials = None
-    if op.job_name == "run":
-        photo, layout = scene_layout(op, context, refusal)
-        mesh, maps = layout.read(context).fitting_view()   # several materials: their atlas, as a local Run All
-        op._layout = result_targets(layout)   # where the results go (Run's apply): every slot of the asset
-        objects, name = [bpy.data.objects[n] for n in layout.objects], layout.name
-        materials = layout.bake_data() if len(layout.materials) > 1 else None
-    else:
-        photo, obj, mesh, maps = scene_asset(op, context, refusal)
-        op._layout = {"objects": [obj.name], "slots": [[(obj.name, obj.active_material_index)]], "wraps": None,
-                      "name": obj.name}
-        objects, name = [obj], obj.name
+    photo, layout = scene_layout(op, context, "A worker environment runs the pipeline that fits the asset into a "
+                                              "photo; other modes run in this Blender")
+    mesh, maps = layout.read(context).fitting_view()   # several materials: their atlas, as a local Run All
+    op._layout = result_targets(layout)   # where the results go: every slot of the asset
+    objects, name = [bpy.data.objects[n] for n in layout.objects], layout.name
+    materials = layout.bake_data() if len(layout.materials) > 1 else None
     models, _ = model_settings(context)
     from dataclasses import replace
 
@@ -176,4 +167,5 @@ def apply_remote(op, context, result: dict) -> str:
     if shaped["stage"] != "adapt":
         raise InputError(f"The worker did not adapt the texture: {shaped['adapt_skipped'] or 'no reason given'}; "
                          f"its results are in '{result['folder']}'.")
-    return done + f"material '{apply_result_material(context, op._object_name, shaped, 'adapt').name}'"
+    mats = apply_layout_results(context, op._layout, shaped, "adapt")
+    return done + f"material{'s' if len(mats) > 1 else ''} {', '.join(repr(m.name) for m in mats)}"
