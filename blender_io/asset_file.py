@@ -152,10 +152,10 @@ def imported_from(objects: list) -> Path | None:
 def import_into_open_scene(path: str | Path) -> list:
     """The objects of the asset file `path`, imported into the open scene's active collection as
     File > Import does (selected, one of them active; each marked with SOURCE_PROPERTY), including what
-    Blender's own importers refuse:
-    a meshopt-compressed glTF is decoded and an ASCII FBX written as binary first. Images the import
-    read from such a temporary copy are packed into the .blend, so they outlive the copy. Nothing
-    that was there before is changed; a file that cannot be read is one sentence (InputError)."""
+    Blender's own importers refuse: a meshopt-compressed glTF is decoded and an ASCII FBX written as
+    binary first. Images the import read from such a temporary copy's folder are packed into the
+    .blend, so they outlive it. Nothing that was there before is changed; a file that cannot be read
+    is one sentence (InputError)."""
     import bpy
 
     path = Path(path)
@@ -168,10 +168,11 @@ def import_into_open_scene(path: str | Path) -> list:
     images_before = set(bpy.data.images)
     with _readable(path) as readable:
         _read_or_sentence(path, lambda: _import_into(bpy, None, readable, readable.suffix.lower()))
-        if readable != path:   # read from a temporary copy, gone after this block
+        if readable != path:   # read from a temporary copy, whose folder is gone after this block
+            copies = readable.parent.resolve()
             for image in set(bpy.data.images) - images_before:
-                if image.packed_file is None and image.source == "FILE" and \
-                        Path(bpy.path.abspath(image.filepath)).is_file():
+                file = Path(bpy.path.abspath(image.filepath)).resolve() if image.filepath else None
+                if image.packed_file is None and file is not None and file.is_file() and file.is_relative_to(copies):
                     image.pack()
     objects = sorted((o for o in bpy.data.objects if o not in before), key=lambda o: o.name)
     for obj in objects:
