@@ -10,7 +10,7 @@ from pathlib import Path
 import bpy
 
 from ..core.base.errors import SceneFitError
-from ..operators.common import artist_camera, dependency_sentence, missing_modules
+from ..operators.common import artist_camera, asset_objects, dependency_sentence, missing_modules
 from .quality import BENCH_MACHINE, EXPECTED_SECONDS, expected_line
 
 class _Section:
@@ -71,6 +71,9 @@ class SCENEFIT_PT_asset(_Subsection, bpy.types.Panel):
         row = layout.row()
         row.label(text=obj.name, icon="OBJECT_DATA")
         row.operator("scenefit.import_asset", text="", icon="IMPORT")
+        objects = asset_objects(context)
+        if len(objects) > 1:   # what Run All, Convert, Adapt, Compose and Bake Asset will take
+            layout.label(text=f"{len(objects)} selected objects, fitted as one asset", icon="GROUP")
         try:
             found, dropped = material_summary(obj.active_material)
         except SceneFitError as error:

@@ -554,6 +554,18 @@ except RuntimeError as error:
 out["after_broken"] = sorted(o.name for o in bpy.data.objects)
 menu = bpy.types.TOPBAR_MT_file_import._dyn_ui_initialize()
 out["in_file_import"] = any(getattr(f, "__module__", "").endswith("operators.import_asset") for f in menu)
+# The Asset section says what the selection is (a recording layout: panels cannot draw without a window)
+class Layout:
+    drawn = []
+    def column(self, **kw): return self
+    def row(self, **kw): return self
+    def prop(self, *args, **kw): pass
+    def operator(self, idname, **kw): self.drawn.append(idname)
+    def label(self, text="", **kw): self.drawn.append(text)
+from types import SimpleNamespace
+mine.select_set(True)
+bpy.types.SCENEFIT_PT_asset.draw(SimpleNamespace(layout=Layout()), bpy.context)
+out["asset_section"] = Layout.drawn
 # Bake Asset writes it as the file was written (Compression and Textures default to As imported)
 painted = bpy.data.objects["Painted"]
 out["source"] = painted.get("scenefit_source_file")
@@ -580,6 +592,7 @@ def test_import_asset_reads_a_file_blenders_importer_refuses_into_the_artists_sc
     assert out["broken"].rstrip().count("\n") == 0 and "Traceback" not in out["broken"]
     assert out["after_broken"] == ["MyCube", "Painted"]
     assert out["in_file_import"]
+    assert out["asset_section"][:3] == ["Painted", "scenefit.import_asset", "2 selected objects, fitted as one asset"]
     assert out["source"] == str((blender.tmp / "packed.glb").resolve())
     assert out["import_convert"] == out["import_bake"] == ["FINISHED"]
     assert "EXT_meshopt_compression" in out["import_bake_extensions"]   # as imported (else plain: "none")
