@@ -163,7 +163,7 @@ def new_uv_map(context, layout, texture) -> tuple[frozenset, object, dict]:
     loaded = load_neural_texture(texture)
     if loaded.layout is None:
         return frozenset(), None, {}
-    remap = materials_to_remap(loaded, layout.mesh, [material_wrap(m) for m in layout.materials])
+    remap = materials_to_remap(loaded, layout.mesh, [material_wrap(m) for m in layout.artists])
     if not remap:
         return remap, None, {}
     objects = [bpy.data.objects[name] for name in layout.objects]
