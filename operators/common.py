@@ -11,7 +11,6 @@ from pathlib import Path
 
 import bpy
 
-from ..blender_io import maps_from_material
 from ..core.base.errors import InputError
 from ..core.data.materials import AssetMaterials
 
@@ -51,20 +50,6 @@ def check_dependencies() -> None:
 
 
 # -- inputs ------------------------------------------------------------------------------------------
-def one_material_object(context):
-    """(object, mesh in object space, material slot number, material) of the active object, whose faces must use one material:
-    in Blender a result is one new material on the object (the command line fits several as an atlas
-    and bakes them back per material)."""
-    from ..blender_io.material import object_mesh_and_slots
-
-    obj = context.active_object
-    mesh, slots = object_mesh_and_slots(obj, context.evaluated_depsgraph_get())
-    if len(slots) != 1:
-        raise InputError(f"'{obj.name}' uses {len(slots)} materials; this step works on objects with one material, "
-                         f"while Run All and Bake Asset take every material (and several selected objects).")
-    return obj, mesh, slots[0], obj.material_slots[slots[0]].material
-
-
 @dataclass
 class AssetLayout:
     """What an operator works on in Blender, read without touching any pixels.
@@ -85,14 +70,16 @@ class AssetLayout:
     slots: list[list[tuple[str, int]]]
     artists: list
 
-    def read(self, context) -> AssetMaterials:
+    def read(self, context, shown: bool = False) -> AssetMaterials:
         """Every material's maps as the artist made it, and what was read (procedural chains are baked over
-        their own faces): Run All and Convert again restyle the asset, not SceneFit's last result."""
+        their own faces): Run All and Convert again restyle the asset, not SceneFit's last result.
+        shown: as the slots show it instead (SceneFit's result where there is one: Export to Mitsuba)."""
         from ..blender_io.material import read_material
 
         users = [bpy.data.objects[pairs[0][0]] for pairs in self.slots]
+        materials = self.materials if shown else self.artists
         return AssetMaterials(mesh=self.mesh, materials=tuple(
-            read_material(m, obj, pairs[0][1]) for m, obj, pairs in zip(self.artists, users, self.slots)))
+            read_material(m, obj, pairs[0][1]) for m, obj, pairs in zip(materials, users, self.slots)))
 
     def bake_data(self) -> dict:
         """What core.game_bake needs to bake each (artist's) material in its own UVs (plain data, for a job)."""
@@ -118,7 +105,8 @@ def artists_materials(context, materials: list, slots: list[list[tuple[str, int]
     artist's material, read again by Run All and Convert, and written by Bake Asset with the baked maps in
     place of its own, keeping its normal map, emission, alpha and glTF extensions, as `scenefit bake`
     keeps a file's."""
-    originals = {(e.asset_object.name, e.slot): e.original for e in context.scene.scenefit.result_slots
+    settings = getattr(context.scene, "scenefit", None)   # (None where the add-on is not registered)
+    originals = {(e.asset_object.name, e.slot): e.original for e in (settings.result_slots if settings else ())
                  if e.asset_object is not None and e.original is not None}
     return [(originals.get(pairs[0]) if TAG in material else None) or material
             for material, pairs in zip(materials, slots)]
@@ -164,12 +152,6 @@ def asset_layout(context) -> AssetLayout:
     materials = list(scene.materials)
     return AssetLayout(name, [o.name for o in objects], scene.mesh, materials, slots,
                        artists_materials(context, materials, slots))
-
-
-def gather_asset(context):
-    """The active object, its mesh (object space) and material maps, as core data."""
-    obj, mesh, _, material = one_material_object(context)
-    return obj, mesh, maps_from_material(material)
 
 
 def scene_layout(op, context, refusal: str):

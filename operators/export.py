@@ -1,16 +1,18 @@
-"""Export to Mitsuba: the active object, its maps, and the photo's camera and estimated light when
+"""Export to Mitsuba: the asset (the active object with every material, or the selected objects; several
+materials as their atlas), its maps, and the photo's camera and estimated light when
 SceneFit made them (else an orbit camera and a white environment), as a scene `mitsuba` renders alone."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import bpy
 
-from ..blender_io import mesh_from_object
+from ..blender_io.material import object_mesh_and_slots
 from ..blender_io.compose import CAMERA_NAME
 from ..core.base.errors import SceneFitError
-from .common import OnMesh, artist_camera, check_dependencies, gather_asset, photo_path, run_folder
+from .common import OnMesh, artist_camera, asset_layout, check_dependencies, photo_path, run_folder
 from .work import written_whole
 
 
@@ -41,8 +43,8 @@ def photo_look_at(context):
 
 
 class SCENEFIT_OT_export_mitsuba(OnMesh, bpy.types.Operator):
-    """Write the active object, its material maps, the photo's camera and the estimated light as a Mitsuba 3
-    scene (XML, PLY, images)"""
+    """Write the asset (the active object, or the selected objects), its material maps, the photo's camera and
+    the estimated light as a Mitsuba 3 scene (XML, PLY, images)"""
 
     bl_idname = "scenefit.export_mitsuba"
     bl_label = "Export to Mitsuba"
@@ -63,11 +65,16 @@ class SCENEFIT_OT_export_mitsuba(OnMesh, bpy.types.Operator):
 
         settings = context.scene.scenefit
         try:
-            obj, mesh, maps = gather_asset(context)
+            # the asset as Run All takes it (every material, or the selection), as its slots show it; several
+            # materials as their atlas, one shape, as `scenefit export` writes them
+            layout = asset_layout(context)
             camera = photo_look_at(context)
-            if camera is not None:  # the photo's camera sees the world: the mesh goes in world space
-                mesh = mesh_from_object(obj, context.evaluated_depsgraph_get(), space="world")
-            else:
+            if camera is not None and len(layout.objects) == 1:   # the photo's camera sees the world
+                obj = bpy.data.objects[layout.objects[0]]
+                layout = replace(layout, mesh=object_mesh_and_slots(obj, context.evaluated_depsgraph_get(),
+                                                                    space="world")[0])
+            mesh, maps = layout.read(context, shown=True).fitting_view()
+            if camera is None:
                 camera = Camera(azimuth_deg=30.0, elevation_deg=-math.degrees(settings.pitch), width=512,
                                 height=512)
             light = Path(bpy.path.abspath(settings.light_path)) if settings.light_path else None
@@ -75,7 +82,7 @@ class SCENEFIT_OT_export_mitsuba(OnMesh, bpy.types.Operator):
             if self.directory:
                 xml = export_mitsuba_scene(mesh, maps, bpy.path.abspath(self.directory), camera=camera, envmap=envmap)
             else:  # a new run folder, written whole
-                xml = written_whole(str(run_folder(context, "mitsuba", obj.name)), lambda folder: {
+                xml = written_whole(str(run_folder(context, "mitsuba", layout.name)), lambda folder: {
                     "xml": str(export_mitsuba_scene(mesh, maps, folder, camera=camera, envmap=envmap))})["xml"]
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))

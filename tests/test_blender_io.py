@@ -168,12 +168,11 @@ def test_example_asset_files_and_shapes(example_asset):
     assert 0.25 - 0.02 <= maps.roughness[covered].min() and maps.roughness[covered].max() <= 0.85 + 0.02
 
 
-def test_operators_take_the_material_the_faces_use_and_refuse_several_in_one_sentence(run_py):
+def test_operators_take_the_materials_the_faces_use(run_py):
     proc = run_py("""
         import json
         import bpy
-        from scenefit.core.base.errors import InputError
-        from scenefit.operators.common import one_material_object
+        from scenefit.operators.common import asset_layout
 
         bpy.ops.wm.read_factory_settings(use_empty=True)
         bpy.ops.mesh.primitive_cube_add()
@@ -184,14 +183,12 @@ def test_operators_take_the_material_the_faces_use_and_refuse_several_in_one_sen
         for face in obj.data.polygons:
             face.material_index = 1
         obj.active_material_index = 0                      # the active slot is not the one the faces use
-        out = {"one": one_material_object(bpy.context)[3].name, "slot": one_material_object(bpy.context)[2]}
-        obj.data.polygons[0].material_index = 0            # now the faces use two materials
-        try:
-            one_material_object(bpy.context)
-        except InputError as error:
-            out["error"] = str(error)
+        layout = asset_layout(bpy.context)
+        out = {"one": [m.name for m in layout.materials], "slots": layout.slots}
+        obj.data.polygons[0].material_index = 0            # now the faces use two materials: both are the asset's
+        out["two"] = [m.name for m in asset_layout(bpy.context).materials]
         print(json.dumps(out))
     """)
     out = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert out["one"] == "Painted" and out["slot"] == 1
-    assert "uses 2 materials" in out["error"] and "Run All" in out["error"] and "\n" not in out["error"]
+    assert out["one"] == ["Painted"] and out["slots"] == [[["Cube", 1]]]
+    assert out["two"] == ["Unused", "Painted"]

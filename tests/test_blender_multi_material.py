@@ -243,6 +243,9 @@ s.preset, s.photo_path, s.prompt, s.placement = "draft", str(tmp / "photo.png"),
 out["convert"] = sorted(bpy.ops.scenefit.convert(iterations=5))
 out["adapt"] = sorted(bpy.ops.scenefit.adapt(iterations=2, model_resolution=32, render_size=16))
 out["results"] = results(["Cube"])
+# Export to Mitsuba takes the three materials too (their atlas, one shape, as `scenefit export` writes them)
+out["export"] = sorted(bpy.ops.scenefit.export_mitsuba(directory=str(tmp / "mitsuba")))
+out["exported"] = sorted(p.name for p in (tmp / "mitsuba").iterdir())
 """
 
 # What cannot work is one sentence: faces on an empty slot, in an object and in a selection.
@@ -390,7 +393,7 @@ def test_convert_takes_every_material_too(blender):
     assert out["reverted"] == {"Cube": ["Red", "Green", "Blue"]}
 
 
-def test_adapt_restyles_every_material_of_the_asset(blender):
+def test_adapt_and_export_take_every_material_of_the_asset(blender):
     out = step(blender, ADAPT)
     assert out["convert"] == out["adapt"] == ["FINISHED"]
     got = out["results"]
@@ -398,6 +401,8 @@ def test_adapt_restyles_every_material_of_the_asset(blender):
         name, tag, _, _ = got[key]
         assert tag == "adapt" and name.startswith(f"{original} SceneFit adapt"), got[key]
     assert len({got[k][0] for k in got}) == 3   # one result per material, each with its own maps
+    assert out["export"] == ["FINISHED"] and any(n.endswith(".xml") for n in out["exported"]) and \
+        any(n.endswith(".ply") for n in out["exported"]), out["exported"]
 
 
 def test_what_cannot_be_textured_is_one_sentence(blender):

@@ -199,7 +199,7 @@ out["snapshot"] = [snapshot(), before]
 # The job path without a window: progress, preview, cancel, error; no bpy in the worker.
 JOBS = r"""
 obj, mat, image, world = make_scene()
-_, mesh, maps = common.gather_asset(bpy.context)
+mesh, maps = common.asset_layout(bpy.context).read(bpy.context).fitting_view()
 touched = []
 
 def profile(frame, event, arg):  # every Python call and C call in threads started from here on
