@@ -16,6 +16,19 @@ from ..core.data.materials import AssetMaterials
 
 ADDON_PACKAGE = __package__.rpartition(".")[0]
 TAG = "scenefit"   # what every datablock SceneFit makes carries (operators/results.py)
+# On a SceneFit result material: the artist's material it replaced (an ID property, so it survives saving,
+# duplicating the object and results made later on other objects).
+ORIGINAL_PROPERTY = "scenefit_original"
+
+
+def artists_material_behind(material, recorded=None):
+    """The artist's material behind `material`: itself when it is not a SceneFit result; else the one the
+    result replaced (its ORIGINAL_PROPERTY; `recorded`, the Results section's record, for a result made
+    before the property was kept); None when neither says."""
+    if material is None or TAG not in material:
+        return material
+    original = material.get(ORIGINAL_PROPERTY)
+    return original if isinstance(original, bpy.types.Material) else recorded
 
 
 # -- dependencies ------------------------------------------------------------------------------------
@@ -108,7 +121,7 @@ def artists_materials(context, materials: list, slots: list[list[tuple[str, int]
     settings = getattr(context.scene, "scenefit", None)   # (None where the add-on is not registered)
     originals = {(e.asset_object.name, e.slot): e.original for e in (settings.result_slots if settings else ())
                  if e.asset_object is not None and e.original is not None}
-    return [(originals.get(pairs[0]) if TAG in material else None) or material
+    return [artists_material_behind(material, originals.get(pairs[0])) or material
             for material, pairs in zip(materials, slots)]
 
 

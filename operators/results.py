@@ -14,7 +14,7 @@ from bpy.props import EnumProperty
 from ..blender_io import write_result_material
 from ..blender_io.world import assign_world, world_from_hdr
 from ..core.base.errors import InputError
-from .common import keep_image, needs_setting, relative_if_saved
+from .common import ORIGINAL_PROPERTY, artists_material_behind, keep_image, needs_setting, relative_if_saved
 
 TAG = "scenefit"
 
@@ -67,15 +67,17 @@ def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: li
     for index, (found, paths) in enumerate(zip(targets, maps)):
         first, number = found[0]
         held = first.material_slots[number].material
-        artists = previous.get((first.name, number)) if held is not None and TAG in held else held
+        artists = artists_material_behind(held, previous.get((first.name, number)))
         name = names[index] if names else f"{artists.name if artists else first.name} SceneFit {stage}"
         mat = write_result_material(first, paths, name=name, assign=False, wrap=wraps[index] if wraps else None)
         mat[TAG] = stage
+        if artists is not None:
+            mat[ORIGINAL_PROPERTY] = artists
         for image in material_images(mat):
             _settle_image(image, stage)
         for obj, number in found:
             current = obj.material_slots[number].material
-            original = previous.get((obj.name, number)) if current is not None and TAG in current else current
+            original = artists_material_behind(current, previous.get((obj.name, number)))
             if current is not None:
                 current.use_fake_user = True   # whichever is swapped out survives saving
             obj.material_slots[number].material = mat

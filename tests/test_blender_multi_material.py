@@ -248,6 +248,31 @@ out["export"] = sorted(bpy.ops.scenefit.export_mitsuba(directory=str(tmp / "mits
 out["exported"] = sorted(p.name for p in (tmp / "mitsuba").iterdir())
 """
 
+# Convert on A, then on B, then A's result repainted and A converted again: A's artist's material is still
+# what is read (it was found only through the last job's record, which B's result replaced).
+ONE_THEN_ANOTHER = r"""
+new_scene()
+bpy.ops.mesh.primitive_cube_add(location=(-2, 0, 0))
+a = bpy.context.active_object
+a.name = "A"
+a.data.materials.append(colour_material("Red"))
+bpy.ops.mesh.primitive_cube_add(location=(2, 0, 0))
+b = bpy.context.active_object
+b.name = "B"
+b.data.materials.append(colour_material("Blue"))
+def convert(obj):
+    bpy.ops.object.select_all(action="DESELECT")
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    return sorted(bpy.ops.scenefit.convert())
+out["converts"] = [convert(a), convert(b)]
+image = a.material_slots[0].material.node_tree.nodes["SceneFit Base Color"].image
+image.pixels.foreach_set(np.tile(np.array([1.0, 0.0, 1.0, 1.0], np.float32), len(image.pixels) // 4))
+out["converts"].append(convert(a))
+out["a"] = results(["A"])["A/0"]
+out["a_behind"] = import_module(MODULE + ".operators.common").asset_layout(bpy.context).artists[0].name
+"""
+
 # What cannot work is one sentence: faces on an empty slot, in an object and in a selection.
 REFUSALS = r"""
 new_scene()
@@ -403,6 +428,15 @@ def test_adapt_and_export_take_every_material_of_the_asset(blender):
     assert len({got[k][0] for k in got}) == 3   # one result per material, each with its own maps
     assert out["export"] == ["FINISHED"] and any(n.endswith(".xml") for n in out["exported"]) and \
         any(n.endswith(".ply") for n in out["exported"]), out["exported"]
+
+
+def test_the_artists_material_is_found_after_results_on_other_objects(blender):
+    out = step(blender, ONE_THEN_ANOTHER)
+    assert out["converts"] == [["FINISHED"]] * 3
+    name, tag, colour, _ = out["a"]
+    assert tag == "convert" and name.startswith("A SceneFit convert"), out["a"]
+    assert np.allclose(colour, COLOURS["Red"], atol=0.03), colour   # not the magenta of its last result
+    assert out["a_behind"] == "Red"
 
 
 def test_what_cannot_be_textured_is_one_sentence(blender):
