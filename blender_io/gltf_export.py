@@ -293,7 +293,7 @@ def bake_object_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_f
 
     For an asset loaded into a temporary scene (blender_io.asset_file.loaded_asset): the materials
     are changed in place and `whole_scene` exports every object of that scene, so the asset keeps
-    its structure. For the user's own object use bake_copy_to_gltf.
+    its structure. For the user's own objects use bake_copies_to_gltf (Bake Asset).
     """
     if len(baked) != len(slots):
         raise InputError(f"{len(baked)} baked materials for {len(slots)} material slots.")
@@ -334,7 +334,7 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
 
     Known bpy 5.0.1 crash: once the exporter has run on the temporary scene and the scene is
     removed, the next glTF import in the same process segfaults. `scenefit bake` is a process of
-    its own; long-lived callers should run it as a subprocess (or use bake_copy_to_gltf)."""
+    its own; long-lived callers should run it as a subprocess (or use bake_copies_to_gltf)."""
     from ..core.stages.bake.game_bake import bake_game_maps, bake_shapes, materials_to_remap
     from ..core.texture.bake import load_neural_texture
     import bpy
@@ -394,19 +394,23 @@ def bake_copy_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_fil
     return bake_copies_to_gltf([obj], baked, [[(obj, slot)] for slot in slots], out_file, file_format, output)
 
 
+# What may carry an asset without being geometry of its own: the file's group nodes and armatures.
+CARRIER_TYPES = ("EMPTY", "ARMATURE")
+
+
 def carriers_of(objects: list) -> list:
-    """What carries `objects` and is not one of them: every object above them that is not a mesh (the
-    file's root and group nodes, an armature) and the armatures that deform them. Exported beside the
-    copies, an asset keeps its node tree, its transforms and the animations on those nodes, and a
-    character its skeleton and skin (without the armature the exporter applies the pose and writes a
-    still mesh). They are exported as they are, never changed; a mesh above the asset that is not part
-    of it stays out (its baked maps would be missing)."""
+    """What carries `objects` and is not one of them: every empty and armature above them (the file's root
+    and group nodes, a rig) and the armatures that deform them. Exported beside the copies, an asset keeps
+    its node tree, its transforms and the animations on those nodes, and a character its skeleton and skin
+    (without the armature the exporter applies the pose and writes a still mesh). They are exported as
+    they are, never changed; geometry above the asset that is not part of it (a mesh, a curve, text)
+    stays out (its baked maps would be missing)."""
     carriers: list = []
     for obj in objects:
         found = [m.object for m in obj.modifiers if m.type == "ARMATURE" and m.object is not None]
         parent = obj.parent
         while parent is not None:
-            if parent.type != "MESH":
+            if parent.type in CARRIER_TYPES:
                 found.append(parent)
             parent = parent.parent
         carriers += [o for o in found if o not in carriers and o not in objects]

@@ -29,16 +29,19 @@ def gather_adapt(op, context, texture: str) -> dict:
     several = layout is not None and (len(layout.materials) > 1 or len(layout.objects) > 1)
     if several:
         mesh = layout.read(context).fitting_view()[0]
-        objects, op._layout = [bpy.data.objects[n] for n in layout.objects], result_targets(layout)
+        objects = [bpy.data.objects[n] for n in layout.objects]
     else:
         mesh = mesh_from_object(obj, context.evaluated_depsgraph_get())
-        objects, op._layout = obj, None
+        objects = obj
+    # The result goes where the faces' materials are (as Convert's and Run All's do), not the active slot;
+    # a texture generated from a prompt goes into the active slot (the object may have no material)
+    op._layout = result_targets(layout) if layout is not None else None
     photo = str(photo_path(context)) if settings.mode == "scene" and settings.photo_path else ""
     light = bpy.path.abspath(settings.light_path) if settings.light_path else ""
     x, y = settings.placement
     view = photo_view(context, Path(photo), objects) if photo else None
     models, _ = model_settings(context)
-    op._object_name = layout.name if several else obj.name
+    op._object_name = layout.name if layout is not None else obj.name
     return {
         "materials": layout.bake_data() if several else None,
         "mesh": mesh, "texture": texture, "mode": settings.mode, "prompt": settings.prompt,
@@ -49,7 +52,7 @@ def gather_adapt(op, context, texture: str) -> dict:
         "view": view,
         "envmap": light if light and Path(light).is_file() else "", "preset": settings.preset,
         "models": models, "iterations": op.iterations, "model_resolution": op.model_resolution,
-        "render_size": op.render_size, "out": str(run_folder(context, "adapt", obj.name))}
+        "render_size": op.render_size, "out": str(run_folder(context, "adapt", op._object_name))}
 
 
 def adapt_seconds_here(context, iterations: int | None = None) -> LocalWork | None:

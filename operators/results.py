@@ -104,7 +104,7 @@ def result_targets(layout) -> dict:
 
     one = len(layout.objects) == 1 and len(layout.materials) == 1
     return {"objects": list(layout.objects), "slots": [list(pairs) for pairs in layout.slots],
-            "wraps": [material_wrap(m) for m in layout.materials], "name": layout.objects[0] if one else None}
+            "wraps": [material_wrap(m) for m in layout.artists], "name": layout.objects[0] if one else None}
 
 
 def apply_layout_results(context, targets: dict, result: dict, stage: str) -> list:

@@ -243,6 +243,18 @@ s.preset, s.photo_path, s.prompt, s.placement = "draft", str(tmp / "photo.png"),
 out["convert"] = sorted(bpy.ops.scenefit.convert(iterations=5))
 out["adapt"] = sorted(bpy.ops.scenefit.adapt(iterations=2, model_resolution=32, render_size=16))
 out["results"] = results(["Cube"])
+# One used material behind an unused active slot: Adapt's result goes where the faces are, as Convert's does
+bpy.ops.mesh.primitive_cube_add(location=(4, 0, 0))
+lone = bpy.context.active_object
+lone.name = "Lone"
+lone.data.materials.append(colour_material("Grey"))
+lone.data.materials.append(colour_material("Yellow"))
+for poly in lone.data.polygons:
+    poly.material_index = 1
+lone.active_material_index = 0
+out["lone"] = [sorted(bpy.ops.scenefit.convert(iterations=5)),
+               sorted(bpy.ops.scenefit.adapt(iterations=2, model_resolution=32, render_size=16))]
+out["lone_slots"] = [[sl.material.name, sl.material.get("scenefit")] for sl in lone.material_slots]
 # Export to Mitsuba takes the three materials too (their atlas, one shape, as `scenefit export` writes them)
 out["export"] = sorted(bpy.ops.scenefit.export_mitsuba(directory=str(tmp / "mitsuba")))
 out["exported"] = sorted(p.name for p in (tmp / "mitsuba").iterdir())
@@ -426,6 +438,9 @@ def test_adapt_and_export_take_every_material_of_the_asset(blender):
         name, tag, _, _ = got[key]
         assert tag == "adapt" and name.startswith(f"{original} SceneFit adapt"), got[key]
     assert len({got[k][0] for k in got}) == 3   # one result per material, each with its own maps
+    assert out["lone"] == [["FINISHED"], ["FINISHED"]]
+    (unused, unused_tag), (used, used_tag) = out["lone_slots"]
+    assert unused.startswith("Grey") and unused_tag is None and used_tag == "adapt", out["lone_slots"]
     assert out["export"] == ["FINISHED"] and any(n.endswith(".xml") for n in out["exported"]) and \
         any(n.endswith(".ply") for n in out["exported"]), out["exported"]
 

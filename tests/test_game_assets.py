@@ -430,6 +430,9 @@ bpy.ops.wm.read_factory_settings(use_empty=True)
 root = bpy.data.objects.new("Root", None)
 bpy.context.scene.collection.objects.link(root)
 root.scale = (2.0, 2.0, 2.0)
+bpy.ops.curve.primitive_bezier_curve_add()   # geometry above the asset, not part of it: left out
+root.parent = bpy.context.object
+bpy.context.object.name = "Path"
 paint = bpy.data.materials.new("Paint")
 parts = {}
 for name, location in (("Body", (0, 0, 1)), ("Wheel", (1, 0, 0))):
@@ -462,7 +465,8 @@ def test_a_baked_selection_keeps_the_node_tree_above_and_between_its_parts(run_p
     nodes = exported["nodes"]
     names = [n.get("name") for n in nodes]
     children = {names[i]: sorted(names[c] for c in n.get("children", [])) for i, n in enumerate(nodes)}
-    # Root (the file's group node, not a mesh) carried along, the wheel still under the body (before: three roots)
+    # Root (the file's group node) carried along, the wheel still under the body (before: three roots); the
+    # curve above Root is geometry that is not the asset's, and stays out
     assert children == {"Root": ["Body"], "Body": ["Wheel"], "Wheel": []}
     assert [names[i] for i in exported["scenes"][0]["nodes"]] == ["Root"]
     assert nodes[names.index("Root")]["scale"] == [2.0, 2.0, 2.0]
