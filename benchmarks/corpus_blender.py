@@ -127,8 +127,9 @@ def contact_sheet(rows: list[dict], path: Path) -> None:
             tiles.append(tile)
     if not tiles:
         return
+    shown = len(tiles)
     tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % SHEET_COLUMNS)
-    grid = {f"{k + 1}-{min(k + SHEET_COLUMNS, len(rows))}": tiles[k:k + SHEET_COLUMNS]
+    grid = {f"{k + 1}-{min(k + SHEET_COLUMNS, shown)} of {shown}": tiles[k:k + SHEET_COLUMNS]
             for k in range(0, len(tiles), SHEET_COLUMNS)}
     write_image(path, sheet(grid))
 

@@ -164,20 +164,33 @@ def import_into_open_scene(path: str | Path) -> list:
     if path.is_dir() or suffix not in IMPORTERS:
         raise InputError(f"Import Asset reads {', '.join(IMPORTABLE_SUFFIXES)} files, not '{path.name}'; "
                          "use File > Append for a .blend file.")
-    before = set(bpy.data.objects)
+    before, ids_before = set(bpy.data.objects), _all_ids(bpy)
     images_before = set(bpy.data.images)
-    with _readable(path) as readable:
-        _read_or_sentence(path, lambda: _import_into(bpy, None, readable, readable.suffix.lower()))
-        if readable != path:   # read from a temporary copy, whose folder is gone after this block
-            copies = readable.parent.resolve()
-            for image in set(bpy.data.images) - images_before:
-                file = Path(bpy.path.abspath(image.filepath)).resolve() if image.filepath else None
-                if image.packed_file is None and file is not None and file.is_file() and file.is_relative_to(copies):
-                    image.pack()
+    try:
+        with _readable(path) as readable:
+            _read_or_sentence(path, lambda: _import_into(bpy, None, readable, readable.suffix.lower()))
+            if readable != path:   # read from a temporary copy, whose folder is gone after this block
+                _pack_images_from(bpy, set(bpy.data.images) - images_before, readable.parent, path)
+    except InputError:   # an import that failed part way leaves nothing behind
+        bpy.data.batch_remove([id_ for id_ in _all_ids(bpy) if id_ not in ids_before])
+        raise
     objects = sorted((o for o in bpy.data.objects if o not in before), key=lambda o: o.name)
     for obj in objects:
         obj[SOURCE_PROPERTY] = str(path.resolve())
     return objects
+
+
+def _pack_images_from(bpy, images, folder: Path, path: Path) -> None:
+    """Pack the `images` read from `folder` (a temporary copy's), so they outlive it."""
+    folder = folder.resolve()
+    for image in images:
+        file = Path(bpy.path.abspath(image.filepath)).resolve() if image.filepath else None
+        if image.packed_file is None and file is not None and file.is_file() and file.is_relative_to(folder):
+            try:
+                image.pack()
+            except RuntimeError as error:
+                raise InputError(f"The image '{image.name}' of '{path.name}' could not be kept in the .blend "
+                                 f"({_blender_reason(error)}); check the file's images.") from None
 
 
 @contextmanager

@@ -15,7 +15,7 @@ from bpy.props import EnumProperty, IntProperty, StringProperty
 from ..blender_io.asset_file import imported_from
 from ..blender_io.gltf_export import FORMATS, bake_copies_to_gltf, normal_mapped
 from ..core.base.errors import InputError
-from ..core.stages.bake.gltf_ktx2 import check_ktx2_output
+from ..core.stages.bake.gltf_ktx2 import basisu_path
 from ..core.stages.bake.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TEXTURE_FORMATS, GltfOutput
 from ..core.base.report import write_report
 from . import work
@@ -54,10 +54,20 @@ def bake_output(compress: str, textures: str, max_texture: int, file_format: str
     like = output_like_input(source) if source is not None else GltfOutput()
     if compress == AS_IMPORTED:
         compress = like.compress if like.compress != "meshopt" or file_format == "glb" else "none"
+    chosen = textures
     if textures == AS_IMPORTED:
         textures = like.textures if like.textures != "ktx2" or file_format == "glb" else "png"
-    if textures == "ktx2":
-        check_ktx2_output(file_format)
+    if textures == "ktx2":   # said in Blender's words (Format, Textures), not the command line's flags
+        if file_format != "glb":
+            raise InputError("Textures KTX2 writes .glb files only; choose the glTF Binary format, or PNG, JPEG or "
+                             "WebP textures.")
+        try:
+            basisu_path()
+        except InputError:
+            why = "As imported (the file had KTX2 textures)" if chosen == AS_IMPORTED else "KTX2"
+            raise InputError(f"Textures {why} needs Basis Universal's encoder 'basisu', which is not on this machine "
+                             "(put it on PATH or set SCENEFIT_BASISU to it), or choose PNG, JPEG or WebP "
+                             "textures.") from None
     return GltfOutput(compress, textures, max_texture, tangents=like.tangents or normal_maps, skins_at_root=True,
                       normals=like.normals)
 

@@ -1,6 +1,8 @@
 """How `scenefit bake` writes its glTF by default: like the input (core.stages.bake.gltf_output)."""
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from scenefit.core.base.errors import InputError
@@ -33,3 +35,32 @@ def test_bad_output_settings_are_one_sentence():
         GltfOutput(max_texture=3000)
     with pytest.raises(InputError, match=r"^--compress must be one of none, draco, meshopt, got 'zip'\.$"):
         GltfOutput(compress="zip")
+
+
+def test_bake_assets_as_imported_settings_follow_the_file_and_say_what_they_lack_in_blenders_words(run_py, tmp_path):
+    document = {"asset": {"version": "2.0"}, "extensionsUsed": ["EXT_meshopt_compression", "KHR_texture_basisu"],
+                "images": [{"uri": "a.ktx2", "mimeType": "image/ktx2"}], "meshes": []}
+    (tmp_path / "in.gltf").write_text(json.dumps(document))
+    proc = run_py(f"""
+        import json, os
+        from pathlib import Path
+        from scenefit.core.base.errors import InputError
+        from scenefit.operators.bake import AS_IMPORTED, bake_output
+        source = Path({str(tmp_path / "in.gltf")!r})
+        out = {{}}
+        os.environ["SCENEFIT_BASISU"] = {str(tmp_path / "no-basisu")!r}
+        for fmt in ("glb", "gltf"):
+            try:
+                o = bake_output(AS_IMPORTED, AS_IMPORTED, 1024, fmt, source, False)
+                out[fmt] = [o.compress, o.textures]
+            except InputError as error:
+                out[fmt] = str(error)
+        out["none"] = list(bake_output(AS_IMPORTED, AS_IMPORTED, 1024, "glb", None, True).report().values())[:4]
+        print("JSON" + json.dumps(out))
+    """)
+    out = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
+    # .glb: meshopt and KTX2 as the file had them; basisu missing here is said with Blender's setting
+    assert out["glb"].startswith("Textures As imported (the file had KTX2 textures) needs Basis Universal's")
+    assert "--" not in out["glb"] and out["glb"].count(". ") == 0
+    assert out["gltf"] == ["none", "png"]   # neither fits a .gltf: plain and PNG
+    assert out["none"] == ["none", "png", 1024, True]   # made in Blender: plain, PNG, tangents for normal maps
