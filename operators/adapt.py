@@ -43,7 +43,7 @@ def gather_adapt(op, context, texture: str) -> dict:
     models, _ = model_settings(context)
     op._object_name = layout.name if layout is not None else obj.name
     return {
-        "materials": layout.bake_data() if several else None,
+        "materials": layout.bake_data() if layout is not None and len(layout.materials) > 1 else None,
         "mesh": mesh, "texture": texture, "mode": settings.mode, "prompt": settings.prompt,
         "object_prompt": settings.object_prompt, "instruction": settings.instruction, "photo": photo,
         # Where the asset stands and its height, as the light and compose stages read them; the photo's
