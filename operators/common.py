@@ -94,6 +94,12 @@ class AssetLayout:
         return AssetMaterials(mesh=self.mesh, materials=tuple(
             read_material(m, obj, pairs[0][1]) for m, obj, pairs in zip(materials, users, self.slots)))
 
+    def fitting(self, context) -> tuple:
+        """(mesh, maps, per-material bake data or None) a run fits: several materials as their atlas
+        (core/data/materials.py), each then baked in its own UVs for its slots (`bake_data`)."""
+        mesh, maps = self.read(context).fitting_view()
+        return mesh, maps, self.bake_data() if len(self.materials) > 1 else None
+
     def bake_data(self) -> dict:
         """What core.game_bake needs to bake each (artist's) material in its own UVs (plain data, for a job)."""
         from ..blender_io.gltf_export import constant_channels
@@ -118,11 +124,22 @@ def artists_materials(context, materials: list, slots: list[list[tuple[str, int]
     artist's material, read again by Run All and Convert, and written by Bake Asset with the baked maps in
     place of its own, keeping its normal map, emission, alpha and glTF extensions, as `scenefit bake`
     keeps a file's."""
-    settings = getattr(context.scene, "scenefit", None)   # (None where the add-on is not registered)
-    originals = {(e.asset_object.name, e.slot): e.original for e in (settings.result_slots if settings else ())
-                 if e.asset_object is not None and e.original is not None}
+    originals = recorded_originals(getattr(context.scene, "scenefit", None))   # (None: add-on not registered)
     return [artists_material_behind(material, originals.get(pairs[0])) or material
             for material, pairs in zip(materials, slots)]
+
+
+def recorded_originals(settings) -> dict:
+    """(object name, slot number) -> the material the last job's result replaced there, as the Results
+    section recorded it (a file from before every slot was recorded: its one object's active slot)."""
+    if settings is None:
+        return {}
+    if settings.result_slots:
+        return {(e.asset_object.name, e.slot): e.original for e in settings.result_slots
+                if e.asset_object is not None and e.original is not None}
+    if settings.result_object is None or settings.original_material is None:
+        return {}
+    return {(settings.result_object.name, settings.result_object.active_material_index): settings.original_material}
 
 
 def asset_objects(context) -> list:

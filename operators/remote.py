@@ -62,10 +62,9 @@ def remote_work(op, context, address: str) -> tuple:
     settings = context.scene.scenefit
     photo, layout = scene_layout(op, context, "A worker environment runs the pipeline that fits the asset into a "
                                               "photo; other modes run in this Blender")
-    mesh, maps = layout.read(context).fitting_view()   # several materials: their atlas, as a local Run All
+    mesh, maps, materials = layout.fitting(context)   # as a local Run All hands them over
     op._layout = result_targets(layout)   # where the results go: every slot of the asset
     objects, name = [bpy.data.objects[n] for n in layout.objects], layout.name
-    materials = layout.bake_data() if len(layout.materials) > 1 else None
     models, _ = model_settings(context)
     from dataclasses import replace
 

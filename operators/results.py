@@ -14,9 +14,9 @@ from bpy.props import EnumProperty
 from ..blender_io import write_result_material
 from ..blender_io.world import assign_world, world_from_hdr
 from ..core.base.errors import InputError
-from .common import ORIGINAL_PROPERTY, artists_material_behind, keep_image, needs_setting, relative_if_saved
+from .common import (ORIGINAL_PROPERTY, TAG, artists_material_behind, keep_image, needs_setting,
+                     recorded_originals, relative_if_saved)
 
-TAG = "scenefit"
 
 
 def _settle_image(image, stage: str) -> None:
@@ -58,11 +58,7 @@ def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: li
                                  f"ran; the maps are in '{where}'.")
             found.append((obj, number))
         targets.append(found)
-    if settings.result_slots:
-        previous = {(e.asset_object.name, e.slot): e.original for e in settings.result_slots if e.asset_object}
-    else:   # a file from before every slot was recorded
-        previous = {(settings.result_object.name, settings.result_object.active_material_index):
-                    settings.original_material} if settings.result_object is not None else {}
+    previous = recorded_originals(settings)
     records, made = [], []
     for index, (found, paths) in enumerate(zip(targets, maps)):
         first, number = found[0]

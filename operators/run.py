@@ -40,7 +40,7 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         settings = context.scene.scenefit
         photo, layout = scene_layout(self, context, "Run All fits the asset into the photo; use Convert and "
                                                     "Adapt for the other modes")
-        mesh, maps = layout.read(context).fitting_view()   # several materials: their atlas (core/data/materials.py)
+        mesh, maps, materials = layout.fitting(context)
         guidance, why_no_adapt = self.guidance, ""
         if not settings.prompt.strip() and guidance == "auto":
             guidance, why_no_adapt = "none", "the Style section has no prompt"
@@ -54,8 +54,7 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
                           "why_no_adapt": why_no_adapt, "models": model_settings(context)[0],
                           "scene_type": settings.scene_type,
                           "depth_model": depth_model_preference(context),
-                          # several materials: each baked in its own UVs for its slots
-                          "materials": layout.bake_data() if len(layout.materials) > 1 else None,
+                          "materials": materials,
                           "out": str(run_folder(context, "run", layout.name))}
 
     def long_local_work(self, context) -> LocalWork | None:
