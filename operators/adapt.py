@@ -28,7 +28,7 @@ def gather_adapt(op, context, texture: str) -> dict:
     layout = asset_layout(context) if settings.mode != "generate" else None
     several = layout is not None and (len(layout.materials) > 1 or len(layout.objects) > 1)
     if several:
-        mesh = layout.read(context).fitting_view()[0]
+        mesh = layout.fitting_mesh()
         objects = [bpy.data.objects[n] for n in layout.objects]
     else:
         mesh = mesh_from_object(obj, context.evaluated_depsgraph_get())

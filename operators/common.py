@@ -94,6 +94,17 @@ class AssetLayout:
         return AssetMaterials(mesh=self.mesh, materials=tuple(
             read_material(m, obj, pairs[0][1]) for m, obj, pairs in zip(materials, users, self.slots)))
 
+    def fitting_mesh(self):
+        """The mesh of `fitting`, read without any pixels (Adapt needs only the mesh: reading the maps
+        would bake a procedural material with Cycles for nothing)."""
+        from dataclasses import replace
+
+        from ..blender_io.material import material_wrap
+        from ..core.data.materials import atlas_mesh
+
+        mesh = replace(self.mesh, wraps=tuple(material_wrap(m) for m in self.artists))
+        return atlas_mesh(mesh) if len(self.materials) > 1 else mesh
+
     def fitting(self, context) -> tuple:
         """(mesh, maps, per-material bake data or None) a run fits: several materials as their atlas
         (core/data/materials.py), each then baked in its own UVs for its slots (`bake_data`)."""
