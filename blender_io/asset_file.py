@@ -141,12 +141,23 @@ SOURCE_PROPERTY = "scenefit_source_file"
 
 
 def imported_from(objects: list) -> Path | None:
-    """The file Import Asset read the first of `objects` that has one from, if it is still there."""
-    for obj in objects:
-        source = obj.get(SOURCE_PROPERTY)
-        if isinstance(source, str) and Path(source).is_file():
-            return Path(source)
-    return None
+    """The file Import Asset read most of `objects` from (the first such file on a tie), if it is still there:
+    a selection that mixes two imports is written as the file most of it came from."""
+    sources = [obj.get(SOURCE_PROPERTY) for obj in objects]
+    files = [s for s in sources if isinstance(s, str) and Path(s).is_file()]
+    return Path(max(files, key=files.count)) if files else None   # (max keeps the first of equal counts)
+
+
+# What an asset file holds beside its geometry and is written with it when it came from the same file.
+BESIDE_TYPES = ("CAMERA", "LIGHT")
+
+
+def imported_beside(objects: list, scene_objects) -> list:
+    """The cameras and lights among `scene_objects` that Import Asset brought from the same file as any of
+    `objects`: the file's own (the diorama's camera and sun), not the artist's nor another import's."""
+    sources = {obj.get(SOURCE_PROPERTY) for obj in objects} - {None}
+    return sorted((o for o in scene_objects if o.type in BESIDE_TYPES and o not in objects
+                   and o.get(SOURCE_PROPERTY) in sources), key=lambda o: o.name)
 
 
 def import_into_open_scene(path: str | Path) -> list:

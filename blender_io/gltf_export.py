@@ -419,7 +419,7 @@ def carriers_of(objects: list) -> list:
 
 def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[list[tuple]], out_file: str | Path,
                         file_format: str = "glb", output: GltfOutput = GltfOutput(), replace: bool = False,
-                        new_uvs: dict | None = None, sources: list | None = None) -> dict:
+                        new_uvs: dict | None = None, sources: list | None = None, beside: list = ()) -> dict:
     """Objects of the user's session written as one asset: a copy of each object, its mesh and its materials
     gets the maps (`baked[i]` into the material in each (object, slot number) pair of `slots[i]`) and the
     copies alone are exported, then removed. The copies carry the originals' names while the exporter runs
@@ -427,7 +427,8 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
     materials as the user does. Nothing of the user's is changed. `new_uvs`: per object name, the UVs per loop
     of the new UV map that materials baked per surface read (blender_io.uv_unwrap.unwrapped_copies).
     `sources[i]`: the material the slots of `slots[i]` are exported from (default: the one they hold;
-    Bake Asset: the artist's material a SceneFit result replaced)."""
+    Bake Asset: the artist's material a SceneFit result replaced). `beside`: objects written as they are
+    with the asset and what carries them (the file's cameras and lights, asset_file.imported_beside)."""
     import bpy
 
     from .uv_unwrap import add_uv_map
@@ -465,7 +466,8 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
             renamed.append((original, name))
             duplicate.name = name
         report = bake_materials_to_gltf(materials, baked, out_file, file_format,
-                                        list(copies.values()) + carriers_of(objects), output=output, replace=replace)
+                                        [*copies.values(), *beside, *carriers_of([*objects, *beside])], output=output,
+                                        replace=replace)
     finally:
         # (a SceneFit result material's own image nodes are also named "SceneFit …": keep those)
         images = set(bpy.data.images) - images_before

@@ -10,9 +10,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import bpy
-from bpy.props import EnumProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
-from ..blender_io.asset_file import imported_from
+from ..blender_io.asset_file import imported_beside, imported_from
 from ..blender_io.gltf_export import FORMATS, bake_copies_to_gltf, normal_mapped
 from ..core.base.errors import InputError
 from ..core.stages.bake.gltf_ktx2 import basisu_path
@@ -99,6 +99,9 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
     textures: EnumProperty(name="Textures", items=TEXTURE_ITEMS, default=AS_IMPORTED)
     max_texture: IntProperty(name="Max texture", default=DEFAULT_MAX_TEXTURE, min=4, max=8192,
                              description="Largest baked texture side, a power of two")
+    cameras_and_lights: BoolProperty(name="Cameras and Lights", default=True,
+                                     description="Also write the cameras and lights Import Asset brought from the "
+                                                 "asset's file, as they are (scenefit bake writes the whole file)")
 
     @classmethod
     def poll(cls, context):
@@ -125,6 +128,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
             out_file = Path(f"{bpy.path.clean_name(layout.name)}.{self.file_format}")
         self._objects, self._slots, self._out_file = layout.objects, layout.slots, out_file
         self._sources = [m.name for m in artists]
+        self._beside = [o.name for o in imported_beside([bpy.data.objects[n] for n in layout.objects],
+                                                        context.scene.objects)] if self.cameras_and_lights else []
         remap, remapped, self._new_uvs = new_uv_map(context, layout, texture)
         return work.bake_game_maps, dict(layout.bake_data(), **layout.own_maps(),
                                          texture=str(texture),
@@ -143,15 +148,17 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         if gone:
             raise InputError(f"The material '{gone[0]}' was deleted or renamed while SceneFit baked it; bake again.")
         sources = [bpy.data.materials[name] for name in self._sources]
+        beside = [bpy.data.objects[name] for name in self._beside if name in bpy.data.objects]
         shown = objects[0].name if len(objects) == 1 else f"{len(objects)} objects ({', '.join(self._objects)})"
 
         def export(folder: Path | None) -> dict:
             out_file = self._out_file if folder is None else folder / self._out_file
             # A chosen file is written over as Blender's own exporters do; a run folder is new.
             report = bake_copies_to_gltf(objects, result["baked"], slots, out_file, self.file_format, self._output,
-                                         replace=True, new_uvs=self._new_uvs, sources=sources)
+                                         replace=True, new_uvs=self._new_uvs, sources=sources, beside=beside)
             report.update({"object": objects[0].name if len(objects) == 1 else None, "objects": list(self._objects),
-                           "format": self.file_format, "texture_size": result["size"], "file": str(out_file)})
+                           "format": self.file_format, "texture_size": result["size"], "file": str(out_file),
+                           "cameras_and_lights": [o.name for o in beside]})
             if folder is not None:
                 write_report(folder / "report.json", report)
             return report

@@ -474,6 +474,71 @@ def test_a_baked_selection_keeps_the_node_tree_above_and_between_its_parts(run_p
     channels = [(names[c["target"]["node"]], c["target"]["path"]) for a in exported["animations"] for c in a["channels"]]
     assert ("Wheel", "rotation") in channels
 
+BESIDE = r"""
+import json
+import bpy
+from scenefit.blender_io.asset_file import import_into_open_scene, imported_beside, imported_from
+from scenefit.blender_io.gltf_export import bake_copies_to_gltf
+from scenefit.blender_io.material import object_mesh_and_slots
+from scenefit.core.stages.bake.game_bake import bake_game_maps
+from scenefit.core.pipeline.presets import stage_config
+from scenefit.core.texture.neural_texture import NeuralTexture
+
+# A file made elsewhere: a box under its root node, the file's camera and sun
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.mesh.primitive_cube_add()
+bpy.context.object.name = "Box"
+bpy.context.object.data.materials.append(bpy.data.materials.new("Paint"))
+bpy.ops.object.camera_add(location=(4, -4, 3))
+bpy.context.object.name = "FileCamera"
+bpy.ops.object.light_add(type="SUN", location=(0, 0, 5))
+bpy.context.object.name = "FileSun"
+source = OUT.replace(".glb", "-source.glb")
+bpy.ops.export_scene.gltf(filepath=source, export_format="GLB", export_cameras=True, export_lights=True)
+other = OUT.replace(".glb", "-other.glb")   # another import: its camera is not the box's file's
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.object.camera_add()
+bpy.context.object.name = "OtherCamera"
+bpy.ops.export_scene.gltf(filepath=other, export_format="GLB", export_cameras=True)
+
+# The artist's scene: their own camera and light, then the two imports
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.object.camera_add()
+bpy.context.object.name = "ArtistsCamera"
+bpy.ops.object.light_add(type="POINT")
+bpy.context.object.name = "ArtistsLamp"
+import_into_open_scene(other)
+imported = import_into_open_scene(source)
+box = bpy.data.objects["Box"]
+beside = imported_beside([box], bpy.context.scene.objects)
+mesh, slots = object_mesh_and_slots(box, bpy.context.evaluated_depsgraph_get())
+baked = bake_game_maps(NeuralTexture(stage_config("texture", "draft", resolution=16), seed=1), mesh, ["Paint"], 16)
+before = sorted((o.name, o.type) for o in bpy.data.objects)
+report = bake_copies_to_gltf([box], baked, [[(box, 0)]], OUT, "glb", beside=beside)
+print("JSON" + json.dumps({"same": before == sorted((o.name, o.type) for o in bpy.data.objects),
+                           "files": report["files"], "beside": [o.name for o in beside],
+                           "from": [str(imported_from(objs)) for objs in ([box], [bpy.data.objects["OtherCamera"], box, box])]}))
+"""
+
+
+def test_bake_asset_writes_the_cameras_and_lights_of_the_assets_own_file_only(run_py, tmp_path):
+    out = tmp_path / "box.glb"
+    proc = run_py(BESIDE.replace("OUT", repr(str(out))))
+    result = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
+    assert result["same"] and result["files"] == [str(out)]
+    # the box's file's camera and sun, not the artist's nor the other import's
+    assert sorted(result["beside"]) == ["FileCamera", "FileSun"]
+    exported = gltf_json(str(out))
+    names = {n.get("name") for n in exported["nodes"]}
+    assert {"Box", "FileCamera", "FileSun"} <= names
+    assert not names & {"ArtistsCamera", "ArtistsLamp", "OtherCamera"}
+    assert len(exported.get("cameras", [])) == 1
+    assert len(exported["extensions"]["KHR_lights_punctual"]["lights"]) == 1
+    # a selection that mixes two imports is written as the file most of it came from
+    source = str(out).replace(".glb", "-source.glb")
+    assert result["from"] == [source, source]
+
+
 def test_bake_refuses_an_asset_folder_in_one_sentence(tmp_path, example_asset):
     proc = scenefit_here("bake", str(example_asset), "--texture", "t.pt", "--out", str(tmp_path / "x.glb"))
     assert proc.returncode == 2 and "asset folder" in proc.stderr and "Traceback" not in proc.stderr
