@@ -141,8 +141,8 @@ def artists_materials(context, materials: list, slots: list[list[tuple[str, int]
 
 
 def recorded_originals(settings) -> dict:
-    """(object name, slot number) -> the material the last job's result replaced there, as the Results
-    section recorded it (a file from before every slot was recorded: its one object's active slot)."""
+    """(object name, slot number) -> the material a result replaced there, as the Results section recorded
+    it for every slot that got one (a file from before every slot was recorded: its one object's active slot)."""
     if settings is None:
         return {}
     if settings.result_slots:

@@ -49,12 +49,14 @@ PATH = _path_options()
 
 
 class SceneFitSlot(bpy.types.PropertyGroup):
-    """One material slot the last result went to: what it held before (the artist's) and SceneFit's material."""
+    """One material slot a result went to: what it held before (the artist's), SceneFit's latest material
+    there, and the job that made it (the Results switch acts on the selection's slots, else the last job's)."""
 
     asset_object: PointerProperty(name="Object", type=bpy.types.Object)
     slot: IntProperty(name="Slot", min=0)
     original: PointerProperty(name="Original material", type=bpy.types.Material)
     result: PointerProperty(name="SceneFit material", type=bpy.types.Material)
+    job: IntProperty(name="Job", min=0, description="Which result this is: a later job has a higher number")
 
 
 class SceneFitSettings(bpy.types.PropertyGroup):

@@ -79,10 +79,17 @@ def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: li
             obj.material_slots[number].material = mat
             records.append((obj, number, original, mat))
         made.append(mat)
-    settings.result_slots.clear()
+    # Every slot that ever got a result keeps its entry (the latest result there), so the switch can act
+    # on an earlier asset: a slot of this job's replaces its own entry, and a deleted object's goes.
+    job = 1 + max((e.job for e in settings.result_slots), default=0)
+    done = {(obj.name, number) for obj, number, _, _ in records}
+    for index in reversed(range(len(settings.result_slots))):
+        entry = settings.result_slots[index]
+        if entry.asset_object is None or (entry.asset_object.name, entry.slot) in done:
+            settings.result_slots.remove(index)
     for obj, number, original, mat in records:
         entry = settings.result_slots.add()
-        entry.asset_object, entry.slot, entry.original, entry.result = obj, number, original, mat
+        entry.asset_object, entry.slot, entry.original, entry.result, entry.job = obj, number, original, mat, job
     settings.result_material, settings.result_object = made[0], records[0][0]
     if records[0][2] is not None:
         settings.original_material = records[0][2]
@@ -139,8 +146,21 @@ def apply_composite_image(context, path: str, stage: str):
     return image
 
 
+def switched_entries(context, entries) -> tuple[list, str]:
+    """The recorded result slots the Results switch acts on, and whose they are in words: those of the
+    selected (or active) objects that have any, else the last job's."""
+    chosen = set(context.selected_objects) | ({context.active_object} - {None})
+    mine = [e for e in entries if e.asset_object is not None and e.asset_object in chosen]
+    if mine:
+        names = sorted({e.asset_object.name for e in mine})
+        return mine, f"the selected object{'s' * (len(names) > 1)} {', '.join(names)}"
+    last = max(e.job for e in entries)
+    return [e for e in entries if e.job == last], "the last result's asset"
+
+
 class SCENEFIT_OT_use_result(bpy.types.Operator):
-    """Switch the asset's material or the scene's World between SceneFit's result and the original"""
+    """Switch the materials of the selected objects (else of the last result's asset) or the scene's World
+    between SceneFit's result and the original"""
 
     bl_idname = "scenefit.use_result"
     bl_label = "Use Result"
@@ -159,9 +179,10 @@ class SCENEFIT_OT_use_result(bpy.types.Operator):
                 return {"CANCELLED"}
             assign_world(context.scene, world)
             return {"FINISHED"}
-        if settings.result_slots:   # every slot of every object the last result went to
+        if settings.result_slots:
+            entries, whose = switched_entries(context, settings.result_slots)
             switched = 0
-            for entry in settings.result_slots:
+            for entry in entries:
                 obj, mat = entry.asset_object, entry.result if self.which == "RESULT" else entry.original
                 if obj is None or mat is None or entry.slot >= len(obj.material_slots):
                     continue
@@ -173,6 +194,8 @@ class SCENEFIT_OT_use_result(bpy.types.Operator):
             if not switched:
                 self.report({"ERROR"}, "There is no such material; convert or adapt the asset first.")
                 return {"CANCELLED"}
+            shown = "SceneFit's results" if self.which == "RESULT" else "the original materials"
+            self.report({"INFO"}, f"{shown.capitalize()} in {switched} material slot{'s' * (switched != 1)} of {whose}.")
             return {"FINISHED"}
         obj = settings.result_object
         mat = settings.result_material if self.which == "RESULT" else settings.original_material

@@ -286,6 +286,19 @@ image.pixels.foreach_set(np.tile(np.array([1.0, 0.0, 1.0, 1.0], np.float32), len
 out["converts"].append(convert(a))
 out["a"] = results(["A"])["A/0"]
 out["a_behind"] = import_module(MODULE + ".operators.common").asset_layout(bpy.context).artists[0].name
+# The Results switch on B alone, though A's result came last: B's original back, A's result stays
+bpy.ops.object.select_all(action="DESELECT")
+b.select_set(True)
+bpy.context.view_layer.objects.active = b
+out["switch_b"] = [sorted(bpy.ops.scenefit.use_result(target="MATERIAL", which="ORIGINAL")),
+                   [o.material_slots[0].material.name for o in (a, b)]]
+out["switch_b"].append(sorted(bpy.ops.scenefit.use_result(target="MATERIAL", which="RESULT")))
+out["switch_b"].append([o.material_slots[0].material.name for o in (a, b)])
+# Nothing selected: the last result's asset (A)
+bpy.ops.object.select_all(action="DESELECT")
+bpy.context.view_layer.objects.active = None
+out["switch_last"] = [sorted(bpy.ops.scenefit.use_result(target="MATERIAL", which="ORIGINAL")),
+                      [o.material_slots[0].material.name for o in (a, b)]]
 """
 
 # What cannot work is one sentence: faces on an empty slot, in an object and in a selection.
@@ -455,6 +468,12 @@ def test_the_artists_material_is_found_after_results_on_other_objects(blender):
     assert tag == "convert" and name.startswith("A SceneFit convert"), out["a"]
     assert np.allclose(colour, COLOURS["Red"], atol=0.03), colour   # not the magenta of its last result
     assert out["a_behind"] == "Red"
+    # The switch acts on the selected object's slots, though another object's result came last (it once
+    # acted on the last job's slots only), and on the last result's asset when nothing is selected
+    (done, (a_slot, b_slot)), again, (a_back, b_back) = out["switch_b"][:2], out["switch_b"][2], out["switch_b"][3]
+    assert done == ["FINISHED"] and a_slot.startswith("A SceneFit convert") and b_slot == "Blue", out["switch_b"]
+    assert again == ["FINISHED"] and a_back == a_slot and b_back.startswith("B SceneFit convert"), out["switch_b"]
+    assert out["switch_last"] == [["FINISHED"], ["Red", b_back]], out["switch_last"]
 
 
 def test_what_cannot_be_textured_is_one_sentence(blender):
