@@ -16,9 +16,9 @@ from ..core.base.errors import InputError
 from ..core.data.imageio import CHECK_SIDE, read_image, stored_orientation
 from ..core.scene.asset_pose import camera_for_placement
 from ..core.scene.camera import PHOTO_YAW_DEG, PhotoCamera, camera_pose
+from .tag import TAG
 from .world import world_controls
 
-TAG = "scenefit"
 CAMERA_NAME = "SceneFit Camera"
 FLOOR_NAME = "SceneFit Shadow Catcher"
 COMPOSITOR_NAME = "SceneFit Composite"

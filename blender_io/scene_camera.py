@@ -13,8 +13,8 @@ import numpy as np
 
 from ..core.base.errors import InputError
 from ..core.scene.asset_pose import SceneView, asset_in_view
+from .tag import TAG   # SceneFit's own objects carry it; its camera is SceneFit's to move
 
-TAG = "scenefit"   # SceneFit's own objects carry it (blender_io/compose.py); its camera is SceneFit's to move
 
 
 def photo_background(camera, photo_path: str | Path, photo_size: tuple[int, int]) -> str | None:

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import bpy
 
-from ..blender_io.compose import TAG, ensure_photo_camera, load_photo_image, object_base
+from ..blender_io.compose import ensure_photo_camera, load_photo_image, object_base
+from ..blender_io.tag import TAG
 from ..core.base.errors import InputError, SceneFitError
 from ..core.scene.asset_pose import camera_for_placement
 from .common import artist_camera, keep_image, photo_path, relative_if_saved, run_folder

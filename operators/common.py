@@ -11,11 +11,11 @@ from pathlib import Path
 
 import bpy
 
+from ..blender_io.tag import TAG   # what every datablock SceneFit makes carries (operators/results.py)
 from ..core.base.errors import InputError
 from ..core.data.materials import AssetMaterials
 
 ADDON_PACKAGE = __package__.rpartition(".")[0]
-TAG = "scenefit"   # what every datablock SceneFit makes carries (operators/results.py)
 # On a SceneFit result material: the artist's material it replaced (an ID property, so it survives saving,
 # duplicating the object and results made later on other objects).
 ORIGINAL_PROPERTY = "scenefit_original"
