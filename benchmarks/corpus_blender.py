@@ -141,9 +141,9 @@ def markdown(rows: list[dict], measured: str) -> str:
              f"{measured}. A fresh Blender per asset, the extension installed from its zip, an object of the "
              "artist's own in the scene; the asset's visible meshes selected as one asset; preset draft, no prompt "
              f"(adapt skipped); photos as `scenefit run`'s part of corpus.md. **{ok} of {len(rows)}** pass (every "
-             "step finished, 0 validator errors, the artist's object as it was). Bake Asset writes the selection "
-             "and what carries it, so cameras and lights beside it in the file are not in the bake (`scenefit "
-             "bake` writes the whole file); \"kept / lost\" counts them. Composites in "
+             "step finished, 0 validator errors, the artist's object as it was). Bake Asset writes the selection, "
+             "what carries it and the cameras and lights of the asset's own file (Cameras and Lights, on by "
+             "default); \"kept / lost\" compares the bake with the input file. Composites in "
              "[corpus_blender_sheet.png](corpus_blender_sheet.png).\n",
              "| asset | file | status | objects | import s | Run All s | Bake Asset s | validator errors / warnings | "
              "kept | lost | message |", "|---|---|---|---|---|---|---|---|---|---|---|"]
