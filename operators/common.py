@@ -397,6 +397,14 @@ def run_folder(context, stage: str, name: str = "") -> Path:
     raise InputError(f"Too many runs in '{parent}' this second; try again.")
 
 
+def last_finished_run(folder: Path) -> Path | None:
+    """The latest finished run beside the new run `folder` (run_folder's <output>/<name>/<stage>-<time>): the
+    one whose report.json was written last; its stages with the new run's keys are reused (copied in)."""
+    stage = folder.name.split("-", 1)[0]
+    finished = [d for d in folder.parent.glob(f"{stage}-*") if d != folder and (d / "report.json").is_file()]
+    return max(finished, key=lambda d: (d / "report.json").stat().st_mtime_ns, default=None)
+
+
 def keep_image(image) -> None:
     """An unsaved file cannot refer to files next to it: pack the image into the .blend instead."""
     if not bpy.data.is_saved and image.packed_file is None:

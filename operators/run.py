@@ -12,7 +12,8 @@ from ..core.base.errors import SceneFitError
 from ..core.scene.camera import PhotoCamera
 from . import work
 from .adapt import adapt_seconds_here
-from .common import OnMesh, depth_model_preference, model_settings, photo_path, photo_view, run_folder, scene_layout
+from .common import (OnMesh, depth_model_preference, last_finished_run, model_settings, photo_path, photo_view,
+                     run_folder, scene_layout)
 from .jobs import JobOperator
 from .results import apply_composite_image, apply_layout_results, apply_result_world, result_targets
 
@@ -49,13 +50,15 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         view = photo_view(context, photo, [bpy.data.objects[name] for name in layout.objects])
         self._scene_camera = view["scene_camera"]
         self._layout = result_targets(layout)
+        out = run_folder(context, "run", layout.name)
+        earlier = last_finished_run(out)   # its stages with this run's settings and inputs are reused
         return work.run, {"mesh": mesh, "maps": maps, "photo": str(photo), "view": view,
                           "preset": settings.preset, "prompt": settings.prompt, "guidance": guidance,
                           "why_no_adapt": why_no_adapt, "models": model_settings(context)[0],
                           "scene_type": settings.scene_type,
                           "depth_model": depth_model_preference(context),
                           "materials": materials,
-                          "out": str(run_folder(context, "run", layout.name))}
+                          "out": str(out), "reuse_from": str(earlier) if earlier else None}
 
     def long_local_work(self, context) -> LocalWork | None:
         if self.guidance == "none" or (self.guidance == "auto" and not context.scene.scenefit.prompt.strip()):
@@ -79,6 +82,9 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
             lines.append(f"Cycles composite set up through '{made['camera'].name}' (F12 renders it)")
         except SceneFitError as error:
             lines.append(f"no Cycles composite: {error}")
+        reused = [name for name, status in result["stages"].items() if status == "reused"]
+        if reused:
+            lines.append(f"{', '.join(reused)} reused from the last run (same settings and inputs)")
         if result["stages"]["adapt"] == "skipped":
             lines.append(f"adapt skipped: {result['adapt_skipped']}")
         return "Done: " + "; ".join(lines)

@@ -244,7 +244,8 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
         config = run_config(data)
         report = run_pipeline(data["mesh"], data["maps"], data["photo"], tuple(data["view"]["placement"]), folder,
                               config, progress=progress, cancel=cancel,
-                              bake_skipped_why="in Blender the game file is written by Bake Asset")
+                              bake_skipped_why="in Blender the game file is written by Bake Asset",
+                              reuse_from=data.get("reuse_from"))
         stages = report["stages"]
         if stages["adapt"]["status"] == "skipped" and data.get("why_no_adapt"):
             stages["adapt"]["why"] = data["why_no_adapt"]

@@ -148,6 +148,15 @@ originals = ["Red", "Green", "Blue"]
 before = artists(originals)
 out.update(operate(["Cube"], originals, tmp / "three.glb"))
 out["artists_before"] = before
+# Run All again with nothing changed: a new run folder, its stages copied from the last run, not redone
+first_run = Path(bpy.path.abspath(bpy.context.scene.scenefit.composite_path)).parent.parent
+listing = lambda folder: sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+first_files = listing(first_run)
+out["run_again"] = sorted(bpy.ops.scenefit.run(guidance="none"))
+second_run = Path(bpy.path.abspath(bpy.context.scene.scenefit.composite_path)).parent.parent
+report = json.loads((second_run / "report.json").read_text())
+out["again_stages"] = {k: v["status"] for k, v in report["stages"].items()}
+out["again_folders"] = [first_run.name != second_run.name, first_files == listing(first_run)]
 """
 
 # A selection of two objects (one with one material, one with two) and an object left out of it.
@@ -418,6 +427,11 @@ def test_an_object_with_three_materials_through_run_all_and_bake_asset(blender, 
     assert out["bake_left_session_as_it_was"]
     found = check_glb(blender.tmp / "three.glb", blender.tmp, validator, expected)
     assert found["_meshes"] == 1 and found["_nodes"] == ["Cube"]
+    # Run All again: a new folder whose stages are the last run's, copied (each run redid everything before)
+    assert out["run_again"] == ["FINISHED"]
+    assert out["again_stages"] == {"convert": "reused", "light": "reused", "adapt": "skipped", "compose": "reused",
+                                   "bake": "skipped"}, out["again_stages"]
+    assert out["again_folders"] == [True, True]   # a folder of its own; the last run's left as it was
 
 
 def test_a_selection_of_two_objects_through_run_all_and_bake_asset(blender, validator):

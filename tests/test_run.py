@@ -219,3 +219,37 @@ def test_run_gives_the_light_stage_the_scene_type_and_the_models_cache(tmp_path,
                  "--cache-dir", str(cache), "--offline"]) == 0
     line = capsys.readouterr().out.strip().splitlines()[-1]
     assert "light reused" in line and "light direction guessed (--sun AZ,EL or --sun-from-shadow sets it)" in line
+
+
+def test_a_new_run_folder_reuses_an_earlier_runs_stages_by_copy_and_leaves_that_run_as_it_was(tmp_path):
+    """Blender's Run All makes a new folder per run: run_pipeline(reuse_from=the last run) copies in each of
+    its stages whose key this run shares (it once redid every stage), and the earlier run is not touched."""
+    from scenefit.core.pipeline.run import RunConfig, run_pipeline
+
+    yy, xx = np.mgrid[0:16, 0:16] / 16
+    maps = PBRMaps(np.stack([0.3 + 0.5 * xx, 0.4 + 0 * xx, 0.7 - 0.4 * yy], -1).astype(np.float32), 0.5, 0.0)
+    mesh = uv_sphere(0.5, 16, 8)
+    photo = write_image(tmp_path / "photo.png", np.clip(np.linspace(0.9, 0.3, 48)[:, None, None]
+                                                        + np.zeros((48, 64, 3)), 0, 1))
+    config = RunConfig(preset="draft", guidance_type="none", compose_spp=2)
+    first = run_pipeline(mesh, maps, photo, (0.5, 0.8), tmp_path / "run-1", config)
+    assert first["reused"] == []
+    files = lambda folder: {p: p.stat().st_mtime_ns for p in sorted(folder.rglob("*")) if p.is_file()}
+    before = files(tmp_path / "run-1")
+
+    second = run_pipeline(mesh, maps, photo, (0.5, 0.8), tmp_path / "run-2", config, reuse_from=tmp_path / "run-1")
+    assert second["reused"] == ["convert", "light", "compose"]
+    for name in ("convert", "light", "compose"):
+        assert (tmp_path / "run-2" / name / "stage.json").is_file()
+        assert second["stages"][name]["from"] == str((tmp_path / "run-1").resolve())
+    assert np.array_equal(read_image(tmp_path / "run-2" / "compose" / "composite.png"),
+                          read_image(tmp_path / "run-1" / "compose" / "composite.png"))
+    written = json.loads((tmp_path / "run-2" / "report.json").read_text())
+    for stage in written["stages"].values():   # its outputs are its own files (copies of the earlier run's)
+        assert "run-1" not in json.dumps(stage.get("report", {}).get("outputs", {}))
+
+    # Another placement: the light and what follows it run again; the texture is still the earlier one's
+    third = run_pipeline(mesh, maps, photo, (0.3, 0.8), tmp_path / "run-3", config, reuse_from=tmp_path / "run-2")
+    assert third["reused"] == ["convert"]
+    assert [third["stages"][n]["status"] for n in ("light", "compose")] == ["ran", "ran"]
+    assert files(tmp_path / "run-1") == before   # nothing of the first run was changed

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+import shutil
 import threading
 import time
 from contextlib import contextmanager
@@ -121,8 +123,10 @@ def asset_digest(mesh: Mesh, maps: PBRMaps) -> str:
 class StageRunner:
     """Runs or reuses one stage at a time, and keeps the run's report."""
 
-    def __init__(self, out: Path, progress: ProgressCallback | None, cancel: threading.Event | None) -> None:
+    def __init__(self, out: Path, progress: ProgressCallback | None, cancel: threading.Event | None,
+                 earlier: Path | None = None) -> None:
         self.out, self.progress, self.cancel = out, progress, cancel
+        self.earlier = earlier   # a finished run's folder: a stage of it with this run's key is copied in, not redone
         self.stages: dict[str, dict] = {}
         self.fresh = False   # once a stage runs, every later stage runs too
 
@@ -143,17 +147,19 @@ class StageRunner:
         folder = self.out / name
         record = folder / STAGE_FILE
         index = STAGES.index(name)
-        if not self.fresh and record.is_file():
-            try:
-                saved = json.loads(record.read_text())
-            except json.JSONDecodeError:
-                saved = {}
-            report = dict(saved.get("report") or {})
-            report["outputs"] = _absolute_outputs(report.get("outputs", {}), folder)
-            if saved.get("key") == key and all(Path(p).exists() for p in _paths(report["outputs"])):
-                emit(self.progress, "run", index + 1, len(STAGES), f"{name}: reused (same settings and inputs)")
-                self.stages[name] = {"status": "reused", "key": key, "seconds": 0.0, "report": report}
-                return lambda: report
+        report, source = (None, "") if self.fresh else (_finished_stage(folder, key), "")
+        if report is None and not self.fresh and self.earlier is not None and not folder.exists() \
+                and _finished_stage(self.earlier / name, key) is not None:
+            # The earlier run's stage, copied whole (hard links where the disk allows): this run's folder
+            # stays one unit of its own, and the earlier run is left as it was.
+            shutil.copytree(self.earlier / name, folder, copy_function=_link_or_copy)
+            report, source = _finished_stage(folder, key), f" from {self.earlier.name}"
+        if report is not None:
+            emit(self.progress, "run", index + 1, len(STAGES), f"{name}: reused{source} (same settings and inputs)")
+            self.stages[name] = {"status": "reused", "key": key, "seconds": 0.0, "report": report}
+            if source:
+                self.stages[name]["from"] = str(self.earlier)
+            return lambda: report
         self.fresh = self.fresh or later_stages_follow
         emit(self.progress, "run", index, len(STAGES), f"{name}: running")
         t0 = time.perf_counter()
@@ -180,6 +186,30 @@ class StageRunner:
         emit(self.progress, "run", STAGES.index(name) + 1, len(STAGES), f"{name}: {status}")
 
 
+def _finished_stage(folder: Path, key: str) -> dict | None:
+    """The report of the stage finished in `folder` with `key` whose outputs all exist, else None."""
+    record = folder / STAGE_FILE
+    if not record.is_file():
+        return None
+    try:
+        saved = json.loads(record.read_text())
+    except json.JSONDecodeError:
+        return None
+    report = dict(saved.get("report") or {})
+    report["outputs"] = _absolute_outputs(report.get("outputs", {}), folder)
+    if saved.get("key") != key or not all(Path(p).exists() for p in _paths(report["outputs"])):
+        return None
+    return report
+
+
+def _link_or_copy(source: str, target: str) -> str:
+    try:
+        os.link(source, target)   # the stages write new files, never into old ones, so sharing is safe
+    except OSError:
+        shutil.copy2(source, target)
+    return target
+
+
 def _absolute_outputs(outputs, folder: Path):
     """A stage.json's outputs (kept relative to the stage's folder) as paths from here."""
     if isinstance(outputs, dict):
@@ -196,7 +226,8 @@ def _paths(outputs) -> list[str]:
 def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, out_dir: str | Path,
                  config: RunConfig = RunConfig(), progress: ProgressCallback | None = None,
                  cancel: threading.Event | None = None, bake: GameBake | None = None,
-                 bake_skipped_why: str = "no game bake was asked for", models: ModelCache | None = None) -> dict:
+                 bake_skipped_why: str = "no game bake was asked for", models: ModelCache | None = None,
+                 reuse_from: str | Path | None = None) -> dict:
     """Convert the asset, estimate the photo's light, adapt the texture (when the SD2 weights exist),
     compose the asset into the photo, and bake (when `bake` is given); returns the run's report (also
     out_dir/report.json).
@@ -204,10 +235,13 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     placement: (x, y) as fractions of the photo's width and height (both <= 1) or pixels, or "X,Y".
     models: the loaded diffusion models to use (a ModelCache: a batch worker keeps one for its life,
     so its jobs load them once); default a cache for this run, so light and adapt share one load.
+    reuse_from: a finished run's folder (Blender's Run All makes a new folder per run): each of its stages
+    whose key this run shares is copied into out_dir and reused, as a stage already in out_dir is.
     This is the one place the stages are strung together: the command line, batch jobs, remote
     workers, the Blender operators and the demo all call it.
     """
-    run = PipelineRun(mesh, maps, photo_path, placement, out_dir, config, progress, cancel, models)  # 1. inputs
+    run = PipelineRun(mesh, maps, photo_path, placement, out_dir, config, progress, cancel, models,  # 1. inputs
+                      reuse_from)
     run.convert()                         # 2. the asset's maps -> neural texture
     with run.baking(bake, bake_skipped_why):  # 6. the texture written into the asset's own file (glTF): a process
         run.light()                       # 3.    of its own, from when the texture is final (after 2, or after 4)
@@ -233,7 +267,7 @@ class PipelineRun:
 
     def __init__(self, mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, out_dir: str | Path,
                  config: RunConfig, progress: ProgressCallback | None, cancel: threading.Event | None,
-                 models: ModelCache | None) -> None:
+                 models: ModelCache | None, reuse_from: str | Path | None = None) -> None:
         from ..stages.light import load_photo
         from ..data.mesh import normalize_to_unit_sphere
         from ..scene.placement import Placement
@@ -260,7 +294,7 @@ class PipelineRun:
         self.asset_key = asset_digest(mesh, maps)
         self.photo_key = _digest(self.photo_path.read_bytes())
         self.normalized, _ = normalize_to_unit_sphere(mesh)
-        self.runner = StageRunner(self.out, progress, cancel)
+        self.runner = StageRunner(self.out, progress, cancel, Path(reuse_from).resolve() if reuse_from else None)
         self.texture_path = self.light_path = None
         self.keys: dict[str, str] = {}
         self.texture_final: Callable[[], None] = lambda: None   # what waits for the final texture (the bake)
