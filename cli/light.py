@@ -64,8 +64,9 @@ def _light(args, out: Path) -> int:
     inputs = light_inputs(args.photo, args.at, args.fspy, {"fov_deg": args.fov, "pitch_deg": photo_pitch(args),
                                                            "roll_deg": args.roll})
     if args.sun_from_shadow:
-        config = replace(config, sun_deg=sun_from_shadow_points(args.sun_from_shadow, inputs.camera,
-                                                                tuple(inputs.info["size"]), inputs.photo.shape[:2]))
+        sun, spread = sun_from_shadow_points(args.sun_from_shadow, inputs.camera, tuple(inputs.info["size"]),
+                                             inputs.photo.shape[:2])
+        config = replace(config, sun_deg=sun, sun_uncertainty_deg=spread)
     result = run_light(inputs, config, progress(args))
     if args.sun_from_shadow:
         result.decisions["sun"]["from"] = "the shadow given by --sun-from-shadow (foot, top, tip)"

@@ -252,7 +252,8 @@ def photo_view(context, photo: Path, obj=None) -> dict:
     """How a job sees the photo, decided once for every operator:
 
     camera: {"fov_deg", "pitch_deg", "roll_deg"} to use, or None to estimate it from the photo in the job;
-    sun_deg: the dominant light's (azimuth, elevation) the artist set (Pick Sun), or None;
+    sun_deg: the dominant light's (azimuth, elevation) the artist set (Pick Sun), or None, and
+    sun_uncertainty_deg how far off it may be;
     camera_source: "blender" (the artist's camera shows the photo), "user" (the panel's values), or
     "estimate"; scene_camera: that camera's name; placement, size, turn_deg: where the asset stands (from
     the arrangement through the artist's camera, else the panel's); notes: what is not modelled."""
@@ -284,6 +285,7 @@ def photo_view(context, photo: Path, obj=None) -> dict:
                             "roll_deg": math.degrees(settings.roll)}, camera_source="user")
     view["sun_deg"] = ((math.degrees(settings.sun_azimuth), math.degrees(settings.sun_elevation))
                        if settings.sun_from == "set" else None)
+    view["sun_uncertainty_deg"] = math.degrees(settings.sun_uncertainty) if settings.sun_from == "set" else 0.0
     return view
 
 

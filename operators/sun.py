@@ -23,11 +23,11 @@ ASK = {"foot": "Click the foot of something upright on the floor (a post, a pers
        "tip": "Click the tip of its shadow on the floor"}
 
 
-def sun_from_points(context, points: dict) -> tuple[float, float]:
-    """(azimuth, elevation) in degrees from the three points (fractions of the photo), through the camera
-    SceneFit composes with (the artist's when it shows the photo, else the panel's or the estimate)."""
+def sun_from_points(context, points: dict) -> tuple[float, float, float]:
+    """(azimuth, elevation, uncertainty) in degrees from the three points (fractions of the photo), through
+    the camera SceneFit composes with (the artist's when it shows the photo, else the panel's or the estimate)."""
     from ..core.data.imageio import upright_size
-    from ..core.stages.light.shadow_hint import sun_from_shadow
+    from ..core.stages.light.shadow_hint import sun_from_shadow, sun_uncertainty_deg
 
     photo = photo_path(context)
     view = photo_view(context, photo)
@@ -36,7 +36,7 @@ def sun_from_points(context, points: dict) -> tuple[float, float]:
         raise InputError(f"The photo '{photo}' cannot be read; choose another in the Scene section.")
     camera = replace(composite_camera(context, photo, view), width=size[0], height=size[1])
     foot, top, tip = ((points[k][0] * size[0], points[k][1] * size[1]) for k in STEPS)
-    return sun_from_shadow(camera, foot, top, tip)
+    return (*sun_from_shadow(camera, foot, top, tip), sun_uncertainty_deg(camera, foot, top, tip))
 
 
 class SCENEFIT_OT_pick_sun(PhotoClicks, bpy.types.Operator):
@@ -53,11 +53,11 @@ class SCENEFIT_OT_pick_sun(PhotoClicks, bpy.types.Operator):
 
     def execute(self, context):
         try:
-            azimuth, elevation = sun_from_points(context, {k: tuple(getattr(self, k)) for k in STEPS})
+            azimuth, elevation, spread = sun_from_points(context, {k: tuple(getattr(self, k)) for k in STEPS})
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        return set_sun(self, context, azimuth, elevation, "the shadow")
+        return set_sun(self, context, azimuth, elevation, "the shadow", spread)
 
     def invoke(self, context, event):
         self._points = {}
@@ -73,12 +73,21 @@ class SCENEFIT_OT_pick_sun(PhotoClicks, bpy.types.Operator):
         return self.execute(context)
 
 
-def set_sun(op, context, azimuth: float, elevation: float, source: str) -> set[str]:
-    """The Scene section's Sun "As set here" at (azimuth, elevation) degrees, said in the status bar."""
+def set_sun(op, context, azimuth: float, elevation: float, source: str, uncertainty: float = 0.0) -> set[str]:
+    """The Scene section's Sun "As set here" at (azimuth, elevation) degrees, give or take `uncertainty`,
+    said in the status bar."""
+    from ..core.stages.light.cues import UNSURE_DEG
+
     settings = context.scene.scenefit
     settings.sun_azimuth, settings.sun_elevation = math.radians(azimuth), math.radians(elevation)
+    settings.sun_uncertainty = math.radians(min(uncertainty, 90.0))
     settings.sun_from = "set"
-    op.report({"INFO"}, f"Sun from {source}: azimuth {azimuth:.0f}°, elevation {elevation:.0f}°")
+    said = f"Sun from {source}: azimuth {azimuth:.0f}°, elevation {elevation:.0f}°"
+    if uncertainty > 0.0:
+        said += f", ±{uncertainty:.0f}° for a slip of a click"
+        if uncertainty > UNSURE_DEG:
+            said += " (a longer shadow, or its tip picked closer, pins it better; the light hedges meanwhile)"
+    op.report({"INFO"}, said)
     return {"FINISHED"}
 
 

@@ -87,7 +87,8 @@ def job_view(view: dict) -> dict:
     return {"at": tuple(view["placement"]), "object_size": view["size"],
             "camera": {names[k]: v for k, v in (view["camera"] or {}).items()},
             "camera_source": source, "camera_why": why, "turn": view["turn_deg"],
-            "sun": tuple(view["sun_deg"]) if view.get("sun_deg") else None}
+            "sun": tuple(view["sun_deg"]) if view.get("sun_deg") else None,
+            "sun_uncertainty": float(view.get("sun_uncertainty_deg", 0.0))}
 
 
 def camera_values(camera) -> dict:
@@ -113,6 +114,7 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
                  "depth": data["depth"]}
     if data["view"].get("sun_deg"):   # the artist's sun (Pick Sun), as --sun
         overrides["sun_deg"] = tuple(data["view"]["sun_deg"])
+        overrides["sun_uncertainty_deg"] = float(data["view"].get("sun_uncertainty_deg", 0.0))
     config = stage_config("light", data["preset"], **overrides)
     config = replace(config, outpaint=replace(config.outpaint, completion_type=data.get("outpaint", "auto")))
     if data.get("iterations"):  # quick looks and tests
@@ -203,6 +205,7 @@ def run_config(data: dict):
                      camera_why=why,
                      turn_deg=view["turn_deg"], models=data["models"],
                      sun_deg=tuple(view["sun_deg"]) if view.get("sun_deg") else None,
+                     sun_uncertainty_deg=float(view.get("sun_uncertainty_deg", 0.0)),
                      scene_type=data.get("scene_type", "auto"), depth_model=data.get("depth_model"))
 
 

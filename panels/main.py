@@ -101,7 +101,7 @@ class SCENEFIT_PT_scene(_Subsection, bpy.types.Panel):
         col.prop(settings, "scene_type")
         draw_camera(settings, context, self.layout.column(align=True))
         draw_choice(self.layout.column(align=True), settings, "sun_from", "Sun", "scenefit.pick_sun", "LIGHT_SUN",
-                    ("sun_azimuth", "sun_elevation") if settings.sun_from == "set" else (),
+                    ("sun_azimuth", "sun_elevation", "sun_uncertainty") if settings.sun_from == "set" else (),
                     more=(("scenefit.sun_from_lamp", "OUTLINER_OB_LIGHT"),))
 
 

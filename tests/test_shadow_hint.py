@@ -11,7 +11,7 @@ from scenefit.cli import main
 from scenefit.core.base.errors import InputError
 from scenefit.core.data.imageio import write_image
 from scenefit.core.stages.light.estimate import sun_direction
-from scenefit.core.stages.light.shadow_hint import sun_from_shadow
+from scenefit.core.stages.light.shadow_hint import CLICK_SLIP, sun_from_shadow, sun_uncertainty_deg
 from scenefit.core.scene.camera import CAMERA_HEIGHT, PhotoCamera
 
 CAMERA = PhotoCamera(yaw_deg=90.0, pitch_deg=-15.0, fov_deg=60.0, width=640, height=480, roll_deg=2.0)
@@ -55,6 +55,40 @@ def test_points_that_cannot_be_a_shadow_are_one_sentence():
         sun_from_shadow(CAMERA, foot, (foot[0] + 150.0, top[1]), tip)   # the top beside it
 
 
+def test_a_shorter_shadow_pins_the_sun_less_and_the_photos_size_does_not_matter():
+    """The uncertainty is how far the sun turns when one click slips CLICK_SLIP of the width: it grows as
+    the post (and its shadow) shrinks, and the same shadow in a photo twice as wide gives the same."""
+    spreads = [sun_uncertainty_deg(CAMERA, *shadow_pixels((40.0, 35.0), foot=(0.4, 10.0), height=h))
+               for h in (2.0, 1.0, 0.5, 0.2)]   # a post 10 m away
+    assert all(a < b for a, b in zip(spreads, spreads[1:])), spreads
+    assert spreads[0] < 15.0 < 30.0 < spreads[-1], spreads    # the lobe's two ends (cues.SURE_DEG, UNSURE_DEG)
+    wide = PhotoCamera(yaw_deg=90.0, pitch_deg=-15.0, fov_deg=60.0, width=1280, height=960, roll_deg=2.0)
+    points = shadow_pixels((40.0, 35.0), height=1.0)
+    twice = [(2 * x, 2 * y) for x, y in points]   # the same points in a photo of twice the pixels
+    assert sun_uncertainty_deg(wide, *twice) == pytest.approx(sun_uncertainty_deg(CAMERA, *points), rel=0.02)
+    assert CLICK_SLIP * CAMERA.width == pytest.approx(2.0)
+
+
+def test_a_slip_that_leaves_the_floor_is_as_unsure_as_can_be():
+    level = PhotoCamera(yaw_deg=90.0, pitch_deg=-15.0, fov_deg=60.0, width=640, height=480)
+    foot, top, _ = shadow_pixels((0.0, 10.0), foot=(0.0, 4.0), camera=level)
+    x, horizon_y = level.project(np.array([[0.0, 1e6, CAMERA_HEIGHT]]), ORIGIN)[0]   # far along the view
+    tip = (x, horizon_y + 1.0)   # a pixel below the horizon: a 2-pixel slip puts it in the sky
+    sun_from_shadow(level, foot, top, tip)   # (itself a shadow, of a sun just above the horizon)
+    assert sun_uncertainty_deg(level, foot, top, tip) == 90.0
+
+
+def test_the_unseen_lights_lobe_widens_with_the_suns_uncertainty():
+    from scenefit.core.stages.light.cues import SURE_DEG, UNSURE_DEG, CueConfig, sun_lobe
+
+    c = CueConfig()
+    narrow, wide = (c.sun_lobe_floor, c.sun_lobe_sharpness), (c.lobe_floor, c.lobe_sharpness)
+    assert sun_lobe(c, 0.0) == narrow and sun_lobe(c, SURE_DEG) == narrow
+    assert sun_lobe(c, UNSURE_DEG) == pytest.approx(wide) and sun_lobe(c, 90.0) == pytest.approx(wide)
+    middle = sun_lobe(c, (SURE_DEG + UNSURE_DEG) / 2)
+    assert middle == pytest.approx(((narrow[0] + wide[0]) / 2, (narrow[1] + wide[1]) / 2))
+
+
 def test_scenefit_light_takes_the_shadow_and_reports_where_the_sun_came_from(tmp_path, capsys):
     photo = write_image(tmp_path / "yard.png", np.broadcast_to(np.linspace(0.9, 0.3, 48)[:, None, None],
                                                                (48, 64, 3)).astype(np.float32))
@@ -66,6 +100,16 @@ def test_scenefit_light_takes_the_shadow_and_reports_where_the_sun_came_from(tmp
     sun = json.loads((tmp_path / "light" / "report.json").read_text())["decisions"]["sun"]
     assert sun["deg"] == [pytest.approx(40.0, abs=0.05), pytest.approx(35.0, abs=0.05)]
     assert "shadow" in sun["from"]
+    # A long shadow pins the sun (the narrow lobe); a short one far away does not, and the light hedges
+    # with the guess's wide lobe (every shadow once got the narrow one)
+    report = json.loads((tmp_path / "light" / "report.json").read_text())["decisions"]
+    assert sun["uncertainty_deg"] < 15.0 and report["cues"]["unseen"]["lobe"] == {"floor": 0.05, "sharpness": 8.0}
+    short = [f"{x / 64:.6f},{y / 48:.6f}" for x, y in shadow_pixels((40.0, 35.0), foot=(0.3, 12.0), height=0.5,
+                                                                     camera=camera)]
+    assert main(common + ["--sun-from-shadow", *short, "--out", str(tmp_path / "short")]) == 0
+    report = json.loads((tmp_path / "short" / "report.json").read_text())["decisions"]
+    assert report["sun"]["uncertainty_deg"] > 30.0
+    assert report["cues"]["unseen"]["lobe"] == {"floor": 0.25, "sharpness": 4.0}
     capsys.readouterr()
     assert main(common + ["--sun", "10,20", "--sun-from-shadow", *points, "--out", str(tmp_path / "both")]) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1 and not (tmp_path / "both").exists()
@@ -91,6 +135,12 @@ def test_pick_sun_in_blender_sets_the_light_stages_sun(run_py, tmp_path):
         out = {{"before": settings.sun_from}}
         out["ops"] = list(bpy.ops.scenefit.pick_sun(foot={foot}, top={top}, tip={tip}))
         out["sun"] = [settings.sun_from, math.degrees(settings.sun_azimuth), math.degrees(settings.sun_elevation)]
+        out["spread"] = math.degrees(settings.sun_uncertainty)
+        from scenefit.operators.sun import set_sun
+        class Op:
+            def report(self, kind, text):
+                out["said"] = text
+        set_sun(Op(), bpy.context, -50.0, 30.0, "the shadow", out["spread"])
         out["light"] = list(bpy.ops.scenefit.estimate_light(critic="none", outpaint="prior"))
         report = Path(bpy.path.abspath(settings.light_path)).parent / "report.json"
         out["decision"] = json.loads(report.read_text())["decisions"]["sun"]
@@ -101,6 +151,9 @@ def test_pick_sun_in_blender_sets_the_light_stages_sun(run_py, tmp_path):
     source, azimuth, elevation = out["sun"]
     assert source == "set" and (azimuth, elevation) == (pytest.approx(-50.0, abs=0.01), pytest.approx(30.0, abs=0.01))
     assert out["decision"]["deg"] == [pytest.approx(-50.0, abs=0.01), pytest.approx(30.0, abs=0.01)]
+    # the clicks' uncertainty goes with them (it was dropped: every shadow got the narrow lobe)
+    assert out["spread"] == pytest.approx(out["decision"]["uncertainty_deg"], abs=0.01) and out["spread"] > 0.0
+    assert "for a slip of a click" in out["said"]
 
 
 def test_scenefit_run_takes_the_sun_as_angles_or_as_a_shadow(tmp_path, capsys):

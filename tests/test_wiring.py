@@ -95,7 +95,8 @@ def test_a_jobs_file_says_how_the_photo_is_seen_as_the_command_line_does(inputs,
     assert cli_call["config"].size == 0.45 and cli_call["config"].camera_overrides["pitch_deg"] == -14.0
     assert cli_call["config"].scene_type == "indoor"
     for bad, says in (("object_size = 1.5", "object_size"), ("camera = { fov = 50, yaw = 3 }", "camera"),
-                      ("sun = [10, 95]", "sun"), ("turn = \"left\"", "turn"), ("scene = \"cave\"", "scene")):
+                      ("sun = [10, 95]", "sun"), ("turn = \"left\"", "turn"), ("scene = \"cave\"", "scene"),
+                      ("sun_uncertainty = -3", "sun_uncertainty")):
         path.write_text(_jobs(inputs["root"], inputs["folder"], inputs["photo"], ["light"]).read_text() + bad + "\n")
         with pytest.raises(InputError, match=f"job 'job': {says}"):
             load_jobs(path)
@@ -120,7 +121,8 @@ def test_a_remote_run_all_sees_the_photo_as_a_local_one(inputs, monkeypatch):
     monkeypatch.setattr(run_module, "run_pipeline", recorder)
     view = {"camera": {"fov_deg": 41.0, "pitch_deg": -9.0, "roll_deg": 1.5}, "camera_source": "blender",
             "scene_camera": "Camera", "placement": (0.4, 0.7), "size": 0.55, "turn_deg": 20.0,
-            "notes": ["the scene camera 'Camera' is used as it is"], "sun_deg": (-30.0, 45.0)}
+            "notes": ["the scene camera 'Camera' is used as it is"], "sun_deg": (-30.0, 45.0),
+            "sun_uncertainty_deg": 12.0}
     mesh, maps = load_asset_folder(inputs["folder"])
     remote.work_remotely({"mesh": mesh, "maps": maps, "photo": str(inputs["photo"]), "worker": "auto",
                           "out": str(inputs["root"] / "remote"), "preset": "draft", "prompt": "",
@@ -132,6 +134,7 @@ def test_a_remote_run_all_sees_the_photo_as_a_local_one(inputs, monkeypatch):
     remote_call = recorder.calls[0]
     assert remote_call["config"] == local and remote_call["placement"] == (0.4, 0.7)
     assert local.scene_type == "outdoor" and local.sun_deg == (-30.0, 45.0) and local.camera_source == "blender"
+    assert local.sun_uncertainty_deg == 12.0   # Pick Sun's clicks' uncertainty reaches the worker too
     assert local.depth_model == "my/depth"
 
 

@@ -274,7 +274,7 @@ def job_run_config(job: Job):
                      models=job.models, stage_overrides=_stage_overrides(job),
                      camera_overrides={CAMERA_KEYS[k]: v for k, v in job.camera.items()},
                      camera_source=job.camera_source, camera_why=job.camera_why, turn_deg=job.turn,
-                     sun_deg=job.sun, scene_type=job.scene, depth_model=job.depth_model, **view)
+                     sun_deg=job.sun, sun_uncertainty_deg=job.sun_uncertainty, scene_type=job.scene, depth_model=job.depth_model, **view)
 
 
 def _load_asset(job: Job):

@@ -29,6 +29,7 @@
     object_size = 0.3             # optional: the asset's height as a fraction of the photo's (compose)
     camera = { fov = 50, pitch = -14, roll = 2 }  # optional, degrees: over the camera found from the photo
     sun = [-30, 45]               # optional: the dominant light's azimuth and elevation, as --sun takes them
+    sun_uncertainty = 10          # optional: degrees that direction may be off (Blender's Pick Sun sends its own)
     scene = "indoor"              # optional: the light stage's scene type, as --scene (default: "auto")
     depth_model = "depth-anything/Depth-Anything-V2-Small-hf"   # optional: the light stage's depth model
     turn = 0                      # optional: degrees the asset turns about its up axis after facing the camera
@@ -83,6 +84,7 @@ class Job:
     camera_source: str = "user"                     # "blender": the values are the artist's scene camera's (a
     camera_why: str = "given by the user"           # remote Run All), and camera_why says how they were read
     sun: tuple[float, float] | None = None          # the artist's dominant light (azimuth, elevation), degrees
+    sun_uncertainty: float = 0.0                    # how far off `sun` may be, degrees
     scene: str = "auto"                             # the light stage's scene type: auto | indoor | outdoor
     depth_model: str | None = None                  # the light stage's depth model (hub id or folder; None: default)
     turn: float = 0.0
@@ -124,7 +126,7 @@ class JobsFile:
 
 
 JOB_KEYS = ("name", "asset", "object", "photo", "at", "preset", "stages", "mode", *PROMPT_KEYS, "seed", "overrides",
-            "object_size", "camera", "camera_source", "camera_why", "sun", "scene", "depth_model", "turn")
+            "object_size", "camera", "camera_source", "camera_why", "sun", "sun_uncertainty", "scene", "depth_model", "turn")
 CAMERA_KEYS = {"fov": "fov_deg", "pitch": "pitch_deg", "roll": "roll_deg"}   # a job's names -> the pipeline's
 MODEL_KEYS = ("base_model", "inpaint_model", "cache_dir", "local_files_only", "device_type", "dtype_type",
               "attention_slicing", "vae_slicing", "vae_tiling", "channels_last", "cpu_offload")
@@ -353,6 +355,10 @@ def _parse_view(entry: dict, where: str) -> dict:
             raise InputError(f"{where}: sun must be [azimuth, elevation] in degrees (elevation within +-90), "
                              f"e.g. [-30, 45], got {sun!r}.")
         view["sun"] = (float(sun[0]), float(sun[1]))
+    spread = entry.get("sun_uncertainty", 0.0)
+    if not (_is_number(spread) and 0.0 <= spread <= 180.0):
+        raise InputError(f"{where}: sun_uncertainty must be degrees within 0 and 180, got {spread!r}.")
+    view["sun_uncertainty"] = float(spread)
     scene = entry.get("scene", "auto")
     if scene not in ("auto", "indoor", "outdoor"):
         raise InputError(f"{where}: scene must be auto, indoor or outdoor, got {scene!r}.")

@@ -293,7 +293,8 @@ def work_remotely(data: dict, progress=None, cancel=None) -> dict:
     the placement), the job run in the worker environment `data["worker"]`, its folder back in
     `data["out"]`. Keys: mesh, maps, photo, at, worker, out; optional name, preset, stages, prompt,
     mode, object_prompt, instruction, negative_prompt, seed, models (a ModelConfig), overrides
-    (stage settings over the preset's), object_size, camera, camera_source, camera_why, sun, scene, depth_model, turn (how the
+    (stage settings over the preset's), object_size, camera, camera_source, camera_why, sun, sun_uncertainty, scene,
+    depth_model, turn (how the
     photo is seen, workers/jobs.py's Job), num_cpus, num_gpus.
     """
     import tempfile
@@ -305,7 +306,7 @@ def work_remotely(data: dict, progress=None, cancel=None) -> dict:
         asset = save_asset_folder(data["mesh"], data["maps"], Path(tmp) / "asset")
         optional = {k: data[k] for k in ("mode", "prompt", "object_prompt", "instruction", "negative_prompt", "seed",
                                          "models", "overrides", "object_size", "camera", "camera_source",
-                                         "camera_why", "sun", "scene", "depth_model", "turn")
+                                         "camera_why", "sun", "sun_uncertainty", "scene", "depth_model", "turn")
                     if data.get(k) is not None}
         job = Job(name=data.get("name", "scenefit"), asset=asset, stages=tuple(data.get("stages", STAGE_TYPES)),
                   preset=data.get("preset", "balanced"), photo=Path(data["photo"]) if data.get("photo") else None,

@@ -62,6 +62,7 @@ class RunConfig:
     # FOOT, TOP, TIP (each as --at takes a point) that gives it through the photo's camera; None: guessed.
     sun_deg: tuple[float, float] | None = None
     sun_shadow: tuple[str, str, str] | None = None
+    sun_uncertainty_deg: float = 0.0          # how far off sun_deg may be (Pick Sun's clicks); a shadow gives its own
     scene_type: str = "auto"                  # light: indoor | outdoor | auto (decided from the photo, or unsure)
     depth_model: str | None = None            # light: hub id or folder of the depth model (None: the default),
                                               # looked for where `models` are (their cache and offline switch)
@@ -98,7 +99,8 @@ def light_settings(config: RunConfig) -> dict:
     model is looked for): the pipeline's light stage and a batch job of light alone take the same."""
     from ..stages.light.depth import depth_config_for
 
-    return {"sun_deg": None if config.sun_deg is None else tuple(config.sun_deg), "scene_type": config.scene_type,
+    return {"sun_deg": None if config.sun_deg is None else tuple(config.sun_deg),
+            "sun_uncertainty_deg": float(config.sun_uncertainty_deg), "scene_type": config.scene_type,
             "models": config.models, "depth": depth_config_for(config.models, model=config.depth_model)}
 
 
@@ -368,8 +370,9 @@ class PipelineRun:
             if self.config.sun_shadow is not None:   # the shadow's points need the camera
                 from ..stages.light.shadow_hint import sun_from_shadow_points
 
-                with_sun = replace(config, sun_deg=sun_from_shadow_points(
-                    self.config.sun_shadow, camera, tuple(self.photo_info["size"]), self.photo.shape[:2]))
+                sun, spread = sun_from_shadow_points(self.config.sun_shadow, camera, tuple(self.photo_info["size"]),
+                                                     self.photo.shape[:2])
+                with_sun = replace(config, sun_deg=sun, sun_uncertainty_deg=spread)
             asset = {}
             if critic_sees_asset:
                 texture = load_neural_texture(self.texture_path)

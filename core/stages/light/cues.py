@@ -30,7 +30,9 @@ and the report records which were used and each region's share of the map's powe
   upper hemisphere's centroid (behind the camera), turned towards the side of the photo that is
   brighter (`photo_bright_side`: walls fall off away from a lamp, the sky brightens towards the
   sun), 35 deg up (real lights sit low); or along the artist's `sun` when given, as a narrower lobe
-  (cos^8 over 0.05): a known direction need not hedge. Front or behind
+  (cos^8 over 0.05): a known direction need not hedge; one known only roughly (a short shadow's
+  clicks: shadow_hint.sun_uncertainty_deg) widens to the guess's lobe as its uncertainty goes from
+  SURE_DEG to UNSURE_DEG (`sun_lobe`). Front or behind
   is not decided from the photo: the sky's rise from its horizon to its top called it on 18 of the
   corpus's 24 real views but on 28 of Blender's 48 (always-front: 30), the ground/sky ratio on at
   best 14 of 24 and 23 of 38; a guess at chance moves the lobe's error from 90 to 180 deg.
@@ -117,14 +119,15 @@ def surface_radiance(photo_srgb: np.ndarray, threshold: float) -> tuple[np.ndarr
 def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regions: dict[str, np.ndarray],
                thresholds: RegionThresholds = RegionThresholds(), config: CueConfig = CueConfig(),
                camera: PhotoCamera | None = None, sun: np.ndarray | None = None,
-               painted_unseen: bool = False) -> Cues:
+               painted_unseen: bool = False, sun_uncertainty_deg: float = 0.0) -> Cues:
     """Scales for the bright regions and an "unseen" region (upper hemisphere the photo did not see).
 
     camera: the photo's camera (its right/up give the photo's bright side a world direction);
     sun: a world unit vector given by the artist, the unseen light's direction then;
     painted_unseen: a model painted the unseen part, so its bright texels are lights it drew and keep
     their regions; otherwise the unseen part is a fill (the sky prior's zenith, an edge's colour) that
-    no camera measured, and all of its upper hemisphere is the unseen light."""
+    no camera measured, and all of its upper hemisphere is the unseen light;
+    sun_uncertainty_deg: how far off `sun` may be (`sun_lobe`)."""
     h, w = unseen.shape
     omega = solid_angles(h, w)
     dirs = equirect_directions(h, w)
@@ -171,8 +174,7 @@ def build_cues(photo_srgb: np.ndarray, ldr: np.ndarray, unseen: np.ndarray, regi
     # The unseen light: mean radiance S / rho over the hidden upper hemisphere, as a lobe.
     if hidden.any() and config.use_energy:
         direction, report["direction"] = unseen_light_direction(photo_srgb, hidden, omega, dirs, camera, sun)
-        lobe = (config.sun_lobe_floor, config.sun_lobe_sharpness) if sun is not None else \
-            (config.lobe_floor, config.lobe_sharpness)
+        lobe = sun_lobe(config, sun_uncertainty_deg) if sun is not None else (config.lobe_floor, config.lobe_sharpness)
         out_ldr, scales["unseen"], report["unseen"] = _unseen_light(out_ldr, hidden, omega, dirs, direction, s_level,
                                                                     config, *lobe)
         out_regions["unseen"] = hidden
@@ -209,6 +211,19 @@ def _unseen_light(ldr: np.ndarray, hidden: np.ndarray, omega: np.ndarray, dirs: 
         "mean_radiance": round(target, 5),
         "mean_radiance_range": [round(s_level * (2 / hi - 1), 5), round(s_level * (2 / lo - 1), 5)],
         "fraction_of_map": round(float(hidden.mean()), 4)}
+
+
+# A given direction within SURE_DEG of the truth keeps most of the narrow lobe's gain; at UNSURE_DEG off it
+# is no better than the guess (README: turned 15 and 30 deg off on the corpus's views and Blender's maps).
+SURE_DEG, UNSURE_DEG = 15.0, 30.0
+
+
+def sun_lobe(config: CueConfig, uncertainty_deg: float) -> tuple[float, float]:
+    """(floor, sharpness) of the unseen light's lobe around the artist's direction: the narrow one for a
+    sure direction, widening to the guess's as its uncertainty goes from SURE_DEG to UNSURE_DEG."""
+    t = float(np.clip((uncertainty_deg - SURE_DEG) / (UNSURE_DEG - SURE_DEG), 0.0, 1.0))
+    return (config.sun_lobe_floor + t * (config.lobe_floor - config.sun_lobe_floor),
+            config.sun_lobe_sharpness + t * (config.lobe_sharpness - config.sun_lobe_sharpness))
 
 
 def photo_bright_side(photo_srgb: np.ndarray) -> tuple[float, float]:

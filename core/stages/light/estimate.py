@@ -64,6 +64,9 @@ class LightConfig:
     # The artist's dominant light (--sun AZ,EL), degrees: azimuth from the photo's view direction,
     # positive to the camera's right (clockwise seen from above), elevation above the horizon.
     sun_deg: tuple[float, float] | None = None
+    # How far off that direction may be (degrees): 0 as typed or taken from a Sun light; a shadow's three
+    # clicks give their own (shadow_hint.sun_uncertainty_deg). The unseen light's lobe widens with it.
+    sun_uncertainty_deg: float = 0.0
     map_height: int = 128                     # the map is map_height x 2 map_height
     depth: DepthConfig = DepthConfig()
     thresholds: RegionThresholds = RegionThresholds()
@@ -92,6 +95,8 @@ class LightConfig:
                                          or not -90.0 <= self.sun_deg[1] <= 90.0):
             raise InputError(f"The sun direction must be two finite angles AZ,EL with the elevation within +-90 "
                              f"degrees, got {self.sun_deg}; give it as --sun 30,45.")
+        if not (math.isfinite(self.sun_uncertainty_deg) and 0.0 <= self.sun_uncertainty_deg <= 180.0):
+            raise InputError(f"sun_uncertainty_deg must be within 0 and 180 degrees, got {self.sun_uncertainty_deg}.")
         if not 8 <= self.map_height <= 4096:
             raise InputError(f"map_height must be between 8 and 4096, got {self.map_height}.")
         if not self.l_white > 1.0:
@@ -359,10 +364,12 @@ def _prior(photo: np.ndarray, pano: Panorama, scene_type: str, photo_camera: Pho
     regions = bright_regions(ldr, pano.distance, scene_type, config.thresholds)
     if config.sun_deg is not None:
         decisions["sun"] = {"deg": list(config.sun_deg), "used": config.prior_type == "cues",
+                            "uncertainty_deg": round(config.sun_uncertainty_deg, 2),
                             "frame": "azimuth from the photo's view, positive to its right; elevation up"}
     if config.prior_type == "cues":
         cues = build_cues(photo, ldr, pano.unseen, regions, config.thresholds, config.cues, camera=photo_camera,
-                          sun=sun_direction(config.sun_deg, photo_camera), painted_unseen=pano.painted)
+                          sun=sun_direction(config.sun_deg, photo_camera), painted_unseen=pano.painted,
+                          sun_uncertainty_deg=config.sun_uncertainty_deg)
         ldr, regions, prior = cues.ldr, cues.regions, cues.scales
         decisions["cues"] = cues.report
     else:

@@ -4,7 +4,9 @@ something standing on the floor, its top (straight above the foot) and the tip o
 With the photo's camera and the floor known (the camera CAMERA_HEIGHT above it), the foot and the tip
 are floor points; the top is the point of its pixel's ray straight above the foot; the sun lies along
 tip -> top. The answer is in `--sun`'s terms: azimuth from the camera's view, positive to its right,
-and elevation above the horizon (core/stages/light/estimate.py:sun_direction is the inverse).
+and elevation above the horizon (core/stages/light/estimate.py:sun_direction is the inverse). How far
+it may be off (`sun_uncertainty_deg`) is how far a slipped click turns it: a long shadow near the
+camera pins it within a degree or two, a short one far away may not pin it at all.
 """
 from __future__ import annotations
 
@@ -47,6 +49,37 @@ def sun_from_shadow(camera: PhotoCamera, foot: tuple[float, float], top: tuple[f
     return sun_deg_from_direction(above - end, camera.basis()[0])
 
 
+# How far a click may slip, as a fraction of the photo's width (2 pixels of a 640-wide view, whatever the
+# photo's own size): the sun's uncertainty is the largest turn of its direction when one point moves that far.
+CLICK_SLIP = 2.0 / 640.0
+
+
+def sun_uncertainty_deg(camera: PhotoCamera, foot: tuple[float, float], top: tuple[float, float],
+                        tip: tuple[float, float]) -> float:
+    """Degrees the sun from these points (pixels of `camera`'s image) turns, at most, when one point slips
+    CLICK_SLIP of the width in any of four directions (a short shadow, or a tip near the horizon, turns it
+    far; 90 where a slip leaves the floor)."""
+    slip_px = CLICK_SLIP * camera.width
+    points = [tuple(map(float, foot)), tuple(map(float, top)), tuple(map(float, tip))]
+    base = _unit(*sun_from_shadow(camera, *points))
+    worst = 0.0
+    for index in range(3):
+        for dx, dy in ((slip_px, 0.0), (-slip_px, 0.0), (0.0, slip_px), (0.0, -slip_px)):
+            moved = list(points)
+            moved[index] = (points[index][0] + dx, points[index][1] + dy)
+            try:
+                turned = _unit(*sun_from_shadow(camera, *moved))
+            except InputError:
+                return 90.0
+            worst = max(worst, math.degrees(math.acos(float(np.clip(base @ turned, -1.0, 1.0)))))
+    return worst
+
+
+def _unit(azimuth_deg: float, elevation_deg: float) -> np.ndarray:
+    az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
+    return np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+
+
 SHADOW_POINTS = ("foot", "top", "tip")
 
 
@@ -64,10 +97,11 @@ def shadow_pixels(points, photo_wh: tuple[int, int], hw: tuple[int, int]) -> lis
 
 
 def sun_from_shadow_points(points, camera: PhotoCamera, photo_wh: tuple[int, int],
-                           hw: tuple[int, int]) -> tuple[float, float]:
-    """`sun_from_shadow` for the points as `shadow_pixels` takes them, through `camera`, the camera of
-    the photo's working copy."""
-    return sun_from_shadow(camera, *shadow_pixels(points, photo_wh, hw))
+                           hw: tuple[int, int]) -> tuple[tuple[float, float], float]:
+    """(`sun_from_shadow`, `sun_uncertainty_deg`) for the points as `shadow_pixels` takes them, through
+    `camera`, the camera of the photo's working copy."""
+    pixels = shadow_pixels(points, photo_wh, hw)
+    return sun_from_shadow(camera, *pixels), sun_uncertainty_deg(camera, *pixels)
 
 
 def sun_deg_from_direction(toward_sun, forward) -> tuple[float, float]:

@@ -92,4 +92,6 @@ def sun_words(decisions: dict, setter: str) -> str:
     sun = decisions.get("sun")
     if not sun:
         return f"light direction guessed ({setter} sets it)"
-    return f"sun {sun['deg'][0]:g},{sun['deg'][1]:g} as given" + ("" if sun.get("used", True) else " (unused by this prior)")
+    spread = sun.get("uncertainty_deg") or 0.0
+    given = f"sun {sun['deg'][0]:.4g},{sun['deg'][1]:.4g} as given" + (f" (±{spread:.0f}°)" if spread >= 0.5 else "")
+    return given + ("" if sun.get("used", True) else " (unused by this prior)")
