@@ -498,13 +498,13 @@ def real_main(argv: list[str]) -> int:
                              "corpus's, written to light_heldout.md/.json/.png")
     args = parser.parse_args(argv)
     if args.heldout:
-        from heldout_hdri import HELD_OUT_MAPS, fetch, read_heldout
+        from heldout_hdri import FETCH_FAILED, HELD_OUT_MAPS, fetch, read_heldout
 
         try:
             folder = fetch()
         except (RuntimeError, ValueError, subprocess.TimeoutExpired) as error:
             print(f"bench_light --real --heldout: {error}.", file=sys.stderr)
-            return 2
+            return FETCH_FAILED
         maps = {name: (kind, folder / f"{name}.exr") for name, kind in HELD_OUT_MAPS.items()}
         read_map, about = read_heldout, HELDOUT_ABOUT
     else:

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 import bench_light as B
-from heldout_hdri import HELD_OUT_MAPS, fetch, read_heldout
+from heldout_hdri import FETCH_FAILED, HELD_OUT_MAPS, fetch, read_heldout
 from scenefit.core.base.errors import InputError
 from scenefit.core.data.imageio import read_image, srgb_to_linear
 from scenefit.core.pipeline.presets import stage_config
@@ -48,11 +48,11 @@ def unit(azimuth: float, elevation: float) -> np.ndarray:
     return np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])
 
 
-def views():
-    """(map, side, camera, photo, truth) for every view of both map sets, median metering."""
+def views(folder: Path):
+    """(map, side, camera, photo, truth) for every view of both map sets (the held-out ones in `folder`),
+    median metering."""
     maps = [(n, B.CORPUS_HDRI / f"{n}_1k.hdr", lambda p: np.ascontiguousarray(read_image(p)[..., :3], np.float32))
             for n in B.REAL_MAPS]
-    folder = fetch()
     maps += [(n, folder / f"{n}.exr", read_heldout) for n in HELD_OUT_MAPS]
     for name, path, reader in maps:
         hdr = reader(path)
@@ -118,11 +118,20 @@ def summary(rows: list[dict]) -> list[str]:
 
 
 def main() -> int:
+    try:
+        folder = fetch()
+    except (RuntimeError, ValueError, subprocess.TimeoutExpired) as error:
+        print(f"bench_sun_clicks: {error}.", file=sys.stderr)
+        return FETCH_FAILED
+    missing = [n for n in B.REAL_MAPS if not (B.CORPUS_HDRI / f"{n}_1k.hdr").is_file()]
+    if missing:
+        print(f"bench_sun_clicks: {B.CORPUS_HDRI} lacks the corpus map {missing[0]}_1k.hdr.", file=sys.stderr)
+        return 2
     started = time.perf_counter()
     config = stage_config("light", "balanced", critic_type="none")
     rng = np.random.default_rng(0)
     rows = []
-    for name, side, camera, photo, truth in views():
+    for name, side, camera, photo, truth in views(folder):
         for setup, (height, foot_row) in SETUPS.items():
             row = one_view(camera, photo, truth, height, foot_row, rng, config)
             if row is not None:

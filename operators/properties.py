@@ -87,8 +87,9 @@ class SceneFitSettings(bpy.types.PropertyGroup):
                                  max=math.pi / 2, description="The sun's height above the horizon")
     sun_uncertainty: FloatProperty(name="Uncertainty", subtype="ANGLE", default=0.0, min=0.0, max=math.pi / 2,
                                    description="How far off the sun's direction may be: Pick Sun sets how far a "
-                                               "2-pixel slip of a click turns it (0: sure). The light around it "
-                                               "widens from the narrow lobe at 15° to the guess's at 30°")
+                                               "click slipping 2/640 of the photo's width turns it; set 0 for a "
+                                               "direction you are sure of. The light around it widens from the "
+                                               "narrow lobe at 15° to the guess's at 30°")
     # Style
     mode: EnumProperty(name="Mode", items=MODES, default="scene")
     prompt: StringProperty(name="Prompt", description="How the asset should look, e.g. 'a leather sofa, "

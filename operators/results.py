@@ -148,8 +148,8 @@ def apply_composite_image(context, path: str, stage: str):
 
 def switched_entries(context, entries) -> tuple[list, str]:
     """The recorded result slots the Results switch acts on, and whose they are in words: those of the
-    selected (or active) objects that have any, else the last job's."""
-    chosen = set(context.selected_objects) | ({context.active_object} - {None})
+    selected objects that have any, else the last job's."""
+    chosen = set(context.selected_objects)
     mine = [e for e in entries if e.asset_object is not None and e.asset_object in chosen]
     if mine:
         names = sorted({e.asset_object.name for e in mine})

@@ -88,7 +88,7 @@ def job_view(view: dict) -> dict:
             "camera": {names[k]: v for k, v in (view["camera"] or {}).items()},
             "camera_source": source, "camera_why": why, "turn": view["turn_deg"],
             "sun": tuple(view["sun_deg"]) if view.get("sun_deg") else None,
-            "sun_uncertainty": float(view.get("sun_uncertainty_deg", 0.0))}
+            "sun_uncertainty": float(view.get("sun_uncertainty_deg", 0.0)) or None}   # (None: left out of the job)
 
 
 def camera_values(camera) -> dict:

@@ -484,40 +484,45 @@ from scenefit.core.stages.bake.game_bake import bake_game_maps
 from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.texture.neural_texture import NeuralTexture
 
-# A file made elsewhere: a box under its root node, the file's camera and sun
-bpy.ops.wm.read_factory_settings(use_empty=True)
-bpy.ops.mesh.primitive_cube_add()
-bpy.context.object.name = "Box"
-bpy.context.object.data.materials.append(bpy.data.materials.new("Paint"))
-bpy.ops.object.camera_add(location=(4, -4, 3))
-bpy.context.object.name = "FileCamera"
-bpy.ops.object.light_add(type="SUN", location=(0, 0, 5))
-bpy.context.object.name = "FileSun"
-source = OUT.replace(".glb", "-source.glb")
-bpy.ops.export_scene.gltf(filepath=source, export_format="GLB", export_cameras=True, export_lights=True)
-other = OUT.replace(".glb", "-other.glb")   # another import: its camera is not the box's file's
-bpy.ops.wm.read_factory_settings(use_empty=True)
-bpy.ops.object.camera_add()
-bpy.context.object.name = "OtherCamera"
-bpy.ops.export_scene.gltf(filepath=other, export_format="GLB", export_cameras=True)
+def made(path, meshes, camera, sun=None):   # a file made elsewhere: its meshes, its camera and sun
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    for name in meshes:
+        bpy.ops.mesh.primitive_cube_add()
+        bpy.context.object.name = name
+        bpy.context.object.data.materials.append(bpy.data.materials.new("Paint"))
+    bpy.ops.object.camera_add(location=(4, -4, 3))
+    bpy.context.object.name = camera
+    if sun:
+        bpy.ops.object.light_add(type="SUN", location=(0, 0, 5))
+        bpy.context.object.name = sun
+    bpy.ops.export_scene.gltf(filepath=path, export_format="GLB", export_cameras=True, export_lights=True)
 
-# The artist's scene: their own camera and light, then the two imports
+source, other = OUT.replace(".glb", "-source.glb"), OUT.replace(".glb", "-other.glb")
+made(source, ["Box", "Lid"], "FileCamera", "FileSun")
+made(other, ["Crate"], "OtherCamera")
+
+# The artist's scene: their own camera and light, then the other file, the source file, and the source again
 bpy.ops.wm.read_factory_settings(use_empty=True)
 bpy.ops.object.camera_add()
 bpy.context.object.name = "ArtistsCamera"
 bpy.ops.object.light_add(type="POINT")
 bpy.context.object.name = "ArtistsLamp"
 import_into_open_scene(other)
-imported = import_into_open_scene(source)
-box = bpy.data.objects["Box"]
-beside = imported_beside([box], bpy.context.scene.objects)
-mesh, slots = object_mesh_and_slots(box, bpy.context.evaluated_depsgraph_get())
-baked = bake_game_maps(NeuralTexture(stage_config("texture", "draft", resolution=16), seed=1), mesh, ["Paint"], 16)
+import_into_open_scene(source)
+again = [o.name for o in import_into_open_scene(source)]   # Box.001, Lid.001, FileCamera.001, FileSun.001
+box, lid, crate = (bpy.data.objects[n] for n in ("Box", "Lid", "Crate"))
+asset = [box, lid, crate]   # a selection mixing two imports: written as the source file, most of it is from there
+beside = imported_beside(asset, bpy.context.scene.objects)
+baked, slots = [], []
+for obj in asset:
+    mesh, _ = object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())
+    baked += bake_game_maps(NeuralTexture(stage_config("texture", "draft", resolution=16), seed=1), mesh, ["Paint"], 16)
+    slots.append([(obj, 0)])
 before = sorted((o.name, o.type) for o in bpy.data.objects)
-report = bake_copies_to_gltf([box], baked, [[(box, 0)]], OUT, "glb", beside=beside)
+report = bake_copies_to_gltf(asset, baked, slots, OUT, "glb", beside=beside)
 print("JSON" + json.dumps({"same": before == sorted((o.name, o.type) for o in bpy.data.objects),
-                           "files": report["files"], "beside": [o.name for o in beside],
-                           "from": [str(imported_from(objs)) for objs in ([box], [bpy.data.objects["OtherCamera"], box, box])]}))
+                           "files": report["files"], "beside": [o.name for o in beside], "again": again,
+                           "from": str(imported_from(asset)), "from_other": str(imported_from([crate]))}))
 """
 
 
@@ -526,17 +531,17 @@ def test_bake_asset_writes_the_cameras_and_lights_of_the_assets_own_file_only(ru
     proc = run_py(BESIDE.replace("OUT", repr(str(out))))
     result = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
     assert result["same"] and result["files"] == [str(out)]
-    # the box's file's camera and sun, not the artist's nor the other import's
-    assert sorted(result["beside"]) == ["FileCamera", "FileSun"]
+    source, other = (str(out).replace(".glb", f"-{k}.glb") for k in ("source", "other"))
+    # a selection that mixes two imports is written as the file most of it came from (it took the first's)
+    assert result["from"] == source and result["from_other"] == other
+    # that import's camera and sun: not the artist's, the other file's, nor the second import's of the same file
+    assert sorted(result["beside"]) == ["FileCamera", "FileSun"] and "FileCamera.001" in result["again"]
     exported = gltf_json(str(out))
     names = {n.get("name") for n in exported["nodes"]}
-    assert {"Box", "FileCamera", "FileSun"} <= names
-    assert not names & {"ArtistsCamera", "ArtistsLamp", "OtherCamera"}
+    assert {"Box", "Lid", "Crate", "FileCamera", "FileSun"} <= names
+    assert not names & {"ArtistsCamera", "ArtistsLamp", "OtherCamera", "FileCamera.001", "FileSun.001"}
     assert len(exported.get("cameras", [])) == 1
     assert len(exported["extensions"]["KHR_lights_punctual"]["lights"]) == 1
-    # a selection that mixes two imports is written as the file most of it came from
-    source = str(out).replace(".glb", "-source.glb")
-    assert result["from"] == [source, source]
 
 
 def test_bake_refuses_an_asset_folder_in_one_sentence(tmp_path, example_asset):

@@ -244,6 +244,9 @@ def test_a_new_run_folder_reuses_an_earlier_runs_stages_by_copy_and_leaves_that_
         assert second["stages"][name]["from"] == str((tmp_path / "run-1").resolve())
     assert np.array_equal(read_image(tmp_path / "run-2" / "compose" / "composite.png"),
                           read_image(tmp_path / "run-1" / "compose" / "composite.png"))
+    # copies, not links: Blender opens these images and may save an edit into one in place
+    copied = [p for p in (tmp_path / "run-2").rglob("*") if p.is_file() and p.parent.name != "run-2"]
+    assert copied and not any(p.samefile(tmp_path / "run-1" / p.relative_to(tmp_path / "run-2")) for p in copied)
     written = json.loads((tmp_path / "run-2" / "report.json").read_text())
     for stage in written["stages"].values():   # its outputs are its own files (copies of the earlier run's)
         assert "run-1" not in json.dumps(stage.get("report", {}).get("outputs", {}))

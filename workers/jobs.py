@@ -94,6 +94,8 @@ class Job:
         d.update(asset=str(self.asset), photo=None if self.photo is None else str(self.photo),
                  stages=list(self.stages), at=None if self.at is None else list(self.at),
                  sun=None if self.sun is None else list(self.sun))
+        if not self.sun_uncertainty:   # (left out when unused, so a worker of an earlier version still takes the job)
+            del d["sun_uncertainty"]
         return d
 
     @classmethod

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import shutil
 import threading
 import time
@@ -152,9 +151,10 @@ class StageRunner:
         report, source = (None, "") if self.fresh else (_finished_stage(folder, key), "")
         if report is None and not self.fresh and self.earlier is not None and not folder.exists() \
                 and _finished_stage(self.earlier / name, key) is not None:
-            # The earlier run's stage, copied whole (hard links where the disk allows): this run's folder
-            # stays one unit of its own, and the earlier run is left as it was.
-            shutil.copytree(self.earlier / name, folder, copy_function=_link_or_copy)
+            # The earlier run's stage, copied whole: this run's folder stays one unit of its own, and the
+            # earlier run is left as it was. Copies, not hard links: Blender opens these images (the
+            # result material's maps, the World's light.exr) and may save an edit into them in place.
+            shutil.copytree(self.earlier / name, folder)
             report, source = _finished_stage(folder, key), f" from {self.earlier.name}"
         if report is not None:
             emit(self.progress, "run", index + 1, len(STAGES), f"{name}: reused{source} (same settings and inputs)")
@@ -202,14 +202,6 @@ def _finished_stage(folder: Path, key: str) -> dict | None:
     if saved.get("key") != key or not all(Path(p).exists() for p in _paths(report["outputs"])):
         return None
     return report
-
-
-def _link_or_copy(source: str, target: str) -> str:
-    try:
-        os.link(source, target)   # the stages write new files, never into old ones, so sharing is safe
-    except OSError:
-        shutil.copy2(source, target)
-    return target
 
 
 def _absolute_outputs(outputs, folder: Path):

@@ -58,7 +58,8 @@ def sun_uncertainty_deg(camera: PhotoCamera, foot: tuple[float, float], top: tup
                         tip: tuple[float, float]) -> float:
     """Degrees the sun from these points (pixels of `camera`'s image) turns, at most, when one point slips
     CLICK_SLIP of the width in any of four directions (a short shadow, or a tip near the horizon, turns it
-    far; 90 where a slip leaves the floor)."""
+    far), up to 90: where a slip makes the points no shadow (a point off the floor, the top no longer
+    above the foot) or turns the sun that far, the clicks do not pin it."""
     slip_px = CLICK_SLIP * camera.width
     points = [tuple(map(float, foot)), tuple(map(float, top)), tuple(map(float, tip))]
     base = _unit(*sun_from_shadow(camera, *points))
@@ -72,7 +73,7 @@ def sun_uncertainty_deg(camera: PhotoCamera, foot: tuple[float, float], top: tup
             except InputError:
                 return 90.0
             worst = max(worst, math.degrees(math.acos(float(np.clip(base @ turned, -1.0, 1.0)))))
-    return worst
+    return min(worst, 90.0)
 
 
 def _unit(azimuth_deg: float, elevation_deg: float) -> np.ndarray:
