@@ -437,7 +437,7 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
         raise InputError(f"{len(baked)} baked materials for {len(slots)} materials of the asset.")
     scene = bpy.context.scene
     images_before = set(bpy.data.images)  # the maps made below are removed after; nothing else is
-    copies, material_copies, renamed = {}, {}, []
+    copies, material_copies, renamed, beside_copies = {}, {}, [], {}
     try:
         for obj in objects:
             copy = obj.copy()
@@ -446,8 +446,12 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
             scene.collection.objects.link(copy)
             if new_uvs and obj.name in new_uvs:
                 add_uv_map(copy, new_uvs[obj.name])
-        for copy in copies.values():   # a wheel under the truck's body hangs under the body's copy
-            if copy.parent is not None and copy.parent.name in copies:
+        for other in beside:   # a camera on the truck's body rides on the body's copy (it shares its data)
+            if other.parent is not None and other.parent.name in copies:
+                beside_copies[other.name] = other.copy()
+                scene.collection.objects.link(beside_copies[other.name])
+        for copy in [*copies.values(), *beside_copies.values()]:   # a wheel under the truck's body hangs
+            if copy.parent is not None and copy.parent.name in copies:   # under the body's copy
                 copy.parent = copies[copy.parent.name]   # (the parent inverse, copied, stays as it was)
         materials = []
         for index, pairs in enumerate(slots):
@@ -459,14 +463,16 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
                 copy.material_slots[slot].link = obj.material_slots[slot].link
                 copy.material_slots[slot].material = material_copies[material.name]
             materials.append(copy.material_slots[slot].material)
-        for original, duplicate in [*[(bpy.data.objects[n], c) for n, c in copies.items()],
+        written_beside = [beside_copies.get(o.name, o) for o in beside]   # (before the originals are renamed)
+        for original, duplicate in [*[(bpy.data.objects[n], c) for n, c in [*copies.items(), *beside_copies.items()]],
                                     *[(bpy.data.materials[n], c) for n, c in material_copies.items()]]:
             name = original.name
             original.name = f"{name}~scenefit"
             renamed.append((original, name))
             duplicate.name = name
         report = bake_materials_to_gltf(materials, baked, out_file, file_format,
-                                        [*copies.values(), *beside, *carriers_of([*objects, *beside])], output=output,
+                                        [*copies.values(), *written_beside, *carriers_of([*objects, *beside])],
+                                        output=output,
                                         replace=replace)
     finally:
         # (a SceneFit result material's own image nodes are also named "SceneFit …": keep those)
@@ -476,6 +482,8 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
             bpy.data.objects.remove(copy)
             if mesh.users == 0:
                 bpy.data.meshes.remove(mesh)
+        for duplicate in beside_copies.values():
+            bpy.data.objects.remove(duplicate)
         for duplicate in material_copies.values():
             bpy.data.materials.remove(duplicate)
         for image in images:

@@ -495,6 +495,9 @@ def made(path, meshes, camera, sun=None):   # a file made elsewhere: its meshes,
     if sun:
         bpy.ops.object.light_add(type="SUN", location=(0, 0, 5))
         bpy.context.object.name = sun
+        bpy.ops.object.camera_add(location=(0, -3, 1))   # a camera riding on the first mesh
+        bpy.context.object.name = "RideCamera"
+        bpy.context.object.parent = bpy.data.objects[meshes[0]]
     bpy.ops.export_scene.gltf(filepath=path, export_format="GLB", export_cameras=True, export_lights=True)
 
 source, other = OUT.replace(".glb", "-source.glb"), OUT.replace(".glb", "-other.glb")
@@ -535,12 +538,15 @@ def test_bake_asset_writes_the_cameras_and_lights_of_the_assets_own_file_only(ru
     # a selection that mixes two imports is written as the file most of it came from (it took the first's)
     assert result["from"] == source and result["from_other"] == other
     # that import's camera and sun: not the artist's, the other file's, nor the second import's of the same file
-    assert sorted(result["beside"]) == ["FileCamera", "FileSun"] and "FileCamera.001" in result["again"]
+    assert sorted(result["beside"]) == ["FileCamera", "FileSun", "RideCamera"] and "FileCamera.001" in result["again"]
     exported = gltf_json(str(out))
-    names = {n.get("name") for n in exported["nodes"]}
-    assert {"Box", "Lid", "Crate", "FileCamera", "FileSun"} <= names
-    assert not names & {"ArtistsCamera", "ArtistsLamp", "OtherCamera", "FileCamera.001", "FileSun.001"}
-    assert len(exported.get("cameras", [])) == 1
+    nodes = exported["nodes"]
+    names = [n.get("name") for n in nodes]
+    assert {"Box", "Lid", "Crate", "FileCamera", "FileSun", "RideCamera"} <= set(names)
+    assert not set(names) & {"ArtistsCamera", "ArtistsLamp", "OtherCamera", "FileCamera.001", "FileSun.001"}
+    assert len(exported.get("cameras", [])) == 2
+    # the camera riding on the box stays under the box's copy (it hung from the unexported original)
+    assert "RideCamera" in [names[c] for c in nodes[names.index("Box")].get("children", [])]
     assert len(exported["extensions"]["KHR_lights_punctual"]["lights"]) == 1
 
 
