@@ -168,3 +168,4 @@ def test_the_sun_in_a_summary_says_guessed_given_or_unused():
     assert sun_words({"sun": {"deg": [30.0, 45.0], "used": False}}, "x").endswith("(unused by this prior)")
     # a shadow's sun: its angles as a person reads them, and how far off its clicks may leave it
     assert sun_words({"sun": {"deg": [40.000013, 35.2], "uncertainty_deg": 12.3}}, "x") == "sun 40,35.2 as given (±12°)"
+    assert "(±43°: a longer shadow" in sun_words({"sun": {"deg": [-90.0, 56.8], "uncertainty_deg": 43.0}}, "x")
