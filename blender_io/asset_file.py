@@ -142,6 +142,28 @@ SOURCE_PROPERTY = "scenefit_source_file"
 IMPORT_PROPERTY = "scenefit_import"
 
 
+def mark_imported(obj, path: str | Path, import_id: str) -> None:
+    """Mark `obj` as brought by the import `import_id` of the file `path` (Import Asset, and Blender's own
+    File > Import of a glTF through the add-on's importer hook)."""
+    if obj is not None:
+        obj[SOURCE_PROPERTY], obj[IMPORT_PROPERTY] = str(Path(path).resolve()), import_id
+
+
+class GltfImportMark:
+    """Blender's glTF importer calls an enabled add-on's `glTF2ImportUserExtension` for every node it makes
+    (one instance per import): each object of a File > Import of a glTF is marked as Import Asset marks its
+    own, so Bake Asset's As imported and Cameras and Lights work for the artist's usual import too."""
+
+    def __init__(self) -> None:
+        import uuid
+
+        self.import_id = uuid.uuid4().hex
+
+    def gather_import_node_after_hook(self, vnode, gltf_node, blender_object, gltf) -> None:
+        # (several files in one import share the instance: the file's path keeps their objects apart)
+        mark_imported(blender_object, gltf.filename, f"{self.import_id}:{Path(gltf.filename).name}")
+
+
 def imported_from(objects: list) -> Path | None:
     """The file Import Asset read most of `objects` from (the first such file on a tie), if it is still there:
     a selection that mixes two imports is written as the file most of it came from."""
@@ -198,8 +220,8 @@ def import_into_open_scene(path: str | Path) -> list:
     import uuid
 
     this_import = uuid.uuid4().hex
-    for obj in objects:
-        obj[SOURCE_PROPERTY], obj[IMPORT_PROPERTY] = str(path.resolve()), this_import
+    for obj in objects:   # (over the hook's marks, which name a temporary copy where one was read)
+        mark_imported(obj, path, this_import)
     return objects
 
 

@@ -27,13 +27,15 @@ FORMAT_ITEMS = (("glb", "glTF Binary (.glb)", "One file holding the mesh, materi
                 ("gltf", "glTF Separate (.gltf)", "JSON, a .bin and the images beside it"))
 assert {key for key, *_ in FORMAT_ITEMS} == set(FORMATS)
 AS_IMPORTED = "imported"
-COMPRESS_ITEMS = ((AS_IMPORTED, "As imported", "As the file Import Asset read the asset from (None for objects made "
-                                               "or imported otherwise; None for meshopt in a .gltf)"),
+COMPRESS_ITEMS = ((AS_IMPORTED, "As imported", "As the file the asset was imported from, by Import Asset or File > "
+                                               "Import > glTF (None for objects made in Blender or imported from "
+                                               "other formats by Blender's importers; None for meshopt in a .gltf)"),
                   ("none", "None", "Plain mesh data"),
                   ("draco", "Draco", "KHR_draco_mesh_compression, by Blender's exporter"),
                   ("meshopt", "meshopt", "EXT_meshopt_compression, by meshoptimizer's encoder (.glb only)"))
-TEXTURE_ITEMS = ((AS_IMPORTED, "As imported", "As the file Import Asset read the asset from (PNG for objects made "
-                                              "or imported otherwise; PNG for KTX2 in a .gltf)"),
+TEXTURE_ITEMS = ((AS_IMPORTED, "As imported", "As the file the asset was imported from, by Import Asset or File > "
+                                              "Import > glTF (PNG for objects made in Blender or imported from "
+                                              "other formats by Blender's importers; PNG for KTX2 in a .gltf)"),
                  ("png", "PNG", "Lossless"), ("jpeg", "JPEG", "Smaller, lossy (images with alpha stay PNG)"),
                  ("webp", "WebP", "Smaller; needs an engine that reads EXT_texture_webp"),
                  ("ktx2", "KTX2", "GPU-compressed (KHR_texture_basisu: ETC1S colour, UASTC data; .glb only; "
@@ -100,7 +102,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
     max_texture: IntProperty(name="Max texture", default=DEFAULT_MAX_TEXTURE, min=4, max=8192,
                              description="Largest baked texture side, a power of two")
     cameras_and_lights: BoolProperty(name="Cameras and Lights", default=True,
-                                     description="Also write the cameras and lights Import Asset brought from the "
+                                     description="Also write the cameras and lights imported with the asset (Import "
+                                                 "Asset, or File > Import > glTF) from the "
                                                  "asset's file, as they are (scenefit bake writes the whole file)")
 
     @classmethod

@@ -597,6 +597,49 @@ def test_import_asset_reads_a_file_blenders_importer_refuses_into_the_artists_sc
     assert out["import_convert"] == out["import_bake"] == ["FINISHED"]
     assert "EXT_meshopt_compression" in out["import_bake_extensions"]   # as imported (else plain: "none")
 
+# Blender's own File > Import of a glTF (not Import Asset): the add-on's importer hook marks what it makes,
+# so Bake Asset writes it as the file was written and takes along the file's camera.
+NATIVE = r"""
+bpy.ops.wm.read_homefile(use_empty=True)
+bpy.ops.mesh.primitive_plane_add()
+plane = bpy.context.object
+plane.name = "Tile"
+image = bpy.data.images.new("tile", 8, 8)
+image.pixels.foreach_set(np.random.default_rng(5).uniform(0, 1, 8 * 8 * 4).astype(np.float32))
+mat = bpy.data.materials.new("Glaze")
+tex = mat.node_tree.nodes.new("ShaderNodeTexImage"); tex.image = image
+mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+plane.data.materials.append(mat)
+bpy.ops.object.camera_add(location=(0, -4, 2))
+bpy.context.object.name = "TileCamera"
+bpy.ops.export_scene.gltf(filepath=str(tmp / "draco.glb"), export_format="GLB", export_cameras=True,
+                          export_draco_mesh_compression_enable=True, export_image_format="WEBP")
+bpy.ops.wm.read_homefile(use_empty=True)
+bpy.ops.import_scene.gltf(filepath=str(tmp / "draco.glb"))   # File > Import > glTF 2.0
+out["marks"] = {o.name: [o.get("scenefit_source_file"), bool(o.get("scenefit_import"))] for o in bpy.data.objects}
+tile = bpy.data.objects["Tile"]
+bpy.ops.object.select_all(action="DESELECT")
+tile.select_set(True)
+bpy.context.view_layer.objects.active = tile
+bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "native.blend"))
+out["native_convert"] = sorted(bpy.ops.scenefit.convert(iterations=5))
+out["native_bake"] = sorted(bpy.ops.scenefit.bake_asset(filepath=str(tmp / "native_bake" / "tile.glb")))
+doc = import_module(MODULE + ".core.data.gltf_meshopt").read_gltf(tmp / "native_bake" / "tile.glb")[0]
+out["native_extensions"] = sorted(doc.get("extensionsUsed", []))
+out["native_nodes"] = sorted(n.get("name", "") for n in doc["nodes"])
+"""
+
+
+def test_blenders_own_gltf_import_is_baked_as_the_file_was_written(blender):
+    out = step(blender, NATIVE)
+    source = str((blender.tmp / "draco.glb").resolve())
+    assert out["marks"] == {"Tile": [source, True], "TileCamera": [source, True]}, out["marks"]
+    assert out["native_convert"] == out["native_bake"] == ["FINISHED"]
+    # Draco and WebP as the file had them (they were none and PNG: the import left no mark), and its camera
+    assert {"KHR_draco_mesh_compression", "EXT_texture_webp"} <= set(out["native_extensions"]), out["native_extensions"]
+    assert out["native_nodes"] == ["Tile", "TileCamera"]
+
+
 def test_missing_dependencies_are_one_sentence(blender):
     out = step(blender, MISSING)   # the module's last test: it disables the add-on
     reported, sentence = out["missing"]
