@@ -43,6 +43,19 @@ common = import_module(MODULE + ".operators.common")
 results = import_module(MODULE + ".operators.results")
 imageio = import_module(MODULE + ".core.data.imageio")
 
+def painted_plane(name, material, seed):
+    """A plane whose material's base colour is an 8x8 image of random colours."""
+    bpy.ops.mesh.primitive_plane_add()
+    plane = bpy.context.object
+    plane.name = name
+    image = bpy.data.images.new(name.lower(), 8, 8)
+    image.pixels.foreach_set(np.random.default_rng(seed).uniform(0, 1, 8 * 8 * 4).astype(np.float32))
+    mat = bpy.data.materials.new(material)
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage"); tex.image = image
+    mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    plane.data.materials.append(mat)
+    return plane
+
 def make_scene():
     bpy.ops.wm.read_homefile(use_empty=True)  # (factory settings would disable the extension)
     bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
@@ -515,15 +528,7 @@ def test_run_all_is_the_command_lines_pipeline_and_shows_the_composite(unsaved):
 # Import Asset: a meshopt-compressed GLB (Blender's glTF importer refuses it) into an artist's scene.
 IMPORT = r"""
 bpy.ops.wm.read_homefile(use_empty=True)
-bpy.ops.mesh.primitive_plane_add()
-plane = bpy.context.object
-plane.name = "Painted"
-image = bpy.data.images.new("paint", 8, 8)
-image.pixels.foreach_set(np.random.default_rng(4).uniform(0, 1, 8 * 8 * 4).astype(np.float32))
-mat = bpy.data.materials.new("Paint")
-tex = mat.node_tree.nodes.new("ShaderNodeTexImage"); tex.image = image
-mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
-plane.data.materials.append(mat)
+painted_plane("Painted", "Paint", 4)
 bpy.ops.export_scene.gltf(filepath=str(tmp / "plain.glb"), export_format="GLB")
 meshopt = import_module(MODULE + ".core.data.gltf_meshopt")
 packed = meshopt.encoded_glb(tmp / "plain.glb", tmp / "packed.glb")
@@ -601,15 +606,7 @@ def test_import_asset_reads_a_file_blenders_importer_refuses_into_the_artists_sc
 # so Bake Asset writes it as the file was written and takes along the file's camera.
 NATIVE = r"""
 bpy.ops.wm.read_homefile(use_empty=True)
-bpy.ops.mesh.primitive_plane_add()
-plane = bpy.context.object
-plane.name = "Tile"
-image = bpy.data.images.new("tile", 8, 8)
-image.pixels.foreach_set(np.random.default_rng(5).uniform(0, 1, 8 * 8 * 4).astype(np.float32))
-mat = bpy.data.materials.new("Glaze")
-tex = mat.node_tree.nodes.new("ShaderNodeTexImage"); tex.image = image
-mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
-plane.data.materials.append(mat)
+painted_plane("Tile", "Glaze", 5)
 bpy.ops.object.camera_add(location=(0, -4, 2))
 bpy.context.object.name = "TileCamera"
 bpy.ops.export_scene.gltf(filepath=str(tmp / "draco.glb"), export_format="GLB", export_cameras=True,
