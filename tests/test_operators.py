@@ -44,7 +44,7 @@ results = import_module(MODULE + ".operators.results")
 imageio = import_module(MODULE + ".core.data.imageio")
 
 def painted_plane(name, material, seed):
-    """A plane whose material's base colour is an 8x8 image of random colours."""
+    # a plane whose material's base colour is an 8x8 image of random colours
     bpy.ops.mesh.primitive_plane_add()
     plane = bpy.context.object
     plane.name = name
