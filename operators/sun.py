@@ -87,7 +87,7 @@ def set_sun(op, context, azimuth: float, elevation: float, source: str, uncertai
         said += f", ±{uncertainty:.0f}° for a slip of a click"
         if uncertainty > UNSURE_DEG:
             said += " (a longer shadow, or its tip picked closer, pins it better; the light hedges meanwhile)"
-    op.report({"INFO"}, said)
+    op.report({"WARNING"} if uncertainty > UNSURE_DEG else {"INFO"}, said)   # (a warning shows in the status bar)
     return {"FINISHED"}
 
 
