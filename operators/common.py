@@ -153,6 +153,31 @@ def recorded_originals(settings) -> dict:
     return {(settings.result_object.name, settings.result_object.active_material_index): settings.original_material}
 
 
+def flat_parts(objects: list) -> list[tuple[str, float]]:
+    """(name, width / height) of the parts that make a selection too flat to place (a ground plane under a
+    tree: the asset is then FLAT_RATIO or more times as wide as tall, and reaches behind the camera at any
+    useful size), when the rest without them is not; [] otherwise. World-space bounding boxes."""
+    import numpy as np
+
+    from ..core.scene.asset_pose import FLAT_RATIO
+
+    def box(obj) -> np.ndarray:
+        m = np.array(obj.matrix_world)
+        corners = np.array([list(c) + [1.0] for c in obj.bound_box]) @ m.T
+        return np.stack([corners[:, :3].min(0), corners[:, :3].max(0)])
+
+    def ratio(boxes: list) -> float:
+        lo, hi = np.min([b[0] for b in boxes], 0), np.max([b[1] for b in boxes], 0)
+        return float(max(hi[0] - lo[0], hi[1] - lo[1]) / max(hi[2] - lo[2], 1e-9))
+
+    boxes = {o.name: box(o) for o in objects}
+    if len(boxes) < 2 or ratio(list(boxes.values())) < FLAT_RATIO:
+        return []
+    flat = [(name, ratio([b])) for name, b in boxes.items() if ratio([b]) >= FLAT_RATIO]
+    rest = [b for name, b in boxes.items() if name not in dict(flat)]
+    return flat if rest and ratio(rest) < FLAT_RATIO else []
+
+
 def asset_objects(context) -> list:
     """The selected mesh objects when two or more are (one asset), else the active object; SceneFit's own
     objects (its camera, shadow catcher) never count."""

@@ -10,7 +10,7 @@ from pathlib import Path
 import bpy
 
 from ..core.base.errors import SceneFitError
-from ..operators.common import artist_camera, asset_objects, dependency_sentence, missing_modules
+from ..operators.common import artist_camera, asset_objects, dependency_sentence, flat_parts, missing_modules
 from .quality import BENCH_MACHINE, EXPECTED_SECONDS, expected_line
 
 class _Section:
@@ -74,6 +74,9 @@ class SCENEFIT_PT_asset(_Subsection, bpy.types.Panel):
         objects = asset_objects(context)
         if len(objects) > 1:   # what Run All, Convert, Adapt, Compose and Bake Asset will take
             layout.label(text=f"{len(objects)} selected objects, fitted as one asset", icon="GROUP")
+            for name, ratio in flat_parts(objects):   # said before Run All refuses the whole selection
+                shape = "flat" if ratio > 1000 else f"{ratio:.0f} times as wide as tall"
+                layout.label(text=f"'{name}' is {shape} (a ground plane?): deselect it to fit the rest", icon="ERROR")
         try:
             found, dropped = material_summary(obj.active_material)
         except SceneFitError as error:

@@ -43,6 +43,20 @@ common = import_module(MODULE + ".operators.common")
 results = import_module(MODULE + ".operators.results")
 imageio = import_module(MODULE + ".core.data.imageio")
 
+class Layout:   # what a panel draws, recorded: panels cannot draw without a window
+    def __init__(self): self.drawn = []
+    def column(self, **kw): return self
+    def row(self, **kw): return self
+    def prop(self, *args, **kw): pass
+    def operator(self, idname, **kw): self.drawn.append(idname)
+    def label(self, text="", **kw): self.drawn.append(text)
+
+def panel_lines(panel):
+    from types import SimpleNamespace
+    layout = Layout()
+    panel.draw(SimpleNamespace(layout=layout), bpy.context)
+    return layout.drawn
+
 def painted_plane(name, material, seed):
     # a plane whose material's base colour is an 8x8 image of random colours
     bpy.ops.mesh.primitive_plane_add()
@@ -559,18 +573,9 @@ except RuntimeError as error:
 out["after_broken"] = sorted(o.name for o in bpy.data.objects)
 menu = bpy.types.TOPBAR_MT_file_import._dyn_ui_initialize()
 out["in_file_import"] = any(getattr(f, "__module__", "").endswith("operators.import_asset") for f in menu)
-# The Asset section says what the selection is (a recording layout: panels cannot draw without a window)
-class Layout:
-    drawn = []
-    def column(self, **kw): return self
-    def row(self, **kw): return self
-    def prop(self, *args, **kw): pass
-    def operator(self, idname, **kw): self.drawn.append(idname)
-    def label(self, text="", **kw): self.drawn.append(text)
-from types import SimpleNamespace
+# The Asset section says what the selection is
 mine.select_set(True)
-bpy.types.SCENEFIT_PT_asset.draw(SimpleNamespace(layout=Layout()), bpy.context)
-out["asset_section"] = Layout.drawn
+out["asset_section"] = panel_lines(bpy.types.SCENEFIT_PT_asset)
 # Bake Asset writes it as the file was written (Compression and Textures default to As imported)
 painted = bpy.data.objects["Painted"]
 out["source"] = painted.get("scenefit_source_file")
@@ -635,6 +640,34 @@ def test_blenders_own_gltf_import_is_baked_as_the_file_was_written(blender):
     # Draco and WebP as the file had them (they were none and PNG: the import left no mark), and its camera
     assert {"KHR_draco_mesh_compression", "EXT_texture_webp"} <= set(out["native_extensions"]), out["native_extensions"]
     assert out["native_nodes"] == ["Tile", "TileCamera"]
+
+
+# A tree on a ground plane, selected together: the Asset section names the plane before Run All refuses.
+FLAT = r"""
+bpy.ops.wm.read_homefile(use_empty=True)
+bpy.ops.mesh.primitive_cylinder_add(radius=0.3, depth=3.0, location=(0, 0, 1.5))
+bpy.context.object.name = "Trunk"
+bpy.ops.mesh.primitive_cone_add(radius1=1.5, depth=2.0, location=(0, 0, 3.5))
+bpy.context.object.name = "Crown"
+bpy.ops.mesh.primitive_plane_add(size=300.0)   # 67 times the tree's height
+bpy.context.object.name = "Ground"
+def drawn(names):
+    bpy.ops.object.select_all(action="DESELECT")
+    for n in names:
+        bpy.data.objects[n].select_set(True)
+    bpy.context.view_layer.objects.active = bpy.data.objects[names[0]]
+    return [t for t in panel_lines(bpy.types.SCENEFIT_PT_asset) if "ground plane" in t]
+out["with_ground"] = drawn(["Trunk", "Crown", "Ground"])
+out["tree_alone"] = drawn(["Trunk", "Crown"])
+out["flat_parts"] = common.flat_parts([bpy.data.objects[n] for n in ("Trunk", "Crown", "Ground")])
+"""
+
+
+def test_the_asset_section_names_a_ground_plane_that_makes_the_selection_too_flat(blender):
+    out = step(blender, FLAT)
+    assert out["with_ground"] == ["'Ground' is flat (a ground plane?): deselect it to fit the rest"]
+    assert out["tree_alone"] == []
+    assert [name for name, _ in out["flat_parts"]] == ["Ground"]
 
 
 def test_missing_dependencies_are_one_sentence(blender):
