@@ -135,18 +135,37 @@ def _read_or_sentence(path: Path, read: Callable[[], None]) -> None:
 
 # What Import Asset reads: the files Blender's importers read, meshopt glTF and ASCII FBX included.
 IMPORTABLE_SUFFIXES = tuple(IMPORTERS)
-# The custom property Import Asset leaves on each object it brought: the file it came from, so Bake
-# Asset can write the game asset as that file was written (compression, texture format, tangents).
+# The mark an import leaves on each object it brought: the file it came from, so Bake Asset can write the
+# game asset as that file was written (compression, texture format, tangents) ...
 SOURCE_PROPERTY = "scenefit_source_file"
-# ... and which import it was (one id per Import Asset): a file imported twice gives two sets of cameras.
+# ... and which import it was (one id per import): a file imported twice gives two sets of cameras.
 IMPORT_PROPERTY = "scenefit_import"
+# Both are properties the add-on registers on Object (operators/properties.py), not custom properties: the
+# artist's own exports with custom properties would write the file's absolute path into what they ship.
 
 
 def mark_imported(obj, path: str | Path, import_id: str) -> None:
     """Mark `obj` as brought by the import `import_id` of the file `path` (Import Asset, and Blender's own
     File > Import of a glTF through the add-on's importer hook)."""
     if obj is not None:
-        obj[SOURCE_PROPERTY], obj[IMPORT_PROPERTY] = str(Path(path).resolve()), import_id
+        _set_mark(obj, SOURCE_PROPERTY, str(Path(path).resolve()))
+        _set_mark(obj, IMPORT_PROPERTY, import_id)
+
+
+def _set_mark(obj, key: str, value: str) -> None:
+    if key in obj.bl_rna.properties:
+        setattr(obj, key, value)
+    else:   # (the add-on not registered: a plain bpy session, as the tests' and the command line's)
+        obj[key] = value
+
+
+def import_mark(obj, key: str) -> str | None:
+    """An object's SOURCE_PROPERTY or IMPORT_PROPERTY, None when it has none (a .blend saved before the
+    marks were registered properties keeps them as custom properties: read those too)."""
+    value = getattr(obj, key, "") if key in obj.bl_rna.properties else ""
+    if not value:
+        value = obj.get(key)
+    return value if isinstance(value, str) and value else None
 
 
 class GltfImportMark:
@@ -167,8 +186,8 @@ class GltfImportMark:
 def imported_from(objects: list) -> Path | None:
     """The file Import Asset read most of `objects` from (the first such file on a tie), if it is still there:
     a selection that mixes two imports is written as the file most of it came from."""
-    sources = [obj.get(SOURCE_PROPERTY) for obj in objects]
-    files = [s for s in sources if isinstance(s, str) and Path(s).is_file()]
+    sources = [import_mark(obj, SOURCE_PROPERTY) for obj in objects]
+    files = [s for s in sources if s and Path(s).is_file()]
     return Path(max(files, key=files.count)) if files else None   # (max keeps the first of equal counts)
 
 
@@ -183,10 +202,10 @@ def imported_beside(objects: list, scene_objects) -> list:
     source = imported_from(objects)
     if source is None:
         return []
-    mine = [o for o in objects if o.get(SOURCE_PROPERTY) == str(source)]
-    imports = {o.get(IMPORT_PROPERTY) for o in mine} - {None}
-    same = (lambda o: o.get(IMPORT_PROPERTY) in imports) if imports else \
-        (lambda o: o.get(SOURCE_PROPERTY) == str(source))   # (objects imported before imports had ids)
+    mine = [o for o in objects if import_mark(o, SOURCE_PROPERTY) == str(source)]
+    imports = {import_mark(o, IMPORT_PROPERTY) for o in mine} - {None}
+    same = (lambda o: import_mark(o, IMPORT_PROPERTY) in imports) if imports else \
+        (lambda o: import_mark(o, SOURCE_PROPERTY) == str(source))   # (objects imported before imports had ids)
     return sorted((o for o in scene_objects if o.type in BESIDE_TYPES and o not in objects and same(o)),
                   key=lambda o: o.name)
 

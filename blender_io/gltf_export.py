@@ -446,13 +446,16 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
             scene.collection.objects.link(copy)
             if new_uvs and obj.name in new_uvs:
                 add_uv_map(copy, new_uvs[obj.name])
-        for other in beside:   # a camera on the truck's body rides on the body's copy (it shares its data)
-            if other.parent is not None and other.parent.name in copies:
+        depth = lambda o: 0 if o.parent is None else 1 + depth(o.parent)
+        for other in sorted(beside, key=depth):   # a camera on the truck's body rides on the body's copy (a copy
+            parent = other.parent                 # of it, sharing its data), and a light on that camera on it
+            if parent is not None and (parent.name in copies or parent.name in beside_copies):
                 beside_copies[other.name] = other.copy()
                 scene.collection.objects.link(beside_copies[other.name])
-        for copy in [*copies.values(), *beside_copies.values()]:   # a wheel under the truck's body hangs
-            if copy.parent is not None and copy.parent.name in copies:   # under the body's copy
-                copy.parent = copies[copy.parent.name]   # (the parent inverse, copied, stays as it was)
+        riders = {**copies, **beside_copies}
+        for copy in riders.values():   # a wheel under the truck's body hangs under the body's copy
+            if copy.parent is not None and copy.parent.name in riders:
+                copy.parent = riders[copy.parent.name]   # (the parent inverse, copied, stays as it was)
         materials = []
         for index, pairs in enumerate(slots):
             for obj, slot in pairs:

@@ -155,8 +155,9 @@ def recorded_originals(settings) -> dict:
 
 def flat_parts(objects: list) -> list[tuple[str, float]]:
     """(name, width / height) of the parts that make a selection too flat to place (a ground plane under a
-    tree: the asset is then FLAT_RATIO or more times as wide as tall, and reaches behind the camera at any
-    useful size), when the rest without them is not; [] otherwise. World-space bounding boxes."""
+    tree: the asset is then FLAT_RATIO or more times as wide as tall, and Run All refuses it at most sizes):
+    flat parts taken away widest first until the rest is not, only those; [] otherwise. World-space
+    bounding boxes (Run All measures the mesh turned to the camera: this is the likely culprit, not a rule)."""
     import numpy as np
 
     from ..core.scene.asset_pose import FLAT_RATIO
@@ -173,9 +174,16 @@ def flat_parts(objects: list) -> list[tuple[str, float]]:
     boxes = {o.name: box(o) for o in objects}
     if len(boxes) < 2 or ratio(list(boxes.values())) < FLAT_RATIO:
         return []
-    flat = [(name, ratio([b])) for name, b in boxes.items() if ratio([b]) >= FLAT_RATIO]
-    rest = [b for name, b in boxes.items() if name not in dict(flat)]
-    return flat if rest and ratio(rest) < FLAT_RATIO else []
+    width = lambda b: float(max(b[1][0] - b[0][0], b[1][1] - b[0][1]))
+    flat = sorted(((name, ratio([b])) for name, b in boxes.items() if ratio([b]) >= FLAT_RATIO),
+                  key=lambda item: -width(boxes[item[0]]))
+    taken: set[str] = set()
+    for count, (name, _) in enumerate(flat, 1):   # a blob shadow or a leaf card under the tree stays
+        taken.add(name)
+        rest = [b for n, b in boxes.items() if n not in taken]
+        if rest and ratio(rest) < FLAT_RATIO:
+            return flat[:count]
+    return []
 
 
 def asset_objects(context) -> list:

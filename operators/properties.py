@@ -122,13 +122,28 @@ class SceneFitSettings(bpy.types.PropertyGroup):
 classes = (SceneFitSlot, SceneFitSettings)
 
 
+def _import_marks() -> dict:
+    """The marks an import leaves on its objects (blender_io/asset_file.py), as registered properties: kept
+    out of the custom properties that exporters may write into the files the artist ships."""
+    from ..blender_io.asset_file import IMPORT_PROPERTY, SOURCE_PROPERTY
+
+    return {SOURCE_PROPERTY: StringProperty(name="Imported from", options={"HIDDEN"}, subtype="FILE_PATH",
+                                            description="The file SceneFit's import mark says this object came from"),
+            IMPORT_PROPERTY: StringProperty(name="Import", options={"HIDDEN"},
+                                            description="Which import brought this object (SceneFit's mark)")}
+
+
 def register() -> None:
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.scenefit = PointerProperty(type=SceneFitSettings)
+    for name, prop in _import_marks().items():
+        setattr(bpy.types.Object, name, prop)
 
 
 def unregister() -> None:
+    for name in _import_marks():
+        delattr(bpy.types.Object, name)
     del bpy.types.Scene.scenefit
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

@@ -83,11 +83,12 @@ def set_sun(op, context, azimuth: float, elevation: float, source: str, uncertai
     settings.sun_uncertainty = math.radians(min(uncertainty, 90.0))
     settings.sun_from = "set"
     said = f"Sun from {source}: azimuth {azimuth:.0f}°, elevation {elevation:.0f}°"
+    unsure = round(uncertainty) > UNSURE_DEG   # (as the command line's summary rounds it)
     if uncertainty > 0.0:
         said += f", ±{uncertainty:.0f}° for a slip of a click"
-        if uncertainty > UNSURE_DEG:
+        if unsure:
             said += " (a longer shadow, or its tip picked closer, pins it better; the light hedges meanwhile)"
-    op.report({"WARNING"} if uncertainty > UNSURE_DEG else {"INFO"}, said)   # (a warning shows in the status bar)
+    op.report({"WARNING"} if unsure else {"INFO"}, said)   # (a warning shows in the status bar)
     return {"FINISHED"}
 
 

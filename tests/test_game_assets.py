@@ -498,6 +498,9 @@ def made(path, meshes, camera, sun=None):   # a file made elsewhere: its meshes,
         bpy.ops.object.camera_add(location=(0, -3, 1))   # a camera riding on the first mesh
         bpy.context.object.name = "RideCamera"
         bpy.context.object.parent = bpy.data.objects[meshes[0]]
+        bpy.ops.object.light_add(type="SPOT", location=(0, -3, 2))   # and a light riding on that camera
+        bpy.context.object.name = "RideLamp"
+        bpy.context.object.parent = bpy.data.objects["RideCamera"]
     bpy.ops.export_scene.gltf(filepath=path, export_format="GLB", export_cameras=True, export_lights=True)
 
 source, other = OUT.replace(".glb", "-source.glb"), OUT.replace(".glb", "-other.glb")
@@ -538,7 +541,8 @@ def test_bake_asset_writes_the_cameras_and_lights_of_the_assets_own_file_only(ru
     # a selection that mixes two imports is written as the file most of it came from (it took the first's)
     assert result["from"] == source and result["from_other"] == other
     # that import's camera and sun: not the artist's, the other file's, nor the second import's of the same file
-    assert sorted(result["beside"]) == ["FileCamera", "FileSun", "RideCamera"] and "FileCamera.001" in result["again"]
+    assert sorted(result["beside"]) == ["FileCamera", "FileSun", "RideCamera", "RideLamp"]
+    assert "FileCamera.001" in result["again"]
     exported = gltf_json(str(out))
     nodes = exported["nodes"]
     names = [n.get("name") for n in nodes]
@@ -547,7 +551,9 @@ def test_bake_asset_writes_the_cameras_and_lights_of_the_assets_own_file_only(ru
     assert len(exported.get("cameras", [])) == 2
     # the camera riding on the box stays under the box's copy (it hung from the unexported original)
     assert "RideCamera" in [names[c] for c in nodes[names.index("Box")].get("children", [])]
-    assert len(exported["extensions"]["KHR_lights_punctual"]["lights"]) == 1
+    assert len(exported["extensions"]["KHR_lights_punctual"]["lights"]) == 2
+    # ... and the light riding on that camera under the camera's copy (one level was all it took before)
+    assert "RideLamp" in [names[c] for c in nodes[names.index("RideCamera")].get("children", [])]
 
 
 def test_bake_refuses_an_asset_folder_in_one_sentence(tmp_path, example_asset):

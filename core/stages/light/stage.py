@@ -95,7 +95,7 @@ def sun_words(decisions: dict, setter: str) -> str:
     from .cues import UNSURE_DEG
 
     spread = sun.get("uncertainty_deg") or 0.0
-    sure = "" if spread < 0.5 else f" (±{spread:.0f}°)" if spread <= UNSURE_DEG else \
+    sure = "" if spread < 0.5 else f" (±{spread:.0f}°)" if round(spread) <= UNSURE_DEG else \
         f" (±{spread:.0f}°: a longer shadow, or its tip picked closer, pins it better)"
     given = f"sun {sun['deg'][0]:.4g},{sun['deg'][1]:.4g} as given{sure}"
     return given + ("" if sun.get("used", True) else " (unused by this prior)")
