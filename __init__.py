@@ -15,14 +15,12 @@ def _modules():
     return [importlib.import_module(f".{name}", __package__) for name in _MODULE_NAMES]
 
 
-class glTF2ImportUserExtension:
-    """Blender's glTF importer looks for this name in every enabled add-on: File > Import of a glTF marks
-    the objects it makes with their file (blender_io.asset_file.GltfImportMark), for Bake Asset."""
+def glTF2ImportUserExtension():
+    """Blender's glTF importer calls this name in every enabled add-on, once per import: File > Import of a
+    glTF marks the objects it makes with their file (blender_io.asset_file.GltfImportMark), for Bake Asset."""
+    from .blender_io.asset_file import GltfImportMark
 
-    def __new__(cls):
-        from .blender_io.asset_file import GltfImportMark
-
-        return GltfImportMark()
+    return GltfImportMark()
 
 
 def register() -> None:

@@ -265,6 +265,11 @@ REAL_METHODS = ("estimate", "constant", "wrapped")
 HEADLINE = ("diffuse", "matte", "mirror")
 
 
+def read_corpus_map(path: Path) -> np.ndarray:
+    """A corpus map as float32 RGB."""
+    return np.ascontiguousarray(read_image(path)[..., :3], np.float32)
+
+
 def metered_exposure(radiance: np.ndarray, metering: str) -> float:
     """Auto-exposure: the median or the log-average luminance to mid-grey (the two conventions cameras use)."""
     if metering == "log-average":
@@ -498,12 +503,10 @@ def real_main(argv: list[str]) -> int:
                              "corpus's, written to light_heldout.md/.json/.png")
     args = parser.parse_args(argv)
     if args.heldout:
-        from heldout_hdri import FETCH_FAILED, HELD_OUT_MAPS, fetch, read_heldout
+        from heldout_hdri import FETCH_FAILED, HELD_OUT_MAPS, fetch_or_say, read_heldout
 
-        try:
-            folder = fetch()
-        except (RuntimeError, ValueError, subprocess.TimeoutExpired) as error:
-            print(f"bench_light --real --heldout: {error}.", file=sys.stderr)
+        folder = fetch_or_say("bench_light --real --heldout")
+        if folder is None:
             return FETCH_FAILED
         maps = {name: (kind, folder / f"{name}.exr") for name, kind in HELD_OUT_MAPS.items()}
         read_map, about = read_heldout, HELDOUT_ABOUT
@@ -514,8 +517,7 @@ def real_main(argv: list[str]) -> int:
                   f"(first: {missing[0]}); pass --corpus with the folder that holds them.", file=sys.stderr)
             return 2
         maps = {name: (kind, args.corpus / f"{name}_1k.hdr") for name, kind in REAL_MAPS.items()}
-        read_map = lambda path: np.ascontiguousarray(read_image(path)[..., :3], np.float32)
-        about = CORPUS_ABOUT
+        read_map, about = read_corpus_map, CORPUS_ABOUT
     started = time.perf_counter()
     configs = {"estimate": stage_config("light", "balanced", critic_type="none")}
     if not args.no_draft:

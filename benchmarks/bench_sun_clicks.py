@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 
 import bench_light as B
-from heldout_hdri import FETCH_FAILED, HELD_OUT_MAPS, fetch, read_heldout
+from heldout_hdri import FETCH_FAILED, HELD_OUT_MAPS, fetch_or_say, read_heldout
 from scenefit.core.base.errors import InputError
-from scenefit.core.data.imageio import read_image, srgb_to_linear
+from scenefit.core.data.imageio import srgb_to_linear
 from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.render.photo import develop_photo, perspective_view
 from scenefit.core.scene.camera import CAMERA_HEIGHT, PhotoCamera
@@ -51,8 +51,7 @@ def unit(azimuth: float, elevation: float) -> np.ndarray:
 def views(folder: Path):
     """(map, side, camera, photo, truth) for every view of both map sets (the held-out ones in `folder`),
     median metering."""
-    maps = [(n, B.CORPUS_HDRI / f"{n}_1k.hdr", lambda p: np.ascontiguousarray(read_image(p)[..., :3], np.float32))
-            for n in B.REAL_MAPS]
+    maps = [(n, B.CORPUS_HDRI / f"{n}_1k.hdr", B.read_corpus_map) for n in B.REAL_MAPS]
     maps += [(n, folder / f"{n}.exr", read_heldout) for n in HELD_OUT_MAPS]
     for name, path, reader in maps:
         hdr = reader(path)
@@ -118,10 +117,8 @@ def summary(rows: list[dict]) -> list[str]:
 
 
 def main() -> int:
-    try:
-        folder = fetch()
-    except (RuntimeError, ValueError, subprocess.TimeoutExpired) as error:
-        print(f"bench_sun_clicks: {error}.", file=sys.stderr)
+    folder = fetch_or_say("bench_sun_clicks")
+    if folder is None:
         return FETCH_FAILED
     missing = [n for n in B.REAL_MAPS if not (B.CORPUS_HDRI / f"{n}_1k.hdr").is_file()]
     if missing:

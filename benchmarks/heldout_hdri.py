@@ -105,6 +105,16 @@ def fetch(cache: Path | None = None) -> Path:
     return cache
 
 
+def fetch_or_say(program: str, cache: Path | None = None) -> Path | None:
+    """`fetch()`'s folder, or None after saying in one sentence on stderr why the maps could not be had
+    (the caller then exits with FETCH_FAILED)."""
+    try:
+        return fetch(cache)
+    except (RuntimeError, ValueError, subprocess.TimeoutExpired) as error:
+        print(f"{program}: {error}.", file=sys.stderr)
+        return None
+
+
 def read_heldout(path: Path) -> np.ndarray:
     """A held-out map as float32 RGB with the lossy compression's negative ringing clamped to 0."""
     from scenefit.core.data.imageio import read_image
@@ -116,10 +126,8 @@ def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cache", type=Path, default=None, help="where the maps go (default: " f"{default_cache()})")
     args = parser.parse_args(argv)
-    try:
-        folder = fetch(args.cache)
-    except (RuntimeError, ValueError, subprocess.TimeoutExpired) as error:
-        print(f"heldout_hdri: {error}.", file=sys.stderr)
+    folder = fetch_or_say("heldout_hdri", args.cache)
+    if folder is None:
         return FETCH_FAILED
     print(folder)
     return 0

@@ -186,28 +186,29 @@ class GltfImportMark:
 def imported_from(objects: list) -> Path | None:
     """The file Import Asset read most of `objects` from (the first such file on a tie), if it is still there:
     a selection that mixes two imports is written as the file most of it came from."""
+    from collections import Counter
+
     sources = [import_mark(obj, SOURCE_PROPERTY) for obj in objects]
-    files = [s for s in sources if s and Path(s).is_file()]
-    return Path(max(files, key=files.count)) if files else None   # (max keeps the first of equal counts)
+    counts = Counter(s for s in sources if s and Path(s).is_file())
+    return Path(counts.most_common(1)[0][0]) if counts else None   # (most_common keeps the first of a tie)
 
 
 # What an asset file holds beside its geometry and is written with it when it came from the same file.
 BESIDE_TYPES = ("CAMERA", "LIGHT")
 
 
-def imported_beside(objects: list, scene_objects) -> list:
+def imported_beside(objects: list, scene_objects, source: Path | None) -> list:
     """The cameras and lights among `scene_objects` that the import of the file the asset is written as
-    (`imported_from`: most of `objects` came from it) brought: the file's own (the diorama's camera and
-    sun), not the artist's, another file's, nor those of a second import of the same file."""
-    source = imported_from(objects)
+    (`source`, imported_from(objects): most of them came from it) brought: the file's own (the diorama's
+    camera and sun), not the artist's, another file's, nor those of a second import of the same file."""
     if source is None:
         return []
     mine = [o for o in objects if import_mark(o, SOURCE_PROPERTY) == str(source)]
     imports = {import_mark(o, IMPORT_PROPERTY) for o in mine} - {None}
-    same = (lambda o: import_mark(o, IMPORT_PROPERTY) in imports) if imports else \
-        (lambda o: import_mark(o, SOURCE_PROPERTY) == str(source))   # (objects imported before imports had ids)
-    return sorted((o for o in scene_objects if o.type in BESIDE_TYPES and o not in objects and same(o)),
-                  key=lambda o: o.name)
+    # (objects imported before imports had ids: by the file alone)
+    key, wanted = (IMPORT_PROPERTY, imports) if imports else (SOURCE_PROPERTY, {str(source)})
+    return sorted((o for o in scene_objects if o.type in BESIDE_TYPES and o not in objects
+                   and import_mark(o, key) in wanted), key=lambda o: o.name)
 
 
 def import_into_open_scene(path: str | Path) -> list:

@@ -145,12 +145,16 @@ def show_photo(data, image) -> None:
         bg.image, bg.alpha, bg.display_depth, bg.frame_method = image, 1.0, "BACK", "FIT"
 
 
+def world_box(objects: list) -> tuple[np.ndarray, np.ndarray]:
+    """(lowest, highest) corner of the objects' bounding boxes in world space."""
+    corners = np.array([o.matrix_world @ _vector(c) for o in objects for c in o.bound_box], dtype=np.float64)
+    return corners.min(axis=0), corners.max(axis=0)
+
+
 def object_base(obj) -> tuple[np.ndarray, float]:
     """The object's (or a list of objects': one asset's) bottom centre in world space and its height
     (evaluated bounding boxes)."""
-    objects = obj if isinstance(obj, (list, tuple)) else [obj]
-    corners = np.array([o.matrix_world @ _vector(c) for o in objects for c in o.bound_box], dtype=np.float64)
-    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    lo, hi = world_box(obj if isinstance(obj, (list, tuple)) else [obj])
     return np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]]), float(hi[2] - lo[2])
 
 

@@ -398,6 +398,11 @@ def bake_copy_to_gltf(obj, baked: list[BakedMaterial], slots: list[int], out_fil
 CARRIER_TYPES = ("EMPTY", "ARMATURE")
 
 
+def _depth(obj) -> int:
+    """How many parents stand above `obj`."""
+    return 0 if obj.parent is None else 1 + _depth(obj.parent)
+
+
 def carriers_of(objects: list) -> list:
     """What carries `objects` and is not one of them: every empty and armature above them (the file's root
     and group nodes, a rig) and the armatures that deform them. Exported beside the copies, an asset keeps
@@ -446,8 +451,7 @@ def bake_copies_to_gltf(objects: list, baked: list[BakedMaterial], slots: list[l
             scene.collection.objects.link(copy)
             if new_uvs and obj.name in new_uvs:
                 add_uv_map(copy, new_uvs[obj.name])
-        depth = lambda o: 0 if o.parent is None else 1 + depth(o.parent)
-        for other in sorted(beside, key=depth):   # a camera on the truck's body rides on the body's copy (a copy
+        for other in sorted(beside, key=_depth):   # a camera on the truck's body rides on the body's copy (a copy
             parent = other.parent                 # of it, sharing its data), and a light on that camera on it
             if parent is not None and (parent.name in copies or parent.name in beside_copies):
                 beside_copies[other.name] = other.copy()

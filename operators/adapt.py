@@ -12,7 +12,7 @@ from ..core.base.errors import InputError
 from . import work
 from .common import OnMesh, asset_layout, model_settings, photo_path, photo_view, run_folder
 from .jobs import JobOperator
-from .results import apply_layout_results, apply_result_material, result_targets
+from .results import apply_layout_results, apply_result_material, materials_words, result_targets
 
 if TYPE_CHECKING:
     from ..panels.quality import LocalWork
@@ -106,8 +106,7 @@ class SCENEFIT_OT_adapt(OnMesh, JobOperator):
             mats = apply_layout_results(context, self._layout, result, "adapt")
         else:
             mats = [apply_result_material(context, self._object_name, result, "adapt")]
-        return (f"Adapted ({result['iterations']} iterations): material{'s' if len(mats) > 1 else ''} "
-                f"{', '.join(repr(m.name) for m in mats)}")
+        return f"Adapted ({result['iterations']} iterations): {materials_words(mats)}"
 
 
 classes = (SCENEFIT_OT_adapt,)

@@ -118,8 +118,9 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         texture = texture_file(context)
         layout = asset_layout(context)   # the selected objects, or the active one with all its materials
         artists = layout.artists   # what is exported: the artist's materials with the baked maps
-        self._output = bake_output(self.compress, self.textures, self.max_texture, self.file_format,
-                                   imported_from([bpy.data.objects[n] for n in layout.objects]),
+        objects = [bpy.data.objects[n] for n in layout.objects]
+        source = imported_from(objects)
+        self._output = bake_output(self.compress, self.textures, self.max_texture, self.file_format, source,
                                    any(normal_mapped(m) for m in artists))
         if self.filepath:
             out_file = Path(bpy.path.abspath(self.filepath))
@@ -131,8 +132,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
             out_file = Path(f"{bpy.path.clean_name(layout.name)}.{self.file_format}")
         self._objects, self._slots, self._out_file = layout.objects, layout.slots, out_file
         self._sources = [m.name for m in artists]
-        self._beside = [o.name for o in imported_beside([bpy.data.objects[n] for n in layout.objects],
-                                                        context.scene.objects)] if self.cameras_and_lights else []
+        self._beside = [o.name for o in imported_beside(objects, context.scene.objects, source)] \
+            if self.cameras_and_lights else []
         remap, remapped, self._new_uvs = new_uv_map(context, layout, texture)
         return work.bake_game_maps, dict(layout.bake_data(), **layout.own_maps(),
                                          texture=str(texture),

@@ -97,13 +97,10 @@ class AssetLayout:
     def fitting_mesh(self):
         """The mesh of `fitting`, read without any pixels (Adapt needs only the mesh: reading the maps
         would bake a procedural material with Cycles for nothing)."""
-        from dataclasses import replace
-
         from ..blender_io.material import material_wrap
-        from ..core.data.materials import atlas_mesh
+        from ..core.data.materials import fitting_mesh
 
-        mesh = replace(self.mesh, wraps=tuple(material_wrap(m) for m in self.artists))
-        return atlas_mesh(mesh) if len(self.materials) > 1 else mesh
+        return fitting_mesh(self.mesh, [material_wrap(m) for m in self.artists], len(self.materials))
 
     def fitting(self, context) -> tuple:
         """(mesh, maps, per-material bake data or None) a run fits: several materials as their atlas
@@ -160,23 +157,19 @@ def flat_parts(objects: list) -> list[tuple[str, float]]:
     bounding boxes (Run All measures the mesh turned to the camera: this is the likely culprit, not a rule)."""
     import numpy as np
 
+    from ..blender_io.compose import world_box
     from ..core.scene.asset_pose import FLAT_RATIO
-
-    def box(obj) -> np.ndarray:
-        m = np.array(obj.matrix_world)
-        corners = np.array([list(c) + [1.0] for c in obj.bound_box]) @ m.T
-        return np.stack([corners[:, :3].min(0), corners[:, :3].max(0)])
 
     def ratio(boxes: list) -> float:
         lo, hi = np.min([b[0] for b in boxes], 0), np.max([b[1] for b in boxes], 0)
         return float(max(hi[0] - lo[0], hi[1] - lo[1]) / max(hi[2] - lo[2], 1e-9))
 
-    boxes = {o.name: box(o) for o in objects}
+    boxes = {o.name: world_box([o]) for o in objects}
     if len(boxes) < 2 or ratio(list(boxes.values())) < FLAT_RATIO:
         return []
     width = lambda b: float(max(b[1][0] - b[0][0], b[1][1] - b[0][1]))
-    flat = sorted(((name, ratio([b])) for name, b in boxes.items() if ratio([b]) >= FLAT_RATIO),
-                  key=lambda item: -width(boxes[item[0]]))
+    alone = {name: ratio([b]) for name, b in boxes.items()}
+    flat = sorted(((name, r) for name, r in alone.items() if r >= FLAT_RATIO), key=lambda item: -width(boxes[item[0]]))
     taken: set[str] = set()
     for count, (name, _) in enumerate(flat, 1):   # a blob shadow or a leaf card under the tree stays
         taken.add(name)

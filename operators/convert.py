@@ -8,7 +8,7 @@ from bpy.props import IntProperty
 from . import work
 from .common import OnMesh, asset_layout, run_folder
 from .jobs import JobOperator
-from .results import apply_layout_results, result_targets
+from .results import apply_layout_results, materials_words, result_targets
 
 
 class SCENEFIT_OT_convert(OnMesh, JobOperator):
@@ -35,7 +35,7 @@ class SCENEFIT_OT_convert(OnMesh, JobOperator):
 
     def apply(self, context, result) -> str:
         mats = apply_layout_results(context, self._layout, result, "convert")
-        return (f"Converted: material{'s' if len(mats) > 1 else ''} {', '.join(repr(m.name) for m in mats)} "
+        return (f"Converted: {materials_words(mats)} "
                 f"({result['psnr_db']:.1f} dB on the covered texels)")
 
 

@@ -12,7 +12,7 @@ import bpy
 from ..blender_io.material import object_mesh_and_slots
 from ..blender_io.compose import CAMERA_NAME
 from ..core.base.errors import SceneFitError
-from .common import OnMesh, artist_camera, asset_layout, check_dependencies, photo_path, run_folder
+from .common import TAG, OnMesh, artist_camera, asset_layout, check_dependencies, photo_path, run_folder
 from .work import written_whole
 
 
@@ -24,7 +24,7 @@ def photo_look_at(context):
     from ..core.render.export import LookAt
 
     cam = bpy.data.objects.get(CAMERA_NAME)
-    if cam is None or cam.type != "CAMERA" or "scenefit" not in cam:
+    if cam is None or cam.type != "CAMERA" or TAG not in cam:
         cam = None
         if context.scene.scenefit.photo_path:
             try:

@@ -16,7 +16,7 @@ import bpy
 
 from ..core.base.errors import InputError
 from .common import depth_model_preference, model_settings, photo_view, preferences, run_folder, scene_layout
-from .results import apply_layout_results, result_targets
+from .results import apply_layout_results, materials_words, result_targets
 
 # What the worker runs for each operator: the whole pipeline (adapt needs convert and the light).
 REMOTE_STAGES = ("convert", "light", "adapt", "compose")
@@ -167,4 +167,4 @@ def apply_remote(op, context, result: dict) -> str:
         raise InputError(f"The worker did not adapt the texture: {shaped['adapt_skipped'] or 'no reason given'}; "
                          f"its results are in '{result['folder']}'.")
     mats = apply_layout_results(context, op._layout, shaped, "adapt")
-    return done + f"material{'s' if len(mats) > 1 else ''} {', '.join(repr(m.name) for m in mats)}"
+    return done + materials_words(mats)

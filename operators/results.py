@@ -98,6 +98,11 @@ def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: li
     return made
 
 
+def materials_words(materials: list) -> str:
+    """The result materials as a status line names them."""
+    return f"material{'s' if len(materials) > 1 else ''} {', '.join(repr(m.name) for m in materials)}"
+
+
 def result_targets(layout) -> dict:
     """Where a job's result goes, as plain data kept on the operator while the job runs (the datablocks
     are found again by name when it ends): an operators.common.AssetLayout's objects and slots, the

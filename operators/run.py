@@ -15,7 +15,8 @@ from .adapt import adapt_seconds_here
 from .common import (OnMesh, depth_model_preference, last_finished_run, model_settings, photo_path, photo_view,
                      run_folder, scene_layout)
 from .jobs import JobOperator
-from .results import apply_composite_image, apply_layout_results, apply_result_world, result_targets
+from .results import (apply_composite_image, apply_layout_results, apply_result_world, materials_words,
+                      result_targets)
 
 if TYPE_CHECKING:
     from ..panels.quality import LocalWork
@@ -69,7 +70,7 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         mats = apply_layout_results(context, self._layout, result, result["stage"])
         world = apply_result_world(context, result["hdr"], "run")
         image = apply_composite_image(context, result["composite"], "run")
-        lines = [f"material{'s' if len(mats) > 1 else ''} {', '.join(repr(m.name) for m in mats)}",
+        lines = [materials_words(mats),
                  f"World '{world.name}'", f"composite image '{image.name}'"]
         settings = context.scene.scenefit
         try:

@@ -14,7 +14,7 @@ import bpy
 from bpy.props import FloatVectorProperty
 
 from ..core.base.errors import InputError, SceneFitError
-from .common import artist_camera, composite_camera, photo_path, photo_view
+from .common import TAG, artist_camera, composite_camera, photo_path, photo_view
 from .placement import PhotoClicks
 
 STEPS = ("foot", "top", "tip")
@@ -76,18 +76,18 @@ class SCENEFIT_OT_pick_sun(PhotoClicks, bpy.types.Operator):
 def set_sun(op, context, azimuth: float, elevation: float, source: str, uncertainty: float = 0.0) -> set[str]:
     """The Scene section's Sun "As set here" at (azimuth, elevation) degrees, give or take `uncertainty`,
     said in the status bar."""
-    from ..core.stages.light.cues import UNSURE_DEG
+    from ..core.stages.light.cues import SUN_UNSURE_ADVICE, sun_is_unsure
 
     settings = context.scene.scenefit
     settings.sun_azimuth, settings.sun_elevation = math.radians(azimuth), math.radians(elevation)
     settings.sun_uncertainty = math.radians(min(uncertainty, 90.0))
     settings.sun_from = "set"
     said = f"Sun from {source}: azimuth {azimuth:.0f}°, elevation {elevation:.0f}°"
-    unsure = round(uncertainty) > UNSURE_DEG   # (as the command line's summary rounds it)
+    unsure = sun_is_unsure(uncertainty)
     if uncertainty > 0.0:
         said += f", ±{uncertainty:.0f}° for a slip of a click"
         if unsure:
-            said += " (a longer shadow, or its tip picked closer, pins it better; the light hedges meanwhile)"
+            said += f" ({SUN_UNSURE_ADVICE}; the light hedges meanwhile)"
     op.report({"WARNING"} if unsure else {"INFO"}, said)   # (a warning shows in the status bar)
     return {"FINISHED"}
 
@@ -96,7 +96,7 @@ def _check_camera(context, why: str = "Pick Sun clicks in the photo seen through
     """The photo behind the scene camera: SceneFit's, or the artist's that shows it."""
     photo = photo_path(context)
     camera = context.scene.camera
-    if camera is None or ("scenefit" not in camera and artist_camera(context, photo)[0] is None):
+    if camera is None or (TAG not in camera and artist_camera(context, photo)[0] is None):
         raise InputError(f"{why}: set it up first (Match Camera or Pick Placement), or make the camera that shows "
                          "the photo active.")
 

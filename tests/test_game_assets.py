@@ -518,7 +518,7 @@ import_into_open_scene(source)
 again = [o.name for o in import_into_open_scene(source)]   # Box.001, Lid.001, FileCamera.001, FileSun.001
 box, lid, crate = (bpy.data.objects[n] for n in ("Box", "Lid", "Crate"))
 asset = [box, lid, crate]   # a selection mixing two imports: written as the source file, most of it is from there
-beside = imported_beside(asset, bpy.context.scene.objects)
+beside = imported_beside(asset, bpy.context.scene.objects, imported_from(asset))
 baked, slots = [], []
 for obj in asset:
     mesh, _ = object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())

@@ -57,6 +57,19 @@ def panel_lines(panel):
     panel.draw(SimpleNamespace(layout=layout), bpy.context)
     return layout.drawn
 
+def select_only(*objects):
+    bpy.ops.object.select_all(action="DESELECT")
+    for o in objects:
+        o.select_set(True)
+    bpy.context.view_layer.objects.active = objects[0]
+
+def convert_and_bake(obj, stem):
+    # the object alone, saved as STEM.blend, converted and baked into STEM_bake/<object>.glb
+    select_only(obj)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp / f"{stem}.blend"))
+    return (sorted(bpy.ops.scenefit.convert(iterations=5)),
+            sorted(bpy.ops.scenefit.bake_asset(filepath=str(tmp / f"{stem}_bake" / f"{obj.name.lower()}.glb"))))
+
 def painted_plane(name, material, seed):
     # a plane whose material's base colour is an 8x8 image of random colours
     bpy.ops.mesh.primitive_plane_add()
@@ -579,12 +592,7 @@ out["asset_section"] = panel_lines(bpy.types.SCENEFIT_PT_asset)
 # Bake Asset writes it as the file was written (Compression and Textures default to As imported)
 painted = bpy.data.objects["Painted"]
 out["source"] = painted.scenefit_source_file
-bpy.ops.object.select_all(action="DESELECT")
-painted.select_set(True)
-bpy.context.view_layer.objects.active = painted
-bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "imported.blend"))
-out["import_convert"] = sorted(bpy.ops.scenefit.convert(iterations=5))
-out["import_bake"] = sorted(bpy.ops.scenefit.bake_asset(filepath=str(tmp / "imported_bake" / "painted.glb")))
+out["import_convert"], out["import_bake"] = convert_and_bake(painted, "imported")
 out["import_bake_extensions"] = meshopt.read_gltf(tmp / "imported_bake" / "painted.glb")[0].get("extensionsUsed", [])
 """
 
@@ -623,13 +631,7 @@ out["marks"] = {o.name: [o.scenefit_source_file, bool(o.scenefit_import)] for o 
 out["custom_properties"] = sorted({k for o in bpy.data.objects for k in o.keys()})
 bpy.ops.export_scene.gltf(filepath=str(tmp / "mine.glb"), export_format="GLB", export_extras=True)
 out["path_in_own_export"] = str(tmp) in (tmp / "mine.glb").read_bytes().decode("latin-1")
-tile = bpy.data.objects["Tile"]
-bpy.ops.object.select_all(action="DESELECT")
-tile.select_set(True)
-bpy.context.view_layer.objects.active = tile
-bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "native.blend"))
-out["native_convert"] = sorted(bpy.ops.scenefit.convert(iterations=5))
-out["native_bake"] = sorted(bpy.ops.scenefit.bake_asset(filepath=str(tmp / "native_bake" / "tile.glb")))
+out["native_convert"], out["native_bake"] = convert_and_bake(bpy.data.objects["Tile"], "native")
 doc = import_module(MODULE + ".core.data.gltf_meshopt").read_gltf(tmp / "native_bake" / "tile.glb")[0]
 out["native_extensions"] = sorted(doc.get("extensionsUsed", []))
 out["native_nodes"] = sorted(n.get("name", "") for n in doc["nodes"])
@@ -659,10 +661,7 @@ bpy.context.object.name = "Ground"
 bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0, 0, 0.01))   # a blob shadow: flat too, but not the culprit
 bpy.context.object.name = "ShadowDecal"
 def drawn(names):
-    bpy.ops.object.select_all(action="DESELECT")
-    for n in names:
-        bpy.data.objects[n].select_set(True)
-    bpy.context.view_layer.objects.active = bpy.data.objects[names[0]]
+    select_only(*(bpy.data.objects[n] for n in names))
     return [t for t in panel_lines(bpy.types.SCENEFIT_PT_asset) if "ground plane" in t]
 out["with_ground"] = drawn(["Trunk", "Crown", "Ground", "ShadowDecal"])
 out["tree_alone"] = drawn(["Trunk", "Crown"])

@@ -70,11 +70,11 @@ class AssetMaterials:
         the asset itself for one material, the atlas for several. The mesh carries each material's
         wrap mode, and an atlas mesh says it is one, so renders sample each material's own cell with
         its own UVs (core.render, material_parts)."""
-        mesh = replace(self.mesh, wraps=tuple(self.wraps))
+        mesh = fitting_mesh(self.mesh, self.wraps, len(self.materials))
         if len(self.materials) == 1:
             return mesh, self.materials[0].maps
         size = atlas_cell_size([m.maps for m in self.materials])
-        return atlas_mesh(mesh), atlas_maps([m.maps for m in self.materials], size)
+        return mesh, atlas_maps([m.maps for m in self.materials], size)
 
     def report(self) -> list[dict]:
         return [m.report() for m in self.materials]
@@ -117,6 +117,12 @@ def atlas_mesh(mesh: Mesh) -> Mesh:
     normals = None if mesh.normals is None else mesh.normals[vertex]
     return Mesh.from_arrays(mesh.positions[vertex], inverse.reshape(-1, 3), uv, normals, mesh.name,
                             mesh.material_index, mesh.wraps, atlas=True)
+
+
+def fitting_mesh(mesh: Mesh, wraps, count: int) -> Mesh:
+    """The mesh a fit of `count` materials uses: each material's wrap mode on it, and their atlas for several."""
+    mesh = replace(mesh, wraps=tuple(wraps))
+    return atlas_mesh(mesh) if count > 1 else mesh
 
 
 def own_uv_mesh(mesh: Mesh) -> Mesh:

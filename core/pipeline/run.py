@@ -148,7 +148,8 @@ class StageRunner:
         folder = self.out / name
         record = folder / STAGE_FILE
         index = STAGES.index(name)
-        report, source = (None, "") if self.fresh else (_finished_stage(folder, key), "")
+        report = None if self.fresh else _finished_stage(folder, key)
+        source = ""
         if report is None and not self.fresh and self.earlier is not None and not folder.exists() \
                 and _finished_stage(self.earlier / name, key) is not None:
             # The earlier run's stage, copied whole: this run's folder stays one unit of its own, and the

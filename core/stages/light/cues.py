@@ -218,6 +218,14 @@ def _unseen_light(ldr: np.ndarray, hidden: np.ndarray, omega: np.ndarray, dirs: 
 SURE_DEG, UNSURE_DEG = 15.0, 30.0
 
 
+SUN_UNSURE_ADVICE = "a longer shadow, or its tip picked closer, pins it better"
+
+
+def sun_is_unsure(uncertainty_deg: float) -> bool:
+    """Whether a sun given this uncertain is worth a word to the artist (as it is shown: whole degrees)."""
+    return round(uncertainty_deg) > UNSURE_DEG
+
+
 def sun_lobe(config: CueConfig, uncertainty_deg: float) -> tuple[float, float]:
     """(floor, sharpness) of the unseen light's lobe around the artist's direction: the narrow one for a
     sure direction, widening to the guess's as its uncertainty goes from SURE_DEG to UNSURE_DEG."""

@@ -92,10 +92,10 @@ def sun_words(decisions: dict, setter: str) -> str:
     sun = decisions.get("sun")
     if not sun:
         return f"light direction guessed ({setter} sets it)"
-    from .cues import UNSURE_DEG
+    from .cues import SUN_UNSURE_ADVICE, sun_is_unsure
 
     spread = sun.get("uncertainty_deg") or 0.0
-    sure = "" if spread < 0.5 else f" (±{spread:.0f}°)" if round(spread) <= UNSURE_DEG else \
-        f" (±{spread:.0f}°: a longer shadow, or its tip picked closer, pins it better)"
+    sure = "" if spread < 0.5 else f" (±{spread:.0f}°: {SUN_UNSURE_ADVICE})" if sun_is_unsure(spread) else \
+        f" (±{spread:.0f}°)"
     given = f"sun {sun['deg'][0]:.4g},{sun['deg'][1]:.4g} as given{sure}"
     return given + ("" if sun.get("used", True) else " (unused by this prior)")
