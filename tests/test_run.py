@@ -106,7 +106,7 @@ def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monk
     monkeypatch.setattr(compose, "compose_to_folder", interrupted)   # Ctrl-C during the compose stage
     assert main(args) == 130
     message = capsys.readouterr().err
-    assert "stages finished so far are kept beside it" in message
+    assert "stages finished so far (convert, light) are kept beside it" in message
     # Nothing is swapped in until the run is whole; the finished stages wait beside the folder.
     staging = staging_path(out)
     assert not out.exists()
@@ -125,6 +125,51 @@ def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monk
     out.rename(moved)
     assert main([str(moved) if a == str(out) else a for a in args]) == 0
     assert json.loads((moved / "report.json").read_text())["reused"] == ["convert", "light", "compose"]
+
+
+def test_a_run_stopped_before_any_stage_finished_says_nothing_was_kept(tmp_path, monkeypatch, capsys):
+    import scenefit.core.stages.convert as convert
+    from scenefit.cli import main
+    from scenefit.core.base.output_folder import staging_path
+
+    maps = PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0)
+    asset = save_asset_folder(uv_sphere(0.5, 12, 6), maps, tmp_path / "asset")
+    photo_path = write_image(tmp_path / "photo.png", np.full((48, 64, 3), 0.5))
+    out = tmp_path / "run"
+
+    def interrupted(*_, **__):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(convert, "convert_and_bake", interrupted)   # Ctrl-C in the first stage
+    assert main(["run", str(asset), "--photo", str(photo_path), "--at", "0.5,0.8", "--out", str(out),
+                 "--preset", "draft", "--guidance", "none", "--quiet"]) == 130
+    message = capsys.readouterr().err
+    assert "no stage had finished, so nothing of this run was kept" in message and "kept beside" not in message
+    assert not out.exists() and not staging_path(out).exists()
+
+
+def test_a_run_refused_mid_way_says_which_finished_stages_it_kept(tmp_path, capsys):
+    """A shadow point in the sky is found only once the camera is known (the light stage, after convert):
+    the refusal names what was kept for the next run, and the next run reuses it."""
+    from scenefit.cli import main
+
+    maps = PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0)
+    asset = save_asset_folder(uv_sphere(0.5, 12, 6), maps, tmp_path / "asset")
+    photo_path = write_image(tmp_path / "photo.png", np.full((48, 64, 3), 0.5))
+    out = tmp_path / "run"
+    args = ["run", str(asset), "--photo", str(photo_path), "--at", "0.5,0.8", "--out", str(out), "--preset", "draft",
+            "--guidance", "none", "--spp", "2", "--no-bake", "--quiet"]
+    assert main([*args, "--sun-from-shadow", "0.5,0.9", "0.5,0.8", "0.3,0.02"]) == 2   # the tip in the sky
+    message = capsys.readouterr().err.strip()
+    assert len(message.splitlines()) == 1 and "above the horizon" in message
+    assert message.endswith(f"The finished stages (convert) are kept beside '{out}' in '.run.partial'; the next run "
+                            "into it reuses them.")
+    assert not out.exists()
+    assert main([*args, "--sun-from-shadow", "0.5,0.9", "0.5,0.8", "0.3,0.95"]) == 0
+    assert json.loads((out / "report.json").read_text())["reused"] == ["convert"]
+    # A refusal before any stage ran keeps nothing and says nothing of it.
+    assert main([*args, "--at", "0.5,1.5"]) == 2
+    assert "kept beside" not in capsys.readouterr().err
 
 
 def _sphere_and_photo(tmp_path):

@@ -295,6 +295,25 @@ def _worth_keeping(staging: Path) -> bool:
     return any(staging.glob("*/stage.json"))
 
 
+def kept_stages(out: str | os.PathLike) -> list[str]:
+    """The stages a stopped `scenefit run` left finished beside `out` (in its staging folder), which the
+    next run into `out` reuses; [] when nothing was kept."""
+    staging = staging_path(Path(out).expanduser().absolute())
+    if not is_run_folder(staging):
+        return []
+    return sorted(path.parent.name for path in staging.glob("*/stage.json"))
+
+
+def kept_stages_sentence(out: str | os.PathLike) -> str:
+    """' The finished stages (convert, light) are kept beside 'out': ...' after a stopped `scenefit run`,
+    or '' when none was kept, so a failed run never leaves work behind unsaid."""
+    kept = kept_stages(out)
+    if not kept:
+        return ""
+    return (f" The finished stages ({', '.join(kept)}) are kept beside '{out}' in "
+            f"'{staging_path(Path(out)).name}'; the next run into it reuses them.")
+
+
 @contextmanager
 def output_folder(out: str | os.PathLike, replace: bool = False, resume: bool = False, inputs: Iterable = (),
                   reuse: bool = False) -> Iterator[Path]:
@@ -382,8 +401,11 @@ def interrupted_message(out: str | os.PathLike, resumable: bool = False, by_stag
     """What the user is told after Ctrl-C or a cancel inside `output_folder` (by_stage: `scenefit run`,
     whose finished stages are kept beside `out` and reused by the next run)."""
     if by_stage:
-        return (f"interrupted; '{out}' is unchanged and the stages finished so far are kept beside it: run the same "
-                "command again to resume (the unfinished stage is redone).")
+        kept = kept_stages(out)
+        if not kept:
+            return f"interrupted; '{out}' is unchanged (no stage had finished, so nothing of this run was kept)."
+        return (f"interrupted; '{out}' is unchanged and the stages finished so far ({', '.join(kept)}) are kept "
+                "beside it: run the same command again to resume (the unfinished stage is redone).")
     if resumable:
         return (f"interrupted; '{out}' is unchanged and the progress so far is kept: run the same command again "
                 "to resume.")
