@@ -48,6 +48,13 @@ def _path_options() -> set[str]:
 PATH = _path_options()
 
 
+def _sun_typed(settings, _context) -> None:
+    """A direction typed in is as sure as it was typed: an earlier Pick Sun's uncertainty no longer applies
+    (Pick Sun sets the direction first and its own uncertainty after)."""
+    if settings.sun_uncertainty != 0.0:
+        settings.sun_uncertainty = 0.0
+
+
 class SceneFitSlot(bpy.types.PropertyGroup):
     """One material slot a result went to: what it held before (the artist's), SceneFit's latest material
     there, and the job that made it (the Results switch acts on the selection's slots, else the last job's)."""
@@ -82,13 +89,15 @@ class SceneFitSettings(bpy.types.PropertyGroup):
                            description="Where the dominant light comes from")
     sun_azimuth: FloatProperty(name="Azimuth", subtype="ANGLE", default=0.0, min=-math.pi, max=math.pi,
                                description="The sun's direction from the photo's view, positive to the right "
-                                           "(90°: from the right, 180°: from behind the camera)")
+                                           "(90°: from the right, 180°: from behind the camera)",
+                               update=_sun_typed)
     sun_elevation: FloatProperty(name="Elevation", subtype="ANGLE", default=math.radians(45.0), min=0.0,
-                                 max=math.pi / 2, description="The sun's height above the horizon")
+                                 max=math.pi / 2, description="The sun's height above the horizon",
+                                 update=_sun_typed)
     sun_uncertainty: FloatProperty(name="Uncertainty", subtype="ANGLE", default=0.0, min=0.0, max=math.pi / 2,
                                    description="How far off the sun's direction may be: Pick Sun sets how far a "
-                                               "click slipping 2/640 of the photo's width turns it; set 0 for a "
-                                               "direction you are sure of. The light around it widens from the "
+                                               "click slipping 2/640 of the photo's width turns it; typing a "
+                                               "direction sets it back to 0 (sure). The light around it widens from the "
                                                "narrow lobe at 15° to the guess's at 30°")
     # Style
     mode: EnumProperty(name="Mode", items=MODES, default="scene")

@@ -144,6 +144,8 @@ def test_pick_sun_in_blender_sets_the_light_stages_sun(run_py, tmp_path):
         out["light"] = list(bpy.ops.scenefit.estimate_light(critic="none", outpaint="prior"))
         report = Path(bpy.path.abspath(settings.light_path)).parent / "report.json"
         out["decision"] = json.loads(report.read_text())["decisions"]["sun"]
+        settings.sun_azimuth = math.radians(-45.0)   # the artist types a direction over the picked one
+        out["typed_spread"] = settings.sun_uncertainty
         print("JSON" + json.dumps(out))
     """)
     out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
@@ -154,6 +156,7 @@ def test_pick_sun_in_blender_sets_the_light_stages_sun(run_py, tmp_path):
     # the clicks' uncertainty goes with them (it was dropped: every shadow got the narrow lobe)
     assert out["spread"] == pytest.approx(out["decision"]["uncertainty_deg"], abs=0.01) and out["spread"] > 0.0
     assert "for a slip of a click" in out["said"]
+    assert out["typed_spread"] == 0.0   # a typed direction is as sure as typed (the pick's ± stayed)
 
 
 def test_scenefit_run_takes_the_sun_as_angles_or_as_a_shadow(tmp_path, capsys):
