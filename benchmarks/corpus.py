@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenefit.core.data.gltf_meshopt import read_gltf
+from scenefit.core.data.glb import gltf_json, read_gltf
 
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = ROOT.parent / "shared" / "corpus"
@@ -77,19 +77,6 @@ def validate(path: Path) -> dict:
             "infos": issues.get("numInfos", 0),
             "messages": [{k: m.get(k) for k in ("code", "severity", "pointer")} for m in issues.get("messages", [])],
             "extensions": report.get("info", {}).get("extensionsUsed", [])}
-
-
-def gltf_json(path: Path) -> dict:
-    import struct
-
-    data = path.read_bytes()
-    if data[:4] == b"glTF":
-        length = struct.unpack_from("<I", data, 12)[0]
-        data = data[20:20 + length]
-    try:
-        return json.loads(data)
-    except ValueError:
-        return {}
 
 
 def structure(document: dict) -> dict:

@@ -4,13 +4,14 @@ commands run as processes of their own, exactly as `scenefit convert` and `scene
 from __future__ import annotations
 
 import json
-import struct
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from scenefit.core.data.glb import gltf_json, read_gltf, write_glb
 
 from conftest import scenefit_here, scenefit_side_by_side
 
@@ -155,12 +156,6 @@ export(folder / "painted.glb")
 """
 
 
-def gltf_json(path: Path) -> dict:
-    data = path.read_bytes()
-    length = struct.unpack("<I", data[12:16])[0]
-    return json.loads(data[20:20 + length])
-
-
 def scenefit(*args: str) -> subprocess.CompletedProcess:
     """The command line in a process of its own (a fresh bpy holding Blender's startup scene)."""
     return subprocess.run([sys.executable, "-m", "scenefit.cli", *args], capture_output=True, text=True,
@@ -200,7 +195,7 @@ PALETTE_FIT = ("--preset", "draft", "--iterations", "300", "--resolution", "16",
 
 def _derived_assets(assets: Path, folder: Path) -> dict[str, Path]:
     """The inputs made from the built ones by editing their glTF (no Blender needed)."""
-    from scenefit.core.data.gltf_meshopt import encoded_glb, read_gltf, write_glb
+    from scenefit.core.data.gltf_meshopt import encoded_glb
 
     document, chunk = read_gltf(assets / "skinned.glb")   # the skinned mesh moved to the scene's root
     nodes = document["nodes"]
@@ -353,24 +348,17 @@ def glb_image(path: Path, data: dict, texture: int) -> np.ndarray:
     """(H, W, 3) float sRGB values of texture `texture` of the GLB at `path` (its JSON `data`)."""
     import cv2
 
-    blob = path.read_bytes()
-    start = 20 + struct.unpack("<I", blob[12:16])[0] + 8  # the BIN chunk's data
+    _, blob = read_gltf(path)
     view = data["bufferViews"][data["images"][data["textures"][texture]["source"]]["bufferView"]]
-    encoded = np.frombuffer(blob[start + view.get("byteOffset", 0):][:view["byteLength"]], np.uint8)
+    encoded = np.frombuffer(blob[view.get("byteOffset", 0):][:view["byteLength"]], np.uint8)
     return cv2.imdecode(encoded, cv2.IMREAD_COLOR)[..., ::-1] / 255.0
 
 
 def rewrite_glb_json(path: Path, out: Path, edit) -> None:
     """`path` with its JSON chunk changed by edit(data) in place, written to `out`."""
-    blob = path.read_bytes()
-    length = struct.unpack("<I", blob[12:16])[0]
-    data = json.loads(blob[20:20 + length])
+    data, blob = read_gltf(path)
     edit(data)
-    text = json.dumps(data).encode()
-    text += b" " * (-len(text) % 4)
-    rest = blob[20 + length:]
-    out.write_bytes(b"glTF" + struct.pack("<II", 2, 20 + len(text) + len(rest)) + struct.pack("<I", len(text))
-                    + b"JSON" + text + rest)
+    write_glb(out, data, blob or b"")
 
 
 def _texcoord_only_transform(data: dict) -> None:

@@ -3,13 +3,13 @@ palette or atlas does (Kenney's diorama: 44 materials, one colour map), bake to 
 again, not one copy per material (it grew 2.3x); a material of one plain colour stays a factor."""
 from __future__ import annotations
 
-import json
-import struct
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+
+from scenefit.core.data.glb import gltf_json
 
 pytestmark = pytest.mark.blender
 ROOT = Path(__file__).resolve().parent.parent
@@ -43,11 +43,6 @@ plain.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0
 bpy.context.active_object.data.materials.append(plain)
 bpy.ops.export_scene.gltf(filepath=str(Path(FOLDER) / "with_plain.glb"), export_format="GLB")
 """
-
-
-def gltf_json(path: Path) -> dict:
-    data = path.read_bytes()
-    return json.loads(data[20:20 + struct.unpack("<I", data[12:16])[0]])
 
 
 def scenefit(*args) -> subprocess.CompletedProcess:

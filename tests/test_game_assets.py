@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import re
-import struct
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +14,7 @@ import torch
 from scenefit.core.base.errors import InputError
 from scenefit.core.stages.bake.game_bake import check_texture_size
 from scenefit.core.data.maps import PBRMaps, resize_channels
+from scenefit.core.data.glb import gltf_json
 
 from conftest import scenefit_here
 
@@ -111,14 +111,6 @@ def pipeline(run_py, tmp_path_factory):
     result = json.loads(line[4:])
     result["stdout"] = proc.stdout
     return result
-
-
-def gltf_json(path: str) -> dict:
-    data = Path(path).read_bytes()
-    if path.endswith(".gltf"):
-        return json.loads(data)
-    length = struct.unpack("<I", data[12:16])[0]
-    return json.loads(data[20:20 + length])
 
 
 @pytest.mark.parametrize("name", ASSETS)
@@ -495,9 +487,11 @@ def made(path, meshes, camera, sun=None):   # a file made elsewhere: its meshes,
     if sun:
         bpy.ops.object.light_add(type="SUN", location=(0, 0, 5))
         bpy.context.object.name = sun
+        first = bpy.data.objects[meshes[0]]   # moved, turned and scaled, so riding on it is more than a tree
+        first.location, first.rotation_euler, first.scale = (1.0, 2.0, 0.5), (0.0, 0.0, 0.5), (1.5, 1.5, 1.5)
         bpy.ops.object.camera_add(location=(0, -3, 1))   # a camera riding on the first mesh
         bpy.context.object.name = "RideCamera"
-        bpy.context.object.parent = bpy.data.objects[meshes[0]]
+        bpy.context.object.parent = first
         bpy.ops.object.light_add(type="SPOT", location=(0, -3, 2))   # and a light riding on that camera
         bpy.context.object.name = "RideLamp"
         bpy.context.object.parent = bpy.data.objects["RideCamera"]
@@ -554,6 +548,39 @@ def test_bake_asset_writes_the_cameras_and_lights_of_the_assets_own_file_only(ru
     assert len(exported["extensions"]["KHR_lights_punctual"]["lights"]) == 2
     # ... and the light riding on that camera under the camera's copy (one level was all it took before)
     assert "RideLamp" in [names[c] for c in nodes[names.index("RideCamera")].get("children", [])]
+    # ... each where the file had it, turned as it was
+    made, baked = world_matrices(gltf_json(source)), world_matrices(exported)
+    for name in ("FileCamera", "FileSun", "RideCamera", "RideLamp"):
+        np.testing.assert_allclose(baked[name], made[name], atol=1e-4, err_msg=name)
+
+
+def world_matrices(document: dict) -> dict[str, np.ndarray]:
+    """Each named node's 4x4 world matrix in a glTF document (its parents' matrices times its own)."""
+    nodes = document["nodes"]
+
+    def local(node: dict) -> np.ndarray:
+        if "matrix" in node:
+            return np.array(node["matrix"], float).reshape(4, 4).T   # glTF stores columns
+        x, y, z, w = node.get("rotation", [0.0, 0.0, 0.0, 1.0])
+        turn = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+        out = np.eye(4)
+        out[:3, :3] = turn * np.array(node.get("scale", [1.0, 1.0, 1.0]))
+        out[:3, 3] = node.get("translation", [0.0, 0.0, 0.0])
+        return out
+
+    found: dict[str, np.ndarray] = {}
+
+    def walk(index: int, parent: np.ndarray) -> None:
+        world = parent @ local(nodes[index])
+        found[nodes[index].get("name", str(index))] = world
+        for child in nodes[index].get("children", []):
+            walk(child, world)
+
+    for root in document["scenes"][document.get("scene", 0)]["nodes"]:
+        walk(root, np.eye(4))
+    return found
 
 
 def test_bake_refuses_an_asset_folder_in_one_sentence(tmp_path, example_asset):

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenefit.core.data.gltf_meshopt import read_gltf, write_glb
+from scenefit.core.data.glb import read_gltf, write_glb
 
 from conftest import built_and_converted, scenefit_here, scenefit_side_by_side
 

@@ -6,7 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenefit.core.data.gltf_meshopt import decoded_glb, encoded_glb, importable, read_gltf, uses_meshopt, write_glb
+from scenefit.core.data.glb import read_gltf, write_glb
+from scenefit.core.data.gltf_meshopt import decoded_glb, encoded_glb, importable, uses_meshopt
 
 
 def plain_glb(path: Path) -> Path:

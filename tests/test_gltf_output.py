@@ -6,7 +6,7 @@ import json
 import pytest
 
 from scenefit.core.base.errors import InputError
-from scenefit.core.data.gltf_meshopt import write_glb
+from scenefit.core.data.glb import write_glb
 from scenefit.core.stages.bake.gltf_output import GltfOutput, output_like_input
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenefit.core.data.gltf_meshopt import read_gltf
+from scenefit.core.data.glb import read_gltf
 
 from conftest import built_and_converted, run_python, scenefit_process
 

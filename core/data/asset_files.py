@@ -2,13 +2,12 @@
 library): the files an output must never overwrite. Read as data (JSON and text lines), never run."""
 from __future__ import annotations
 
-import json
 import os
-import struct
 from pathlib import Path
 from urllib.parse import unquote
 
 from ..base.errors import InputError
+from .glb import gltf_json
 
 
 def asset_files(path: str | os.PathLike) -> list[Path]:
@@ -27,19 +26,8 @@ def asset_files(path: str | os.PathLike) -> list[Path]:
     return sorted({p.resolve() for p in found if p.is_file()})
 
 
-def _gltf_json(path: Path) -> dict:
-    data = path.read_bytes()
-    if data[:4] == b"glTF" and len(data) >= 20:
-        length, kind = struct.unpack_from("<II", data, 12)
-        data = data[20:20 + length] if kind == 0x4E4F534A else b"{}"   # the JSON chunk
-    try:
-        return json.loads(data)
-    except ValueError:
-        return {}
-
-
 def _gltf_uris(path: Path) -> list[str]:
-    document = _gltf_json(path)
+    document = gltf_json(path)
     entries = [*document.get("buffers", []), *document.get("images", [])]
     return [e["uri"] for e in entries
             if isinstance(e, dict) and isinstance(e.get("uri"), str) and not e["uri"].startswith("data:")]

@@ -5,7 +5,6 @@ buffers and images embedded) in a temporary folder, and that copy is imported.""
 from __future__ import annotations
 
 import base64
-import json
 import struct
 import tempfile
 from contextlib import contextmanager
@@ -15,21 +14,11 @@ from urllib.parse import unquote
 import numpy as np
 
 from ..base.errors import InputError
+from .glb import read_gltf, write_glb
 
 EXTENSION = "EXT_meshopt_compression"
 _MIME = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".webp": "image/webp",
          ".ktx2": "image/ktx2"}
-
-
-def read_gltf(path: Path) -> tuple[dict, bytes | None]:
-    """(the JSON, the GLB's BIN chunk or None) of a .glb or .gltf file."""
-    data = path.read_bytes()
-    if data[:4] != b"glTF":
-        return json.loads(data), None
-    length = struct.unpack_from("<I", data, 12)[0]
-    document = json.loads(data[20:20 + length])
-    rest = data[20 + length:]
-    return document, (rest[8:8 + struct.unpack_from("<I", rest, 0)[0]] if len(rest) >= 8 else None)
 
 
 def uses_meshopt(path: Path) -> bool:
@@ -115,17 +104,6 @@ def decoded_glb(path: Path, out: Path) -> Path:
             document[key] = kept
     write_glb(out, document, bytes(blob))
     return out
-
-
-def write_glb(out: Path, document: dict, blob: bytes) -> None:
-    text = json.dumps(document, separators=(",", ":")).encode()
-    text += b" " * (-len(text) % 4)
-    blob += b"\0" * (-len(blob) % 4)
-    total = 12 + 8 + len(text) + (8 + len(blob) if blob else 0)
-    parts = [b"glTF", struct.pack("<II", 2, total), struct.pack("<I", len(text)), b"JSON", text]
-    if blob:
-        parts += [struct.pack("<I", len(blob)), b"BIN\0", blob]
-    out.write_bytes(b"".join(parts))
 
 
 @contextmanager

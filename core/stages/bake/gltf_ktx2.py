@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ...base.errors import InputError
-from ...data.gltf_meshopt import read_gltf, write_glb
+from ...data.glb import read_gltf, write_glb
 
 EXTENSION = "KHR_texture_basisu"
 MIME = "image/ktx2"

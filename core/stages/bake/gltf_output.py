@@ -46,14 +46,9 @@ class GltfOutput:
 
 
 def _document(path: Path) -> dict:
-    from ...data.gltf_meshopt import read_gltf
+    from ...data.glb import gltf_json
 
-    if path.suffix.lower() not in (".gltf", ".glb"):
-        return {}
-    try:
-        return read_gltf(path)[0]
-    except (OSError, ValueError, UnicodeDecodeError):
-        return {}
+    return gltf_json(path) if path.suffix.lower() in (".gltf", ".glb") else {}
 
 
 def _image_format(image: dict) -> str | None:
@@ -117,7 +112,7 @@ def move_skinned_meshes_to_root(document: dict) -> int:
 
 def skinned_meshes_moved_to_root(path: Path) -> int:
     """move_skinned_meshes_to_root on the .glb or .gltf file at `path`, rewritten in place if any moved."""
-    from ...data.gltf_meshopt import read_gltf, write_glb
+    from ...data.glb import read_gltf, write_glb
 
     document, chunk = read_gltf(path)
     moved = move_skinned_meshes_to_root(document)
