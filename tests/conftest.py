@@ -41,6 +41,15 @@ def run_python(code: str, env: dict | None = None, timeout: float = 300) -> subp
     return proc
 
 
+def printed_json(proc: subprocess.CompletedProcess) -> dict:
+    """What a test's script printed as its result: the JSON after "JSON" on its last such line of stdout;
+    a script that printed none fails the test with its output."""
+    lines = [line for line in proc.stdout.splitlines() if line.startswith("JSON")]
+    if not lines:
+        pytest.fail(f"the script printed no JSON line:\n{proc.stdout[-4000:]}\n{proc.stderr[-4000:]}")
+    return json.loads(lines[-1][4:])
+
+
 def scenefit_process(*args, env: dict | None = None) -> subprocess.CompletedProcess:
     """`scenefit ARGS` as a user runs it: a process of its own (a fresh bpy), its output captured."""
     return subprocess.run([sys.executable, "-m", "scenefit.cli", *map(str, args)], capture_output=True, text=True,
@@ -158,9 +167,9 @@ def run_installed_extension(tmp: Path, script: str, timeout: float = 900) -> tup
     zip_path, tiny, user = extension_and_models(tmp)
     proc = run_python(fill_in(script, tmp, zip_path, tiny), env={"BLENDER_USER_RESOURCES": str(user)},
                       timeout=timeout)
-    line = next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))
-    (tmp / "out.json").write_text(line[4:])  # for a look after a failure
-    return json.loads(line[4:]), user
+    result = printed_json(proc)
+    (tmp / "out.json").write_text(json.dumps(result))  # for a look after a failure
+    return result, user
 
 
 _MARK = "@@scenefit-session@@"

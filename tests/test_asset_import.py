@@ -13,7 +13,7 @@ import pytest
 
 from scenefit.core.data.glb import gltf_json, read_gltf, write_glb
 
-from conftest import scenefit_here, scenefit_side_by_side
+from conftest import printed_json, scenefit_here, scenefit_side_by_side
 
 pytestmark = pytest.mark.blender
 
@@ -226,7 +226,7 @@ def runs(assets, run_py, tmp_path_factory) -> dict[str, dict]:
         jobs.append((f"camera{suffix}", ["convert", str(assets / f"names{suffix}"), "--object", "Camera", "--out",
                                          str(folder / f"camera{suffix}")]))
     proc = run_py(CONVERTS.replace("JOBS", repr(json.dumps(jobs))), timeout=900)
-    converted = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    converted = printed_json(proc)
     out = {name: {"convert": (c["code"], c["stderr"])} for name, c in converted.items()}
     for name, asset in inputs.items():
         out[name].update(asset=asset, work=folder / name)
@@ -311,7 +311,7 @@ def test_a_skinned_gltf_loads_into_a_temporary_scene_of_an_open_file(assets, run
     the window while it runs (the importer's bone shapes use the window's active object), and goes."""
     blend = tmp_path / "artist.blend"
     proc = run_py(IN_SESSION.replace("BLEND", repr(str(blend))).replace("ASSET", repr(str(assets / "skinned.glb"))))
-    out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    out = printed_json(proc)
     assert out == {"materials": ["Skin"], "same": True, "scene": "Scene", "active": "Cube", "file": str(blend)}
 
 
@@ -497,7 +497,7 @@ def test_procedural_inputs_are_baked_over_uvs_that_tile(run_py):
     """Blender bakes only UVs inside [0, 1]: a chain over u in [1, 2] came back all black. Each copy of
     the image the faces reach is baked through a moved UV map, the chain reading the mesh's own UVs."""
     proc = run_py(PROCEDURAL_TILES)
-    out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    out = printed_json(proc)
     base, rough = np.array(out["base"]), np.array(out["rough"])
     assert np.abs(base - [0.2, 0.5, 0.8]).max() < 1e-3
     u = (np.arange(rough.shape[1]) + 0.5) / rough.shape[1]  # texel centres: the chain's u - 1 there

@@ -6,6 +6,8 @@ import pytest
 
 from scenefit.core.data.asset_io import load_asset_folder
 
+from conftest import printed_json
+
 pytestmark = pytest.mark.blender
 
 EXTRACT = r"""
@@ -96,8 +98,7 @@ def extracted(run_py, tmp_path_factory):
     png = tmp_path_factory.mktemp("result") / "base_color.png"
     write_image(png, np.full((4, 4, 3), 0.5, np.float32))
     proc = run_py(EXTRACT.replace("sys.argv[1]", repr(str(png))))
-    line = next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))
-    return json.loads(line[4:])
+    return printed_json(proc)
 
 
 def _srgb_to_linear(x):

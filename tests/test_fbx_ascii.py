@@ -6,12 +6,13 @@ embedded image); this test writes the same tree as FBX text, the way the FBX SDK
 files are read by SceneFit and must give the same asset, to the bit."""
 from __future__ import annotations
 
-import json
 
 import pytest
 
 from scenefit.blender_io.fbx_ascii import binary_copy, parse_ascii_fbx
 from scenefit.core.base.errors import InputError
+
+from conftest import printed_json
 
 SAME_ASSET = r"""
 import base64, json, sys
@@ -107,7 +108,7 @@ print("JSON" + json.dumps({"binary": asset(binary), "ascii": asset(ascii_file), 
 @pytest.mark.blender
 def test_an_ascii_fbx_reads_as_the_same_binary_fbx_does(run_py, tmp_path):
     proc = run_py(SAME_ASSET.replace("FOLDER", repr(str(tmp_path))))
-    got = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    got = printed_json(proc)
     binary, text = got["binary"], got["ascii"]
     assert got["head"].startswith("; FBX 7.") and "Objects:  {" not in got["head"]
     assert ["Ball", "MESH", "Holder"] in binary["objects"]

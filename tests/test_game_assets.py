@@ -3,7 +3,6 @@ converted at draft, baked back with `scenefit bake`, checked by the Khronos glTF
 re-imported. One Blender subprocess builds, converts, bakes and re-imports everything."""
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 
@@ -16,7 +15,7 @@ from scenefit.core.stages.bake.game_bake import check_texture_size
 from scenefit.core.data.maps import PBRMaps, resize_channels
 from scenefit.core.data.glb import gltf_json
 
-from conftest import scenefit_here
+from conftest import printed_json, scenefit_here
 
 pytestmark = pytest.mark.blender
 
@@ -107,8 +106,7 @@ def pipeline(run_py, tmp_path_factory):
     code = PIPELINE.replace("WORK", repr(str(work))).replace("ITERATIONS", str(ITERATIONS)) \
         .replace("BAKE_SIZE", str(BAKE_SIZE)).replace("EXACT_START", repr(EXACT_START))
     proc = run_py(code, timeout=900)
-    line = next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))
-    result = json.loads(line[4:])
+    result = printed_json(proc)
     result["stdout"] = proc.stdout
     return result
 
@@ -287,7 +285,7 @@ print("JSON" + json.dumps({
 
 def test_factor_nodes_are_read_and_procedural_chains_baked_by_cycles(run_py):
     proc = run_py(NODE_CHAINS)
-    out = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
+    out = printed_json(proc)
     base, grey = np.array(out["base"]), np.round(np.array(out["grey"]) * 255) / 255  # 8-bit image
     np.testing.assert_allclose(base, grey[..., None] * np.array([0.5, 0.25, 1.0]), atol=1e-6)
     rough = np.array(out["rough"])
@@ -334,7 +332,7 @@ def baked_in_session(run_py, script: str, out: Path) -> dict:
     """The glTF JSON `script` (a Blender session baking into OUT) wrote to `out`, after checking that the
     session's own data was left as it was and that `out` alone was written."""
     proc = run_py(script.replace("OUT", repr(str(out))))
-    result = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
+    result = printed_json(proc)
     assert result["same"] and result["files"] == [str(out)]
     return gltf_json(str(out))
 
@@ -529,7 +527,7 @@ print("JSON" + json.dumps({"same": before == sorted((o.name, o.type) for o in bp
 def test_bake_asset_writes_the_cameras_and_lights_of_the_assets_own_file_only(run_py, tmp_path):
     out = tmp_path / "box.glb"
     proc = run_py(BESIDE.replace("OUT", repr(str(out))))
-    result = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
+    result = printed_json(proc)
     assert result["same"] and result["files"] == [str(out)]
     source, other = (str(out).replace(".glb", f"-{k}.glb") for k in ("source", "other"))
     # a selection that mixes two imports is written as the file most of it came from (it took the first's)

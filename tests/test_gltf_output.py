@@ -9,6 +9,8 @@ from scenefit.core.base.errors import InputError
 from scenefit.core.data.glb import write_glb
 from scenefit.core.stages.bake.gltf_output import GltfOutput, output_like_input
 
+from conftest import printed_json
+
 
 def test_the_output_is_compressed_textured_and_given_tangents_as_the_input(tmp_path):
     path = tmp_path / "in.glb"
@@ -58,7 +60,7 @@ def test_bake_assets_as_imported_settings_follow_the_file_and_say_what_they_lack
         out["none"] = list(bake_output(AS_IMPORTED, AS_IMPORTED, 1024, "glb", None, True).report().values())[:4]
         print("JSON" + json.dumps(out))
     """)
-    out = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
+    out = printed_json(proc)
     # .glb: meshopt and KTX2 as the file had them; basisu missing here is said with Blender's setting
     assert out["glb"].startswith("Textures As imported (the file had KTX2 textures) needs Basis Universal's")
     assert "--" not in out["glb"] and out["glb"].count(". ") == 0

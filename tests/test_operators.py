@@ -14,7 +14,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import PythonSession, extension_and_models, fill_in
+from conftest import PythonSession, extension_and_models, fill_in, printed_json
 
 from scenefit.core.data.imageio import read_image
 
@@ -488,7 +488,7 @@ def test_bake_asset_writes_valid_gltf_that_reads_back(blender, operated, validat
             err[channel] = float(np.max(np.abs(np.round(got * 255) - expected) if expected.ndim else np.abs(got - expected) * 255))
         print("JSON" + json.dumps(err))
     """)
-    err = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
+    err = printed_json(proc)
     artist, in_slot = out["bake_material"]
     assert err["name"] == artist == "AssetMaterial" and in_slot != artist   # the artist's, not SceneFit's preview
     assert err["base_color"] <= 1.0 and err["roughness"] <= 1.0 and err["metallic"] <= 1.0, err

@@ -1,5 +1,4 @@
 """Packaging: Blender's validator accepts the manifest; the zip installs, enables and unregisters cleanly."""
-import json
 import subprocess
 import sys
 import tomllib
@@ -7,6 +6,8 @@ import zipfile
 from pathlib import Path
 
 import pytest
+
+from conftest import printed_json
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tools"))
@@ -99,7 +100,7 @@ def test_zip_installs_enables_and_unregisters_cleanly(nowheels_zip, tmp_path, ru
     user.mkdir()
     proc = run_py(INSTALL.replace("sys.argv[1]", repr(str(nowheels_zip))),
                   env={"BLENDER_USER_RESOURCES": str(user)})
-    report = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
+    report = printed_json(proc)
     assert report["install"] == ["FINISHED"]
     assert report["enabled"], proc.stdout[-2000:]
     # it really is the installed copy, inside the throwaway user folder

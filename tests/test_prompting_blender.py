@@ -1,10 +1,11 @@
 """The Write Prompt operator in a real bpy session, against the 127.0.0.1 chat server: the model's
 prompt lands in the Style section (the instruction in edit mode), Blender's online-access switch
 and the add-on's Offline switch give the template with no connection."""
-import json
 from pathlib import Path
 
 import pytest
+
+from conftest import printed_json
 
 pytestmark = pytest.mark.blender
 
@@ -63,7 +64,7 @@ def test_write_prompt_operator(run_py, tmp_path):
         addon_utils.disable("scenefit")
         print("JSON" + json.dumps(out))
     """, env={"XDG_CACHE_HOME": str(tmp_path / "cache"), "SCENEFIT_CONFIG": str(tmp_path / "none.toml")})
-    out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    out = printed_json(proc)
     for name in ("blender_offline", "addon_offline"):
         result, prompt, _, source, connections = out[name]
         assert result == ["FINISHED"] and prompt == "a leather sofa in a swamp" and connections == 0

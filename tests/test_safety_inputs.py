@@ -20,6 +20,8 @@ from scenefit.core.data.maps import PBRMaps
 from scenefit.core.data.mesh import Mesh
 from scenefit.core.data.primitives import uv_sphere
 
+from conftest import printed_json
+
 CONVERT_FAST = ("--preset", "draft", "--iterations", "2", "--resolution", "16", "--quiet")
 LIGHT_FAST = ("--at", "0.5,0.8", "--critic", "none", "--depth", "geometric", "--outpaint", "prior", "--quiet")
 
@@ -179,7 +181,7 @@ def test_a_refused_compose_or_pick_leaves_no_datablock_behind(run_py, tmp_path):
         out["good"] = {{"compose": list(bpy.ops.scenefit.compose(render=False)), "images": images()}}
         print("JSON" + json.dumps(out))
     """)
-    out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    out = printed_json(proc)
     for name in ("cut.jpg", "cut.png", "noise.png"):
         result = out[name]
         assert result["new"] == [], (name, result)

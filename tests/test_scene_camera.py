@@ -3,13 +3,14 @@ used as it is. The pipeline's composite (Mitsuba) and Cycles' render through tha
 in the same place, and nothing of the artist's is moved."""
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
 import pytest
 
 from scenefit.core.data.imageio import read_image, write_image
+
+from conftest import printed_json
 
 pytestmark = pytest.mark.blender
 
@@ -92,7 +93,7 @@ def test_run_all_composes_through_the_artists_matched_camera(run_py, tmp_path):
             "light": report["stages"]["light"]["report"]["decisions"],
             "composite": str(Path(bpy.path.abspath(settings.composite_path)))}}))
     """, timeout=600)
-    out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    out = printed_json(proc)
     assert out["ops"] == ["FINISHED"]
     assert out["camera"] == "Camera" and out["moved"] < 1e-6 and out["ours"] == []
     camera, used = out["light"]["camera"], out["light"]["photo_camera"]
@@ -182,7 +183,7 @@ def test_match_camera_makes_scenefits_camera_from_the_photos_lines(run_py, tmp_p
                 out[name] = str(error).splitlines()[0]
         print("JSON" + json.dumps(out))
     """)
-    out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    out = printed_json(proc)
     assert out["ops"] == [["FINISHED"], ["FINISHED"]]
     source, fov, pitch, roll = out["panel"]
     assert source == "panel"

@@ -14,6 +14,8 @@ from scenefit.core.stages.light.estimate import sun_direction
 from scenefit.core.stages.light.shadow_hint import CLICK_SLIP, sun_from_shadow, sun_uncertainty_deg
 from scenefit.core.scene.camera import CAMERA_HEIGHT, PhotoCamera
 
+from conftest import printed_json
+
 CAMERA = PhotoCamera(yaw_deg=90.0, pitch_deg=-15.0, fov_deg=60.0, width=640, height=480, roll_deg=2.0)
 ORIGIN = np.array([0.0, 0.0, CAMERA_HEIGHT])
 
@@ -148,7 +150,7 @@ def test_pick_sun_in_blender_sets_the_light_stages_sun(run_py, tmp_path):
         out["typed_spread"] = settings.sun_uncertainty
         print("JSON" + json.dumps(out))
     """)
-    out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    out = printed_json(proc)
     assert out["before"] == "estimate" and out["ops"] == ["FINISHED"] and out["light"] == ["FINISHED"]
     source, azimuth, elevation = out["sun"]
     assert source == "set" and (azimuth, elevation) == (pytest.approx(-50.0, abs=0.01), pytest.approx(30.0, abs=0.01))
@@ -252,7 +254,7 @@ def test_sun_from_light_reads_a_sun_lights_direction_from_the_photos_camera(run_
         out["two"] = call()
         print("JSON" + json.dumps(out))
     """)
-    out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    out = printed_json(proc)
     assert out["no_camera"][0] == "CANCELLED" and "camera that shows the photo" in out["no_camera"][1]
     assert out["ops"] == ["FINISHED"]
     source, azimuth, elevation = out["sun"]

@@ -10,7 +10,6 @@ meshes at 1e-4/1e4 through the renderer (test_render.py), light scales at 1e-3/1
 """
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 import textwrap
@@ -30,6 +29,8 @@ from scenefit.core.data.mesh import Mesh
 from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.render.renderer import AssetRenderer
+
+from conftest import printed_json
 
 TEX = (16, 16)
 GEOMETRIC = DepthConfig(depth_type="geometric")
@@ -169,7 +170,7 @@ def light_stage_peak(photo_path, tmp_path) -> dict:
     proc = subprocess.run([sys.executable, "-c", LIGHT_PEAK, str(photo_path), str(small)], capture_output=True,
                           text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    return json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("JSON"))[4:])
+    return printed_json(proc)
 
 
 def test_an_8000x6000_photo_costs_the_light_stage_what_its_working_size_costs(tmp_path):

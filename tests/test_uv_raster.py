@@ -2,7 +2,6 @@
 and every triangle spanning the whole UV square (memory bounded by the texture and mesh size)."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +11,8 @@ from scenefit.core.base.errors import InputError
 from scenefit.core.data.mesh import Mesh
 from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.data.uv_raster import _barycentric, _nearest_covered, rasterize_uv, seam_fill_index
+
+from conftest import printed_json
 
 ROOT = Path(__file__).resolve().parent.parent
 WRAPS = (("clamp", "clamp"), ("repeat", "repeat"), ("mirror", "mirror"), ("repeat", "mirror"), ("clamp", "repeat"))
@@ -196,7 +197,7 @@ def test_triangles_each_spanning_the_whole_square_stay_within_a_memory_bound(run
     every texel of every triangle's box (4000 x 512² candidates, about 140 GiB); now the peak stays
     under 160 MiB (measured: about 75), a few times the raster's own arrays."""
     proc = run_py(MEMORY.replace("TRIANGLES", "4000"), timeout=300)
-    out = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("JSON"))[4:])
+    out = printed_json(proc)
     for name, measured in out.items():
         assert measured["peak_mib"] < 160, (name, measured)
     assert out["half"]["coverage"] == pytest.approx(0.5, abs=0.01) and out["quads"]["coverage"] == 1.0
