@@ -33,7 +33,7 @@ def run(args) -> int:
     refuse_overwriting(targets, list(protect))
     if not args.replace:   # before any work; the images of a .gltf are checked once their names are known
         refuse_replacing(targets)
-    output = output_like_input(args.asset, args.compress, args.textures, args.max_texture)
+    output = output_like_input(args.asset, args.compress, args.textures, args.max_texture, args.format)
     if output.textures == "ktx2":
         check_ktx2_output(args.format)
     report = bake_asset_file(args.asset, Path(args.texture), args.out, args.format, args.texture_size, args.object,
@@ -47,6 +47,8 @@ def run(args) -> int:
         print(f"  {report['uv_map']}")
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
+    for why in output.unlike_input:
+        print(f"  {why}")
     print(f"wrote {', '.join(report['files'])} (glTF 2.0 by Blender's exporter)")
     return 0
 

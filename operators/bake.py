@@ -7,6 +7,7 @@ thread, then removed: the artist's object, materials and scene stay as they were
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import bpy
@@ -53,25 +54,23 @@ def bake_output(compress: str, textures: str, max_texture: int, file_format: str
     One sentence (InputError) for a setting that cannot be written, before any work."""
     from ..core.stages.bake.gltf_output import output_like_input
 
-    like = output_like_input(source) if source is not None else GltfOutput()
-    if compress == AS_IMPORTED:
-        compress = like.compress if like.compress != "meshopt" or file_format == "glb" else "none"
-    chosen = textures
-    if textures == AS_IMPORTED:
-        textures = like.textures if like.textures != "ktx2" or file_format == "glb" else "png"
-    if textures == "ktx2":   # said in Blender's words (Format, Textures), not the command line's flags
+    like = output_like_input(source, None if compress == AS_IMPORTED else compress,
+                             None if textures == AS_IMPORTED else textures, max_texture, file_format)
+    if like.compress == "meshopt" and file_format != "glb":   # (Blender's words, not the command line's flags)
+        raise InputError("Compression meshopt writes .glb files only; choose the glTF Binary format, or None or "
+                         "Draco compression.")
+    if like.textures == "ktx2":
         if file_format != "glb":
             raise InputError("Textures KTX2 writes .glb files only; choose the glTF Binary format, or PNG, JPEG or "
                              "WebP textures.")
         try:
             basisu_path()
         except InputError:
-            why = "As imported (the file had KTX2 textures)" if chosen == AS_IMPORTED else "KTX2"
+            why = "As imported (the file had KTX2 textures)" if textures == AS_IMPORTED else "KTX2"
             raise InputError(f"Textures {why} needs Basis Universal's encoder 'basisu', which is not on this machine "
                              "(put it on PATH or set SCENEFIT_BASISU to it), or choose PNG, JPEG or WebP "
                              "textures.") from None
-    return GltfOutput(compress, textures, max_texture, tangents=like.tangents or normal_maps, skins_at_root=True,
-                      normals=like.normals)
+    return replace(like, tangents=like.tangents or normal_maps, skins_at_root=True)
 
 
 def texture_file(context) -> Path:
@@ -169,7 +168,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
 
         # A run folder is written whole; a chosen file is moved into place once the exporter has finished.
         report = export(None) if self._folder is None else work.written_whole(str(self._folder), export)
-        return f"Baked '{shown}' at up to {result['size']} px a side into {report['file']}"
+        unlike = "".join(f"; {why}" for why in self._output.unlike_input)   # (a .gltf cannot hold meshopt, KTX2)
+        return f"Baked '{shown}' at up to {result['size']} px a side into {report['file']}{unlike}"
 
 
 def new_uv_map(context, layout, texture) -> tuple[frozenset, object, dict]:

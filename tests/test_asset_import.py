@@ -413,6 +413,15 @@ def test_a_meshopt_compressed_file_converts_and_bakes(runs):
     report, out = convert_and_bake(runs, "meshopt")
     assert report["decisions"]["materials"][0]["uv_coverage"] == round(20 / 32 ** 2, 4)  # each face its texel
     assert [m["name"] for m in out["materials"]] == ["Palette"] and len(out["meshes"]) == 1
+    assert "EXT_meshopt_compression" in out["extensionsUsed"]   # compressed as the input was
+    # A .gltf cannot hold meshopt (its encoder works on a .glb's binary chunk): written plain, and said so.
+    # It was refused for "--compress meshopt", which the user never gave.
+    work = runs["meshopt"]["work"]
+    proc = scenefit("bake", str(runs["meshopt"]["asset"]), "--texture", str(work / "convert/maps/texture.pt"),
+                    "--out", str(work / "baked.gltf"), "--texture-size", "32")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "the input's meshopt compression is written into .glb files only: none in this .gltf" in proc.stdout
+    assert "EXT_meshopt_compression" not in gltf_json(work / "baked.gltf").get("extensionsUsed", [])
 
 
 def test_bake_compresses_like_the_input_follows_its_tangents_and_writes_the_chosen_textures(runs, tmp_path,

@@ -24,6 +24,22 @@ def test_the_output_is_compressed_textured_and_given_tangents_as_the_input(tmp_p
     assert output_like_input(tmp_path / "knight.fbx").skins_at_root
 
 
+def test_what_only_a_glb_holds_is_written_plain_into_a_gltf_and_said(tmp_path):
+    path = tmp_path / "in.glb"
+    write_glb(path, {"asset": {"version": "2.0"}, "extensionsUsed": ["EXT_meshopt_compression", "KHR_texture_basisu"],
+                     "images": [{"mimeType": "image/ktx2"}]}, b"")
+    assert output_like_input(path) == GltfOutput("meshopt", "ktx2", 2048)
+    into_gltf = output_like_input(path, file_format="gltf")
+    assert (into_gltf.compress, into_gltf.textures) == ("none", "png")
+    assert into_gltf.report()["unlike_input"] == [
+        "the input's meshopt compression is written into .glb files only: none in this .gltf",
+        "the input's KTX2 textures are written into .glb files only: PNG in this .gltf"]
+    # Given settings are the caller's to refuse, never changed quietly.
+    given = output_like_input(path, "meshopt", "ktx2", file_format="gltf")
+    assert (given.compress, given.textures, given.unlike_input) == ("meshopt", "ktx2", ())
+    assert "unlike_input" not in output_like_input(path).report()
+
+
 def test_skinned_meshes_stay_where_a_gltf_input_had_them(tmp_path):
     nodes = [{"children": [1]}, {"mesh": 0, "skin": 0}]
     for name, parented in (("under.glb", True), ("root.glb", False)):
@@ -58,6 +74,10 @@ def test_bake_assets_as_imported_settings_follow_the_file_and_say_what_they_lack
             except InputError as error:
                 out[fmt] = str(error)
         out["none"] = list(bake_output(AS_IMPORTED, AS_IMPORTED, 1024, "glb", None, True).report().values())[:4]
+        try:
+            bake_output("meshopt", "png", 1024, "gltf", source, False)
+        except InputError as error:
+            out["chosen_meshopt"] = str(error)
         print("JSON" + json.dumps(out))
     """)
     out = printed_json(proc)
@@ -66,3 +86,6 @@ def test_bake_assets_as_imported_settings_follow_the_file_and_say_what_they_lack
     assert "--" not in out["glb"] and out["glb"].count(". ") == 0
     assert out["gltf"] == ["none", "png"]   # neither fits a .gltf: plain and PNG
     assert out["none"] == ["none", "png", 1024, True]   # made in Blender: plain, PNG, tangents for normal maps
+    # meshopt chosen for a .gltf: Blender's words (it was the command line's "--compress meshopt")
+    assert out["chosen_meshopt"] == ("Compression meshopt writes .glb files only; choose the glTF Binary format, "
+                                     "or None or Draco compression.")

@@ -30,6 +30,8 @@ class GltfOutput:
     tangents: bool = False
     skins_at_root: bool = False
     normals: bool = True              # False where the input had none: glTF then shades flat, as it did
+    # What of the input's own settings the output file cannot hold, and what it gets instead.
+    unlike_input: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.compress not in COMPRESSIONS:
@@ -42,7 +44,8 @@ class GltfOutput:
 
     def report(self) -> dict:
         return {"compress": self.compress, "textures": self.textures, "max_texture": self.max_texture,
-                "tangents": self.tangents, "skins_at_root": self.skins_at_root, "normals": self.normals}
+                "tangents": self.tangents, "skins_at_root": self.skins_at_root, "normals": self.normals,
+                **({"unlike_input": list(self.unlike_input)} if self.unlike_input else {})}
 
 
 def _document(path: Path) -> dict:
@@ -57,27 +60,42 @@ def _image_format(image: dict) -> str | None:
     return _FORMAT_OF_SUFFIX.get(Path(str(image.get("uri", ""))).suffix.lower())
 
 
-def output_like_input(asset: str | Path, compress: str | None = None, textures: str | None = None,
-                      max_texture: int | None = None) -> GltfOutput:
-    """The output settings: each one given, else as the input file has it (a non-glTF input: none,
-    png). Tangents where the input has them (and, for inputs that are not glTF, where a loaded material
-    has a normal map: blender_io.gltf_export)."""
-    document = _document(Path(asset))
+# Written into .glb files only (meshoptimizer's encoder and KTX2's rewrite work on the binary chunk).
+GLB_ONLY = {"compress": "meshopt", "textures": "ktx2"}
+_PLAIN = {"compress": "none", "textures": "png"}
+
+
+def output_like_input(asset: str | Path | None, compress: str | None = None, textures: str | None = None,
+                      max_texture: int | None = None, file_format: str = "glb") -> GltfOutput:
+    """The output settings: each one given, else as the input file has it (a non-glTF input, or none:
+    none, png), within what `file_format` holds: an input's meshopt or KTX2 becomes plain or PNG in a
+    .gltf (`unlike_input` says so; given ones are the caller's to refuse). Tangents where the input has
+    them (and, for inputs that are not glTF, where a loaded material has a normal map:
+    blender_io.gltf_export)."""
+    document = _document(Path(asset)) if asset is not None else {}
     used = document.get("extensionsUsed", [])
+    unlike = []
     if compress is None:
         compress = next((c for e, c in _COMPRESSION_OF_EXTENSION.items() if e in used), "none")
+        if file_format != "glb" and compress == GLB_ONLY["compress"]:
+            compress = _PLAIN["compress"]
+            unlike.append("the input's meshopt compression is written into .glb files only: none in this .gltf")
     if textures is None:
         formats = [_image_format(image) for image in document.get("images", [])]
         textures = max(set(formats) - {None}, key=formats.count, default="png")
+        if file_format != "glb" and textures == GLB_ONLY["textures"]:
+            textures = _PLAIN["textures"]
+            unlike.append("the input's KTX2 textures are written into .glb files only: PNG in this .gltf")
     attributes = [set(primitive.get("attributes", {})) for mesh in document.get("meshes", [])
                   for primitive in mesh.get("primitives", [])]
     tangents = any("TANGENT" in names for names in attributes)
     normals = not attributes or tangents or any("NORMAL" in names for names in attributes)
     # A glTF's skinned meshes stay where it had them; another kind of file has no say, so they go to the
     # root, where glTF wants them (the validator warns NODE_SKINNED_MESH_NON_ROOT under Blender's armature).
-    at_root = _skinned_meshes_at_root(document) if Path(asset).suffix.lower() in (".gltf", ".glb") else True
+    at_root = _skinned_meshes_at_root(document) if asset is not None and \
+        Path(asset).suffix.lower() in (".gltf", ".glb") else True
     return GltfOutput(compress, textures, DEFAULT_MAX_TEXTURE if max_texture is None else max_texture, tangents,
-                      at_root, normals)
+                      at_root, normals, tuple(unlike))
 
 
 def _parents(document: dict) -> dict[int, int]:
