@@ -185,9 +185,9 @@ def block_sections(renders: list[dict], textures: list[dict]) -> list[str]:
                              ("s / iteration", "forward_backward_s", ".3f")]), ""]
 
 
-CORPUS_PARTS = {"camera", "speed", "start", "uv_layout", "light_real", "light_heldout", "sun_clicks"}   # parts that read the corpus
+CORPUS_PARTS = {"camera", "speed", "start", "uv_layout", "light_real", "light_heldout", "light_sides", "sun_clicks"}   # parts that read the corpus
 PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "batch", "samplers", "study", "camera",
-         "speed", "start", "uv_layout", "light_real", "light_heldout", "sun_clicks", "sd2")
+         "speed", "start", "uv_layout", "light_real", "light_heldout", "light_sides", "sun_clicks", "sd2")
 TITLES = {"convert": "Convert", "light": "Light", "compose": "Compose", "adapt": "Adapt (tiny models)",
           "run": "End to end: `scenefit run`"}
 
@@ -322,6 +322,8 @@ def main() -> int:
          "What the paper's light parametrisation can reach on those views (scales fitted to the truth)"),
         ("light_heldout", ["bench_light.py", "--real", "--heldout"], "light_heldout", 3,
          "Light from real photos on 18 held-out HDR maps (no number of the light stage was set on them)"),
+        ("light_sides", ["bench_light_sides.py"], "light_sides", 3,
+         "The light behind the camera, toward and away from the light: what one level costs, what the photo tells"),
         ("sun_clicks", ["bench_sun_clicks.py"], "sun_clicks", 3,
          "The sun from a shadow's three clicks: slipped clicks, the reported uncertainty, the lobe it calls for"),
         ("sd2", ["bench_adapt.py", "--sd2-bench"], "adapt_sd2", 2, "Adapt at SD2's size on this CPU (random weights)"))
