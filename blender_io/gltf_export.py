@@ -20,9 +20,10 @@ import numpy as np
 
 from ..core.base.errors import InputError
 from ..core.stages.bake.game_bake import BakedMaterial
-from ..core.stages.bake.gltf_ktx2 import check_ktx2_output, ktx2_glb
+from ..core.stages.bake.gltf_ktx2 import basisu_path, ktx2_glb
 from ..core.data.gltf_meshopt import encoded_glb
-from ..core.stages.bake.gltf_output import GltfOutput, output_like_input, skinned_meshes_moved_to_root
+from ..core.stages.bake.gltf_output import (GltfOutput, check_output_format, output_like_input,
+                                               skinned_meshes_moved_to_root)
 from ..core.data.imageio import srgb_to_linear, write_image
 from ..core.data.maps import resize_channels
 from ..core.base.quiet import native_output_captured
@@ -240,10 +241,9 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
     out_file = Path(out_file)
     if out_file.suffix.lower() != f".{file_format}":
         raise InputError(f"The output '{out_file.name}' should end in .{file_format} for --format {file_format}.")
-    if output.compress == "meshopt" and file_format != "glb":
-        raise InputError("--compress meshopt writes .glb files only; use --format glb, or --compress none or draco.")
+    check_output_format(output, file_format)
     if output.textures == "ktx2":
-        check_ktx2_output(file_format)
+        basisu_path()
     out_file.parent.mkdir(parents=True, exist_ok=True)
     addon_utils.enable("io_scene_gltf2", default_set=False)
     layer = bpy.context.view_layer

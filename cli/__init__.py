@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..core.base.errors import Cancelled, SceneFitError
 from ..core.base.os_errors import os_error_sentence, with_out_paths
-from ..core.base.output_folder import interrupted_message, kept_stages_sentence
+from ..core.base.output_folder import interrupted_message, kept_stages, kept_stages_sentence
 from . import adapt, bake, camera, batch, compose, convert, demo, export, light, prompt, render, run
 
 # The order `scenefit --help` lists them in.
@@ -53,16 +53,16 @@ def main(argv: list[str] | None = None) -> int:
             if _interrupted(error):
                 raise KeyboardInterrupt from error
             raise
-    except (Cancelled, KeyboardInterrupt):
-        print(f"\nscenefit: {interrupted_message(args.out, getattr(args, 'resumable', False), getattr(args, 'by_stage', False))}"
+    except (Cancelled, KeyboardInterrupt) as stop:
+        print(f"\nscenefit: {interrupted_message(args.out, getattr(args, 'resumable', False), getattr(args, 'by_stage', False), kept_stages(stop))}"
               if getattr(args, "out", None) else "\nscenefit: interrupted.", file=sys.stderr)
         return 130
     except SceneFitError as error:   # a file written into the staging folder is named as in --out
-        print(f"scenefit: error: {with_out_paths(str(error), getattr(args, 'out', None))}{_kept_words(args)}",
+        print(f"scenefit: error: {with_out_paths(str(error), getattr(args, 'out', None))}{_kept_words(args, error)}",
               file=sys.stderr)
         return 2
     except OSError as error:   # a full disk, a read-only folder, a file in the way: a sentence, not a traceback
-        print(f"scenefit: error: {os_error_sentence(error, getattr(args, 'out', None))}{_kept_words(args)}",
+        print(f"scenefit: error: {os_error_sentence(error, getattr(args, 'out', None))}{_kept_words(args, error)}",
               file=sys.stderr)
         return 2
 
@@ -83,11 +83,11 @@ def _joined_negative_pairs(argv: list[str]) -> list[str]:
     return out
 
 
-def _kept_words(args) -> str:
+def _kept_words(args, error: BaseException) -> str:
     """What a `scenefit run` stopped by bad input mid-way (a shadow point in the sky) kept for the next run."""
     if not getattr(args, "by_stage", False) or not getattr(args, "out", None):
         return ""
-    return kept_stages_sentence(args.out)
+    return kept_stages_sentence(error, args.out)
 
 
 def _check_inputs(args) -> None:

@@ -15,8 +15,8 @@ def run(args) -> int:
     from ..core.data.asset_io import is_asset_folder
     from ..core.base.errors import InputError
     from ..core.stages.bake.game_bake import check_texture_size
-    from ..core.stages.bake.gltf_ktx2 import check_ktx2_output
-    from ..core.stages.bake.gltf_output import output_like_input
+    from ..core.stages.bake.gltf_ktx2 import basisu_path
+    from ..core.stages.bake.gltf_output import check_output_format, output_like_input
 
     if is_asset_folder(args.asset):
         raise InputError(f"'{args.asset}' is a SceneFit asset folder; scenefit bake rewrites the asset's own file "
@@ -34,8 +34,16 @@ def run(args) -> int:
     if not args.replace:   # before any work; the images of a .gltf are checked once their names are known
         refuse_replacing(targets)
     output = output_like_input(args.asset, args.compress, args.textures, args.max_texture, args.format)
+    check_output_format(output, args.format)
     if output.textures == "ktx2":
-        check_ktx2_output(args.format)
+        try:
+            basisu_path()
+        except InputError as error:
+            if args.textures is not None:
+                raise
+            raise InputError(f"The input's KTX2 textures are written as KTX2 again, which needs Basis Universal's "
+                             f"encoder 'basisu' ({str(error).split(': ', 1)[-1].rstrip('.')}); or give --textures png, "
+                             "jpeg or webp.") from None
     report = bake_asset_file(args.asset, Path(args.texture), args.out, args.format, args.texture_size, args.object,
                              protect=protect, output=output, replace=args.replace)
     for material in report["materials"]:

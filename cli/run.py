@@ -65,7 +65,7 @@ def run(args) -> int:
     bake, why_not = game_bake(args)
     # Written beside and swapped in whole, like every command's folder; an earlier run's folder is
     # taken up (its finished stages reused), never mixed with this run's files.
-    with output(args, reuse=True) as staging:
+    with output(args, reuse=not args.replace) as staging:   # (--replace starts over)
         report = run_pipeline(mesh, maps, args.photo, args.at, staging, config, progress=progress(args),
                               bake=bake, bake_skipped_why=why_not)
         if how["source"] == "asset":

@@ -52,17 +52,18 @@ def bake_output(compress: str, textures: str, max_texture: int, file_format: str
     tangents where that file had them or a material has a normal map; skinned meshes at the root, where
     glTF wants them (Blender's exporter puts them under the armature: NODE_SKINNED_MESH_NON_ROOT).
     One sentence (InputError) for a setting that cannot be written, before any work."""
-    from ..core.stages.bake.gltf_output import output_like_input
+    from ..core.stages.bake.gltf_output import glb_only, output_like_input
 
     like = output_like_input(source, None if compress == AS_IMPORTED else compress,
                              None if textures == AS_IMPORTED else textures, max_texture, file_format)
-    if like.compress == "meshopt" and file_format != "glb":   # (Blender's words, not the command line's flags)
+    cannot = glb_only(like, file_format)   # (in Blender's words, not the command line's flags)
+    if cannot == "compress":
         raise InputError("Compression meshopt writes .glb files only; choose the glTF Binary format, or None or "
                          "Draco compression.")
+    if cannot == "textures":
+        raise InputError("Textures KTX2 writes .glb files only; choose the glTF Binary format, or PNG, JPEG or "
+                         "WebP textures.")
     if like.textures == "ktx2":
-        if file_format != "glb":
-            raise InputError("Textures KTX2 writes .glb files only; choose the glTF Binary format, or PNG, JPEG or "
-                             "WebP textures.")
         try:
             basisu_path()
         except InputError:

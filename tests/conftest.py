@@ -47,7 +47,10 @@ def printed_json(proc: subprocess.CompletedProcess) -> dict:
     lines = [line for line in proc.stdout.splitlines() if line.startswith("JSON")]
     if not lines:
         pytest.fail(f"the script printed no JSON line:\n{proc.stdout[-4000:]}\n{proc.stderr[-4000:]}")
-    return json.loads(lines[-1][4:])
+    try:
+        return json.loads(lines[-1][4:])
+    except ValueError as error:
+        pytest.fail(f"the script's JSON line does not parse ({error}):\n{proc.stdout[-4000:]}\n{proc.stderr[-4000:]}")
 
 
 def scenefit_process(*args, env: dict | None = None) -> subprocess.CompletedProcess:

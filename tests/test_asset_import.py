@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenefit.core.data.glb import gltf_json, read_gltf, write_glb
+from scenefit.core.data.glb import read_gltf, write_glb
 
 from conftest import printed_json, scenefit_here, scenefit_side_by_side
 
@@ -244,7 +244,7 @@ def convert_and_bake(runs: dict, name: str) -> tuple[dict, dict]:
     run = runs[name]
     assert run["convert"][0] == 0, run["convert"][1][-2000:]
     assert run["bake"][0] == 0, run["bake"][1][-2000:]
-    return json.loads((run["work"] / "convert" / "report.json").read_text()), gltf_json(run["work"] / "baked.glb")
+    return json.loads((run["work"] / "convert" / "report.json").read_text()), read_gltf(run["work"] / "baked.glb")[0]
 
 
 def test_a_skinned_gltf_converts_and_bakes_with_its_skin(runs):
@@ -282,7 +282,7 @@ def test_bake_keeps_the_names_the_startup_scene_also_uses(assets, runs):
     scene it reads (it stopped at "Object "Cube" is not in view layer")."""
     report, out = convert_and_bake(runs, "names")
     assert [m["name"] for m in report["decisions"]["materials"]] == ["Material"]
-    source = gltf_json(assets / "names.glb")
+    source = read_gltf(assets / "names.glb")[0]
     assert [m["name"] for m in out["materials"]] == ["Material"]
     assert sorted(n["name"] for n in out["nodes"]) == sorted(n["name"] for n in source["nodes"]) == ["Camera", "Cube"]
     assert [c["name"] for c in out["cameras"]] == [c["name"] for c in source["cameras"]] == ["Camera"]
@@ -421,7 +421,7 @@ def test_a_meshopt_compressed_file_converts_and_bakes(runs):
                     "--out", str(work / "baked.gltf"), "--texture-size", "32")
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "the input's meshopt compression is written into .glb files only: none in this .gltf" in proc.stdout
-    assert "EXT_meshopt_compression" not in gltf_json(work / "baked.gltf").get("extensionsUsed", [])
+    assert "EXT_meshopt_compression" not in read_gltf(work / "baked.gltf")[0].get("extensionsUsed", [])
 
 
 def test_bake_compresses_like_the_input_follows_its_tangents_and_writes_the_chosen_textures(runs, tmp_path,
@@ -442,7 +442,7 @@ def test_bake_compresses_like_the_input_follows_its_tangents_and_writes_the_chos
                     "--texture-size", "32", "--compress", "meshopt", "--textures", "jpeg", "--max-texture", "16",
                     "--report", str(tmp_path / "meshopt.json"))
     assert proc.returncode == 0, proc.stderr[-2000:]
-    out, report = gltf_json(baked), json.loads((tmp_path / "meshopt.json").read_text())
+    out, report = read_gltf(baked)[0], json.loads((tmp_path / "meshopt.json").read_text())
     assert "EXT_meshopt_compression" in out["extensionsRequired"] and "KHR_draco_mesh_compression" not in \
         out.get("extensionsUsed", [])
     base = out["textures"][out["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["index"]]
@@ -458,7 +458,7 @@ def test_vertex_colours_are_baked_into_the_base_colour_and_not_multiplied_in_aga
     """Vertex colours are read as base colour (Blender's bake of the Color Attribute chain); the
     exporter then still wrote COLOR_0 (and a second, made-up COLOR_1), which glTF multiplies into
     the baked base colour that already holds them: the colours came out squared."""
-    assert any("COLOR_0" in p["attributes"] for m in gltf_json(runs["painted"]["asset"])["meshes"]
+    assert any("COLOR_0" in p["attributes"] for m in read_gltf(runs["painted"]["asset"])[0]["meshes"]
                for p in m["primitives"])
     report, out = convert_and_bake(runs, "painted")
     assert any("Color Attribute" in line for line in report["materials"][0]["read"]), report["materials"][0]["read"]

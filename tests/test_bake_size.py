@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from scenefit.core.data.glb import gltf_json
+from scenefit.core.data.glb import read_gltf
 
 pytestmark = pytest.mark.blender
 ROOT = Path(__file__).resolve().parent.parent
@@ -53,13 +53,13 @@ def scenefit(*args) -> subprocess.CompletedProcess:
 def test_materials_sharing_a_palette_bake_to_one_shared_image(run_py, tmp_path, validator):
     run_py(BUILD.replace("FOLDER", repr(str(tmp_path))))
     asset = tmp_path / "blocks.glb"
-    assert len(gltf_json(asset)["images"]) == 1 and len(gltf_json(asset)["materials"]) == 3
+    assert len(read_gltf(asset)[0]["images"]) == 1 and len(read_gltf(asset)[0]["materials"]) == 3
     proc = scenefit("convert", asset, "--out", tmp_path / "convert", "--preset", "draft", "--quiet")
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = tmp_path / "baked.glb"
     proc = scenefit("bake", asset, "--texture", tmp_path / "convert" / "maps" / "texture.pt", "--out", out)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    baked = gltf_json(out)
+    baked = read_gltf(out)[0]
     assert len(baked["materials"]) == 3 and len(baked["textures"]) >= 1
     assert len(baked["images"]) == 1, [image.get("name") for image in baked["images"]]
     assert out.stat().st_size <= 1.2 * asset.stat().st_size, (out.stat().st_size, asset.stat().st_size)
@@ -72,7 +72,7 @@ def test_materials_sharing_a_palette_bake_to_one_shared_image(run_py, tmp_path, 
     out = tmp_path / "with_plain_baked.glb"
     proc = scenefit("bake", asset, "--texture", tmp_path / "convert_plain" / "maps" / "texture.pt", "--out", out)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    materials = {m["name"]: m["pbrMetallicRoughness"] for m in gltf_json(out)["materials"]}
+    materials = {m["name"]: m["pbrMetallicRoughness"] for m in read_gltf(out)[0]["materials"]}
     assert "baseColorTexture" not in materials["plain"] and "baseColorTexture" in materials["block0"]
     assert materials["plain"]["baseColorFactor"] == [pytest.approx(v, abs=0.01) for v in (0.2, 0.5, 0.8, 1.0)]
-    assert len(gltf_json(out)["images"]) == 1
+    assert len(read_gltf(out)[0]["images"]) == 1

@@ -33,10 +33,14 @@ def test_each_side_finds_its_own_level_and_one_level_for_both_is_a_compromise():
     assert 2.0 <= close["level"] <= 4.0 and close["toward"]["beats"] == close["away"]["beats"] == 1
 
 
-def test_a_measure_that_tells_the_side_is_found_and_one_that_does_not_is_at_chance():
+def test_a_measure_that_tells_the_side_is_found_and_scored_on_views_it_was_not_set_on():
     train = [_row("toward", 1.0, 0.9), _row("toward", 1.0, 0.8), _row("away", 1.0, 0.1), _row("away", 1.0, 0.2)]
     held = [_row("toward", 1.0, 0.7), _row("away", 1.0, 0.3)]
     split = side_split(train, held)["clipped fraction"]
     assert split["development"] == 1.0 and split["held_out"] == 1.0 and split["toward_if_above"]
     flipped = [_row("toward", 1.0, 0.0), _row("away", 1.0, 1.0)]   # the same threshold, the sides the other way
     assert side_split(train, flipped)["clipped fraction"]["held_out"] == 0.0
+    # a measure that says nothing of the side: the same value on both sides is at chance on either set
+    blind = [_row("toward", 1.0, 0.5), _row("away", 1.0, 0.5)]
+    assert side_split(blind, blind)["clipped fraction"] == {"threshold": 0.5, "toward_if_above": True,
+                                                            "development": 0.5, "held_out": 0.5}

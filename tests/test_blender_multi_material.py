@@ -8,7 +8,6 @@ operator through EXEC_DEFAULT. Each material's base colour is one colour of its 
 took another material's cell of the atlas shows the wrong colour.
 """
 import json
-import struct
 from contextlib import closing
 from pathlib import Path
 from types import SimpleNamespace
@@ -18,6 +17,7 @@ import pytest
 from conftest import PythonSession, extension_and_models, fill_in
 
 from scenefit.core.data.imageio import read_image
+from scenefit.core.data.glb import read_gltf
 
 pytestmark = pytest.mark.blender
 
@@ -354,11 +354,8 @@ def step(blender, code: str) -> dict:
 def glb_materials(path: Path, tmp: Path) -> dict[str, list[float]]:
     """Each material of a .glb with the median stored colour of its base colour image ("_sizes": each
     image's height and width)."""
-    data = path.read_bytes()
-    assert data[:4] == b"glTF"
-    length, kind = struct.unpack_from("<I4s", data, 12)
-    doc = json.loads(data[20:20 + length])
-    binary = data[20 + length + 8:]
+    assert path.read_bytes()[:4] == b"glTF"
+    doc, binary = read_gltf(path)
     out, sizes = {}, {}
     for index, material in enumerate(doc["materials"]):
         texture = material["pbrMetallicRoughness"]["baseColorTexture"]["index"]
@@ -508,9 +505,7 @@ def test_bake_asset_bakes_a_texture_adapted_per_surface_into_a_new_uv_map(blende
     assert out["uv_layers_after"] == out["uv_layers_before"]
     path = blender.tmp / "mirrored.glb"
     assert validator(str(path))["issues"]["numErrors"] == 0
-    data = path.read_bytes()
-    length = struct.unpack_from("<I", data, 12)[0]
-    doc = json.loads(data[20:20 + length])
+    doc = read_gltf(path)[0]
     coords = {m["name"]: m["pbrMetallicRoughness"]["baseColorTexture"].get("texCoord", 0) for m in doc["materials"]}
     assert coords == {"Red": 0, "Blue": 1, "Yellow": 1}, coords
     ball = next(m for m in doc["meshes"] if any(doc["materials"][p["material"]]["name"] == "Blue"

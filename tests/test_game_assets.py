@@ -13,7 +13,7 @@ import torch
 from scenefit.core.base.errors import InputError
 from scenefit.core.stages.bake.game_bake import check_texture_size
 from scenefit.core.data.maps import PBRMaps, resize_channels
-from scenefit.core.data.glb import gltf_json
+from scenefit.core.data.glb import read_gltf
 
 from conftest import printed_json, scenefit_here
 
@@ -124,13 +124,13 @@ def test_baked_file_is_valid_gltf_and_keeps_the_materials(pipeline, validator, n
     run = pipeline["runs"][name]
     report = validator(run["baked_file"])
     assert report["issues"]["numErrors"] == 0, report["issues"]["messages"]
-    baked = gltf_json(run["baked_file"])
+    baked = read_gltf(run["baked_file"])[0]
     if name in ("obj", "fbx"):  # the source is not glTF: compare against what was read from it
         # the source was read after other imports in the same process, so Blender may have suffixed ".001"
         read = [re.sub(r"\.\d{3}$", "", m["name"]) for m in run["source_materials"]]
         assert [m["name"] for m in baked["materials"]] == read
         return
-    source = gltf_json(pipeline["assets"][name])
+    source = read_gltf(pipeline["assets"][name])[0]
     by_name = {m["name"]: m for m in baked["materials"]}
     assert sorted(by_name) == sorted(m["name"] for m in source["materials"])
     for original in source["materials"]:
@@ -156,12 +156,12 @@ def test_baked_maps_read_back_within_one_step(pipeline):
 def test_packed_metallic_roughness_is_read_per_channel(pipeline):
     read = " | ".join(pipeline["runs"]["textured"]["source_materials"][0]["read"])
     assert "Roughness <- channel G via Separate Color" in read and "Metallic <- channel B via Separate Color" in read
-    baked = gltf_json(pipeline["runs"]["textured"]["baked_file"])["materials"][0]["pbrMetallicRoughness"]
+    baked = read_gltf(pipeline["runs"]["textured"]["baked_file"])[0]["materials"][0]["pbrMetallicRoughness"]
     assert "metallicRoughnessTexture" in baked
 
 
 def test_constants_stay_factors(pipeline):
-    pbr = gltf_json(pipeline["runs"]["big_constants"]["baked_file"])["materials"][0]["pbrMetallicRoughness"]
+    pbr = read_gltf(pipeline["runs"]["big_constants"]["baked_file"])[0]["materials"][0]["pbrMetallicRoughness"]
     assert "metallicRoughnessTexture" not in pbr
     assert pbr["roughnessFactor"] == pytest.approx(0.35, abs=0.02)
     assert pbr["metallicFactor"] == pytest.approx(0.75, abs=0.02)
@@ -334,7 +334,7 @@ def baked_in_session(run_py, script: str, out: Path) -> dict:
     proc = run_py(script.replace("OUT", repr(str(out))))
     result = printed_json(proc)
     assert result["same"] and result["files"] == [str(out)]
-    return gltf_json(str(out))
+    return read_gltf(str(out))[0]
 
 
 def test_baking_inside_a_users_session_changes_nothing_of_theirs(run_py, tmp_path):
@@ -535,7 +535,7 @@ def test_bake_asset_writes_the_cameras_and_lights_of_the_assets_own_file_only(ru
     # that import's camera and sun: not the artist's, the other file's, nor the second import's of the same file
     assert sorted(result["beside"]) == ["FileCamera", "FileSun", "RideCamera", "RideLamp"]
     assert "FileCamera.001" in result["again"]
-    exported = gltf_json(str(out))
+    exported = read_gltf(str(out))[0]
     nodes = exported["nodes"]
     names = [n.get("name") for n in nodes]
     assert {"Box", "Lid", "Crate", "FileCamera", "FileSun", "RideCamera"} <= set(names)
@@ -547,7 +547,7 @@ def test_bake_asset_writes_the_cameras_and_lights_of_the_assets_own_file_only(ru
     # ... and the light riding on that camera under the camera's copy (one level was all it took before)
     assert "RideLamp" in [names[c] for c in nodes[names.index("RideCamera")].get("children", [])]
     # ... each where the file had it, turned as it was
-    made, baked = world_matrices(gltf_json(source)), world_matrices(exported)
+    made, baked = world_matrices(read_gltf(source)[0]), world_matrices(exported)
     for name in ("FileCamera", "FileSun", "RideCamera", "RideLamp"):
         np.testing.assert_allclose(baked[name], made[name], atol=1e-4, err_msg=name)
 

@@ -38,6 +38,47 @@ def test_what_only_a_glb_holds_is_written_plain_into_a_gltf_and_said(tmp_path):
     given = output_like_input(path, "meshopt", "ktx2", file_format="gltf")
     assert (given.compress, given.textures, given.unlike_input) == ("meshopt", "ktx2", ())
     assert "unlike_input" not in output_like_input(path).report()
+    # a .gltf's JSON that is no object is no glTF to follow: plain and PNG, not a traceback
+    (tmp_path / "list.gltf").write_text("[]")
+    assert output_like_input(tmp_path / "list.gltf") == GltfOutput(skins_at_root=False)
+
+
+def test_a_setting_only_a_glb_holds_is_refused_for_a_gltf_before_any_work(tmp_path):
+    from scenefit.core.stages.bake.gltf_output import check_output_format, glb_only
+
+    assert glb_only(GltfOutput("meshopt", "ktx2"), "glb") is None
+    assert glb_only(GltfOutput("meshopt", "ktx2"), "gltf") == "compress"
+    assert glb_only(GltfOutput("draco", "ktx2"), "gltf") == "textures"
+    with pytest.raises(InputError, match=r"^--compress meshopt writes \.glb files only; use --format glb, or "
+                                         r"--compress none or draco\.$"):
+        check_output_format(GltfOutput("meshopt"), "gltf")
+    with pytest.raises(InputError, match=r"^--textures ktx2 writes \.glb files only; use --format glb, or "
+                                         r"--textures png, jpeg or webp\.$"):
+        check_output_format(GltfOutput(textures="ktx2"), "gltf")
+    check_output_format(GltfOutput("meshopt", "ktx2"), "glb")
+
+
+def test_an_inputs_ktx2_without_basisu_is_said_as_the_inputs_not_as_a_flag(tmp_path, monkeypatch, capsys):
+    """`scenefit bake` of a KTX2 .glb where basisu is missing named '--textures ktx2', which the user never
+    gave; the sentence now says the input's textures and the flag that avoids it, before any work."""
+    from scenefit.cli import main
+
+    asset = tmp_path / "in.glb"
+    write_glb(asset, {"asset": {"version": "2.0"}, "extensionsUsed": ["KHR_texture_basisu"],
+                      "images": [{"mimeType": "image/ktx2"}]}, b"")
+    (tmp_path / "texture.pt").write_bytes(b"")
+    monkeypatch.setenv("SCENEFIT_BASISU", str(tmp_path / "no-basisu"))
+    out = tmp_path / "out.glb"
+    assert main(["bake", str(asset), "--texture", str(tmp_path / "texture.pt"), "--out", str(out)]) == 2
+    said = capsys.readouterr().err.strip()
+    assert said.startswith("scenefit: error: The input's KTX2 textures are written as KTX2 again, which needs "
+                           "Basis Universal's encoder 'basisu'") and "--textures ktx2" not in said
+    assert said.endswith("or give --textures png, jpeg or webp.") and len(said.splitlines()) == 1
+    assert not out.exists()
+    # given as a flag, it is said as the flag
+    assert main(["bake", str(asset), "--texture", str(tmp_path / "texture.pt"), "--out", str(out), "--textures",
+                 "ktx2"]) == 2
+    assert "SCENEFIT_BASISU points at" in capsys.readouterr().err
 
 
 def test_skinned_meshes_stay_where_a_gltf_input_had_them(tmp_path):

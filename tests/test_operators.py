@@ -558,6 +558,7 @@ bpy.ops.wm.read_homefile(use_empty=True)
 painted_plane("Painted", "Paint", 4)
 bpy.ops.export_scene.gltf(filepath=str(tmp / "plain.glb"), export_format="GLB")
 meshopt = import_module(MODULE + ".core.data.gltf_meshopt")
+glb = import_module(MODULE + ".core.data.glb")
 packed = meshopt.encoded_glb(tmp / "plain.glb", tmp / "packed.glb")
 (tmp / "broken.glb").write_bytes(b"glTF not really")
 bpy.ops.wm.read_homefile(use_empty=True)
@@ -593,7 +594,7 @@ out["asset_section"] = panel_lines(bpy.types.SCENEFIT_PT_asset)
 painted = bpy.data.objects["Painted"]
 out["source"] = painted.scenefit_source_file
 out["import_convert"], out["import_bake"] = convert_and_bake(painted, "imported")
-out["import_bake_extensions"] = meshopt.read_gltf(tmp / "imported_bake" / "painted.glb")[0].get("extensionsUsed", [])
+out["import_bake_extensions"] = glb.read_gltf(tmp / "imported_bake" / "painted.glb")[0].get("extensionsUsed", [])
 """
 
 
@@ -632,7 +633,7 @@ out["custom_properties"] = sorted({k for o in bpy.data.objects for k in o.keys()
 bpy.ops.export_scene.gltf(filepath=str(tmp / "mine.glb"), export_format="GLB", export_extras=True)
 out["path_in_own_export"] = str(tmp) in (tmp / "mine.glb").read_bytes().decode("latin-1")
 out["native_convert"], out["native_bake"] = convert_and_bake(bpy.data.objects["Tile"], "native")
-doc = import_module(MODULE + ".core.data.gltf_meshopt").read_gltf(tmp / "native_bake" / "tile.glb")[0]
+doc = import_module(MODULE + ".core.data.glb").read_gltf(tmp / "native_bake" / "tile.glb")[0]
 out["native_extensions"] = sorted(doc.get("extensionsUsed", []))
 out["native_nodes"] = sorted(n.get("name", "") for n in doc["nodes"])
 """

@@ -21,6 +21,7 @@ from scenefit.core.data.imageio import write_image
 from scenefit.core.data.maps import PBRMaps
 from scenefit.core.base.output_folder import MARKER, _FolderLock, is_run_folder, output_folder, staging_path
 from scenefit.core.data.primitives import uv_sphere
+from scenefit.core.data.glb import write_glb
 
 CONVERT_FAST = ("--preset", "draft", "--iterations", "2", "--resolution", "16", "--quiet")
 RUN_FAST = ("--preset", "draft", "--guidance", "none", "--spp", "2", "--quiet")
@@ -128,8 +129,6 @@ def test_an_out_that_is_a_symbolic_link_is_refused(tmp_path, project, capsys):
 # -- outputs never overwrite an input -------------------------------------------------------------------
 def _glb(path: Path) -> Path:
     """A minimal valid GLB (one triangle), as any exporter writes it."""
-    import struct
-
     positions = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32).tobytes()
     document = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
                 "nodes": [{"mesh": 0, "name": "Tri"}],
@@ -138,10 +137,7 @@ def _glb(path: Path) -> Path:
                                "min": [0, 0, 0], "max": [1, 1, 0]}],
                 "bufferViews": [{"buffer": 0, "byteLength": len(positions)}],
                 "buffers": [{"byteLength": len(positions)}]}
-    text = json.dumps(document).encode()
-    text += b" " * (-len(text) % 4)
-    body = struct.pack("<II", len(text), 0x4E4F534A) + text + struct.pack("<II", len(positions), 0x004E4942) + positions
-    path.write_bytes(struct.pack("<III", 0x46546C67, 2, 12 + len(body)) + body)
+    write_glb(path, document, positions)
     return path
 
 

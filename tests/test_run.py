@@ -54,6 +54,11 @@ def test_run_composes_and_a_second_run_reuses_every_stage(tmp_path):
     last = json.loads((out / "report.json").read_text())
     assert last["reused"] == ["convert", "light"] and last["stages"]["compose"]["status"] == "ran"
 
+    # --replace starts over (it took up the earlier run's stages all the same)
+    fourth = scenefit_here("run", *args, "--replace")
+    assert fourth.returncode == 0, fourth.stderr
+    assert json.loads((out / "report.json").read_text())["reused"] == []
+
 
 def test_run_on_an_asset_file_bakes_a_game_asset_and_reuses_it(tmp_path):
     yy, xx = np.mgrid[0:32, 0:32] / 32
@@ -127,25 +132,50 @@ def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monk
     assert json.loads((moved / "report.json").read_text())["reused"] == ["convert", "light", "compose"]
 
 
+def _grey_sphere_run(tmp_path) -> tuple:
+    """(asset folder, --out, the `scenefit run` arguments) of a grey sphere in a grey photo, at draft."""
+    maps = PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0)
+    asset = save_asset_folder(uv_sphere(0.5, 12, 6), maps, tmp_path / "asset")
+    photo_path = write_image(tmp_path / "photo.png", np.full((48, 64, 3), 0.5))
+    out = tmp_path / "run"
+    return asset, out, ["run", str(asset), "--photo", str(photo_path), "--at", "0.5,0.8", "--out", str(out),
+                        "--preset", "draft", "--guidance", "none", "--spp", "2", "--no-bake", "--quiet"]
+
+
+def _interrupted(*_, **__):
+    raise KeyboardInterrupt
+
+
 def test_a_run_stopped_before_any_stage_finished_says_nothing_was_kept(tmp_path, monkeypatch, capsys):
     import scenefit.core.stages.convert as convert
     from scenefit.cli import main
     from scenefit.core.base.output_folder import staging_path
 
-    maps = PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0)
-    asset = save_asset_folder(uv_sphere(0.5, 12, 6), maps, tmp_path / "asset")
-    photo_path = write_image(tmp_path / "photo.png", np.full((48, 64, 3), 0.5))
-    out = tmp_path / "run"
-
-    def interrupted(*_, **__):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(convert, "convert_and_bake", interrupted)   # Ctrl-C in the first stage
-    assert main(["run", str(asset), "--photo", str(photo_path), "--at", "0.5,0.8", "--out", str(out),
-                 "--preset", "draft", "--guidance", "none", "--quiet"]) == 130
+    _, out, args = _grey_sphere_run(tmp_path)
+    monkeypatch.setattr(convert, "convert_and_bake", _interrupted)   # Ctrl-C in the first stage
+    assert main(args) == 130
     message = capsys.readouterr().err
     assert "no stage had finished, so nothing of this run was kept" in message and "kept beside" not in message
     assert not out.exists() and not staging_path(out).exists()
+
+
+def test_a_stopped_rerun_never_counts_the_earlier_runs_stages_as_kept(tmp_path, monkeypatch, capsys):
+    """A rerun starts from the earlier run's files: stopped before a stage of its own finished, it keeps
+    nothing and says so (it named the earlier run's stages as kept), and the earlier folder stays whole."""
+    import scenefit.core.stages.convert as convert
+    from scenefit.cli import main
+    from scenefit.core.base.output_folder import staging_path
+
+    asset, out, args = _grey_sphere_run(tmp_path)
+    assert main(args) == 0
+    before = (out / "report.json").read_bytes()
+    save_asset_folder(uv_sphere(0.5, 12, 6), PBRMaps(np.full((16, 16, 3), 0.3, np.float32), 0.5, 0.0), asset)
+    monkeypatch.setattr(convert, "convert_and_bake", _interrupted)   # the changed asset's convert, stopped
+    capsys.readouterr()
+    assert main(args) == 130
+    message = capsys.readouterr().err
+    assert "no stage had finished, so nothing of this run was kept" in message, message
+    assert not staging_path(out).exists() and (out / "report.json").read_bytes() == before
 
 
 def test_a_run_refused_mid_way_says_which_finished_stages_it_kept(tmp_path, capsys):
@@ -153,12 +183,7 @@ def test_a_run_refused_mid_way_says_which_finished_stages_it_kept(tmp_path, caps
     the refusal names what was kept for the next run, and the next run reuses it."""
     from scenefit.cli import main
 
-    maps = PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0)
-    asset = save_asset_folder(uv_sphere(0.5, 12, 6), maps, tmp_path / "asset")
-    photo_path = write_image(tmp_path / "photo.png", np.full((48, 64, 3), 0.5))
-    out = tmp_path / "run"
-    args = ["run", str(asset), "--photo", str(photo_path), "--at", "0.5,0.8", "--out", str(out), "--preset", "draft",
-            "--guidance", "none", "--spp", "2", "--no-bake", "--quiet"]
+    asset, out, args = _grey_sphere_run(tmp_path)
     assert main([*args, "--sun-from-shadow", "0.5,0.9", "0.5,0.8", "0.3,0.02"]) == 2   # the tip in the sky
     message = capsys.readouterr().err.strip()
     assert len(message.splitlines()) == 1 and "above the horizon" in message

@@ -6,11 +6,12 @@ scene with only that object re-textured."""
 from __future__ import annotations
 
 import json
-import struct
 import subprocess
 import sys
 
 import pytest
+
+from scenefit.core.data.glb import read_gltf
 
 pytestmark = pytest.mark.blender
 
@@ -72,12 +73,6 @@ assert main(["convert", bike, "--object", "Bicycle", "--out", str(folder / "none
 """
 
 
-def glb_json(path) -> dict:
-    data = path.read_bytes()
-    length = struct.unpack_from("<I", data, 12)[0]
-    return json.loads(data[20:20 + length])
-
-
 def scenefit(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "scenefit.cli", *args], capture_output=True, text=True, timeout=900)
 
@@ -100,7 +95,7 @@ def test_a_multi_object_file_is_one_asset_in_convert_and_bake(tmp_path, run_py):
     bake = json.loads((tmp_path / "convert.json").read_text())
     assert bake["objects"] == ["Frame", "Sign", "Wheel"]
     assert [m["name"] for m in bake["materials"]] == ["Paint", "Board", "Rubber"]
-    document = glb_json(tmp_path / "baked_convert.glb")
+    document = read_gltf(tmp_path / "baked_convert.glb")[0]
     names = {n.get("name") for n in document["nodes"]}
     assert {"Bike", "Frame", "Wheel", "Sign"} <= names
     # Every material carries a newly baked base colour image.
@@ -116,7 +111,7 @@ def test_a_multi_object_file_is_one_asset_in_convert_and_bake(tmp_path, run_py):
     node_bake = json.loads((tmp_path / "bike.json").read_text())
     assert node_bake["objects"] == ["Frame", "Wheel"] and [m["name"] for m in node_bake["materials"]] == ["Paint",
                                                                                                           "Rubber"]
-    document = glb_json(tmp_path / "baked_bike.glb")
+    document = read_gltf(tmp_path / "baked_bike.glb")[0]
     assert {"Bike", "Frame", "Wheel", "Sign"} <= {n.get("name") for n in document["nodes"]}
     board = next(m for m in document["materials"] if m["name"] == "Board")
     source = document["images"][document["textures"][board["pbrMetallicRoughness"]["baseColorTexture"]["index"]]

@@ -254,8 +254,8 @@ def _swap_in(staging: Path, out: Path) -> None:
         except OSError as error:
             if error.errno not in (errno.ENOTEMPTY, errno.EEXIST):
                 raise
-            raise InputError(f"Files appeared in '{out}' while SceneFit was writing; this run is kept in "
-                             f"'{staging}' and '{out}' is untouched: move them away and run again.") from None
+            raise InputError(f"Files appeared in '{out}' while SceneFit was writing; this run is kept beside it in "
+                             f"'{staging.name}' and '{out}' is untouched: move them away and run again.") from None
     try:
         staging.rename(out)
     except OSError:
@@ -290,24 +290,35 @@ def _link_or_copy(src: str, dst: str) -> None:
         shutil.copy2(src, dst)
 
 
-def _worth_keeping(staging: Path) -> bool:
-    """A stopped `run` keeps its staging folder only when a stage finished in it."""
-    return any(staging.glob("*/stage.json"))
+def _finished_here(staging: Path, out: Path) -> list[str]:
+    """The stages finished in `staging` that `out` does not already hold (a `run` starts its staging folder
+    from `out`'s files, hard-linked: those are no work of this run), in the order they finished."""
+    found = []
+    for path in staging.glob("*/stage.json"):
+        same = out / path.parent.name / "stage.json"
+        try:
+            if same.is_file() and os.path.samefile(path, same):
+                continue
+            found.append((path.stat().st_mtime_ns, path.parent.name))
+        except OSError:
+            continue
+    return [name for _, name in sorted(found)]
 
 
-def kept_stages(out: str | os.PathLike) -> list[str]:
-    """The stages a stopped `scenefit run` left finished beside `out` (in its staging folder), which the
-    next run into `out` reuses; [] when nothing was kept."""
-    staging = staging_path(Path(out).expanduser().absolute())
-    if not is_run_folder(staging):
-        return []
-    return sorted(path.parent.name for path in staging.glob("*/stage.json"))
+# The attribute an exception leaving `output_folder` carries: the stages kept beside `out` for the next run.
+KEPT_ATTRIBUTE = "scenefit_kept_stages"
 
 
-def kept_stages_sentence(out: str | os.PathLike) -> str:
-    """' The finished stages (convert, light) are kept beside 'out': ...' after a stopped `scenefit run`,
-    or '' when none was kept, so a failed run never leaves work behind unsaid."""
-    kept = kept_stages(out)
+def kept_stages(error: BaseException) -> list[str]:
+    """The finished stages a `scenefit run` stopped by `error` kept beside its folder ([] when none, or
+    when the run never reached its folder)."""
+    return list(getattr(error, KEPT_ATTRIBUTE, []))
+
+
+def kept_stages_sentence(error: BaseException, out: str | os.PathLike) -> str:
+    """' The finished stages (convert, light) are kept beside 'out' ...' after a `scenefit run` stopped by
+    `error`, or '' when it kept none, so a failed run never leaves work behind unsaid."""
+    kept = kept_stages(error)
     if not kept:
         return ""
     return (f" The finished stages ({', '.join(kept)}) are kept beside '{out}' in "
@@ -337,14 +348,19 @@ def output_folder(out: str | os.PathLike, replace: bool = False, resume: bool = 
         _prepare_staging(out, staging, resume, reuse)
         try:
             yield staging
-        except (KeyboardInterrupt, Cancelled):
-            keep_staging = resume or (reuse and _worth_keeping(staging))
-            raise
-        except BaseException:
-            keep_staging = reuse and _worth_keeping(staging)
+        except BaseException as error:
+            finished = _finished_here(staging, out) if reuse else []
+            interrupted = isinstance(error, (KeyboardInterrupt, Cancelled))
+            keep_staging = (resume and interrupted) or bool(finished)
+            if finished:
+                setattr(error, KEPT_ATTRIBUTE, finished)
             raise
         remove_stale_temps(staging)
-        _swap_in(staging, out)
+        try:
+            _swap_in(staging, out)
+        except InputError:   # files appeared in `out`: this run's files wait beside it, as the sentence says
+            keep_staging = True
+            raise
     finally:
         if staging.exists() and not keep_staging and is_run_folder(staging):
             shutil.rmtree(staging, ignore_errors=True)
@@ -397,11 +413,12 @@ def install_folder(parent: str | os.PathLike, name: str, fill: Callable[[Path], 
             shutil.rmtree(staging, ignore_errors=True)
 
 
-def interrupted_message(out: str | os.PathLike, resumable: bool = False, by_stage: bool = False) -> str:
-    """What the user is told after Ctrl-C or a cancel inside `output_folder` (by_stage: `scenefit run`,
+def interrupted_message(out: str | os.PathLike, resumable: bool = False, by_stage: bool = False,
+                        kept: list[str] = ()) -> str:
+    """What the user is told after Ctrl-C or a cancel inside `output_folder` (by_stage: `scenefit run`, with
+    the stages it kept (`kept_stages`),
     whose finished stages are kept beside `out` and reused by the next run)."""
     if by_stage:
-        kept = kept_stages(out)
         if not kept:
             return f"interrupted; '{out}' is unchanged (no stage had finished, so nothing of this run was kept)."
         return (f"interrupted; '{out}' is unchanged and the stages finished so far ({', '.join(kept)}) are kept "

@@ -26,9 +26,10 @@ def read_gltf(path: Path) -> tuple[dict, bytes | None]:
 def gltf_json(path: Path) -> dict:
     """A .glb's or .gltf's JSON, or {} when the file cannot be read as glTF (the importer says why)."""
     try:
-        return read_gltf(path)[0]
+        document = read_gltf(path)[0]
     except (OSError, ValueError, struct.error, UnicodeDecodeError):
         return {}
+    return document if isinstance(document, dict) else {}   # ([] or null parse, but are no glTF)
 
 
 def write_glb(out: Path, document: dict, blob: bytes) -> None:

