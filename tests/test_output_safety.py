@@ -385,3 +385,18 @@ def test_a_gltf_bake_beside_the_asset_never_writes_over_its_own_images(tmp_path,
     assert done.returncode == 2 and "one of the inputs" in done.stderr and "Ball_base_color.png" in done.stderr
     after = snapshot(tmp_path / "conv") | {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
     assert after == before and not (tmp_path / "baked.gltf").exists()
+
+
+def test_files_that_appear_in_the_output_while_writing_are_left_and_this_run_waits_beside_them(tmp_path):
+    """Someone saves into the (empty) output folder while a run writes: neither is lost. Their file stays,
+    and this run's files stay in the staging folder the sentence names (it named it, then deleted it)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    with pytest.raises(InputError) as refused:
+        with output_folder(out) as staging:
+            (staging / "result.txt").write_text("this run")
+            (out / "mine.txt").write_text("theirs")
+    assert str(refused.value) == (f"Files appeared in '{out}' while SceneFit was writing; this run is kept beside it "
+                                  f"in '.out.partial' and '{out}' is untouched: move them away and run again.")
+    assert (out / "mine.txt").read_text() == "theirs" and not (out / "result.txt").exists()
+    assert (staging_path(out) / "result.txt").read_text() == "this run"
