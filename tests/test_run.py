@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from scenefit.core.data.asset_io import save_asset_folder
 from scenefit.core.data.imageio import read_image, write_image
@@ -159,15 +160,22 @@ def test_a_run_stopped_before_any_stage_finished_says_nothing_was_kept(tmp_path,
     assert not out.exists() and not staging_path(out).exists()
 
 
-def test_a_stopped_rerun_never_counts_the_earlier_runs_stages_as_kept(tmp_path, monkeypatch, capsys):
-    """A rerun starts from the earlier run's files: stopped before a stage of its own finished, it keeps
-    nothing and says so (it named the earlier run's stages as kept), and the earlier folder stays whole."""
+@pytest.mark.parametrize("links", [True, False], ids=["hard links", "copies"])
+def test_a_stopped_rerun_never_counts_the_earlier_runs_stages_as_kept(tmp_path, monkeypatch, capsys, links):
+    """A rerun starts from the earlier run's files (hard-linked, or copied where links fail): stopped before
+    a stage of its own finished, it keeps nothing and says so (it named the earlier run's stages as kept),
+    and the earlier folder stays whole."""
+    import scenefit.core.base.output_folder as output_folder
     import scenefit.core.stages.convert as convert
     from scenefit.cli import main
     from scenefit.core.base.output_folder import staging_path
 
     asset, out, args = _grey_sphere_run(tmp_path)
     assert main(args) == 0
+    if not links:   # a file system without hard links
+        def no_links(*_):
+            raise OSError("no hard links here")
+        monkeypatch.setattr(output_folder.os, "link", no_links)
     before = (out / "report.json").read_bytes()
     save_asset_folder(uv_sphere(0.5, 12, 6), PBRMaps(np.full((16, 16, 3), 0.3, np.float32), 0.5, 0.0), asset)
     monkeypatch.setattr(convert, "convert_and_bake", _interrupted)   # the changed asset's convert, stopped

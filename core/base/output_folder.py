@@ -26,6 +26,7 @@ The contract (README "Output folders"):
 from __future__ import annotations
 
 import errno
+import filecmp
 import json
 import os
 import shutil
@@ -292,12 +293,13 @@ def _link_or_copy(src: str, dst: str) -> None:
 
 def _finished_here(staging: Path, out: Path) -> list[str]:
     """The stages finished in `staging` that `out` does not already hold (a `run` starts its staging folder
-    from `out`'s files, hard-linked: those are no work of this run), in the order they finished."""
+    from `out`'s files, hard-linked or, where links fail, copied: those are no work of this run), in the
+    order they finished."""
     found = []
     for path in staging.glob("*/stage.json"):
         same = out / path.parent.name / "stage.json"
         try:
-            if same.is_file() and os.path.samefile(path, same):
+            if same.is_file() and filecmp.cmp(path, same, shallow=False):
                 continue
             found.append((path.stat().st_mtime_ns, path.parent.name))
         except OSError:
