@@ -156,6 +156,7 @@ def one_asset(path: Path, work: Path, timeout: float) -> dict:
             row["size_ratio"] = round(baked.stat().st_size / max(1, asset_bytes(path)), 2)
         if row["bake"]["rc"] == 0 and read_gltf(baked)[0].get("images"):
             row["ktx2"] = ktx2_bake(cli, path, texture, baked, work, timeout)
+        row["gltf"] = separate_bake(cli, path, texture, work, timeout)
     row["status"] = status(row)
     return row
 
@@ -168,6 +169,19 @@ def ktx2_bake(cli: list[str], path: Path, texture: Path, baked: Path, work: Path
     if out.is_file():
         result["validator"] = validate(out)
         result["size_vs_bake"] = round(out.stat().st_size / baked.stat().st_size, 2)
+    return result
+
+
+def separate_bake(cli: list[str], path: Path, texture: Path, work: Path, timeout: float) -> dict:
+    """The same bake as a .gltf with its .bin and images beside it: its time, validator counts, what of the
+    input it lost, and what a .gltf cannot hold of the input (meshopt, KTX2: written plain and said)."""
+    out, report = work / "bake_gltf" / f"{path.stem}.gltf", work / "bake_gltf.json"
+    result = timed(cli + ["bake", str(path), "--texture", str(texture), "--out", str(out), "--report", str(report),
+                          "--quiet"], timeout)
+    if out.is_file():
+        result["validator"] = validate(out)
+        result["lost"] = kept_and_lost(path, out)[1]
+        result["unlike_input"] = json.loads(report.read_text()).get("output", {}).get("unlike_input", [])
     return result
 
 
@@ -238,8 +252,9 @@ def markdown(rows: list[dict], runs: list[dict], load: str) -> str:
              f"Made by `make corpus` (benchmarks/corpus.py) on {time.strftime('%Y-%m-%d')}; load average at the "
              f"start: {load}. {ok} of {len(rows)} assets pass (convert >= 30 dB, bake, 0 validator errors).\n",
              "| asset | file | status | convert s | convert GB | PSNR dB | bake s | validator errors / warnings "
-             "(input -> output) | size vs input | KTX2 bake: size vs bake, errors | kept | lost | message |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "(input -> output) | size vs input | KTX2 bake: size vs bake, errors | .gltf bake: errors, lost | kept | "
+             "lost | message |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         vin, vout = r.get("input_validator", {}), r.get("output_validator", {})
         counts = (f"{vin.get('errors', '-')}/{vin.get('warnings', '-')} -> {vout.get('errors', '-')}/"
@@ -247,7 +262,8 @@ def markdown(rows: list[dict], runs: list[dict], load: str) -> str:
         message = (r.get("bake", {}).get("message") if r["convert"]["rc"] == 0 else r["convert"]["message"]) or ""
         lines.append(f"| {r['asset']} | {r['file']} | {r['status']} | {r['convert']['seconds']} | "
                      f"{r['convert']['peak_gb']} | {r.get('psnr_db', '-')} | {r.get('bake', {}).get('seconds', '-')} | "
-                     f"{counts} | {r.get('size_ratio', '-')} | {ktx2_cell(r.get('ktx2'))} | {'; '.join(r.get('kept', []))} | "
+                     f"{counts} | {r.get('size_ratio', '-')} | {ktx2_cell(r.get('ktx2'))} | {gltf_cell(r.get('gltf'))} | "
+                     f"{'; '.join(r.get('kept', []))} | "
                      f"{'; '.join(r.get('lost', []))} | {message.replace('|', '/')} |")
     if runs:
         lines += ["\n## `scenefit run --preset draft --guidance none` on real photos\n",
@@ -259,6 +275,17 @@ def markdown(rows: list[dict], runs: list[dict], load: str) -> str:
             lines.append(f"| {r['asset']} | {r['photo']} | {r['rc']} | {r['seconds']} | {r['peak_gb']} | {per} | "
                          f"{r['message'].replace('|', '/')} |")
     return "\n".join(lines) + "\n"
+
+
+def gltf_cell(bake: dict | None) -> str:
+    if not bake:
+        return "-"
+    if bake["rc"] != 0:
+        return f"exit {bake['rc']}"
+    words = [f"{bake.get('validator', {}).get('errors', '-')} errors"]
+    words += [f"lost {'; '.join(bake['lost'])}"] if bake.get("lost") else []
+    words += [why.split(':')[0] for why in bake.get("unlike_input", [])]   # "the input's meshopt compression is ..."
+    return ", ".join(words)
 
 
 def ktx2_cell(ktx2: dict | None) -> str:

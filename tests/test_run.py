@@ -196,7 +196,7 @@ def test_a_run_refused_mid_way_says_which_finished_stages_it_kept(tmp_path, caps
     message = capsys.readouterr().err.strip()
     assert len(message.splitlines()) == 1 and "above the horizon" in message
     assert message.endswith(f"The finished stages (convert) are kept beside '{out}' in '.run.partial'; the next run "
-                            "into it reuses them.")
+                            "into it reuses each whose inputs and settings are the same.")
     assert not out.exists()
     assert main([*args, "--sun-from-shadow", "0.5,0.9", "0.5,0.8", "0.3,0.95"]) == 0
     assert json.loads((out / "report.json").read_text())["reused"] == ["convert"]

@@ -324,7 +324,8 @@ def kept_stages_sentence(error: BaseException, out: str | os.PathLike) -> str:
     if not kept:
         return ""
     return (f" The finished stages ({', '.join(kept)}) are kept beside '{out}' in "
-            f"'{staging_path(Path(out)).name}'; the next run into it reuses them.")
+            f"'{staging_path(Path(out)).name}'; the next run into it reuses each whose inputs and settings are "
+            "the same.")
 
 
 @contextmanager
