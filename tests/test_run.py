@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 import subprocess
 import sys
 
@@ -186,23 +187,51 @@ def test_a_stopped_rerun_never_counts_the_earlier_runs_stages_as_kept(tmp_path, 
     assert not staging_path(out).exists() and (out / "report.json").read_bytes() == before
 
 
-def test_a_run_refused_mid_way_says_which_finished_stages_it_kept(tmp_path, capsys):
-    """A shadow point in the sky is found only once the camera is known (the light stage, after convert):
-    the refusal names what was kept for the next run, and the next run reuses it."""
+def test_a_run_refused_mid_way_says_which_finished_stages_it_kept(tmp_path, monkeypatch, capsys):
+    """A refusal once stages have finished (here compose's, after convert and light) names what was kept for
+    the next run, and the next run reuses it."""
+    import scenefit.core.stages.compose as compose
     from scenefit.cli import main
+    from scenefit.core.base.errors import InputError
 
-    asset, out, args = _grey_sphere_run(tmp_path)
-    assert main([*args, "--sun-from-shadow", "0.5,0.9", "0.5,0.8", "0.3,0.02"]) == 2   # the tip in the sky
+    _, out, args = _grey_sphere_run(tmp_path)
+
+    def refused(*_, **__):
+        raise InputError("Compose refused this.")
+
+    monkeypatch.setattr(compose, "compose_to_folder", refused)
+    assert main(args) == 2
     message = capsys.readouterr().err.strip()
-    assert len(message.splitlines()) == 1 and "above the horizon" in message
-    assert message.endswith(f"The finished stages (convert) are kept beside '{out}' in '.run.partial'; the next run "
-                            "into it reuses each whose inputs and settings are the same.")
+    assert message == (f"scenefit: error: Compose refused this. The finished stages (convert, light) are kept beside "
+                       f"'{out}' in '.run.partial'; the next run into it reuses each whose inputs and settings are "
+                       "the same.")
     assert not out.exists()
-    assert main([*args, "--sun-from-shadow", "0.5,0.9", "0.5,0.8", "0.3,0.95"]) == 0
-    assert json.loads((out / "report.json").read_text())["reused"] == ["convert"]
+    monkeypatch.undo()
+    assert main(args) == 0
+    assert json.loads((out / "report.json").read_text())["reused"] == ["convert", "light"]
     # A refusal before any stage ran keeps nothing and says nothing of it.
     assert main([*args, "--at", "0.5,1.5"]) == 2
     assert "kept beside" not in capsys.readouterr().err
+
+
+def test_what_only_the_camera_shows_is_refused_before_any_work(tmp_path, monkeypatch, capsys):
+    """A shadow tip in the sky and an asset too flat to stand in view were found by the light stage and
+    compose, after convert had run (the corpus's palm tree on its ground plane: convert and light first)."""
+    import scenefit.core.stages.convert as convert
+    from scenefit.cli import main
+
+    monkeypatch.setattr(convert, "convert_and_bake", _interrupted)   # any work would stop the test with 130
+    _, out, args = _grey_sphere_run(tmp_path)
+    assert main([*args, "--sun-from-shadow", "0.5,0.9", "0.5,0.8", "0.3,0.02"]) == 2   # the tip in the sky
+    said = capsys.readouterr().err.strip()
+    assert len(said.splitlines()) == 1 and "above the horizon" in said and "kept" not in said
+    sphere = uv_sphere(0.5, 12, 6)
+    plane = replace(sphere, positions=sphere.positions * np.float32([1.0, 1.0, 0.01]))   # 100 times as wide as tall
+    save_asset_folder(plane, PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0), tmp_path / "flat")
+    assert main([str(tmp_path / "flat") if a == str(tmp_path / "asset") else a for a in args]) == 2
+    said = capsys.readouterr().err.strip()
+    assert "times as wide as it is tall (a ground plane?)" in said and len(said.splitlines()) == 1
+    assert not out.exists() and not (tmp_path / ".run.partial").exists()
 
 
 def _sphere_and_photo(tmp_path):

@@ -237,6 +237,7 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     """
     run = PipelineRun(mesh, maps, photo_path, placement, out_dir, config, progress, cancel, models,  # 1. inputs
                       reuse_from)
+    run.check_the_view()                  #    ... and where the asset stands, seen by the photo's camera
     run.convert()                         # 2. the asset's maps -> neural texture
     with run.baking(bake, bake_skipped_why):  # 6. the texture written into the asset's own file (glTF): a process
         run.light()                       # 3.    of its own, from when the texture is final (after 2, or after 4)
@@ -291,6 +292,7 @@ class PipelineRun:
         self.normalized, _ = normalize_to_unit_sphere(mesh)
         self.runner = StageRunner(self.out, progress, cancel, Path(reuse_from).resolve() if reuse_from else None)
         self.texture_path = self.light_path = None
+        self.camera: tuple[PhotoCamera, dict] | None = None   # the photo's camera, once estimated
         self.keys: dict[str, str] = {}
         self.texture_final: Callable[[], None] = lambda: None   # what waits for the final texture (the bake)
 
@@ -386,15 +388,34 @@ class PipelineRun:
     def photo_camera(self) -> tuple[PhotoCamera, dict]:
         """The photo's camera for the light stage (whose report hands it to adapt and compose) and
         where it came from: the caller's, else the estimate (fSpy, EXIF, the photo's lines, or the
-        defaults, each field saying which) with the user's values over it."""
-        h, w = self.photo.shape[:2]
-        if self.config.photo_camera is not None:
-            return replace(self.config.photo_camera, width=w, height=h), {"source": "given by the caller"}
-        from ..stages.camera import photo_camera_estimate
+        defaults, each field saying which) with the user's values over it. Estimated once a run."""
+        if self.camera is None:
+            h, w = self.photo.shape[:2]
+            if self.config.photo_camera is not None:
+                self.camera = replace(self.config.photo_camera, width=w, height=h), {"source": "given by the caller"}
+            else:
+                from ..stages.camera import photo_camera_estimate
 
-        estimate = photo_camera_estimate(self.photo_path, self.config.fspy, self.config.camera_overrides,
-                                         self.config.camera_source, self.config.camera_why)
-        return estimate.photo_camera(width=w, height=h), estimate.to_dict()
+                estimate = photo_camera_estimate(self.photo_path, self.config.fspy, self.config.camera_overrides,
+                                                 self.config.camera_source, self.config.camera_why)
+                self.camera = estimate.photo_camera(width=w, height=h), estimate.to_dict()
+        return self.camera
+
+    def check_the_view(self) -> None:
+        """What only the photo's camera shows wrong with the inputs, before any work: a shadow point in the
+        sky, an asset that cannot stand where it was put (a ground plane reaching behind the camera). The
+        light stage and compose found them after convert (and adapt) had run; they find the same."""
+        from ..scene.asset_pose import place_asset
+
+        camera, _ = self.photo_camera()
+        if self.config.sun_shadow is not None:
+            from ..stages.light.shadow_hint import sun_from_shadow_points
+
+            sun_from_shadow_points(self.config.sun_shadow, camera, tuple(self.photo_info["size"]),
+                                   self.photo.shape[:2])
+        size = self.stage_config("compose", size=self.config.size, shadow_type=self.config.shadow_type,
+                                 spp=self.config.compose_spp).size
+        place_asset(self.normalized, camera, self.placement_px, size, self.config.turn_deg)
 
     def adapt(self) -> None:
         from ..stages.adapt import adapt_and_bake
