@@ -181,7 +181,8 @@ def separate_bake(cli: list[str], path: Path, texture: Path, work: Path, timeout
     if out.is_file():
         result["validator"] = validate(out)
         result["lost"] = kept_and_lost(path, out)[1]
-        result["unlike_input"] = json.loads(report.read_text()).get("output", {}).get("unlike_input", [])
+        if report.is_file():
+            result["unlike_input"] = json.loads(report.read_text()).get("output", {}).get("unlike_input", [])
     return result
 
 

@@ -234,6 +234,23 @@ def test_what_only_the_camera_shows_is_refused_before_any_work(tmp_path, monkeyp
     assert not out.exists() and not (tmp_path / ".run.partial").exists()
 
 
+def test_a_run_that_reuses_every_stage_does_not_estimate_the_camera_again(tmp_path, monkeypatch):
+    """The check runs before the first stage that works; a rerun that reuses them all passed it before
+    (estimating the camera again cost 1-3 s per rerun)."""
+    import scenefit.core.stages.camera as camera
+    from scenefit.cli import main
+
+    _, out, args = _grey_sphere_run(tmp_path)
+    assert main(args) == 0
+
+    def estimated(*_, **__):
+        raise AssertionError("the camera was estimated again")
+
+    monkeypatch.setattr(camera, "photo_camera_estimate", estimated)
+    assert main(args) == 0
+    assert json.loads((out / "report.json").read_text())["reused"] == ["convert", "light", "compose"]
+
+
 def _sphere_and_photo(tmp_path):
     maps = PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0)
     photo = write_image(tmp_path / "photo.png", np.broadcast_to(np.linspace(0.9, 0.3, 48)[:, None, None],

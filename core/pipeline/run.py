@@ -125,9 +125,10 @@ class StageRunner:
     """Runs or reuses one stage at a time, and keeps the run's report."""
 
     def __init__(self, out: Path, progress: ProgressCallback | None, cancel: threading.Event | None,
-                 earlier: Path | None = None) -> None:
+                 earlier: Path | None = None, before_work: Callable[[], None] | None = None) -> None:
         self.out, self.progress, self.cancel = out, progress, cancel
         self.earlier = earlier   # a finished run's folder: a stage of it with this run's key is copied in, not redone
+        self.before_work = before_work   # called once, before the first stage that is not reused
         self.stages: dict[str, dict] = {}
         self.fresh = False   # once a stage runs, every later stage runs too
 
@@ -163,6 +164,9 @@ class StageRunner:
             if source:
                 self.stages[name]["from"] = str(self.earlier)
             return lambda: report
+        if self.before_work is not None:
+            check, self.before_work = self.before_work, None
+            check()
         self.fresh = self.fresh or later_stages_follow
         emit(self.progress, "run", index, len(STAGES), f"{name}: running")
         t0 = time.perf_counter()
@@ -237,7 +241,6 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     """
     run = PipelineRun(mesh, maps, photo_path, placement, out_dir, config, progress, cancel, models,  # 1. inputs
                       reuse_from)
-    run.check_the_view()                  #    ... and where the asset stands, seen by the photo's camera
     run.convert()                         # 2. the asset's maps -> neural texture
     with run.baking(bake, bake_skipped_why):  # 6. the texture written into the asset's own file (glTF): a process
         run.light()                       # 3.    of its own, from when the texture is final (after 2, or after 4)
@@ -290,7 +293,8 @@ class PipelineRun:
         self.asset_key = asset_digest(mesh, maps)
         self.photo_key = _digest(self.photo_path.read_bytes())
         self.normalized, _ = normalize_to_unit_sphere(mesh)
-        self.runner = StageRunner(self.out, progress, cancel, Path(reuse_from).resolve() if reuse_from else None)
+        self.runner = StageRunner(self.out, progress, cancel, Path(reuse_from).resolve() if reuse_from else None,
+                                  before_work=self.check_the_view)
         self.texture_path = self.light_path = None
         self.camera: tuple[PhotoCamera, dict] | None = None   # the photo's camera, once estimated
         self.keys: dict[str, str] = {}
@@ -402,20 +406,38 @@ class PipelineRun:
         return self.camera
 
     def check_the_view(self) -> None:
-        """What only the photo's camera shows wrong with the inputs, before any work: a shadow point in the
-        sky, an asset that cannot stand where it was put (a ground plane reaching behind the camera). The
-        light stage and compose found them after convert (and adapt) had run; they find the same."""
+        """What only the photo's camera shows wrong with the inputs, before the run's first work (the
+        StageRunner calls it once, when a stage is about to run; a run that reuses every stage passed it
+        before): a shadow point in the sky, an asset that cannot stand where it was put (a ground plane
+        reaching behind the camera) at compose's turn or at adapt's. The light stage, adapt and compose
+        found them after convert (and light) had run; they find the same, with the same camera."""
         from ..scene.asset_pose import place_asset
 
-        camera, _ = self.photo_camera()
+        h, w = self.photo.shape[:2]
+        if self.light_path is not None and self.light_path.is_file():   # the light stage's camera, as compose's
+            from ..stages.compose import light_camera
+
+            camera = light_camera(self.light_path, self.photo_info, w, h)[0]
+        else:
+            camera = self.photo_camera()[0]
         if self.config.sun_shadow is not None:
             from ..stages.light.shadow_hint import sun_from_shadow_points
 
-            sun_from_shadow_points(self.config.sun_shadow, camera, tuple(self.photo_info["size"]),
-                                   self.photo.shape[:2])
+            sun_from_shadow_points(self.config.sun_shadow, camera, tuple(self.photo_info["size"]), (h, w))
         size = self.stage_config("compose", size=self.config.size, shadow_type=self.config.shadow_type,
                                  spp=self.config.compose_spp).size
         place_asset(self.normalized, camera, self.placement_px, size, self.config.turn_deg)
+        if self.found:   # adapt's global views place it at each of its azimuths' turns, at most the photo's height
+            from ..stages.adapt.global_views import turn_for_azimuth
+
+            views = self.adapt_config().views
+            for turn in sorted({turn_for_azimuth(360.0 * k / views) for k in range(views)}):
+                place_asset(self.normalized, camera, self.placement_px, min(1.0, self.config.size), turn)
+
+    def adapt_config(self):
+        """The adapt stage's config: scene mode, the run's prompt (or one from the asset's name)."""
+        prompt = self.config.prompt or f"a {self.mesh.name} in this scene, photo"
+        return self.stage_config("adapt", mode_type="scene", prompt=prompt, models=self.config.models)
 
     def adapt(self) -> None:
         from ..stages.adapt import adapt_and_bake
@@ -428,8 +450,7 @@ class PipelineRun:
                              f"converted texture is composed as it is ({self.where})"
                              if self.config.guidance_type == "auto" else self.where)
             return
-        prompt = self.config.prompt or f"a {self.mesh.name} in this scene, photo"
-        config = self.stage_config("adapt", mode_type="scene", prompt=prompt, models=self.config.models)
+        config = self.adapt_config()
         # The global views are the compose stage's composite: same point, size and camera as compose below.
         h, w = self.photo.shape[:2]
         placement = Placement((self.placement_px[0] / w, self.placement_px[1] / h), min(1.0, self.config.size))
