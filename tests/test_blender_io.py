@@ -1,5 +1,4 @@
 """blender_io: Blender data -> core arrays (exact on known data), originals untouched, example asset."""
-import json
 
 import numpy as np
 import pytest
@@ -188,8 +187,8 @@ def test_operators_take_the_materials_the_faces_use(run_py):
         out = {"one": [m.name for m in layout.materials], "slots": layout.slots}
         obj.data.polygons[0].material_index = 0            # now the faces use two materials: both are the asset's
         out["two"] = [m.name for m in asset_layout(bpy.context).materials]
-        print(json.dumps(out))
+        print("JSON" + json.dumps(out))
     """)
-    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    out = printed_json(proc)
     assert out["one"] == ["Painted"] and out["slots"] == [[["Cube", 1]]]
     assert out["two"] == ["Unused", "Painted"]

@@ -1,6 +1,7 @@
 """core/ never imports bpy: import every core module with bpy made unimportable."""
-import json
 from pathlib import Path
+
+from conftest import printed_json
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -27,9 +28,9 @@ def test_every_core_module_imports_without_bpy(run_py):
             imported.append(name)
         import scenefit  # the package root must not import bpy either
         assert "bpy" not in sys.modules
-        print(json.dumps(imported))
+        print("JSON" + json.dumps(imported))
     """)
-    assert json.loads(proc.stdout.strip().splitlines()[-1]) == modules
+    assert printed_json(proc) == modules
 
 
 def test_blocker_really_blocks_bpy(run_py):

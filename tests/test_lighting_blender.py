@@ -1,7 +1,6 @@
 """The estimated map lights a sphere in Blender (Cycles, World nodes) from the same side as in Mitsuba."""
 from __future__ import annotations
 
-import json
 
 import numpy as np
 import torch
@@ -11,6 +10,8 @@ from scenefit.core.data.imageio import read_image, write_image
 from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.render.renderer import AssetRenderer
 from scenefit.core.scene.frame import equirect_directions
+
+from conftest import printed_json
 
 SIZE = 32
 LIGHT = np.array([1.0, -1.0, 1.0]) / np.sqrt(3.0)   # right of, towards and above the camera at azimuth 0
@@ -74,11 +75,11 @@ def test_estimated_map_lights_a_sphere_from_the_same_side_in_blender_and_mitsuba
         scene.render.image_settings.file_format = 'OPEN_EXR'
         scene.render.filepath = {str(tmp_path / 'cycles.exr')!r}
         bpy.ops.render.render(write_still=True)
-        print("RESULT", json.dumps({{"before": before, "after": (mine.name, len(mine.node_tree.nodes)),
+        print("JSON" + json.dumps({{"before": before, "after": (mine.name, len(mine.node_tree.nodes)),
                                     "fake_user": mine.use_fake_user, "world": scene.world.name,
                                     "nodes": sorted(n.bl_idname for n in world.node_tree.nodes)}}))
     """)
-    info = json.loads(proc.stdout.split("RESULT", 1)[1])
+    info = printed_json(proc)
     assert info["before"] == info["after"] and info["fake_user"]     # the user's world is untouched and kept
     assert info["world"] == "SceneFit Light"
     assert info["nodes"] == ["ShaderNodeBackground", "ShaderNodeMapping", "ShaderNodeOutputWorld",

@@ -3,10 +3,11 @@ or mirrors it, places the mesh so in convert, compose and bake alike (the baked 
 transforms, so reading the mesh in object space composited a rotated painting lying flat)."""
 from __future__ import annotations
 
-import json
 
 import numpy as np
 import pytest
+
+from conftest import printed_json
 
 pytestmark = pytest.mark.blender
 
@@ -54,7 +55,7 @@ for name in out:
     geometric = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     shading = np.asarray(mesh.normals)[np.asarray(mesh.faces)].mean(axis=1)
     out[name]["outward"] = float(np.mean(np.sum(geometric * shading, axis=1) > 0))
-print(json.dumps(out))
+print("JSON" + json.dumps(out))
 """
 
 
@@ -64,7 +65,7 @@ def _extent(points: np.ndarray) -> np.ndarray:
 
 def test_a_rotated_and_a_mirrored_node_are_read_as_the_file_places_them(tmp_path, run_py):
     proc = run_py(CHECK.replace("FOLDER", repr(str(tmp_path))), timeout=600)
-    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    out = printed_json(proc)
     upright = out["upright"]
     got, want = np.array(upright["positions"]), np.array(upright["expected"])
     # glTF is Y-up and Blender Z-up; the importer converts, so Blender's world frame is what counts.

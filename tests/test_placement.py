@@ -12,6 +12,8 @@ from scenefit.core.base.errors import InputError
 from scenefit.core.scene.asset_pose import asset_in_view, camera_for_placement
 from scenefit.core.scene.camera import PhotoCamera
 
+from conftest import printed_json
+
 RECT = frame_rect([(300.0, 500.0), (300.0, 200.0), (100.0, 200.0), (100.0, 500.0)])  # view_frame order
 
 
@@ -199,9 +201,9 @@ def test_blender_shows_a_sideways_stored_photo_upright_like_the_pipeline(tmp_pat
         w, h = shown.size
         px = np.array(shown.pixels[:]).reshape(h, w, 4)[::-1, :, :3]
         ours, _ = load_photo({str(photo)!r})
-        print(json.dumps({{"size": [w, h], "packed": shown.packed_file is not None,
+        print("JSON" + json.dumps({{"size": [w, h], "packed": shown.packed_file is not None,
                           "diff": float(np.abs(px - ours).max())}}))
     """)
-    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    result = printed_json(proc)
     assert result["size"] == [40, 60] and result["packed"]
     assert result["diff"] < 2 / 255

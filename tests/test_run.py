@@ -107,10 +107,7 @@ def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monk
     args = ["run", str(asset), "--photo", str(photo_path), "--at", "0.5,0.8", "--out", str(out), "--preset", "draft",
             "--guidance", "none", "--spp", "2", "--quiet"]
 
-    def interrupted(*_, **__):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(compose, "compose_to_folder", interrupted)   # Ctrl-C during the compose stage
+    monkeypatch.setattr(compose, "compose_to_folder", _interrupted)   # Ctrl-C during the compose stage
     assert main(args) == 130
     message = capsys.readouterr().err
     assert "stages finished so far (convert, light) are kept beside it" in message

@@ -424,25 +424,35 @@ class PipelineRun:
             from ..stages.light.shadow_hint import sun_from_shadow_points
 
             sun_from_shadow_points(self.config.sun_shadow, camera, tuple(self.photo_info["size"]), (h, w))
-        size = self.stage_config("compose", size=self.config.size, shadow_type=self.config.shadow_type,
-                                 spp=self.config.compose_spp).size
-        place_asset(self.normalized, camera, self.placement_px, size, self.config.turn_deg)
-        if self.found:   # adapt's global views place it at each of its azimuths' turns, at most the photo's height
-            from ..stages.adapt.global_views import turn_for_azimuth
+        place_asset(self.normalized, camera, self.placement_px, self.compose_config().size, self.config.turn_deg)
+        if self.found:   # adapt's global views place it at each of its azimuths' turns
+            from ..stages.adapt.global_views import placement_turns
+            from ..stages.adapt.sampling import view_azimuths
 
-            views = self.adapt_config().views
-            for turn in sorted({turn_for_azimuth(360.0 * k / views) for k in range(views)}):
-                place_asset(self.normalized, camera, self.placement_px, min(1.0, self.config.size), turn)
+            size = self.adapt_placement().size
+            for turn in placement_turns(view_azimuths(self.adapt_config().views)):
+                place_asset(self.normalized, camera, self.placement_px, size, turn)
 
     def adapt_config(self):
         """The adapt stage's config: scene mode, the run's prompt (or one from the asset's name)."""
         prompt = self.config.prompt or f"a {self.mesh.name} in this scene, photo"
         return self.stage_config("adapt", mode_type="scene", prompt=prompt, models=self.config.models)
 
+    def adapt_placement(self):
+        """Where adapt's global views place the asset: compose's point, at most the photo's height."""
+        from ..scene.placement import Placement
+
+        h, w = self.photo.shape[:2]
+        return Placement((self.placement_px[0] / w, self.placement_px[1] / h), min(1.0, self.config.size))
+
+    def compose_config(self):
+        """The compose stage's config: the run's size, shadow and samples over the preset's."""
+        return self.stage_config("compose", size=self.config.size, shadow_type=self.config.shadow_type,
+                                 spp=self.config.compose_spp)
+
     def adapt(self) -> None:
         from ..stages.adapt import adapt_and_bake
         from ..stages.compose import light_camera
-        from ..scene.placement import Placement
         from ..texture.bake import WEIGHTS_FILE, load_neural_texture
 
         if not self.found:
@@ -453,7 +463,7 @@ class PipelineRun:
         config = self.adapt_config()
         # The global views are the compose stage's composite: same point, size and camera as compose below.
         h, w = self.photo.shape[:2]
-        placement = Placement((self.placement_px[0] / w, self.placement_px[1] / h), min(1.0, self.config.size))
+        placement = self.adapt_placement()
         self.keys["adapt"] = _digest("adapt", config.to_dict(), self.keys["convert"], self.photo_key,
                                      asdict(placement), self.keys["light"])
         texture_path = self.texture_path
@@ -475,8 +485,7 @@ class PipelineRun:
         from ..texture.surface_layout import texture_view
         from ..texture.bake import load_neural_texture
 
-        config = self.stage_config("compose", size=self.config.size, shadow_type=self.config.shadow_type,
-                                   spp=self.config.compose_spp)
+        config = self.compose_config()
         self.keys["compose"] = _digest("compose", asdict(config), self.upstream, self.keys["light"], self.photo_key,
                                        self.placement_px, self.config.turn_deg)
         texture_path, light_path = self.texture_path, self.light_path

@@ -42,6 +42,11 @@ def turn_for_azimuth(azimuth_deg: float) -> float:
     return float(-azimuth_deg % 360.0)
 
 
+def placement_turns(azimuths) -> list[float]:
+    """The distinct turns the asset is placed at for orbit cameras at `azimuths` (degrees)."""
+    return sorted({turn_for_azimuth(a) for a in azimuths})
+
+
 class GlobalScene:
     """The photo, its camera and the asset placed in it; renders a view's asset layer and shadow."""
 
@@ -60,7 +65,7 @@ class GlobalScene:
                                             max_depth=max_depth, seed=seed)
         self.placements: dict[float, ObjectPlacement] = {
             turn: place_asset(self.mesh, self.camera, self.pixel, placement.size, turn)
-            for turn in sorted({turn_for_azimuth(a) for a in azimuths})}
+            for turn in placement_turns(azimuths)}
         boxes = np.array([p.pixel_box for p in self.placements.values()])
         self.window = (int(boxes[:, 0].min()), int(boxes[:, 1].min()), int(boxes[:, 2].max()), int(boxes[:, 3].max()))
         self.renderer = AssetRenderer(self.mesh, maps_shape, self.envmap,

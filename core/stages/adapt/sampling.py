@@ -133,8 +133,13 @@ def sample_camera(config: AdaptConfig, rng: np.random.Generator, size: int) -> C
     return _camera(config, rng, int(rng.integers(config.views)), size)
 
 
+def view_azimuths(views: int) -> list[float]:
+    """The `views` evenly spaced azimuths (degrees) the orbit cameras are drawn from."""
+    return [360.0 * k / views for k in range(views)]
+
+
 def _camera(config: AdaptConfig, rng: np.random.Generator, k: int, size: int) -> Camera:
-    azimuth = 360.0 * k / config.views
+    azimuth = view_azimuths(config.views)[k]
     if config.elevation_choices:
         elevation = float(config.elevation_choices[int(rng.integers(len(config.elevation_choices)))])
         elevation = float(np.clip(elevation + rng.uniform(-5.0, 5.0), -89.0, 89.0))

@@ -41,7 +41,7 @@ from .config import AdaptConfig
 from .constants import ConstantWork, ViewConstants, bank_box
 from .distributed import join_process_group, rank_world, sum_gradients, views_of_rank
 from .global_views import GlobalRender, GlobalScene
-from .sampling import ViewSample, draw_view_bank, sample_view, uses_view_bank
+from .sampling import ViewSample, draw_view_bank, sample_view, uses_view_bank, view_azimuths
 
 PHASES = ("constants", "render", "vae", "unet", "vae_backward", "render_backward", "lora", "step")
 
@@ -357,7 +357,7 @@ def _global_scene(inputs: AdaptInputs, config: AdaptConfig, photo: np.ndarray, e
     """The photo, its camera (the light stage's) and the asset placed in it, for the global views."""
     h, w = photo.shape[:2]
     camera = inputs.photo_camera or photo_camera_for({}, w, h)[0]
-    azimuths = [360.0 * k / config.views for k in range(config.views)]  # sample_camera's choices
+    azimuths = view_azimuths(config.views)  # sample_camera's choices
     return GlobalScene(inputs.mesh, inputs.raster.resolution, photo, inputs.placement, camera, envmap, azimuths,
                        config.max_depth, config.shadow_type, config.shadow_spp, config.seed)
 

@@ -48,12 +48,6 @@ class GltfOutput:
                 **({"unlike_input": list(self.unlike_input)} if self.unlike_input else {})}
 
 
-def _document(path: Path) -> dict:
-    from ...data.glb import gltf_json
-
-    return gltf_json(path) if path.suffix.lower() in (".gltf", ".glb") else {}
-
-
 def _image_format(image: dict) -> str | None:
     if image.get("mimeType") in _FORMAT_OF_MIME:
         return _FORMAT_OF_MIME[image["mimeType"]]
@@ -61,9 +55,8 @@ def _image_format(image: dict) -> str | None:
 
 
 # Written into .glb files only (meshoptimizer's encoder and KTX2's rewrite work on the binary chunk), and
-# what a .gltf gets instead of an input's, or can be given.
+# what a .gltf can be given instead.
 GLB_ONLY = {"compress": "meshopt", "textures": "ktx2"}
-_PLAIN = {"compress": "none", "textures": "png"}
 _OTHERS = {"compress": "none or draco", "textures": "png, jpeg or webp"}
 
 
@@ -89,19 +82,22 @@ def output_like_input(asset: str | Path | None, compress: str | None = None, tex
     .gltf (`unlike_input` says so; given ones are the caller's to refuse). Tangents where the input has
     them (and, for inputs that are not glTF, where a loaded material has a normal map:
     blender_io.gltf_export)."""
-    document = _document(Path(asset)) if asset is not None else {}
+    from ...data.glb import gltf_json
+
+    is_gltf = asset is not None and Path(asset).suffix.lower() in (".gltf", ".glb")
+    document = gltf_json(Path(asset)) if is_gltf else {}
     used = document.get("extensionsUsed", [])
     unlike = []
     if compress is None:
         compress = next((c for e, c in _COMPRESSION_OF_EXTENSION.items() if e in used), "none")
-        if glb_only(GltfOutput(compress=compress), file_format):
-            compress = _PLAIN["compress"]
+        if file_format != "glb" and compress == GLB_ONLY["compress"]:
+            compress = "none"
             unlike.append("the input's meshopt compression is written into .glb files only: none in this .gltf")
     if textures is None:
         formats = [_image_format(image) for image in document.get("images", [])]
         textures = max(set(formats) - {None}, key=formats.count, default="png")
-        if glb_only(GltfOutput(textures=textures), file_format):
-            textures = _PLAIN["textures"]
+        if file_format != "glb" and textures == GLB_ONLY["textures"]:
+            textures = "png"
             unlike.append("the input's KTX2 textures are written into .glb files only: PNG in this .gltf")
     attributes = [set(primitive.get("attributes", {})) for mesh in document.get("meshes", [])
                   for primitive in mesh.get("primitives", [])]
@@ -109,8 +105,7 @@ def output_like_input(asset: str | Path | None, compress: str | None = None, tex
     normals = not attributes or tangents or any("NORMAL" in names for names in attributes)
     # A glTF's skinned meshes stay where it had them; another kind of file has no say, so they go to the
     # root, where glTF wants them (the validator warns NODE_SKINNED_MESH_NON_ROOT under Blender's armature).
-    at_root = _skinned_meshes_at_root(document) if asset is not None and \
-        Path(asset).suffix.lower() in (".gltf", ".glb") else True
+    at_root = _skinned_meshes_at_root(document) if is_gltf else True
     return GltfOutput(compress, textures, DEFAULT_MAX_TEXTURE if max_texture is None else max_texture, tangents,
                       at_root, normals, tuple(unlike))
 
