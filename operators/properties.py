@@ -6,7 +6,7 @@ only the artist's choices and the datablocks SceneFit made are saved with the .b
 import math
 
 import bpy
-from bpy.props import (CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
                        PointerProperty, StringProperty)
 
 from ..core.pipeline.presets import PRESET_DESCRIPTIONS, PRESET_NAMES
@@ -50,9 +50,17 @@ PATH = _path_options()
 
 def _sun_typed(settings, _context) -> None:
     """A direction typed in is as sure as it was typed: an earlier Pick Sun's uncertainty no longer applies
-    (Pick Sun sets the direction first and its own uncertainty after)."""
-    if settings.sun_uncertainty != 0.0:
+    (Pick Sun sets the direction first and its own uncertainty after). One the artist typed stays: it
+    says how sure they are of whatever direction they set."""
+    if settings.sun_uncertainty_picked and settings.sun_uncertainty != 0.0:
         settings.sun_uncertainty = 0.0
+
+
+def _uncertainty_typed(settings, _context) -> None:
+    """An uncertainty set by hand is the artist's own, which later nudges of the angles keep (set_sun marks
+    a pick's after setting it)."""
+    if settings.sun_uncertainty_picked:
+        settings.sun_uncertainty_picked = False
 
 
 class SceneFitSlot(bpy.types.PropertyGroup):
@@ -97,8 +105,12 @@ class SceneFitSettings(bpy.types.PropertyGroup):
     sun_uncertainty: FloatProperty(name="Uncertainty", subtype="ANGLE", default=0.0, min=0.0, max=math.pi / 2,
                                    description="How far off the sun's direction may be: Pick Sun sets how far a "
                                                "click slipping 2/640 of the photo's width turns it; typing a "
-                                               "direction sets it back to 0 (sure). The light around it widens from the "
-                                               "narrow lobe at 15° to the guess's at 30°")
+                                               "direction sets that back to 0 (sure); one typed here stays. The light "
+                                               "around it widens from the narrow lobe at 15° to the guess's at 30°",
+                                   update=_uncertainty_typed)
+    sun_uncertainty_picked: BoolProperty(name="Uncertainty from Pick Sun", default=False, options={"HIDDEN"},
+                                         description="Whether Uncertainty is Pick Sun's (a typed direction "
+                                                     "resets it) rather than the artist's (kept)")
     # Style
     mode: EnumProperty(name="Mode", items=MODES, default="scene")
     prompt: StringProperty(name="Prompt", description="How the asset should look, e.g. 'a leather sofa, "

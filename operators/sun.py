@@ -81,6 +81,7 @@ def set_sun(op, context, azimuth: float, elevation: float, source: str, uncertai
     settings = context.scene.scenefit
     settings.sun_azimuth, settings.sun_elevation = math.radians(azimuth), math.radians(elevation)
     settings.sun_uncertainty = math.radians(min(uncertainty, 90.0))
+    settings.sun_uncertainty_picked = uncertainty > 0.0   # (after: typing the angles resets only a pick's)
     settings.sun_from = "set"
     said = f"Sun from {source}: azimuth {azimuth:.0f}°, elevation {elevation:.0f}°"
     unsure = sun_is_unsure(uncertainty)

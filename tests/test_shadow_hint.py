@@ -148,6 +148,13 @@ def test_pick_sun_in_blender_sets_the_light_stages_sun(run_py, tmp_path):
         out["decision"] = json.loads(report.read_text())["decisions"]["sun"]
         settings.sun_azimuth = math.radians(-45.0)   # the artist types a direction over the picked one
         out["typed_spread"] = settings.sun_uncertainty
+        settings.sun_uncertainty = math.radians(20.0)   # then how sure they are, then nudges the direction
+        settings.sun_elevation = math.radians(35.0)
+        settings.sun_azimuth = math.radians(-40.0)
+        out["own_spread"] = math.degrees(settings.sun_uncertainty)
+        set_sun(Op(), bpy.context, -50.0, 30.0, "the shadow", 7.0)   # a new pick's ± replaces it, and a typed
+        settings.sun_azimuth = math.radians(-45.0)                   # direction resets that one again
+        out["repicked_typed_spread"] = settings.sun_uncertainty
         print("JSON" + json.dumps(out))
     """)
     out = printed_json(proc)
@@ -159,6 +166,8 @@ def test_pick_sun_in_blender_sets_the_light_stages_sun(run_py, tmp_path):
     assert out["spread"] == pytest.approx(out["decision"]["uncertainty_deg"], abs=0.01) and out["spread"] > 0.0
     assert "for a slip of a click" in out["said"]
     assert out["typed_spread"] == 0.0   # a typed direction is as sure as typed (the pick's ± stayed)
+    # an uncertainty the artist typed is theirs: nudging the angles keeps it (it was wiped)
+    assert out["own_spread"] == pytest.approx(20.0, abs=1e-4) and out["repicked_typed_spread"] == 0.0
 
 
 def test_scenefit_run_takes_the_sun_as_angles_or_as_a_shadow(tmp_path, capsys):
