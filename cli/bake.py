@@ -35,15 +35,9 @@ def run(args) -> int:
         refuse_replacing(targets)
     output = output_like_input(args.asset, args.compress, args.textures, args.max_texture, args.format)
     check_output_format(output, args.format)
-    if output.textures == "ktx2":
-        try:
-            basisu_path()
-        except InputError as error:
-            if args.textures is not None:
-                raise
-            raise InputError(f"The input's KTX2 textures are written as KTX2 again, which needs Basis Universal's "
-                             f"encoder 'basisu' ({str(error).split(': ', 1)[-1].rstrip('.')}); or give --textures png, "
-                             "jpeg or webp.") from None
+    if output.textures == "ktx2":   # (asked for, or the input's KTX2 written as KTX2 again)
+        basisu_path() if args.textures is not None else \
+            basisu_path("Writing the input's KTX2 textures as KTX2 again", "; or give --textures png, jpeg or webp")
     report = bake_asset_file(args.asset, Path(args.texture), args.out, args.format, args.texture_size, args.object,
                              protect=protect, output=output, replace=args.replace)
     for material in report["materials"]:

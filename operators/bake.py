@@ -64,13 +64,8 @@ def bake_output(compress: str, textures: str, max_texture: int, file_format: str
         raise InputError("Textures KTX2 writes .glb files only; choose the glTF Binary format, or PNG, JPEG or "
                          "WebP textures.")
     if like.textures == "ktx2":
-        try:
-            basisu_path()
-        except InputError:
-            why = "As imported (the file had KTX2 textures)" if textures == AS_IMPORTED else "KTX2"
-            raise InputError(f"Textures {why} needs Basis Universal's encoder 'basisu', which is not on this machine "
-                             "(put it on PATH or set SCENEFIT_BASISU to it), or choose PNG, JPEG or WebP "
-                             "textures.") from None
+        why = "As imported (the file had KTX2 textures)" if textures == AS_IMPORTED else "KTX2"
+        basisu_path(f"Textures {why}", "; or choose PNG, JPEG or WebP textures")
     return replace(like, tangents=like.tangents or normal_maps, skins_at_root=True)
 
 

