@@ -190,6 +190,25 @@ PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "bat
          "speed", "start", "uv_layout", "light_real", "light_heldout", "light_sides", "sun_clicks", "sd2")
 TITLES = {"convert": "Convert", "light": "Light", "compose": "Compose", "adapt": "Adapt (tiny models)",
           "run": "End to end: `scenefit run`"}
+CONVERSION_TITLE = "Conversion: the direct fit against inverse rendering"
+LIGHT_STUDY_TITLE = "Light without weights: the cue estimate against the true maps"
+CAMERA_TITLE = "The photo's camera: `scenefit camera` on real panoramas"
+
+SEPARATE = (  # (part, script and arguments, results stem, paragraphs before its table, title)
+    ("speed", ["bench_real_speed.py"], "real_speed", 3, "`scenefit run` on real 2k assets and a 12 MP photo"),
+    ("start", ["bench_start.py"], "start", 2, "The exact start against the paper's fit (`--init fit`), real assets"),
+    ("uv_layout", ["bench_uv_layout.py"], "uv_layout", 3, "Adaptation's new UV layout where real assets' UVs share texels"),
+    ("light_real", ["bench_light.py", "--real"], "light_real", 3,
+     "Light from real photos: the field's protocol on the corpus's 12 HDR panoramas"),
+    ("light_real", ["bench_light.py", "--real", "--ceiling", "--no-draft"], "light_real_ceiling", 3,
+     "What the paper's light parametrisation can reach on those views (scales fitted to the truth)"),
+    ("light_heldout", ["bench_light.py", "--real", "--heldout"], "light_heldout", 3,
+     "Light from real photos on 18 held-out HDR maps (no number of the light stage was set on them)"),
+    ("light_sides", ["bench_light_sides.py"], "light_sides", 3,
+     "The light behind the camera, toward and away from the light: what one level costs, what the photo tells"),
+    ("sun_clicks", ["bench_sun_clicks.py"], "sun_clicks", 3,
+     "The sun from a shadow's three clicks: slipped clicks, the reported uncertainty, the lobe it calls for"),
+    ("sd2", ["bench_adapt.py", "--sd2-bench"], "adapt_sd2", 2, "Adapt at SD2's size on this CPU (random weights)"))
 
 
 def main() -> int:
@@ -205,7 +224,8 @@ def main() -> int:
                         help="comma-separated stages whose trade_<stage>.md from an earlier pass of this code goes into "
                              "bench.md instead of running them again (a pass stopped part way)")
     parser.add_argument("--parts", default=",".join(PARTS),
-                        help=f"comma-separated subset of {', '.join(PARTS)} (development; bench.md then holds only those)")
+                        help=f"comma-separated subset of {', '.join(PARTS)}: their sections in bench.md (and numbers in "
+                             "bench.json) replace the earlier pass's, the rest stay")
     args = parser.parse_args()
     parts = set(args.parts.split(","))
     results = RESULTS / "quick" if args.quick else RESULTS
@@ -254,7 +274,8 @@ def main() -> int:
         its = 20 if args.quick else 100
         conversions = [bench_direct(mesh, maps, "balanced", its), bench_inverse(mesh, maps, "balanced", its, 5)]
         plot_conversions(conversions, results / "conversion_psnr.png")
-        sections += [f"Conversion of the example's 512² maps, direct fit against inverse rendering ({its} iterations "
+        sections += [f"## {CONVERSION_TITLE}", "",
+                     f"Conversion of the example's 512² maps, direct fit against inverse rendering ({its} iterations "
                      "each, balanced network; PSNR on covered texels):", "",
                      table(conversions, [("method", "method", ""), ("iterations", "iterations", ""),
                                          ("seconds", "seconds", ".1f"), ("PSNR dB", "final_psnr", ".2f")]), "",
@@ -295,7 +316,7 @@ def main() -> int:
         subprocess.run([sys.executable, str(Path(__file__).with_name("bench_light.py"))] + out_flag + study, check=True)
         log("light study done")
         light_md = (results / "light.md").read_text()
-        sections += ["## Light without weights: the cue estimate against the true maps", "",
+        sections += [f"## {LIGHT_STUDY_TITLE}", "",
                      light_md.split("## Per view")[0].strip(),
                      "", "Per view: [light.md](light.md). ![Estimated vs true maps](light_maps.png)", ""]
 
@@ -305,31 +326,16 @@ def main() -> int:
         subprocess.run([sys.executable, str(Path(__file__).with_name("bench_camera_cost.py"))], check=True)
         log("camera benches done")
         cost = (RESULTS / "camera_cost.md").read_text().split("## Every view")[0].split("\n\n", 3)[-1].strip()
-        sections += ["## The photo's camera: `scenefit camera` on real panoramas", "",
+        sections += [f"## {CAMERA_TITLE}", "",
                      "Median and 90th-percentile errors per field, split by maps with and without architecture: "
                      "[camera.md](camera.md). The real assets of the corpus: `make corpus` "
                      "([corpus.md](corpus.md)).", "", "What a wrong camera costs the composite "
                      "([camera_cost.md](camera_cost.md)):", "", cost, ""]
 
     # Benches run as processes of their own, each writing its results file, quoted here.
-    separate = (  # (part, script and arguments, results stem, paragraphs before its table, title)
-        ("speed", ["bench_real_speed.py"], "real_speed", 3, "`scenefit run` on real 2k assets and a 12 MP photo"),
-        ("start", ["bench_start.py"], "start", 2, "The exact start against the paper's fit (`--init fit`), real assets"),
-        ("uv_layout", ["bench_uv_layout.py"], "uv_layout", 3, "Adaptation's new UV layout where real assets' UVs share texels"),
-        ("light_real", ["bench_light.py", "--real"], "light_real", 3,
-         "Light from real photos: the field's protocol on the corpus's 12 HDR panoramas"),
-        ("light_real", ["bench_light.py", "--real", "--ceiling", "--no-draft"], "light_real_ceiling", 3,
-         "What the paper's light parametrisation can reach on those views (scales fitted to the truth)"),
-        ("light_heldout", ["bench_light.py", "--real", "--heldout"], "light_heldout", 3,
-         "Light from real photos on 18 held-out HDR maps (no number of the light stage was set on them)"),
-        ("light_sides", ["bench_light_sides.py"], "light_sides", 3,
-         "The light behind the camera, toward and away from the light: what one level costs, what the photo tells"),
-        ("sun_clicks", ["bench_sun_clicks.py"], "sun_clicks", 3,
-         "The sun from a shadow's three clicks: slipped clicks, the reported uncertainty, the lobe it calls for"),
-        ("sd2", ["bench_adapt.py", "--sd2-bench"], "adapt_sd2", 2, "Adapt at SD2's size on this CPU (random weights)"))
     from heldout_hdri import FETCH_FAILED   # maps fetched from npm on first use: without them, a part is skipped
 
-    for part, command, stem, before, title in separate:
+    for part, command, stem, before, title in SEPARATE:
         if part in parts and not args.quick:
             done = subprocess.run([sys.executable, str(Path(__file__).with_name(command[0])), *command[1:]])
             if done.returncode == FETCH_FAILED:
@@ -338,23 +344,70 @@ def main() -> int:
             done.check_returncode()
             log(f"{stem} done")
             # (a per-view table stays in its own file)
-            table = (RESULTS / f"{stem}.md").read_text().split("\n\n", before)[-1].split("## Per view")[0].strip()
-            sections += [f"## {title}", "", f"[{stem}.md]({stem}.md):", "", table, ""]
+            quoted = (RESULTS / f"{stem}.md").read_text().split("\n\n", before)[-1].split("## Per view")[0].strip()
+            sections += [f"## {title}", "", f"[{stem}.md]({stem}.md):", "", quoted, ""]
 
     total = time.perf_counter() - started
     load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
-    head = [f"# `make bench` results", "", f"**{mode}.** Machine: {machine()}; load average at the end {load} (1/5/15 min); Mitsuba variant "
+    head = ["# `make bench` results", "", f"**{mode}.** Machine: {machine()}; load average at the end {load} (1/5/15 min); Mitsuba variant "
             f"{env['mitsuba_variant']}; torch {env['torch']}, {torch.get_num_threads()} threads (benchmark children: "
             f"{os.environ.get('SCENEFIT_BENCH_THREADS', 'the same')}). Total {total / 60:.0f} min. Timing on 2 shared "
             "cores is noisy: compare ratios within one table.", ""]
-    (results / "bench.md").write_text("\n".join(head + sections))
-    (results / "bench.json").write_text(json.dumps({
-        "mode": "quick" if args.quick else "full", "machine": machine(), "environment": env, "seconds": total,
-        "render": renders, "texture": textures, "conversion": conversions, "adapt": adapt["rows"],
-        "trade": {stage: json.loads((results / f"trade_{stage}.json").read_text())["rows"] for stage in stages + reused},
-    }, indent=1, default=float))
-    print("\n".join(head + sections))
+    numbers = {"mode": "quick" if args.quick else "full", "machine": machine(), "environment": env, "seconds": total,
+               "render": renders, "texture": textures, "conversion": conversions, "adapt": adapt["rows"],
+               "trade": {stage: json.loads((results / f"trade_{stage}.json").read_text())["rows"]
+                         for stage in stages + reused}}
+    text = "\n".join(head + sections)
+    if parts != set(PARTS) and (results / "bench.md").is_file():
+        # Some parts re-run: their sections and numbers replace the earlier pass's, the rest stay.
+        ran = ", ".join(part for part in PARTS if part in parts)
+        text = merged_sections((results / "bench.md").read_text(), "\n".join(sections),
+                               f"(Re-run since, on their own: {ran}; {time.strftime('%Y-%m-%d')}, load at the end {load}, "
+                               f"{total / 60:.0f} min.)")
+        numbers = merged_numbers(json.loads((results / "bench.json").read_text()), numbers)
+    (results / "bench.md").write_text(text)
+    (results / "bench.json").write_text(json.dumps(numbers, indent=1, default=float))
+    print(text)
     return 0
+
+
+def section_titles() -> list[str]:
+    """Every heading a pass writes, in bench.md's order ("### " for a stage's preset table)."""
+    separate = [title for *_, title in SEPARATE]
+    return (["## Presets: speed against accuracy"] + [f"### {title}" for title in TITLES.values()]
+            + [f"## {title}" for title in ("Building blocks", CONVERSION_TITLE, "Adapt: seconds per iteration by phase",
+                                           "Batches", "Compose: samplers and denoising at equal time", LIGHT_STUDY_TITLE,
+                                           CAMERA_TITLE, *separate)])
+
+
+def split_sections(text: str) -> tuple[list[str], dict[str, str]]:
+    """(the lines before the first known heading, {heading: its section's text}); a heading a part's own
+    results quote (light.md's "## Development maps") stays inside its section."""
+    known, head, units, current = set(section_titles()), [], {}, None
+    for line in text.splitlines():
+        if line in known:
+            current = line
+            units[current] = []
+        (units[current] if current else head).append(line)
+    return head, {title: "\n".join(lines).rstrip() + "\n" for title, lines in units.items()}
+
+
+def merged_sections(earlier: str, sections: str, note: str) -> str:
+    """The earlier bench.md with the sections of a partial pass in place of its own, in bench.md's order,
+    and a line in its head saying which parts are newer."""
+    head, units = split_sections(earlier)
+    units.update(split_sections(sections)[1])
+    head = [line for line in head if not line.startswith("(Re-run since, on their own:")]
+    head = "\n".join(head).rstrip() + "\n\n" + note + "\n"
+    return "\n".join([head] + [units[title] for title in section_titles() if title in units])
+
+
+def merged_numbers(earlier: dict, numbers: dict) -> dict:
+    """bench.json with what a partial pass measured in place of the earlier pass's, the rest kept."""
+    merged = dict(earlier)
+    merged.update({key: value for key, value in numbers.items() if value and key not in ("mode", "seconds", "trade")})
+    merged["trade"] = {**earlier.get("trade", {}), **numbers["trade"]}
+    return merged
 
 
 if __name__ == "__main__":
