@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+import shutil
 import subprocess
 import sys
 
@@ -377,3 +378,32 @@ def test_a_new_run_folder_reuses_an_earlier_runs_stages_by_copy_and_leaves_that_
     assert third["reused"] == ["convert"]
     assert [third["stages"][n]["status"] for n in ("light", "compose")] == ["ran", "ran"]
     assert files(tmp_path / "run-1") == before   # nothing of the first run was changed
+
+
+@pytest.mark.parametrize("lead_out", ["parent", "absolute", "link"])
+def test_a_stage_whose_outputs_lead_out_of_its_folder_is_run_again(tmp_path, capsys, lead_out):
+    """stage.json is data from wherever the run folder came from: an output naming a file outside the
+    stage's folder ('..', an absolute path, a link out) is not taken as the finished stage's, which runs
+    again and writes its own."""
+    from scenefit.cli import main
+
+    _, out, args = _grey_sphere_run(tmp_path)
+    assert main(args) == 0
+    outside = tmp_path / "elsewhere.exr"
+    shutil.copy(out / "light" / "light.exr", outside)
+    before = outside.read_bytes()
+    record = out / "light" / "stage.json"
+    saved = json.loads(record.read_text())
+    if lead_out == "link":
+        (out / "light" / "light.exr").unlink()
+        (out / "light" / "light.exr").symlink_to(outside)
+    else:
+        saved["report"]["outputs"]["hdr_exr"] = "../../elsewhere.exr" if lead_out == "parent" else str(outside)
+        record.write_text(json.dumps(saved))
+    assert main(args) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["reused"] == ["convert"] and report["stages"]["light"]["status"] == "ran"
+    light = out / "light" / "light.exr"
+    assert light.is_file() and not light.is_symlink()
+    assert json.loads(record.read_text())["report"]["outputs"]["hdr_exr"] == "light.exr"
+    assert outside.read_bytes() == before   # the file outside is neither read as the stage's nor written

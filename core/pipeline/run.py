@@ -194,7 +194,10 @@ class StageRunner:
 
 
 def _finished_stage(folder: Path, key: str) -> dict | None:
-    """The report of the stage finished in `folder` with `key` whose outputs all exist, else None."""
+    """The report of the stage finished in `folder` with `key` whose outputs all exist, else None. A
+    stage.json is data from wherever the folder came from (an earlier run, a worker, someone else's run
+    folder): an output that leads out of the stage's folder ('..', an absolute path, a link) is not this
+    stage's, so the stage is not taken as finished and runs again."""
     record = folder / STAGE_FILE
     if not record.is_file():
         return None
@@ -204,7 +207,9 @@ def _finished_stage(folder: Path, key: str) -> dict | None:
         return None
     report = dict(saved.get("report") or {})
     report["outputs"] = _absolute_outputs(report.get("outputs", {}), folder)
-    if saved.get("key") != key or not all(Path(p).exists() for p in _paths(report["outputs"])):
+    inside = folder.resolve()
+    if saved.get("key") != key or not all(Path(p).exists() and Path(p).resolve().is_relative_to(inside)
+                                          for p in _paths(report["outputs"])):
         return None
     return report
 
