@@ -384,3 +384,42 @@ def test_a_killed_workers_job_folder_is_removed_by_the_next_worker_and_nothing_e
         (folder / "out" / "composite.png").write_bytes(b"x")
     assert remove_orphaned_job_folders(tmp_path) == [orphan]
     assert not orphan.exists() and running.is_dir() and all(f.is_dir() for f in others)
+
+
+def test_a_changed_job_runs_again_reusing_its_unchanged_stages(tmp_path, capsys):
+    """A job edited since an earlier batch (or whose input files changed) used to be skipped as done, its
+    folder then holding another job's results. It runs again, and its earlier stages whose inputs and
+    settings are the same travel with it and are reused; an input file touched but not changed is the same."""
+    make_inputs(tmp_path)
+    jobs_path = tmp_path / "jobs.toml"
+    text = ('[defaults]\npreset = "draft"\nphoto = "room.png"\nat = [0.5, 0.7]\n'
+            'stages = ["convert", "light", "compose"]\n[[job]]\nname = "a"\nasset = "ball"\n'
+            'overrides = { compose = { shadow_type = "ratio" } }\n')
+    jobs_path.write_text(text)
+    out = tmp_path / "out"
+    args = ["batch", str(jobs_path), "--out", str(out)]
+
+    def statuses() -> dict:
+        stages = json.loads((out / "a" / "report.json").read_text())["stages"]["run"]["stages"]
+        return {name: stage["status"] for name, stage in stages.items() if name in ("convert", "light", "compose")}
+
+    assert main(args) == 0 and statuses() == {"convert": "ran", "light": "ran", "compose": "ran"}
+    capsys.readouterr()
+    first = (out / "a" / "compose" / "composite.png").read_bytes()
+    photo = tmp_path / "room.png"
+    photo.write_bytes(photo.read_bytes())   # touched, not changed: still done
+    assert main(args) == 0 and "0 done, 1 skipped" in capsys.readouterr().out
+
+    jobs_path.write_text(text.replace('"ratio"', '"none"'))   # compose's setting only
+    assert main(args) == 0
+    said = capsys.readouterr()
+    assert "1 done, 0 skipped" in said.out and "[a] changed since the earlier run" in said.err
+    assert statuses() == {"convert": "reused", "light": "reused", "compose": "ran"}
+    assert (out / "a" / "compose" / "composite.png").read_bytes() != first   # no shadow now, not the old one
+    assert main(args) == 0 and "0 done, 1 skipped" in capsys.readouterr().out
+
+    write_image(photo, np.full((48, 64, 3), 0.4, np.float32))   # another photo under the same name
+    assert main(args) == 0 and "1 done, 0 skipped" in capsys.readouterr().out
+    assert statuses() == {"convert": "reused", "light": "ran", "compose": "ran"}
+    assert main(args + ["--replace"]) == 0   # --replace runs the job again from scratch
+    assert statuses() == {"convert": "ran", "light": "ran", "compose": "ran"}

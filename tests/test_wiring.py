@@ -54,7 +54,7 @@ class Recorder:
         self.calls: list[dict] = []
 
     def __call__(self, mesh, maps, photo_path, placement, out_dir, config, progress=None, cancel=None, bake=None,
-                 bake_skipped_why="", models=None) -> dict:
+                 bake_skipped_why="", models=None, reuse_from=None) -> dict:
         self.calls.append({"config": config, "placement": tuple(placement), "bake": bake is not None,
                            "mesh_faces": len(mesh.faces)})
         return {"stages": {}, "seconds_total": 0.0, "composite": str(Path(out_dir) / "compose" / "composite.png")}

@@ -7,12 +7,15 @@ packed as bytes). The driver swaps the folder into DIR/<name>/ in one step, so a
 always one whole run. Workers (`JobWorker`; on Ray an actor with declared CPUs, GPUs and memory)
 keep their loaded models between jobs. The in-process executor runs the very same `JobWorker`.
 
-Resuming: a job whose DIR/<name>/report.json says "done" is skipped. Failures: a job is tried
-1 + retries times; after that its folder holds a report with status "failed" and the error, the
-summary lists it, and the next run tries it again.
+Resuming: a job whose DIR/<name>/report.json says "done" with the same settings and the same input
+files (by content) is skipped. One changed since runs again, and the finished stages of its earlier
+folder travel with it (`earlier/` in its payload): the worker reuses each whose inputs and settings
+are the same, as `scenefit run` does. Failures: a job is tried 1 + retries times; after that its folder
+holds a report with status "failed" and the error, the summary lists it, and the next run tries it again.
 """
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import math
@@ -63,27 +66,66 @@ def unpack(data: bytes, folder: Path) -> Path:
 
 @dataclass(frozen=True)
 class JobPayload:
-    """A job with its inputs packed: what a worker anywhere needs to run it."""
+    """A job with its inputs packed: what a worker anywhere needs to run it. `digest`: what its settings
+    and input files were (job_digest), which its report keeps so a later batch can tell it unchanged."""
 
     job: Job
     inputs: bytes
     attempt: int = 1
+    digest: str = ""
 
 
-def make_payload(job: Job, attempt: int = 1) -> JobPayload:
-    # Stored as asset/<its name> and photo/<its name>; a .gltf takes its folder (buffers, images).
+# Where a payload carries the finished stages of the job's earlier folder, beside asset/ and photo/.
+EARLIER = "earlier"
+
+
+def job_files(job: Job) -> dict[str, Path]:
+    """The job's input files as the payload stores them: asset/<its name> and photo/<its name>; a .gltf
+    takes its folder (buffers, images)."""
     files = {"asset": job.asset.parent} if job.asset.suffix.lower() == ".gltf" else {f"asset/{job.asset.name}": job.asset}
     if job.photo is not None:
         files[f"photo/{job.photo.name}"] = job.photo
-    return JobPayload(job, pack(files), attempt)
+    return files
 
 
-def unpacked_job(payload: JobPayload, folder: Path) -> Job:
-    """The payload's job with its paths pointing at the unpacked copies in `folder`."""
+def job_digest(job: Job) -> str:
+    """The job's settings and its input files' contents, not where they are (a jobs folder that moved is
+    the same job)."""
+    settings = {k: v for k, v in job.to_dict().items() if k not in ("asset", "photo")}
+    digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
+    for name, path in sorted(job_files(job).items()):
+        for file in sorted(path.rglob("*")) if path.is_dir() else [path]:
+            if file.is_file():
+                digest.update(f"{name}/{file.relative_to(path) if path.is_dir() else file.name}".encode())
+                digest.update(hashlib.sha256(file.read_bytes()).digest())
+    return digest.hexdigest()
+
+
+def make_payload(job: Job, attempt: int = 1, earlier: Path | None = None) -> JobPayload:
+    """The job and its inputs packed; `earlier`: a folder of the job from an earlier run, whose finished
+    stages travel with it for the worker to reuse where their inputs and settings are the same."""
+    files = job_files(job)
+    for stage in _finished_stage_folders(earlier):
+        files[f"{EARLIER}/{stage.name}"] = stage
+    return JobPayload(job, pack(files), attempt, job_digest(job))
+
+
+def _finished_stage_folders(folder: Path | None) -> list[Path]:
+    from ..core.pipeline.run import STAGE_FILE, STAGES
+
+    if folder is None or not folder.is_dir():
+        return []
+    return [folder / name for name in STAGES if (folder / name / STAGE_FILE).is_file()]
+
+
+def unpacked_job(payload: JobPayload, folder: Path) -> tuple[Job, Path | None]:
+    """The payload's job with its paths pointing at the unpacked copies in `folder`, and the earlier
+    stages it carries (None: none)."""
     unpack(payload.inputs, folder)
     job = payload.job
     photo = None if job.photo is None else folder / "photo" / job.photo.name
-    return replace(job, asset=folder / "asset" / job.asset.name, photo=photo)
+    earlier = folder / EARLIER
+    return replace(job, asset=folder / "asset" / job.asset.name, photo=photo), earlier if earlier.is_dir() else None
 
 
 # -- one job on a worker ---------------------------------------------------------------------------
@@ -141,15 +183,16 @@ class JobWorker:
         self.cancel_event.clear()
         progress = None if progress_sink is None else SinkProgress(progress_sink, payload.job.name)
         with tempfile.TemporaryDirectory(prefix=f"{JOB_FOLDER_PREFIX}{os.getpid()}-") as tmp:
-            job = unpacked_job(payload, Path(tmp) / "in")
+            job, earlier = unpacked_job(payload, Path(tmp) / "in")
             out = Path(tmp) / "out"
             out.mkdir()
             try:
-                stages = run_job_stages(job, out, progress=progress, cancel=self.cancel_event, models=self.models)
+                stages = run_job_stages(job, out, progress=progress, cancel=self.cancel_event, models=self.models,
+                                        reuse_from=earlier)
             except SceneFitError as error:   # name the user's files, not the unpacked copies
                 raise type(error)(with_user_paths(str(error), job, payload.job)) from None
             self.jobs_run += 1
-            report = {"status": "done", "job": payload.job.to_dict(), "attempts": payload.attempt,
+            report = {"status": "done", "job": payload.job.to_dict(), "digest": payload.digest, "attempts": payload.attempt,
                       "seconds": round(time.perf_counter() - started, 3), "quality": quality_figures(stages),
                       "stages": stages, "worker": worker_info(self.jobs_run, self.models.loads)}
             write_json_atomic(out / REPORT, report)
@@ -231,19 +274,21 @@ def worker_info(jobs_run: int, model_loads: int) -> dict:
             "model_loads_by_this_worker": model_loads, "torch_threads": torch.get_num_threads()}
 
 
-def run_job_stages(job: Job, out: Path, progress=None, cancel=None, models=None) -> dict:
+def run_job_stages(job: Job, out: Path, progress=None, cancel=None, models=None, reuse_from: Path | None = None) -> dict:
     """Run the job's stages into `out`; returns each stage's report.
 
     A job that composes runs `scenefit run`'s pipeline (core/pipeline/run.py, adapt included when its stages
-    list it); a job of convert and/or light alone runs those stage functions. `models`: the worker's
+    list it), reusing the stages of `reuse_from` (an earlier run of the job) whose inputs and settings are
+    the same; a job of convert and/or light alone runs those stage functions. `models`: the worker's
     ModelCache (None: the pipeline loads what it needs for this job alone).
     """
     if "compose" in job.stages or "bake" in job.stages:
-        return _relative_outputs({"run": run_pipeline_for_job(job, out, progress, cancel, models)}, out)
+        return _relative_outputs({"run": run_pipeline_for_job(job, out, progress, cancel, models, reuse_from)}, out)
     return _available_stages(job, out, progress, cancel)
 
 
-def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models=None) -> dict:
+def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models=None,
+                         reuse_from: Path | None = None) -> dict:
     """The job through core/pipeline/run.py's run_pipeline: adapt when listed (and its weights are found)."""
     from ..core.pipeline.run import run_pipeline
 
@@ -254,7 +299,7 @@ def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models
     bake, why_not = asset_file_bake(job.asset, job.object) if "bake" in job.stages else (None, "the job's stages "
                                                                                          "do not list bake")
     return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel, models=models,
-                        bake=bake, bake_skipped_why=why_not)
+                        bake=bake, bake_skipped_why=why_not, reuse_from=reuse_from)
 
 
 def _stage_overrides(job: Job) -> dict:
@@ -353,9 +398,11 @@ def job_report(out_dir: Path, name: str) -> dict | None:
         return None
 
 
-def is_done(out_dir: Path, name: str) -> bool:
-    report = job_report(out_dir, name)
-    return report is not None and report.get("status") == "done"
+def is_done(out_dir: Path, job: Job, digest: str | None = None) -> bool:
+    """DIR/<job>/ holds this job done: its settings and input files as now (`digest`: job_digest's)."""
+    report = job_report(out_dir, job.name)
+    return report is not None and report.get("status") == "done" and \
+        report.get("digest") == (digest if digest is not None else job_digest(job))
 
 
 @dataclass
@@ -449,15 +496,19 @@ def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: E
     pending = 0
     try:
         for job in jobs.jobs:
-            if not redo and is_done(out_dir, job.name):
-                report = job_report(out_dir, job.name) or {}
+            digest = job_digest(job)
+            report = job_report(out_dir, job.name) or {}
+            if not redo and is_done(out_dir, job, digest):
                 outcomes[job.name] = JobOutcome(job.name, "skipped", report.get("attempts", 0),
                                                 report.get("seconds", 0.0), report.get("quality", {}))
                 say(job.name, "done by an earlier run; skipped")
                 continue
-            dispatcher.submit(make_payload(job))
+            # Changed since an earlier run (not --replace): its finished stages go along, to be reused.
+            changed = not redo and report.get("status") == "done"
+            dispatcher.submit(make_payload(job, earlier=out_dir / job.name if changed else None))
             pending += 1
-            say(job.name, "queued")
+            say(job.name, "changed since the earlier run (settings or input files): queued, its unchanged stages "
+                          "to be reused" if changed else "queued")
         tries = 1 + jobs.settings.retries
         while pending:
             payload, result = dispatcher.next_done()
