@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 
 def run(args) -> int:
@@ -11,6 +12,10 @@ def run(args) -> int:
 
     jobs = load_jobs(args.jobs)
     check_batch(jobs, args.out)
+    if args.reuse_from is not None and not Path(args.reuse_from).is_dir():
+        from ..core.base.errors import InputError
+
+        raise InputError(f"--reuse-from '{args.reuse_from}' is not a folder; give an earlier batch's --out folder.")
 
     def say(name: str, message: str) -> None:
         if not args.quiet:
@@ -30,7 +35,8 @@ def run(args) -> int:
             dispatcher = RayDispatcher(jobs.settings, len(jobs.jobs))
             where = f"on Ray ({dispatcher.workers} worker(s), each {dispatcher.options})"
         say("batch", f"{len(jobs.jobs)} job(s) from {jobs.path} {where}")
-        outcomes = run_batch(jobs, args.out, dispatcher, on_event=say, redo=args.replace)
+        outcomes = run_batch(jobs, args.out, dispatcher, on_event=say, redo=args.replace,
+                             reuse_from=Path(args.reuse_from) if args.reuse_from else None)
     finally:
         if started_ray:
             import ray
@@ -83,5 +89,8 @@ def add_parser(sub) -> None:
                    help="in-process: print each progress event as a JSON line on stdout (for a calling program)")
     p.add_argument("--replace", action="store_true",
                    help="run the jobs an earlier batch into DIR finished again, replacing their folders (default: skip them)")
+    p.add_argument("--reuse-from", metavar="EARLIER",
+                   help="an earlier batch's --out folder: each job to run takes the finished stages of "
+                        "EARLIER/<job name>/ along and reuses those whose inputs and settings are the same")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=run)

@@ -15,7 +15,8 @@ from urllib.parse import urlparse
 import bpy
 
 from ..core.base.errors import InputError
-from .common import depth_model_preference, model_settings, photo_view, preferences, run_folder, scene_layout
+from .common import (depth_model_preference, last_finished_run, model_settings, photo_view, preferences, run_folder,
+                     scene_layout)
 from .results import apply_layout_results, materials_words, result_targets
 
 # What the worker runs for each operator: the whole pipeline (adapt needs convert and the light).
@@ -74,6 +75,7 @@ def remote_work(op, context, address: str) -> tuple:
                                             "depth model": depth_model_preference(context)})
     # The job's folder comes back whole as this run's new folder (nothing of it while it runs or if cancelled).
     folder = run_folder(context, op.job_name, name)
+    earlier = last_finished_run(folder)   # its stages with this run's settings and inputs are reused, as here
     # How the photo is seen, as Run All here sees it (operators/common.photo_view): the artist's camera or the
     # panel's values, where the asset stands, and the artist's sun.
     from .work import job_view
@@ -83,7 +85,7 @@ def remote_work(op, context, address: str) -> tuple:
         "out": str(folder.parent), "name": folder.name, "preset": settings.preset,
         "stages": REMOTE_STAGES, "prompt": settings.prompt, "models": models, "overrides": quick_overrides(op),
         "scene": settings.scene_type, "depth_model": depth_model_preference(context), "materials": materials,
-        **job_view(photo_view(context, photo, objects))}
+        "earlier": str(earlier) if earlier else None, **job_view(photo_view(context, photo, objects))}
 
 
 def check_models_reach_the_worker(address: str, models: dict[str, str | None]) -> None:

@@ -310,6 +310,39 @@ def test_work_remotely_takes_the_add_ons_plain_data(tmp_path):
     assert result["report"]["job"]["stages"] == ["light"] and [e.stage for e in events][-1] == "light"
 
 
+
+def test_a_worker_run_reuses_the_stages_of_the_earlier_run_it_is_given(tmp_path, capsys):
+    """Run All on a worker reused nothing (a local Run All reuses the last run's stages): the earlier run's
+    finished stages now travel with the job, here to another install's process through `scenefit batch
+    --reuse-from`, and those whose inputs and settings are the same come back reused."""
+    from scenefit.core.data.asset_io import load_asset_folder
+    from scenefit.workers.remote import work_remotely
+
+    make_inputs(tmp_path / "in")
+    mesh, maps = load_asset_folder(tmp_path / "in" / "ball")
+    data = {"mesh": mesh, "maps": maps, "photo": str(tmp_path / "in" / "room.png"), "at": (0.5, 0.7),
+            "stages": ["convert", "light", "compose"], "preset": "draft", "worker": sys.executable,
+            "overrides": {"compose": {"shadow_type": "ratio"}}}
+
+    def statuses(result) -> dict:
+        stages = result["report"]["stages"]["run"]["stages"]
+        return {name: stages[name]["status"] for name in ("convert", "light", "compose")}
+
+    first = work_remotely(dict(data, name="run-1", out=str(tmp_path / "back")))
+    assert statuses(first) == {"convert": "ran", "light": "ran", "compose": "ran"}
+    second = work_remotely(dict(data, name="run-2", out=str(tmp_path / "back"), earlier=first["folder"],
+                                overrides={"compose": {"shadow_type": "none"}}))
+    assert statuses(second) == {"convert": "reused", "light": "reused", "compose": "ran"}
+    assert (Path(second["folder"]) / "convert" / "maps" / "texture.pt").is_file()   # copied in, whole
+    assert (tmp_path / "back" / "run-1" / "convert" / "stage.json").is_file()   # the earlier run as it was
+
+    assert main(["batch", str(tmp_path / "in" / "jobs.toml"), "--out", str(tmp_path / "x"), "--reuse-from",
+                 str(tmp_path / "nowhere")]) == 2
+    said = capsys.readouterr().err.strip()
+    assert said.endswith("is not a folder; give an earlier batch's --out folder.") and len(said.splitlines()) == 1
+    assert not (tmp_path / "x").exists()
+
+
 TINY_JOBS = """
 [batch]
 retries = 0

@@ -4,6 +4,8 @@ the same background-job path as a local job, cancel ends it cleanly, and the res
 new datablocks on the main thread. bpy with the extension installed from its zip, tiny models, a
 local Ray cluster of two CPUs."""
 
+from pathlib import Path
+
 import pytest
 from conftest import run_installed_extension
 
@@ -95,6 +97,20 @@ if state.status == "done":
     out["run_composite"] = list(composite.size) if composite else None
     out["run_report"] = state.result["report"]
 
+# 1b. Run All again, nothing changed: the earlier run's stages travel with the job and the worker reuses
+# them (a Run All on a worker reused nothing, while one here reuses the last run's).
+work, data = Run.job_work(op, bpy.context)
+data["overrides"]["adapt"].update(preview_every=1)   # as the first run had it
+out["rerun_earlier"] = data.get("earlier")
+t0 = time.perf_counter()
+job = jobs.start_job(jobs.Job("run", work, data))
+state = job.wait(300)
+jobs.release_job(job)
+out["rerun"] = {"status": state.status, "error": state.error, "seconds": round(time.perf_counter() - t0, 1)}
+if state.status == "done":
+    out["rerun"]["stages"] = {k: v["status"] for k, v in state.result["report"]["stages"]["run"]["stages"].items()}
+    out["rerun_message"] = Run.apply_result(op, bpy.context, state.result)
+
 # 2. Cancel: a long job stops at the worker, nothing comes back, Blender's data unchanged.
 materials_before = sorted(m.name for m in bpy.data.materials)
 op_long = SimpleNamespace(job_name="run", iterations=100000, model_resolution=0, render_size=0)
@@ -159,6 +175,17 @@ def test_run_on_ray_streams_progress_and_previews_and_applies_the_results(handed
     assert set(images).isdisjoint(trim_images)
     assert out["run_world"][0] == "SceneFit Light" and out["user_material_kept"]
     assert out["run_composite"] is not None and min(out["run_composite"]) > 0
+
+
+def test_run_all_again_on_the_worker_reuses_the_last_runs_stages(handed_off):
+    _, out = handed_off
+    rerun = out["rerun"]
+    print("remote rerun:", rerun["seconds"], "s against", out["run"]["seconds"], "s;", out.get("rerun_message"))
+    assert rerun["status"] == "done", rerun["error"]
+    assert Path(out["rerun_earlier"]).name.startswith("run-")   # the first run's folder beside the new one
+    assert {name: rerun["stages"][name] for name in ("convert", "light", "adapt", "compose")} == \
+        {"convert": "reused", "light": "reused", "adapt": "reused", "compose": "reused"}
+    assert "convert, light, adapt, compose reused from the last run" in out["rerun_message"]
 
 
 def test_cancel_stops_the_worker_and_brings_nothing_back(handed_off):

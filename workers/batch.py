@@ -105,12 +105,13 @@ def make_payload(job: Job, attempt: int = 1, earlier: Path | None = None) -> Job
     """The job and its inputs packed; `earlier`: a folder of the job from an earlier run, whose finished
     stages travel with it for the worker to reuse where their inputs and settings are the same."""
     files = job_files(job)
-    for stage in _finished_stage_folders(earlier):
+    for stage in finished_stage_folders(earlier):
         files[f"{EARLIER}/{stage.name}"] = stage
     return JobPayload(job, pack(files), attempt, job_digest(job))
 
 
-def _finished_stage_folders(folder: Path | None) -> list[Path]:
+def finished_stage_folders(folder: Path | None) -> list[Path]:
+    """The stage folders of a run folder that hold a finished stage (its stage.json)."""
     from ..core.pipeline.run import STAGE_FILE, STAGES
 
     if folder is None or not folder.is_dir():
@@ -463,15 +464,17 @@ class InProcessDispatcher(Dispatcher):
 
 
 def run_batch(jobs: JobsFile, out_dir: str | Path, dispatcher: Dispatcher | None = None,
-              on_event: EventCallback | None = None, redo: bool = False) -> list[JobOutcome]:
+              on_event: EventCallback | None = None, redo: bool = False,
+              reuse_from: Path | None = None) -> list[JobOutcome]:
     """Run every job not yet done; write the per-job folders, summary.json/.md and the contact sheet.
 
     The folder follows every command's contract (core/base/output_folder.py): locked while the batch runs,
     never a folder holding an input or files SceneFit did not write; each job's folder is swapped in
-    whole. redo: run the jobs done by an earlier batch again (`--replace`)."""
+    whole. redo: run the jobs done by an earlier batch again (`--replace`). reuse_from: an earlier batch's
+    folder, whose REUSE_FROM/<job>/ stages a job with no earlier folder of its own in out_dir takes along."""
     check_batch(jobs, out_dir)
     with folder_in_place(out_dir, batch_inputs(jobs)) as out_dir:
-        return _run_jobs(jobs, out_dir, dispatcher or InProcessDispatcher(jobs.settings), on_event, redo)
+        return _run_jobs(jobs, out_dir, dispatcher or InProcessDispatcher(jobs.settings), on_event, redo, reuse_from)
 
 
 def batch_inputs(jobs: JobsFile) -> list[Path]:
@@ -490,7 +493,7 @@ def check_batch(jobs: JobsFile, out_dir: str | Path) -> None:
 
 
 def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: EventCallback | None,
-              redo: bool) -> list[JobOutcome]:
+              redo: bool, reuse_from: Path | None) -> list[JobOutcome]:
     say = on_event or (lambda name, message: None)
     outcomes: dict[str, JobOutcome] = {}
     pending = 0
@@ -505,7 +508,8 @@ def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: E
                 continue
             # Changed since an earlier run (not --replace): its finished stages go along, to be reused.
             changed = not redo and report.get("status") == "done"
-            dispatcher.submit(make_payload(job, earlier=out_dir / job.name if changed else None))
+            earlier = out_dir / job.name if changed else reuse_from / job.name if reuse_from else None
+            dispatcher.submit(make_payload(job, earlier=earlier))
             pending += 1
             say(job.name, "changed since the earlier run (settings or input files): queued, its unchanged stages "
                           "to be reused" if changed else "queued")

@@ -62,7 +62,7 @@ class RemoteJob:
     """One job running on a Ray cluster; poll it, cancel it, fetch its outputs."""
 
     def __init__(self, job: Job, address: str = "auto", settings: BatchSettings = BatchSettings(),
-                 queue_size: int = 256) -> None:
+                 queue_size: int = 256, earlier: Path | None = None) -> None:
         ray = import_ray()
         from ray.util.queue import Queue
 
@@ -74,7 +74,7 @@ class RemoteJob:
             self.actor = ray.remote(worker_actor_class()).options(max_concurrency=2, **options).remote(
                 threads=max(1, int(settings.num_cpus)))
             self.queue = Queue(maxsize=queue_size)
-            payload = make_payload(job)
+            payload = make_payload(job, earlier=earlier)   # (an earlier run's stages travel with the inputs)
             self.ref = self.actor.run.remote(job.to_dict(), payload.inputs, self.queue)
         except BaseException:
             self.close()
@@ -133,16 +133,17 @@ class RemoteJob:
         self.close()
 
 
-def open_worker(job: Job, address: str, settings: BatchSettings = BatchSettings()):
+def open_worker(job: Job, address: str, settings: BatchSettings = BatchSettings(), earlier: Path | None = None):
     """The worker environment the add-on's preference names: a Python interpreter of another SceneFit
-    install (a path to a file) runs the job as a local process; anything else is a Ray address."""
+    install (a path to a file) runs the job as a local process; anything else is a Ray address.
+    `earlier`: an earlier run of the job, whose stages with the same inputs and settings the worker reuses."""
     if Path(address).expanduser().is_file():
-        return LocalProcessJob(job, str(Path(address).expanduser()), settings)
-    return RemoteJob(job, address, settings)
+        return LocalProcessJob(job, str(Path(address).expanduser()), settings, earlier=earlier)
+    return RemoteJob(job, address, settings, earlier=earlier)
 
 
 def run_remote(job: Job, out_dir: str | Path, address: str = "auto", settings: BatchSettings = BatchSettings(),
-               progress=None, cancel=None, poll_seconds: float = 0.2) -> tuple[Path, dict]:
+               progress=None, cancel=None, poll_seconds: float = 0.2, earlier: Path | None = None) -> tuple[Path, dict]:
     """Run `job` in the worker environment at `address` (open_worker) and wait: the shape of a
     background-job work function.
 
@@ -153,7 +154,7 @@ def run_remote(job: Job, out_dir: str | Path, address: str = "auto", settings: B
 
     from ..core.base.progress import ProgressEvent
 
-    with open_worker(job, address, settings) as remote:
+    with open_worker(job, address, settings, earlier) as remote:
         asked_to_cancel = False
         while True:
             finished = remote.finished()
@@ -180,9 +181,11 @@ class LocalProcessJob:
     command line turns into a clean stop.
     """
 
-    def __init__(self, job: Job, python: str, settings: BatchSettings = BatchSettings(), env: dict | None = None) -> None:
+    def __init__(self, job: Job, python: str, settings: BatchSettings = BatchSettings(), env: dict | None = None,
+                 earlier: Path | None = None) -> None:
         import os
         import queue
+        import shutil
         import subprocess
         import tempfile
         import threading
@@ -198,8 +201,15 @@ class LocalProcessJob:
         lines += ["", "[[job]]"] + [f"{k} = {_toml(v)}" for k, v in entry.items()]
         (root / "jobs.toml").write_text("\n".join(lines) + "\n")
         self.out = root / "out"
+        reuse = []
+        if earlier is not None:   # its finished stages, copied as an earlier batch's job folder
+            from .batch import finished_stage_folders
+
+            for stage in finished_stage_folders(earlier):
+                shutil.copytree(stage, root / "earlier" / job.name / stage.name)
+            reuse = ["--reuse-from", str(root / "earlier")]
         self.process = subprocess.Popen([python, "-m", "scenefit.cli", "batch", str(root / "jobs.toml"), "--out",
-                                         str(self.out), "--events", "--quiet"], stdout=subprocess.PIPE,
+                                         str(self.out), "--events", "--quiet", *reuse], stdout=subprocess.PIPE,
                                         stderr=subprocess.PIPE, text=True, env={**os.environ, **(env or {})})
         self._events: queue.Queue = queue.Queue()
         self._reader = threading.Thread(target=self._read, daemon=True)
@@ -295,7 +305,8 @@ def work_remotely(data: dict, progress=None, cancel=None) -> dict:
     mode, object_prompt, instruction, negative_prompt, seed, models (a ModelConfig), overrides
     (stage settings over the preset's), object_size, camera, camera_source, camera_why, sun, sun_uncertainty, scene,
     depth_model, turn (how the
-    photo is seen, workers/jobs.py's Job), num_cpus, num_gpus.
+    photo is seen, workers/jobs.py's Job), num_cpus, num_gpus, earlier (an earlier run's folder: its stages
+    with the same inputs and settings are reused).
     """
     import tempfile
 
@@ -313,5 +324,6 @@ def work_remotely(data: dict, progress=None, cancel=None) -> dict:
                   at=tuple(data["at"]) if data.get("at") is not None else None, **optional)
         settings = BatchSettings(retries=0, num_cpus=float(data.get("num_cpus", 1.0)),
                                  num_gpus=data.get("num_gpus", "auto"))
-        folder, report = run_remote(job, data["out"], data["worker"], settings, progress=progress, cancel=cancel)
+        folder, report = run_remote(job, data["out"], data["worker"], settings, progress=progress, cancel=cancel,
+                                    earlier=Path(data["earlier"]) if data.get("earlier") else None)
     return {"folder": str(folder), "report": report}
