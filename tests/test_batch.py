@@ -456,3 +456,51 @@ def test_a_changed_job_runs_again_reusing_its_unchanged_stages(tmp_path, capsys)
     assert statuses() == {"convert": "reused", "light": "ran", "compose": "ran"}
     assert main(args + ["--replace"]) == 0   # --replace runs the job again from scratch
     assert statuses() == {"convert": "ran", "light": "ran", "compose": "ran"}
+
+
+def test_a_job_of_an_obj_takes_its_material_library_and_maps_along(tmp_path, capsys):
+    """A job's .obj travelled alone (a .gltf took its whole folder): the worker read it without its .mtl
+    and maps, and the batch fitted a flat white where `scenefit convert` fits the texture. Its files now
+    travel as the file names them, a map in a folder beside it ('../shared/') included."""
+    from asset_builder import write_obj
+
+    from scenefit.core.data.imageio import read_image
+
+    make_inputs(tmp_path)
+    rng = np.random.default_rng(3)
+    obj = Path(write_obj(tmp_path / "model", uv_sphere(0.5, 16, 8), rng.uniform(0.1, 0.9, (32, 32, 3)).astype(np.float32)))
+    (tmp_path / "shared").mkdir()
+    (tmp_path / "model" / "albedo.png").rename(tmp_path / "shared" / "albedo.png")
+    (tmp_path / "model" / "ball.mtl").write_text((tmp_path / "model" / "ball.mtl").read_text()
+                                                 .replace("map_Kd albedo.png", "map_Kd ../shared/albedo.png"))
+    (tmp_path / "jobs.toml").write_text('[defaults]\npreset = "draft"\nphoto = "room.png"\nat = [0.5, 0.7]\n'
+                                        'stages = ["convert"]\n[[job]]\nname = "obj"\nasset = "model/ball.obj"\n')
+    out = tmp_path / "model" / "runs"   # the batch's folder inside the asset's: not an input of the job
+    assert main(["batch", str(tmp_path / "jobs.toml"), "--out", str(out), "--quiet"]) == 0
+    assert main(["convert", str(obj), "--out", str(tmp_path / "convert"), "--preset", "draft", "--quiet"]) == 0
+    batch = read_image(out / "obj" / "convert" / "maps" / "base_color.png")
+    alone = read_image(tmp_path / "convert" / "maps" / "base_color.png")
+    assert batch.std() > 0.1 and batch.shape == alone.shape and np.abs(batch - alone).max() < 1e-6
+    capsys.readouterr()
+    assert main(["batch", str(tmp_path / "jobs.toml"), "--out", str(out)]) == 0   # its own results are no input
+    assert "0 done, 1 skipped" in capsys.readouterr().out
+
+
+def test_what_travels_with_a_blend_is_the_images_beside_it(tmp_path, monkeypatch):
+    """A .blend's (or an .fbx's) references are not read here: the images in its folder and below go with
+    it, never SceneFit's own run folders there, and a folder of too many is one sentence."""
+    from scenefit.core.base.output_folder import MARKER
+    from scenefit.workers import batch
+
+    blend = tmp_path / "props.blend"
+    blend.write_bytes(b"BLENDER")
+    for name in ("textures/wood.png", "textures/deep/metal.JPG", "runs/sofa/convert/maps/base_color.png", "notes.txt"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_bytes(b"x" * 10)
+    (tmp_path / "runs" / MARKER).write_text("{}")
+    assert [p.relative_to(tmp_path).as_posix() for p in batch.asset_inputs(blend)] == \
+        ["props.blend", "textures/deep/metal.JPG", "textures/wood.png"]
+    monkeypatch.setattr(batch, "MAX_BESIDE_BYTES", 15)
+    with pytest.raises(InputError, match=r"come to 0\.0 GB; pack its textures into the file \(in Blender: File > "
+                                         r"External Data > Pack Resources\) or move it into a folder of its own\.$"):
+        batch.asset_inputs(blend)

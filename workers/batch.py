@@ -73,19 +73,58 @@ class JobPayload:
     inputs: bytes
     attempt: int = 1
     digest: str = ""
+    asset_name: str = ""   # where the asset lies in `inputs` ("": asset/<its name>, an asset folder's)
 
 
 # Where a payload carries the finished stages of the job's earlier folder, beside asset/ and photo/.
 EARLIER = "earlier"
 
 
-def job_files(job: Job) -> dict[str, Path]:
-    """The job's input files as the payload stores them: asset/<its name> and photo/<its name>; a .gltf
-    takes its folder (buffers, images)."""
-    files = {"asset": job.asset.parent} if job.asset.suffix.lower() == ".gltf" else {f"asset/{job.asset.name}": job.asset}
+# Files Blender may read beside a .blend or an .fbx that does not name them in a way read here (its images).
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tga", ".tif", ".tiff", ".exr", ".hdr", ".bmp", ".webp", ".dds", ".ktx2")
+# What a job may send of a .blend's or an .fbx's folder (its images): past this, one sentence.
+MAX_BESIDE_BYTES = 2 * 2**30
+
+
+def asset_inputs(asset: Path) -> list[Path]:
+    """The files the job's asset is made of, resolved: a .gltf/.glb's buffers and images and an .obj's
+    material library and maps as the file names them (core.data.asset_files); for a .blend or an .fbx,
+    whose references are not read here, the image files in its folder and below (SceneFit's own run
+    folders aside). A worker unpacks them in the same layout, so every relative reference still holds."""
+    from ..core.base.output_folder import MARKER
+    from ..core.data.asset_files import asset_files
+
+    asset = asset.resolve()
+    if asset.suffix.lower() in (".gltf", ".glb", ".obj"):
+        return asset_files(asset)
+    runs = {marker.parent for marker in asset.parent.rglob(MARKER)}
+    beside = [p.resolve() for p in sorted(asset.parent.rglob("*")) if p.suffix.lower() in IMAGE_SUFFIXES
+              and p.is_file() and not any(folder == p.parent or folder in p.parents for folder in runs)]
+    size = sum(p.stat().st_size for p in beside)
+    if size > MAX_BESIDE_BYTES:
+        raise InputError(f"The images in '{asset.parent}' and below, which a job of '{asset.name}' sends to its "
+                         f"worker in case the file uses them, come to {size / 2**30:.1f} GB; pack its textures "
+                         "into the file (in Blender: File > External Data > Pack Resources) or move it into a "
+                         "folder of its own.")
+    return [asset] + beside
+
+
+def job_files(job: Job) -> tuple[dict[str, Path], str]:
+    """({name in the payload: file or folder}, the asset's name in the payload): an asset folder as
+    asset/<its name>; an asset file and what it is made of (asset_inputs) under asset/, laid out as on
+    disk from their nearest common folder; the photo as photo/<its name>."""
+    import os
+
+    if job.asset.is_dir():
+        files, asset_name = {f"asset/{job.asset.name}": job.asset}, f"asset/{job.asset.name}"
+    else:
+        inputs = asset_inputs(job.asset)
+        root = Path(os.path.commonpath([p.parent for p in inputs]))
+        files = {f"asset/{p.relative_to(root).as_posix()}": p for p in inputs}
+        asset_name = f"asset/{job.asset.resolve().relative_to(root).as_posix()}"
     if job.photo is not None:
         files[f"photo/{job.photo.name}"] = job.photo
-    return files
+    return files, asset_name
 
 
 def job_digest(job: Job) -> str:
@@ -93,7 +132,7 @@ def job_digest(job: Job) -> str:
     the same job)."""
     settings = {k: v for k, v in job.to_dict().items() if k not in ("asset", "photo")}
     digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
-    for name, path in sorted(job_files(job).items()):
+    for name, path in sorted(job_files(job)[0].items()):
         for file in sorted(path.rglob("*")) if path.is_dir() else [path]:
             if file.is_file():
                 digest.update(f"{name}/{file.relative_to(path) if path.is_dir() else file.name}".encode())
@@ -104,10 +143,10 @@ def job_digest(job: Job) -> str:
 def make_payload(job: Job, attempt: int = 1, earlier: Path | None = None) -> JobPayload:
     """The job and its inputs packed; `earlier`: a folder of the job from an earlier run, whose finished
     stages travel with it for the worker to reuse where their inputs and settings are the same."""
-    files = job_files(job)
+    files, asset_name = job_files(job)
     for stage in finished_stage_folders(earlier):
         files[f"{EARLIER}/{stage.name}"] = stage
-    return JobPayload(job, pack(files), attempt, job_digest(job))
+    return JobPayload(job, pack(files), attempt, job_digest(job), asset_name)
 
 
 def finished_stage_folders(folder: Path | None) -> list[Path]:
@@ -126,7 +165,8 @@ def unpacked_job(payload: JobPayload, folder: Path) -> tuple[Job, Path | None]:
     job = payload.job
     photo = None if job.photo is None else folder / "photo" / job.photo.name
     earlier = folder / EARLIER
-    return replace(job, asset=folder / "asset" / job.asset.name, photo=photo), earlier if earlier.is_dir() else None
+    asset = folder / (payload.asset_name or f"asset/{job.asset.name}")
+    return replace(job, asset=asset, photo=photo), earlier if earlier.is_dir() else None
 
 
 # -- one job on a worker ---------------------------------------------------------------------------
@@ -490,6 +530,8 @@ def check_batch(jobs: JobsFile, out_dir: str | Path) -> None:
     out_dir = check_output_folder(out_dir, inputs=batch_inputs(jobs), reuse=True)
     for job in jobs.jobs:
         check_subfolder(out_dir, job.name)   # a user's folder of that name is refused, never replaced
+        if not job.asset.is_dir():
+            asset_inputs(job.asset)   # (what would travel with it is said now, not after other jobs ran)
 
 
 def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: EventCallback | None,
