@@ -198,7 +198,7 @@ SEPARATE = (  # (part, script and arguments, results stem, paragraphs before its
     ("speed", ["bench_real_speed.py"], "real_speed", 3, "`scenefit run` on real 2k assets and a 12 MP photo"),
     ("start", ["bench_start.py"], "start", 2, "The exact start against the paper's fit (`--init fit`), real assets"),
     ("uv_layout", ["bench_uv_layout.py"], "uv_layout", 3, "Adaptation's new UV layout where real assets' UVs share texels"),
-    ("light_real", ["bench_light.py", "--real"], "light_real", 3,
+    ("light_real", ["bench_light.py", "--real", "--before", str(RESULTS / "light_real_before.json")], "light_real", 3,
      "Light from real photos: the field's protocol on the corpus's 12 HDR panoramas"),
     ("light_real", ["bench_light.py", "--real", "--ceiling", "--no-draft"], "light_real_ceiling", 3,
      "What the paper's light parametrisation can reach on those views (scales fitted to the truth)"),
