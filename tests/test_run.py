@@ -380,7 +380,7 @@ def test_a_new_run_folder_reuses_an_earlier_runs_stages_by_copy_and_leaves_that_
     assert files(tmp_path / "run-1") == before   # nothing of the first run was changed
 
 
-@pytest.mark.parametrize("lead_out", ["parent", "absolute", "link"])
+@pytest.mark.parametrize("lead_out", ["parent", "absolute", "link", "folder link"])
 def test_a_stage_whose_outputs_lead_out_of_its_folder_is_run_again(tmp_path, capsys, lead_out):
     """stage.json is data from wherever the run folder came from: an output naming a file outside the
     stage's folder ('..', an absolute path, a link out) is not taken as the finished stage's, which runs
@@ -397,6 +397,13 @@ def test_a_stage_whose_outputs_lead_out_of_its_folder_is_run_again(tmp_path, cap
     if lead_out == "link":
         (out / "light" / "light.exr").unlink()
         (out / "light" / "light.exr").symlink_to(outside)
+    elif lead_out == "folder link":   # the whole stage folder a link to a copy elsewhere
+        shutil.copytree(out / "light", tmp_path / "elsewhere")
+        shutil.rmtree(out / "light")
+        (out / "light").symlink_to(tmp_path / "elsewhere")
+        outside = tmp_path / "elsewhere" / "light.exr"
+        record = tmp_path / "elsewhere" / "stage.json"
+        before = outside.read_bytes()
     else:
         saved["report"]["outputs"]["hdr_exr"] = "../../elsewhere.exr" if lead_out == "parent" else str(outside)
         record.write_text(json.dumps(saved))
@@ -404,6 +411,7 @@ def test_a_stage_whose_outputs_lead_out_of_its_folder_is_run_again(tmp_path, cap
     report = json.loads((out / "report.json").read_text())
     assert report["reused"] == ["convert"] and report["stages"]["light"]["status"] == "ran"
     light = out / "light" / "light.exr"
-    assert light.is_file() and not light.is_symlink()
-    assert json.loads(record.read_text())["report"]["outputs"]["hdr_exr"] == "light.exr"
+    assert light.is_file() and not light.is_symlink() and not (out / "light").is_symlink()
+    assert json.loads((out / "light" / "stage.json").read_text())["report"]["outputs"]["hdr_exr"] == "light.exr"
     assert outside.read_bytes() == before   # the file outside is neither read as the stage's nor written
+    assert record.is_file()   # nor the stage.json outside removed

@@ -170,6 +170,8 @@ class StageRunner:
         self.fresh = self.fresh or later_stages_follow
         emit(self.progress, "run", index, len(STAGES), f"{name}: running")
         t0 = time.perf_counter()
+        if folder.is_symlink():   # a link in the run folder: the stage writes its own folder, never through it
+            folder.unlink()
         record.unlink(missing_ok=True)  # a stage half redone is not a finished stage
         wait = begin(folder)
 
@@ -207,7 +209,7 @@ def _finished_stage(folder: Path, key: str) -> dict | None:
         return None
     report = dict(saved.get("report") or {})
     report["outputs"] = _absolute_outputs(report.get("outputs", {}), folder)
-    inside = folder.resolve()
+    inside = folder.parent.resolve() / folder.name   # (a stage folder that is itself a link out is not inside)
     if saved.get("key") != key or not all(Path(p).exists() and Path(p).resolve().is_relative_to(inside)
                                           for p in _paths(report["outputs"])):
         return None
