@@ -108,7 +108,8 @@ class SceneFitSettings(bpy.types.PropertyGroup):
                                                "direction sets that back to 0 (sure); one typed here stays. The light "
                                                "around it widens from the narrow lobe at 15° to the guess's at 30°",
                                    update=_uncertainty_typed)
-    sun_uncertainty_picked: BoolProperty(name="Uncertainty from Pick Sun", default=False, options={"HIDDEN"},
+    # True by default: a file saved before this flag holds Pick Sun's uncertainty, which typing then reset.
+    sun_uncertainty_picked: BoolProperty(name="Uncertainty from Pick Sun", default=True, options={"HIDDEN"},
                                          description="Whether Uncertainty is Pick Sun's (a typed direction "
                                                      "resets it) rather than the artist's (kept)")
     # Style
