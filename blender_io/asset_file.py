@@ -280,6 +280,28 @@ def _blender_reason(error: Exception) -> str:
     return reason[:200]
 
 
+def blend_external_files(path: str | Path) -> list[Path]:
+    """The files a .blend's images read from disk (not packed into it), as absolute paths: its images are
+    linked for the look and removed again, so the open file is neither reset nor left changed."""
+    import os
+
+    import bpy
+
+    before = {id_ for id_ in (*bpy.data.images, *bpy.data.libraries)}
+    try:
+        with native_output_captured(), bpy.data.libraries.load(str(path), link=True) as (source, target):
+            target.images = list(source.images)
+        files = []
+        for image in target.images:
+            if image is None or image.packed_file is not None or image.source not in ("FILE", "SEQUENCE", "TILED"):
+                continue
+            if image.filepath:
+                files.append(Path(os.path.normpath(bpy.path.abspath(image.filepath, library=image.library))))
+        return sorted(set(files))
+    finally:
+        bpy.data.batch_remove([id_ for id_ in (*bpy.data.images, *bpy.data.libraries) if id_ not in before])
+
+
 def _append_blend(bpy, scene, path: Path, object_name: str | None) -> None:
     """Every object of the file (a named one's children come with it; the others are left out later)."""
     with bpy.data.libraries.load(str(path), link=False) as (source, target):

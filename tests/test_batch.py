@@ -461,7 +461,8 @@ def test_a_changed_job_runs_again_reusing_its_unchanged_stages(tmp_path, capsys)
 def test_a_job_of_an_obj_takes_its_material_library_and_maps_along(tmp_path, capsys):
     """A job's .obj travelled alone (a .gltf took its whole folder): the worker read it without its .mtl
     and maps, and the batch fitted a flat white where `scenefit convert` fits the texture. Its files now
-    travel as the file names them, a map in a folder beside it ('../shared/') included."""
+    travel as the file names them (a map in a subfolder, a link by its own name); one it names outside
+    its folder is refused in one sentence before any job (a downloaded asset could name any file)."""
     from asset_builder import write_obj
 
     from scenefit.core.data.imageio import read_image
@@ -469,10 +470,12 @@ def test_a_job_of_an_obj_takes_its_material_library_and_maps_along(tmp_path, cap
     make_inputs(tmp_path)
     rng = np.random.default_rng(3)
     obj = Path(write_obj(tmp_path / "model", uv_sphere(0.5, 16, 8), rng.uniform(0.1, 0.9, (32, 32, 3)).astype(np.float32)))
-    (tmp_path / "shared").mkdir()
-    (tmp_path / "model" / "albedo.png").rename(tmp_path / "shared" / "albedo.png")
-    (tmp_path / "model" / "ball.mtl").write_text((tmp_path / "model" / "ball.mtl").read_text()
-                                                 .replace("map_Kd albedo.png", "map_Kd ../shared/albedo.png"))
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "model" / "albedo.png").rename(tmp_path / "lib" / "albedo.png")
+    (tmp_path / "model" / "Textures").mkdir()
+    (tmp_path / "model" / "Textures" / "albedo.png").symlink_to(tmp_path / "lib" / "albedo.png")
+    mtl = tmp_path / "model" / "ball.mtl"
+    mtl.write_text(mtl.read_text().replace("map_Kd albedo.png", "map_Kd Textures/albedo.png"))
     (tmp_path / "jobs.toml").write_text('[defaults]\npreset = "draft"\nphoto = "room.png"\nat = [0.5, 0.7]\n'
                                         'stages = ["convert"]\n[[job]]\nname = "obj"\nasset = "model/ball.obj"\n')
     out = tmp_path / "model" / "runs"   # the batch's folder inside the asset's: not an input of the job
@@ -485,22 +488,79 @@ def test_a_job_of_an_obj_takes_its_material_library_and_maps_along(tmp_path, cap
     assert main(["batch", str(tmp_path / "jobs.toml"), "--out", str(out)]) == 0   # its own results are no input
     assert "0 done, 1 skipped" in capsys.readouterr().out
 
+    secret = tmp_path / "secret.png"
+    secret.write_bytes(b"not for the cluster")
+    for named in ("../secret.png", str(secret)):
+        mtl.write_text(f"newmtl Ball\nmap_Kd {named}\n")
+        assert main(["batch", str(tmp_path / "jobs.toml"), "--out", str(tmp_path / "elsewhere")]) == 2
+        said = capsys.readouterr().err.strip()
+        assert f"'ball.obj' reads '{secret}', outside its folder" in said and len(said.splitlines()) == 1
+        assert not (tmp_path / "elsewhere").exists()
 
-def test_what_travels_with_a_blend_is_the_images_beside_it(tmp_path, monkeypatch):
-    """A .blend's (or an .fbx's) references are not read here: the images in its folder and below go with
-    it, never SceneFit's own run folders there, and a folder of too many is one sentence."""
-    from scenefit.core.base.output_folder import MARKER
-    from scenefit.workers import batch
 
-    blend = tmp_path / "props.blend"
-    blend.write_bytes(b"BLENDER")
-    for name in ("textures/wood.png", "textures/deep/metal.JPG", "runs/sofa/convert/maps/base_color.png", "notes.txt"):
+def test_a_blend_job_sends_the_images_it_reads_and_no_others(tmp_path):
+    """A .blend's external images (not packed) travel, found by linking its images for a look (the open
+    file keeps what it had); other images beside it (photos, renders) do not, so they neither travel nor
+    change its digest. An .fbx sends the images beside it whose names it holds."""
+    import bpy
+
+    from scenefit.core.data.imageio import write_image
+    from scenefit.workers.job_inputs import job_digest, job_files
+    from scenefit.workers.jobs import Job
+
+    for name in ("textures/wood.png", "textures/unused.png", "photos/room.png"):
         (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / name).write_bytes(b"x" * 10)
-    (tmp_path / "runs" / MARKER).write_text("{}")
-    assert [p.relative_to(tmp_path).as_posix() for p in batch.asset_inputs(blend)] == \
-        ["props.blend", "textures/deep/metal.JPG", "textures/wood.png"]
-    monkeypatch.setattr(batch, "MAX_BESIDE_BYTES", 15)
-    with pytest.raises(InputError, match=r"come to 0\.0 GB; pack its textures into the file \(in Blender: File > "
-                                         r"External Data > Pack Resources\) or move it into a folder of its own\.$"):
-        batch.asset_inputs(blend)
+        write_image(tmp_path / name, np.full((4, 4, 3), 0.5, np.float32))
+    script = (f"import bpy\nbpy.ops.wm.read_factory_settings(use_empty=True)\n"
+              f"image = bpy.data.images.load({str(tmp_path / 'textures' / 'wood.png')!r})\nimage.use_fake_user = True\n"
+              f"bpy.ops.wm.save_as_mainfile(filepath={str(tmp_path / 'props.blend')!r}, relative_remap=True)\n")
+    import subprocess
+    subprocess.run([sys.executable, "-c", script], check=True, capture_output=True)
+    before = (len(bpy.data.images), len(bpy.data.libraries))
+    job = Job(name="a", asset=tmp_path / "props.blend", stages=("convert",))
+    files, asset_name = job_files(job)
+    assert sorted(files) == ["asset/props.blend", "asset/textures/wood.png"] and asset_name == "asset/props.blend"
+    assert (len(bpy.data.images), len(bpy.data.libraries)) == before   # nothing of the look stays
+    digest = job_digest(job, files)
+    write_image(tmp_path / "photos" / "room.png", np.full((4, 4, 3), 0.9, np.float32))   # another job's photo
+    assert job_digest(job, job_files(job)[0]) == digest
+    write_image(tmp_path / "textures" / "wood.png", np.full((4, 4, 3), 0.1, np.float32))  # its own texture
+    assert job_digest(job, job_files(job)[0]) != digest
+
+    (tmp_path / "sofa.fbx").write_bytes(b"Kaydara FBX Binary\x00 Texture::Wood RelativeFilename textures\\wood.png")
+    files, _ = job_files(Job(name="b", asset=tmp_path / "sofa.fbx", stages=("convert",)))
+    assert sorted(files) == ["asset/sofa.fbx", "asset/textures/wood.png"]
+
+
+
+def test_a_changed_job_that_fails_keeps_its_earlier_stages_for_the_next_try(tmp_path):
+    """A job changed since a done run, failing this time, was written down as failed with nothing else: the
+    earlier run's finished stages were lost and the next try ran all of them again."""
+    make_inputs(tmp_path)
+    text = ('[batch]\nretries = 0\n[defaults]\npreset = "draft"\nphoto = "room.png"\nat = [0.5, 0.7]\n'
+            'stages = ["convert", "light", "compose"]\n[[job]]\nname = "b"\nasset = "ball"\n'
+            'overrides = { compose = { shadow_type = "ratio" } }\n')
+    (tmp_path / "jobs.toml").write_text(text)
+    out = tmp_path / "out"
+    assert [o.status for o in run_batch(load_jobs(tmp_path / "jobs.toml"), out)] == ["done"]
+    (tmp_path / "jobs.toml").write_text(text.replace('"ratio"', '"none"'))
+    jobs = load_jobs(tmp_path / "jobs.toml")
+    assert [o.status for o in run_batch(jobs, out, InProcessDispatcher(jobs.settings, AlwaysFailingWorker))] == ["failed"]
+    report = json.loads((out / "b" / "report.json").read_text())
+    assert report["status"] == "failed" and report["kept"]["stages"] == ["convert", "light", "compose"]
+    assert [o.status for o in run_batch(jobs, out)] == ["done"]
+    stages = json.loads((out / "b" / "report.json").read_text())["stages"]["run"]["stages"]
+    assert {name: stages[name]["status"] for name in ("convert", "light", "compose")} == \
+        {"convert": "reused", "light": "reused", "compose": "ran"}
+
+
+def test_an_install_without_reuse_from_is_not_given_it(tmp_path):
+    """A worker install from before `scenefit batch --reuse-from` would refuse the whole job over the flag:
+    it is asked first, and only one that has it is given it."""
+    from scenefit.workers.remote import install_takes_reuse_from
+
+    older = tmp_path / "python"
+    older.write_text("#!/bin/sh\necho 'usage: scenefit batch [-h] [--out OUT] [--replace] jobs'\n")
+    older.chmod(0o755)
+    assert install_takes_reuse_from(sys.executable) and not install_takes_reuse_from(str(older))
+    assert not install_takes_reuse_from(str(tmp_path / "missing-python"))

@@ -15,7 +15,6 @@ holds a report with status "failed" and the error, the summary lists it, and the
 """
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import math
@@ -32,6 +31,7 @@ from typing import Callable
 
 from ..core.base.atomic import write_json_atomic, write_text_atomic
 from ..core.base.errors import InputError, SceneFitError
+from .job_inputs import job_digest, job_files
 from .jobs import CAMERA_KEYS, BatchSettings, Job, JobsFile, with_user_paths
 from ..core.base.output_folder import check_output_folder, check_subfolder, folder_in_place, install_folder
 
@@ -49,9 +49,9 @@ SHEET_IMAGES = ("composite.png", "compose/composite.png", "light/light_preview.p
 # -- packing files as bytes ------------------------------------------------------------------------
 
 def pack(paths: dict[str, Path]) -> bytes:
-    """A tar (gzip) of files and folders, each stored under its given name."""
+    """A tar (gzip) of files and folders, each stored under its given name; a link as the file it points at."""
     buffer = io.BytesIO()
-    with tarfile.open(fileobj=buffer, mode="w:gz") as tar:
+    with tarfile.open(fileobj=buffer, mode="w:gz", dereference=True) as tar:
         for name, path in paths.items():
             tar.add(str(path), arcname=name)
     return buffer.getvalue()
@@ -80,73 +80,17 @@ class JobPayload:
 EARLIER = "earlier"
 
 
-# Files Blender may read beside a .blend or an .fbx that does not name them in a way read here (its images).
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tga", ".tif", ".tiff", ".exr", ".hdr", ".bmp", ".webp", ".dds", ".ktx2")
-# What a job may send of a .blend's or an .fbx's folder (its images): past this, one sentence.
-MAX_BESIDE_BYTES = 2 * 2**30
-
-
-def asset_inputs(asset: Path) -> list[Path]:
-    """The files the job's asset is made of, resolved: a .gltf/.glb's buffers and images and an .obj's
-    material library and maps as the file names them (core.data.asset_files); for a .blend or an .fbx,
-    whose references are not read here, the image files in its folder and below (SceneFit's own run
-    folders aside). A worker unpacks them in the same layout, so every relative reference still holds."""
-    from ..core.base.output_folder import MARKER
-    from ..core.data.asset_files import asset_files
-
-    asset = asset.resolve()
-    if asset.suffix.lower() in (".gltf", ".glb", ".obj"):
-        return asset_files(asset)
-    runs = {marker.parent for marker in asset.parent.rglob(MARKER)}
-    beside = [p.resolve() for p in sorted(asset.parent.rglob("*")) if p.suffix.lower() in IMAGE_SUFFIXES
-              and p.is_file() and not any(folder == p.parent or folder in p.parents for folder in runs)]
-    size = sum(p.stat().st_size for p in beside)
-    if size > MAX_BESIDE_BYTES:
-        raise InputError(f"The images in '{asset.parent}' and below, which a job of '{asset.name}' sends to its "
-                         f"worker in case the file uses them, come to {size / 2**30:.1f} GB; pack its textures "
-                         "into the file (in Blender: File > External Data > Pack Resources) or move it into a "
-                         "folder of its own.")
-    return [asset] + beside
-
-
-def job_files(job: Job) -> tuple[dict[str, Path], str]:
-    """({name in the payload: file or folder}, the asset's name in the payload): an asset folder as
-    asset/<its name>; an asset file and what it is made of (asset_inputs) under asset/, laid out as on
-    disk from their nearest common folder; the photo as photo/<its name>."""
-    import os
-
-    if job.asset.is_dir():
-        files, asset_name = {f"asset/{job.asset.name}": job.asset}, f"asset/{job.asset.name}"
-    else:
-        inputs = asset_inputs(job.asset)
-        root = Path(os.path.commonpath([p.parent for p in inputs]))
-        files = {f"asset/{p.relative_to(root).as_posix()}": p for p in inputs}
-        asset_name = f"asset/{job.asset.resolve().relative_to(root).as_posix()}"
-    if job.photo is not None:
-        files[f"photo/{job.photo.name}"] = job.photo
-    return files, asset_name
-
-
-def job_digest(job: Job) -> str:
-    """The job's settings and its input files' contents, not where they are (a jobs folder that moved is
-    the same job)."""
-    settings = {k: v for k, v in job.to_dict().items() if k not in ("asset", "photo")}
-    digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
-    for name, path in sorted(job_files(job)[0].items()):
-        for file in sorted(path.rglob("*")) if path.is_dir() else [path]:
-            if file.is_file():
-                digest.update(f"{name}/{file.relative_to(path) if path.is_dir() else file.name}".encode())
-                digest.update(hashlib.sha256(file.read_bytes()).digest())
-    return digest.hexdigest()
-
-
-def make_payload(job: Job, attempt: int = 1, earlier: Path | None = None) -> JobPayload:
-    """The job and its inputs packed; `earlier`: a folder of the job from an earlier run, whose finished
-    stages travel with it for the worker to reuse where their inputs and settings are the same."""
-    files, asset_name = job_files(job)
+def make_payload(job: Job, attempt: int = 1, earlier: Path | None = None,
+                 files: tuple[dict[str, Path], str] | None = None, digest: str | None = None) -> JobPayload:
+    """The job and its inputs packed (job_inputs.job_files; `files` and `digest`: already worked out);
+    `earlier`: a folder of the job from an earlier run, whose finished stages travel with it for the
+    worker to reuse where their inputs and settings are the same."""
+    inputs, asset_name = files if files is not None else job_files(job)
+    digest = digest if digest is not None else job_digest(job, inputs)   # (before packing: an edit meanwhile re-runs)
+    packed = dict(inputs)
     for stage in finished_stage_folders(earlier):
-        files[f"{EARLIER}/{stage.name}"] = stage
-    return JobPayload(job, pack(files), attempt, job_digest(job), asset_name)
+        packed[f"{EARLIER}/{stage.name}"] = stage
+    return JobPayload(job, pack(packed), attempt, digest, asset_name)
 
 
 def finished_stage_folders(folder: Path | None) -> list[Path]:
@@ -323,9 +267,15 @@ def run_job_stages(job: Job, out: Path, progress=None, cancel=None, models=None,
     the same; a job of convert and/or light alone runs those stage functions. `models`: the worker's
     ModelCache (None: the pipeline loads what it needs for this job alone).
     """
-    if "compose" in job.stages or "bake" in job.stages:
+    if runs_pipeline(job):
         return _relative_outputs({"run": run_pipeline_for_job(job, out, progress, cancel, models, reuse_from)}, out)
     return _available_stages(job, out, progress, cancel)
+
+
+def runs_pipeline(job: Job) -> bool:
+    """A job that composes or bakes runs `scenefit run`'s pipeline (and reuses earlier stages); one of
+    convert and/or light alone runs those stage functions."""
+    return "compose" in job.stages or "bake" in job.stages
 
 
 def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models=None,
@@ -440,10 +390,11 @@ def job_report(out_dir: Path, name: str) -> dict | None:
 
 
 def is_done(out_dir: Path, job: Job, digest: str | None = None) -> bool:
-    """DIR/<job>/ holds this job done: its settings and input files as now (`digest`: job_digest's)."""
+    """DIR/<job>/ holds this job done: its settings and input files as now (`digest`: job_digest's). A
+    report of a SceneFit before digests has none: such a job runs once more."""
     report = job_report(out_dir, job.name)
     return report is not None and report.get("status") == "done" and \
-        report.get("digest") == (digest if digest is not None else job_digest(job))
+        report.get("digest") == (digest if digest is not None else job_digest(job, job_files(job)[0]))
 
 
 @dataclass
@@ -530,8 +481,8 @@ def check_batch(jobs: JobsFile, out_dir: str | Path) -> None:
     out_dir = check_output_folder(out_dir, inputs=batch_inputs(jobs), reuse=True)
     for job in jobs.jobs:
         check_subfolder(out_dir, job.name)   # a user's folder of that name is refused, never replaced
-        if not job.asset.is_dir():
-            asset_inputs(job.asset)   # (what would travel with it is said now, not after other jobs ran)
+    for job in {job.asset: job for job in jobs.jobs}.values():   # each asset once
+        job_files(job)   # a file it names outside its folder is said now, not after other jobs ran
 
 
 def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: EventCallback | None,
@@ -541,20 +492,23 @@ def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: E
     pending = 0
     try:
         for job in jobs.jobs:
-            digest = job_digest(job)
+            files = job_files(job)
+            digest = job_digest(job, files[0])
             report = job_report(out_dir, job.name) or {}
             if not redo and is_done(out_dir, job, digest):
                 outcomes[job.name] = JobOutcome(job.name, "skipped", report.get("attempts", 0),
                                                 report.get("seconds", 0.0), report.get("quality", {}))
                 say(job.name, "done by an earlier run; skipped")
                 continue
-            # Changed since an earlier run (not --replace): its finished stages go along, to be reused.
-            changed = not redo and report.get("status") == "done"
-            earlier = out_dir / job.name if changed else reuse_from / job.name if reuse_from else None
-            dispatcher.submit(make_payload(job, earlier=earlier))
+            # Changed since an earlier run, or failed after one (not --replace): its finished stages go
+            # along, to be reused by a job that runs the pipeline.
+            own = out_dir / job.name if not redo and finished_stage_folders(out_dir / job.name) else None
+            earlier = own or (reuse_from / job.name if reuse_from else None)
+            dispatcher.submit(make_payload(job, earlier=earlier, files=files, digest=digest))
             pending += 1
-            say(job.name, "changed since the earlier run (settings or input files): queued, its unchanged stages "
-                          "to be reused" if changed else "queued")
+            reuses = earlier is not None and runs_pipeline(job) and finished_stage_folders(earlier)
+            say(job.name, ("changed since the earlier run (settings or input files): queued" if report.get("status") ==
+                           "done" and not redo else "queued") + (", its unchanged stages to be reused" if reuses else ""))
         tries = 1 + jobs.settings.retries
         while pending:
             payload, result = dispatcher.next_done()
@@ -574,7 +528,17 @@ def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: E
                 continue
             report = {"status": "failed", "job": job.to_dict(), "attempts": payload.attempt, "error": error,
                       "traceback": "".join(traceback.format_exception(result))[-4000:]}
-            install_folder(out_dir, job.name, lambda folder: write_json_atomic(folder / REPORT, report))
+
+            def failed(folder: Path) -> None:   # the earlier run's finished stages stay, for the next try
+                kept = finished_stage_folders(out_dir / job.name) if not redo else []
+                for stage in kept:
+                    shutil.copytree(stage, folder / stage.name)
+                if kept:
+                    report["kept"] = {"stages": [stage.name for stage in kept],
+                                      "why": "the earlier run's finished stages, for the next try to reuse"}
+                write_json_atomic(folder / REPORT, report)
+
+            install_folder(out_dir, job.name, failed)
             outcomes[job.name] = JobOutcome(job.name, "failed", payload.attempt, 0.0, {}, error)
             say(job.name, f"failed after {payload.attempt} attempt(s): {error}")
     finally:

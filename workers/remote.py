@@ -202,10 +202,10 @@ class LocalProcessJob:
         (root / "jobs.toml").write_text("\n".join(lines) + "\n")
         self.out = root / "out"
         reuse = []
-        if earlier is not None:   # its finished stages, copied as an earlier batch's job folder
+        if earlier is not None and install_takes_reuse_from(python):   # (an older install runs all again)
             from .batch import finished_stage_folders
 
-            for stage in finished_stage_folders(earlier):
+            for stage in finished_stage_folders(earlier):   # copied as an earlier batch's job folder
                 shutil.copytree(stage, root / "earlier" / job.name / stage.name)
             reuse = ["--reuse-from", str(root / "earlier")]
         self.process = subprocess.Popen([python, "-m", "scenefit.cli", "batch", str(root / "jobs.toml"), "--out",
@@ -276,6 +276,24 @@ class LocalProcessJob:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+_TAKES_REUSE_FROM: dict[str, bool] = {}
+
+
+def install_takes_reuse_from(python: str) -> bool:
+    """Whether the SceneFit install of `python` has `scenefit batch --reuse-from` (asked once per install
+    and session: an install from before it would refuse the whole job over the flag)."""
+    import subprocess
+
+    if python not in _TAKES_REUSE_FROM:
+        try:
+            shown = subprocess.run([python, "-m", "scenefit.cli", "batch", "--help"], capture_output=True, text=True,
+                                   timeout=120).stdout
+        except (OSError, subprocess.SubprocessError):
+            shown = ""
+        _TAKES_REUSE_FROM[python] = "--reuse-from" in shown
+    return _TAKES_REUSE_FROM[python]
 
 
 def _toml(value) -> str:

@@ -10,11 +10,13 @@ from ..base.errors import InputError
 from .glb import gltf_json
 
 
-def asset_files(path: str | os.PathLike) -> list[Path]:
-    """The asset file and the files it refers to that exist, resolved (a folder: every file in it)."""
+def asset_files(path: str | os.PathLike, resolve: bool = True) -> list[Path]:
+    """The asset file and the files it refers to that exist, resolved (a folder: every file in it).
+    resolve False: absolute and normalised as named ('..' folded, links kept under their own names),
+    for laying the files out elsewhere as the asset names them."""
     path = Path(path)
     if path.is_dir():
-        return sorted(p.resolve() for p in path.rglob("*") if p.is_file())
+        return sorted(p.resolve() if resolve else Path(os.path.abspath(p)) for p in path.rglob("*") if p.is_file())
     found = [path]
     suffix = path.suffix.lower()
     if suffix in (".gltf", ".glb"):
@@ -23,7 +25,7 @@ def asset_files(path: str | os.PathLike) -> list[Path]:
         for library in _obj_libraries(path):
             found.append(library)
             found += _mtl_maps(library)
-    return sorted({p.resolve() for p in found if p.is_file()})
+    return sorted({p.resolve() if resolve else Path(os.path.normpath(os.path.abspath(p))) for p in found if p.is_file()})
 
 
 def _gltf_uris(path: Path) -> list[str]:

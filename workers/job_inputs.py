@@ -1,0 +1,98 @@
+"""What a batch or worker job sends of its asset, and what its inputs were (to tell a job unchanged).
+
+A job's asset travels with the files it names and nothing else of the user's: a .gltf's or .glb's
+buffers and images and an .obj's material library and maps as the file names them, a .blend's images
+that are not packed into it (Blender lists them), an .fbx's images that it names. They go in the layout
+they have below the asset's folder, so every relative reference still holds on the worker; a name that
+leads out of that folder (an absolute path, '..') is refused in one sentence: an asset from someone
+else could otherwise send any file of the user's to a cluster. Links are sent as the files they point
+at, under their own names (tar's dereference).
+
+The digest of a job is its settings (not where its files are: a moved jobs folder is the same job) and
+the contents of what it sends. Files are hashed in chunks, and a file's hash is kept while its size and
+modification time stay, so a batch of many jobs on one asset reads the asset once.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from functools import lru_cache
+from pathlib import Path
+
+from ..core.base.errors import InputError
+from .jobs import Job
+
+# Files an .fbx may name for Blender's importer to read beside it (its images).
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tga", ".tif", ".tiff", ".exr", ".hdr", ".bmp", ".webp", ".dds")
+
+
+def asset_references(asset: Path) -> list[Path]:
+    """The asset file and the files it names that exist, absolute and normalised as named (links kept)."""
+    from ..core.data.asset_files import asset_files
+
+    suffix = asset.suffix.lower()
+    if suffix in (".gltf", ".glb", ".obj"):
+        return asset_files(asset, resolve=False)
+    own = Path(os.path.normpath(os.path.abspath(asset)))
+    if suffix == ".blend":
+        from ..blender_io.asset_file import blend_external_files
+
+        return [own] + [p for p in blend_external_files(own) if p.is_file()]
+    if suffix == ".fbx":
+        return [own] + _fbx_named_images(own)
+    return [own]   # .ply, .usd*: read as the file alone
+
+
+def _fbx_named_images(fbx: Path) -> list[Path]:
+    """The images in the .fbx's folder and below whose file name the .fbx holds (binary and ASCII FBX
+    store a texture's file name as a plain string; Blender's importer also looks beside the file)."""
+    data = fbx.read_bytes()
+    found = []
+    for path in sorted(fbx.parent.rglob("*")):
+        if path.suffix.lower() in IMAGE_SUFFIXES and path.is_file() and path.name.encode() in data:
+            found.append(Path(os.path.abspath(path)))
+    return found
+
+
+def job_files(job: Job) -> tuple[dict[str, Path], str]:
+    """({name in the payload: file or folder}, the asset's name in it): an asset folder as
+    asset/<its name>; an asset file and the files it names below asset/, as they lie below its folder;
+    the photo as photo/<its name>. One sentence for a named file outside the asset's folder."""
+    if job.asset.is_dir():
+        files, asset_name = {f"asset/{job.asset.name}": job.asset}, f"asset/{job.asset.name}"
+    else:
+        folder = Path(os.path.normpath(os.path.abspath(job.asset.parent)))
+        files = {}
+        for path in asset_references(job.asset):
+            try:
+                files[f"asset/{path.relative_to(folder).as_posix()}"] = path
+            except ValueError:
+                raise InputError(f"Job '{job.name}': '{job.asset.name}' reads '{path}', outside its folder "
+                                 f"'{folder}'; a job sends only what lies in the asset's folder and below, so "
+                                 "move the file in (and name it from there), or run the asset with scenefit run.") \
+                    from None
+        asset_name = f"asset/{job.asset.name}"
+    if job.photo is not None:
+        files[f"photo/{job.photo.name}"] = job.photo
+    return files, asset_name
+
+
+def job_digest(job: Job, files: dict[str, Path]) -> str:
+    """The job's settings and the contents of `files` (job_files'), not where they lie."""
+    settings = {k: v for k, v in job.to_dict().items() if k not in ("asset", "photo")}
+    digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
+    for name, path in sorted(files.items()):
+        for file in sorted(path.rglob("*")) if path.is_dir() else [path]:
+            if file.is_file():
+                digest.update(f"{name}/{file.relative_to(path).as_posix() if path.is_dir() else ''}".encode())
+                stat = file.stat()
+                digest.update(_file_sha(str(file), stat.st_size, stat.st_mtime_ns))
+    return digest.hexdigest()
+
+
+@lru_cache(maxsize=4096)
+def _file_sha(path: str, size: int, mtime_ns: int) -> bytes:
+    """A file's SHA-256, read in chunks; kept while its size and modification time stay."""
+    with open(path, "rb") as f:
+        return hashlib.file_digest(f, "sha256").digest()
