@@ -138,11 +138,13 @@ def test_cli_bad_input_is_a_sentence_not_a_traceback(tmp_path):
     # the test if bpy is imported), so a mistyped path is refused at once, not after seconds of loading.
     (tmp_path / "notes.txt").write_text("hello")
     (tmp_path / "empty.glb").write_bytes(b"")
+    (tmp_path / "fox.obj").write_text("mtllib fox.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")   # its .mtl left behind
     for command in ("convert", "run", "bake", "render", "export"):
         for asset, words in (("missing.glb", "does not exist"), ("notes.txt", "cannot read '.txt'"),
-                             ("empty.glb", "is empty")):
+                             ("empty.glb", "is empty"), ("fox.obj", "names the material library 'fox.mtl', "
+                                                                    "which is not in")):
             extra = {"run": ["--photo", tmp_path / "p.png", "--at", "0.5,0.6"], "bake": ["--texture", "t.pt"]}
             proc = scenefit_here(command, tmp_path / asset, "--out", tmp_path / "o.glb", *extra.get(command, []))
             assert proc.returncode == 2 and words in proc.stderr, (command, asset, proc.stderr)
             assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.glb", "notes.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.glb", "fox.obj", "notes.txt"]

@@ -22,7 +22,7 @@ def asset_files(path: str | os.PathLike, resolve: bool = True) -> list[Path]:
     if suffix in (".gltf", ".glb"):
         found += [path.parent / unquote(uri) for uri in _gltf_uris(path)]
     elif suffix == ".obj":
-        for library in _obj_libraries(path):
+        for library in obj_material_libraries(path):
             found.append(library)
             found += _mtl_maps(library)
     return sorted({p.resolve() if resolve else Path(os.path.normpath(os.path.abspath(p))) for p in found if p.is_file()})
@@ -35,7 +35,8 @@ def _gltf_uris(path: Path) -> list[str]:
             if isinstance(e, dict) and isinstance(e.get("uri"), str) and not e["uri"].startswith("data:")]
 
 
-def _obj_libraries(path: Path) -> list[Path]:
+def obj_material_libraries(path: Path) -> list[Path]:
+    """The material libraries an .obj names (its `mtllib` lines), beside it, whether or not they exist."""
     libraries = []
     with open(path, errors="replace") as f:
         for line in f:

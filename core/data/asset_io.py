@@ -84,6 +84,14 @@ def check_asset_path(path: str | Path) -> None:
                          f"{', '.join(sorted(ASSET_FILE_SUFFIXES))}, or an asset folder.")
     if path.stat().st_size == 0:
         raise InputError(f"Asset file '{path}' is empty; export it again.")
+    if path.suffix.lower() == ".obj":   # Blender reads it without, grey and silent: the maps never arrive
+        from .asset_files import obj_material_libraries
+
+        for library in obj_material_libraries(path):
+            if not library.is_file():
+                raise InputError(f"'{path.name}' names the material library '{library.name}', which is not in "
+                                 f"'{library.parent}'; put it there with the maps it names, or export the OBJ "
+                                 "again with its materials.")
 
 
 def load_asset_folder(folder: str | Path) -> tuple[Mesh, PBRMaps]:
