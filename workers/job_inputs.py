@@ -36,12 +36,19 @@ def asset_references(asset: Path) -> list[Path]:
         return asset_files(asset, resolve=False)
     own = Path(os.path.normpath(os.path.abspath(asset)))
     if suffix == ".blend":
-        from ..blender_io.asset_file import blend_external_files
-
-        return [own] + [p for p in blend_external_files(own) if p.is_file()]
+        stat = own.stat()
+        return [own] + [p for p in _blend_images(str(own), stat.st_size, stat.st_mtime_ns) if p.is_file()]
     if suffix == ".fbx":
         return [own] + _fbx_named_images(own)
     return [own]   # .ply, .usd*: read as the file alone
+
+
+@lru_cache(maxsize=256)
+def _blend_images(path: str, size: int, mtime_ns: int) -> tuple[Path, ...]:
+    """blend_external_files, once per .blend while it is unchanged (a batch of many photos on one asset)."""
+    from ..blender_io.asset_file import blend_external_files
+
+    return tuple(blend_external_files(path))
 
 
 def _fbx_named_images(fbx: Path) -> list[Path]:
