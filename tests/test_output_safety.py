@@ -199,6 +199,33 @@ def test_the_files_a_gltf_asset_is_made_of_are_known(tmp_path):
     assert names == ["ball.mtl", "ball.obj", "tex/Material_base_color.png"]
 
 
+@pytest.mark.parametrize("mtllib, library", [
+    ("mtllib my fox.mtl", "my fox.mtl"),          # the line's rest is one name, spaces and all
+    ('mtllib "quoted.mtl"', "quoted.mtl"),        # quotes stripped
+    ("mtllib gone.mtl", "fox.mtl"),               # a missing one: Blender reads the same-named .mtl
+    ("", "fox.mtl"),                              # none named: the same-named .mtl all the same
+])
+def test_an_objs_libraries_and_maps_are_read_as_blender_reads_them(tmp_path, mtllib, library):
+    """The OBJ's material library as Blender's importer finds it, and a map whose name has spaces after
+    its options: what the refusal of a missing library and what a batch job sends rest on (a library
+    named with a space, quotes or missing beside a same-named .mtl was refused, though Blender reads it)."""
+    from scenefit.core.data.asset_files import asset_files
+    from scenefit.core.data.asset_io import check_asset_path
+
+    (tmp_path / "fox.obj").write_text(f"{mtllib}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (tmp_path / library).write_text("newmtl Fox\nmap_Kd -s 2 2 1 -clamp on my wood.png\n")
+    (tmp_path / "my wood.png").write_bytes(b"x")
+    check_asset_path(tmp_path / "fox.obj")   # not refused
+    names = [p.name for p in asset_files(tmp_path / "fox.obj")]
+    assert names == sorted(["fox.obj", library, "my wood.png"])
+    (tmp_path / library).unlink()
+    if mtllib:   # named, and neither it nor the same-named .mtl there: one sentence
+        with pytest.raises(InputError, match="names the material library"):
+            check_asset_path(tmp_path / "fox.obj")
+    else:
+        check_asset_path(tmp_path / "fox.obj")
+
+
 # -- nothing from a folder runs code ------------------------------------------------------------------
 class _Payload:
     """A pickle that, if unpickled by an unrestricted loader, creates a file: the proof that code ran."""

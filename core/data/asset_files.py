@@ -22,7 +22,8 @@ def asset_files(path: str | os.PathLike, resolve: bool = True) -> list[Path]:
     if suffix in (".gltf", ".glb"):
         found += [path.parent / unquote(uri) for uri in _gltf_uris(path)]
     elif suffix == ".obj":
-        for library in obj_material_libraries(path):
+        named, same_name = obj_material_libraries(path)
+        for library in dict.fromkeys(named + [same_name]):
             found.append(library)
             found += _mtl_maps(library)
     return sorted({p.resolve() if resolve else Path(os.path.normpath(os.path.abspath(p))) for p in found if p.is_file()})
@@ -35,17 +36,27 @@ def _gltf_uris(path: Path) -> list[str]:
             if isinstance(e, dict) and isinstance(e.get("uri"), str) and not e["uri"].startswith("data:")]
 
 
-def obj_material_libraries(path: Path) -> list[Path]:
-    """The material libraries an .obj names (its `mtllib` lines), beside it, whether or not they exist."""
-    libraries = []
+def obj_material_libraries(path: Path) -> tuple[list[Path], Path]:
+    """(the libraries the .obj's `mtllib` lines name, `<its name>.mtl` beside it), whether or not they
+    exist, as Blender's OBJ importer reads them: a line's rest is one name (quotes stripped; joined to the
+    .obj's folder even when absolute, as Blender joins it), and the same-named .mtl is read as well."""
+    named = []
     with open(path, errors="replace") as f:
         for line in f:
-            if line.startswith("mtllib "):
-                libraries += [path.parent / name for name in line.split()[1:]]
-    return libraries
+            words = line.split(maxsplit=1)
+            if len(words) == 2 and words[0] == "mtllib":
+                name = words[1].strip().strip('"').lstrip("/\\")
+                if name:
+                    named.append(path.parent / name)
+    return named, path.with_suffix(".mtl")
+
+
+# MTL map options and how many values each takes (numbers, up to three; or one word: -clamp on).
+_NUMERIC_OPTIONS = ("-o", "-s", "-t", "-mm", "-bm", "-boost", "-texres")
 
 
 def _mtl_maps(library: Path) -> list[Path]:
+    """The maps an MTL names (map_*, bump, disp, norm): each line's rest after its options, spaces kept."""
     if not library.is_file():
         return []
     maps = []
@@ -53,8 +64,30 @@ def _mtl_maps(library: Path) -> list[Path]:
         for line in f:
             words = line.split()
             if words and (words[0].startswith("map_") or words[0] in ("bump", "disp", "norm")):
-                maps.append(library.parent / words[-1])
+                name = _map_name(words[1:])
+                if name:
+                    maps.append(library.parent / name)
     return maps
+
+
+def _map_name(words: list[str]) -> str:
+    i = 0
+    while i < len(words) and words[i].startswith("-") and not _is_number(words[i]):
+        option, i = words[i], i + 1
+        if option in _NUMERIC_OPTIONS:
+            while i < len(words) and _is_number(words[i]):
+                i += 1
+        else:
+            i += 1
+    return " ".join(words[i:])
+
+
+def _is_number(word: str) -> bool:
+    try:
+        float(word)
+    except ValueError:
+        return False
+    return True
 
 
 def refuse_overwriting(targets: list[Path], protected: list[Path], what: str = "the output") -> None:

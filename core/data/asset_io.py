@@ -87,11 +87,11 @@ def check_asset_path(path: str | Path) -> None:
     if path.suffix.lower() == ".obj":   # Blender reads it without, grey and silent: the maps never arrive
         from .asset_files import obj_material_libraries
 
-        for library in obj_material_libraries(path):
-            if not library.is_file():
-                raise InputError(f"'{path.name}' names the material library '{library.name}', which is not in "
-                                 f"'{library.parent}'; put it there with the maps it names, or export the OBJ "
-                                 "again with its materials.")
+        named, same_name = obj_material_libraries(path)
+        if named and not any(library.is_file() for library in named + [same_name]):
+            raise InputError(f"'{path.name}' names the material library '{named[0].name}', which is not in "
+                             f"'{named[0].parent}'; put it there with the maps it names, or export the OBJ "
+                             "again with its materials.")
 
 
 def load_asset_folder(folder: str | Path) -> tuple[Mesh, PBRMaps]:
