@@ -289,17 +289,36 @@ def blend_external_files(path: str | Path) -> list[Path]:
 
     before = {id_ for id_ in (*bpy.data.images, *bpy.data.libraries)}
     try:
-        with native_output_captured(), bpy.data.libraries.load(str(path), link=True) as (source, target):
-            target.images = list(source.images)
+        try:
+            with native_output_captured(), bpy.data.libraries.load(str(path), link=True) as (source, target):
+                target.images = list(source.images)
+        except (OSError, RuntimeError) as error:
+            raise InputError(f"Blender cannot read '{path}' ({_blender_reason(error)}); open it in Blender and "
+                             "save it again.") from None
         files = []
         for image in target.images:
             if image is None or image.packed_file is not None or image.source not in ("FILE", "SEQUENCE", "TILED"):
                 continue
             if image.filepath:
-                files.append(Path(os.path.normpath(bpy.path.abspath(image.filepath, library=image.library))))
+                named = Path(os.path.normpath(bpy.path.abspath(image.filepath, library=image.library)))
+                files += _tiles_or_frames(named, image.source) if image.source != "FILE" else [named]
         return sorted(set(files))
     finally:
         bpy.data.batch_remove([id_ for id_ in (*bpy.data.images, *bpy.data.libraries) if id_ not in before])
+
+
+def _tiles_or_frames(named: Path, source: str) -> list[Path]:
+    """A UDIM image's tiles (its name holds '<UDIM>' or a tile number) or an image sequence's frames: the
+    files beside `named` that differ from it only in those digits."""
+    import re
+
+    stem = named.name.replace("<UDIM>", "1001") if source == "TILED" else named.name
+    match = list(re.finditer(r"\d+", stem))
+    if not match:
+        return [named]
+    last = match[-1]
+    pattern = re.compile(re.escape(stem[:last.start()]) + r"\d+" + re.escape(stem[last.end():]) + "$")
+    return [p for p in named.parent.glob("*") if pattern.match(p.name)] if named.parent.is_dir() else []
 
 
 def _append_blend(bpy, scene, path: Path, object_name: str | None) -> None:

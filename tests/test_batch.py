@@ -470,10 +470,10 @@ def test_a_job_of_an_obj_takes_its_material_library_and_maps_along(tmp_path, cap
     make_inputs(tmp_path)
     rng = np.random.default_rng(3)
     obj = Path(write_obj(tmp_path / "model", uv_sphere(0.5, 16, 8), rng.uniform(0.1, 0.9, (32, 32, 3)).astype(np.float32)))
-    (tmp_path / "lib").mkdir()
-    (tmp_path / "model" / "albedo.png").rename(tmp_path / "lib" / "albedo.png")
+    (tmp_path / "model" / "lib").mkdir()
+    (tmp_path / "model" / "albedo.png").rename(tmp_path / "model" / "lib" / "albedo.png")
     (tmp_path / "model" / "Textures").mkdir()
-    (tmp_path / "model" / "Textures" / "albedo.png").symlink_to(tmp_path / "lib" / "albedo.png")
+    (tmp_path / "model" / "Textures" / "albedo.png").symlink_to(Path("..") / "lib" / "albedo.png")
     mtl = tmp_path / "model" / "ball.mtl"
     mtl.write_text(mtl.read_text().replace("map_Kd albedo.png", "map_Kd Textures/albedo.png"))
     (tmp_path / "jobs.toml").write_text('[defaults]\npreset = "draft"\nphoto = "room.png"\nat = [0.5, 0.7]\n'
@@ -490,11 +490,13 @@ def test_a_job_of_an_obj_takes_its_material_library_and_maps_along(tmp_path, cap
 
     secret = tmp_path / "secret.png"
     secret.write_bytes(b"not for the cluster")
-    for named in ("../secret.png", str(secret)):
+    (tmp_path / "model" / "lib" / "leak.png").symlink_to(secret)
+    for named, shown in (("../secret.png", f"'{secret}'"), (str(secret), f"'{secret}'"),
+                         ("lib/leak.png", f"'{tmp_path / 'model' / 'lib' / 'leak.png'}', a link to '{secret}'")):
         mtl.write_text(f"newmtl Ball\nmap_Kd {named}\n")
         assert main(["batch", str(tmp_path / "jobs.toml"), "--out", str(tmp_path / "elsewhere")]) == 2
         said = capsys.readouterr().err.strip()
-        assert f"'ball.obj' reads '{secret}', outside its folder" in said and len(said.splitlines()) == 1
+        assert f"'ball.obj' reads {shown}, outside its folder" in said and len(said.splitlines()) == 1
         assert not (tmp_path / "elsewhere").exists()
 
 
@@ -527,9 +529,48 @@ def test_a_blend_job_sends_the_images_it_reads_and_no_others(tmp_path):
     write_image(tmp_path / "textures" / "wood.png", np.full((4, 4, 3), 0.1, np.float32))  # its own texture
     assert job_digest(job, job_files(job)[0]) != digest
 
-    (tmp_path / "sofa.fbx").write_bytes(b"Kaydara FBX Binary\x00 Texture::Wood RelativeFilename textures\\wood.png")
+    # an .fbx: the images whose whole names it holds ("wood.png", not "unused.png" inside "not_unused.png"),
+    # never its own batch's outputs beside it
+    (tmp_path / "sofa.fbx").write_bytes(b"Kaydara FBX Binary\x00 Texture::Wood RelativeFilename textures\\wood.png"
+                                        b"\x00S\x0e\x00\x00\x00not_unused.png")
+    from scenefit.core.base.output_folder import MARKER
+
+    (tmp_path / "runs" / "sofa" / "textures").mkdir(parents=True)
+    (tmp_path / "runs" / MARKER).write_text("{}")
+    write_image(tmp_path / "runs" / "sofa" / "textures" / "wood.png", np.zeros((4, 4, 3), np.float32))
     files, _ = job_files(Job(name="b", asset=tmp_path / "sofa.fbx", stages=("convert",)))
     assert sorted(files) == ["asset/sofa.fbx", "asset/textures/wood.png"]
+
+
+def test_blend_tiles_and_frames_and_an_unreadable_blend(tmp_path):
+    """A UDIM image's tiles and a sequence's frames travel (the .blend names one file for all); a .blend
+    Blender cannot read is one sentence."""
+    from scenefit.blender_io.asset_file import _tiles_or_frames, blend_external_files
+
+    for name in ("wall.1001.png", "wall.1002.png", "wall.png", "walls.1003.png", "fire_0001.png", "fire_0002.png"):
+        (tmp_path / name).write_bytes(b"x")
+    tiles = _tiles_or_frames(tmp_path / "wall.<UDIM>.png", "TILED")
+    assert sorted(p.name for p in tiles) == ["wall.1001.png", "wall.1002.png"]
+    assert sorted(p.name for p in _tiles_or_frames(tmp_path / "fire_0001.png", "SEQUENCE")) == \
+        ["fire_0001.png", "fire_0002.png"]
+    (tmp_path / "broken.blend").write_bytes(b"BLENDER-v400 not really")
+    with pytest.raises(InputError, match=r"^Blender cannot read '.*broken\.blend' \(.*\); open it in Blender and save "
+                                         r"it again\.$"):
+        blend_external_files(tmp_path / "broken.blend")
+
+
+def test_an_earlier_stage_holding_a_link_is_not_sent(tmp_path):
+    """Earlier stages travel as files: one holding a link (to anything) would send what it points at, so
+    it runs again instead."""
+    from scenefit.workers.batch import finished_stage_folders
+
+    for stage in ("convert", "light"):
+        (tmp_path / "run" / stage).mkdir(parents=True)
+        (tmp_path / "run" / stage / "stage.json").write_text("{}")
+    (tmp_path / "secret.txt").write_text("x")
+    assert [p.name for p in finished_stage_folders(tmp_path / "run")] == ["convert", "light"]
+    (tmp_path / "run" / "light" / "light.exr").symlink_to(tmp_path / "secret.txt")
+    assert [p.name for p in finished_stage_folders(tmp_path / "run")] == ["convert"]
 
 
 
@@ -564,3 +605,32 @@ def test_an_install_without_reuse_from_is_not_given_it(tmp_path):
     older.chmod(0o755)
     assert install_takes_reuse_from(sys.executable) and not install_takes_reuse_from(str(older))
     assert not install_takes_reuse_from(str(tmp_path / "missing-python"))
+
+
+def test_a_convert_job_of_several_materials_fits_them_as_scenefit_convert_does(tmp_path):
+    """A batch convert job read the asset as one atlas texture and capped it whole (half the detail per
+    material of `scenefit convert`'s: the corpus's ToyCar at a 512² atlas against 1024²); it now fits each
+    material in its own cell, and its maps are the command line's."""
+    from scenefit.core.data.imageio import read_image, write_image
+
+    make_inputs(tmp_path)
+    mesh, rng = uv_sphere(0.5, 16, 8), np.random.default_rng(5)
+    folder = tmp_path / "two"
+    folder.mkdir()
+    for name in ("red", "blue"):
+        write_image(folder / f"{name}.png", rng.uniform(0.1, 0.9, (512, 512, 3)).astype(np.float32))   # draft's cap
+    (folder / "two.mtl").write_text("newmtl Red\nmap_Kd red.png\nnewmtl Blue\nmap_Kd blue.png\n")
+    lines = ["mtllib two.mtl"] + [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in mesh.positions]
+    lines += [f"vt {u:.6f} {v:.6f}" for u, v in mesh.uvs]
+    half = len(mesh.faces) // 2
+    for material, faces in (("Red", mesh.faces[:half]), ("Blue", mesh.faces[half:])):
+        lines += [f"usemtl {material}"] + [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in faces]
+    (folder / "two.obj").write_text("\n".join(lines) + "\n")
+    (tmp_path / "jobs.toml").write_text('[defaults]\npreset = "draft"\nphoto = "room.png"\nat = [0.5, 0.7]\n'
+                                        'stages = ["convert"]\n[[job]]\nname = "two"\nasset = "two/two.obj"\n')
+    assert main(["batch", str(tmp_path / "jobs.toml"), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    assert main(["convert", str(folder / "two.obj"), "--out", str(tmp_path / "convert"), "--preset", "draft",
+                 "--quiet"]) == 0
+    batch = read_image(tmp_path / "out" / "two" / "convert" / "maps" / "base_color.png")
+    alone = read_image(tmp_path / "convert" / "maps" / "base_color.png")
+    assert batch.shape == alone.shape == (1024, 1024, 3) and np.abs(batch - alone).max() < 1e-6

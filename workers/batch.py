@@ -94,12 +94,14 @@ def make_payload(job: Job, attempt: int = 1, earlier: Path | None = None,
 
 
 def finished_stage_folders(folder: Path | None) -> list[Path]:
-    """The stage folders of a run folder that hold a finished stage (its stage.json)."""
+    """The stage folders of a run folder that hold a finished stage (its stage.json) and no link, which
+    would be sent as the file it points at: those are run again instead."""
     from ..core.pipeline.run import STAGE_FILE, STAGES
 
     if folder is None or not folder.is_dir():
         return []
-    return [folder / name for name in STAGES if (folder / name / STAGE_FILE).is_file()]
+    return [folder / name for name in STAGES if (folder / name / STAGE_FILE).is_file()
+            and not (folder / name).is_symlink() and not any(p.is_symlink() for p in (folder / name).rglob("*"))]
 
 
 def unpacked_job(payload: JobPayload, folder: Path) -> tuple[Job, Path | None]:
@@ -329,9 +331,11 @@ def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
         raise InputError(f"Job '{job.name}': stage adapt runs inside the whole pipeline in a batch; "
                          f"list compose too, or use stages convert and light.")
     reports: dict = {}
-    if "convert" in job.stages:
-        mesh, maps = _load_asset(job)
-        _, reports["convert"] = convert_and_bake(mesh, maps, out / "convert" / "maps",
+    if "convert" in job.stages:   # every material at its own cell's size, as `scenefit convert` fits them
+        from ..blender_io.asset_file import load_asset_materials
+
+        asset = load_asset_materials(str(job.asset), job.object)
+        _, reports["convert"] = convert_and_bake(asset, None, out / "convert" / "maps",
                                                  stage_config("convert", job.preset, **_stage_overrides(job).get(
                                                      "convert", {})), progress, cancel)
     if "light" in job.stages:   # as `scenefit light` lights it: the photo's own camera, the same files

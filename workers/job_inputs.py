@@ -1,12 +1,12 @@
 """What a batch or worker job sends of its asset, and what its inputs were (to tell a job unchanged).
 
 A job's asset travels with the files it names and nothing else of the user's: a .gltf's or .glb's
-buffers and images and an .obj's material library and maps as the file names them, a .blend's images
-that are not packed into it (Blender lists them), an .fbx's images that it names. They go in the layout
-they have below the asset's folder, so every relative reference still holds on the worker; a name that
-leads out of that folder (an absolute path, '..') is refused in one sentence: an asset from someone
-else could otherwise send any file of the user's to a cluster. Links are sent as the files they point
-at, under their own names (tar's dereference).
+buffers and images and an .obj's material libraries and maps as Blender reads them, a .blend's images
+that are not packed into it (Blender lists them), an .fbx's images beside it whose names it holds.
+They go in the layout they have below the asset's folder, so every relative reference still holds on
+the worker; a name that leads out of that folder (an absolute path, '..', a link to a file outside it)
+is refused in one sentence: an asset from someone else could otherwise send any file of the user's to
+a cluster. A link to a file inside the folder is sent as that file, under the link's name.
 
 The digest of a job is its settings (not where its files are: a moved jobs folder is the same job) and
 the contents of what it sends. Files are hashed in chunks, and a file's hash is kept while its size and
@@ -39,7 +39,8 @@ def asset_references(asset: Path) -> list[Path]:
         stat = own.stat()
         return [own] + [p for p in _blend_images(str(own), stat.st_size, stat.st_mtime_ns) if p.is_file()]
     if suffix == ".fbx":
-        return [own] + _fbx_named_images(own)
+        stat = own.stat()
+        return [own] + list(_fbx_named_images(str(own), stat.st_size, stat.st_mtime_ns))
     return [own]   # .ply, .usd*: read as the file alone
 
 
@@ -51,15 +52,27 @@ def _blend_images(path: str, size: int, mtime_ns: int) -> tuple[Path, ...]:
     return tuple(blend_external_files(path))
 
 
-def _fbx_named_images(fbx: Path) -> list[Path]:
-    """The images in the .fbx's folder and below whose file name the .fbx holds (binary and ASCII FBX
-    store a texture's file name as a plain string; Blender's importer also looks beside the file)."""
+@lru_cache(maxsize=256)
+def _fbx_named_images(path: str, size: int, mtime_ns: int) -> tuple[Path, ...]:
+    """The images in the .fbx's folder and below whose whole file name the .fbx holds (binary and ASCII FBX
+    keep a texture's file name as a string, after a separator, a quote or its length; Blender's importer
+    also looks beside the file), SceneFit's own run folders aside; once while the .fbx is unchanged."""
+    from ..core.base.output_folder import MARKER
+
+    fbx = Path(path)
     data = fbx.read_bytes()
+    runs = [marker.parent for marker in fbx.parent.rglob(MARKER)]
     found = []
-    for path in sorted(fbx.parent.rglob("*")):
-        if path.suffix.lower() in IMAGE_SUFFIXES and path.is_file() and path.name.encode() in data:
-            found.append(Path(os.path.abspath(path)))
-    return found
+    for image in sorted(fbx.parent.rglob("*")):
+        if image.suffix.lower() not in IMAGE_SUFFIXES or any(run in image.parents for run in runs):
+            continue
+        name = image.name.encode()
+        at = data.find(name)
+        while at >= 0 and not (at == 0 or data[at - 1:at] in (b"/", b"\\", b'"', b"\x00")):
+            at = data.find(name, at + 1)
+        if at >= 0 and image.is_file():
+            found.append(Path(os.path.abspath(image)))
+    return tuple(found)
 
 
 def job_files(job: Job) -> tuple[dict[str, Path], str]:
@@ -68,6 +81,10 @@ def job_files(job: Job) -> tuple[dict[str, Path], str]:
     the photo as photo/<its name>. One sentence for a named file outside the asset's folder."""
     if job.asset.is_dir():
         files, asset_name = {f"asset/{job.asset.name}": job.asset}, f"asset/{job.asset.name}"
+        inside = job.asset.resolve()
+        for path in job.asset.rglob("*"):   # (a folder link could loop, or lead anywhere)
+            if path.is_symlink() and (path.is_dir() or not path.resolve().is_relative_to(inside)):
+                _outside(job, path, job.asset, f", a link to '{path.resolve()}'")
     else:
         folder = Path(os.path.normpath(os.path.abspath(job.asset.parent)))
         files = {}
@@ -75,14 +92,19 @@ def job_files(job: Job) -> tuple[dict[str, Path], str]:
             try:
                 files[f"asset/{path.relative_to(folder).as_posix()}"] = path
             except ValueError:
-                raise InputError(f"Job '{job.name}': '{job.asset.name}' reads '{path}', outside its folder "
-                                 f"'{folder}'; a job sends only what lies in the asset's folder and below, so "
-                                 "move the file in (and name it from there), or run the asset with scenefit run.") \
-                    from None
+                _outside(job, path, folder)
+            if path.resolve() != path and not path.resolve().is_relative_to(folder.resolve()):
+                _outside(job, path, folder, f", a link to '{path.resolve()}'")
         asset_name = f"asset/{job.asset.name}"
     if job.photo is not None:
         files[f"photo/{job.photo.name}"] = job.photo
     return files, asset_name
+
+
+def _outside(job: Job, path: Path, folder: Path, link: str = "") -> None:
+    raise InputError(f"Job '{job.name}': '{job.asset.name}' reads '{path}'{link}, outside its folder '{folder}'; a "
+                     "job sends only what lies in the asset's folder and below, so copy the file in (and name it "
+                     "from there), or run the asset with scenefit run.")
 
 
 def job_digest(job: Job, files: dict[str, Path]) -> str:

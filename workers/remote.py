@@ -202,7 +202,7 @@ class LocalProcessJob:
         (root / "jobs.toml").write_text("\n".join(lines) + "\n")
         self.out = root / "out"
         reuse = []
-        if earlier is not None and install_takes_reuse_from(python):   # (an older install runs all again)
+        if earlier is not None and install_takes_reuse_from(python, env):   # (an older install runs all again)
             from .batch import finished_stage_folders
 
             for stage in finished_stage_folders(earlier):   # copied as an earlier batch's job folder
@@ -281,15 +281,17 @@ class LocalProcessJob:
 _TAKES_REUSE_FROM: dict[str, bool] = {}
 
 
-def install_takes_reuse_from(python: str) -> bool:
+def install_takes_reuse_from(python: str, env: dict | None = None) -> bool:
     """Whether the SceneFit install of `python` has `scenefit batch --reuse-from` (asked once per install
-    and session: an install from before it would refuse the whole job over the flag)."""
+    and session: an install from before it would refuse the whole job over the flag; one that does not
+    answer in 30 s is taken for such an install)."""
+    import os
     import subprocess
 
     if python not in _TAKES_REUSE_FROM:
         try:
             shown = subprocess.run([python, "-m", "scenefit.cli", "batch", "--help"], capture_output=True, text=True,
-                                   timeout=120).stdout
+                                   timeout=30, env={**os.environ, **(env or {})}).stdout
         except (OSError, subprocess.SubprocessError):
             shown = ""
         _TAKES_REUSE_FROM[python] = "--reuse-from" in shown
