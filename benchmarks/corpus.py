@@ -1,14 +1,16 @@
 """`make corpus`: every asset of the development corpus (../shared/corpus/, real files made outside
 this project) through `scenefit convert --preset draft` -> `scenefit bake --format glb` -> the Khronos
-glTF validator, and `scenefit run --preset draft` on a few of them with photos cut from the corpus's
-real HDR panoramas. Writes benchmarks/results/corpus.md (+ corpus.json, corpus_sheet.png).
+glTF validator, every asset once more as a job of one `scenefit batch` (its convert maps against the
+command line's: what travels with a job is all the asset needs), and `scenefit run --preset draft` on a
+few of them with photos cut from the corpus's real HDR panoramas. Writes benchmarks/results/corpus.md
+(+ corpus.json, corpus_sheet.png).
 
 Each command runs as a user runs it (a child process of the installed `scenefit`), timed, with its
 peak memory (the child's max RSS). "Kept / lost" compares the input's glTF JSON with the bake's:
 nodes, meshes, materials, skins, animations, UV sets, tangents, extensions, file size.
 The corpus is for development only: nothing of it is copied into the repository.
 
-    python benchmarks/corpus.py [--only NAME ...] [--no-run] [--timeout 600]
+    python benchmarks/corpus.py [--only NAME ...] [--no-run] [--no-batch] [--timeout 600]
 """
 from __future__ import annotations
 
@@ -223,6 +225,42 @@ def one_run(path: Path, hdri: str, work: Path, timeout: float) -> dict:
             "composite": str(work / "run" / "compose" / "composite.png")}
 
 
+def batch_column(rows: list[dict], works: list[Path], paths: list[Path], work: Path, timeout: float) -> None:
+    """Every converted asset as a convert job of one `scenefit batch` (draft, in this process's way: each
+    job's files packed and unpacked as for a worker); row["batch"]: the job's status and whether its
+    convert maps are the command line's (the largest difference in 8-bit levels)."""
+    from scenefit.core.data.imageio import read_image
+
+    work.mkdir(parents=True, exist_ok=True)
+    photo = photo_from("noon_grass_1k", work / "photo.png")   # (a job needs one; convert does not read it)
+    taken = [(row, done, path) for row, done, path in zip(rows, works, paths) if row["convert"]["rc"] == 0]
+    lines = [f'[defaults]\npreset = "draft"\nphoto = "{photo}"\nat = [0.5, 0.75]\nstages = ["convert"]\n']
+    lines += [f'[[job]]\nname = "{row["asset"]}"\nasset = "{path}"\n' for row, _, path in taken]
+    (work / "jobs.toml").write_text("\n".join(lines))
+    result = timed([sys.executable, "-m", "scenefit.cli", "batch", str(work / "jobs.toml"), "--out", str(work / "out"),
+                    "--quiet"], timeout * 2)
+    summary = work / "out" / "summary.json"
+    statuses = {job["name"]: job for job in json.loads(summary.read_text())["jobs"]} if summary.is_file() else {}
+    for row, done, _ in taken:
+        job = statuses.get(row["asset"], {"status": f"batch exit {result['rc']}", "error": result["message"]})
+        cell = {"status": job["status"], "error": (job.get("error") or "")[:200]}
+        mine, alone = work / "out" / row["asset"] / "convert" / "maps" / "base_color.png", done / "convert" / "maps" / "base_color.png"
+        if job["status"] == "done" and mine.is_file() and alone.is_file():
+            a, b = read_image(mine), read_image(alone)
+            cell["levels_off"] = int(round(float(np.abs(a - b).max()) * 255)) if a.shape == b.shape else None
+        row["batch"] = cell
+
+
+def batch_cell(batch: dict | None) -> str:
+    if not batch:
+        return "-"
+    if batch["status"] != "done":
+        return f"{batch['status']}: {batch['error']}".replace("|", "/")
+    off = batch.get("levels_off")
+    return "done, maps as convert's" if off == 0 else "done, maps of another size" if off is None else \
+        f"done, maps {off} levels off convert's"
+
+
 def contact_sheet(runs: list[dict], path: Path) -> None:
     from scenefit.core.data.imageio import read_image, write_image
     from scenefit.core.texture.views import contact_sheet as sheet
@@ -251,11 +289,14 @@ def markdown(rows: list[dict], runs: list[dict], load: str) -> str:
     ok = sum(r["status"].startswith("ok") and "dB" not in r["status"] for r in rows)
     lines = ["# The corpus: real assets through convert -> bake -> validator\n",
              f"Made by `make corpus` (benchmarks/corpus.py) on {time.strftime('%Y-%m-%d')}; load average at the "
-             f"start: {load}. {ok} of {len(rows)} assets pass (convert >= 30 dB, bake, 0 validator errors).\n",
+             f"start: {load}. {ok} of {len(rows)} assets pass (convert >= 30 dB, bake, 0 validator errors)"
+             + (f"; as jobs of one `scenefit batch`, {sum((r.get('batch') or {}).get('levels_off') == 0 for r in rows)} "
+                f"of {len(rows)} give the command line's convert maps" if any(r.get("batch") for r in rows) else "")
+             + ".\n",
              "| asset | file | status | convert s | convert GB | PSNR dB | bake s | validator errors / warnings "
-             "(input -> output) | size vs input | KTX2 bake: size vs bake, errors | .gltf bake: errors, lost | kept | "
-             "lost | message |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "(input -> output) | size vs input | KTX2 bake: size vs bake, errors | .gltf bake: errors, lost | "
+             "batch job | kept | lost | message |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         vin, vout = r.get("input_validator", {}), r.get("output_validator", {})
         counts = (f"{vin.get('errors', '-')}/{vin.get('warnings', '-')} -> {vout.get('errors', '-')}/"
@@ -264,6 +305,7 @@ def markdown(rows: list[dict], runs: list[dict], load: str) -> str:
         lines.append(f"| {r['asset']} | {r['file']} | {r['status']} | {r['convert']['seconds']} | "
                      f"{r['convert']['peak_gb']} | {r.get('psnr_db', '-')} | {r.get('bake', {}).get('seconds', '-')} | "
                      f"{counts} | {r.get('size_ratio', '-')} | {ktx2_cell(r.get('ktx2'))} | {gltf_cell(r.get('gltf'))} | "
+                     f"{batch_cell(r.get('batch'))} | "
                      f"{'; '.join(r.get('kept', []))} | "
                      f"{'; '.join(r.get('lost', []))} | {message.replace('|', '/')} |")
     if runs:
@@ -321,29 +363,38 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", nargs="*", help="asset folder names to run (default: all)")
     parser.add_argument("--no-run", action="store_true", help="skip the scenefit run part")
+    parser.add_argument("--no-batch", action="store_true", help="skip the scenefit batch column")
     parser.add_argument("--timeout", type=float, default=900, help="seconds per command")
     args = parser.parse_args()
     if not corpus_ready("corpus"):
         return 2
     load = load_average()
-    rows, runs = [], []
+    rows, runs, works, paths = [], [], [], []
     with tempfile.TemporaryDirectory(prefix="scenefit-corpus-") as tmp:
         for path in corpus_assets():
             if args.only and path.parent.name not in args.only:
                 continue
             row = one_asset(path, Path(tmp) / path.parent.name / path.stem, args.timeout)
             rows.append(row)
+            works.append(Path(tmp) / path.parent.name / path.stem)
+            paths.append(path)
             print(f"{row['asset']}: {row['status']} (convert {row['convert']['seconds']} s)", flush=True)
             if not args.no_run and path.parent.name in RUN_ON:
                 run = one_run(path, RUN_ON[path.parent.name], Path(tmp) / path.parent.name / "with_photo", args.timeout)
                 runs.append(run)
                 print(f"  run: exit {run['rc']} in {run['seconds']} s", flush=True)
+        if not args.no_batch:
+            batch_column(rows, works, paths, Path(tmp) / "batch", args.timeout)
+            print(f"batch: {sum(r.get('batch', {}).get('levels_off') == 0 for r in rows)} of {len(rows)} jobs give "
+                  "convert's maps", flush=True)
         RESULTS.mkdir(parents=True, exist_ok=True)
         contact_sheet(runs, RESULTS / "corpus_sheet.png")
     end = load_average()
     measured = f"{' '.join(load)} (at the end {' '.join(end)})"
     if args.only and (RESULTS / "corpus.json").is_file():   # the other assets' rows stay as last measured
         rows, runs, measured = _merged(json.loads((RESULTS / "corpus.json").read_text()), rows, runs, measured)
+    elif args.no_run and (RESULTS / "corpus.json").is_file():   # the run table stays as last measured
+        runs = json.loads((RESULTS / "corpus.json").read_text())["runs"]
     (RESULTS / "corpus.json").write_text(json.dumps({"load": load, "load_at_end": end, "assets": rows, "runs": runs,
                                                      "measured": measured}, indent=2) + "\n")
     (RESULTS / "corpus.md").write_text(markdown(rows, runs, measured))
