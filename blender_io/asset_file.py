@@ -282,21 +282,26 @@ def _blender_reason(error: Exception) -> str:
 
 def blend_external_files(path: str | Path) -> list[Path]:
     """The files a .blend's images read from disk (not packed into it), as absolute paths: its images are
-    linked for the look and removed again, so the open file is neither reset nor left changed."""
+    linked for the look and removed again, so the open file is neither reset nor left changed (the open
+    file itself, which Blender cannot link from, is read from what it holds)."""
     import os
 
     import bpy
 
     before = {id_ for id_ in (*bpy.data.images, *bpy.data.libraries)}
     try:
-        try:
-            with native_output_captured(), bpy.data.libraries.load(str(path), link=True) as (source, target):
-                target.images = list(source.images)
-        except (OSError, RuntimeError) as error:
-            raise InputError(f"Blender cannot read '{path}' ({_blender_reason(error)}); open it in Blender and "
-                             "save it again.") from None
+        if bpy.data.filepath and Path(bpy.path.abspath(bpy.data.filepath)).resolve() == Path(path).resolve():
+            images = [image for image in bpy.data.images if image.library is None]   # the open file's own
+        else:
+            try:
+                with native_output_captured(), bpy.data.libraries.load(str(path), link=True) as (source, target):
+                    target.images = list(source.images)
+            except (OSError, RuntimeError, ValueError) as error:
+                raise InputError(f"Blender cannot read '{path}' ({_blender_reason(error)}); open it in Blender "
+                                 "and save it again.") from None
+            images = target.images
         files = []
-        for image in target.images:
+        for image in images:
             if image is None or image.packed_file is not None or image.source not in ("FILE", "SEQUENCE", "TILED"):
                 continue
             if image.filepath:

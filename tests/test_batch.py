@@ -529,6 +529,13 @@ def test_a_blend_job_sends_the_images_it_reads_and_no_others(tmp_path):
     write_image(tmp_path / "textures" / "wood.png", np.full((4, 4, 3), 0.1, np.float32))  # its own texture
     assert job_digest(job, job_files(job)[0]) != digest
 
+    # a headless batch run in Blender with that .blend open (Blender cannot link from the open file)
+    opened = subprocess.run([sys.executable, "-c", f"import bpy\nbpy.ops.wm.open_mainfile(filepath={str(tmp_path / 'props.blend')!r})\n"
+                             "from scenefit.workers.job_inputs import job_files\nfrom scenefit.workers.jobs import Job\n"
+                             f"print('FILES', sorted(job_files(Job(name='a', asset=__import__('pathlib').Path({str(tmp_path / 'props.blend')!r}), "
+                             "stages=('convert',)))[0]))\n"], capture_output=True, text=True)
+    assert "FILES ['asset/props.blend', 'asset/textures/wood.png']" in opened.stdout, opened.stderr[-2000:]
+
     # an .fbx: the images whose whole names it holds ("wood.png", not "unused.png" inside "not_unused.png"),
     # never its own batch's outputs beside it
     (tmp_path / "sofa.fbx").write_bytes(b"Kaydara FBX Binary\x00 Texture::Wood RelativeFilename textures\\wood.png"
