@@ -304,8 +304,10 @@ def blend_external_files(path: str | Path) -> list[Path]:
         for image in images:
             if image is None or image.packed_file is not None or image.source not in ("FILE", "SEQUENCE", "TILED"):
                 continue
-            if image.filepath:
-                named = Path(os.path.normpath(bpy.path.abspath(image.filepath, library=image.library)))
+            if image.filepath:   # ('//' is the .blend's folder: the asset's, however the open file was reached)
+                relative = image.filepath.startswith("//") and image.library is None
+                named = Path(os.path.normpath(Path(path).parent / image.filepath[2:] if relative else
+                                              bpy.path.abspath(image.filepath, library=image.library)))
                 files += _tiles_or_frames(named, image.source) if image.source != "FILE" else [named]
         return sorted(set(files))
     finally:
@@ -317,12 +319,16 @@ def _tiles_or_frames(named: Path, source: str) -> list[Path]:
     files beside `named` that differ from it only in those digits."""
     import re
 
-    stem = named.name.replace("<UDIM>", "1001") if source == "TILED" else named.name
-    match = list(re.finditer(r"\d+", stem))
-    if not match:
-        return [named]
-    last = match[-1]
-    pattern = re.compile(re.escape(stem[:last.start()]) + r"\d+" + re.escape(stem[last.end():]) + "$")
+    name = named.name
+    if "<UDIM>" in name or "<UVTILE>" in name:   # the tile number's own place
+        pattern = re.compile("^" + re.escape(name).replace(re.escape("<UDIM>"), r"\d{4}")
+                             .replace(re.escape("<UVTILE>"), r"u\d+_v\d+") + "$")
+    else:
+        match = list(re.finditer(r"\d+", name))
+        if not match:
+            return [named]
+        last = match[-1]
+        pattern = re.compile("^" + re.escape(name[:last.start()]) + r"\d+" + re.escape(name[last.end():]) + "$")
     return [p for p in named.parent.glob("*") if pattern.match(p.name)] if named.parent.is_dir() else []
 
 

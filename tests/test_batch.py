@@ -491,6 +491,15 @@ def test_a_job_of_an_obj_takes_its_material_library_and_maps_along(tmp_path, cap
     secret = tmp_path / "secret.png"
     secret.write_bytes(b"not for the cluster")
     (tmp_path / "model" / "lib" / "leak.png").symlink_to(secret)
+    # the asset the jobs file names may itself be a link (its files are what it names, beside the link)
+    (tmp_path / "library").mkdir()
+    (tmp_path / "library" / "chair.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (tmp_path / "model" / "chair.obj").symlink_to(tmp_path / "library" / "chair.obj")
+    from scenefit.workers.job_inputs import job_files
+    from scenefit.workers.jobs import Job
+
+    assert list(job_files(Job(name="l", asset=tmp_path / "model" / "chair.obj", stages=("convert",)))[0]) == \
+        ["asset/chair.obj"]
     for named, shown in (("../secret.png", f"'{secret}'"), (str(secret), f"'{secret}'"),
                          ("lib/leak.png", f"'{tmp_path / 'model' / 'lib' / 'leak.png'}', a link to '{secret}'")):
         mtl.write_text(f"newmtl Ball\nmap_Kd {named}\n")
@@ -558,6 +567,10 @@ def test_blend_tiles_and_frames_and_an_unreadable_blend(tmp_path):
         (tmp_path / name).write_bytes(b"x")
     tiles = _tiles_or_frames(tmp_path / "wall.<UDIM>.png", "TILED")
     assert sorted(p.name for p in tiles) == ["wall.1001.png", "wall.1002.png"]
+    for name in ("rock_1001_4k.png", "rock_1002_4k.png", "rock_1001_2k.png"):   # digits after the tile's own
+        (tmp_path / name).write_bytes(b"x")
+    assert sorted(p.name for p in _tiles_or_frames(tmp_path / "rock_<UDIM>_4k.png", "TILED")) == \
+        ["rock_1001_4k.png", "rock_1002_4k.png"]
     assert sorted(p.name for p in _tiles_or_frames(tmp_path / "fire_0001.png", "SEQUENCE")) == \
         ["fire_0001.png", "fire_0002.png"]
     (tmp_path / "broken.blend").write_bytes(b"BLENDER-v400 not really")

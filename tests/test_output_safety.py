@@ -213,17 +213,32 @@ def test_an_objs_libraries_and_maps_are_read_as_blender_reads_them(tmp_path, mtl
     from scenefit.core.data.asset_io import check_asset_path
 
     (tmp_path / "fox.obj").write_text(f"{mtllib}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
-    (tmp_path / library).write_text("newmtl Fox\nmap_Kd -s 2 2 1 -clamp on my wood.png\n")
-    (tmp_path / "my wood.png").write_bytes(b"x")
+    (tmp_path / library).write_text("newmtl Fox\nmap_Kd -s 2 2 1 -clamp on my wood.png\n"
+                                    'map_Ks "quoted name.png"\nmap_Ns C:\\Users\\me\\tex\\beside.png\n')
+    for name in ("my wood.png", "quoted name.png", "beside.png"):
+        (tmp_path / name).write_bytes(b"x")
     check_asset_path(tmp_path / "fox.obj")   # not refused
-    names = [p.name for p in asset_files(tmp_path / "fox.obj")]
-    assert names == sorted(["fox.obj", library, "my wood.png"])
+    names = [p.name for p in asset_files(tmp_path / "fox.obj")]   # (a path from elsewhere: its base name beside)
+    assert names == sorted(["fox.obj", library, "my wood.png", "quoted name.png", "beside.png"])
     (tmp_path / library).unlink()
     if mtllib:   # named, and neither it nor the same-named .mtl there: one sentence
         with pytest.raises(InputError, match="names the material library"):
             check_asset_path(tmp_path / "fox.obj")
     else:
         check_asset_path(tmp_path / "fox.obj")
+
+
+def test_one_missing_library_of_two_is_refused(tmp_path):
+    """Two libraries named, one missing and no same-named .mtl to stand in: Blender would import that
+    one's materials grey without a word."""
+    from scenefit.core.data.asset_io import check_asset_path
+
+    (tmp_path / "fox.obj").write_text("mtllib a.mtl\nmtllib b.mtl\nv 0 0 0\n")
+    (tmp_path / "a.mtl").write_text("newmtl A\n")
+    with pytest.raises(InputError, match="names the material library 'b.mtl', which is not in"):
+        check_asset_path(tmp_path / "fox.obj")
+    (tmp_path / "fox.mtl").write_text("newmtl B\n")   # the same-named .mtl, which Blender reads as well
+    check_asset_path(tmp_path / "fox.obj")
 
 
 # -- nothing from a folder runs code ------------------------------------------------------------------

@@ -40,7 +40,7 @@ def asset_references(asset: Path) -> list[Path]:
         return [own] + [p for p in _blend_images(str(own), stat.st_size, stat.st_mtime_ns) if p.is_file()]
     if suffix == ".fbx":
         stat = own.stat()
-        return [own] + list(_fbx_named_images(str(own), stat.st_size, stat.st_mtime_ns))
+        return [own] + [p for p in _fbx_named_images(str(own), stat.st_size, stat.st_mtime_ns) if p.is_file()]
     return [own]   # .ply, .usd*: read as the file alone
 
 
@@ -87,13 +87,14 @@ def job_files(job: Job) -> tuple[dict[str, Path], str]:
                 _outside(job, path, job.asset, f", a link to '{path.resolve()}'")
     else:
         folder = Path(os.path.normpath(os.path.abspath(job.asset.parent)))
+        own = Path(os.path.normpath(os.path.abspath(job.asset)))   # (the file the jobs file names may be a link)
         files = {}
         for path in asset_references(job.asset):
             try:
                 files[f"asset/{path.relative_to(folder).as_posix()}"] = path
             except ValueError:
                 _outside(job, path, folder)
-            if path.resolve() != path and not path.resolve().is_relative_to(folder.resolve()):
+            if path != own and path.resolve() != path and not path.resolve().is_relative_to(folder.resolve()):
                 _outside(job, path, folder, f", a link to '{path.resolve()}'")
         asset_name = f"asset/{job.asset.name}"
     if job.photo is not None:

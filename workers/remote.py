@@ -288,14 +288,15 @@ def install_takes_reuse_from(python: str, env: dict | None = None) -> bool:
     import os
     import subprocess
 
-    if python not in _TAKES_REUSE_FROM:
+    key = python + repr(sorted((env or {}).items()))
+    if key not in _TAKES_REUSE_FROM:
         try:
             shown = subprocess.run([python, "-m", "scenefit.cli", "batch", "--help"], capture_output=True, text=True,
                                    timeout=30, env={**os.environ, **(env or {})}).stdout
         except (OSError, subprocess.SubprocessError):
             shown = ""
-        _TAKES_REUSE_FROM[python] = "--reuse-from" in shown
-    return _TAKES_REUSE_FROM[python]
+        _TAKES_REUSE_FROM[key] = "--reuse-from" in shown
+    return _TAKES_REUSE_FROM[key]
 
 
 def _toml(value) -> str:

@@ -64,9 +64,9 @@ def _mtl_maps(library: Path) -> list[Path]:
         for line in f:
             words = line.split()
             if words and (words[0].startswith("map_") or words[0] in ("bump", "disp", "norm")):
-                name = _map_name(words[1:])
-                if name:
-                    maps.append(library.parent / name)
+                name = _map_name(words[1:]).strip('"')
+                if name:   # as named, and its base name beside the library, where Blender looks next
+                    maps += [library.parent / name, library.parent / name.replace("\\", "/").rsplit("/", 1)[-1]]
     return maps
 
 

@@ -88,9 +88,10 @@ def check_asset_path(path: str | Path) -> None:
         from .asset_files import obj_material_libraries
 
         named, same_name = obj_material_libraries(path)
-        if named and not any(library.is_file() for library in named + [same_name]):
-            raise InputError(f"'{path.name}' names the material library '{named[0].name}', which is not in "
-                             f"'{named[0].parent}'; put it there with the maps it names, or export the OBJ "
+        missing = [library for library in named if not library.is_file()]
+        if missing and (same_name in named or not same_name.is_file()):   # (else Blender reads that one)
+            raise InputError(f"'{path.name}' names the material library '{missing[0].name}', which is not in "
+                             f"'{missing[0].parent}'; put it there with the maps it names, or export the OBJ "
                              "again with its materials.")
 
 
