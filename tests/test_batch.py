@@ -448,6 +448,9 @@ def test_a_changed_job_runs_again_reusing_its_unchanged_stages(tmp_path, capsys)
     said = capsys.readouterr()
     assert "1 done, 0 skipped" in said.out and "[a] changed since the earlier run" in said.err
     assert statuses() == {"convert": "reused", "light": "reused", "compose": "ran"}
+    assert "; convert, light reused" in said.err   # said, and in the summary
+    assert "| a | done | 1 |" in (out / "summary.md").read_text() and "| convert, light |" in (out / "summary.md").read_text()
+    assert json.loads((out / "summary.json").read_text())["jobs"][0]["reused"] == ["convert", "light"]
     assert (out / "a" / "compose" / "composite.png").read_bytes() != first   # no shadow now, not the old one
     assert main(args) == 0 and "0 done, 1 skipped" in capsys.readouterr().out
 

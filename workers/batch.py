@@ -409,6 +409,13 @@ class JobOutcome:
     seconds: float = 0.0
     quality: dict = field(default_factory=dict)
     error: str | None = None
+    reused: tuple[str, ...] = ()   # the stages taken from an earlier run, not run again
+
+
+def reused_stages(report: dict) -> tuple[str, ...]:
+    """The stages a job's report says were reused (a pipeline job's; none for convert/light alone)."""
+    stages = report.get("stages", {}).get("run", {}).get("stages", {})
+    return tuple(name for name, stage in stages.items() if isinstance(stage, dict) and stage.get("status") == "reused")
 
 
 def _error_text(error: BaseException) -> str:
@@ -501,7 +508,8 @@ def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: E
             report = job_report(out_dir, job.name) or {}
             if not redo and is_done(out_dir, job, digest):
                 outcomes[job.name] = JobOutcome(job.name, "skipped", report.get("attempts", 0),
-                                                report.get("seconds", 0.0), report.get("quality", {}))
+                                                report.get("seconds", 0.0), report.get("quality", {}),
+                                                reused=reused_stages(report))
                 say(job.name, "done by an earlier run; skipped")
                 continue
             # Changed since an earlier run, or failed after one (not --replace): its finished stages go
@@ -520,9 +528,11 @@ def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: E
             job = payload.job
             if isinstance(result, JobResult):
                 install_folder(out_dir, job.name, lambda folder: unpack(result.outputs, folder))
+                reused = reused_stages(result.report)
                 outcomes[job.name] = JobOutcome(job.name, "done", payload.attempt, result.report["seconds"],
-                                                result.report.get("quality", {}))
-                say(job.name, f"done in {result.report['seconds']:.1f} s (attempt {payload.attempt})")
+                                                result.report.get("quality", {}), reused=reused)
+                say(job.name, f"done in {result.report['seconds']:.1f} s (attempt {payload.attempt})"
+                              + (f"; {', '.join(reused)} reused" if reused else ""))
                 continue
             error = _error_text(result)
             if payload.attempt < tries:
@@ -556,11 +566,11 @@ def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: E
 
 def summary_table(outcomes: list[JobOutcome]) -> str:
     keys = sorted({k for o in outcomes for k in o.quality})
-    head = "| job | status | attempts | seconds | " + " | ".join(keys) + (" |" if keys else "") + " error |"
-    rule = "|" + "---|" * (5 + len(keys))
+    head = "| job | status | attempts | seconds | reused | " + " | ".join(keys) + (" |" if keys else "") + " error |"
+    rule = "|" + "---|" * (6 + len(keys))
     rows = []
     for o in outcomes:
-        cells = [o.name, o.status, str(o.attempts), f"{o.seconds:.1f}"]
+        cells = [o.name, o.status, str(o.attempts), f"{o.seconds:.1f}", ", ".join(o.reused)]
         cells += ["" if o.quality.get(k) is None else _cell(o.quality[k]) for k in keys]
         cells.append((o.error or "").replace("|", "/"))
         rows.append("| " + " | ".join(cells) + " |")
@@ -578,7 +588,7 @@ def write_summary(out_dir: Path, outcomes: list[JobOutcome], jobs: JobsFile) -> 
     write_json_atomic(out_dir / SUMMARY_JSON, {
         "jobs_file": str(jobs.path), "counts": counts,
         "jobs": [{"name": o.name, "status": o.status, "attempts": o.attempts, "seconds": o.seconds,
-                  "quality": o.quality, "error": o.error} for o in outcomes]})
+                  "reused": list(o.reused), "quality": o.quality, "error": o.error} for o in outcomes]})
     text = (f"# Batch {jobs.path.name}\n\n{counts['done']} done, {counts['skipped']} skipped (done before), "
             f"{counts['failed']} failed.\n\n{summary_table(outcomes)}\n")
     write_text_atomic(out_dir / SUMMARY_MD, text)
