@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..core.base.errors import Cancelled, SceneFitError
 from ..core.base.os_errors import os_error_sentence, with_out_paths
-from ..core.base.output_folder import interrupted_message, kept_stages, kept_stages_sentence
+from ..core.base.output_folder import finished_jobs, interrupted_message, kept_stages, kept_stages_sentence
 from . import adapt, bake, camera, batch, compose, convert, demo, export, light, prompt, render, run
 
 # The order `scenefit --help` lists them in.
@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
                 raise KeyboardInterrupt from error
             raise
     except (Cancelled, KeyboardInterrupt) as stop:
-        print(f"\nscenefit: {interrupted_message(args.out, getattr(args, 'resumable', False), getattr(args, 'by_stage', False), kept_stages(stop))}"
+        print(f"\nscenefit: {interrupted_message(args.out, getattr(args, 'resumable', False), getattr(args, 'by_stage', False), kept_stages(stop), finished_jobs(stop))}"
               if getattr(args, "out", None) else "\nscenefit: interrupted.", file=sys.stderr)
         return 130
     except SceneFitError as error:   # a file written into the staging folder is named as in --out

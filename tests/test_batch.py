@@ -657,3 +657,32 @@ def test_a_convert_job_of_several_materials_fits_them_as_scenefit_convert_does(t
     batch = read_image(tmp_path / "out" / "two" / "convert" / "maps" / "base_color.png")
     alone = read_image(tmp_path / "convert" / "maps" / "base_color.png")
     assert batch.shape == alone.shape == (1024, 1024, 3) and np.abs(batch - alone).max() < 1e-6
+
+
+def test_a_batch_stopped_half_way_says_which_jobs_it_finished_and_its_summary_matches(tmp_path, monkeypatch, capsys):
+    """Ctrl-C half-way through a batch said "'DIR' is unchanged (nothing of this run was written to it)" though
+    the jobs finished before it were in DIR, and its summary.md still described the earlier batch."""
+    make_inputs(tmp_path)
+    out = tmp_path / "out"
+    args = ["batch", str(tmp_path / "jobs.toml"), "--out", str(out)]
+    assert main(args) == 0
+    before = (out / "c" / "report.json").read_text()
+    run = JobWorker.run
+
+    def stopped_at_b(self, payload, progress_sink=None):
+        if payload.job.name == "b":
+            raise KeyboardInterrupt
+        return run(self, payload, progress_sink)
+
+    monkeypatch.setattr(JobWorker, "run", stopped_at_b)
+    capsys.readouterr()
+    assert main(args + ["--replace"]) == 130
+    said = capsys.readouterr().err.strip().splitlines()[-1]
+    assert said == (f"scenefit: interrupted; the jobs finished before it (a) are in '{out}', each folder whole, the "
+                    "others as they were (summary.md says which): run the same command again to run them.")
+    summary = json.loads((out / "summary.json").read_text())
+    assert [job["status"] for job in summary["jobs"]] == ["done", "interrupted", "interrupted"]
+    assert "1 done, 0 skipped (done before), 0 failed, 2 not run (the batch was interrupted)" in \
+        (out / "summary.md").read_text()
+    assert (out / "c" / "report.json").read_text() == before   # a job not reached is as it was
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]   # nothing half-written beside it

@@ -30,10 +30,11 @@ from pathlib import Path
 from typing import Callable
 
 from ..core.base.atomic import write_json_atomic, write_text_atomic
-from ..core.base.errors import InputError, SceneFitError
+from ..core.base.errors import Cancelled, InputError, SceneFitError
 from .job_inputs import job_digest, job_files
 from .jobs import CAMERA_KEYS, BatchSettings, Job, JobsFile, with_user_paths
-from ..core.base.output_folder import check_output_folder, check_subfolder, folder_in_place, install_folder
+from ..core.base.output_folder import (FINISHED_JOBS_ATTRIBUTE, check_output_folder, check_subfolder,
+                                      folder_in_place, install_folder)
 
 REPORT = "report.json"
 # A job's unpacked inputs and its output, in the system's temp folder: scenefit-job-<pid>-XXXX. A worker
@@ -198,8 +199,6 @@ def run_plain(worker: JobWorker, job: dict, inputs: bytes, progress_sink=None) -
     "outputs"} or {"error", "kind"}). What a caller whose copy of SceneFit has another package name
     (the Blender add-on: bl_ext.<repo>.scenefit) exchanges with a worker, since neither side can
     unpickle the other's classes."""
-    from ..core.base.errors import Cancelled
-
     try:
         result = worker.run(JobPayload(Job.from_dict(job), inputs), progress_sink)
     except (SceneFitError, Cancelled) as error:
@@ -555,11 +554,19 @@ def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: E
             install_folder(out_dir, job.name, failed)
             outcomes[job.name] = JobOutcome(job.name, "failed", payload.attempt, 0.0, {}, error)
             say(job.name, f"failed after {payload.attempt} attempt(s): {error}")
+    except (KeyboardInterrupt, Cancelled) as stop:   # the folder's summary says what is in it now
+        finished = [name for name, outcome in outcomes.items() if outcome.status != "skipped"]
+        write_summary(out_dir, [outcomes.get(job.name) or JobOutcome(
+            job.name, "interrupted", error="the batch was stopped before this job finished: its folder is as it was")
+            for job in jobs.jobs], jobs)
+        setattr(stop, FINISHED_JOBS_ATTRIBUTE, finished)
+        raise
     finally:
         dispatcher.close()
     ordered = [outcomes[job.name] for job in jobs.jobs]
     write_summary(out_dir, ordered, jobs)
     return ordered
+
 
 
 # -- summary -----------------------------------------------------------------------------------------
@@ -585,12 +592,15 @@ def _cell(value) -> str:
 
 def write_summary(out_dir: Path, outcomes: list[JobOutcome], jobs: JobsFile) -> None:
     counts = {s: sum(o.status == s for o in outcomes) for s in ("done", "skipped", "failed")}
+    if any(o.status == "interrupted" for o in outcomes):
+        counts["interrupted"] = sum(o.status == "interrupted" for o in outcomes)
     write_json_atomic(out_dir / SUMMARY_JSON, {
         "jobs_file": str(jobs.path), "counts": counts,
         "jobs": [{"name": o.name, "status": o.status, "attempts": o.attempts, "seconds": o.seconds,
                   "reused": list(o.reused), "quality": o.quality, "error": o.error} for o in outcomes]})
+    stopped = f", {counts['interrupted']} not run (the batch was interrupted)" if "interrupted" in counts else ""
     text = (f"# Batch {jobs.path.name}\n\n{counts['done']} done, {counts['skipped']} skipped (done before), "
-            f"{counts['failed']} failed.\n\n{summary_table(outcomes)}\n")
+            f"{counts['failed']} failed{stopped}.\n\n{summary_table(outcomes)}\n")
     write_text_atomic(out_dir / SUMMARY_MD, text)
     sheet = contact_sheet_image(out_dir, [o.name for o in outcomes if o.status in ("done", "skipped")])
     if sheet is not None:

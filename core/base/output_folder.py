@@ -311,6 +311,16 @@ def _finished_here(staging: Path, out: Path) -> list[str]:
 KEPT_ATTRIBUTE = "scenefit_kept_stages"
 
 
+# On a Ctrl-C or cancel out of a batch: the jobs it finished, each swapped into its folder whole.
+FINISHED_JOBS_ATTRIBUTE = "scenefit_finished_jobs"
+
+
+def finished_jobs(error: BaseException) -> list[str] | None:
+    """The jobs a `scenefit batch` stopped by `error` had finished (None: not a batch's stop)."""
+    jobs = getattr(error, FINISHED_JOBS_ATTRIBUTE, None)
+    return None if jobs is None else list(jobs)
+
+
 def kept_stages(error: BaseException) -> list[str]:
     """The finished stages a `scenefit run` stopped by `error` kept beside its folder ([] when none, or
     when the run never reached its folder)."""
@@ -417,10 +427,16 @@ def install_folder(parent: str | os.PathLike, name: str, fill: Callable[[Path], 
 
 
 def interrupted_message(out: str | os.PathLike, resumable: bool = False, by_stage: bool = False,
-                        kept: list[str] = ()) -> str:
+                        kept: list[str] = (), jobs: list[str] | None = None) -> str:
     """What the user is told after Ctrl-C or a cancel inside `output_folder` (by_stage: `scenefit run`, with
     the stages it kept (`kept_stages`),
-    whose finished stages are kept beside `out` and reused by the next run)."""
+    whose finished stages are kept beside `out` and reused by the next run; jobs: `scenefit batch`, the jobs
+    it finished, each swapped into `out` whole)."""
+    if jobs is not None:
+        if not jobs:
+            return f"interrupted; '{out}' is unchanged but for its summary (no job had finished)."
+        return (f"interrupted; the jobs finished before it ({', '.join(jobs)}) are in '{out}', each folder whole, the "
+                "others as they were (summary.md says which): run the same command again to run them.")
     if by_stage:
         if not kept:
             return f"interrupted; '{out}' is unchanged (no stage had finished, so nothing of this run was kept)."
