@@ -175,7 +175,7 @@ def bench_blocks(mesh, maps, normalized) -> tuple[list[dict], list[dict]]:
 
 
 def block_sections(renders: list[dict], textures: list[dict]) -> list[str]:
-    return ["## Building blocks", "",
+    return [f"## {SECTION_TITLES['blocks']}", "",
             "Render + backward (gradients to base colour, roughness, metallic), 256², 16 spp, median of 10:", "",
             table(renders, [("scene", "scene", ""), ("triangles", "triangles", ""), ("texture", "texture", ""),
                             ("s / iteration", "render_backward_s", ".3f"),
@@ -190,9 +190,13 @@ PARTS = ("convert", "light", "compose", "adapt", "run", "blocks", "phases", "bat
          "speed", "start", "uv_layout", "light_real", "light_heldout", "light_sides", "sun_clicks", "sd2")
 TITLES = {"convert": "Convert", "light": "Light", "compose": "Compose", "adapt": "Adapt (tiny models)",
           "run": "End to end: `scenefit run`"}
-CONVERSION_TITLE = "Conversion: the direct fit against inverse rendering"
-LIGHT_STUDY_TITLE = "Light without weights: the cue estimate against the true maps"
-CAMERA_TITLE = "The photo's camera: `scenefit camera` on real panoramas"
+# Every fixed "## " section a pass writes, in bench.md's order (the stages' preset tables go under presets).
+SECTION_TITLES = {"presets": "Presets: speed against accuracy", "blocks": "Building blocks",
+                  "conversion": "Conversion: the direct fit against inverse rendering",
+                  "phases": "Adapt: seconds per iteration by phase", "batch": "Batches",
+                  "samplers": "Compose: samplers and denoising at equal time",
+                  "study": "Light without weights: the cue estimate against the true maps",
+                  "camera": "The photo's camera: `scenefit camera` on real panoramas"}
 
 SEPARATE = (  # (part, script and arguments, results stem, paragraphs before its table, title)
     ("speed", ["bench_real_speed.py"], "real_speed", 3, "`scenefit run` on real 2k assets and a 12 MP photo"),
@@ -254,7 +258,7 @@ def main() -> int:
     trade = bench_trade(example_asset(), results, quick=args.quick, stages=stages, log=log)
     trade.update({stage: (results / f"trade_{stage}.md").read_text().strip() for stage in reused})
     if stages or reused:
-        sections += ["## Presets: speed against accuracy", ""]
+        sections += [f"## {SECTION_TITLES['presets']}", ""]
     if reused:
         sections += [f"({', '.join(reused)}: from an earlier pass of the same code, which stopped after them.)", ""]
     for stage in TITLES:
@@ -274,7 +278,7 @@ def main() -> int:
         its = 20 if args.quick else 100
         conversions = [bench_direct(mesh, maps, "balanced", its), bench_inverse(mesh, maps, "balanced", its, 5)]
         plot_conversions(conversions, results / "conversion_psnr.png")
-        sections += [f"## {CONVERSION_TITLE}", "",
+        sections += [f"## {SECTION_TITLES['conversion']}", "",
                      f"Conversion of the example's 512² maps, direct fit against inverse rendering ({its} iterations "
                      "each, balanced network; PSNR on covered texels):", "",
                      table(conversions, [("method", "method", ""), ("iterations", "iterations", ""),
@@ -288,7 +292,7 @@ def main() -> int:
     if "phases" in parts:
         adapt = bench_adapt(quick=args.quick)
         log("adapt phases done")
-        sections += ["## Adapt: seconds per iteration by phase", "", adapt["markdown"], ""]
+        sections += [f"## {SECTION_TITLES['phases']}", "", adapt["markdown"], ""]
 
     # Batches: jobs per hour in-process and on 1 and 2 local Ray workers; the paper's settings on N GPUs.
     if "batch" in parts:
@@ -299,7 +303,7 @@ def main() -> int:
         (results / "batch.md").write_text(batch["markdown"] + "\n")
         (results / "batch.json").write_text(json.dumps({"rows": batch["rows"], "estimate": batch["estimate"]},
                                                        indent=1, default=float))
-        sections += ["## Batches", "", batch["markdown"], ""]
+        sections += [f"## {SECTION_TITLES['batch']}", "", batch["markdown"], ""]
 
     # Composition: noise of the final render against a high-sample reference, raw and denoised.
     out_flag = ["--out", str(results)]
@@ -307,7 +311,7 @@ def main() -> int:
         subprocess.run([sys.executable, str(Path(__file__).with_name("bench_compose.py"))] + out_flag
                        + (["--quick"] if args.quick else []), check=True)
         log("compose sampler sweep done")
-        sections += ["## Compose: samplers and denoising at equal time", "", (results / "compose.md").read_text(),
+        sections += [f"## {SECTION_TITLES['samplers']}", "", (results / "compose.md").read_text(),
                      "![compose noise against time](compose_noise.png)", ""]
 
     # Light estimation without weights against ground-truth HDR maps (writes light.md and its plots).
@@ -316,7 +320,7 @@ def main() -> int:
         subprocess.run([sys.executable, str(Path(__file__).with_name("bench_light.py"))] + out_flag + study, check=True)
         log("light study done")
         light_md = (results / "light.md").read_text()
-        sections += [f"## {LIGHT_STUDY_TITLE}", "",
+        sections += [f"## {SECTION_TITLES['study']}", "",
                      light_md.split("## Per view")[0].strip(),
                      "", "Per view: [light.md](light.md). ![Estimated vs true maps](light_maps.png)", ""]
 
@@ -326,7 +330,7 @@ def main() -> int:
         subprocess.run([sys.executable, str(Path(__file__).with_name("bench_camera_cost.py"))], check=True)
         log("camera benches done")
         cost = (RESULTS / "camera_cost.md").read_text().split("## Every view")[0].split("\n\n", 3)[-1].strip()
-        sections += [f"## {CAMERA_TITLE}", "",
+        sections += [f"## {SECTION_TITLES['camera']}", "",
                      "Median and 90th-percentile errors per field, split by maps with and without architecture: "
                      "[camera.md](camera.md). The real assets of the corpus: `make corpus` "
                      "([corpus.md](corpus.md)).", "", "What a wrong camera costs the composite "
@@ -374,10 +378,9 @@ def main() -> int:
 def section_titles() -> list[str]:
     """Every heading a pass writes, in bench.md's order ("### " for a stage's preset table)."""
     separate = [title for *_, title in SEPARATE]
-    return (["## Presets: speed against accuracy"] + [f"### {title}" for title in TITLES.values()]
-            + [f"## {title}" for title in ("Building blocks", CONVERSION_TITLE, "Adapt: seconds per iteration by phase",
-                                           "Batches", "Compose: samplers and denoising at equal time", LIGHT_STUDY_TITLE,
-                                           CAMERA_TITLE, *separate)])
+    fixed = [f"## {title}" for title in SECTION_TITLES.values()]
+    return (fixed[:1] + [f"### {title}" for title in TITLES.values()] + fixed[1:]
+            + [f"## {title}" for title in separate])
 
 
 def split_sections(text: str) -> tuple[list[str], dict[str, str]]:

@@ -317,8 +317,6 @@ def blend_external_files(path: str | Path) -> list[Path]:
 def _tiles_or_frames(named: Path, source: str) -> list[Path]:
     """A UDIM image's tiles (its name holds '<UDIM>' or a tile number) or an image sequence's frames: the
     files beside `named` that differ from it only in those digits."""
-    import re
-
     name = named.name
     if "<UDIM>" in name or "<UVTILE>" in name:   # the tile number's own place
         pattern = re.compile("^" + re.escape(name).replace(re.escape("<UDIM>"), r"\d{4}")

@@ -11,11 +11,8 @@ def run(args) -> int:
     from ..workers.jobs import load_jobs
 
     jobs = load_jobs(args.jobs)
-    check_batch(jobs, args.out)
-    if args.reuse_from is not None and not Path(args.reuse_from).is_dir():
-        from ..core.base.errors import InputError
-
-        raise InputError(f"--reuse-from '{args.reuse_from}' is not a folder; give an earlier batch's --out folder.")
+    reuse_from = Path(args.reuse_from) if args.reuse_from else None
+    listed = check_batch(jobs, args.out, reuse_from)
 
     def say(name: str, message: str) -> None:
         if not args.quiet:
@@ -35,8 +32,8 @@ def run(args) -> int:
             dispatcher = RayDispatcher(jobs.settings, len(jobs.jobs))
             where = f"on Ray ({dispatcher.workers} worker(s), each {dispatcher.options})"
         say("batch", f"{len(jobs.jobs)} job(s) from {jobs.path} {where}")
-        outcomes = run_batch(jobs, args.out, dispatcher, on_event=say, redo=args.replace,
-                             reuse_from=Path(args.reuse_from) if args.reuse_from else None)
+        outcomes = run_batch(jobs, args.out, dispatcher, on_event=say, redo=args.replace, reuse_from=reuse_from,
+                             listed=listed)
     finally:
         if started_ray:
             import ray

@@ -501,7 +501,7 @@ def test_a_job_of_an_obj_takes_its_material_library_and_maps_along(tmp_path, cap
     from scenefit.workers.job_inputs import job_files
     from scenefit.workers.jobs import Job
 
-    assert list(job_files(Job(name="l", asset=tmp_path / "model" / "chair.obj", stages=("convert",)))[0]) == \
+    assert list(job_files(Job(name="l", asset=tmp_path / "model" / "chair.obj", stages=("convert",)))) == \
         ["asset/chair.obj"]
     for named, shown in (("../secret.png", f"'{secret}'"), (str(secret), f"'{secret}'"),
                          ("lib/leak.png", f"'{tmp_path / 'model' / 'lib' / 'leak.png'}', a link to '{secret}'")):
@@ -532,20 +532,20 @@ def test_a_blend_job_sends_the_images_it_reads_and_no_others(tmp_path):
     subprocess.run([sys.executable, "-c", script], check=True, capture_output=True)
     before = (len(bpy.data.images), len(bpy.data.libraries))
     job = Job(name="a", asset=tmp_path / "props.blend", stages=("convert",))
-    files, asset_name = job_files(job)
-    assert sorted(files) == ["asset/props.blend", "asset/textures/wood.png"] and asset_name == "asset/props.blend"
+    files = job_files(job)
+    assert sorted(files) == ["asset/props.blend", "asset/textures/wood.png"]
     assert (len(bpy.data.images), len(bpy.data.libraries)) == before   # nothing of the look stays
     digest = job_digest(job, files)
     write_image(tmp_path / "photos" / "room.png", np.full((4, 4, 3), 0.9, np.float32))   # another job's photo
-    assert job_digest(job, job_files(job)[0]) == digest
+    assert job_digest(job, job_files(job)) == digest
     write_image(tmp_path / "textures" / "wood.png", np.full((4, 4, 3), 0.1, np.float32))  # its own texture
-    assert job_digest(job, job_files(job)[0]) != digest
+    assert job_digest(job, job_files(job)) != digest
 
     # a headless batch run in Blender with that .blend open (Blender cannot link from the open file)
     opened = subprocess.run([sys.executable, "-c", f"import bpy\nbpy.ops.wm.open_mainfile(filepath={str(tmp_path / 'props.blend')!r})\n"
                              "from scenefit.workers.job_inputs import job_files\nfrom scenefit.workers.jobs import Job\n"
                              f"print('FILES', sorted(job_files(Job(name='a', asset=__import__('pathlib').Path({str(tmp_path / 'props.blend')!r}), "
-                             "stages=('convert',)))[0]))\n"], capture_output=True, text=True)
+                             "stages=('convert',)))))\n"], capture_output=True, text=True)
     assert "FILES ['asset/props.blend', 'asset/textures/wood.png']" in opened.stdout, opened.stderr[-2000:]
 
     # an .fbx: the images whose whole names it holds ("wood.png", not "unused.png" inside "not_unused.png"),
@@ -557,7 +557,7 @@ def test_a_blend_job_sends_the_images_it_reads_and_no_others(tmp_path):
     (tmp_path / "runs" / "sofa" / "textures").mkdir(parents=True)
     (tmp_path / "runs" / MARKER).write_text("{}")
     write_image(tmp_path / "runs" / "sofa" / "textures" / "wood.png", np.zeros((4, 4, 3), np.float32))
-    files, _ = job_files(Job(name="b", asset=tmp_path / "sofa.fbx", stages=("convert",)))
+    files = job_files(Job(name="b", asset=tmp_path / "sofa.fbx", stages=("convert",)))
     assert sorted(files) == ["asset/sofa.fbx", "asset/textures/wood.png"]
 
 

@@ -12,7 +12,7 @@ _SPEC = importlib.util.spec_from_file_location("bench_run", Path(__file__).resol
 bench_run = importlib.util.module_from_spec(_SPEC)
 _SPEC.loader.exec_module(bench_run)
 
-STUDY, CAMERA = f"## {bench_run.LIGHT_STUDY_TITLE}", f"## {bench_run.CAMERA_TITLE}"
+STUDY, CAMERA = f"## {bench_run.SECTION_TITLES['study']}", f"## {bench_run.SECTION_TITLES['camera']}"
 REAL = "## " + next(title for part, *_, title in bench_run.SEPARATE if part == "light_real")
 
 
@@ -47,7 +47,7 @@ def test_every_heading_a_pass_writes_is_known_once():
     titles = bench_run.section_titles()
     assert len(titles) == len(set(titles))
     assert {f"### {title}" for title in bench_run.TITLES.values()} <= set(titles)
-    assert {STUDY, CAMERA, REAL, f"## {bench_run.CONVERSION_TITLE}"} <= set(titles)
+    assert {STUDY, CAMERA, REAL, f"## {bench_run.SECTION_TITLES['conversion']}"} <= set(titles)
 
 
 def test_a_partial_pass_keeps_the_numbers_it_did_not_measure():

@@ -74,24 +74,20 @@ class JobPayload:
     inputs: bytes
     attempt: int = 1
     digest: str = ""
-    asset_name: str = ""   # where the asset lies in `inputs` ("": asset/<its name>, an asset folder's)
 
 
 # Where a payload carries the finished stages of the job's earlier folder, beside asset/ and photo/.
 EARLIER = "earlier"
 
 
-def make_payload(job: Job, attempt: int = 1, earlier: Path | None = None,
-                 files: tuple[dict[str, Path], str] | None = None, digest: str | None = None) -> JobPayload:
+def make_payload(job: Job, attempt: int = 1, stages: list[Path] = (), files: dict[str, Path] | None = None,
+                 digest: str | None = None) -> JobPayload:
     """The job and its inputs packed (job_inputs.job_files; `files` and `digest`: already worked out);
-    `earlier`: a folder of the job from an earlier run, whose finished stages travel with it for the
-    worker to reuse where their inputs and settings are the same."""
-    inputs, asset_name = files if files is not None else job_files(job)
-    digest = digest if digest is not None else job_digest(job, inputs)   # (before packing: an edit meanwhile re-runs)
-    packed = dict(inputs)
-    for stage in finished_stage_folders(earlier):
-        packed[f"{EARLIER}/{stage.name}"] = stage
-    return JobPayload(job, pack(packed), attempt, digest, asset_name)
+    `stages`: finished stage folders of an earlier run of the job (finished_stage_folders), which travel
+    with it for the worker to reuse where their inputs and settings are the same."""
+    files = files if files is not None else job_files(job)
+    digest = digest if digest is not None else job_digest(job, files)   # (before packing: an edit meanwhile re-runs)
+    return JobPayload(job, pack({**files, **{f"{EARLIER}/{stage.name}": stage for stage in stages}}), attempt, digest)
 
 
 def finished_stage_folders(folder: Path | None) -> list[Path]:
@@ -112,8 +108,7 @@ def unpacked_job(payload: JobPayload, folder: Path) -> tuple[Job, Path | None]:
     job = payload.job
     photo = None if job.photo is None else folder / "photo" / job.photo.name
     earlier = folder / EARLIER
-    asset = folder / (payload.asset_name or f"asset/{job.asset.name}")
-    return replace(job, asset=asset, photo=photo), earlier if earlier.is_dir() else None
+    return replace(job, asset=folder / "asset" / job.asset.name, photo=photo), earlier if earlier.is_dir() else None
 
 
 # -- one job on a worker ---------------------------------------------------------------------------
@@ -392,14 +387,6 @@ def job_report(out_dir: Path, name: str) -> dict | None:
         return None
 
 
-def is_done(out_dir: Path, job: Job, digest: str | None = None) -> bool:
-    """DIR/<job>/ holds this job done: its settings and input files as now (`digest`: job_digest's). A
-    report of a SceneFit before digests has none: such a job runs once more."""
-    report = job_report(out_dir, job.name)
-    return report is not None and report.get("status") == "done" and \
-        report.get("digest") == (digest if digest is not None else job_digest(job, job_files(job)[0]))
-
-
 @dataclass
 class JobOutcome:
     name: str
@@ -466,24 +453,27 @@ class InProcessDispatcher(Dispatcher):
 
 def run_batch(jobs: JobsFile, out_dir: str | Path, dispatcher: Dispatcher | None = None,
               on_event: EventCallback | None = None, redo: bool = False,
-              reuse_from: Path | None = None) -> list[JobOutcome]:
+              reuse_from: Path | None = None, listed: dict | None = None) -> list[JobOutcome]:
     """Run every job not yet done; write the per-job folders, summary.json/.md and the contact sheet.
 
     The folder follows every command's contract (core/base/output_folder.py): locked while the batch runs,
     never a folder holding an input or files SceneFit did not write; each job's folder is swapped in
     whole. redo: run the jobs done by an earlier batch again (`--replace`). reuse_from: an earlier batch's
-    folder, whose REUSE_FROM/<job>/ stages a job with no earlier folder of its own in out_dir takes along."""
-    check_batch(jobs, out_dir)
+    folder, whose REUSE_FROM/<job>/ stages a job with no earlier folder of its own in out_dir takes along.
+    listed: what check_batch returned, when the caller checked already (each asset is listed once)."""
+    listed = listed if listed is not None else check_batch(jobs, out_dir, reuse_from)
     with folder_in_place(out_dir, batch_inputs(jobs)) as out_dir:
-        return _run_jobs(jobs, out_dir, dispatcher or InProcessDispatcher(jobs.settings), on_event, redo, reuse_from)
+        return _run_jobs(jobs, out_dir, dispatcher or InProcessDispatcher(jobs.settings), on_event, redo, reuse_from,
+                         listed)
 
 
 def batch_inputs(jobs: JobsFile) -> list[Path]:
     return [jobs.path, *(p for job in jobs.jobs for p in (job.asset, job.photo) if p is not None)]
 
 
-def check_batch(jobs: JobsFile, out_dir: str | Path) -> None:
-    """Every refusal of the batch's folder and job names, before any work (and before Ray starts)."""
+def check_batch(jobs: JobsFile, out_dir: str | Path, reuse_from: Path | None = None) -> dict:
+    """Every refusal of the batch's folder, job names, assets and --reuse-from, before any work (and before
+    Ray starts); returns each asset's files (job_inputs.job_files' `listed`), for run_batch."""
     for job in jobs.jobs:
         if job.name in RESERVED_NAMES or job.name.startswith("."):
             raise InputError(f"{jobs.path.name}: job '{job.name}' is named like a file the batch writes itself "
@@ -491,21 +481,26 @@ def check_batch(jobs: JobsFile, out_dir: str | Path) -> None:
     out_dir = check_output_folder(out_dir, inputs=batch_inputs(jobs), reuse=True)
     for job in jobs.jobs:
         check_subfolder(out_dir, job.name)   # a user's folder of that name is refused, never replaced
-    for job in {job.asset: job for job in jobs.jobs}.values():   # each asset once
-        job_files(job)   # a file it names outside its folder is said now, not after other jobs ran
+    if reuse_from is not None and not reuse_from.is_dir():
+        raise InputError(f"--reuse-from '{reuse_from}' is not a folder; give an earlier batch's --out folder.")
+    listed: dict = {}
+    for job in jobs.jobs:   # a file an asset names outside its folder is said now, not after other jobs ran
+        job_files(job, listed)
+    return listed
 
 
 def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: EventCallback | None,
-              redo: bool, reuse_from: Path | None) -> list[JobOutcome]:
+              redo: bool, reuse_from: Path | None, listed: dict) -> list[JobOutcome]:
     say = on_event or (lambda name, message: None)
     outcomes: dict[str, JobOutcome] = {}
     pending = 0
     try:
         for job in jobs.jobs:
-            files = job_files(job)
-            digest = job_digest(job, files[0])
+            files = job_files(job, listed)
+            digest = job_digest(job, files)
             report = job_report(out_dir, job.name) or {}
-            if not redo and is_done(out_dir, job, digest):
+            done_before = report.get("status") == "done"   # (a report from before digests has none: runs once more)
+            if not redo and done_before and report.get("digest") == digest:
                 outcomes[job.name] = JobOutcome(job.name, "skipped", report.get("attempts", 0),
                                                 report.get("seconds", 0.0), report.get("quality", {}),
                                                 reused=reused_stages(report))
@@ -513,13 +508,14 @@ def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: E
                 continue
             # Changed since an earlier run, or failed after one (not --replace): its finished stages go
             # along, to be reused by a job that runs the pipeline.
-            own = out_dir / job.name if not redo and finished_stage_folders(out_dir / job.name) else None
-            earlier = own or (reuse_from / job.name if reuse_from else None)
-            dispatcher.submit(make_payload(job, earlier=earlier, files=files, digest=digest))
+            stages = []
+            if runs_pipeline(job):   # (convert or light alone reuses nothing)
+                stages = (finished_stage_folders(out_dir / job.name) if not redo else []) or \
+                    finished_stage_folders(reuse_from / job.name if reuse_from else None)
+            dispatcher.submit(make_payload(job, stages=stages, files=files, digest=digest))
             pending += 1
-            reuses = earlier is not None and runs_pipeline(job) and finished_stage_folders(earlier)
-            say(job.name, ("changed since the earlier run (settings or input files): queued" if report.get("status") ==
-                           "done" and not redo else "queued") + (", its unchanged stages to be reused" if reuses else ""))
+            say(job.name, ("changed since the earlier run (settings or input files): queued" if done_before and not redo
+                           else "queued") + (", its unchanged stages to be reused" if stages else ""))
         tries = 1 + jobs.settings.retries
         while pending:
             payload, result = dispatcher.next_done()

@@ -10,13 +10,13 @@ a cluster. A link to a file inside the folder is sent as that file, under the li
 
 The digest of a job is its settings (not where its files are: a moved jobs folder is the same job) and
 the contents of what it sends. Files are hashed in chunks, and a file's hash is kept while its size and
-modification time stay, so a batch of many jobs on one asset reads the asset once.
+modification time stay; a batch lists each asset's files once (`listed`), so a batch of many jobs on
+one asset reads and hashes the asset once.
 """
 from __future__ import annotations
 
 import hashlib
 import json
-import os
 from functools import lru_cache
 from pathlib import Path
 
@@ -29,37 +29,28 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tga", ".tif", ".tiff", ".exr", ".hd
 
 def asset_references(asset: Path) -> list[Path]:
     """The asset file and the files it names that exist, absolute and normalised as named (links kept)."""
-    from ..core.data.asset_files import asset_files
+    from ..core.data.asset_files import as_named, asset_files
 
     suffix = asset.suffix.lower()
     if suffix in (".gltf", ".glb", ".obj"):
         return asset_files(asset, resolve=False)
-    own = Path(os.path.normpath(os.path.abspath(asset)))
+    own = as_named(asset)
     if suffix == ".blend":
-        stat = own.stat()
-        return [own] + [p for p in _blend_images(str(own), stat.st_size, stat.st_mtime_ns) if p.is_file()]
+        from ..blender_io.asset_file import blend_external_files
+
+        return [own] + [p for p in blend_external_files(own) if p.is_file()]
     if suffix == ".fbx":
-        stat = own.stat()
-        return [own] + [p for p in _fbx_named_images(str(own), stat.st_size, stat.st_mtime_ns) if p.is_file()]
+        return [own] + _fbx_named_images(own)
     return [own]   # .ply, .usd*: read as the file alone
 
 
-@lru_cache(maxsize=256)
-def _blend_images(path: str, size: int, mtime_ns: int) -> tuple[Path, ...]:
-    """blend_external_files, once per .blend while it is unchanged (a batch of many photos on one asset)."""
-    from ..blender_io.asset_file import blend_external_files
-
-    return tuple(blend_external_files(path))
-
-
-@lru_cache(maxsize=256)
-def _fbx_named_images(path: str, size: int, mtime_ns: int) -> tuple[Path, ...]:
+def _fbx_named_images(fbx: Path) -> list[Path]:
     """The images in the .fbx's folder and below whose whole file name the .fbx holds (binary and ASCII FBX
     keep a texture's file name as a string, after a separator, a quote or its length; Blender's importer
-    also looks beside the file), SceneFit's own run folders aside; once while the .fbx is unchanged."""
+    also looks beside the file), SceneFit's own run folders aside."""
     from ..core.base.output_folder import MARKER
+    from ..core.data.asset_files import as_named
 
-    fbx = Path(path)
     data = fbx.read_bytes()
     runs = [marker.parent for marker in fbx.parent.rglob(MARKER)]
     found = []
@@ -71,35 +62,42 @@ def _fbx_named_images(path: str, size: int, mtime_ns: int) -> tuple[Path, ...]:
         while at >= 0 and not (at == 0 or data[at - 1:at] in (b"/", b"\\", b'"', b"\x00")):
             at = data.find(name, at + 1)
         if at >= 0 and image.is_file():
-            found.append(Path(os.path.abspath(image)))
-    return tuple(found)
+            found.append(as_named(image))
+    return found
 
 
-def job_files(job: Job) -> tuple[dict[str, Path], str]:
-    """({name in the payload: file or folder}, the asset's name in it): an asset folder as
-    asset/<its name>; an asset file and the files it names below asset/, as they lie below its folder;
-    the photo as photo/<its name>. One sentence for a named file outside the asset's folder."""
+def job_files(job: Job, listed: dict[Path, dict[str, Path]] | None = None) -> dict[str, Path]:
+    """{name in the payload: file or folder}: an asset folder as asset/<its name>; an asset file and the
+    files it names below asset/, as they lie below its folder; the photo as photo/<its name>. One sentence
+    for a named file outside the asset's folder. `listed`: a batch's assets listed so far (each once)."""
+    listed = {} if listed is None else listed
+    if job.asset not in listed:
+        listed[job.asset] = _asset_files(job)
+    files = dict(listed[job.asset])
+    if job.photo is not None:
+        files[f"photo/{job.photo.name}"] = job.photo
+    return files
+
+
+def _asset_files(job: Job) -> dict[str, Path]:
+    from ..core.data.asset_files import as_named
+
     if job.asset.is_dir():
-        files, asset_name = {f"asset/{job.asset.name}": job.asset}, f"asset/{job.asset.name}"
         inside = job.asset.resolve()
         for path in job.asset.rglob("*"):   # (a folder link could loop, or lead anywhere)
             if path.is_symlink() and (path.is_dir() or not path.resolve().is_relative_to(inside)):
                 _outside(job, path, job.asset, f", a link to '{path.resolve()}'")
-    else:
-        folder = Path(os.path.normpath(os.path.abspath(job.asset.parent)))
-        own = Path(os.path.normpath(os.path.abspath(job.asset)))   # (the file the jobs file names may be a link)
-        files = {}
-        for path in asset_references(job.asset):
-            try:
-                files[f"asset/{path.relative_to(folder).as_posix()}"] = path
-            except ValueError:
-                _outside(job, path, folder)
-            if path != own and path.resolve() != path and not path.resolve().is_relative_to(folder.resolve()):
-                _outside(job, path, folder, f", a link to '{path.resolve()}'")
-        asset_name = f"asset/{job.asset.name}"
-    if job.photo is not None:
-        files[f"photo/{job.photo.name}"] = job.photo
-    return files, asset_name
+        return {f"asset/{job.asset.name}": job.asset}
+    folder, own = as_named(job.asset.parent), as_named(job.asset)   # (the file the jobs file names may be a link)
+    files = {}
+    for path in asset_references(job.asset):
+        try:
+            files[f"asset/{path.relative_to(folder).as_posix()}"] = path
+        except ValueError:
+            _outside(job, path, folder)
+        if path != own and path.resolve() != path and not path.resolve().is_relative_to(folder.resolve()):
+            _outside(job, path, folder, f", a link to '{path.resolve()}'")
+    return files
 
 
 def _outside(job: Job, path: Path, folder: Path, link: str = "") -> None:

@@ -20,7 +20,7 @@ import json
 from pathlib import Path
 
 from ..core.base import errors
-from .batch import make_payload, unpack
+from .batch import finished_stage_folders, make_payload, unpack
 from ..core.base.output_folder import install_folder
 from .batch_ray import connect, import_ray, job_resources
 from ..core.base.errors import Cancelled, SceneFitError
@@ -74,7 +74,7 @@ class RemoteJob:
             self.actor = ray.remote(worker_actor_class()).options(max_concurrency=2, **options).remote(
                 threads=max(1, int(settings.num_cpus)))
             self.queue = Queue(maxsize=queue_size)
-            payload = make_payload(job, earlier=earlier)   # (an earlier run's stages travel with the inputs)
+            payload = make_payload(job, stages=finished_stage_folders(earlier))   # (they travel with the inputs)
             self.ref = self.actor.run.remote(job.to_dict(), payload.inputs, self.queue)
         except BaseException:
             self.close()

@@ -12,11 +12,11 @@ from .glb import gltf_json
 
 def asset_files(path: str | os.PathLike, resolve: bool = True) -> list[Path]:
     """The asset file and the files it refers to that exist, resolved (a folder: every file in it).
-    resolve False: absolute and normalised as named ('..' folded, links kept under their own names),
-    for laying the files out elsewhere as the asset names them."""
+    resolve False (a file): absolute and normalised as named (`as_named`: links kept under their own
+    names), for laying the files out elsewhere as the asset names them."""
     path = Path(path)
     if path.is_dir():
-        return sorted(p.resolve() if resolve else Path(os.path.abspath(p)) for p in path.rglob("*") if p.is_file())
+        return sorted(p.resolve() for p in path.rglob("*") if p.is_file())
     found = [path]
     suffix = path.suffix.lower()
     if suffix in (".gltf", ".glb"):
@@ -26,7 +26,12 @@ def asset_files(path: str | os.PathLike, resolve: bool = True) -> list[Path]:
         for library in dict.fromkeys(named + [same_name]):
             found.append(library)
             found += _mtl_maps(library)
-    return sorted({p.resolve() if resolve else Path(os.path.normpath(os.path.abspath(p))) for p in found if p.is_file()})
+    return sorted({p.resolve() if resolve else as_named(p) for p in found if p.is_file()})
+
+
+def as_named(path: str | os.PathLike) -> Path:
+    """`path` absolute and normalised ('..' folded) as named: links are not followed."""
+    return Path(os.path.normpath(os.path.abspath(path)))
 
 
 def _gltf_uris(path: Path) -> list[str]:
