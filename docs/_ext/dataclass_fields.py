@@ -6,8 +6,10 @@
 
 The meaning of a field is, in this order: a string literal right after it (an attribute docstring), its
 comment on the same line (with the comment lines under it aligned with it), the comment block right
-above it, or else the comment of its line in an example in the module's docstring (`key = value  # meaning`,
-as a TOML example writes it). Any dataclass can be pointed at; nothing here knows SceneFit's classes.
+above it, a sentence of the class's docstring that starts with its name (`views: number of azimuths ...`,
+`a / b: ...`), or else the comment of its line in an example in the module's docstring (`key = value  #
+meaning`, as a TOML example writes it). Any dataclass can be pointed at; nothing here knows SceneFit's
+classes.
 """
 from __future__ import annotations
 
@@ -42,8 +44,25 @@ def field_docs(cls: type) -> dict[str, str]:
             continue
         docs[statement.target.id] = _trailing_comment(lines, statement.end_lineno - 1) or \
             _comment_above(lines, statement.lineno - 2)
+    described = _docstring_sentences(inspect.getdoc(cls) or "", set(docs))
     example = _example_comments(inspect.getdoc(inspect.getmodule(cls)) or "")
-    return {name: doc or example.get(name, "") for name, doc in docs.items()}
+    return {name: doc or described.get(name) or example.get(name, "") for name, doc in docs.items()}
+
+
+_NAMED = re.compile(r"(?:^|(?<=[.:;]\s))([a-z_][a-z0-9_]*(?:\s*/\s*[a-z_][a-z0-9_]*)*):\s")
+
+
+def _docstring_sentences(text: str, fields: set[str]) -> dict[str, str]:
+    """`name: meaning` (or `a / b: meaning`) runs of a docstring, for names that are fields; each runs to the
+    next such name."""
+    text = " ".join(text.split())
+    starts = [m for m in _NAMED.finditer(text) if set(re.split(r"\s*/\s*", m.group(1))) <= fields]
+    found: dict[str, str] = {}
+    for match, after in zip(starts, starts[1:] + [None]):
+        meaning = text[match.end():after.start() if after else len(text)].strip()
+        for name in re.split(r"\s*/\s*", match.group(1)):
+            found.setdefault(name, meaning)
+    return found
 
 
 _EXAMPLE_LINE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*=.*?\s#\s*(.+)$")
@@ -95,11 +114,23 @@ def _comment_above(lines: list[str], index: int) -> str:
 
 def _default(field: dataclasses.Field) -> str:
     if field.default is not dataclasses.MISSING:
-        return repr(field.default)
+        return _shown(field.default)
     if field.default_factory is not dataclasses.MISSING:
-        value = field.default_factory()
-        return repr(value) if not dataclasses.is_dataclass(value) else f"{type(value).__name__}()"
+        return _shown(field.default_factory())
     return "required"
+
+
+def _shown(value) -> str:
+    """A default as written: a config held in a config shows only what differs from its own defaults."""
+    if not (dataclasses.is_dataclass(value) and not isinstance(value, type)):
+        return repr(value)
+    try:
+        plain = type(value)()
+    except Exception:   # a config whose fields are required, or that refuses its own defaults
+        return repr(value)
+    changed = [f"{f.name}={getattr(value, f.name)!r}" for f in dataclasses.fields(value)
+               if getattr(value, f.name) != getattr(plain, f.name)]
+    return f"{type(value).__name__}({', '.join(changed)})"
 
 
 def dataclass_rows(cls: type, exclude: set[str] = frozenset()) -> list[list[str]]:
