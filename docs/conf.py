@@ -38,6 +38,8 @@ exclude_patterns = ["_build", "_static/*.md"]
 myst_enable_extensions = ["colon_fence", "deflist"]
 myst_heading_anchors = 3
 nitpicky = True
+# Option names stay as typed: no "--" turned into a dash, no curly quotes in commands.
+smartquotes = False
 html_theme = "alabaster"
 html_static_path = ["_static"]
 html_theme_options = {"description": "Restyle a 3D asset to fit a photo", "fixed_sidebar": True}

@@ -58,6 +58,11 @@ def test_every_command_and_option_is_in_the_cli_reference(site):
                 if option not in text:
                     missing.append(f"{name} {option}")
     assert not missing, f"the CLI reference lacks {missing}"
+    flat = " ".join(text.split())
+    in_help = {" ".join(help_[max(0, m.start() - 12):m.end()].split()) for parser in commands.values()
+               for help_ in (a.help or "" for a in parser._actions) for m in re.finditer(r"--[a-z][a-z-]+", help_)}
+    assert in_help and not [words for words in in_help if words not in flat], \
+        "an option named in a help text is not shown as typed (smart dashes?)"
 
 
 def test_every_jobs_file_key_is_in_the_schema(site):
