@@ -105,8 +105,12 @@ def _trailing_comment(lines: list[str], index: int) -> str:
 
 
 def _comment_above(lines: list[str], index: int) -> str:
+    """The comment lines right above line `index + 1` at its indentation (a deeper one continues the
+    comment of the field before)."""
+    field_line = lines[index + 1]
+    indent = len(field_line) - len(field_line.lstrip())
     parts: list[str] = []
-    while index >= 0 and lines[index].strip().startswith("#"):
+    while index >= 0 and lines[index].strip().startswith("#") and lines[index].index("#") == indent:
         parts.insert(0, lines[index].strip().lstrip("#:").strip())
         index -= 1
     return " ".join(parts)
@@ -133,10 +137,17 @@ def _shown(value) -> str:
     return f"{type(value).__name__}({', '.join(changed)})"
 
 
+def _type(annotation) -> str:
+    """A field's type as written (a string under `from __future__ import annotations`, else the object)."""
+    if isinstance(annotation, str):
+        return annotation
+    return annotation.__name__ if isinstance(annotation, type) else str(annotation).replace("typing.", "")
+
+
 def dataclass_rows(cls: type, exclude: set[str] = frozenset()) -> list[list[str]]:
     """[name, type, default, meaning] per field of dataclass `cls`, in declaration order."""
     docs = field_docs(cls)
-    return [[f.name, str(f.type), _default(f), docs.get(f.name, "")]
+    return [[f.name, _type(f.type), _default(f), docs.get(f.name, "")]
             for f in dataclasses.fields(cls) if f.name not in exclude]
 
 
