@@ -10,12 +10,13 @@ PLATFORM ?= linux-x64
 # Mitsuba's llvm variant loads this library (found lazily, after `setup` may have installed it).
 export DRJIT_LIBLLVM_PATH ?= $(shell tools/find_llvm.sh 2>/dev/null)
 
-.PHONY: help setup test test-quick demo bench corpus extension extension-nowheels check-extension validate clean
+.PHONY: help setup test test-quick demo docs bench corpus extension extension-nowheels check-extension validate clean
 
 help:
 	@echo "make demo       set up on first use, run SceneFit on the bundled example -> out/demo/"
 	@echo "make test       set up on first use, run the tests (all of them: what CI runs)"
 	@echo "make test-quick the tests without those marked slow (multi-process, worker environments)"
+	@echo "make docs       the docs site into build/docs/ (warnings are errors; the tests build it too)"
 	@echo "make bench      speed and accuracy table (benchmarks/run.py)"
 	@echo "make gpu-check  on a CUDA machine: SD2-sized random models, each preset's adapt iterations, benchmarks/results/gpu.md"
 	@echo "make corpus     every real asset in ../shared/corpus through convert -> bake -> glTF validator"
@@ -46,6 +47,10 @@ test-quick: setup
 
 demo: setup
 	$(VENV)/bin/scenefit demo --out out/demo
+
+docs: setup
+	$(PY) -m sphinx -W -n --keep-going -b html docs build/docs
+	@echo "open build/docs/index.html"
 
 bench: setup
 	$(PY) benchmarks/run.py

@@ -77,7 +77,7 @@ class EventLines:
 
 def add_parser(sub) -> None:
     p = sub.add_parser("batch", help="run many asset x scene jobs from a jobs file (in-process or on Ray)")
-    p.add_argument("jobs", help="the jobs file (TOML, [[job]] tables; see README 'Batches')")
+    p.add_argument("jobs", help="the jobs file (TOML, [[job]] tables; see docs/technical/jobs-file.md)")
     p.add_argument("--out", required=True, help="output folder: DIR/<job name>/, summary.md, contact_sheet.png")
     p.add_argument("--ray", nargs="?", const="auto", metavar="auto|local|ADDRESS",
                    help="run the jobs as Ray tasks: auto (a running cluster, else a local one; here without Ray "

@@ -45,17 +45,17 @@ class ModelConfig:
     The gradients that reach the texture, the LoRA and its optimiser stay float32.
     """
 
-    base_model: str = DEFAULT_BASE_MODEL
-    inpaint_model: str = DEFAULT_INPAINT_MODEL
-    cache_dir: str | None = None
-    local_files_only: bool = False
-    device_type: str = "auto"
-    dtype_type: str = "auto"
-    attention_slicing: bool = False
-    vae_slicing: bool = False
-    vae_tiling: bool = False
-    channels_last: bool = False
-    cpu_offload: bool = False
+    base_model: str = DEFAULT_BASE_MODEL      # SD2 text-to-image: a hub id or a folder
+    inpaint_model: str = DEFAULT_INPAINT_MODEL   # SD2 inpainting: a hub id or a folder
+    cache_dir: str | None = None              # the Hugging Face cache (None: HF_HUB_CACHE / HF_HOME / ~/.cache)
+    local_files_only: bool = False            # never download (also HF_HUB_OFFLINE=1)
+    device_type: str = "auto"                 # auto | cpu | cuda
+    dtype_type: str = "auto"                  # auto (fp16 on CUDA, bf16 where a CPU computes it) | fp32 | fp16 | bf16
+    attention_slicing: bool = False           # memory switches: less memory, more time
+    vae_slicing: bool = False                 # (diffusers' own switches of the same names)
+    vae_tiling: bool = False                  # the VAE in tiles
+    channels_last: bool = False               # the UNet in channels-last memory layout
+    cpu_offload: bool = False                 # models wait on the CPU and move to the GPU when used
 
     def __post_init__(self) -> None:
         if self.device_type not in DEVICE_TYPES:

@@ -60,15 +60,15 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
 @dataclass(frozen=True)
 class ComposeConfig:
     size: float = DEFAULT_OBJECT_SIZE  # fraction of the photo's height the asset spans
-    shadow_type: str = "ratio"
+    shadow_type: str = "ratio"        # ratio (a shadow catcher) | paper (the thresholded matte) | none
     spp: int | None = None            # None: chosen from noise_target by a pilot render
     noise_target: float = 0.03        # RMS noise of the raw object render, display sRGB units
-    pilot_spp: int = 4
-    min_spp: int = 4
-    max_spp: int = 64
+    pilot_spp: int = 4                # samples of each of the two pilot renders that measure the noise
+    min_spp: int = 4                  # the chosen sample count's bounds
+    max_spp: int = 64                 # (the preset sets the upper one)
     sampler_type: str = "multijitter"  # picked by benchmarks/bench_compose.py
-    denoiser_type: str = "auto"
-    max_depth: int = 6
+    denoiser_type: str = "auto"       # oidn | none | auto (Open Image Denoise when installed)
+    max_depth: int = 6                # light bounces per path
     floor_albedo: float = 0.8          # cancels in the ratio; sets only the paper shadow's noise level
     paper_threshold: float = 0.9       # "shadowed" below this fraction of the floor's mean intensity
     matte_tolerance: float = 0.01      # darkening below 1% (about one 8-bit level of the photo at most) is
@@ -78,7 +78,7 @@ class ComposeConfig:
                                        # the matte is scaled up: shadows are soft, and a 12 MP floor pass would
                                        # cost ten times the object pass for no visible change
     max_side: int = COMPOSE_MAX_SIDE   # the composite's long side at most (a larger photo is reduced to it)
-    seed: int = 0
+    seed: int = 0                      # the renders' sampler
 
     def __post_init__(self) -> None:
         if not 64 <= self.max_side <= COMPOSE_MAX_SIDE:

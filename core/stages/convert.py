@@ -45,18 +45,18 @@ class ConvertConfig:
     """How to convert. Defaults are the "balanced" preset (core/pipeline/presets.py)."""
 
     init_type: str = "exact"          # exact: the asset's maps + a zero residual; fit: the paper's fitted network
-    method_type: str = "direct"
+    method_type: str = "direct"       # fit only: direct (texels against the maps) | inverse (through renders)
     texture: NeuralTextureConfig = BALANCED_TEXTURE   # the hash grid; resolution and residual are set by the run
     resolution: int | None = None     # None: the asset's base colour resolution, capped at max_resolution
     screen_px: int | None = None      # the object's height in the composite, pixels: no more texels than it shows
-    max_resolution: int = 1024
-    iterations: int = 400
+    max_resolution: int = 1024        # texels per side at most (larger maps are area-averaged to it)
+    iterations: int = 400             # fit only: optimisation steps
     lr_start: float = 0.02            # paper: 0.02 annealed to 0.001
-    lr_end: float = 0.001
+    lr_end: float = 0.001             # the learning rate at the last step
     batch_texels: int | None = None   # direct: texels per step (None = all)
     render_size: int = 256            # inverse: render resolution and samples per pixel
-    spp: int = 16
-    seed: int = 0
+    spp: int = 16                     # inverse: samples per pixel
+    seed: int = 0                     # the network's initialisation and the texel batches
 
     def __post_init__(self) -> None:
         if self.init_type not in INIT_TYPES:

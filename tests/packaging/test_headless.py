@@ -1,5 +1,5 @@
-"""The README's headless batch recipe, run as written: the extension installed from its zip, a .blend
-holding two objects, a jobs file naming them (`asset = "props.blend"`, `object = ...`); run twice, the
+"""The docs' headless batch recipe (docs/technical/headless.md), run as written: the extension installed
+from its zip, a .blend holding two objects, a jobs file naming them (`asset = "props.blend"`, `object = ...`); run twice, the
 second run does no work. (`blender -b --python-expr X` is bpy imported, then X.)"""
 import json
 import os
@@ -67,10 +67,10 @@ photo.save()
 
 
 def readme_batch_recipe() -> str:
-    """The Python expression of the README's `blender -b --python-expr "..."` batch line."""
-    text = (ROOT / "README.md").read_text()
+    """The Python expression of the docs' `blender -b --python-expr "..."` batch line."""
+    text = (ROOT / "docs" / "technical" / "headless.md").read_text()
     match = re.search(r'^blender -b --python-expr "(.*?)"$', text, re.MULTILINE)
-    assert match, "the README has no one-line headless batch recipe"
+    assert match, "docs/technical/headless.md has no one-line headless batch recipe"
     return match.group(1)
 
 

@@ -65,41 +65,41 @@ class AdaptConfig:
     shadow_type / shadow_spp: the global views' shadow, made by the compose stage's floor passes.
     """
 
-    mode_type: str = "scene"
+    mode_type: str = "scene"                      # scene (setup m) | generate (a) | edit (c)
     prompt: str = ""
-    negative_prompt: str = ""
-    object_prompt: str = ""
-    instruction: str = ""
-    critic: CriticConfig = field(default_factory=CriticConfig)
-    views_type: str = "local+global"
-    models: ModelConfig = field(default_factory=ModelConfig)
-    iterations: int = 4000
-    stages: tuple[StageSpec, ...] = SCENE_STAGES
-    model_resolution: int = 512
-    lr_texture: float = 1e-3
-    lr_lora: float = 1e-4
-    lora_rank: int = 4
-    condition_dropout: float = 0.1
+    negative_prompt: str = ""                     # what the critics are steered away from
+    object_prompt: str = ""                       # the object alone (local views; edit: with the instruction)
+    instruction: str = ""                         # edit: what to change, verb first
+    critic: CriticConfig = field(default_factory=CriticConfig)   # the score-distillation critic (VSD, guidance scale)
+    views_type: str = "local+global"              # local+global (the paper's) | local (solid backgrounds only)
+    models: ModelConfig = field(default_factory=ModelConfig)     # the SD2 models (core/guidance/models.py)
+    iterations: int = 4000                        # optimisation steps
+    stages: tuple[StageSpec, ...] = SCENE_STAGES  # the schedule: fraction, render size, spp, timestep range
+    model_resolution: int = 512                   # the diffusion model's image side
+    lr_texture: float = 1e-3                      # the texture's learning rate (constant)
+    lr_lora: float = 1e-4                         # the LoRA noise predictor's learning rate (constant)
+    lora_rank: int = 4                            # the LoRA adapter's rank
+    condition_dropout: float = 0.1                # how often the LoRA's camera condition is zeroed in training
     views: int = 24
     views_per_step: int = 4
     view_variants: int = 2                        # fixed views per azimuth (sampling.draw_view_bank)
-    elevation: float = 15.0
+    elevation: float = 15.0                       # degrees above the horizon the views look from
     elevation_choices: tuple[float, ...] = ()     # "generate": (20, 30, 45) with small perturbations
-    fov_range: tuple[float, float] = (1.0, 1.21)
-    background_random_p: float = 0.5
+    fov_range: tuple[float, float] = (1.0, 1.21)  # λ_FOV drawn from this range (docs: conventions)
+    background_random_p: float = 0.5             # local views: chance of a random solid background, else grey
     global_crops: int = 2
     shadow_type: str = "ratio"                    # the global views' shadow (core/stages/compose.py SHADOW_TYPES)
     shadow_spp: int = 32                          # samples per pixel of its floor passes (once per turn)
-    light_type: str = "ambient"
-    ambient: float = 1.0
+    light_type: str = "ambient"                   # ambient | envmap | random: the local views' light
+    ambient: float = 1.0                          # the ambient light's radiance
     light_random_p: float = 0.0                   # "random": chance of a spherical-Gaussian light
-    normal_weight_type: str = "cosine"
-    timestep_anneal_type: str = "linear"
-    max_depth: int = 3
+    normal_weight_type: str = "cosine"            # w_t weighted by ⟨camera, normal⟩ (cosine) or not
+    timestep_anneal_type: str = "linear"          # how the timestep window slides from high to low
+    max_depth: int = 3                            # light bounces per path in the renders
     texture: NeuralTextureConfig = BALANCED_TEXTURE   # "generate": the fresh texture (resolution: the raster's)
-    seed: int = 0
-    preview_every: int = 50
-    checkpoint_every: int = 200
+    seed: int = 0                                 # the views, timesteps and noise (the same on one device or four)
+    preview_every: int = 50                       # iterations between previews
+    checkpoint_every: int = 200                   # iterations between checkpoints (a stopped run resumes)
 
     def __post_init__(self) -> None:
         def need(ok: bool, message: str) -> None:

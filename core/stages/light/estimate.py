@@ -58,7 +58,7 @@ class LightConfig:
     except the critic's optimisation, which keeps the paper's 2000 iterations at lr 0.01 (it runs only
     with a critic, i.e. with the SD2 weights; core/pipeline/preset_tables.py has shorter ones)."""
 
-    scene_type: str = "auto"
+    scene_type: str = "auto"                  # indoor | outdoor | auto (decided from the photo; unsure: both)
     fov_deg: float | None = None              # horizontal; None: the photo's metadata, else DEFAULT_FOV_DEG
     camera_pitch_deg: float = DEFAULT_PITCH_DEG   # the photo camera looks this far up (negative: down)
     # The artist's dominant light (--sun AZ,EL), degrees: azimuth from the photo's view direction,
@@ -68,18 +68,18 @@ class LightConfig:
     # clicks give their own (shadow_hint.sun_uncertainty_deg). The unseen light's lobe widens with it.
     sun_uncertainty_deg: float = 0.0
     map_height: int = 128                     # the map is map_height x 2 map_height
-    depth: DepthConfig = DepthConfig()
-    thresholds: RegionThresholds = RegionThresholds()
-    prior_type: str = "cues"
-    cues: CueConfig = CueConfig()
-    l_white: float = DEFAULT_L_WHITE
-    critic_type: str = "none"
-    apparatus: ApparatusConfig = ApparatusConfig()
-    optimise: OptimiseConfig = OptimiseConfig()
-    object_prompt: str = "a 3D object"
+    depth: DepthConfig = DepthConfig()        # the monocular depth model that lifts an indoor photo to 3D
+    thresholds: RegionThresholds = RegionThresholds()   # the paper's bright-region thresholds
+    prior_type: str = "cues"                  # cues (weight-free, cues.py) | inverse_tonemap (the paper's prior)
+    cues: CueConfig = CueConfig()             # the weight-free cues' settings
+    l_white: float = DEFAULT_L_WHITE          # inverse_tonemap: the extended Reinhard white point
+    critic_type: str = "none"                 # none | diffusion (SD2, the paper's) | reference (the true map)
+    apparatus: ApparatusConfig = ApparatusConfig()   # the critic's renders of the object and sphere
+    optimise: OptimiseConfig = OptimiseConfig()      # the critic's optimisation of the region scales
+    object_prompt: str = "a 3D object"        # the diffusion critic's words for the object
     tint: str | None = None                   # e.g. "in blue tint", appended to both prompts
     models: ModelConfig = ModelConfig()       # SD2 for critic_type "diffusion" (core/guidance/models.py)
-    diffusion: DiffusionCriticConfig = DiffusionCriticConfig()
+    diffusion: DiffusionCriticConfig = DiffusionCriticConfig()   # the diffusion critic's settings
     outpaint: OutpaintConfig = OutpaintConfig()   # outdoor completion: SD2 inpainting or the sky/ground prior
 
     def __post_init__(self) -> None:
