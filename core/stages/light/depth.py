@@ -14,18 +14,16 @@ naming the model, where it was looked for and how to provide it.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ...base.errors import InputError, ModelMissingError
-from ...guidance.models import load_depth_estimator
+from ...guidance.models import DEFAULT_DEPTH_MODEL, hub_cache, load_depth_estimator
 from ...scene.camera import CAMERA_HEIGHT, PhotoCamera
 from ...scene.floor import FloorPoint, geometric_ray_distance
 
-DEFAULT_DEPTH_MODEL = "depth-anything/Depth-Anything-V2-Small-hf"
 DEPTH_TYPES = ("auto", "model", "geometric")
 
 
@@ -49,7 +47,7 @@ def depth_config_for(models, depth_type: str = "auto", model: str | None = None)
     offline switch and device, so every entry point finds it alike."""
     return DepthConfig(depth_type=depth_type, model=model or DEFAULT_DEPTH_MODEL, cache_dir=models.cache_dir,
                        local_files_only=True if models.local_files_only else None,
-                       device="cuda" if models.device_type == "cuda" else "cpu")
+                       device=models.device_type if models.device_type in ("cuda", "mps") else "cpu")
 
 
 @dataclass
@@ -64,14 +62,9 @@ class DepthResult:
 _ABSENT: dict[tuple, ModelMissingError] = {}
 
 
-def _hub_cache(cache_dir: str | None) -> Path:
-    return Path(cache_dir).expanduser() if cache_dir else Path(os.environ.get("HF_HUB_CACHE") or os.path.join(
-        os.environ.get("HF_HOME", os.path.expanduser("~/.cache/huggingface")), "hub"))
-
-
 def _hub_snapshot_present(model: str, cache_dir: str | None) -> bool:
     """Whether a hub id has a snapshot holding config.json in the Hugging Face cache (a file system look)."""
-    snapshots = _hub_cache(cache_dir) / f"models--{model.replace('/', '--')}" / "snapshots"
+    snapshots = hub_cache(cache_dir) / f"models--{model.replace('/', '--')}" / "snapshots"
     return snapshots.is_dir() and any((s / "config.json").is_file() for s in snapshots.iterdir())
 
 
@@ -86,7 +79,7 @@ def load_depth_model(config: DepthConfig):
         is_folder = Path(config.model).expanduser().exists() or config.model.startswith((".", "/", "~"))
         if not is_folder and not _hub_snapshot_present(config.model, config.cache_dir):
             _ABSENT[key] = ModelMissingError(
-                f"The depth model '{config.model}' is not in the Hugging Face cache {_hub_cache(config.cache_dir)}; download it "
+                f"The depth model '{config.model}' is not in the Hugging Face cache {hub_cache(config.cache_dir)}; download it "
                 f"(`huggingface-cli download {config.model}`) or pass a local folder (--depth-model PATH).")
             raise _ABSENT[key]
     try:
