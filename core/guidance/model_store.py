@@ -24,7 +24,7 @@ from pathlib import Path
 from ..base.errors import InputError, ModelMissingError
 from ..base.progress import ProgressCallback, check_cancel, emit
 from .models import (BASE_PARTS, DEFAULT_BASE_MODEL, DEFAULT_DEPTH_MODEL, DEFAULT_INPAINT_MODEL, IGNORE_PATTERNS,
-                     INPAINT_PARTS, ModelConfig, _WEIGHT_PATTERNS, hub_cache, hub_offline, hub_patterns)
+                     DEPTH_PATTERNS, INPAINT_PARTS, ModelConfig, hub_cache, hub_offline, hub_patterns)
 
 FOUND, PARTIAL, MISSING, FOLDER, FOLDER_INCOMPLETE = "found", "partial", "missing", "folder", "folder incomplete"
 PARTIAL_SUFFIX = ".incomplete"
@@ -87,7 +87,7 @@ def model_specs(config: ModelConfig = ModelConfig(), depth_model: str | None = N
                   _required(BASE_PARTS)),
         ModelSpec("inpaint", "Stable Diffusion 2 inpainting", config.inpaint_model,
                   tuple(hub_patterns(INPAINT_PARTS)), _required(INPAINT_PARTS)),
-        ModelSpec("depth", "Depth model", depth_model or DEFAULT_DEPTH_MODEL, tuple(_WEIGHT_PATTERNS),
+        ModelSpec("depth", "Depth model", depth_model or DEFAULT_DEPTH_MODEL, tuple(DEPTH_PATTERNS),
                   ("config.json", "preprocessor_config.json", "*.safetensors")),
     )
 
@@ -159,14 +159,11 @@ def model_states(config: ModelConfig = ModelConfig(), depth_model: str | None = 
 def fetch_sentence(spec: ModelSpec, cache: Path) -> str:
     """What to fetch and where to put it, for a machine that cannot download it itself."""
     if spec.is_folder:
-        return (f"The {spec.label} is the folder '{spec.model}', which must hold "
-                f"{', '.join(spec.required)}.")
+        return f"The {spec.label} is the folder '{spec.model}', which must hold {', '.join(spec.required)}."
     include = " ".join(f"--include '{p}'" for p in spec.allow)
     exclude = " ".join(f"--exclude '{p}'" for p in IGNORE_PATTERNS)
-    return (f"The {spec.label} is the hub repository '{spec.model}' (files {', '.join(spec.allow)}, without "
-            f"{', '.join(IGNORE_PATTERNS)}): on a connected machine run `hf download {spec.model} {include} "
-            f"{exclude} --cache-dir CACHE` and copy CACHE/{storage_folder(Path('.'), spec.model).name} into "
-            f"'{cache}'.")
+    return (f"{spec.label}: on a connected machine run `hf download {spec.model} {include} {exclude} "
+            f"--cache-dir CACHE`, then copy CACHE/{storage_folder(Path('.'), spec.model).name} into '{cache}'.")
 
 
 def remove_model(spec: ModelSpec, cache: Path) -> int:

@@ -31,9 +31,16 @@ _WEIGHT_PATTERNS = ["*.json", "*.txt", "*.safetensors", "*.model"]
 IGNORE_PATTERNS = ["*.fp16.*"]
 
 
+# The files of each part a run reads: configs, safetensors weights, the tokenizer's vocabulary.
+_PART_FILES = {"unet": ("*.json", "*.safetensors"), "vae": ("*.json", "*.safetensors"),
+               "text_encoder": ("*.json", "*.safetensors"), "tokenizer": ("*.json", "*.txt", "*.model"),
+               "scheduler": ("*.json",)}
+DEPTH_PATTERNS = ["*.json", "*.safetensors"]
+
+
 def hub_patterns(parts: dict) -> list[str]:
     """The files a diffusion role's snapshot holds: its parts' configs, vocabularies and safetensors weights."""
-    return [f"{sub}/{p}" for sub in parts for p in _WEIGHT_PATTERNS] + ["model_index.json"]
+    return [f"{sub}/{p}" for sub in parts for p in _PART_FILES.get(sub, _WEIGHT_PATTERNS)] + ["model_index.json"]
 
 
 def hub_cache(cache_dir: str | None = None) -> Path:
@@ -403,7 +410,7 @@ class DepthEstimator:
                 # One snapshot call fails at once without a network; transformers' own loading retries
                 # each file's request and took 100 s to give up.
                 source = snapshot_download(model, cache_dir=hub_cache(cache_dir), local_files_only=only_local,
-                                           allow_patterns=_WEIGHT_PATTERNS)
+                                           allow_patterns=DEPTH_PATTERNS, ignore_patterns=IGNORE_PATTERNS)
             self.processor = AutoImageProcessor.from_pretrained(source, local_files_only=True)
             self.model = AutoModelForDepthEstimation.from_pretrained(source, local_files_only=True,
                                                                      use_safetensors=True)

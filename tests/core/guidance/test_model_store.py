@@ -45,7 +45,9 @@ def test_download_cancel_resume_find_remove(hub, tmp_path, monkeypatch):
     config = ModelConfig(base_model=BASE, inpaint_model=INPAINT, cache_dir=str(cache))
     spec = store.spec_named(store.model_specs(config), "base")
     assert store.model_state(spec, cache).state == store.MISSING
-    assert store.model_state(spec, cache).fetch.count(BASE) >= 2 and str(cache) in store.model_state(spec, cache).fetch
+    fetch = store.model_state(spec, cache).fetch        # what to fetch and where, for an offline machine
+    assert f"hf download {BASE} " in fetch and f"models--tiny--sd2-base into '{cache}'" in fetch
+    assert all(f"--include '{pattern}'" in fetch for pattern in spec.allow) and "unet/*.safetensors" in spec.allow
 
     cancel, events = threading.Event(), []
 
