@@ -11,6 +11,7 @@ import hashlib
 import json
 import re
 import threading
+import time
 from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from urllib.parse import unquote, urlsplit
@@ -25,6 +26,7 @@ class HubServer:
     repos: dict[str, dict[str, bytes]]
     requests: list[dict] = field(default_factory=list)   # {"method", "path", "range"}
     bytes_sent: int = 0
+    seconds_per_mib: float = 0.0   # a slow link, so a test can stop a download half-way from another thread
 
     def commit(self, repo: str) -> str:
         return hashlib.sha1(repo.encode()).hexdigest()
@@ -89,11 +91,14 @@ class HubServer:
                     self.send_header("Content-Range", f"bytes {start}-{len(data) - 1}/{len(data)}")
                 self.end_headers()
                 if body:
-                    try:
-                        self.wfile.write(data[start:])
-                    except (BrokenPipeError, ConnectionResetError):   # the client stopped reading (a cancel)
-                        return
-                    hub.bytes_sent += len(data) - start
+                    step = 1 << 20
+                    for at in range(start, len(data), step):
+                        try:
+                            self.wfile.write(data[at:at + step])
+                        except (BrokenPipeError, ConnectionResetError):   # the client stopped reading (a cancel)
+                            return
+                        hub.bytes_sent += len(data[at:at + step])
+                        time.sleep(hub.seconds_per_mib)
 
         self._server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
         self._server.daemon_threads = True
