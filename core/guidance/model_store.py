@@ -120,14 +120,13 @@ def _size(folder: Path) -> int:
 
 
 def _snapshot(storage: Path, spec: ModelSpec) -> Path | None:
-    """The complete snapshot of the revision 'main' points at, else any complete one."""
-    snapshots = storage / "snapshots"
-    if not snapshots.is_dir():
-        return None
+    """The snapshot of the revision 'main' points at, when it holds every required file: the folder the
+    loaders' own lookup (the hub's, by that ref) resolves to."""
     ref = storage / "refs" / "main"
-    head = snapshots / ref.read_text().strip() if ref.is_file() else None
-    candidates = ([head] if head is not None else []) + sorted(p for p in snapshots.iterdir() if p != head)
-    return next((c for c in candidates if c.is_dir() and _complete(c, spec.required)), None)
+    if not ref.is_file():
+        return None
+    head = storage / "snapshots" / ref.read_text().strip()
+    return head if head.is_dir() and _complete(head, spec.required) else None
 
 
 def model_state(spec: ModelSpec, cache: Path) -> ModelState:

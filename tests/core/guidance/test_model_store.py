@@ -109,3 +109,26 @@ def test_a_folder_model_is_reported_and_never_removed(tmp_path):
     with pytest.raises(InputError, match="does not delete"):
         store.remove_model(spec, tmp_path / "hub")
     assert (folder / "unet" / "diffusion_pytorch_model.safetensors").is_file()
+
+
+def test_a_run_fetches_what_it_lacks(tmp_path, monkeypatch):
+    """The download step a run's job calls: only the missing models, with progress; cancelled before it starts."""
+    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
+    depth = {"config.json": b'{"model_type": "dpt"}', "preprocessor_config.json": b'{"p": 1}',
+             "model.safetensors": b"d" * 5000, "README.md": b"# not fetched"}
+    server = HubServer({"tiny/depth": depth}).start()
+    config = ModelConfig(base_model=str(tmp_path / "no_such_folder"), cache_dir=str(tmp_path / "hub"))
+    try:
+        stopped = threading.Event()
+        stopped.set()
+        with pytest.raises(Cancelled):
+            store.download_missing(config, ("depth",), None, stopped, depth_model="tiny/depth", endpoint=server.url)
+        events = []
+        states = store.download_missing(config, ("depth",), events.append, threading.Event(), depth_model="tiny/depth",
+                                        endpoint=server.url)
+        assert [s.state for s in states] == [store.FOUND] and events[-1].step == events[-1].total == sum(
+            len(data) for name, data in depth.items() if name != "README.md")
+        assert store.download_missing(config, ("depth",), None, None, depth_model="tiny/depth", endpoint=server.url) == []
+    finally:
+        server.stop()
+    assert not any(r["path"].endswith("README.md") for r in server.requests)
