@@ -21,7 +21,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..base.errors import InputError, ModelMissingError
+from ..base.errors import InputError, ModelMissingError, SceneFitError
 from ..base.progress import ProgressCallback, check_cancel, emit
 from .models import (BASE_PARTS, DEFAULT_BASE_MODEL, DEFAULT_DEPTH_MODEL, DEFAULT_INPAINT_MODEL, IGNORE_PATTERNS,
                      DEPTH_PATTERNS, INPAINT_PARTS, ModelConfig, hub_cache, hub_offline, hub_patterns)
@@ -142,7 +142,9 @@ def model_state(spec: ModelSpec, cache: Path) -> ModelState:
         return state(FOLDER if found else FOLDER_INCOMPLETE, _size(folder), folder if folder.is_dir() else None, False)
     storage = storage_folder(cache, spec.model)
     snapshot = _snapshot(storage, spec)
-    weights = _size(storage / "blobs")   # the files and partial downloads, without the hub's bookkeeping
+    # the files and partial downloads (in snapshots/ themselves where the file system has no links), without
+    # the hub's bookkeeping
+    weights = _size(storage / "blobs") + _size(storage / "snapshots")
     if snapshot is not None:
         return state(FOUND, weights, snapshot, True)
     if storage.is_dir():
@@ -302,19 +304,31 @@ def download_model(spec: ModelSpec, cache: Path, progress: ProgressCallback | No
     if hub_offline():
         raise ModelMissingError(f"Downloading is off (HF_HUB_OFFLINE is set). {fetch_sentence(spec, cache)}")
     storage = storage_folder(cache, spec.model)
-    commit, sizes = _repo_files(HfApi(endpoint=endpoint), spec, revision)
-    todo = [n for n in sorted(sizes) if not _already_there(storage, commit, n)]
-    transfer = _Transfer(spec, sum(sizes.values()), sum(sizes[n] for n in sizes if n not in todo), progress, cancel)
-    for name in todo:
+    try:
+        commit, sizes = _repo_files(HfApi(endpoint=endpoint), spec, revision)
+        todo = [n for n in sorted(sizes) if not _already_there(storage, commit, n)]
+        transfer = _Transfer(spec, sum(sizes.values()), sum(sizes[n] for n in sizes if n not in todo), progress, cancel)
+        for name in todo:
+            check_cancel(cancel)
+            transfer.file = name
+            transfer.report()
+            _fetch_blob(spec, storage, commit, name, endpoint, transfer)
         check_cancel(cancel)
-        transfer.file = name
-        transfer.report()
-        _fetch_blob(spec, storage, commit, name, endpoint, transfer)
-    check_cancel(cancel)
-    # Every blob is here: the hub links them into the snapshot and records the revision and its file list.
-    snapshot_download(spec.model, revision=revision, cache_dir=cache, allow_patterns=list(spec.allow),
-                      ignore_patterns=IGNORE_PATTERNS, endpoint=endpoint, tqdm_class=_quiet_bar())
+        # Every blob is here: the hub links them into the snapshot and records the revision and its file list.
+        snapshot_download(spec.model, revision=revision, cache_dir=cache, allow_patterns=list(spec.allow),
+                          ignore_patterns=IGNORE_PATTERNS, endpoint=endpoint, tqdm_class=_quiet_bar())
+    except (SceneFitError, OSError):   # a cancel, or the disk (full, read-only): said as they are
+        raise
+    except Exception as error:        # the network or the hub: what went wrong, and what to do instead
+        raise ModelMissingError(f"The {spec.label} could not be downloaded ({type(error).__name__}: "
+                                f"{_first_line(error)}); the part fetched so far is kept for the next try. "
+                                f"{fetch_sentence(spec, cache)}") from None
     return model_state(spec, cache)
+
+
+def _first_line(error: Exception) -> str:
+    lines = str(error).strip().splitlines()
+    return lines[0][:200] if lines else "no detail"
 
 
 def download_missing(config: ModelConfig, keys: tuple[str, ...], progress: ProgressCallback | None = None,

@@ -51,3 +51,16 @@ def test_download_then_list_offline_and_remove(tmp_path, monkeypatch):
     assert removed.returncode == 0 and "removed" in removed.stdout
     assert not (cache / "models--tiny--sd2-base").exists()
     assert json.loads(scenefit_here("models", "--json", "--base-model", BASE).stdout)["models"][0]["state"] == "missing"
+
+
+def test_a_hub_that_cannot_be_reached_is_one_sentence(tmp_path):
+    """A download with no hub to reach (a closed port) ends in one sentence that says what to fetch and where."""
+    import socket
+
+    with socket.socket() as probe:          # a port nothing listens on
+        probe.bind(("127.0.0.1", 0))
+        closed = f"http://127.0.0.1:{probe.getsockname()[1]}"
+    proc = scenefit_process("models", "download", "depth", env={"HF_ENDPOINT": closed, "HF_HUB_OFFLINE": "0",
+                                                                 "HF_HUB_CACHE": str(tmp_path / "hub")})
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr[-2000:]
+    assert "could not be downloaded" in proc.stderr and "hf download depth-anything/Depth-Anything-V2-Small-hf" in proc.stderr
