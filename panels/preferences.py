@@ -135,7 +135,7 @@ def draw_models(box, context) -> None:
         col.scale_y = 0.7
         col.label(text=state.where or state.cache)
         if not here and (offline(context) or state.state == store.FOLDER_INCOMPLETE):
-            for line in textwrap.wrap(state.fetch, 110):
+            for line in textwrap.wrap(state.fetch, 110, break_on_hyphens=False, break_long_words=False):
                 col.label(text=line)
     job = downloading()
     if job is not None:

@@ -80,16 +80,20 @@ def test_download_cancel_resume_remove_in_blender(run_py, tmp_path):
                 return type("Op", (), {{}})()
             def label(self, **kw): self.drawn.append(["label", kw.get("text", "")])
             def progress(self, **kw): self.drawn.append(["progress", kw.get("text")])
-        from scenefit.panels.preferences import draw_models
-        draw_models(Layout(), bpy.context)
+        class Drawn:                     # the preferences as Blender draws them, into the recording layout
+            layout = Layout()
+            def __getattr__(self, name): return getattr(prefs, name)
+        type(prefs).draw(Drawn(), bpy.context)
         out["drawn"] = Layout.drawn
-        out["memory_props"] = [n in prefs.bl_rna.properties for n in ("attention_slicing", "vae_tiling", "cpu_offload")]
 
         out["remove"] = list(bpy.ops.scenefit.remove_model(model="base"))
         out["after_remove"] = [ops.model_states()[0].state, (Path({str(tmp_path / "cache")!r}) / "models--tiny--sd2-base").exists(),
                                ops.model_folder(bpy.context, "base")]
         bpy.context.preferences.system.use_online_access = False
         out["poll_offline"] = bpy.ops.scenefit.download_model.poll()
+        Layout.drawn = []
+        type(prefs).draw(Drawn(), bpy.context)
+        out["drawn_offline"] = " ".join(d[1] for d in Layout.drawn if d[0] == "label")
         server.stop()
         addon_utils.disable("scenefit")
         print("JSON" + json.dumps(out))
@@ -114,7 +118,13 @@ def test_download_cancel_resume_remove_in_blender(run_py, tmp_path):
     assert sum(d[1] == "scenefit.download_model" for d in ops_drawn) == 2     # inpaint and depth are missing
     labels = [d[1] for d in out["drawn"] if d[0] == "label"]
     assert "Stable Diffusion 2 base" in labels and where in labels
-    assert out["memory_props"] == [True, True, True]
+    props = [d[1] for d in out["drawn"] if d[0] == "prop"]
+    assert all(d[2] for d in out["drawn"] if d[0] == "prop")
+    assert {"attention_slicing", "vae_tiling", "device", "model_cache"} <= set(props)
+    assert "cpu_offload" not in props          # the device is the CPU: nothing to offload to
     assert out["remove"] == ["FINISHED"]
     assert out["after_remove"] == ["missing", False, str(tmp_path / "cache")]
     assert out["poll_offline"] is False
+    # offline, each missing model says what to fetch and where to put it
+    offline = out["drawn_offline"]
+    assert "hf download tiny/sd2-base" in offline and "hf download stabilityai/stable-diffusion-2-inpainting" in offline
