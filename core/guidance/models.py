@@ -176,8 +176,8 @@ def locate_model(model: str, role: str, parts: dict, config: ModelConfig) -> Pat
         how = (f"Give a folder laid out like the hub repository ({layout}), a hub id such as "
                f"'{DEFAULT_BASE_MODEL}', or run without diffusion guidance (`--guidance none`).")
     else:
-        how = (f"Provide it by (a) running `huggingface-cli download {model}` on a machine with internet and "
-               f"copying its cache here (or pointing the cache folder setting / HF_HUB_CACHE at it), or (b) giving "
+        how = (f"Provide it by (a) downloading it (`scenefit models download`, or Download in SceneFit's "
+               f"Preferences), or running `hf download {model}` on a machine with internet and copying its cache here (or pointing the cache folder setting / HF_HUB_CACHE at it), or (b) giving "
                f"a local folder with {layout} as the {role} model; or run without diffusion guidance "
                f"(`--guidance none`).")
     if is_folder:
@@ -418,7 +418,7 @@ class DepthEstimator:
             raise ModelMissingError(
                 f"The depth model '{model}' was not found in {_where_looked(model, cache_dir)}"
                 f"{' (offline: downloads are off)' if only_local else ''}. Provide it by downloading it on a "
-                f"connected machine (`huggingface-cli download {model}`) into that cache, or pass a local folder "
+                f"connected machine (`scenefit models download depth`, or `hf download {model}`) into that cache, or pass a local folder "
                 f"holding config.json, the weights and preprocessor_config.json (--depth-model PATH); or use "
                 f"the geometric fallback (--depth geometric). Cause: {_first_sentence(error)}") from error
         self.model.eval().to(device)

@@ -80,7 +80,8 @@ def load_depth_model(config: DepthConfig):
         if not is_folder and not _hub_snapshot_present(config.model, config.cache_dir):
             _ABSENT[key] = ModelMissingError(
                 f"The depth model '{config.model}' is not in the Hugging Face cache {hub_cache(config.cache_dir)}; download it "
-                f"(`huggingface-cli download {config.model}`) or pass a local folder (--depth-model PATH).")
+                f"(`scenefit models download depth`, or `hf download {config.model}`) or pass a local folder "
+                f"(--depth-model PATH).")
             raise _ABSENT[key]
     try:
         return load_depth_estimator(config.model, config.cache_dir, local_only, config.device)
