@@ -132,3 +132,17 @@ def test_a_run_fetches_what_it_lacks(tmp_path, monkeypatch):
     finally:
         server.stop()
     assert not any(r["path"].endswith("README.md") for r in server.requests)
+
+
+def test_the_cache_is_the_hubs_own(tmp_path, monkeypatch):
+    """No folder asked for: HF_HUB_CACHE, else HF_HOME/hub (where other tools put their weights)."""
+    from scenefit.core.guidance.models import hub_cache
+
+    monkeypatch.delenv("HF_HUB_CACHE", raising=False)
+    monkeypatch.setenv("HF_HOME", str(tmp_path / "home"))
+    assert hub_cache() == tmp_path / "home" / "hub"
+    monkeypatch.setenv("HF_HUB_CACHE", str(tmp_path / "elsewhere"))
+    assert hub_cache() == tmp_path / "elsewhere"
+    assert hub_cache(str(tmp_path / "asked")) == tmp_path / "asked"
+    states = store.model_states(ModelConfig())
+    assert [s.cache for s in states] == [str(tmp_path / "elsewhere")] * 3
