@@ -26,7 +26,7 @@ def run(args) -> int:
     elif args.action == "download":
         from ..core.base.progress import TerminalProgress
 
-        progress = None if args.quiet or args.json else TerminalProgress()
+        progress = None if args.quiet or args.json else store.in_megabytes(TerminalProgress())
         for spec in chosen:
             if store.model_state(spec, cache).state in (store.FOUND, store.FOLDER):
                 _say(args, f"{spec.key}: already here")

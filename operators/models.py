@@ -3,12 +3,9 @@ and Esc / Cancel; a cancelled download resumes where it stopped), Remove (after 
 Folder, for the Stable Diffusion 2 base and inpainting models and the depth model."""
 from __future__ import annotations
 
-import math
-
 import bpy
 from bpy.props import EnumProperty
 
-from ..core.base.progress import ProgressEvent
 from ..workers import background
 from .common import model_settings, offline
 from .jobs import JobOperator
@@ -55,11 +52,7 @@ def download_work(data: dict, progress, cancel) -> dict:
     """The job's thread: one model fetched into the cache, its progress in megabytes with the speed."""
     from ..core.guidance import model_store
 
-    def in_megabytes(event: ProgressEvent) -> None:
-        progress(ProgressEvent("MB", event.step // 1_000_000, max(1, math.ceil(event.total / 1_000_000)),
-                               event.message, event.metrics))
-
-    state = model_store.download_model(data["spec"], data["cache"], in_megabytes, cancel)
+    state = model_store.download_model(data["spec"], data["cache"], model_store.in_megabytes(progress), cancel)
     return state.as_dict()
 
 

@@ -14,6 +14,7 @@ then links the finished blobs into the snapshot and records the revision, as its
 from __future__ import annotations
 
 import fnmatch
+import math
 import os
 import shutil
 import threading
@@ -22,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..base.errors import InputError, ModelMissingError, SceneFitError
-from ..base.progress import ProgressCallback, check_cancel, emit
+from ..base.progress import ProgressCallback, ProgressEvent, check_cancel, emit
 from .models import (BASE_PARTS, DEFAULT_BASE_MODEL, DEFAULT_DEPTH_MODEL, DEFAULT_INPAINT_MODEL, IGNORE_PATTERNS,
                      DEPTH_PATTERNS, INPAINT_PARTS, ModelConfig, hub_cache, hub_offline, hub_patterns)
 
@@ -228,6 +229,16 @@ class _Transfer:
                 pass
 
         return Bar
+
+
+def in_megabytes(progress: ProgressCallback) -> ProgressCallback:
+    """A download's progress counted in megabytes, its bytes and speed said in the message: what a progress bar
+    shows (the stage's name is the unit: "MB 10/25")."""
+    def forward(event: ProgressEvent) -> None:
+        progress(ProgressEvent("MB", event.step // 1_000_000, max(1, math.ceil(event.total / 1_000_000)),
+                               event.message))
+
+    return forward
 
 
 def _quiet_bar():
