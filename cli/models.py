@@ -63,7 +63,9 @@ def _list(args, specs, cache, config) -> int:
         about = f" (about {store.format_bytes(s.about_bytes)} to download)" if s.about_bytes and s.state in (
             store.MISSING, store.PARTIAL) else ""
         print(f"{s.key:<8} {s.state:<17} {store.format_bytes(s.bytes_on_disk):>9}  {s.where or '-'}{about}")
-        if s.state not in (store.FOUND, store.FOLDER):
+        if s.state in (store.MISSING, store.PARTIAL) and not config.offline:
+            print(f"         scenefit models download {s.key}")
+        elif s.state not in (store.FOUND, store.FOLDER):
             print(f"         {s.fetch}")
     return 0
 

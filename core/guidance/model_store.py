@@ -235,7 +235,8 @@ def in_megabytes(progress: ProgressCallback) -> ProgressCallback:
     """A download's progress counted in megabytes, its bytes and speed said in the message: what a progress bar
     shows (the stage's name is the unit: "MB 10/25")."""
     def forward(event: ProgressEvent) -> None:
-        progress(ProgressEvent("MB", event.step // 1_000_000, max(1, math.ceil(event.total / 1_000_000)),
+        total = max(1, math.ceil(event.total / 1_000_000))
+        progress(ProgressEvent("MB", total if event.step >= event.total else event.step // 1_000_000, total,
                                event.message))
 
     return forward
