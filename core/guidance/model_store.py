@@ -279,25 +279,29 @@ def _fetch_blob(spec: ModelSpec, storage: Path, commit: str, name: str, endpoint
     """One file's bytes into blobs/<etag>, resumed from blobs/<etag>.incomplete when an earlier try left one."""
     from huggingface_hub import get_hf_file_metadata, hf_hub_url
     from huggingface_hub.file_download import http_get
-    from huggingface_hub.utils import build_hf_headers
+    from huggingface_hub.utils import WeakFileLock, build_hf_headers
 
     meta = get_hf_file_metadata(hf_hub_url(spec.model, name, revision=commit, endpoint=endpoint))
     blob = storage / "blobs" / meta.etag
-    if blob.is_file():   # fetched by an earlier, stopped download: only its link is missing
-        transfer.done += blob.stat().st_size
-        return
-    blob.parent.mkdir(parents=True, exist_ok=True)
-    partial = blob.with_name(blob.name + PARTIAL_SUFFIX)
-    with partial.open("ab") as out:
-        transfer.done += out.tell()
-        http_get(meta.location, out, resume_size=out.tell(), headers=build_hf_headers(),
-                 expected_size=meta.size, tqdm_class=transfer.bar_class())
-    arrived = partial.stat().st_size
-    if meta.size is not None and arrived != meta.size:
-        partial.unlink()
-        raise OSError(f"'{name}' of {spec.model} arrived with {arrived} bytes, not {meta.size}; the next "
-                      "download fetches it again")
-    os.replace(partial, blob)
+    # The hub's own lock for this blob: another download of it (SceneFit's or the hub's) waits, never appends.
+    lock = storage.parent / ".locks" / storage.name / f"{meta.etag}.lock"
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    with WeakFileLock(lock):
+        if blob.is_file():   # fetched by an earlier, stopped download: only its link is missing
+            transfer.done += blob.stat().st_size
+            return
+        blob.parent.mkdir(parents=True, exist_ok=True)
+        partial = blob.with_name(blob.name + PARTIAL_SUFFIX)
+        with partial.open("ab") as out:
+            transfer.done += out.tell()
+            http_get(meta.location, out, resume_size=out.tell(), headers=build_hf_headers(),
+                     expected_size=meta.size, tqdm_class=transfer.bar_class())
+        arrived = partial.stat().st_size
+        if meta.size is not None and arrived != meta.size:
+            partial.unlink()
+            raise OSError(f"'{name}' of {spec.model} arrived with {arrived} bytes, not {meta.size}; the next "
+                          "download fetches it again")
+        os.replace(partial, blob)
 
 
 def _already_there(storage: Path, commit: str, name: str) -> bool:
