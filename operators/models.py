@@ -7,7 +7,7 @@ import bpy
 from bpy.props import EnumProperty
 
 from ..workers import background
-from .common import model_settings, offline
+from .common import ADDON_PACKAGE, model_settings, offline, preferences
 from .jobs import JobOperator
 
 MODEL_ITEMS = (
@@ -171,6 +171,41 @@ class SCENEFIT_OT_open_model_folder(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (SCENEFIT_OT_download_model, SCENEFIT_OT_remove_model, SCENEFIT_OT_open_model_folder)
+def earlier_model_cache() -> str | None:
+    """The folder earlier SceneFit versions downloaded models into ('models' in the extension's user folder,
+    which Blender deletes with the extension), when it holds a model: offered, never used unasked."""
+    from pathlib import Path
+
+    try:
+        folder = Path(bpy.utils.extension_path_user(ADDON_PACKAGE, path="models", create=False))
+    except (ValueError, KeyError):   # not installed as an extension (development)
+        return None
+    return str(folder) if folder.is_dir() and any(folder.glob("models--*")) else None
+
+
+class SCENEFIT_OT_use_earlier_model_cache(bpy.types.Operator):
+    """Look for models in the folder an earlier SceneFit downloaded them into, instead of downloading them again
+    (it is deleted with the extension: move it elsewhere first to keep it)"""
+
+    bl_idname = "scenefit.use_earlier_model_cache"
+    bl_label = "Use Earlier Downloads"
+    bl_options = {"REGISTER", "INTERNAL"}
+
+    @classmethod
+    def poll(cls, context):
+        if earlier_model_cache() is None or preferences(context) is None:
+            cls.poll_message_set("No models from an earlier SceneFit were found")
+            return False
+        return True
+
+    def execute(self, context):
+        folder = earlier_model_cache()
+        preferences(context).model_cache = folder
+        self.report({"INFO"}, f"Model cache: {folder}")
+        return {"FINISHED"}
+
+
+classes = (SCENEFIT_OT_download_model, SCENEFIT_OT_remove_model, SCENEFIT_OT_open_model_folder,
+           SCENEFIT_OT_use_earlier_model_cache)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

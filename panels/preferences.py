@@ -102,6 +102,10 @@ def _size_words(state) -> str:
     return "missing" if state.state == store.FOLDER_INCOMPLETE else f"missing ({about})"
 
 
+def preferences_of(context):
+    return context.preferences.addons[ADDON_PACKAGE].preferences
+
+
 def draw_models(box, context) -> None:
     """One row per model: found or missing, its size, Download / Remove / Open Folder, and where it is;
     offline, the sentence that says what to fetch and where to put it."""
@@ -112,8 +116,14 @@ def draw_models(box, context) -> None:
     from ..operators.models import downloading, model_states
 
     from ..core.base.errors import SceneFitError
+    from ..operators.models import earlier_model_cache
 
     box.label(text="Models")
+    earlier = earlier_model_cache()
+    if earlier and not preferences_of(context).model_cache:
+        row = box.row()
+        row.label(text=f"An earlier SceneFit downloaded models into {earlier}", icon="INFO")
+        row.operator("scenefit.use_earlier_model_cache")
     try:
         states = model_states(context)
     except SceneFitError as error:   # a model setting above that names nothing

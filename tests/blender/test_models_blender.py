@@ -86,6 +86,19 @@ def test_download_cancel_resume_remove_in_blender(run_py, tmp_path):
         type(prefs).draw(Drawn(), bpy.context)
         out["drawn"] = Layout.drawn
 
+        # an installed extension whose earlier version downloaded into its user folder: offered, not used unasked
+        earlier = Path({str(tmp_path / "ext")!r}) / "models"
+        (earlier / "models--stabilityai--stable-diffusion-2-base").mkdir(parents=True)
+        bpy.utils.extension_path_user = lambda package, path="", create=False: str(earlier.parent / path)
+        prefs.model_cache = ""
+        Layout.drawn = []
+        type(prefs).draw(Drawn(), bpy.context)
+        out["earlier_offer"] = [d for d in Layout.drawn if d[0] == "op" and d[1] == "scenefit.use_earlier_model_cache"]
+        out["earlier_cache_before"] = prefs.model_cache
+        out["earlier_use"] = list(bpy.ops.scenefit.use_earlier_model_cache())
+        out["earlier_cache"] = prefs.model_cache
+        prefs.model_cache = {str(tmp_path / "cache")!r}
+
         out["remove"] = list(bpy.ops.scenefit.remove_model(model="base"))
         out["after_remove"] = [ops.model_states()[0].state, (Path({str(tmp_path / "cache")!r}) / "models--tiny--sd2-base").exists(),
                                ops.model_folder(bpy.context, "base")]
@@ -122,6 +135,9 @@ def test_download_cancel_resume_remove_in_blender(run_py, tmp_path):
     assert all(d[2] for d in out["drawn"] if d[0] == "prop")
     assert {"attention_slicing", "vae_tiling", "device", "model_cache"} <= set(props)
     assert "cpu_offload" not in props          # the device is the CPU: nothing to offload to
+    assert len(out["earlier_offer"]) == 1 and out["earlier_offer"][0][3]
+    assert out["earlier_cache_before"] == "" and out["earlier_use"] == ["FINISHED"]
+    assert out["earlier_cache"] == str(tmp_path / "ext" / "models")
     assert out["remove"] == ["FINISHED"]
     assert out["after_remove"] == ["missing", False, str(tmp_path / "cache")]
     assert out["poll_offline"] is False
