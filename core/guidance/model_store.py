@@ -88,9 +88,13 @@ def model_specs(config: ModelConfig = ModelConfig(), depth_model: str | None = N
                   _required(BASE_PARTS)),
         ModelSpec("inpaint", "Stable Diffusion 2 inpainting", config.inpaint_model,
                   tuple(hub_patterns(INPAINT_PARTS)), _required(INPAINT_PARTS)),
-        ModelSpec("depth", "Depth model", depth_model or DEFAULT_DEPTH_MODEL, tuple(DEPTH_PATTERNS),
-                  ("config.json", "preprocessor_config.json", "*.safetensors")),
+        depth_spec(depth_model or DEFAULT_DEPTH_MODEL),
     )
+
+
+def depth_spec(model: str) -> ModelSpec:
+    return ModelSpec("depth", "Depth model", model, tuple(DEPTH_PATTERNS),
+                     ("config.json", "preprocessor_config.json", "*.safetensors"))
 
 
 def spec_named(specs: tuple[ModelSpec, ...], key: str) -> ModelSpec:

@@ -10,7 +10,9 @@ import torch
 
 from hub_server import HubServer
 from scenefit.core.guidance import model_store as store
+from scenefit.core.base.errors import ModelMissingError
 from scenefit.core.guidance.models import ModelConfig, load_depth_estimator, load_guidance_models
+from scenefit.core.stages.light.depth import DepthConfig, load_depth_model
 from scenefit.devtools.tiny_models import build_tiny_pair
 
 
@@ -39,6 +41,9 @@ def test_downloaded_models_load_offline(tmp_path, monkeypatch):
     server = HubServer({"tiny/base": _repo(base), "tiny/inpaint": _repo(inpaint), "tiny/depth": _repo(depth)}).start()
     cache = tmp_path / "hub"
     config = ModelConfig(base_model="tiny/base", inpaint_model="tiny/inpaint", cache_dir=str(cache), dtype_type="fp32")
+    depth_auto = DepthConfig(depth_type="auto", model="tiny/depth", cache_dir=str(cache))
+    with pytest.raises(ModelMissingError, match="scenefit models download depth"):
+        load_depth_model(depth_auto)
     try:
         fetched = store.download_missing(config, ("base", "inpaint", "depth"), depth_model="tiny/depth",
                                          endpoint=server.url)
@@ -55,3 +60,4 @@ def test_downloaded_models_load_offline(tmp_path, monkeypatch):
             assert (Path(fetched[0].where) / name).read_bytes() == data, name
     estimator = load_depth_estimator("tiny/depth", str(cache), local_files_only=True)
     assert estimator.kind == "disparity" and estimator.model.config.model_type == "depth_anything"
+    assert load_depth_model(depth_auto) is estimator    # found in this process once downloaded, not absent for good
