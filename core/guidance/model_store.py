@@ -303,8 +303,8 @@ def _fetch_blob(spec: ModelSpec, storage: Path, commit: str, name: str, endpoint
         arrived = partial.stat().st_size
         if meta.size is not None and arrived != meta.size:
             partial.unlink()
-            raise OSError(f"'{name}' of {spec.model} arrived with {arrived} bytes, not {meta.size}; the next "
-                          "download fetches it again")
+            raise ModelMissingError(f"'{name}' of {spec.model} arrived with {arrived} bytes, not {meta.size}; "
+                                    "the next download fetches it again.")
         os.replace(partial, blob)
 
 
@@ -337,9 +337,12 @@ def download_model(spec: ModelSpec, cache: Path, progress: ProgressCallback | No
         # Every blob is here: the hub links them into the snapshot and records the revision and its file list.
         snapshot_download(spec.model, revision=revision, cache_dir=cache, allow_patterns=list(spec.allow),
                           ignore_patterns=IGNORE_PATTERNS, endpoint=endpoint, tqdm_class=_quiet_bar())
-    except (SceneFitError, OSError):   # a cancel, or the disk (full, read-only): said as they are
+    except SceneFitError:   # a cancel
         raise
-    except Exception as error:        # the network or the hub: what went wrong, and what to do instead
+    except Exception as error:
+        if isinstance(error, OSError) and error.errno is not None:   # the disk (full, read-only): said as it is
+            raise
+        # the network or the hub (whose errors are OSErrors without an errno): what went wrong, what to do instead
         raise ModelMissingError(f"The {spec.label} could not be downloaded ({type(error).__name__}: "
                                 f"{_first_line(error)}); the part fetched so far is kept for the next try. "
                                 f"{fetch_sentence(spec, cache)}") from None

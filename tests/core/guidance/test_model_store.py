@@ -129,6 +129,8 @@ def test_a_run_fetches_what_it_lacks(tmp_path, monkeypatch):
         assert [s.state for s in states] == [store.FOUND] and events[-1].step == events[-1].total == sum(
             len(data) for name, data in depth.items() if name != "README.md")
         assert store.download_missing(config, ("depth",), None, None, depth_model="tiny/depth", endpoint=server.url) == []
+        with pytest.raises(ModelMissingError, match=r"could not be downloaded \(RepositoryNotFoundError.*hf download"):
+            store.download_missing(config, ("depth",), depth_model="tiny/no-such-model", endpoint=server.url)
     finally:
         server.stop()
     assert not any(r["path"].endswith("README.md") for r in server.requests)
