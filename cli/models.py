@@ -83,5 +83,5 @@ def add_parser(sub) -> None:
     p.add_argument("--depth-model", help="hub id or folder of the depth model (default "
                                          "depth-anything/Depth-Anything-V2-Small-hf)")
     p.add_argument("--json", action="store_true", help="print one JSON object: the cache, the device and each model")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true", help="no progress bar and nothing printed but errors")
     p.set_defaults(func=run)
