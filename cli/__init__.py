@@ -16,10 +16,10 @@ from pathlib import Path
 from ..core.base.errors import Cancelled, SceneFitError
 from ..core.base.os_errors import os_error_sentence, with_out_paths
 from ..core.base.output_folder import finished_jobs, interrupted_message, kept_stages, kept_stages_sentence
-from . import adapt, bake, camera, batch, compose, convert, demo, export, light, prompt, render, run
+from . import adapt, bake, camera, batch, compose, convert, demo, export, light, models, prompt, render, run
 
 # The order `scenefit --help` lists them in.
-COMMANDS = (convert, render, export, bake, camera, light, prompt, adapt, compose, run, batch, demo)
+COMMANDS = (convert, render, export, bake, camera, light, prompt, adapt, compose, run, batch, demo, models)
 
 
 class OneLineParser(argparse.ArgumentParser):

@@ -344,14 +344,12 @@ def offline(context=None) -> bool:
 
 
 def model_cache(context=None) -> str | None:
-    """The preference's folder, else 'models' in this extension's user folder (None in development)."""
+    """The preference's folder, else None: the Hugging Face cache (HF_HUB_CACHE / HF_HOME), where weights other
+    tools fetched are found, and which outlives the extension (its user folder is deleted with it)."""
     prefs = preferences(context)
     if prefs is not None and prefs.model_cache:
         return bpy.path.abspath(prefs.model_cache)
-    try:
-        return bpy.utils.extension_path_user(ADDON_PACKAGE, path="models", create=True)
-    except (ValueError, KeyError):  # not installed as an extension (tests, development)
-        return None
+    return None
 
 
 def depth_model_preference(context=None) -> str | None:
@@ -370,7 +368,9 @@ def model_settings(context=None):
     device = prefs.device if prefs is not None else "auto"
     kwargs = {}
     if prefs is not None:
-        kwargs = {"base_model": prefs.base_model, "inpaint_model": prefs.inpaint_model}
+        kwargs = {"base_model": prefs.base_model, "inpaint_model": prefs.inpaint_model,
+                  "attention_slicing": prefs.attention_slicing, "vae_tiling": prefs.vae_tiling,
+                  "cpu_offload": prefs.cpu_offload}
     models = ModelConfig(cache_dir=cache, local_files_only=local_only, device_type=device, **kwargs)
     return models, depth_config_for(models, model=prefs.depth_model if prefs is not None else None)
 

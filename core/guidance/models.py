@@ -18,7 +18,8 @@ from ..base.errors import InputError, ModelMissingError
 
 DEFAULT_BASE_MODEL = "stabilityai/stable-diffusion-2-base"
 DEFAULT_INPAINT_MODEL = "stabilityai/stable-diffusion-2-inpainting"
-DEVICE_TYPES = ("auto", "cpu", "cuda")
+DEFAULT_DEPTH_MODEL = "depth-anything/Depth-Anything-V2-Small-hf"
+DEVICE_TYPES = ("auto", "cpu", "cuda", "mps")
 DTYPE_TYPES = ("auto", "fp32", "fp16", "bf16")
 
 # What each role needs from its folder (a file that must exist in each subfolder).
@@ -26,6 +27,35 @@ BASE_PARTS = {"unet": "config.json", "vae": "config.json", "text_encoder": "conf
               "tokenizer": None, "scheduler": "scheduler_config.json"}
 INPAINT_PARTS = {"unet": "config.json"}
 _WEIGHT_PATTERNS = ["*.json", "*.txt", "*.safetensors", "*.model"]
+# Half-precision copies the loader never reads (it asks for no variant): a download without them is half the size.
+IGNORE_PATTERNS = ["*.fp16.*"]
+
+
+# The files of each part a run reads: configs, safetensors weights, the tokenizer's vocabulary.
+_PART_FILES = {"unet": ("*.json", "*.safetensors"), "vae": ("*.json", "*.safetensors"),
+               "text_encoder": ("*.json", "*.safetensors"), "tokenizer": ("*.json", "*.txt", "*.model"),
+               "scheduler": ("*.json",)}
+DEPTH_PATTERNS = ["*.json", "*.safetensors"]
+
+
+def hub_patterns(parts: dict) -> list[str]:
+    """The files a diffusion role's snapshot holds: its parts' configs, vocabularies and safetensors weights."""
+    return [f"{sub}/{p}" for sub in parts for p in _PART_FILES.get(sub, _WEIGHT_PATTERNS)] + ["model_index.json"]
+
+
+def hub_cache(cache_dir: str | None = None) -> Path:
+    """The Hugging Face cache models are looked for and downloaded into: `cache_dir` when given, else the
+    hub's own (HF_HUB_CACHE, else HF_HOME/hub, else ~/.cache/huggingface/hub), so weights another tool
+    fetched are used where they are."""
+    if cache_dir:
+        return Path(cache_dir).expanduser()
+    if os.environ.get("HF_HUB_CACHE"):
+        return Path(os.environ["HF_HUB_CACHE"]).expanduser()
+    if os.environ.get("HF_HOME"):
+        return Path(os.environ["HF_HOME"]).expanduser() / "hub"
+    from huggingface_hub import constants
+
+    return Path(constants.HF_HUB_CACHE)
 
 
 def hub_offline(local_files_only: bool | None = None) -> bool:
@@ -73,19 +103,44 @@ class ModelConfig:
         import torch
 
         if self.device_type == "auto":
-            return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+            return torch.device(found_device())
         if self.device_type == "cuda" and not torch.cuda.is_available():
             raise InputError("device_type 'cuda' was asked for but torch sees no CUDA GPU; use 'auto' or 'cpu'.")
+        if self.device_type == "mps" and not _mps_available():
+            raise InputError("device_type 'mps' was asked for but torch sees no Apple GPU (MPS); use 'auto' or 'cpu'.")
         return torch.device(self.device_type)
 
     def dtype(self):
         import torch
 
         if self.dtype_type == "auto":
-            if self.device().type == "cuda":
+            if self.device().type in ("cuda", "mps"):
                 return torch.float16
             return torch.bfloat16 if cpu_computes_bf16() else torch.float32
         return {"fp32": torch.float32, "fp16": torch.float16, "bf16": torch.bfloat16}[self.dtype_type]
+
+
+def _mps_available() -> bool:
+    import torch
+
+    backend = getattr(torch.backends, "mps", None)
+    return backend is not None and bool(backend.is_available())
+
+
+def found_device() -> str:
+    """The device "auto" means here: an NVIDIA GPU (CUDA), else an Apple GPU (MPS), else the CPU."""
+    import torch
+
+    if torch.cuda.is_available():
+        return "cuda"
+    return "mps" if _mps_available() else "cpu"
+
+
+def memory_options_for(device: str) -> tuple[str, ...]:
+    """The ModelConfig memory switches that do something on `device`: slicing and tiling on any device; CPU
+    offload only where the models otherwise sit in a GPU's own memory (CUDA; MPS shares the CPU's)."""
+    options = ("attention_slicing", "vae_slicing", "vae_tiling")
+    return options + ("cpu_offload",) if device == "cuda" else options
 
 
 def cpu_computes_bf16() -> bool:
@@ -97,11 +152,7 @@ def cpu_computes_bf16() -> bool:
 
 
 def _cache_dir(config: ModelConfig) -> Path:
-    if config.cache_dir:
-        return Path(config.cache_dir).expanduser()
-    from huggingface_hub import constants
-
-    return Path(os.environ.get("HF_HUB_CACHE") or constants.HF_HUB_CACHE)
+    return hub_cache(config.cache_dir)
 
 
 def _missing_parts(folder: Path, parts: dict) -> list[str]:
@@ -125,8 +176,8 @@ def locate_model(model: str, role: str, parts: dict, config: ModelConfig) -> Pat
         how = (f"Give a folder laid out like the hub repository ({layout}), a hub id such as "
                f"'{DEFAULT_BASE_MODEL}', or run without diffusion guidance (`--guidance none`).")
     else:
-        how = (f"Provide it by (a) running `huggingface-cli download {model}` on a machine with internet and "
-               f"copying its cache here (or pointing the cache folder setting / HF_HUB_CACHE at it), or (b) giving "
+        how = (f"Provide it by (a) downloading it (`scenefit models download`, or Download in SceneFit's "
+               f"Preferences), or running `hf download {model}` on a machine with internet and copying its cache here (or pointing the cache folder setting / HF_HUB_CACHE at it), or (b) giving "
                f"a local folder with {layout} as the {role} model; or run without diffusion guidance "
                f"(`--guidance none`).")
     if is_folder:
@@ -140,9 +191,10 @@ def locate_model(model: str, role: str, parts: dict, config: ModelConfig) -> Pat
     from huggingface_hub import snapshot_download
 
     cache = _cache_dir(config)
-    patterns = [f"{sub}/{p}" for sub in parts for p in _WEIGHT_PATTERNS] + ["model_index.json"]
+    patterns = hub_patterns(parts)
     try:
-        folder = Path(snapshot_download(model, cache_dir=cache, local_files_only=True, allow_patterns=patterns))
+        folder = Path(snapshot_download(model, cache_dir=cache, local_files_only=True, allow_patterns=patterns,
+                                        ignore_patterns=IGNORE_PATTERNS))
     except Exception:
         folder = None
     if folder is not None and not _missing_parts(folder, parts):
@@ -152,7 +204,7 @@ def locate_model(model: str, role: str, parts: dict, config: ModelConfig) -> Pat
         raise ModelMissingError(f"The {role} model '{model}' is not in the Hugging Face cache at '{cache}' "
                                 f"and downloading is off ({why}). {how}")
     try:
-        folder = Path(snapshot_download(model, cache_dir=cache, allow_patterns=patterns))
+        folder = Path(snapshot_download(model, cache_dir=cache, allow_patterns=patterns, ignore_patterns=IGNORE_PATTERNS))
     except Exception as error:
         raise ModelMissingError(f"The {role} model '{model}' is not in the Hugging Face cache at '{cache}' and "
                                 f"could not be downloaded ({type(error).__name__}: {_first_sentence(error)}). {how}") from None
@@ -245,6 +297,8 @@ def _empty_cache(device) -> None:
     gc.collect()
     if getattr(device, "type", "") == "cuda":
         torch.cuda.empty_cache()
+    elif getattr(device, "type", "") == "mps":
+        torch.mps.empty_cache()
 
 
 def load_guidance_models(config: ModelConfig, need_inpaint: bool, paths: dict[str, Path] | None = None) -> GuidanceModels:
@@ -355,8 +409,8 @@ class DepthEstimator:
 
                 # One snapshot call fails at once without a network; transformers' own loading retries
                 # each file's request and took 100 s to give up.
-                source = snapshot_download(model, cache_dir=cache_dir, local_files_only=only_local,
-                                           allow_patterns=_WEIGHT_PATTERNS)
+                source = snapshot_download(model, cache_dir=hub_cache(cache_dir), local_files_only=only_local,
+                                           allow_patterns=DEPTH_PATTERNS, ignore_patterns=IGNORE_PATTERNS)
             self.processor = AutoImageProcessor.from_pretrained(source, local_files_only=True)
             self.model = AutoModelForDepthEstimation.from_pretrained(source, local_files_only=True,
                                                                      use_safetensors=True)
@@ -364,7 +418,7 @@ class DepthEstimator:
             raise ModelMissingError(
                 f"The depth model '{model}' was not found in {_where_looked(model, cache_dir)}"
                 f"{' (offline: downloads are off)' if only_local else ''}. Provide it by downloading it on a "
-                f"connected machine (`huggingface-cli download {model}`) into that cache, or pass a local folder "
+                f"connected machine (`scenefit models download depth`, or `hf download {model}`) into that cache, or pass a local folder "
                 f"holding config.json, the weights and preprocessor_config.json (--depth-model PATH); or use "
                 f"the geometric fallback (--depth geometric). Cause: {_first_sentence(error)}") from error
         self.model.eval().to(device)
@@ -396,9 +450,7 @@ def _first_sentence(error: Exception) -> str:
 def _where_looked(model: str, cache_dir: str | None) -> str:
     if Path(model).expanduser().exists() or model.startswith((".", "/", "~")):
         return f"the folder {Path(model).expanduser()}"
-    hub = cache_dir or os.environ.get("HF_HUB_CACHE") or os.path.join(
-        os.environ.get("HF_HOME", os.path.expanduser("~/.cache/huggingface")), "hub")
-    return f"the Hugging Face cache {hub}"
+    return f"the Hugging Face cache {hub_cache(cache_dir)}"
 
 
 _DEPTH_CACHE: dict[tuple, DepthEstimator] = {}

@@ -14,18 +14,17 @@ naming the model, where it was looked for and how to provide it.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ...base.errors import InputError, ModelMissingError
-from ...guidance.models import load_depth_estimator
+from ...guidance.model_store import FOUND, depth_spec, model_state
+from ...guidance.models import DEFAULT_DEPTH_MODEL, hub_cache, load_depth_estimator
 from ...scene.camera import CAMERA_HEIGHT, PhotoCamera
 from ...scene.floor import FloorPoint, geometric_ray_distance
 
-DEFAULT_DEPTH_MODEL = "depth-anything/Depth-Anything-V2-Small-hf"
 DEPTH_TYPES = ("auto", "model", "geometric")
 
 
@@ -49,7 +48,7 @@ def depth_config_for(models, depth_type: str = "auto", model: str | None = None)
     offline switch and device, so every entry point finds it alike."""
     return DepthConfig(depth_type=depth_type, model=model or DEFAULT_DEPTH_MODEL, cache_dir=models.cache_dir,
                        local_files_only=True if models.local_files_only else None,
-                       device="cuda" if models.device_type == "cuda" else "cpu")
+                       device=models.device_type if models.device_type in ("cuda", "mps") else "cpu")
 
 
 @dataclass
@@ -59,35 +58,28 @@ class DepthResult:
     detail: dict
 
 
-# depth_type "auto" decides once per process that a model is absent (importing transformers to find
-# out cost about 3 s per indoor photo): the ModelMissingError is kept here and raised again.
+# depth_type "auto" decides once per model folder that a model cannot be loaded (importing transformers to
+# find out cost about 3 s per indoor photo): the ModelMissingError is kept here and raised again. A model
+# downloaded later (the Preferences' Models, `scenefit models download`) is a new folder, looked at anew.
 _ABSENT: dict[tuple, ModelMissingError] = {}
-
-
-def _hub_cache(cache_dir: str | None) -> Path:
-    return Path(cache_dir).expanduser() if cache_dir else Path(os.environ.get("HF_HUB_CACHE") or os.path.join(
-        os.environ.get("HF_HOME", os.path.expanduser("~/.cache/huggingface")), "hub"))
-
-
-def _hub_snapshot_present(model: str, cache_dir: str | None) -> bool:
-    """Whether a hub id has a snapshot holding config.json in the Hugging Face cache (a file system look)."""
-    snapshots = _hub_cache(cache_dir) / f"models--{model.replace('/', '--')}" / "snapshots"
-    return snapshots.is_dir() and any((s / "config.json").is_file() for s in snapshots.iterdir())
 
 
 def load_depth_model(config: DepthConfig):
     """The configured model through core/guidance/models.py (loaded once per process); depth_type
-    "auto" looks only on this machine, and a model found absent stays absent for the process."""
+    "auto" looks only on this machine (the model manager's file system look, no import)."""
     local_only = True if config.depth_type == "auto" else config.local_files_only
     key = (config.model, config.cache_dir, config.device)
     if config.depth_type == "auto":
-        if key in _ABSENT:
-            raise _ABSENT[key]
         is_folder = Path(config.model).expanduser().exists() or config.model.startswith((".", "/", "~"))
-        if not is_folder and not _hub_snapshot_present(config.model, config.cache_dir):
-            _ABSENT[key] = ModelMissingError(
-                f"The depth model '{config.model}' is not in the Hugging Face cache {_hub_cache(config.cache_dir)}; download it "
-                f"(`huggingface-cli download {config.model}`) or pass a local folder (--depth-model PATH).")
+        if not is_folder:
+            state = model_state(depth_spec(config.model), hub_cache(config.cache_dir))
+            if state.state != FOUND:
+                raise ModelMissingError(
+                    f"The depth model '{config.model}' is not in the Hugging Face cache {state.cache}; download it "
+                    f"(`scenefit models download depth`, Download in SceneFit's Preferences, or `hf download "
+                    f"{config.model}`) or pass a local folder (--depth-model PATH).")
+            key += (state.where,)
+        if key in _ABSENT:
             raise _ABSENT[key]
     try:
         return load_depth_estimator(config.model, config.cache_dir, local_only, config.device)

@@ -84,7 +84,8 @@ def test_missing_weights_give_a_clear_message(tmp_path, monkeypatch, tiny_folder
         locate_models(config, need_inpaint=True)
     message = str(info.value)
     assert "stabilityai/stable-diffusion-2-base" in message and str(empty_cache) in message
-    assert "huggingface-cli download" in message and "--guidance none" in message
+    assert "scenefit models download" in message and "hf download stabilityai/stable-diffusion-2-base" in message
+    assert "--guidance none" in message
     # HF_HUB_OFFLINE alone also stops before any download.
     monkeypatch.setenv("HF_HUB_OFFLINE", "1")
     with pytest.raises(ModelMissingError, match="HF_HUB_OFFLINE"):
