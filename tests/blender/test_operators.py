@@ -14,7 +14,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import PythonSession, extension_and_models, fill_in, printed_json
+from conftest import ROOT, PythonSession, extension_and_models, fill_in, printed_json
 
 from scenefit.core.data.imageio import read_image
 
@@ -28,7 +28,6 @@ from importlib import import_module
 from pathlib import Path
 import numpy as np
 import bpy, addon_utils
-from conftest import ROOT
 
 tmp, zip_path, tiny = Path(TMP), ZIP, TINY
 MODULE = "bl_ext.user_default.scenefit"
