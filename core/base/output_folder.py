@@ -34,7 +34,7 @@ import sys
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Iterable, Iterator
+from typing import Callable, Iterable, Iterator, Sequence
 
 from .atomic import is_temp_name
 from .errors import Cancelled, InputError
@@ -427,7 +427,7 @@ def install_folder(parent: str | os.PathLike, name: str, fill: Callable[[Path], 
 
 
 def interrupted_message(out: str | os.PathLike, resumable: bool = False, by_stage: bool = False,
-                        kept: list[str] = (), jobs: list[str] | None = None) -> str:
+                        kept: Sequence[str] = (), jobs: list[str] | None = None) -> str:
     """What the user is told after Ctrl-C or a cancel inside `output_folder` (by_stage: `scenefit run`, with
     the stages it kept (`kept_stages`),
     whose finished stages are kept beside `out` and reused by the next run; jobs: `scenefit batch`, the jobs

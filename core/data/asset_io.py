@@ -114,7 +114,7 @@ def load_asset_folder(folder: str | Path) -> tuple[Mesh, PBRMaps]:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise InputError(f"'{name}' in '{folder / 'material.json'}' must be a number between 0 and 1, "
                              f"got {value!r}.")
-        channels[name] = float(value)
+        channels[name] = float(value)  # type: ignore[assignment]
     normal_path = folder / "normal.png"
     normal = read_image(normal_path)[..., :3] if normal_path.is_file() else None
     return mesh, PBRMaps(base_color=read_color_image(base_path), normal=normal, **channels)

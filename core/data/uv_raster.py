@@ -52,7 +52,7 @@ class UVRaster:
 
     @property
     def resolution(self) -> tuple[int, int]:
-        return self.mask.shape
+        return self.mask.shape  # type: ignore[return-value]
 
     @property
     def coverage(self) -> float:
@@ -120,9 +120,9 @@ class _Texels:
 
     def weights(self, owner: np.ndarray, flat: np.ndarray, near: np.ndarray) -> np.ndarray:
         """Barycentrics of texels `flat` in faces `owner`, in the image copy where texels `near` are held."""
-        return _weights(self.tri, self.area2, self.point, owner,
-                        _unwrapped(flat % self.width, self.tiles[0, near], self.width, self.modes[0]),
-                        _unwrapped(flat // self.width, self.tiles[1, near], self.height, self.modes[1]))
+        return _weights(self.tri, self.area2, self.point, owner,  # type: ignore[arg-type]
+                        _unwrapped(flat % self.width, self.tiles[0, near], self.width, self.modes[0]),  # type: ignore[index]
+                        _unwrapped(flat // self.width, self.tiles[1, near], self.height, self.modes[1]))  # type: ignore[index]
 
 
 def _covered_texels(texels: _Texels, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -165,7 +165,7 @@ def _add_border(texels: _Texels, mask: np.ndarray, border_width: float, flat: np
         return flat, owner, bary
     # (in the copy of the image where the nearest covered texel's triangle lies)
     near = nearest[ring]
-    ring_owner = texels.owner_map[near]
+    ring_owner = texels.owner_map[near]  # type: ignore[index]
     ring_bary = texels.weights(ring_owner, ring, near)
     return np.concatenate((flat, ring)), np.concatenate((owner, ring_owner)), np.concatenate((bary, ring_bary))
 

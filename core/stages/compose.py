@@ -144,7 +144,7 @@ def _scene(mi, envmap: np.ndarray, mesh: Mesh | None, maps: np.ndarray | None, b
         shape.set_bsdf(mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}}))
         scene["asset"] = shape
     elif mesh is not None:   # one shape per material, sampling its own texels with its wrap mode
-        scene.update(material_shapes(mi, mesh, maps)[0])
+        scene.update(material_shapes(mi, mesh, maps)[0])  # type: ignore[arg-type]
     if floor_albedo is not None:
         scene["floor"] = {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale(1000.0 * CAMERA_HEIGHT),
                           "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": floor_albedo}}}

@@ -164,7 +164,7 @@ def convert_asset(mesh: Mesh, maps: PBRMaps, config: ConvertConfig = ConvertConf
         history, iterations = fit.psnr_history, fit.iterations
     else:
         plan = texture.plan(raster.position, raster.border, raster.fill_index)
-        fit = fit_inverse_rendering(lambda: texture.texture_from_plan(plan), texture.parameters(), normalized,
+        fit = fit_inverse_rendering(lambda: texture.texture_from_plan(plan), texture.parameters(), normalized,  # type: ignore[assignment]
                                     target, iterations=config.iterations, lr_start=config.lr_start,
                                     lr_end=config.lr_end, render_size=config.render_size, spp=config.spp,
                                     seed=config.seed, progress=progress, cancel=cancel)
@@ -241,11 +241,11 @@ def run_convert(inputs: ConvertInputs, config: ConvertConfig = ConvertConfig(),
     if isinstance(asset, AssetMaterials):
         result = convert_materials(asset, config, progress=progress, cancel=cancel)
     else:
-        result = convert_asset(asset, maps, config, progress=progress, cancel=cancel)
+        result = convert_asset(asset, maps, config, progress=progress, cancel=cancel)  # type: ignore[arg-type]
     result.config = config
     if inputs.keep_constants:
         channels = (material_constant_channels([m.maps for m in asset.materials], [m.name for m in asset.materials])
-                    if isinstance(asset, AssetMaterials) else constant_channels(maps))
+                    if isinstance(asset, AssetMaterials) else constant_channels(maps))  # type: ignore[arg-type]
         result.constants = {name: d.choice for name, d in channels.items() if d.choice != "map"}
         result.decisions["channels"] = {name: needs_report(d) for name, d in channels.items()}
     if isinstance(asset, AssetMaterials):
@@ -262,7 +262,7 @@ def write_convert(result: ConvertResult, folder: str | Path) -> dict:
                       Path(folder), constants=result.constants)
     return {
         "stage": "convert",
-        "config": asdict(result.config),
+        "config": asdict(result.config),  # type: ignore[arg-type]
         "decisions": result.decisions,
         "psnr_covered_texels_db": round(result.psnr, 3),
         "seconds": round(result.seconds, 3),

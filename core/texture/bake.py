@@ -59,7 +59,7 @@ def save_neural_texture(texture: NeuralTexture, path: str | os.PathLike) -> Path
     payload = {"format": WEIGHTS_FORMAT, "version": WEIGHTS_VERSION,
                "config": texture.config.to_dict(), "state_dict": state}
     if getattr(texture, "layout", None) is not None:   # adaptation's new UV layout (core.surface_layout)
-        payload["layout"] = texture.layout.to_payload()
+        payload["layout"] = texture.layout.to_payload()  # type: ignore[attr-defined]
     buffer = io.BytesIO()
     torch.save(payload, buffer)
     return write_bytes_atomic(path, buffer.getvalue())
@@ -100,7 +100,7 @@ def load_neural_texture(path: str | os.PathLike, device: str | torch.device = "c
         from .surface_layout import SurfaceLayout
 
         try:
-            texture.layout = SurfaceLayout.from_payload(payload["layout"])
+            texture.layout = SurfaceLayout.from_payload(payload["layout"])  # type: ignore[assignment]
         except (KeyError, TypeError, ValueError, AttributeError):
             raise InputError(f"'{path}' has an unreadable UV layout; adapt the asset again.") from None
     return texture.to(device)

@@ -261,7 +261,7 @@ def unseen_light_direction(photo_srgb: np.ndarray, hidden: np.ndarray, omega: np
     at LOBE_ELEVATION_DEG."""
     if sun is not None:
         d = np.asarray(sun, np.float64)
-        return d / max(np.linalg.norm(d), 1e-12), {"from": "the artist's --sun", "vector": np.round(d, 4).tolist()}
+        return d / max(np.linalg.norm(d), 1e-12), {"from": "the artist's --sun", "vector": np.round(d, 4).tolist()}  # type: ignore[operator]
     weights = (omega * np.ones((1, hidden.shape[1])))[hidden]
     centroid = (dirs[hidden] * weights[:, None]).sum(axis=0)
     horizontal = np.array([centroid[0], centroid[1], 0.0])

@@ -402,12 +402,12 @@ def _critic_scales(config: LightConfig, critic, reference_envmap, mesh, maps, ph
         else:
             mesh, _ = normalize_to_unit_sphere(mesh)
             decisions["object"] = f"the asset '{mesh.name}' with its own maps"
-        scene = ApparatusScene(mesh, maps, ldr.shape[:2], config.apparatus,
+        scene = ApparatusScene(mesh, maps, ldr.shape[:2], config.apparatus,  # type: ignore[arg-type]
                                photo_azimuth_deg=photo_camera.yaw_deg - 90.0)
         if config.critic_type == "reference":
             from .reference_critic import ReferenceCritic
 
-            use_critic = ReferenceCritic.from_true_map(scene, _fit_map(reference_envmap, ldr.shape[:2]))
+            use_critic = ReferenceCritic.from_true_map(scene, _fit_map(reference_envmap, ldr.shape[:2]))  # type: ignore[arg-type]
         elif use_critic is None:   # diffusion, with the models located above
             from .diffusion_critic import DiffusionLightCritic
 

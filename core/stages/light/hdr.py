@@ -255,7 +255,7 @@ class ApparatusScene:
                                                    np.full(self.renderer.envmap_shape, 0.5, np.float32),
                                                    SceneOptions(sphere=self.sphere, max_depth=2))
                 with torch.no_grad():
-                    out = self._no_floor.render(self.cameras[index], *self.maps,
+                    out = self._no_floor.render(self.cameras[index], *self.maps,  # type: ignore[call-arg, misc]
                                                 torch.full(self.renderer.envmap_shape, 0.5), spp=4 * self.config.spp)
                 self._object_alphas[index] = out.alpha
         return self._object_alphas[index]
@@ -286,7 +286,7 @@ class ApparatusScene:
 
     def render_view(self, envmap: torch.Tensor, index: int, spp: int | None = None,
                     seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
-        out = self.renderer.render(self.cameras[index], *self.maps, envmap, spp=spp or self.config.spp,
+        out = self.renderer.render(self.cameras[index], *self.maps, envmap, spp=spp or self.config.spp,  # type: ignore[call-arg, misc]
                                    seed=seed * 16 + index)
         return out.rgb, out.alpha
 

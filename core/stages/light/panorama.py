@@ -82,7 +82,7 @@ def splat(colors: np.ndarray, points: np.ndarray, origin: np.ndarray, height: in
     return image.reshape(height, width, -1), distance.reshape(height, width), mask.reshape(height, width)
 
 
-def _kernel(size: int):
+def _kernel(size: float):
     import cv2
 
     size = max(3, int(size) | 1)
