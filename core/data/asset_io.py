@@ -18,6 +18,7 @@ import numpy as np
 
 from ..base.atomic import write_bytes_atomic, write_json_atomic
 from ..base.errors import InputError
+from .asset_files import obj_material_libraries
 from .imageio import linear_to_srgb, read_color_image, read_image, write_image
 from .maps import PBRMaps
 from .mesh import Mesh, check_face_indices
@@ -85,7 +86,6 @@ def check_asset_path(path: str | Path) -> None:
     if path.stat().st_size == 0:
         raise InputError(f"Asset file '{path}' is empty; export it again.")
     if path.suffix.lower() == ".obj":   # Blender reads it without, grey and silent: the maps never arrive
-        from .asset_files import obj_material_libraries
 
         named, same_name = obj_material_libraries(path)
         missing = [library for library in named if not library.is_file()]

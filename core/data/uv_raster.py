@@ -217,7 +217,7 @@ def seam_fill_index(mask: np.ndarray) -> np.ndarray:
 
 def _nearest_covered(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Distance in texels to, and flat index of, the nearest True texel of a non-empty 2D mask."""
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     covered = np.flatnonzero(mask)
     # Zero pixels (covered texels) each get their own label, numbered in raster order from 1;

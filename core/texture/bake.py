@@ -18,6 +18,7 @@ from ..base.atomic import write_bytes_atomic
 from ..base.errors import InputError
 from ..data.imageio import linear_to_srgb, write_image
 from .neural_texture import NeuralTexture, NeuralTextureConfig
+from .surface_layout import SurfaceLayout
 
 WEIGHTS_FORMAT = "scenefit.neural_texture"
 WEIGHTS_VERSION = 1
@@ -97,8 +98,6 @@ def load_neural_texture(path: str | os.PathLike, device: str | torch.device = "c
     except RuntimeError as error:
         raise InputError(f"The weights in '{path}' do not match their config: {error}") from error
     if payload.get("layout") is not None:
-        from .surface_layout import SurfaceLayout
-
         try:
             texture.layout = SurfaceLayout.from_payload(payload["layout"])  # type: ignore[assignment]
         except (KeyError, TypeError, ValueError, AttributeError):

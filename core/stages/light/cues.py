@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...base.errors import InputError
-from ...data.imageio import srgb_to_linear
+from ...data.imageio import linear_to_srgb, srgb_to_linear
 from ...scene.camera import PhotoCamera
 from ...scene.frame import equirect_directions
 from .regions import RegionThresholds, intensity
@@ -194,8 +194,6 @@ def _unseen_light(ldr: np.ndarray, hidden: np.ndarray, omega: np.ndarray, dirs: 
     """The hidden upper hemisphere shaded as a cos^sharpness lobe around `direction` over `floor`, and the
     scale that gives it mean radiance S (2 / rho - 1): camera-facing surfaces see it and the ground
     (about S) half each."""
-    from ...data.imageio import linear_to_srgb
-
     h, w = hidden.shape
     weights = (omega * np.ones((1, w)))[hidden]
     lobe = np.maximum(dirs @ direction, 0.0) ** sharpness

@@ -27,10 +27,11 @@ import torch
 
 from ...render.orbit_camera import Camera
 from ...base.errors import InputError
-from ...data.imageio import srgb_to_linear
+from ...data.imageio import linear_to_srgb, srgb_to_linear
 from ...data.mesh import Mesh
 from ...base.progress import ProgressCallback, check_cancel, emit
 from ...render.renderer import AssetRenderer, SceneOptions, SphereSpec
+from ...scene.frame import equirect_directions
 from ...texture.neural_texture import split_channels
 
 LOG_SCALE_MIN = math.log(1e-4)
@@ -62,8 +63,6 @@ class LightVector:
     """
 
     def __init__(self, ldr_linear: torch.Tensor, masks: dict[str, torch.Tensor]) -> None:
-        from ...scene.frame import equirect_directions
-
         h, w = ldr_linear.shape[:2]
         level = ldr_linear.double().mean(dim=-1)
         rows = (torch.arange(h, dtype=torch.float64) + 0.5) / h
@@ -128,8 +127,6 @@ def prior_scales(ldr_srgb: np.ndarray, regions: dict[str, np.ndarray], l_white: 
 def tonemap_preview(hdr: np.ndarray, l_white: float = DEFAULT_L_WHITE) -> np.ndarray:
     """sRGB [0, 1] preview by the extended Reinhard operator (the forward of `inverse_tonemap`), so the
     prior's HDR previews as the LDR map and brighter lights roll off instead of clipping."""
-    from ...data.imageio import linear_to_srgb
-
     x = np.maximum(np.asarray(hdr, np.float64), 0.0)
     lw2 = float(l_white) ** 2
     return linear_to_srgb((x * (1.0 + x / lw2) / (1.0 + x)).astype(np.float32))
