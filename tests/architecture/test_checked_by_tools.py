@@ -49,12 +49,14 @@ def test_mypy_passes_on_core_and_workers():
 
 
 def test_both_tools_report_a_planted_bug_under_the_project_settings(tmp_path):
-    """So the two tests above can fail: an undefined name for ruff, a wrong type in an unannotated
-    function for mypy (its bodies are checked too)."""
+    """So the two tests above can fail: an unused import, an undefined name and an eval of a file's text
+    for ruff, a wrong type in an unannotated function for mypy (its bodies are checked too)."""
     package = tmp_path / "planted"
     package.mkdir()
-    (package / "__init__.py").write_text("import os\n\n\ndef f():\n    size: int = 'a'\n    return size + missing\n")
+    (package / "__init__.py").write_text("import os\n\n\ndef f(text):\n    size: int = 'a'\n    return size + missing\n"
+                                         "\n\ndef g(text: str):\n    return eval(text)\n")
     ruff = _run(["ruff", "check", "--no-cache", "--config", str(CONFIG), "--output-format", "concise", "."], tmp_path)
-    assert ruff.returncode == 1 and "F401" in ruff.stdout and "F821" in ruff.stdout, ruff.stdout + ruff.stderr
+    found = ruff.stdout + ruff.stderr
+    assert ruff.returncode == 1 and all(code in found for code in ("F401", "F821", "S307")), found
     mypy = _mypy(tmp_path, "-p", "planted")
     assert mypy.returncode == 1 and "[assignment]" in mypy.stdout, mypy.stdout + mypy.stderr
