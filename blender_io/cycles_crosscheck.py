@@ -1,6 +1,6 @@
 """core/stages/compose.py's scene rebuilt in Blender for Cycles, to cross-check the Mitsuba composite: the
 photo camera, the light map as a new World, the placed asset, a floor and a transparent film
-(tests/test_compose_cycles.py compares the two). The artist-facing set-up (camera around the
+(tests/blender/test_compose_cycles.py compares the two). The artist-facing set-up (camera around the
 asset, photo behind, shadow catcher) is blender_io/compose.py.
 
 Cycles renders three passes: the asset alone (floor hidden) over nothing, and the floor with and

@@ -7,7 +7,7 @@ Background (strength) -> World Output. At rotation 0 Blender looks the map up wi
     u = 0.5 - atan2(d.y, d.x) / 2pi,    v = atan2(d.z, hypot(d.x, d.y)) / pi + 0.5  (v from the bottom)
 
 which is the convention core/render/renderer.py gives Mitsuba through ENVMAP_TO_WORLD, so the map lights the
-asset from the same directions in both renderers (tests/test_lighting_blender.py checks it).
+asset from the same directions in both renderers (tests/blender/test_lighting_blender.py checks it).
 """
 from __future__ import annotations
 

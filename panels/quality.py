@@ -1,7 +1,7 @@
 """Expected time per stage for each preset, from `make bench` (benchmarks/results/trade_run.json: the
 whole `scenefit run` on the bundled example in a 320x240 photo, seconds per stage).
 
-benchmarks/ is not shipped in the extension, so the numbers are copied here; tests/test_placement.py
+benchmarks/ is not shipped in the extension, so the numbers are copied here; tests/blender/test_placement.py
 checks them against trade_run.json so they cannot drift from the measurement silently. None: not
 measured on that machine. Adapt's time is projected from its seconds per iteration with models of
 Stable Diffusion 2's size: on the bench CPU (benchmarks/results/adapt_sd2.json) it is hours to days, on

@@ -1,6 +1,6 @@
 """The project's own import graph, read from the source (module- and function-level imports alike).
 
-Two users: tests/test_layout.py checks the layers and that no import circle exists; the run folder's
+Two users: tests/architecture/test_layout.py checks the layers and that no import circle exists; the run folder's
 copy of Blender's read of an asset (core/data/asset_read_cache.py) is keyed by every source file the reader
 can reach, so the key follows the code as it grows instead of a hand-kept list.
 """

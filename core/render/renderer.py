@@ -9,7 +9,7 @@ Conventions:
   which makes a latitude-longitude map light the asset from the same directions as Blender's
   Environment Texture does (top row = +Z, bottom row = -Z; the centre column (u = 0.5) looks along
   +X, u = 0.25 along +Y, u = 0 / 1 along -X, u = 0.75 along -Y; see `blender_direction_to_equirect_uv`,
-  checked against Cycles in tests/test_lighting_blender.py).
+  checked against Cycles in tests/blender/test_lighting_blender.py).
 - Mesh UVs arrive in OpenGL convention (v = 0 at the bottom); Mitsuba looks textures up with v = 0 at
   the top row, so v is flipped when the mesh is built.
 - Maps are torch tensors (H, W, C), linear, rows top to bottom as in image files.

@@ -1,6 +1,6 @@
 """The scene's geometry, in one place: the photo camera, the floor, where the asset stands, the
 environment map's convention and the compositing mattes. Lighting, guidance, compose, adapt and
-blender_io import it; it imports no stage (tests/test_layout.py).
+blender_io import it; it imports no stage (tests/architecture/test_layout.py).
 
     frame.py       the world's axes (Blender's, Z up), a camera's look frame, turns about Z, and the
                    latitude-longitude convention every light map is in

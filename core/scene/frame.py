@@ -3,7 +3,7 @@
 World space is Blender's: Z up. A camera's frame is (forward, right, up) with right = forward x Z.
 Light maps are latitude-longitude, twice as wide as high, rows from the zenith (+Z) down; the column
 at u = 0.5 looks along +X and u = 0.25 along +Y: Blender's equirectangular Environment Texture
-(checked against Cycles in tests/test_lighting_blender.py). Mitsuba's envmap is Y up, so its emitter
+(checked against Cycles in tests/blender/test_lighting_blender.py). Mitsuba's envmap is Y up, so its emitter
 gets ENVMAP_TO_WORLD.
 """
 from __future__ import annotations

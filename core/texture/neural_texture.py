@@ -102,7 +102,7 @@ class NeuralTextureConfig:
 
 
 # The balanced preset's hash grid (core/pipeline/preset_tables.py, "texture"): what a stage config that
-# makes a texture holds by default, as every stage's default is balanced (tests/test_wiring.py pins it).
+# makes a texture holds by default, as every stage's default is balanced (tests/architecture/test_wiring.py pins it).
 BALANCED_TEXTURE = NeuralTextureConfig(n_levels=12, log2_table=18, finest_resolution=1024)
 
 

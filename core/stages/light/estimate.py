@@ -47,7 +47,7 @@ from .scene_type import scene_type_cue
 # smaller map is area-averaged from it, which keeps every light's energy. A lamp smaller than a texel
 # survives at any height because a clipped highlight wins its texel in the splat (panorama.splat), so
 # draft's 64 rows are built at 64: at 128 it did balanced's work for a coarser map (benchmarks: same
-# seconds, same error). tests/test_stability.py finds a 1.5 deg lamp and a 2 px 1e6 spot at every preset.
+# seconds, same error). tests/core/stages/test_stability.py finds a 1.5 deg lamp and a 2 px 1e6 spot at every preset.
 MIN_WORKING_HEIGHT = 64
 SCENE_TYPES = ("auto", "indoor", "outdoor")
 CRITIC_TYPES = ("none", "reference", "diffusion")

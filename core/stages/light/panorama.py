@@ -3,7 +3,7 @@
 Map convention (the one the renderer and Blender share, see `core/render/renderer.py`): latitude-longitude,
 twice as wide as high, rows top (+Z, zenith) to bottom (-Z, nadir); the column at u = 0.5 looks
 along world +X and u = 0.25 along +Y, exactly Blender's equirectangular Environment Texture
-(checked against Cycles in tests/test_lighting_blender.py):
+(checked against Cycles in tests/blender/test_lighting_blender.py):
 
     u = 0.5 - atan2(d.y, d.x) / 2pi,        v_top = 0.5 - atan2(d.z, hypot(d.x, d.y)) / pi
 
