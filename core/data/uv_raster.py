@@ -120,9 +120,10 @@ class _Texels:
 
     def weights(self, owner: np.ndarray, flat: np.ndarray, near: np.ndarray) -> np.ndarray:
         """Barycentrics of texels `flat` in faces `owner`, in the image copy where texels `near` are held."""
-        return _weights(self.tri, self.area2, self.point, owner,  # type: ignore[arg-type]
-                        _unwrapped(flat % self.width, self.tiles[0, near], self.width, self.modes[0]),  # type: ignore[index]
-                        _unwrapped(flat // self.width, self.tiles[1, near], self.height, self.modes[1]))  # type: ignore[index]
+        assert self.area2 is not None and self.point is not None and self.tiles is not None, "pass 1 fills them"
+        return _weights(self.tri, self.area2, self.point, owner,
+                        _unwrapped(flat % self.width, self.tiles[0, near], self.width, self.modes[0]),
+                        _unwrapped(flat // self.width, self.tiles[1, near], self.height, self.modes[1]))
 
 
 def _covered_texels(texels: _Texels, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
