@@ -285,7 +285,7 @@ def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models
     config = job_run_config(job)
     bake, why_not = asset_file_bake(job.asset, job.object) if "bake" in job.stages else (None, "the job's stages "
                                                                                          "do not list bake")
-    return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel, models=models,  # type: ignore[arg-type]
+    return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel, models=models,
                         bake=bake, bake_skipped_why=why_not, reuse_from=reuse_from)
 
 
@@ -306,7 +306,7 @@ def job_run_config(job: Job):
                      models=job.models, stage_overrides=_stage_overrides(job),
                      camera_overrides={CAMERA_KEYS[k]: v for k, v in job.camera.items()},
                      camera_source=job.camera_source, camera_why=job.camera_why, turn_deg=job.turn,
-                     sun_deg=job.sun, sun_uncertainty_deg=job.sun_uncertainty, scene_type=job.scene, depth_model=job.depth_model, **view)  # type: ignore[arg-type]
+                     sun_deg=job.sun, sun_uncertainty_deg=job.sun_uncertainty, scene_type=job.scene, depth_model=job.depth_model, **view)
 
 
 def _load_asset(job: Job):
@@ -334,7 +334,7 @@ def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
                                                      "convert", {})), progress, cancel)
     if "light" in job.stages:   # as `scenefit light` lights it: the photo's own camera, the same files
         run = job_run_config(job)
-        inputs = light_inputs(job.photo, job.at, None, run.camera_overrides, run.camera_source, run.camera_why)  # type: ignore[arg-type]
+        inputs = light_inputs(job.photo, job.at, None, run.camera_overrides, run.camera_source, run.camera_why)
         # (what run_pipeline's light stage would be given, the job's own overrides over it)
         overrides = dict(job.overrides.get("light", {}))
         critic = critic_choice(overrides.pop("critic_type", "auto"), job.models)

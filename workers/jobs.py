@@ -221,8 +221,8 @@ def _parse_models(table: dict, path: Path) -> ModelConfig:
         kind = bool if key not in ("base_model", "inpaint_model", "cache_dir", "device_type", "dtype_type") else str
         if not isinstance(value, kind):
             raise InputError(f"{where}: {key} must be a {'true/false' if kind is bool else 'string'}, got {value!r}.")
-        if key in ("base_model", "inpaint_model", "cache_dir") and value.startswith((".", "/", "~")):  # type: ignore[union-attr]
-            value = str(_resolve(value, path))  # type: ignore[arg-type]
+        if key in ("base_model", "inpaint_model", "cache_dir") and value.startswith((".", "/", "~")):
+            value = str(_resolve(value, path))
         values[key] = value
     try:
         return ModelConfig(**values)
@@ -325,7 +325,7 @@ def _parse_job(entry: dict, index: int, path: Path) -> Job:
         raise InputError(f"{where}: seed must be a whole number >= 0, got {seed!r}.")
     overrides = _parse_overrides(entry.get("overrides", {}), where)
     return Job(name=name, asset=asset, stages=stages, preset=preset, photo=photo, at=at, object=obj, mode=mode,
-               seed=seed, overrides=overrides, **prompts, **_parse_view(entry, where))  # type: ignore[arg-type]
+               seed=seed, overrides=overrides, **prompts, **_parse_view(entry, where))
 
 
 def _parse_view(entry: dict, where: str) -> dict:
