@@ -60,7 +60,7 @@ def check_plain(value: Any, where: str = "data") -> None:
         for i, item in enumerate(value):
             check_plain(item, f"{where}[{i}]")
         return
-    if dataclasses.is_dataclass(value) and not isinstance(value, type) and value.__dataclass_params__.frozen:
+    if dataclasses.is_dataclass(value) and not isinstance(value, type) and value.__dataclass_params__.frozen:  # type: ignore[attr-defined]
         for f in dataclasses.fields(value):
             check_plain(getattr(value, f.name), f"{where}.{f.name}")
         return

@@ -27,7 +27,7 @@ import time
 import traceback
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Protocol, Sequence
 
 from ..core.base.atomic import write_json_atomic, write_text_atomic
 from ..core.base.errors import Cancelled, InputError, SceneFitError
@@ -80,7 +80,7 @@ class JobPayload:
 EARLIER = "earlier"
 
 
-def make_payload(job: Job, attempt: int = 1, stages: list[Path] = (), files: dict[str, Path] | None = None,
+def make_payload(job: Job, attempt: int = 1, stages: Sequence[Path] = (), files: dict[str, Path] | None = None,
                  digest: str | None = None) -> JobPayload:
     """The job and its inputs packed (job_inputs.job_files; `files` and `digest`: already worked out);
     `stages`: finished stage folders of an earlier run of the job (finished_stage_folders), which travel
@@ -418,7 +418,7 @@ def _error_text(error: BaseException) -> str:
 EventCallback = Callable[[str, str], None]   # (job name, message)
 
 
-class Dispatcher:
+class Dispatcher(Protocol):
     """Hands payloads to workers and gives back (payload, JobResult | exception) as they finish."""
 
     def submit(self, payload: JobPayload) -> None: ...

@@ -56,7 +56,7 @@ def job_resources(settings: BatchSettings, cluster: dict) -> dict:
     gpus = settings.num_gpus
     if gpus == "auto":
         gpus = 1.0 if cluster.get("GPU", 0) >= 1 else 0.0
-    if gpus > 0 and cluster.get("GPU", 0) < gpus:
+    if gpus > 0 and cluster.get("GPU", 0) < gpus:  # type: ignore[operator]
         raise InputError(f"Each job asks for {gpus:g} GPU(s) but the Ray cluster has {cluster.get('GPU', 0):g}; "
                          f"set num_gpus in the jobs file's [batch] table.")
     if cluster.get("CPU", 0) < settings.num_cpus:

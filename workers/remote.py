@@ -83,7 +83,7 @@ class RemoteJob:
 
     def events(self, limit: int | None = None) -> list[dict]:
         """Progress events that arrived since the last call, oldest first (never waits)."""
-        out = []
+        out: list[dict] = []
         while (limit is None or len(out) < limit) and not self.queue.empty():
             try:
                 out.append(self.queue.get_nowait())
@@ -218,7 +218,7 @@ class LocalProcessJob:
     def _read(self) -> None:
         import json
 
-        for line in self.process.stdout:
+        for line in self.process.stdout:  # type: ignore[union-attr]
             try:
                 event = json.loads(line)
             except ValueError:
@@ -230,7 +230,7 @@ class LocalProcessJob:
                 self._events.put(event)
 
     def events(self, limit: int | None = None) -> list[dict]:
-        out = []
+        out: list[dict] = []
         while limit is None or len(out) < limit:
             try:
                 out.append(self._events.get_nowait())
@@ -252,7 +252,7 @@ class LocalProcessJob:
 
         code = self.process.wait(timeout=timeout)
         self._reader.join(timeout=10)
-        error = self.process.stderr.read().strip()
+        error = self.process.stderr.read().strip()  # type: ignore[union-attr]
         if code == 130:
             raise Cancelled("Cancelled by the user; the worker stopped and nothing came back.")
         report = json.loads((self.out / self.job.name / "report.json").read_text()) if (

@@ -12,6 +12,7 @@ import os
 from pathlib import Path
 
 from .atomic import TEMP_MARK, is_temp_name
+from .output_folder import staging_path
 
 
 _DISK_FULL = {errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)}   # EDQUOT: the user's quota is full
@@ -68,7 +69,6 @@ def with_out_paths(text: str, out: str | os.PathLike | None) -> str:
     """`text` with the run's hidden staging folder named as the --out it becomes."""
     if not out:
         return text
-    from .output_folder import staging_path
 
     out_path = Path(out).expanduser().absolute()
     return text.replace(str(staging_path(out_path)), str(out_path))
@@ -82,8 +82,6 @@ def _user_path(path, out: Path | None) -> str:
     if is_temp_name(p.name):   # ".<name>.<random>.scenefit-tmp<ext>" -> "<name>"
         p = p.with_name(p.name[1:].split(TEMP_MARK)[0].rsplit(".", 1)[0])
     if out is not None:
-        from .output_folder import staging_path
-
         staging = staging_path(out)
         absolute = p if p.is_absolute() else p.absolute()
         if absolute == staging or staging in absolute.parents:

@@ -34,7 +34,7 @@ import sys
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Iterable, Iterator
+from typing import Callable, Iterable, Iterator, Sequence
 
 from .atomic import is_temp_name
 from .errors import Cancelled, InputError
@@ -199,14 +199,14 @@ class _FolderLock:
 
 def _try_lock(fd: int) -> bool:
     if sys.platform == "win32":
-        import msvcrt
+        import msvcrt  # lazy: Windows only
 
         try:
             msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
             return True
         except OSError:
             return False
-    import fcntl
+    import fcntl  # lazy: POSIX only
 
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -427,7 +427,7 @@ def install_folder(parent: str | os.PathLike, name: str, fill: Callable[[Path], 
 
 
 def interrupted_message(out: str | os.PathLike, resumable: bool = False, by_stage: bool = False,
-                        kept: list[str] = (), jobs: list[str] | None = None) -> str:
+                        kept: Sequence[str] = (), jobs: list[str] | None = None) -> str:
     """What the user is told after Ctrl-C or a cancel inside `output_folder` (by_stage: `scenefit run`, with
     the stages it kept (`kept_stages`),
     whose finished stages are kept beside `out` and reused by the next run; jobs: `scenefit batch`, the jobs

@@ -52,7 +52,7 @@ class TerminalProgress:
         self.interval = interval if interval is not None else (0.2 if self.tty else 5.0)
         self.width = width
         self._last = 0.0
-        self._stage = None
+        self._stage: str | None = None
         self._start = time.perf_counter()
 
     def __call__(self, event: ProgressEvent) -> None:

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..base.atomic import write_bytes_atomic, write_json_atomic
 from ..base.errors import InputError
+from .asset_files import obj_material_libraries
 from .imageio import linear_to_srgb, read_color_image, read_image, write_image
 from .maps import PBRMaps
 from .mesh import Mesh, check_face_indices
@@ -85,7 +86,6 @@ def check_asset_path(path: str | Path) -> None:
     if path.stat().st_size == 0:
         raise InputError(f"Asset file '{path}' is empty; export it again.")
     if path.suffix.lower() == ".obj":   # Blender reads it without, grey and silent: the maps never arrive
-        from .asset_files import obj_material_libraries
 
         named, same_name = obj_material_libraries(path)
         missing = [library for library in named if not library.is_file()]
@@ -114,7 +114,7 @@ def load_asset_folder(folder: str | Path) -> tuple[Mesh, PBRMaps]:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise InputError(f"'{name}' in '{folder / 'material.json'}' must be a number between 0 and 1, "
                              f"got {value!r}.")
-        channels[name] = float(value)
+        channels[name] = float(value)  # type: ignore[assignment]
     normal_path = folder / "normal.png"
     normal = read_image(normal_path)[..., :3] if normal_path.is_file() else None
     return mesh, PBRMaps(base_color=read_color_image(base_path), normal=normal, **channels)

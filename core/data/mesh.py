@@ -88,7 +88,7 @@ class Mesh:
             normals=None if normals is None else np.ascontiguousarray(normals, dtype=np.float32),
             name=name,
             material_index=None if material_index is None else np.ascontiguousarray(material_index, dtype=np.int32),
-            wraps=tuple(tuple(w) for w in wraps),
+            wraps=tuple(tuple(w) for w in wraps),  # type: ignore[misc]
             atlas=atlas,
         )
 

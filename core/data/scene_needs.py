@@ -83,7 +83,7 @@ def envmap_height_for(maps: PBRMaps, covered: np.ndarray | None = None) -> Decis
     if isinstance(rough, np.ndarray):
         used = rough
         if covered is not None:
-            import cv2
+            import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
             mask = cv2.resize(covered.astype(np.uint8), rough.shape[::-1], interpolation=cv2.INTER_NEAREST) > 0
             used = rough[mask] if mask.any() else rough

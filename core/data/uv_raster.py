@@ -52,7 +52,7 @@ class UVRaster:
 
     @property
     def resolution(self) -> tuple[int, int]:
-        return self.mask.shape
+        return self.mask.shape  # type: ignore[return-value]
 
     @property
     def coverage(self) -> float:
@@ -120,6 +120,7 @@ class _Texels:
 
     def weights(self, owner: np.ndarray, flat: np.ndarray, near: np.ndarray) -> np.ndarray:
         """Barycentrics of texels `flat` in faces `owner`, in the image copy where texels `near` are held."""
+        assert self.area2 is not None and self.point is not None and self.tiles is not None, "pass 1 fills them"
         return _weights(self.tri, self.area2, self.point, owner,
                         _unwrapped(flat % self.width, self.tiles[0, near], self.width, self.modes[0]),
                         _unwrapped(flat // self.width, self.tiles[1, near], self.height, self.modes[1]))
@@ -165,7 +166,7 @@ def _add_border(texels: _Texels, mask: np.ndarray, border_width: float, flat: np
         return flat, owner, bary
     # (in the copy of the image where the nearest covered texel's triangle lies)
     near = nearest[ring]
-    ring_owner = texels.owner_map[near]
+    ring_owner = texels.owner_map[near]  # type: ignore[index]
     ring_bary = texels.weights(ring_owner, ring, near)
     return np.concatenate((flat, ring)), np.concatenate((owner, ring_owner)), np.concatenate((bary, ring_bary))
 
@@ -217,7 +218,7 @@ def seam_fill_index(mask: np.ndarray) -> np.ndarray:
 
 def _nearest_covered(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Distance in texels to, and flat index of, the nearest True texel of a non-empty 2D mask."""
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     covered = np.flatnonzero(mask)
     # Zero pixels (covered texels) each get their own label, numbered in raster order from 1;

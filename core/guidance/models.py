@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from typing import Any
 from pathlib import Path
 
 from ..base.errors import InputError, ModelMissingError
@@ -239,14 +240,14 @@ class GuidanceModels:
     """Loaded models. Text embeddings are computed once per prompt (`embed`), after which the text
     encoder can be released (`release_text_encoder`)."""
 
-    tokenizer: object
-    text_encoder: object | None
-    vae: object
-    unet: object
-    scheduler: object
-    inpaint_unet: object | None
-    device: object
-    dtype: object
+    tokenizer: Any
+    text_encoder: Any | None
+    vae: Any
+    unet: Any
+    scheduler: Any
+    inpaint_unet: Any | None
+    device: Any
+    dtype: Any
     paths: dict[str, Path]
     config: ModelConfig
     _embeddings: dict[str, object] = field(default_factory=dict)

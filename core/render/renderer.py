@@ -17,6 +17,7 @@ Conventions:
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -88,8 +89,8 @@ class WindowCamera:
 class RenderOutput:
     """Torch tensors (h, w, C): radiance is linear HDR; alpha is 1 where the asset (or floor/sphere) is."""
 
-    rgb: "object"
-    alpha: "object"
+    rgb: Any
+    alpha: Any
     seconds: float = 0.0
 
 

@@ -116,7 +116,7 @@ def place_asset(normalized: Mesh, camera: PhotoCamera, pixel: tuple[float, float
     if box[2] <= box[0] or box[3] <= box[1]:
         raise InputError("The placed asset falls outside the photo; pick a point inside it.")
     base = (anchor[0], anchor[1], 0.0 if on_floor else anchor[2])
-    return ObjectPlacement(tuple(float(v) for v in pixel), tuple(float(v) for v in base), on_floor, why,
+    return ObjectPlacement(tuple(float(v) for v in pixel), tuple(float(v) for v in base), on_floor, why,  # type: ignore[arg-type]
                            float(scale), float(facing), float((hi[2] - lo[2]) * scale), box)
 
 

@@ -10,7 +10,7 @@ def paper_shadow_matte(intensity, floor, threshold_fraction: float):
     intensity: (h, w) torch tensor (differentiable: the light stage's critic views pass gradients
     through the shadowed pixels); floor: (h, w) bool. Returns (matte, threshold, lit mean, shadowed).
     """
-    import torch
+    import torch  # lazy: torch takes seconds to load
 
     if not bool(floor.any()):
         return torch.ones_like(intensity), 0.0, 0.0, torch.zeros_like(floor)

@@ -17,7 +17,7 @@ def camera_overlay(estimate: CameraEstimate) -> np.ndarray:
     """(H, W, 4) float RGBA at the photo's size, transparent except for the lines: each segment the
     estimate used, coloured by its vanishing direction, and the horizon across the whole photo (drawn
     also when it came from a default or the user, since that is where the stages put it)."""
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     width, height = estimate.width, estimate.height
     canvas = np.zeros((height, width, 4), np.float32)

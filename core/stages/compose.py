@@ -29,22 +29,26 @@ The shadow (appendix "Scene Composition" of the paper, and the shadow-catcher de
 """
 from __future__ import annotations
 
+import json
 import math
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
 from ..render.backend import init_mitsuba
 from ..render.denoise import DENOISER_TYPES, denoise, oidn_available
+from ..base.atomic import write_json_atomic
 from ..base.errors import InputError, check_choice
-from ..data.imageio import linear_to_srgb, srgb_to_linear
+from ..data.imageio import linear_to_srgb, srgb_to_linear, write_image
 from ..data.mesh import Mesh, normalize_to_unit_sphere
 from ..base.progress import ProgressCallback, check_cancel, emit
 from ..render.renderer import _mitsuba_mesh, material_shapes
 from ..scene.asset_pose import ASSUMED_CAMERA_HEIGHT_M, ObjectPlacement, place_asset, placed_mesh
-from ..scene.camera import CAMERA_HEIGHT, PhotoCamera, camera_origin, horizon_row
+from ..scene.camera import CAMERA_HEIGHT, PhotoCamera, camera_origin, horizon_row, photo_camera_for
 from ..scene.frame import ENVMAP_TO_WORLD
 from ..scene.mattes import composite_linear, paper_shadow_matte
 from ..scene.placement import DEFAULT_OBJECT_SIZE
@@ -144,7 +148,7 @@ def _scene(mi, envmap: np.ndarray, mesh: Mesh | None, maps: np.ndarray | None, b
         shape.set_bsdf(mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}}))
         scene["asset"] = shape
     elif mesh is not None:   # one shape per material, sampling its own texels with its wrap mode
-        scene.update(material_shapes(mi, mesh, maps)[0])
+        scene.update(material_shapes(mi, mesh, maps)[0])  # type: ignore[arg-type]
     if floor_albedo is not None:
         scene["floor"] = {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale(1000.0 * CAMERA_HEIGHT),
                           "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": floor_albedo}}}
@@ -197,7 +201,7 @@ class ComposeJob:
         self.denoiser_why = oidn_why if self.denoiser == "oidn" else (
             "none (asked for)" if config.denoiser_type == "none" else f"none: {oidn_why}")
         self.backend = init_mitsuba()
-        import mitsuba as mi
+        import mitsuba as mi  # lazy: Mitsuba is heavy and Blender may lack it
 
         self.mi = mi
         normalized, _ = normalize_to_unit_sphere(inputs.mesh)
@@ -329,7 +333,7 @@ class ComposeJob:
         return radiance.astype(np.float32), free > 0.5
 
     def _ratio_matte(self) -> np.ndarray:
-        import cv2
+        import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
         with_object, _ = self._floor_radiance("floor_with_object")
         without, _ = self._floor_radiance("floor_without_object")
@@ -360,7 +364,7 @@ class ComposeJob:
             t0 = time.perf_counter()
             radiance = denoise(radiance)
             self.timings["denoise_shadow"] = time.perf_counter() - t0
-        import torch
+        import torch  # lazy: torch takes seconds to load
 
         if not floor.any():
             return np.ones(radiance.shape, np.float32)
@@ -383,7 +387,7 @@ class ComposeJob:
     def _photo_sized(self, matte: np.ndarray) -> np.ndarray:
         """The floor passes' matte scaled up to the photo (bilinear: shadows are soft), with pixels the
         shadow does not reach exactly 1 again, so the photo stays untouched there."""
-        import cv2
+        import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
         h, w = self.photo.shape[:2]
         if matte.shape[:2] == (h, w):
@@ -491,10 +495,6 @@ def write_compose(result: ComposeResult, folder, extra: dict | None = None) -> d
     """The stage's files in `folder`: composite.png (sRGB, the photo's size), composite.exr (linear),
     layers/object_rgba.png (16-bit, straight alpha), layers/shadow.png (16-bit matte, 1 = untouched), and
     report.json (`extra` over the result's report); returns the report."""
-    from pathlib import Path
-
-    from ..base.atomic import write_json_atomic
-
     report = {**result.report, **(extra or {})}
     report["outputs"] = _write_images(result, Path(folder))
     write_json_atomic(Path(folder) / "report.json", report)
@@ -502,10 +502,6 @@ def write_compose(result: ComposeResult, folder, extra: dict | None = None) -> d
 
 
 def _write_images(result: ComposeResult, out) -> dict[str, str]:
-    from concurrent.futures import ThreadPoolExecutor
-
-    from ..data.imageio import write_image
-
     alpha = result.alpha[..., None]
     straight = np.where(alpha > 0, result.object_rgb / np.maximum(alpha, 1e-8), 0.0)
     rgba = np.concatenate([linear_to_srgb(np.clip(straight, 0.0, 1.0)), alpha], axis=-1)
@@ -526,11 +522,6 @@ def light_camera(light_path, photo_info: dict, width: int, height: int, fov_deg:
                  pitch_deg: float | None = None) -> tuple[PhotoCamera, str]:
     """The photo camera the light map was estimated with: from the light stage's report.json beside the
     map when there is one, else the light stage's default for this photo; fov/pitch given here win."""
-    import json
-    from pathlib import Path
-
-    from ..scene.camera import photo_camera_for
-
     report_path = Path(light_path).with_name("report.json")
     camera = None
     if report_path.is_file():

@@ -23,11 +23,13 @@ import numpy as np
 import torch
 
 from ..base.errors import InputError
+from ..base.limits import check_texture_size
 from ..data.maps import PBRMaps
 from ..data.materials import AssetMaterials, atlas_grid, atlas_maps, atlas_mesh, atlas_raster, atlas_slices, mesh_raster
 from ..data.mesh import Mesh, NormalizeTransform, normalize_to_unit_sphere
 from ..base.progress import ProgressCallback, check_cancel, emit
-from ..data.scene_needs import constant_channels, material_constant_channels, report as needs_report
+from ..data.scene_needs import (constant_channels, material_constant_channels, report as needs_report,
+                                texture_size_for_screen)
 from ..texture.bake import bake_maps
 from ..texture.fit_direct import fit_direct, masked_psnr
 from ..texture.fit_inverse import fit_inverse_rendering
@@ -104,8 +106,6 @@ def choose_resolution(maps: PBRMaps, config: ConvertConfig) -> tuple[int, str]:
         return config.resolution, "set by the user"
     native = max(maps.resolution)
     if config.screen_px is not None:
-        from ..data.scene_needs import texture_size_for_screen
-
         needed = texture_size_for_screen(config.screen_px)
         if needed < min(native, config.max_resolution):
             return needed, (f"the object is {config.screen_px} px tall in the composite, so {needed} texels show "
@@ -124,8 +124,6 @@ def asset_stack(maps: PBRMaps, what: str = "the asset's maps") -> np.ndarray:
     """(H, W, 5) float32 maps at their own size, the largest height and width among them, for rendering
     the asset as it is. Never squared: a 16384x16 base colour squared to 16384² took 21 GB to render
     16 pixels. Refused in one sentence (`what` names the asset) when it would not fit in memory."""
-    from ..base.limits import check_texture_size
-
     arrays = [maps.base_color] + [m for m in (maps.roughness, maps.metallic) if isinstance(m, np.ndarray)]
     height, width = max(a.shape[0] for a in arrays), max(a.shape[1] for a in arrays)
     check_texture_size(height, width, what)
@@ -164,7 +162,7 @@ def convert_asset(mesh: Mesh, maps: PBRMaps, config: ConvertConfig = ConvertConf
         history, iterations = fit.psnr_history, fit.iterations
     else:
         plan = texture.plan(raster.position, raster.border, raster.fill_index)
-        fit = fit_inverse_rendering(lambda: texture.texture_from_plan(plan), texture.parameters(), normalized,
+        fit = fit_inverse_rendering(lambda: texture.texture_from_plan(plan), texture.parameters(), normalized,  # type: ignore[assignment]
                                     target, iterations=config.iterations, lr_start=config.lr_start,
                                     lr_end=config.lr_end, render_size=config.render_size, spp=config.spp,
                                     seed=config.seed, progress=progress, cancel=cancel)
@@ -241,11 +239,11 @@ def run_convert(inputs: ConvertInputs, config: ConvertConfig = ConvertConfig(),
     if isinstance(asset, AssetMaterials):
         result = convert_materials(asset, config, progress=progress, cancel=cancel)
     else:
-        result = convert_asset(asset, maps, config, progress=progress, cancel=cancel)
+        result = convert_asset(asset, maps, config, progress=progress, cancel=cancel)  # type: ignore[arg-type]
     result.config = config
     if inputs.keep_constants:
         channels = (material_constant_channels([m.maps for m in asset.materials], [m.name for m in asset.materials])
-                    if isinstance(asset, AssetMaterials) else constant_channels(maps))
+                    if isinstance(asset, AssetMaterials) else constant_channels(maps))  # type: ignore[arg-type]
         result.constants = {name: d.choice for name, d in channels.items() if d.choice != "map"}
         result.decisions["channels"] = {name: needs_report(d) for name, d in channels.items()}
     if isinstance(asset, AssetMaterials):
@@ -262,7 +260,7 @@ def write_convert(result: ConvertResult, folder: str | Path) -> dict:
                       Path(folder), constants=result.constants)
     return {
         "stage": "convert",
-        "config": asdict(result.config),
+        "config": asdict(result.config),  # type: ignore[arg-type]
         "decisions": result.decisions,
         "psnr_covered_texels_db": round(result.psnr, 3),
         "seconds": round(result.seconds, 3),

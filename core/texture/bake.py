@@ -18,6 +18,7 @@ from ..base.atomic import write_bytes_atomic
 from ..base.errors import InputError
 from ..data.imageio import linear_to_srgb, write_image
 from .neural_texture import NeuralTexture, NeuralTextureConfig
+from .surface_layout import SurfaceLayout
 
 WEIGHTS_FORMAT = "scenefit.neural_texture"
 WEIGHTS_VERSION = 1
@@ -59,7 +60,7 @@ def save_neural_texture(texture: NeuralTexture, path: str | os.PathLike) -> Path
     payload = {"format": WEIGHTS_FORMAT, "version": WEIGHTS_VERSION,
                "config": texture.config.to_dict(), "state_dict": state}
     if getattr(texture, "layout", None) is not None:   # adaptation's new UV layout (core.surface_layout)
-        payload["layout"] = texture.layout.to_payload()
+        payload["layout"] = texture.layout.to_payload()  # type: ignore[attr-defined]
     buffer = io.BytesIO()
     torch.save(payload, buffer)
     return write_bytes_atomic(path, buffer.getvalue())
@@ -97,10 +98,8 @@ def load_neural_texture(path: str | os.PathLike, device: str | torch.device = "c
     except RuntimeError as error:
         raise InputError(f"The weights in '{path}' do not match their config: {error}") from error
     if payload.get("layout") is not None:
-        from .surface_layout import SurfaceLayout
-
         try:
-            texture.layout = SurfaceLayout.from_payload(payload["layout"])
+            texture.layout = SurfaceLayout.from_payload(payload["layout"])  # type: ignore[assignment]
         except (KeyError, TypeError, ValueError, AttributeError):
             raise InputError(f"'{path}' has an unreadable UV layout; adapt the asset again.") from None
     return texture.to(device)

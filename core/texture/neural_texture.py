@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import asdict, dataclass
+from typing import TypeVar
 
 import numpy as np
 import torch
@@ -20,6 +21,8 @@ import torch
 from ..base.errors import InputError
 from ..data.mesh import NORMALIZED_RADIUS
 from .hashgrid import EncodingPlan, HashGrid3D
+
+_Stack = TypeVar("_Stack", torch.Tensor, np.ndarray)
 
 CHANNELS = ("base_r", "base_g", "base_b", "roughness", "metallic")
 
@@ -94,7 +97,7 @@ class NeuralTextureConfig:
         unknown = sorted(set(values) - set(known))
         if unknown:
             raise InputError(f"Neural texture config has unknown fields {unknown}; was it saved by a newer SceneFit?")
-        return NeuralTextureConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+        return NeuralTextureConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})  # type: ignore[arg-type]
 
 
 
@@ -300,7 +303,7 @@ def to_logit(stack: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.T
     return torch.log(unit) - torch.log1p(-unit)
 
 
-def split_channels(stack: torch.Tensor | np.ndarray):
+def split_channels(stack: _Stack) -> tuple[_Stack, _Stack, _Stack]:
     """The 5-channel stack (..., 5) as the renderer takes it: base colour (..., 3), roughness (..., 1),
     metallic (..., 1) (views, not copies)."""
     return stack[..., 0:3], stack[..., 3:4], stack[..., 4:5]

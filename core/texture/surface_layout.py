@@ -140,7 +140,7 @@ def mesh_digest(mesh: Mesh) -> str:
 
 def new_layout(mesh: Mesh, resolution: int, sharing: UVSharing) -> SurfaceLayout:
     """xatlas's charts of `mesh` packed for a resolution² texture, as UVs per face corner."""
-    import xatlas
+    import xatlas  # lazy: its wheel is not on every platform
 
     started = time.perf_counter()
     atlas = xatlas.Atlas()

@@ -55,7 +55,7 @@ def image_psnr(a: np.ndarray, b: np.ndarray) -> float:
 
 def contact_sheet(rows: dict[str, list[np.ndarray]], label_height: int = 22) -> np.ndarray:
     """A grid image (one labelled row per entry) of sRGB [0, 1] images."""
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     strips = []
     for label, images in rows.items():

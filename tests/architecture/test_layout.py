@@ -78,7 +78,7 @@ def test_no_import_circle_anywhere():
     assert circles == []
 
 
-# Issue 19's bound on a function in core/: longer ones are split into named steps.
+# The bound on a function in core/: longer ones are split into named steps.
 MAX_FUNCTION_LINES = 80
 
 

@@ -1,4 +1,4 @@
-"""One pipeline (issue 19): every entry point hands the same inputs to the same pipeline with the same
+"""One pipeline: every entry point hands the same inputs to the same pipeline with the same
 settings, so no copy can drift. Each test here pins a bug the copies once had."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""`make gpu-check` works the first time a GPU is lent (issue 24): its dry run is the same code path
+"""`make gpu-check` works the first time a GPU is lent: its dry run is the same code path
 with the tiny models on the CPU, and without a GPU the real check says so in one sentence."""
 from __future__ import annotations
 

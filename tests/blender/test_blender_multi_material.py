@@ -1,5 +1,5 @@
-"""Run All and Bake Asset in Blender on an object with three materials and on a selection of two objects
-(issue 23): every slot of every object gets a new SceneFit material with that material's own maps (baked
+"""Run All and Bake Asset in Blender on an object with three materials and on a selection of two objects:
+every slot of every object gets a new SceneFit material with that material's own maps (baked
 in its own UVs, not the atlas), the Results switch restores every slot, the artist's materials are kept,
 and Bake Asset writes a GLB that validates with every material baked.
 

@@ -1,4 +1,4 @@
-"""An asset file's node transforms are part of the asset (issue 23): a node that stands a mesh upright,
+"""An asset file's node transforms are part of the asset: a node that stands a mesh upright,
 or mirrors it, places the mesh so in convert, compose and bake alike (the baked file keeps the
 transforms, so reading the mesh in object space composited a rotated painting lying flat)."""
 from __future__ import annotations
@@ -138,7 +138,7 @@ print("DONE")
 
 
 def test_a_rotated_and_a_mirrored_node_composite_as_cycles_renders_the_imported_file(tmp_path, run_py):
-    """Issue 23: the pipeline's composite of a file with a rotated and a mirrored node shows the asset
+    """The pipeline's composite of a file with a rotated and a mirrored node shows the asset
     where and as Cycles shows Blender's own import of that file (silhouette IoU >= 0.95)."""
     from scenefit.core.data.imageio import read_image
 

@@ -1,8 +1,7 @@
-"""A multi-object asset file is one asset (issue 23): every mesh object with its world transform and
+"""A multi-object asset file is one asset: every mesh object with its world transform and
 its own materials, in convert and bake alike; `--object` takes one object, or a node with the meshes
-under it. Before, the object with
-the most faces was taken silently (a bike's chain rather than the bike), and bake exported the whole
-scene with only that object re-textured."""
+under it, never the object with the most faces alone (a bike's chain rather than the bike), and bake
+never exports the whole scene with only that object re-textured."""
 from __future__ import annotations
 
 import json

@@ -1,4 +1,4 @@
-"""Issue 22, in Blender: an artist's camera that shows the photo (as the fSpy importer leaves it) is
+"""In Blender, an artist's camera that shows the photo (as the fSpy importer leaves it) is
 used as it is. The pipeline's composite (Mitsuba) and Cycles' render through that camera show the asset
 in the same place, and nothing of the artist's is moved."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Bad input and interruptions: one sentence and exit 2, nothing lost, a run's folder is one unit (issue 10)."""
+"""Bad input and interruptions: one sentence and exit 2, nothing lost, a run's folder is one unit."""
 from __future__ import annotations
 
 import json

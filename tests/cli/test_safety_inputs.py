@@ -1,4 +1,4 @@
-"""Damaged inputs, resource limits and OS errors (issue 18): each is refused in one sentence that
+"""Damaged inputs, resource limits and OS errors: each is refused in one sentence that
 names the user's file, exit 2, before it can be used half-read or exhaust the machine."""
 from __future__ import annotations
 

@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...base.errors import InputError
-from ...data.imageio import srgb_to_linear
+from ...data.imageio import linear_to_srgb, srgb_to_linear
 from ...scene.camera import PhotoCamera
 from ...scene.frame import equirect_directions
 from .regions import RegionThresholds, intensity
@@ -194,8 +194,6 @@ def _unseen_light(ldr: np.ndarray, hidden: np.ndarray, omega: np.ndarray, dirs: 
     """The hidden upper hemisphere shaded as a cos^sharpness lobe around `direction` over `floor`, and the
     scale that gives it mean radiance S (2 / rho - 1): camera-facing surfaces see it and the ground
     (about S) half each."""
-    from ...data.imageio import linear_to_srgb
-
     h, w = hidden.shape
     weights = (omega * np.ones((1, w)))[hidden]
     lobe = np.maximum(dirs @ direction, 0.0) ** sharpness
@@ -261,7 +259,7 @@ def unseen_light_direction(photo_srgb: np.ndarray, hidden: np.ndarray, omega: np
     at LOBE_ELEVATION_DEG."""
     if sun is not None:
         d = np.asarray(sun, np.float64)
-        return d / max(np.linalg.norm(d), 1e-12), {"from": "the artist's --sun", "vector": np.round(d, 4).tolist()}
+        return d / max(np.linalg.norm(d), 1e-12), {"from": "the artist's --sun", "vector": np.round(d, 4).tolist()}  # type: ignore[operator]
     weights = (omega * np.ones((1, hidden.shape[1])))[hidden]
     centroid = (dirs[hidden] * weights[:, None]).sum(axis=0)
     horizontal = np.array([centroid[0], centroid[1], 0.0])

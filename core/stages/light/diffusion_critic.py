@@ -160,10 +160,10 @@ class DiffusionLightCritic:
         """The appendix's two global views as square windows (x0, y0, side) of the photo: one always the
         full scene (the whole photo, its short side padded by repeating the edge), one interpolated
         between the view's own square and the full scene (u ~ U[0, 1] from the critic's generator)."""
-        h, w = self.photo.shape[:2]
+        h, w = self.photo.shape[:2]  # type: ignore[union-attr]
         full = ((w - max(h, w)) / 2, (h - max(h, w)) / 2, float(max(h, w)))
         u = float(self.rng.uniform())
-        return full, tuple(a + u * (b - a) for a, b in zip(self.squares[view], full))
+        return full, tuple(a + u * (b - a) for a, b in zip(self.squares[view], full))  # type: ignore[index]
 
     def views(self, leaf: torch.Tensor, request: CriticRequest, i: int, view: int) -> dict[str, torch.Tensor]:
         """The (1, 3, h, w) sRGB images the model scores for one render (h, w, 3): the render itself
@@ -181,12 +181,12 @@ class DiffusionLightCritic:
         matte, *_ = paper_shadow_matte(intensity, floor, self.config.shadow_threshold)
         darkening = (1.0 - matte)[..., None].expand(*matte.shape, 3)
         layer = torch.cat([premultiplied, alpha, darkening], dim=-1)
-        x0, y0, side = self.squares[view]
+        x0, y0, side = self.squares[view]  # type: ignore[index]
         size = self.config.model_resolution
         images = {}
         for name, window in zip(("full", "crop"), self.global_windows(view)):
             pasted = paste_layer(layer, (x0, y0, side, side), window, size)
-            photo = torch.from_numpy(photo_crop(self.photo, window, size)).to(leaf).permute(2, 0, 1)[None]
+            photo = torch.from_numpy(photo_crop(self.photo, window, size)).to(leaf).permute(2, 0, 1)[None]  # type: ignore[arg-type]
             linear = composite_linear(pasted[:, :3], pasted[:, 3:4], srgb_to_linear_torch(photo), 1.0 - pasted[:, 4:7])
             images[name] = linear_to_srgb_torch(linear)
         return images

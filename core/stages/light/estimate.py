@@ -22,23 +22,25 @@ import torch
 
 from ...base.decision import Decision
 from ...base.errors import InputError, ModelMissingError, check_choice
+from ...guidance import models as model_loading   # called through the module, where tests stand in for them
 from ...guidance.models import ModelConfig
 from ...data.imageio import linear_to_srgb, read_image, srgb_to_linear, write_image
 from ...data.mesh import Mesh, normalize_to_unit_sphere
 from ...render.photo import camera_exposure
 from ...data.primitives import uv_sphere
 from ...base.progress import ProgressCallback, check_cancel, emit
-from ...scene.camera import DEFAULT_PITCH_DEG, PhotoCamera
+from ...scene.camera import DEFAULT_PITCH_DEG, PhotoCamera, photo_camera_for
 from .cues import CueConfig, build_cues
 from .depth import DepthConfig, estimate_ray_distance
-from .diffusion_critic import DiffusionCriticConfig
-from .outpaint import OutpaintConfig
+from .diffusion_critic import DiffusionCriticConfig, DiffusionLightCritic
+from .outpaint import OutpaintConfig, outpaint_panorama
 from .hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, Critic, OptimiseConfig, OptimiseResult,
                   hdr_from_scales, is_dark_environment, light_prompt, optimise_scales, prior_scales, tonemap_preview,
                   DEFAULT_L_WHITE)
 from ...scene.floor import place_on_floor
 from .panorama import Panorama, indoor_panorama, outdoor_panorama
 from .regions import RegionThresholds, bright_regions
+from .reference_critic import ReferenceCritic
 from .scene_type import scene_type_cue
 
 # The panorama is built (and its lights found) at least this tall, whatever map size is asked for; a
@@ -197,7 +199,7 @@ def _decoded_photo(path: Path, max_side: int | None) -> tuple[np.ndarray, dict]:
 
 def _metadata(path: Path) -> dict:
     """The photo's upright size (EXIF Orientation 5-8 swap width and height) and 35 mm focal length."""
-    import OpenImageIO as oiio
+    import OpenImageIO as oiio  # lazy: Blender may lack it (missing_modules)
 
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
@@ -215,8 +217,6 @@ def _metadata(path: Path) -> dict:
 def default_photo_camera(config: LightConfig, photo_info: dict, width: int, height: int) -> tuple[PhotoCamera, dict]:
     """The camera the light stage assumes for a photo when none is given: core/scene/camera.py's, with the
     config's field of view and pitch (the one definition of the frame and the defaults)."""
-    from ...scene.camera import photo_camera_for
-
     return photo_camera_for(photo_info, width, height, config.fov_deg, config.camera_pitch_deg)
 
 
@@ -265,10 +265,9 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
 
     def guidance_models():
         if "models" not in loaded:
-            from ...guidance.models import load_guidance_models
-
             loaded["models"] = (models.get(config.models, want_outpaint) if models is not None else
-                                load_guidance_models(config.models, need_inpaint=want_outpaint, paths=model_paths))
+                                model_loading.load_guidance_models(config.models, need_inpaint=want_outpaint,
+                                                                   paths=model_paths))
         return loaded["models"]
 
     photo = np.clip(np.asarray(photo_srgb, np.float32)[..., :3], 0.0, 1.0)
@@ -346,8 +345,6 @@ def _panorama(photo: np.ndarray, photo_camera: PhotoCamera, placement_px: tuple[
     else:
         outpaint = None
         if outpainting.choice == "sd2":
-            from .outpaint import outpaint_panorama
-
             def outpaint(ldr, seen):
                 return outpaint_panorama(ldr, seen, guidance_models(), config.outpaint)
         pano = outdoor_panorama(photo, photo_camera, work_height, outpaint=outpaint)
@@ -402,14 +399,11 @@ def _critic_scales(config: LightConfig, critic, reference_envmap, mesh, maps, ph
         else:
             mesh, _ = normalize_to_unit_sphere(mesh)
             decisions["object"] = f"the asset '{mesh.name}' with its own maps"
-        scene = ApparatusScene(mesh, maps, ldr.shape[:2], config.apparatus,
+        scene = ApparatusScene(mesh, maps, ldr.shape[:2], config.apparatus,  # type: ignore[arg-type]
                                photo_azimuth_deg=photo_camera.yaw_deg - 90.0)
         if config.critic_type == "reference":
-            from .reference_critic import ReferenceCritic
-
-            use_critic = ReferenceCritic.from_true_map(scene, _fit_map(reference_envmap, ldr.shape[:2]))
+            use_critic = ReferenceCritic.from_true_map(scene, _fit_map(reference_envmap, ldr.shape[:2]))  # type: ignore[arg-type]
         elif use_critic is None:   # diffusion, with the models located above
-            from .diffusion_critic import DiffusionLightCritic
 
             models = guidance_models()
             # Where the object stands in the photo: its foot at the placement, `object_size` of the photo tall.
@@ -461,13 +455,13 @@ def _hedge_unsure_scene(photo_srgb: np.ndarray, placement_px: tuple[float, float
 
 def _area_resize(image: np.ndarray, height: int) -> np.ndarray:
     """Area-average a latitude-longitude map down to `height` rows (the mean radiance per texel is kept)."""
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     return cv2.resize(np.ascontiguousarray(image, np.float32), (2 * height, height), interpolation=cv2.INTER_AREA)
 
 
 def _fit_map(envmap: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     envmap = np.ascontiguousarray(envmap[..., :3], np.float32)
     if envmap.shape[:2] != tuple(shape):
@@ -491,10 +485,8 @@ def _choose_critic(config: LightConfig, critic, reference_envmap, regions) -> tu
 
 
 def _locate_light_models(models: ModelConfig, need_inpaint: bool) -> dict:
-    from ...guidance.models import locate_models
-
     try:
-        return locate_models(models, need_inpaint=need_inpaint)
+        return model_loading.locate_models(models, need_inpaint=need_inpaint)
     except ModelMissingError as error:
         raise ModelMissingError(f"{error} For light estimation, `scenefit light --critic none` (critic_type "
                                 f"'none') sets the scales by the inverse-tone-mapping prior instead, and "
@@ -510,9 +502,8 @@ def _choose_completion(config: LightConfig) -> Decision:
         return Decision("prior", "completion_type 'prior': the sky/ground prior completes the map")
     if kind == "sd2":
         return Decision("sd2", "completion_type 'sd2'")
-    from ...guidance.models import models_available
 
-    found, where = models_available(config.models, need_inpaint=True)
+    found, where = model_loading.models_available(config.models, need_inpaint=True)
     if found:
         return Decision("sd2", f"auto: Stable Diffusion 2 inpainting found ({where})")
     return Decision("prior", "auto: Stable Diffusion 2 inpainting is not on this machine, so the sky/ground prior "

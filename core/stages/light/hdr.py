@@ -27,10 +27,11 @@ import torch
 
 from ...render.orbit_camera import Camera
 from ...base.errors import InputError
-from ...data.imageio import srgb_to_linear
+from ...data.imageio import linear_to_srgb, srgb_to_linear
 from ...data.mesh import Mesh
 from ...base.progress import ProgressCallback, check_cancel, emit
 from ...render.renderer import AssetRenderer, SceneOptions, SphereSpec
+from ...scene.frame import equirect_directions
 from ...texture.neural_texture import split_channels
 
 LOG_SCALE_MIN = math.log(1e-4)
@@ -62,8 +63,6 @@ class LightVector:
     """
 
     def __init__(self, ldr_linear: torch.Tensor, masks: dict[str, torch.Tensor]) -> None:
-        from ...scene.frame import equirect_directions
-
         h, w = ldr_linear.shape[:2]
         level = ldr_linear.double().mean(dim=-1)
         rows = (torch.arange(h, dtype=torch.float64) + 0.5) / h
@@ -128,8 +127,6 @@ def prior_scales(ldr_srgb: np.ndarray, regions: dict[str, np.ndarray], l_white: 
 def tonemap_preview(hdr: np.ndarray, l_white: float = DEFAULT_L_WHITE) -> np.ndarray:
     """sRGB [0, 1] preview by the extended Reinhard operator (the forward of `inverse_tonemap`), so the
     prior's HDR previews as the LDR map and brighter lights roll off instead of clipping."""
-    from ...data.imageio import linear_to_srgb
-
     x = np.maximum(np.asarray(hdr, np.float64), 0.0)
     lw2 = float(l_white) ** 2
     return linear_to_srgb((x * (1.0 + x / lw2) / (1.0 + x)).astype(np.float32))
@@ -255,7 +252,7 @@ class ApparatusScene:
                                                    np.full(self.renderer.envmap_shape, 0.5, np.float32),
                                                    SceneOptions(sphere=self.sphere, max_depth=2))
                 with torch.no_grad():
-                    out = self._no_floor.render(self.cameras[index], *self.maps,
+                    out = self._no_floor.render(self.cameras[index], *self.maps,  # type: ignore[call-arg, misc]
                                                 torch.full(self.renderer.envmap_shape, 0.5), spp=4 * self.config.spp)
                 self._object_alphas[index] = out.alpha
         return self._object_alphas[index]
@@ -286,7 +283,7 @@ class ApparatusScene:
 
     def render_view(self, envmap: torch.Tensor, index: int, spp: int | None = None,
                     seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
-        out = self.renderer.render(self.cameras[index], *self.maps, envmap, spp=spp or self.config.spp,
+        out = self.renderer.render(self.cameras[index], *self.maps, envmap, spp=spp or self.config.spp,  # type: ignore[call-arg, misc]
                                    seed=seed * 16 + index)
         return out.rgb, out.alpha
 

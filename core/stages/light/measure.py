@@ -16,7 +16,7 @@ import torch
 from ...render.orbit_camera import Camera
 from ...data.primitives import uv_sphere
 from ...render.renderer import AssetRenderer
-from ...scene.frame import equirect_directions
+from ...scene.frame import blender_direction_to_equirect_uv, equirect_directions, look_frame
 from .cues import solid_angles
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
@@ -36,7 +36,7 @@ def si_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
 
 def dominant_direction(envmap: np.ndarray, blur_fraction: float = 1 / 32) -> np.ndarray:
     """Unit world direction of the map's brightest (blurred, solid-angle weighted) luminance."""
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     h, w = envmap.shape[:2]
     lum = (np.asarray(envmap, np.float32)[..., :3] @ LUMINANCE)
@@ -64,7 +64,7 @@ def angular_error_deg(estimate: np.ndarray, truth: np.ndarray) -> float:
 
 
 def _resize_like(envmap: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     if envmap.shape[:2] == tuple(shape):
         return np.ascontiguousarray(envmap, np.float32)
@@ -125,9 +125,7 @@ DIFFUSE_ALBEDO = 0.8
 
 def sample_envmap(envmap: np.ndarray, dirs: np.ndarray) -> np.ndarray:
     """Bilinear radiance of a lat-long map along world directions (..., 3), wrapping in u."""
-    import cv2
-
-    from ...scene.frame import blender_direction_to_equirect_uv
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     h, w = envmap.shape[:2]
     flat = dirs.reshape(-1, 1, 3)
@@ -141,8 +139,6 @@ def sample_envmap(envmap: np.ndarray, dirs: np.ndarray) -> np.ndarray:
 
 def probe_geometry(forward: np.ndarray, size: int = 64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(mask (s, s), normals (n, 3), reflected view directions (n, 3)) of a unit sphere seen along `forward`."""
-    from ...scene.frame import look_frame
-
     f, right, up = look_frame(forward)
     xs = (np.arange(size) + 0.5) / size * 2 - 1
     x, y = np.meshgrid(xs, -xs)
@@ -155,8 +151,6 @@ def probe_geometry(forward: np.ndarray, size: int = 64) -> tuple[np.ndarray, np.
 
 def _lobe_integral(envmap: np.ndarray, axes: np.ndarray, weight) -> np.ndarray:
     """sum over texels of L * weight(axis . texel) * solid angle, normalised per axis, chunked."""
-    from ...scene.frame import equirect_directions
-
     h, w = envmap.shape[:2]
     dirs = equirect_directions(h, w).reshape(-1, 3).astype(np.float32)
     omega = solid_angles(h, w)[:, 0].astype(np.float32)
@@ -180,7 +174,7 @@ def _ggx_weight(cos_r: np.ndarray) -> np.ndarray:
 
 def render_probe(envmap: np.ndarray, material: str, forward: np.ndarray, size: int = 64) -> np.ndarray:
     """(size, size, 3) linear radiance of a mirror / matte-silver / diffuse sphere under `envmap`, black outside."""
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     env = np.ascontiguousarray(np.asarray(envmap, np.float32)[..., :3])
     mask, normals, reflected = probe_geometry(np.asarray(forward, np.float64), size)

@@ -60,7 +60,7 @@ def _decode(models: GuidanceModels, latents: torch.Tensor) -> torch.Tensor:
 def inpaint(models: GuidanceModels, image: torch.Tensor, paint: torch.Tensor, config: OutpaintConfig,
             generator: torch.Generator) -> torch.Tensor:
     """(1, 3, h, w) sRGB [0, 1] with the `paint` (1, 1, h, w) = 1 region painted by the inpainting UNet."""
-    from diffusers import DDIMScheduler
+    from diffusers import DDIMScheduler  # lazy: diffusers takes seconds to load
 
     if models.inpaint_unet is None:
         raise InputError("Outpainting needs the inpainting model; load the models with need_inpaint=True.")

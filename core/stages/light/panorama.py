@@ -82,8 +82,8 @@ def splat(colors: np.ndarray, points: np.ndarray, origin: np.ndarray, height: in
     return image.reshape(height, width, -1), distance.reshape(height, width), mask.reshape(height, width)
 
 
-def _kernel(size: int):
-    import cv2
+def _kernel(size: float):
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     size = max(3, int(size) | 1)
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
@@ -105,7 +105,7 @@ def fill_panorama(ldr: np.ndarray, seen: np.ndarray, fill_color: np.ndarray,
     4. the rest (behind the camera, gaps too large to be holes) gets `fill_color`.
     Returns (filled, kept_seen, inpainted, unseen) with every texel assigned a finite value.
     """
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     h, w = seen.shape
     pad = max(4, w // 8)
@@ -139,7 +139,7 @@ def keep_highlights(photo: np.ndarray, reduced: np.ndarray, level: float = 0.95)
     dark surroundings would bring it under the light thresholds, and no light would be found; a
     reduced pixel whose footprint holds a clipped pixel keeps the brightest colour there instead.
     """
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     h, w = photo.shape[:2]
     rh, rw = reduced.shape[:2]
@@ -157,7 +157,7 @@ def keep_highlights(photo: np.ndarray, reduced: np.ndarray, level: float = 0.95)
 
 
 def _resize_for_splat(photo: np.ndarray, distance: np.ndarray, long_side: int) -> tuple[np.ndarray, np.ndarray]:
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     h, w = photo.shape[:2]
     scale = long_side / max(h, w)
@@ -223,7 +223,7 @@ def outdoor_panorama(photo: np.ndarray, camera: PhotoCamera, height: int = 128,
     sky, blended towards the brightest tenth of the photo's upper part at the zenith; below it, the mean
     colour of the photo's lower part (see `sky_ground_prior`).
     """
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     width = 2 * height
     dirs = equirect_directions(height, width)

@@ -35,7 +35,7 @@ UNSURE_LOW, UNSURE_HIGH = 0.6, 1.7   # widened on the corpus's 24 real views (is
 
 def scene_type_cue(photo_srgb: np.ndarray) -> dict:
     """{"scene_type", "score", "unsure", "clutter", "sky_ratio", "rule"} for an sRGB [0, 1] photo."""
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     photo = np.asarray(photo_srgb, np.float32)[..., :3]
     h, w = photo.shape[:2]

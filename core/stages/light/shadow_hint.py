@@ -62,14 +62,14 @@ def sun_uncertainty_deg(camera: PhotoCamera, foot: tuple[float, float], top: tup
     above the foot) or turns the sun that far, the clicks do not pin it."""
     slip_px = CLICK_SLIP * camera.width
     points = [tuple(map(float, foot)), tuple(map(float, top)), tuple(map(float, tip))]
-    base = _unit(*sun_from_shadow(camera, *points))
+    base = _unit(*sun_from_shadow(camera, *points))  # type: ignore[arg-type]
     worst = 0.0
     for index in range(3):
         for dx, dy in ((slip_px, 0.0), (-slip_px, 0.0), (0.0, slip_px), (0.0, -slip_px)):
             moved = list(points)
             moved[index] = (points[index][0] + dx, points[index][1] + dy)
             try:
-                turned = _unit(*sun_from_shadow(camera, *moved))
+                turned = _unit(*sun_from_shadow(camera, *moved))  # type: ignore[arg-type]
             except InputError:
                 return 90.0
             worst = max(worst, math.degrees(math.acos(float(np.clip(base @ turned, -1.0, 1.0)))))

@@ -1,4 +1,4 @@
-"""The user's files are never deleted, overwritten or run (issue 18), on decoy folders: `--replace`
+"""The user's files are never deleted, overwritten or run, on decoy folders: `--replace`
 only replaces a SceneFit run folder, outputs never overwrite inputs, checkpoints and textures are
 data, and `run` and `batch` follow every command's output-folder contract."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Only what the scene needs (issue 10): each size and representation chosen from the asset and the shot."""
+"""Only what the scene needs: each size and representation chosen from the asset and the shot."""
 from __future__ import annotations
 
 import json

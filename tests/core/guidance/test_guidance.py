@@ -63,7 +63,7 @@ def test_loads_tiny_models_through_the_real_loader(models):
     assert models.unet.config.in_channels == 4 and models.inpaint_unet.config.in_channels == 9
     from scenefit.core.guidance.models import cpu_computes_bf16
 
-    # "auto": bf16 where the CPU computes it (AVX512-BF16 / AMX), else fp32 (issue 24); the fixture asks fp32.
+    # "auto": bf16 where the CPU computes it (AVX512-BF16 / AMX), else fp32; the fixture asks fp32.
     assert ModelConfig().dtype() == (torch.bfloat16 if cpu_computes_bf16() else torch.float32)
     assert models.dtype == torch.float32 == models.unet.dtype and models.device.type == "cpu"
     emb = models.embed("a sofa")

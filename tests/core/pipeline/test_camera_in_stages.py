@@ -1,4 +1,4 @@
-"""Every stage sees the photo through one camera (issue 22): `scenefit run` estimates it (fSpy, EXIF,
+"""Every stage sees the photo through one camera: `scenefit run` estimates it (fSpy, EXIF,
 the photo's lines, else the defaults), the user's --fov / --pitch / --roll win, and the light
 stage's report hands it to adapt and compose, roll included."""
 from __future__ import annotations

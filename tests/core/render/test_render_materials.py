@@ -1,5 +1,5 @@
 """Several materials rendered as several Mitsuba shapes, each sampling its own maps with its own UVs and
-its sampler's wrap mode (issues 20 and 23), against the colour a glTF sampler reads at each hit."""
+its sampler's wrap mode, against the colour a glTF sampler reads at each hit."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""The stability matrix (issue 10): every extreme gives finite outputs or a clear error.
+"""The stability matrix: every extreme gives finite outputs or a clear error.
 
 Covered here: HDR maps 1e-4..1e6, roughness/metallic 0 and 1, degenerate triangles, meshes at 1e-3
 and 1e3 scale through conversion, photos 1e-4..1e6 (EXR), black and white photos, 1x1 and 8000x6000

@@ -1,4 +1,4 @@
-"""The asset itself as the exact start (issue 23): the texture is the asset's own maps plus a residual
+"""The asset itself as the exact start: the texture is the asset's own maps plus a residual
 that is exactly zero at the start, in logit space per channel; nothing is fitted, and adaptation
 starts from the asset exactly."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Adaptation in a new UV layout where the asset's UVs share texels (issue 23): mirrored halves, tiling
+"""Adaptation in a new UV layout where the asset's UVs share texels: mirrored halves, tiling
 and palettes are measured, xatlas makes the layout, the asset's own maps read through it as through
 its own UVs, a learned residual differs per surface there, and the layout travels with texture.pt."""
 from __future__ import annotations

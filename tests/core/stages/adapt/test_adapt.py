@@ -287,7 +287,7 @@ def test_cli_adapt_and_demo_guidance(tiny_models, asset, tmp_path, monkeypatch, 
     assert not (tmp_path / "demo").exists()
 
 
-# -- issue 24's cost work: the constant work of the fixed view bank, half-precision frozen weights ------
+# -- cost: the constant work of the fixed view bank, half-precision frozen weights ------
 
 def _cost_config(tiny_models, dtype_type: str = "fp32", **overrides) -> AdaptConfig:
     """One bank view (so every step comes back to it), one stage, fp32 unless asked."""

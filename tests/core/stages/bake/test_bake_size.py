@@ -1,4 +1,4 @@
-"""A game asset out no larger than the one in (issue 20): materials that share one texture, as a
+"""A game asset out no larger than the one in: materials that share one texture, as a
 palette or atlas does (Kenney's diorama: 44 materials, one colour map), bake to one shared image
 again, not one copy per material (it grew 2.3x); a material of one plain colour stays a factor."""
 from __future__ import annotations

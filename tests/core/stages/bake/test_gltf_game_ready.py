@@ -1,4 +1,4 @@
-"""`scenefit bake` keeps what a game needs (issue 20) and what the asset had (issue 23): KTX2 textures
+"""`scenefit bake` keeps what a game needs and what the asset had: KTX2 textures
 (KHR_texture_basisu: ETC1S colour, UASTC data, full mip chains) that are valid and smaller than the
 PNG bake; each material baked at its own images' size from its own maps (texel for texel when not
 adapted), whatever size the preset worked at; no NORMAL attribute where the input had none."""

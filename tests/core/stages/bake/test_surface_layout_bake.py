@@ -1,4 +1,4 @@
-"""`scenefit bake` of a texture adapted per surface on UVs that share texels (issue 23): the material's
+"""`scenefit bake` of a texture adapted per surface on UVs that share texels: the material's
 maps go into a new UV map made by Smart UV Project and written as one more TEXCOORD, the asset's own
 UVs stay for its other images, the file is valid, and the two mirrored halves now show their own
 results (through the asset's own UVs they could only show one)."""

@@ -1,4 +1,4 @@
-"""The photo camera estimate (issue 22): fSpy projects, EXIF, the photo's own lines, `scenefit camera`."""
+"""The photo camera estimate: fSpy projects, EXIF, the photo's own lines, `scenefit camera`."""
 from __future__ import annotations
 
 import json

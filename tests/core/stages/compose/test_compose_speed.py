@@ -1,4 +1,4 @@
-"""What keeps a 12 MP photo's draft run under 30 s (issue 23) without changing what compose makes:
+"""What keeps a 12 MP photo's draft run under 30 s without changing what compose makes:
 the pilot measures noise with fewer, larger pixels, and a draft composes at most 2048 px."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The light stage is never catastrophically wrong (issue 21): clipped lights are bounded by what the
+"""The light stage is never catastrophically wrong: clipped lights are bounded by what the
 photo supports, the answer does not jump with a small exposure change or with the preset."""
 from __future__ import annotations
 

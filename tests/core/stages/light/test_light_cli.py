@@ -1,4 +1,4 @@
-"""scenefit light's small promises (issue 21): strict JSON from --dry-run, a silent --quiet, the depth
+"""scenefit light's small promises: strict JSON from --dry-run, a silent --quiet, the depth
 model's absence decided once per process, and the artist's --sun."""
 from __future__ import annotations
 

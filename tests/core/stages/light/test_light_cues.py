@@ -1,4 +1,4 @@
-"""The weight-free light cues (issue 11) on synthetic scenes with known answers."""
+"""The weight-free light cues on synthetic scenes with known answers."""
 from __future__ import annotations
 
 import math

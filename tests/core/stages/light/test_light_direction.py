@@ -1,4 +1,4 @@
-"""The unseen light's direction comes from the photo (issue 21): the side its surfaces are brighter on."""
+"""The unseen light's direction comes from the photo: the side its surfaces are brighter on."""
 from __future__ import annotations
 
 import math

@@ -1,4 +1,4 @@
-"""An unsure indoor/outdoor call is reported and handled as unsure (issue 21): the map hedges between both."""
+"""An unsure indoor/outdoor call is reported and handled as unsure: the map hedges between both."""
 from __future__ import annotations
 
 import numpy as np

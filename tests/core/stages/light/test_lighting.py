@@ -1,4 +1,4 @@
-"""Light estimation (issue 4): panorama geometry, hole filling, regions, prompt rule, scales, EXR, CLI."""
+"""Light estimation: panorama geometry, hole filling, regions, prompt rule, scales, EXR, CLI."""
 from __future__ import annotations
 
 import json

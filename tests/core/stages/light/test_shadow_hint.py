@@ -1,4 +1,4 @@
-"""The sun from a shadow the artist points at (issue 21's hint): the foot of something upright, its
+"""The sun from a shadow the artist points at: the foot of something upright, its
 top and its shadow's tip, through the photo's camera, give --sun's azimuth and elevation."""
 from __future__ import annotations
 

@@ -1,0 +1,130 @@
+"""Imports in core/ sit at the top of their module; one inside a function is kept only where it puts
+off a heavy or optional library (one that takes seconds to load, or that Blender may lack: the extension
+registers without it and `operators.common.missing_modules` names it), and says so in a comment."""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+from scenefit.core.base.source_graph import ROOT, project_modules
+
+# Libraries worth putting off, by top-level name: heavy at import, or optional (in Blender, on a platform).
+BOUNDARIES = frozenset({
+    "torch", "diffusers", "transformers", "peft", "accelerate", "huggingface_hub",   # seconds to load
+    "mitsuba", "drjit", "bpy", "ray", "pyoidn", "openai",
+    "cv2", "OpenImageIO",   # the extension registers without them (missing_modules)
+    "xatlas", "meshopt",    # wheels not on every platform
+    "fcntl", "msvcrt", "resource",   # one operating system's
+})
+
+# TODO: modules being rewritten now (the run schema, the camera stage, the stage splits): their imports
+# inside functions are swept when they settle.
+REWRITTEN = ("core/pipeline/", "core/stages/camera.py", "core/stages/camera/", "core/stages/light/stage.py",
+             "core/render/", "core/stages/adapt/", "core/guidance/", "core/stages/bake/", "core/data/asset_files.py",
+             "core/data/asset_read_cache.py", "core/data/gltf_meshopt.py", "core/base/report.py")
+
+
+def _target(module: str, node: ast.Import | ast.ImportFrom, alias: ast.alias) -> str:
+    """The dotted name an import statement in `module` loads ("core.data.imageio", "torch")."""
+    if isinstance(node, ast.Import):
+        return alias.name.removeprefix("scenefit.")
+    if node.level:
+        package = module.split(".")[:len(module.split(".")) - node.level]
+        return ".".join(package + ([node.module] if node.module else []))
+    return (node.module or "").removeprefix("scenefit.")
+
+
+def _imports(module: str, path: Path) -> tuple[set[str], list[tuple[int, str]]]:
+    """(what `module` imports at module level, [(line, target)] of the imports inside its functions)."""
+    top: set[str] = set()
+    inside: list[tuple[int, str]] = []
+    # A package's __init__ resolves relative imports against the package itself.
+    module = module + ".__init__" if path.name == "__init__.py" else module
+
+    def visit(node: ast.AST, in_function: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.Import, ast.ImportFrom)):
+                for alias in child.names:
+                    target = _target(module, child, alias)
+                    (inside.append((child.lineno, target)) if in_function else top.add(target))
+            visit(child, in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)))
+
+    visit(ast.parse(path.read_text(encoding="utf-8")), False)
+    return top, inside
+
+
+def _graph(root: Path) -> dict[str, tuple[Path, set[str], list[tuple[int, str]]]]:
+    return {module: (path, *_imports(module, path)) for module, path in project_modules(root).items()}
+
+
+def _boundaries_reached(start: str, graph: dict) -> set[str]:
+    """The boundary libraries importing `start` loads through module-level imports (a project module's
+    package __init__ included)."""
+    seen, todo, found = set(), [start], set()
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        if name.split(".")[0] in BOUNDARIES:
+            found.add(name.split(".")[0])
+            continue
+        parts = name.split(".")
+        todo += [".".join(parts[:k]) for k in range(1, len(parts))]
+        if name in graph:
+            todo += sorted(graph[name][1])
+    return found
+
+
+def _has_reason(lines: list[str], lineno: int) -> bool:
+    return "#" in lines[lineno - 1] or lines[lineno - 2].strip().startswith("#")
+
+
+def unjustified_imports(root: Path = ROOT) -> list[str]:
+    """'path:line target (why)' for each import inside a core/ function that puts off no boundary library
+    the module does not load anyway, or that gives no reason in a comment."""
+    graph = _graph(root)
+    bad = []
+    for module, (path, _, inside) in sorted(graph.items()):
+        relative = path.relative_to(root).as_posix()
+        if not module.startswith("core") or relative.startswith(REWRITTEN):
+            continue
+        already = _boundaries_reached(module, graph)
+        lines = path.read_text(encoding="utf-8").splitlines()
+        for lineno, target in inside:
+            put_off = _boundaries_reached(target, graph) - already
+            if not put_off:
+                bad.append(f"{relative}:{lineno} {target} (puts off nothing heavy or optional: import it at the top)")
+            elif not _has_reason(lines, lineno):
+                bad.append(f"{relative}:{lineno} {target} (puts off {', '.join(sorted(put_off))}: say so in a comment)")
+    return bad
+
+
+def test_imports_inside_core_functions_only_put_off_heavy_or_optional_libraries():
+    assert unjustified_imports() == []
+
+
+def test_the_check_sees_each_kind_of_unjustified_import(tmp_path):
+    files = {
+        "core/__init__.py": "",
+        "core/base/__init__.py": "",
+        "core/base/light.py": "import json\n",
+        "core/base/heavy.py": "import torch\n",
+        "core/base/user.py": (
+            "import numpy\n\n\n"
+            "def a():\n    import json\n\n\n"                          # stdlib: nothing put off
+            "def b():\n    from .light import x\n\n\n"                 # a light project module
+            "def c():\n    import torch\n\n\n"                         # heavy, but no reason given
+            "def d():\n    from .heavy import y  # torch: seconds to load\n\n\n"   # fine
+            "def e():\n    # cv2: Blender may lack it\n    import cv2\n"),         # fine
+        "core/base/torch_user.py": "import torch\n\n\ndef f():\n    from .heavy import y  # already loaded\n",
+    }
+    for name, text in files.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    for package in ("cli", "blender_io", "operators", "panels", "workers"):
+        (tmp_path / package).mkdir()
+    found = unjustified_imports(tmp_path)
+    assert [line.split(" (")[0] for line in found] == [
+        "core/base/torch_user.py:5 core.base.heavy", "core/base/user.py:5 json", "core/base/user.py:9 core.base.light",
+        "core/base/user.py:13 torch"], found
