@@ -68,7 +68,7 @@ def load_depth_model(config: DepthConfig):
     """The configured model through core/guidance/models.py (loaded once per process); depth_type
     "auto" looks only on this machine (the model manager's file system look, no import)."""
     local_only = True if config.depth_type == "auto" else config.local_files_only
-    key = (config.model, config.cache_dir, config.device)
+    key: tuple[str | None, ...] = (config.model, config.cache_dir, config.device)
     if config.depth_type == "auto":
         is_folder = Path(config.model).expanduser().exists() or config.model.startswith((".", "/", "~"))
         if not is_folder:
