@@ -22,7 +22,7 @@ from ..core.base.errors import InputError
 from ..core.stages.bake.game_bake import BakedMaterial
 from ..core.stages.bake.gltf_ktx2 import basisu_path, ktx2_glb
 from ..core.data.gltf_meshopt import encoded_glb
-from ..core.stages.bake.gltf_output import (GltfOutput, check_output_format, output_like_input,
+from ..core.stages.bake.gltf_output import (GltfOutput, check_output_format, extensions_kept, output_like_input,
                                                skinned_meshes_moved_to_root)
 from ..core.data.imageio import srgb_to_linear, write_image
 from ..core.data.maps import resize_channels
@@ -266,6 +266,8 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
         staged = staging / out_file.name
         if output.skins_at_root:
             skinned_meshes_moved_to_root(staged)
+        if output.extensions is not None:   # an engine's bake: only what its importer reads
+            extensions_kept(staged, output.extensions)
         if output.textures == "ktx2":
             ktx2_glb(staged)
         if output.compress == "meshopt":
