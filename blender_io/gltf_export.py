@@ -21,6 +21,7 @@ import numpy as np
 from ..core.base.errors import InputError
 from ..core.stages.bake.game_bake import BakedMaterial
 from ..core.stages.bake.gltf_ktx2 import basisu_path, ktx2_glb
+from ..core.stages.bake.gltf_tangents import tangents_repaired
 from ..core.data.gltf_meshopt import encoded_glb
 from ..core.stages.bake.gltf_output import (GltfOutput, check_output_format, extensions_kept, output_like_input,
                                                skinned_meshes_moved_to_root)
@@ -71,7 +72,7 @@ def _with_tangents(output: GltfOutput, asset_path: str | Path) -> GltfOutput:
 
     if Path(asset_path).suffix.lower() in (".glb", ".gltf"):
         return output
-    tangents = output.tangents or any(normal_mapped(m) for m in bpy.data.materials)
+    tangents = (output.tangents or any(normal_mapped(m) for m in bpy.data.materials)) and output.compress != "draco"
     return replace(output, tangents=tangents, normals=output.normals or tangents)  # glTF: no TANGENT without NORMAL
 
 
@@ -258,7 +259,8 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
                                       use_selection=selection_only is not None, use_active_scene=True,
                                       export_apply=True, export_cameras=True, export_lights=True,
                                       export_image_format=_IMAGE_FORMATS[output.textures], export_materials="EXPORT",
-                                      export_tangents=output.tangents, export_normals=output.normals, export_optimize_animation_keep_anim_armature=False,
+                                      export_tangents=output.tangents and output.compress != "draco",
+                                      export_normals=output.normals, export_optimize_animation_keep_anim_armature=False,
                                       # glTF multiplies COLOR_0 into the base colour, and the baked base colour
                                       # already holds the vertex colours it read: no COLOR_n no material uses
                                       export_all_vertex_colors=False,
@@ -268,6 +270,8 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
             skinned_meshes_moved_to_root(staged)
         if output.extensions is not None:   # an engine's bake: only what its importer reads
             extensions_kept(staged, output.extensions)
+        if output.tangents and output.compress != "draco":   # the input's where it can, none of zero length
+            tangents_repaired(staged, Path(output.tangent_source) if output.tangent_source else None)
         if output.textures == "ktx2":
             ktx2_glb(staged)
         if output.compress == "meshopt":

@@ -9,7 +9,7 @@ validator's NODE_SKINNED_MESH_NON_ROOT warning."""
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ...base.errors import InputError
@@ -20,6 +20,10 @@ TEXTURE_FORMATS = ("png", "jpeg", "webp", "ktx2")
 DEFAULT_MAX_TEXTURE = 2048
 _COMPRESSION_OF_EXTENSION = {"KHR_draco_mesh_compression": "draco", "EXT_meshopt_compression": "meshopt"}
 _FORMAT_OF_MIME = {"image/png": "png", "image/jpeg": "jpeg", "image/webp": "webp", "image/ktx2": "ktx2"}
+# Blender's exporter compresses TANGENT inside the Draco data, where a degenerate UV triangle's zero tangent
+# can be neither kept from the input nor mended: a Draco file goes without, and clients generate them.
+DRACO_TANGENTS = ("the input's tangents are not written into Draco-compressed meshes: engines generate "
+                  "MikkTSpace tangents, as glTF asks")
 _FORMAT_OF_SUFFIX = {".png": "png", ".jpg": "jpeg", ".jpeg": "jpeg", ".webp": "webp", ".ktx2": "ktx2"}
 
 
@@ -35,6 +39,8 @@ class GltfOutput:
     unlike_input: tuple[str, ...] = ()
     target: str = AS_IMPORTED          # the engine it is written for (engine_targets.TARGETS)
     extensions: frozenset[str] | None = None   # the only extensions it may carry (None: any)
+    # The glTF whose own tangents the output keeps where its vertices are the input's (gltf_tangents).
+    tangent_source: str | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         if self.compress not in COMPRESSIONS:
@@ -114,11 +120,15 @@ def output_like_input(asset: str | Path | None, compress: str | None = None, tex
                   for primitive in mesh.get("primitives", [])]
     tangents = any("TANGENT" in names for names in attributes)
     normals = not attributes or tangents or any("NORMAL" in names for names in attributes)
+    if tangents and compress == "draco":
+        tangents = False
+        unlike.append(DRACO_TANGENTS)
     # A glTF's skinned meshes stay where it had them; another kind of file has no say, so they go to the
     # root, where glTF wants them (the validator warns NODE_SKINNED_MESH_NON_ROOT under Blender's armature).
     at_root = _skinned_meshes_at_root(document) if is_gltf else True
     return GltfOutput(compress, textures, DEFAULT_MAX_TEXTURE if max_texture is None else max_texture, tangents,
-                      at_root, normals, tuple(unlike), engine.name, kept_extensions(engine, compress, textures))
+                      at_root, normals, tuple(unlike), engine.name, kept_extensions(engine, compress, textures),
+                      str(asset) if tangents else None)
 
 
 def _input_compression(document: dict) -> str:
