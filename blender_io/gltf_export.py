@@ -346,13 +346,14 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
     import bpy
 
     from .asset_file import loaded_asset
-    from .material import object_mesh_and_slots, read_material
+    from .material import object_mesh_and_slots, read_material, unwrap_vertex_coloured
     from .scene_asset import scene_mesh
     from .uv_unwrap import NEW_UV_MAP, new_uv_map_active
 
     if not hasattr(texture, "texture"):
         texture = load_neural_texture(texture)
     with loaded_asset(asset_path, object_name) as (meshes, scene):
+        unwrap_vertex_coloured(meshes)   # as convert read it: vertex colours without UVs get a UV map
         def read() -> tuple:
             depsgraph = bpy.context.evaluated_depsgraph_get()
             if len(meshes) > 1:   # several objects are the asset, joined as convert read them
