@@ -21,6 +21,7 @@ import numpy as np
 from ..core.base.errors import InputError
 from ..core.stages.bake.game_bake import BakedMaterial
 from ..core.stages.bake.gltf_ktx2 import basisu_path, ktx2_glb
+from ..core.stages.bake.engine_targets import engine_target
 from ..core.stages.bake.gltf_tangents import tangents_repaired
 from ..core.data.gltf_meshopt import encoded_glb
 from ..core.stages.bake.gltf_output import (GltfOutput, check_output_format, extensions_kept, output_like_input,
@@ -221,7 +222,8 @@ def _write_roughness_metallic(material, bsdf, baked: BakedMaterial, folder: Path
 
 
 def export_gltf(out_file: str | Path, file_format: str, selection_only: list | None = None,
-                protect: tuple = (), output: GltfOutput = GltfOutput(), replace: bool = False) -> list[Path]:
+                protect: tuple = (), output: GltfOutput = GltfOutput(), replace: bool = False,
+                notes: list[str] | None = None) -> list[Path]:
     """Write the current scene (or only `selection_only` objects) with Blender's glTF exporter, with
     `output`'s compression (Draco by the exporter, meshopt by meshoptimizer's encoder after it),
     texture format and tangents.
@@ -268,10 +270,17 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
         staged = staging / out_file.name
         if output.skins_at_root:
             skinned_meshes_moved_to_root(staged)
+        said = [] if notes is None else notes   # (what the caller's report says of the file)
         if output.extensions is not None:   # an engine's bake: only what its importer reads
-            extensions_kept(staged, output.extensions)
+            removed = extensions_kept(staged, output.extensions)
+            if removed:
+                said.append(f"left out for {engine_target(output.target).label}, whose importer does not read "
+                            f"them: {', '.join(removed)}")
         if output.tangents and output.compress != "draco":   # the input's where it can, none of zero length
-            tangents_repaired(staged, Path(output.tangent_source) if output.tangent_source else None)
+            counts = tangents_repaired(staged, Path(output.tangent_source) if output.tangent_source else None)
+            if counts["input_tangents_kept"] or counts["tangents_made_usable"]:
+                said.append(f"tangents: {counts['input_tangents_kept']} of {counts['tangents']} the input's own, "
+                            f"{counts['tangents_made_usable']} made unit and orthogonal to their normal")
         if output.textures == "ktx2":
             ktx2_glb(staged)
         if output.compress == "meshopt":
@@ -321,9 +330,10 @@ def bake_materials_to_gltf(materials: list, baked: list[BakedMaterial], out_file
             done.add(material.name)
             notes = apply_baked_material(material, maps, Path(folder), shared)
             report["materials"].append(dict(maps.report(), done=notes))
-        written = export_gltf(out_file, file_format, selection_only, protect, output, replace)
+        notes: list[str] = []
+        written = export_gltf(out_file, file_format, selection_only, protect, output, replace, notes)
     report["files"] = [str(p) for p in written]
-    report["output"] = output.report()
+    report["output"] = output.report() | ({"notes": notes} if notes else {})
     return report
 
 

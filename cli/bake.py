@@ -51,7 +51,7 @@ def run(args) -> int:
         print(f"  {report['uv_map']}")
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
-    for why in output.unlike_input:
+    for why in (*output.unlike_input, *report["output"].get("notes", ())):
         print(f"  {why}")
     print(f"wrote {', '.join(report['files'])} (glTF 2.0 by Blender's exporter)")
     return 0
