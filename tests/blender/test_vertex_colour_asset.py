@@ -75,3 +75,9 @@ def test_a_vertex_coloured_mesh_without_uvs_converts_with_each_corners_colour(tm
         assert np.abs(seen - weights @ expected_corners).max() < 0.03, (source, seen, weights @ expected_corners)
     assert matched == {0, 1, 2, 3}
     assert report["stage"] == "convert"
+    # The game bake reads it as convert did (the same unwrap) and writes a file that validates clean.
+    baked = tmp_path / "baked.glb"
+    proc = scenefit_process("bake", asset, "--texture", tmp_path / "convert" / "maps" / "texture.pt", "--out", baked,
+                            "--quiet")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert validator(str(baked))["issues"]["numErrors"] == 0
