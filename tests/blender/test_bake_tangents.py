@@ -1,4 +1,5 @@
-"""A bake of a glTF that carries its own TANGENT, with triangles whose UVs are degenerate: the output keeps
+"""A bake of a glTF that carries its own TANGENT, with triangles degenerate in UV and sliver triangles (where
+Blender's MikkTSpace writes zero tangents: ACCESSOR_VECTOR3_NON_UNIT without the mend): the output keeps
 the input's tangents where its vertices are the input's and writes no zero-length tangent, so an input that
 validates clean bakes clean (core.stages.bake.gltf_tangents)."""
 from __future__ import annotations
@@ -27,19 +28,21 @@ def _png(rgb: tuple[int, int, int], size: int = 8) -> bytes:
 
 
 def tangent_asset(path: Path, degenerate_tangent=(1.0, 0.0, 0.0, 1.0)) -> None:
-    """A 3x3 quad plane (+Y up, UVs across it, each vertex's TANGENT tilted 30 degrees from +U) and beside
-    it a quad whose four UVs are one point (both its triangles degenerate in UV), normal-mapped."""
+    """A 3x3 quad plane (+Y up, UVs across it, each vertex's TANGENT tilted 30 degrees from +U), beside it
+    a quad whose four UVs are one point (both its triangles degenerate in UV) and a quad whose four corners
+    lie on one line (both its triangles slivers: MikkTSpace gives them zero tangents), normal-mapped."""
     grid = [(x, z) for z in range(4) for x in range(4)]
-    positions = [(x, 0.0, z) for x, z in grid] + [(4.0, 0.0, 0.0), (5.0, 0.0, 0.0), (5.0, 0.0, 1.0), (4.0, 0.0, 1.0)]
-    uvs = [(x / 3, z / 3) for x, z in grid] + [(0.5, 0.5)] * 4
-    tangents = [TILTED] * 16 + [degenerate_tangent] * 4
+    positions = [(x, 0.0, z) for x, z in grid] + [(4.0, 0.0, 0.0), (5.0, 0.0, 0.0), (5.0, 0.0, 1.0), (4.0, 0.0, 1.0)] \
+        + [(4.0, 0.0, 2.0), (5.0, 0.0, 2.0), (6.0, 0.0, 2.0), (7.0, 0.0, 2.0)]
+    uvs = [(x / 3, z / 3) for x, z in grid] + [(0.5, 0.5)] * 4 + [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]
+    tangents = [TILTED] * 16 + [degenerate_tangent] * 8
     indices = []
     for z in range(3):
         for x in range(3):
             a, b, c, d = z * 4 + x, z * 4 + x + 1, (z + 1) * 4 + x + 1, (z + 1) * 4 + x
             indices += [a, d, c, a, c, b]   # counter-clockwise seen from +Y
-    indices += [16, 19, 18, 16, 18, 17]
-    arrays = [np.array(positions, "<f4"), np.array([(0.0, 1.0, 0.0)] * 20, "<f4"), np.array(uvs, "<f4"),
+    indices += [16, 19, 18, 16, 18, 17, 20, 23, 22, 20, 22, 21]
+    arrays = [np.array(positions, "<f4"), np.array([(0.0, 1.0, 0.0)] * 24, "<f4"), np.array(uvs, "<f4"),
               np.array(tangents, "<f4"), np.array(indices, "<u2")]
     images = [_png((200, 120, 60)), _png((128, 128, 255))]
     blob, views = b"", []
@@ -88,10 +91,10 @@ def test_a_written_file_is_mended_in_place_and_takes_the_inputs_tangents(tmp_pat
     counts = tangents_repaired(written, source)
     positions, normals, tangents = _tangents(written)
     assert np.allclose(np.linalg.norm(tangents[:, :3], axis=1), 1)
-    assert np.allclose(tangents[:16], TILTED) and counts["input_tangents_kept"] == 20
+    assert np.allclose(tangents[:16], TILTED) and counts["input_tangents_kept"] == 24
     other = tmp_path / "other.glb"
     tangent_asset(other, degenerate_tangent=(0.0, 0.0, 0.0, 1.0))
-    assert tangents_repaired(other)["tangents_made_usable"] == 4
+    assert tangents_repaired(other)["tangents_made_usable"] == 8
 
 
 def test_a_bake_of_an_asset_with_its_own_tangents_and_degenerate_uvs_validates_clean(tmp_path, validator):
