@@ -373,7 +373,10 @@ def load_asset_materials(path: str | Path, object_name: str | None = None) -> As
                                                              read=(f"asset folder '{path}'",)),))
     import bpy
 
+    from .material import unwrap_vertex_coloured
+
     with loaded_asset(path, object_name) as (meshes, scene):
+        unwrap_vertex_coloured(meshes)   # (vertex colours without UVs: the temporary copy gets a UV map)
         depsgraph = bpy.context.evaluated_depsgraph_get()
         if len(meshes) > 1:
             return read_scene_materials(meshes, depsgraph, object_name or Path(path).stem,

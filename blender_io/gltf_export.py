@@ -21,8 +21,10 @@ import numpy as np
 from ..core.base.errors import InputError
 from ..core.stages.bake.game_bake import BakedMaterial
 from ..core.stages.bake.gltf_ktx2 import basisu_path, ktx2_glb
+from ..core.stages.bake.engine_targets import engine_target
+from ..core.stages.bake.gltf_tangents import tangents_repaired
 from ..core.data.gltf_meshopt import encoded_glb
-from ..core.stages.bake.gltf_output import (GltfOutput, check_output_format, output_like_input,
+from ..core.stages.bake.gltf_output import (GltfOutput, check_output_format, extensions_kept, output_like_input,
                                                skinned_meshes_moved_to_root)
 from ..core.data.imageio import srgb_to_linear, write_image
 from ..core.data.maps import resize_channels
@@ -71,7 +73,7 @@ def _with_tangents(output: GltfOutput, asset_path: str | Path) -> GltfOutput:
 
     if Path(asset_path).suffix.lower() in (".glb", ".gltf"):
         return output
-    tangents = output.tangents or any(normal_mapped(m) for m in bpy.data.materials)
+    tangents = (output.tangents or any(normal_mapped(m) for m in bpy.data.materials)) and output.compress != "draco"
     return replace(output, tangents=tangents, normals=output.normals or tangents)  # glTF: no TANGENT without NORMAL
 
 
@@ -220,7 +222,8 @@ def _write_roughness_metallic(material, bsdf, baked: BakedMaterial, folder: Path
 
 
 def export_gltf(out_file: str | Path, file_format: str, selection_only: list | None = None,
-                protect: tuple = (), output: GltfOutput = GltfOutput(), replace: bool = False) -> list[Path]:
+                protect: tuple = (), output: GltfOutput = GltfOutput(), replace: bool = False,
+                notes: list[str] | None = None) -> list[Path]:
     """Write the current scene (or only `selection_only` objects) with Blender's glTF exporter, with
     `output`'s compression (Draco by the exporter, meshopt by meshoptimizer's encoder after it),
     texture format and tangents.
@@ -258,7 +261,8 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
                                       use_selection=selection_only is not None, use_active_scene=True,
                                       export_apply=True, export_cameras=True, export_lights=True,
                                       export_image_format=_IMAGE_FORMATS[output.textures], export_materials="EXPORT",
-                                      export_tangents=output.tangents, export_normals=output.normals, export_optimize_animation_keep_anim_armature=False,
+                                      export_tangents=output.tangents and output.compress != "draco",
+                                      export_normals=output.normals, export_optimize_animation_keep_anim_armature=False,
                                       # glTF multiplies COLOR_0 into the base colour, and the baked base colour
                                       # already holds the vertex colours it read: no COLOR_n no material uses
                                       export_all_vertex_colors=False,
@@ -266,6 +270,17 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
         staged = staging / out_file.name
         if output.skins_at_root:
             skinned_meshes_moved_to_root(staged)
+        said = [] if notes is None else notes   # (what the caller's report says of the file)
+        if output.extensions is not None:   # an engine's bake: only what its importer reads
+            removed = extensions_kept(staged, output.extensions)
+            if removed:
+                said.append(f"left out for {engine_target(output.target).label}, whose importer does not read "
+                            f"them: {', '.join(removed)}")
+        if output.tangents and output.compress != "draco":   # the input's where it can, none of zero length
+            counts = tangents_repaired(staged, Path(output.tangent_source) if output.tangent_source else None)
+            if counts["input_tangents_kept"] or counts["tangents_made_usable"]:
+                said.append(f"tangents: {counts['input_tangents_kept']} of {counts['tangents']} the input's own, "
+                            f"{counts['tangents_made_usable']} made unit and orthogonal to their normal")
         if output.textures == "ktx2":
             ktx2_glb(staged)
         if output.compress == "meshopt":
@@ -315,9 +330,10 @@ def bake_materials_to_gltf(materials: list, baked: list[BakedMaterial], out_file
             done.add(material.name)
             notes = apply_baked_material(material, maps, Path(folder), shared)
             report["materials"].append(dict(maps.report(), done=notes))
-        written = export_gltf(out_file, file_format, selection_only, protect, output, replace)
+        notes: list[str] = []
+        written = export_gltf(out_file, file_format, selection_only, protect, output, replace, notes)
     report["files"] = [str(p) for p in written]
-    report["output"] = output.report()
+    report["output"] = output.report() | ({"notes": notes} if notes else {})
     return report
 
 
@@ -340,13 +356,14 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
     import bpy
 
     from .asset_file import loaded_asset
-    from .material import object_mesh_and_slots, read_material
+    from .material import object_mesh_and_slots, read_material, unwrap_vertex_coloured
     from .scene_asset import scene_mesh
     from .uv_unwrap import NEW_UV_MAP, new_uv_map_active
 
     if not hasattr(texture, "texture"):
         texture = load_neural_texture(texture)
     with loaded_asset(asset_path, object_name) as (meshes, scene):
+        unwrap_vertex_coloured(meshes)   # as convert read it: vertex colours without UVs get a UV map
         def read() -> tuple:
             depsgraph = bpy.context.evaluated_depsgraph_get()
             if len(meshes) > 1:   # several objects are the asset, joined as convert read them

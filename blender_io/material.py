@@ -138,6 +138,50 @@ def _chain_images(socket) -> list:
     return found
 
 
+def _chain_nodes(socket) -> list:
+    """Every node in the chain behind `socket`."""
+    found, queue, seen = [], [socket], set()
+    while queue:
+        linked = source(queue.pop(0))
+        if linked is None or linked[0].name in seen:
+            continue
+        seen.add(linked[0].name)
+        found.append(linked[0])
+        queue.extend(s for s in linked[0].inputs if s.is_linked)
+    return found
+
+
+def reads_vertex_colours(material) -> bool:
+    """Whether the material's Base Color reads the mesh's colour attribute (glTF's COLOR_0, as Blender's
+    importer links it through a Color Attribute node)."""
+    try:
+        bsdf = principled_bsdf(material)
+    except InputError:
+        return False
+    socket = bsdf.inputs.get("Base Color")
+    return socket is not None and any(n.type in ("VERTEX_COLOR", "ATTRIBUTE") for n in _chain_nodes(socket))
+
+
+def unwrap_vertex_coloured(objects: list) -> list[str]:
+    """A UV map (Smart UV Project, blender_io.uv_unwrap) for each of `objects` that has none and whose
+    materials read its vertex colours: their colours, baked through it (each corner's colour, as the
+    triangle interpolates them), become the material's base colour image, which a mesh without UVs could
+    not hold. Only for objects loaded into SceneFit's own temporary scene (the command line, batch jobs):
+    the artist's meshes are never changed. Returns what was done, for the report."""
+    from .uv_unwrap import new_uv_map_active
+
+    needing = [obj for obj in objects if obj.type == "MESH" and obj.data.uv_layers.active is None and
+               any(slot.material is not None and reads_vertex_colours(slot.material) for slot in obj.material_slots)]
+    if not needing:
+        return []
+    materials = list({slot.material.name: slot.material for obj in needing for slot in obj.material_slots
+                      if slot.material is not None}.values())
+    with new_uv_map_active(needing, materials):
+        pass   # (a mesh that had no UV map keeps the new one as its only one)
+    return [f"'{obj.name}' has no UV map and its material reads its vertex colours: unwrapped (Smart UV Project) "
+            "so its colours bake into a base colour image" for obj in needing]
+
+
 def material_wrap(material, dropped: list[str] | None = None) -> tuple[str, str]:
     """How the material's UVs outside [0, 1] read its maps, (u, v): the extension of the image behind
     Base Color (else Roughness, else Metallic), as Blender's glTF importer sets it from the sampler

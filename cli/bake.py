@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..core.stages.bake.engine_targets import AS_IMPORTED, TARGET_NAMES
 from ..core.stages.bake.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TEXTURE_FORMATS
 from .options import add_asset_args
 
@@ -33,7 +34,8 @@ def run(args) -> int:
     refuse_overwriting(targets, list(protect))
     if not args.replace:   # before any work; the images of a .gltf are checked once their names are known
         refuse_replacing(targets)
-    output = output_like_input(args.asset, args.compress, args.textures, args.max_texture, args.format)
+    output = output_like_input(args.asset, args.compress, args.textures, args.max_texture, args.format,
+                               args.target)
     check_output_format(output, args.format)
     if output.textures == "ktx2":   # (asked for, or the input's KTX2 written as KTX2 again)
         basisu_path() if args.textures is not None else \
@@ -49,7 +51,7 @@ def run(args) -> int:
         print(f"  {report['uv_map']}")
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
-    for why in output.unlike_input:
+    for why in (*output.unlike_input, *report["output"].get("notes", ())):
         print(f"  {why}")
     print(f"wrote {', '.join(report['files'])} (glTF 2.0 by Blender's exporter)")
     return 0
@@ -64,9 +66,13 @@ def add_parser(sub) -> None:
     p.add_argument("--out", required=True, help="output file, ending in .glb or .gltf")
     p.add_argument("--texture-size", type=int, help="power of two, for every material (default: each material's own images' size, "
                                                         "rounded up to a power of two, at most --max-texture)")
+    p.add_argument("--target", choices=TARGET_NAMES, default=AS_IMPORTED,
+                   help="the engine the file is for: only the compression, texture format and extensions its "
+                        "importer reads (web: three.js / model-viewer, meshopt; godot: Godot 4; unity: glTFast; "
+                        "unreal; see docs/engine_targets.md) (default: as-imported, as the input file)")
     p.add_argument("--compress", choices=COMPRESSIONS,
                    help="mesh compression: none, draco (Blender's exporter) or meshopt (.glb only, meshoptimizer's "
-                        "encoder) (default: as the input)")
+                        "encoder) (default: as the input, or the --target's choice)")
     p.add_argument("--textures", choices=TEXTURE_FORMATS, help="image format of the textures; ktx2: KHR_texture_basisu, ETC1S for colour and UASTC for data, "
                         "with mipmaps (.glb only; needs Basis Universal's basisu) (default: the input's)")
     p.add_argument("--max-texture", type=int, default=DEFAULT_MAX_TEXTURE,

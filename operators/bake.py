@@ -17,6 +17,7 @@ from ..blender_io.asset_file import imported_beside, imported_from
 from ..blender_io.gltf_export import FORMATS, bake_copies_to_gltf, normal_mapped
 from ..core.base.errors import InputError
 from ..core.stages.bake.gltf_ktx2 import basisu_path
+from ..core.stages.bake.engine_targets import TARGETS
 from ..core.stages.bake.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TEXTURE_FORMATS, GltfOutput
 from ..core.base.report import write_report
 from . import work
@@ -41,12 +42,21 @@ TEXTURE_ITEMS = ((AS_IMPORTED, "As imported", "As the file the asset was importe
                  ("webp", "WebP", "Smaller; needs an engine that reads EXT_texture_webp"),
                  ("ktx2", "KTX2", "GPU-compressed (KHR_texture_basisu: ETC1S colour, UASTC data; .glb only; "
                                   "needs Basis Universal's basisu)"))
+TARGET_ITEMS = ((TARGETS["as-imported"].name, "As imported", "Compression, textures and extensions as chosen "
+                                                              "here or as the imported file had them"),
+                ("web", "Web", "three.js and model-viewer: meshopt compression; PNG, JPEG, WebP or KTX2 textures"),
+                ("godot", "Godot 4", "No mesh compression; PNG, JPEG or WebP; only the extensions Godot reads"),
+                ("unity", "Unity (glTFast)", "No mesh compression; PNG or JPEG; only the extensions glTFast reads "
+                                             "without extra packages"),
+                ("unreal", "Unreal Engine", "No mesh compression; PNG or JPEG; only the extensions Unreal's glTF "
+                                            "importer reads"))
+assert [k for k, *_ in TARGET_ITEMS] == list(TARGETS)
 assert [k for k, *_ in COMPRESS_ITEMS[1:]] == list(COMPRESSIONS) and \
     [k for k, *_ in TEXTURE_ITEMS[1:]] == list(TEXTURE_FORMATS)
 
 
 def bake_output(compress: str, textures: str, max_texture: int, file_format: str, source: Path | None,
-                normal_maps: bool) -> GltfOutput:
+                normal_maps: bool, target: str = "as-imported") -> GltfOutput:
     """Bake Asset's output: compression and texture format as chosen, or As imported: as the file `source`
     was written (scenefit bake's default), within what `file_format` holds (meshopt and KTX2: .glb only);
     tangents where that file had them or a material has a normal map; skinned meshes at the root, where
@@ -55,7 +65,7 @@ def bake_output(compress: str, textures: str, max_texture: int, file_format: str
     from ..core.stages.bake.gltf_output import glb_only, output_like_input
 
     like = output_like_input(source, None if compress == AS_IMPORTED else compress,
-                             None if textures == AS_IMPORTED else textures, max_texture, file_format)
+                             None if textures == AS_IMPORTED else textures, max_texture, file_format, target)
     cannot = glb_only(like, file_format)   # (in Blender's words, not the command line's flags)
     if cannot == "compress":
         raise InputError("Compression meshopt writes .glb files only; choose the glTF Binary format, or None or "
@@ -92,6 +102,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
     texture_size: IntProperty(name="Texture size", default=0, min=0, max=8192, options={"SKIP_SAVE"},
                               description="Pixels per side (a power of two) for every material; 0: each "
                                           "material's own images' size")
+    target: EnumProperty(name="Target", items=TARGET_ITEMS, default="as-imported",
+                         description="The engine the file is for: only what its importer reads")
     compress: EnumProperty(name="Compression", items=COMPRESS_ITEMS, default=AS_IMPORTED)
     textures: EnumProperty(name="Textures", items=TEXTURE_ITEMS, default=AS_IMPORTED)
     max_texture: IntProperty(name="Max texture", default=DEFAULT_MAX_TEXTURE, min=4, max=8192,
@@ -116,7 +128,7 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         objects = [bpy.data.objects[n] for n in layout.objects]
         source = imported_from(objects)
         self._output = bake_output(self.compress, self.textures, self.max_texture, self.file_format, source,
-                                   any(normal_mapped(m) for m in artists))
+                                   any(normal_mapped(m) for m in artists), self.target)
         if self.filepath:
             out_file = Path(bpy.path.abspath(self.filepath))
             if out_file.suffix.lower() != f".{self.file_format}":

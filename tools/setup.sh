@@ -58,4 +58,20 @@ fi
 "${PIP[@]}" install -q -r requirements-ray.txt
 "${PIP[@]}" install -q --no-deps -e .
 "$VENV/bin/python" -c 'import scenefit.core.data.mesh' || die "the editable install of scenefit does not import."
+
+# 5. For the web target's browser test (tests/blender/test_web_bake_in_browser.py): Debian's chromium
+#    (headless, SwiftShader's WebGL) and npm's three with its Draco, meshopt and KTX2 decoders, pinned,
+#    in .web/ (ignored by git). Without them that test skips; nothing else needs them.
+THREE_VERSION=0.187.0
+if ! command -v chromium >/dev/null && ! command -v chromium-browser >/dev/null; then
+  apt_install chromium || echo "make setup: could not install chromium; the browser test will skip." >&2
+fi
+if command -v npm >/dev/null; then
+  if [ "$(node -p "require('./.web/node_modules/three/package.json').version" 2>/dev/null)" != "$THREE_VERSION" ]; then
+    npm install --no-audit --no-fund --prefix .web "three@$THREE_VERSION" >/dev/null \
+      || echo "make setup: npm install three failed; the browser test will skip." >&2
+  fi
+else
+  echo "make setup: no npm; the browser test (and the glTF validator's) will skip." >&2
+fi
 echo "Set-up done."

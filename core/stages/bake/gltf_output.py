@@ -9,16 +9,21 @@ validator's NODE_SKINNED_MESH_NON_ROOT warning."""
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ...base.errors import InputError
+from .engine_targets import AS_IMPORTED, check_given, engine_target, kept_extensions
 
 COMPRESSIONS = ("none", "draco", "meshopt")
 TEXTURE_FORMATS = ("png", "jpeg", "webp", "ktx2")
 DEFAULT_MAX_TEXTURE = 2048
 _COMPRESSION_OF_EXTENSION = {"KHR_draco_mesh_compression": "draco", "EXT_meshopt_compression": "meshopt"}
 _FORMAT_OF_MIME = {"image/png": "png", "image/jpeg": "jpeg", "image/webp": "webp", "image/ktx2": "ktx2"}
+# Blender's exporter compresses TANGENT inside the Draco data, where a degenerate UV triangle's zero tangent
+# can be neither kept from the input nor mended: a Draco file goes without, and clients generate them.
+DRACO_TANGENTS = ("the input's tangents are not written into Draco-compressed meshes: engines generate "
+                  "MikkTSpace tangents, as glTF asks")
 _FORMAT_OF_SUFFIX = {".png": "png", ".jpg": "jpeg", ".jpeg": "jpeg", ".webp": "webp", ".ktx2": "ktx2"}
 
 
@@ -32,6 +37,10 @@ class GltfOutput:
     normals: bool = True              # False where the input had none: glTF then shades flat, as it did
     # What of the input's own settings the output file cannot hold, and what it gets instead.
     unlike_input: tuple[str, ...] = ()
+    target: str = AS_IMPORTED          # the engine it is written for (engine_targets.TARGETS)
+    extensions: frozenset[str] | None = None   # the only extensions it may carry (None: any)
+    # The glTF whose own tangents the output keeps where its vertices are the input's (gltf_tangents).
+    tangent_source: str | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         if self.compress not in COMPRESSIONS:
@@ -45,6 +54,7 @@ class GltfOutput:
     def report(self) -> dict:
         return {"compress": self.compress, "textures": self.textures, "max_texture": self.max_texture,
                 "tangents": self.tangents, "skins_at_root": self.skins_at_root, "normals": self.normals,
+                "target": self.target,
                 **({"unlike_input": list(self.unlike_input)} if self.unlike_input else {})}
 
 
@@ -76,26 +86,33 @@ def check_output_format(output: GltfOutput, file_format: str) -> None:
 
 
 def output_like_input(asset: str | Path | None, compress: str | None = None, textures: str | None = None,
-                      max_texture: int | None = None, file_format: str = "glb") -> GltfOutput:
+                      max_texture: int | None = None, file_format: str = "glb",
+                      target: str = AS_IMPORTED) -> GltfOutput:
     """The output settings: each one given, else as the input file has it (a non-glTF input, or none:
     none, png), within what `file_format` holds: an input's meshopt or KTX2 becomes plain or PNG in a
-    .gltf (`unlike_input` says so; given ones are the caller's to refuse). Tangents where the input has
-    them (and, for inputs that are not glTF, where a loaded material has a normal map:
+    .gltf (`unlike_input` says so; given ones are the caller's to refuse). For an engine `target`: only
+    the compression, texture format and extensions that engine reads (engine_targets). Tangents where the
+    input has them (and, for inputs that are not glTF, where a loaded material has a normal map:
     blender_io.gltf_export)."""
     from ...data.glb import gltf_json
 
+    engine = engine_target(target)
+    check_given(engine, compress, textures)
     is_gltf = asset is not None and Path(asset).suffix.lower() in (".gltf", ".glb")
     document = gltf_json(Path(asset)) if is_gltf else {}
-    used = document.get("extensionsUsed", [])
     unlike = []
     if compress is None:
-        compress = next((c for e, c in _COMPRESSION_OF_EXTENSION.items() if e in used), "none")
-        if file_format != "glb" and compress == GLB_ONLY["compress"]:
+        compress = _input_compression(document)
+        if engine.compressions:   # an engine's first choice that this kind of file holds
+            compress = next(c for c in engine.compressions if file_format == "glb" or c != GLB_ONLY["compress"])
+        elif file_format != "glb" and compress == GLB_ONLY["compress"]:
             compress = "none"
             unlike.append("the input's meshopt compression is written into .glb files only: none in this .gltf")
     if textures is None:
-        formats = [_image_format(image) for image in document.get("images", [])]
-        textures = max(set(formats) - {None}, key=formats.count, default="png")
+        textures = _input_texture_format(document)
+        if engine.textures and textures not in engine.textures:
+            unlike.append(f"{engine.label} does not read the input's {textures} textures: {engine.textures[0]}")
+            textures = engine.textures[0]
         if file_format != "glb" and textures == GLB_ONLY["textures"]:
             textures = "png"
             unlike.append("the input's KTX2 textures are written into .glb files only: PNG in this .gltf")
@@ -103,11 +120,40 @@ def output_like_input(asset: str | Path | None, compress: str | None = None, tex
                   for primitive in mesh.get("primitives", [])]
     tangents = any("TANGENT" in names for names in attributes)
     normals = not attributes or tangents or any("NORMAL" in names for names in attributes)
+    if tangents and compress == "draco":
+        tangents = False
+        unlike.append(DRACO_TANGENTS)
     # A glTF's skinned meshes stay where it had them; another kind of file has no say, so they go to the
     # root, where glTF wants them (the validator warns NODE_SKINNED_MESH_NON_ROOT under Blender's armature).
     at_root = _skinned_meshes_at_root(document) if is_gltf else True
     return GltfOutput(compress, textures, DEFAULT_MAX_TEXTURE if max_texture is None else max_texture, tangents,
-                      at_root, normals, tuple(unlike))
+                      at_root, normals, tuple(unlike), engine.name, kept_extensions(engine, compress, textures),
+                      str(asset) if tangents else None)
+
+
+def _input_compression(document: dict) -> str:
+    used = document.get("extensionsUsed", [])
+    return next((c for e, c in _COMPRESSION_OF_EXTENSION.items() if e in used), "none")
+
+
+def _input_texture_format(document: dict) -> str:
+    formats = [_image_format(image) for image in document.get("images", [])]
+    return max(set(formats) - {None}, key=formats.count, default="png")
+
+
+def extensions_kept(path: Path, keep: frozenset[str]) -> list[str]:
+    """engine_targets.keep_only_extensions on the .glb or .gltf file at `path`, rewritten in place if any
+    went. Returns the extensions taken out."""
+    from ...data.glb import read_gltf, write_glb
+    from .engine_targets import keep_only_extensions
+
+    document, chunk = read_gltf(path)
+    removed = keep_only_extensions(document, keep)
+    if removed and path.suffix.lower() == ".gltf":
+        path.write_text(json.dumps(document, indent=2))
+    elif removed:
+        write_glb(path, document, chunk)
+    return removed
 
 
 def _parents(document: dict) -> dict[int, int]:

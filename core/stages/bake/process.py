@@ -73,8 +73,10 @@ class BakeProcess:
 GameBake = Callable[[Path, Path, "threading.Event | None"], BakeProcess]
 
 
-def asset_file_bake(asset: str | Path, object_name: str | None = None) -> tuple[GameBake | None, str]:
-    """(bake function or None, why not): a SceneFit asset folder has no file of its own to rewrite."""
+def asset_file_bake(asset: str | Path, object_name: str | None = None,
+                    target: str = "as-imported") -> tuple[GameBake | None, str]:
+    """(bake function or None, why not): a SceneFit asset folder has no file of its own to rewrite.
+    `target`: the engine the file is for (`scenefit bake --target`)."""
     if is_asset_folder(asset):
         return None, ("the asset is a SceneFit asset folder; the game bake rewrites an asset's own file "
                       "(.glb, .gltf, .obj, .fbx, .blend)")
@@ -87,6 +89,8 @@ def asset_file_bake(asset: str | Path, object_name: str | None = None) -> tuple[
                    "--replace"]   # the stage's own folder: a stage redone replaces its own earlier bake
         if object_name:
             command += ["--object", object_name]
+        if target != "as-imported":
+            command += ["--target", target]
         return BakeProcess(command, asset, glb, report_file, cancel)
 
     return bake, ""

@@ -1,0 +1,59 @@
+"""`scenefit bake --target`: a corpus asset (ToyCar: clearcoat, sheen, transmission, texture transforms)
+baked for each engine validates clean and carries only what that engine's importer reads."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from scenefit.core.data.glb import gltf_json
+from scenefit.core.stages.bake.engine_targets import COMPRESSION_EXTENSION, TARGETS
+
+from conftest import ROOT, scenefit_process, scenefit_side_by_side
+
+CORPUS = Path(os.environ.get("SCENEFIT_CORPUS", ROOT.parent / "shared" / "corpus")) / "assets"
+TOY_CAR = CORPUS / "khronos_ToyCar" / "ToyCar.gltf"
+MIME_OF_FORMAT = {"png": "image/png", "jpeg": "image/jpeg", "webp": "image/webp", "ktx2": "image/ktx2"}
+ENGINES = ("web", "godot", "unity", "unreal")
+
+
+@pytest.fixture(scope="module")
+def toy_car_bakes(tmp_path_factory) -> dict[str, Path]:
+    if not TOY_CAR.is_file():
+        pytest.skip(f"the development corpus is not at {CORPUS.parent} (set SCENEFIT_CORPUS)")
+    folder = tmp_path_factory.mktemp("targets")
+    proc = scenefit_process("convert", TOY_CAR, "--out", folder / "convert", "--preset", "draft",
+                            "--resolution", "64", "--quiet")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    texture = folder / "convert" / "maps" / "texture.pt"
+    outs = {engine: folder / f"car_{engine}.glb" for engine in ENGINES}
+    results = scenefit_side_by_side(*[("bake", TOY_CAR, "--texture", texture, "--out", out, "--target", engine,
+                                       "--max-texture", "256", "--quiet") for engine, out in outs.items()])
+    for (code, err), engine in zip(results, ENGINES):
+        assert code == 0, f"{engine}: {err[-2000:]}"
+    return outs
+
+
+def test_each_engines_bake_validates_and_uses_only_what_that_engine_reads(toy_car_bakes, validator):
+    source = set(gltf_json(TOY_CAR)["extensionsUsed"])
+    assert {"KHR_materials_sheen", "KHR_materials_clearcoat", "KHR_materials_transmission"} <= source
+    seen = {}
+    for engine, path in toy_car_bakes.items():
+        target = TARGETS[engine]
+        report = validator(str(path))
+        assert report["issues"]["numErrors"] == 0, (engine, report["issues"]["messages"][:5])
+        document = gltf_json(path)
+        used = set(document.get("extensionsUsed", []))
+        assert used <= target.extensions, (engine, used - target.extensions)
+        assert set(document.get("extensionsRequired", [])) <= used
+        mimes = {image.get("mimeType") for image in document.get("images", [])}
+        assert mimes <= {MIME_OF_FORMAT[f] for f in target.textures}, (engine, mimes)
+        compressions = {c for c, name in COMPRESSION_EXTENSION.items() if name in used}
+        assert compressions <= set(target.compressions) and len(compressions) <= 1, (engine, compressions)
+        seen[engine] = used
+    # What each engine reads of the car's materials stays; what it does not goes.
+    assert "EXT_meshopt_compression" in seen["web"] and source <= seen["web"]
+    assert seen["godot"] & source == {"KHR_texture_transform"}
+    assert "KHR_materials_sheen" not in seen["unity"] and "KHR_materials_clearcoat" in seen["unity"]
+    assert source <= seen["unreal"]
