@@ -69,7 +69,7 @@ def add_parser(sub) -> None:
     p.add_argument("--target", choices=TARGET_NAMES, default=AS_IMPORTED,
                    help="the engine the file is for: only the compression, texture format and extensions its "
                         "importer reads (web: three.js / model-viewer, meshopt; godot: Godot 4; unity: glTFast; "
-                        "unreal; see docs/engine_targets.md) (default: as-imported, as the input file)")
+                        "unreal; see docs/technical/engine-targets.md) (default: as-imported, as the input file)")
     p.add_argument("--compress", choices=COMPRESSIONS,
                    help="mesh compression: none, draco (Blender's exporter) or meshopt (.glb only, meshoptimizer's "
                         "encoder) (default: as the input, or the --target's choice)")

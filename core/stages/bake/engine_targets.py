@@ -1,6 +1,6 @@
 """The engines a game bake is written for (`scenefit bake --target`, Bake Asset's Target): per engine, the
 mesh compressions, texture formats and glTF extensions its own importer reads, as its documentation
-says (docs/engine_targets.md cites each). A bake for an engine keeps what of the input that engine
+says (docs/technical/engine-targets.md cites each). A bake for an engine keeps what of the input that engine
 reads and gives up the rest: an extension it does not read is taken out of the file (a client ignores
 an optional extension it does not know, so only bytes and the validator's word change), a compression
 or texture format it does not read becomes the first it does."""
