@@ -61,7 +61,7 @@ def nowheels_zip(tmp_path_factory) -> Path:
     out = build_extension.build_without_wheels(tmp_path_factory.mktemp("dist") / "scenefit-nowheels.zip")
     names = zipfile.ZipFile(out).namelist()
     assert "blender_manifest.toml" in names and "__init__.py" in names and "core/data/mesh.py" in names
-    assert not any(n.startswith(("tests/", ".venv/", "wheels/", "benchmarks/")) for n in names)
+    assert not any(n.startswith(("tests/", ".venv/", "wheels/", "benchmarks/", "docs/")) for n in names)
     return out
 
 
