@@ -58,17 +58,24 @@ def obj_material_libraries(path: Path) -> tuple[list[Path], Path]:
 
 # MTL map options and how many values each takes (numbers, up to three; or one word: -clamp on).
 _NUMERIC_OPTIONS = ("-o", "-s", "-t", "-mm", "-bm", "-boost", "-texres")
+# The lines that name a map: Blender's OBJ importer reads map_* (map_Kd, map_Pm, map_refl, ...), refl (older
+# exporters' metallic) and bump; disp and norm are listed too, so nothing a reader may take goes unlisted.
+MTL_MAP_PREFIX, MTL_MAP_KEYWORDS = "map_", ("refl", "bump", "disp", "norm")
+
+
+def is_mtl_map(keyword: str) -> bool:
+    return keyword.startswith(MTL_MAP_PREFIX) or keyword in MTL_MAP_KEYWORDS
 
 
 def _mtl_maps(library: Path) -> list[Path]:
-    """The maps an MTL names (map_*, bump, disp, norm): each line's rest after its options, spaces kept."""
+    """The maps an MTL names (is_mtl_map): each line's rest after its options, spaces kept."""
     if not library.is_file():
         return []
     maps = []
     with open(library, errors="replace") as f:
         for line in f:
             words = line.split()
-            if words and (words[0].startswith("map_") or words[0] in ("bump", "disp", "norm")):
+            if words and is_mtl_map(words[0]):
                 name = _map_name(words[1:]).strip('"')
                 if name:   # as named, and its base name beside the library, where Blender looks next
                     maps += [library.parent / name, library.parent / name.replace("\\", "/").rsplit("/", 1)[-1]]
