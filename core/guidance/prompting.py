@@ -467,12 +467,13 @@ class ChatClient:
                 f"{where} answered HTTP {error.status_code} ({short(error.message)}); check the "
                 "endpoint, model name and API key, or use --offline.")) from None
         except openai.APIConnectionError as error:
-            raise PromptServiceError(self.secret_free(f"{where} cannot be reached ({short(str(error.__cause__ or error))}); "
-                                                      "check --endpoint or use --offline.")) from None
+            why = short(str(error.__cause__ or error))
+            raise PromptServiceError(self.secret_free(
+                f"{where} cannot be reached ({why}); check --endpoint or use --offline.")) from None
         except InputError as error:   # the body: not JSON, not a chat answer, too large
-            raise PromptServiceError(self.secret_free(f"{where} sent an answer that is not a chat completion "
-                                                      f"({short(str(error).rstrip('.'), 200)}); check --endpoint "
-                                                      "(it must be an OpenAI-compatible /v1 URL) or use --offline.")) from None
+            raise PromptServiceError(self.secret_free(
+                f"{where} sent an answer that is not a chat completion ({short(str(error).rstrip('.'), 200)}); "
+                "check --endpoint (it must be an OpenAI-compatible /v1 URL) or use --offline.")) from None
         text, refusal = self.secret_free(text), self.secret_free(refusal)
         if refusal or finish == "content_filter" or (REFUSAL_START.match(text) and ":" not in text):
             raise PromptServiceError(f"{where} refused to write the prompt ({short(refusal or text or finish)}); "
