@@ -80,9 +80,13 @@ def job_files(job: Job, listed: dict[Path, dict[str, Path]] | None = None) -> di
 
 
 def _asset_files(job: Job) -> dict[str, Path]:
-    from ..core.data.asset_files import as_named
+    from ..core.data.asset_files import as_named, refuse_special_files
 
     if job.asset.is_dir():
+        try:
+            refuse_special_files(job.asset)
+        except InputError as error:
+            raise InputError(f"Job '{job.name}': {error}") from None
         inside = job.asset.resolve()
         for path in job.asset.rglob("*"):   # (a folder link could loop, or lead anywhere)
             if path.is_symlink() and (path.is_dir() or not path.resolve().is_relative_to(inside)):

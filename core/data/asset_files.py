@@ -3,6 +3,7 @@ library): the files an output must never overwrite. Read as data (JSON and text 
 from __future__ import annotations
 
 import os
+import stat
 from pathlib import Path
 from urllib.parse import unquote
 
@@ -16,6 +17,7 @@ def asset_files(path: str | os.PathLike, resolve: bool = True) -> list[Path]:
     names), for laying the files out elsewhere as the asset names them."""
     path = Path(path)
     if path.is_dir():
+        refuse_special_files(path)
         return sorted(p.resolve() for p in path.rglob("*") if p.is_file())
     found = [path]
     suffix = path.suffix.lower()
@@ -26,7 +28,37 @@ def asset_files(path: str | os.PathLike, resolve: bool = True) -> list[Path]:
         for library in dict.fromkeys(named + [same_name]):
             found.append(library)
             found += _mtl_maps(library)
+    for named in found:   # a FIFO named as a map would hang Blender's importer, and any reader of it
+        kind = _special_kind(named)
+        if kind and not kind.startswith("a link"):
+            raise InputError(f"'{path.name}' names '{named}', which is {kind}, not a file; SceneFit reads only "
+                             "regular files, so put the file itself there.")
     return sorted({p.resolve() if resolve else as_named(p) for p in found if p.is_file()})
+
+
+def refuse_special_files(folder: Path) -> None:
+    """One sentence for the first entry below `folder` that is neither a regular file, a folder, nor a link
+    to one: a FIFO (reading it waits for ever), a socket, a device, or a link to nothing."""
+    for entry in folder.rglob("*"):
+        kind = _special_kind(entry)
+        if kind:
+            raise InputError(f"The asset folder '{folder}' holds '{entry.relative_to(folder)}', which is {kind}; "
+                             "SceneFit reads and sends only regular files and folders, so remove it or put the "
+                             "file itself there.")
+
+
+def _special_kind(path: Path) -> str:
+    """What `path` is when it exists and is not a regular file or folder (followed through links), else ''."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        return f"a link to nothing ('{os.readlink(path)}')" if path.is_symlink() else ""
+    except OSError as error:   # a link loop, a name too long
+        return f"unreadable ({error.strerror})"
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return ""
+    return ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode)
+            else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "not a regular file")
 
 
 def as_named(path: str | os.PathLike) -> Path:
