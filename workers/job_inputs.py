@@ -80,18 +80,18 @@ def job_files(job: Job, listed: dict[Path, dict[str, Path]] | None = None) -> di
 
 
 def _asset_files(job: Job) -> dict[str, Path]:
-    from ..core.data.asset_files import as_named, refuse_special_files
+    from ..core.data.asset_files import as_named, folder_files
 
-    if job.asset.is_dir():
+    if job.asset.is_dir():   # its files one by one: SceneFit's own output inside it neither travels nor counts
         try:
-            refuse_special_files(job.asset)
+            files = folder_files(job.asset)
         except InputError as error:
             raise InputError(f"Job '{job.name}': {error}") from None
         inside = job.asset.resolve()
         for path in job.asset.rglob("*"):   # (a folder link could loop, or lead anywhere)
             if path.is_symlink() and (path.is_dir() or not path.resolve().is_relative_to(inside)):
                 _outside(job, path, job.asset, f", a link to '{path.resolve()}'")
-        return {f"asset/{job.asset.name}": job.asset}
+        return {f"asset/{job.asset.name}/{path.relative_to(job.asset).as_posix()}": path for path in files}
     folder, own = as_named(job.asset.parent), as_named(job.asset)   # (the file the jobs file names may be a link)
     files = {}
     for path in asset_references(job.asset):

@@ -17,8 +17,7 @@ def asset_files(path: str | os.PathLike, resolve: bool = True) -> list[Path]:
     names), for laying the files out elsewhere as the asset names them."""
     path = Path(path)
     if path.is_dir():
-        refuse_special_files(path)
-        return sorted(p.resolve() for p in path.rglob("*") if p.is_file())
+        return sorted(p.resolve() for p in folder_files(path))
     found = [path]
     suffix = path.suffix.lower()
     if suffix in (".gltf", ".glb"):
@@ -34,6 +33,24 @@ def asset_files(path: str | os.PathLike, resolve: bool = True) -> list[Path]:
             raise InputError(f"'{path.name}' names '{named}', which is {kind}, not a file; SceneFit reads only "
                              "regular files, so put the file itself there.")
     return sorted({p.resolve() if resolve else as_named(p) for p in found if p.is_file()})
+
+
+def folder_files(folder: Path) -> list[Path]:
+    """The regular files of an asset folder, as named below it, SceneFit's own output beside them left out
+    (a run or batch folder written inside it, its staging and lock files): what an asset folder is made of,
+    for a job's payload and its digest alike, so a batch whose --out lies inside the folder does not
+    change the asset it reads. One sentence for a FIFO, socket, device or link to nothing in it."""
+    from ..base.output_folder import LOCK_TEXT, MARKER
+
+    refuse_special_files(folder)
+    runs = [marker.parent for marker in folder.rglob(MARKER) if marker.is_file()]
+    return sorted(p for p in folder.rglob("*") if p.is_file() and not any(run in p.parents for run in runs)
+                  and not (p.name.startswith(".") and p.name.endswith(".lock") and _starts_with(p, LOCK_TEXT)))
+
+
+def _starts_with(path: Path, head: bytes) -> bool:
+    with open(path, "rb") as handle:
+        return handle.read(len(head)) == head
 
 
 def refuse_special_files(folder: Path) -> None:
