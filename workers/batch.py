@@ -31,7 +31,8 @@ from typing import Callable
 
 from ..core.base.atomic import write_json_atomic, write_text_atomic
 from ..core.base.errors import Cancelled, InputError, SceneFitError
-from .job_inputs import job_digest, job_files
+from .job_inputs import job_digest, job_files, read_job_report, user_report
+from ..core.base.report import relative_paths
 from .jobs import CAMERA_KEYS, BatchSettings, Job, JobsFile, with_user_paths
 from ..core.base.output_folder import (FINISHED_JOBS_ATTRIBUTE, check_output_folder, check_subfolder,
                                       folder_in_place, install_folder)
@@ -178,6 +179,7 @@ class JobWorker:
             report = {"status": "done", "job": payload.job.to_dict(), "digest": payload.digest, "attempts": payload.attempt,
                       "seconds": round(time.perf_counter() - started, 3), "quality": quality_figures(stages),
                       "stages": stages, "worker": worker_info(self.jobs_run, self.models.loads)}
+            report = relative_paths(user_report(report, job, payload.job, Path(tmp)), out)   # no temporary paths
             write_json_atomic(out / REPORT, report)
             return JobResult(payload.job.name, report, pack({".": out}))
 
@@ -380,11 +382,7 @@ def quality_figures(stages: dict) -> dict:
 # -- the driver's side: folders, resume, retries ----------------------------------------------------
 
 def job_report(out_dir: Path, name: str) -> dict | None:
-    path = Path(out_dir) / name / REPORT
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
+    return read_job_report(Path(out_dir) / name / REPORT)   # (data: a planted report reads as none)
 
 
 @dataclass
