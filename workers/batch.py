@@ -33,6 +33,7 @@ from ..core.base.atomic import write_json_atomic, write_text_atomic
 from ..core.base.errors import Cancelled, InputError, SceneFitError
 from .job_inputs import job_digest, job_files, read_job_report, user_report
 from ..core.base.report import relative_paths
+from .interrupt import CtrlCStops
 from .jobs import CAMERA_KEYS, BatchSettings, Job, JobsFile, with_user_paths
 from ..core.base.output_folder import (FINISHED_JOBS_ATTRIBUTE, check_output_folder, check_subfolder,
                                       folder_in_place, install_folder)
@@ -461,8 +462,8 @@ def run_batch(jobs: JobsFile, out_dir: str | Path, dispatcher: Dispatcher | None
     listed: what check_batch returned, when the caller checked already (each asset is listed once)."""
     listed = listed if listed is not None else check_batch(jobs, out_dir, reuse_from)
     with folder_in_place(out_dir, batch_inputs(jobs)) as out_dir:
-        return _run_jobs(jobs, out_dir, dispatcher or InProcessDispatcher(jobs.settings), on_event, redo, reuse_from,
-                         listed)
+        return _run_jobs(jobs, out_dir, CtrlCStops(dispatcher or InProcessDispatcher(jobs.settings)), on_event, redo,
+                         reuse_from, listed)
 
 
 def batch_inputs(jobs: JobsFile) -> list[Path]:
