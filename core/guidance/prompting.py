@@ -26,11 +26,13 @@ import time
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Annotated, Callable
+
+from pydantic import Field
 
 from ..base.atomic import write_json_atomic
 from ..base.errors import InputError, PromptServiceError
-from ..base.untrusted import Record, checked, parse_json, read_json
+from ..base.untrusted import Record, checked, parse_json, read_bytes, read_json
 
 MODE_TYPES = ("describe", "instruct")
 VISION_TYPES = ("auto", "yes", "no")
@@ -184,18 +186,30 @@ def default_cache_dir() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "scenefit" / "prompts"
 
 
+class PromptingTable(Record):
+    """The config file's [prompting] table: each setting of the type it is used as."""
+
+    endpoint: str = ""
+    model: str = ""
+    api_key: str = ""
+    timeout_s: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 60.0
+    vision: str = "auto"
+
+
 def read_config_file(path: Path | None = None) -> dict:
     """The [prompting] table of the config file ({} when there is none)."""
     path = Path(path) if path else default_config_path()
     if not path.is_file():
         return {}
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
-        raise InputError(f"The config file '{path}' is not valid TOML: {error}.") from error
+        data = tomllib.loads(read_bytes(path, 2**20, "config file").decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as error:
+        reason = "it nests too deep" if isinstance(error, RecursionError) else str(error)
+        raise InputError(f"The config file '{path}' is not valid TOML: {reason}.") from None
     table = data.get("prompting", {})
     if not isinstance(table, dict):
         raise InputError(f"In '{path}', 'prompting' must be a table ([prompting]).")
+    checked(table, PromptingTable, f"the config file '{path}'s [prompting] table")
     return table
 
 

@@ -186,3 +186,22 @@ def test_fuzz_any_answer_gives_a_prompt_or_one_sentence(server, tmp_path, body, 
         assert result.prompt.strip() and result.source == "model"
     except PromptServiceError as error:
         one_sentence(error)
+
+
+@pytest.mark.parametrize("text, words", [
+    ('[prompting]\ntimeout_s = "soon"\n', ("'timeout_s'",)),
+    ("[prompting]\ntimeout_s = inf\n", ("'timeout_s'", "finite")),
+    ("a = " + "[" * 5000 + "]" * 5000 + "\n", ("nests too deep",)),
+    ("[prompting]\nendpoint = 5\n", ("'endpoint'",)),
+])
+def test_a_config_file_of_another_shape_is_one_sentence(tmp_path, text, words):
+    from scenefit.core.base.errors import InputError
+    from scenefit.core.guidance.prompting import read_config_file, resolve_service
+
+    path = tmp_path / "config.toml"
+    path.write_text(text)
+    with pytest.raises(InputError) as caught:
+        resolve_service(config_path=path)
+    one_sentence(caught.value, str(path), *words)
+    path.write_text('[prompting]\nendpoint = "http://127.0.0.1:9/v1"\nmodel = "m"\ntimeout_s = 30\n')
+    assert read_config_file(path)["timeout_s"] == 30 and resolve_service(config_path=path).timeout_s == 30.0
