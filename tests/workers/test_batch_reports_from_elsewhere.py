@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from scenefit.core.base.report import relative_paths, write_report
 from scenefit.core.data.asset_io import save_asset_folder
@@ -73,3 +74,18 @@ def test_a_planted_job_report_reads_as_none(tmp_path, raw):
     assert job_report(tmp_path, "a") is None
     (tmp_path / "a" / "report.json").write_text('{"status": "done", "digest": "d", "seconds": 2}')
     assert job_report(tmp_path, "a")["digest"] == "d"
+
+
+@settings(derandomize=True, max_examples=150, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(st.recursive(st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False) | st.text(max_size=8),
+                    lambda c: st.lists(c, max_size=3) | st.dictionaries(st.sampled_from(
+                        ["status", "digest", "attempts", "seconds", "quality", "stages", "run", "x"]), c, max_size=4),
+                    max_leaves=15), st.binary(max_size=8))
+def test_fuzz_job_reports_read_as_a_report_or_none(tmp_path, value, tail):
+    (tmp_path / "a").mkdir(exist_ok=True)
+    (tmp_path / "a" / "report.json").write_bytes(json.dumps(value).encode() + (tail if tail[:1] == b"\xff" else b""))
+    report = job_report(tmp_path, "a")
+    if report is not None:   # what the batch reads of it is of the types it uses
+        assert isinstance(report["status"], str) and isinstance(report["digest"], str)
+        assert isinstance(report["stages"]["run"]["stages"], dict) and isinstance(report["quality"], dict)
