@@ -83,7 +83,8 @@ def test_a_copy_inflating_past_a_gigabyte_is_refused_without_inflating_it(tmp_pa
 import json, resource
 from scenefit.core.data.asset_read_cache import load_read
 found = load_read({str(tmp_path)!r}, "k")
-print("JSON", json.dumps({{"found": found is not None, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}}))
+peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print("JSON", json.dumps({{"found": found is not None, "peak_mb": peak_mb}}))
 """)
     result = printed_json(proc)
     assert not result["found"] and result["peak_mb"] < 900, result   # the array alone is 1152 MB

@@ -150,7 +150,7 @@ def test_a_damaged_cache_entry_is_asked_for_again(server, tmp_path, damage):
 
 def test_the_api_key_an_endpoint_echoes_is_kept_out_of_report_cache_and_messages(server, tmp_path):
     echoed = f"Analysis: your header was {{auth}}.\n\nDescription: {GOOD}".encode()
-    server.script = [(200, "application/json", completion("x").replace(b'"x"', json.dumps(echoed.decode()).encode()), 0)]
+    server.script = [(200, "application/json", completion(echoed.decode()), 0)]
     result = ask(server, tmp_path)
     assert result.prompt == GOOD and "[API key]" in result.analysis
     assert KEY not in json.dumps(result.to_report())
