@@ -39,11 +39,12 @@ def folder_files(folder: Path) -> list[Path]:
     """The regular files of an asset folder, as named below it, SceneFit's own output beside them left out
     (a run or batch folder written inside it, its staging and lock files): what an asset folder is made of,
     for a job's payload and its digest alike, so a batch whose --out lies inside the folder does not
-    change the asset it reads. One sentence for a FIFO, socket, device or link to nothing in it."""
+    change the asset it reads (the folder itself may be one of SceneFit's: a convert's texture folder is read
+    whole). One sentence for a FIFO, socket, device or link to nothing in it."""
     from ..base.output_folder import LOCK_TEXT, MARKER
 
     refuse_special_files(folder)
-    runs = [marker.parent for marker in folder.rglob(MARKER) if marker.is_file()]
+    runs = [marker.parent for marker in folder.rglob(MARKER) if marker.is_file() and marker.parent != folder]
     return sorted(p for p in folder.rglob("*") if p.is_file() and not any(run in p.parents for run in runs)
                   and not (p.name.startswith(".") and p.name.endswith(".lock") and _starts_with(p, LOCK_TEXT)))
 

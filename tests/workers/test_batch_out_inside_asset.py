@@ -37,3 +37,13 @@ def test_the_batchs_own_output_inside_the_asset_folder_leaves_the_digest(tmp_pat
     (folder / "notes.txt").unlink()
     (folder / ".mine.lock").write_text("a user's file of that name is theirs")
     assert job_digest(job, job_files(job)) != before
+
+
+def test_a_folder_that_is_itself_a_run_folder_is_read_whole(tmp_path):
+    from scenefit.core.data.asset_files import asset_files
+
+    folder = save_asset_folder(uv_sphere(segments=8, rings=4), PBRMaps(np.full((4, 4, 3), 0.5, np.float32)),
+                               tmp_path / "texture")
+    write_marker(folder)   # a convert's output folder, given as `scenefit bake --texture`: its files are inputs
+    listed = {p.name for p in asset_files(folder)}
+    assert {p.name for p in folder.iterdir() if p.is_file()} <= listed and len(listed) >= 2
