@@ -13,7 +13,9 @@ float32. Files older than FBX 7 (a different text layout) are refused in one sen
 from __future__ import annotations
 
 import base64
+import math
 import re
+from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -76,7 +78,12 @@ def _tokens(text: str) -> list[tuple[str, str]]:
     return out
 
 
-def _nodes(tokens: list, at: int) -> tuple[list, int]:
+MAX_DEPTH = 200   # FBX files nest a dozen levels; a brace thousands deep is not one
+
+
+def _nodes(tokens: list, at: int, depth: int = 0) -> tuple[list, int]:
+    if depth > MAX_DEPTH:
+        raise ValueError(f"nodes nest more than {MAX_DEPTH} deep")
     nodes = []
     while at < len(tokens) and tokens[at] != ("brace", "}"):
         kind, name = tokens[at]
@@ -85,7 +92,7 @@ def _nodes(tokens: list, at: int) -> tuple[list, int]:
         props, at = _values(tokens, at + 1)
         children = []
         if at < len(tokens) and tokens[at] == ("brace", "{"):
-            children, at = _nodes(tokens, at + 1)
+            children, at = _nodes(tokens, at + 1, depth + 1)
             if at >= len(tokens):
                 raise ValueError(f"node '{name}' is not closed")
             at += 1
@@ -97,7 +104,10 @@ def _values(tokens: list, at: int) -> tuple[list, int]:
     """A node's values: an array (`*N {a: ...}`) or a comma-separated list (possibly empty)."""
     if at < len(tokens) and tokens[at][0] == "array":
         # One token for the whole array, split in C: a mesh's millions of numbers never pass the tokenizer.
-        count, body = _ARRAY.fullmatch(tokens[at][1]).groups()
+        array = _ARRAY.fullmatch(tokens[at][1])
+        if array is None:
+            raise ValueError(f"an array not written as '*N {{a: values}}': {tokens[at][1][:30]!r}")
+        count, body = array.groups()
         numbers = [number.strip() for number in body.split(",")] if body and body.strip() else []
         if numbers and not numbers[-1]:   # a trailing comma, as Asset Forge writes
             numbers.pop()
@@ -118,27 +128,40 @@ def _values(tokens: list, at: int) -> tuple[list, int]:
 
 def binary_copy(source: Path, out: Path) -> Path:
     """`out`: the ASCII FBX `source` written as a binary FBX of the same version. InputError (one
-    sentence) for text that is not an FBX 7 file."""
-    try:
-        nodes = parse_ascii_fbx(Path(source).read_text(encoding="utf-8", errors="replace"))
-    except (ValueError, IndexError) as error:
-        raise InputError(f"Asset file '{source}' is an ASCII FBX file that cannot be read ({error}); check that "
-                         "it is a valid FBX file.") from None
-    version = _version(nodes)
-    if version < 7000:
-        raise InputError(f"Asset file '{source}' is an FBX {version / 1000:g} text file; Blender reads FBX 7 and "
-                         "later, so save it from its application as a binary FBX (2011 or later) or as glTF.")
+    sentence) for text that is not an FBX 7 file, or holds a value its field cannot take."""
+    version, typed = read_text_fbx(source)
     from io_scene_fbx import encode_bin   # Blender's add-on, on the path once bpy is imported
 
     root = encode_bin.FBXElem(b"")
-    # The binary writer stamps its own file id and creation time, which must be of its types.
-    nodes = [node for node in nodes if node[0] not in ("FileId", "CreationTime")]
-    for node in nodes:
-        _element(encode_bin, root, node, parent="")
+    for node in typed:
+        _element(encode_bin, root, node)
     root.elems.append(_with(encode_bin.FBXElem(b"FileId"), "add_bytes", b"\0" * 16))
     root.elems.append(_with(encode_bin.FBXElem(b"CreationTime"), "add_string", b"1970-01-01 10:00:00:000"))
     encode_bin.write(str(out), root, version)
     return out
+
+
+def read_text_fbx(source: Path) -> tuple[int, list[tuple]]:
+    """(FBX version, typed_tree) of the ASCII FBX `source`; InputError (one sentence) for text that is not
+    an FBX 7 file or holds a value its field cannot take. Everything of the file is read here: what the
+    binary writer is handed after it has its types."""
+    try:
+        nodes = parse_ascii_fbx(Path(source).read_text(encoding="utf-8", errors="replace"))
+        version = _version(nodes)
+        # The binary writer stamps its own file id and creation time, which must be of its types.
+        typed = typed_tree([node for node in nodes if node[0] not in ("FileId", "CreationTime")])
+    except (ValueError, IndexError, OverflowError) as error:   # (binascii.Error is a ValueError)
+        raise InputError(f"Asset file '{source}' is an ASCII FBX file that cannot be read ({_short(error)}); check "
+                         "that it is a valid FBX file.") from None
+    if version < 7000:
+        raise InputError(f"Asset file '{source}' is an FBX {version / 1000:g} text file; Blender reads FBX 7 and "
+                         "later, so save it from its application as a binary FBX (2011 or later) or as glTF.")
+    return version, typed
+
+
+def _short(error: Exception) -> str:
+    text = " ".join(str(error).split())
+    return text if len(text) <= 120 else text[:119] + "…"
 
 
 def _with(element, method: str, value):
@@ -151,52 +174,101 @@ def _version(nodes: list) -> int:
         if name == "FBXHeaderExtension":
             for child_name, child_props, _ in children:
                 if child_name == "FBXVersion" and child_props:
-                    return int(child_props[0][1])
+                    return _integer(child_props[0][1], _INT32, "FBXVersion")
     return 0
 
 
-def _element(encode_bin, parent_element, node: tuple, parent: str) -> None:
-    name, props, children = node
-    element = encode_bin.FBXElem(name.encode())
-    parent_element.elems.append(element)
-    declared = props[1][1] if name == "P" and len(props) > 1 else None
-    for index, (kind, value) in enumerate(props):
-        _add(element, name, parent, index, kind, value, declared)
-    for child in children:
-        _element(encode_bin, element, child, parent=name)
+def typed_tree(nodes: list, parent: str = "") -> list[tuple]:
+    """The parsed nodes with each value as the binary writer takes it: (name, [(writer method, value)],
+    [children]). ValueError naming the field for a value its type cannot hold (a word in a number
+    array, a number out of its integer range, text that is not base64)."""
+    typed: list[tuple] = []
+    todo = [(nodes, parent, typed)]
+    while todo:   # (no recursion: a hostile file may nest its braces thousands deep)
+        level, above, into = todo.pop()
+        for name, props, children in level:
+            declared = props[1][1] if name == "P" and len(props) > 1 else None
+            label = f"property '{props[0][1]}'" if declared is not None else name   # (what the sentence names)
+            values = [_typed(name, above, index, kind, value, declared, label)
+                      for index, (kind, value) in enumerate(props)]
+            node = (name, values, [])
+            into.append(node)
+            todo.append((children, name, node[2]))
+    return typed
 
 
-def _add(element, name: str, parent: str, index: int, kind: str, value, declared: str | None) -> None:
+def _element(encode_bin, parent_element, node: tuple) -> None:
+    todo = deque([(parent_element, node)])
+    while todo:
+        above, (name, values, children) = todo.popleft()
+        element = encode_bin.FBXElem(name.encode())
+        above.elems.append(element)
+        for method, value in values:
+            getattr(element, method)(value)
+        todo += [(element, child) for child in children]
+
+
+_INT32, _INT64 = (-2**31, 2**31), (-2**63, 2**63)
+
+
+def _integer(text: str, bounds: tuple[int, int], field: str) -> int:
+    number = float(text)
+    whole = int(text) if re.fullmatch(r"[-+]?\d+", text) else int(number) if math.isfinite(number) else None
+    if whole is None or not bounds[0] <= whole < bounds[1]:
+        raise ValueError(f"{field} holds {text[:30]!r}, not an integer it can take")
+    return whole
+
+
+def _typed(name: str, parent: str, index: int, kind: str, value, declared: str | None,
+           label: str) -> tuple[str, object]:
     if kind == "array":
-        numbers = np.array(value, dtype=np.float64)   # exact for the integers an FBX holds (< 2^53)
-        if name in _INT32_ARRAYS:
-            element.add_int32_array(numbers.astype(np.int32))
-        elif name in _INT64_ARRAYS:
-            element.add_int64_array(numbers.astype(np.int64))
-        elif name in _FLOAT32_ARRAYS:
-            element.add_float32_array(numbers.astype(np.float32))
-        else:
-            element.add_float64_array(numbers)
-    elif kind == "string":
+        try:
+            numbers = np.array(value, dtype=np.float64)   # exact for the integers an FBX holds (< 2^53)
+        except ValueError:
+            word = next(v for v in value if not _is_number(v))
+            raise ValueError(f"{name} holds {word[:30]!r} among its numbers") from None
+        if name in _INT32_ARRAYS or name in _INT64_ARRAYS:
+            bounds = _INT32 if name in _INT32_ARRAYS else _INT64
+            if numbers.size and not (np.isfinite(numbers).all() and bounds[0] <= numbers.min()
+                                     and numbers.max() < bounds[1]):
+                raise ValueError(f"{name} holds numbers that are not integers it can take")
+            return ("add_int32_array", numbers.astype(np.int32)) if name in _INT32_ARRAYS else \
+                ("add_int64_array", numbers.astype(np.int64))
+        if name in _FLOAT32_ARRAYS:
+            return "add_float32_array", numbers.astype(np.float32)
+        return "add_float64_array", numbers
+    if kind == "string":
         if name == "Content":   # embedded media, base64 in text
-            element.add_bytes(base64.b64decode(value) if value else b"")
-            return
+            return "add_bytes", base64.b64decode(value) if value else b""
         named = _OBJECT_NAME.match(value)
         raw = (named.group(2) + "\x00\x01" + named.group(1)) if named else value
-        element.add_string(raw.encode("utf-8"))
-    elif kind == "word":
-        element.add_char(value[:1].encode())
-    elif declared is not None:   # a P: property's value
+        return "add_string", raw.encode("utf-8", "replace")
+    if kind == "word":
+        return "add_char", value[:1].encode()
+    if declared is not None:   # a P: property's value
         if declared in _P_INT32:
-            element.add_int32(int(float(value)))
-        elif declared in _P_INT64:
-            element.add_int64(int(float(value)))
-        else:
-            element.add_float64(float(value))
-    elif parent == "Objects" and index == 0 or name == "C" or name in _INT64_SCALARS:
-        element.add_int64(int(float(value)))
-    elif re.fullmatch(r"[-+]?\d+", value):
-        number = int(value)
-        element.add_int32(number) if -2**31 <= number < 2**31 else element.add_int64(number)
-    else:
-        element.add_float64(float(value))
+            return "add_int32", _integer(value, _INT32, label)
+        if declared in _P_INT64:
+            return "add_int64", _integer(value, _INT64, label)
+        return "add_float64", _finite(value, label)
+    if parent == "Objects" and index == 0 or name == "C" or name in _INT64_SCALARS:
+        return "add_int64", _integer(value, _INT64, name)
+    if re.fullmatch(r"[-+]?\d+", value):
+        number = _integer(value, _INT64, name)
+        return ("add_int32", number) if _INT32[0] <= number < _INT32[1] else ("add_int64", number)
+    return "add_float64", _finite(value, name)
+
+
+def _finite(text: str, field: str) -> float:
+    number = float(text)
+    if not math.isfinite(number):
+        raise ValueError(f"{field} holds {text[:30]!r}, out of range")
+    return number
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

@@ -31,7 +31,9 @@ from typing import Callable, Protocol, Sequence
 
 from ..core.base.atomic import write_json_atomic, write_text_atomic
 from ..core.base.errors import Cancelled, InputError, SceneFitError
-from .job_inputs import job_digest, job_files
+from .job_inputs import job_digest, job_files, read_job_report, user_report
+from ..core.base.report import relative_paths
+from .interrupt import CtrlCStops
 from .jobs import CAMERA_KEYS, BatchSettings, Job, JobsFile, with_user_paths
 from ..core.base.output_folder import (FINISHED_JOBS_ATTRIBUTE, check_output_folder, check_subfolder,
                                       folder_in_place, install_folder)
@@ -178,6 +180,7 @@ class JobWorker:
             report = {"status": "done", "job": payload.job.to_dict(), "digest": payload.digest, "attempts": payload.attempt,
                       "seconds": round(time.perf_counter() - started, 3), "quality": quality_figures(stages),
                       "stages": stages, "worker": worker_info(self.jobs_run, self.models.loads)}
+            report = relative_paths(user_report(report, job, payload.job, Path(tmp)), out)   # no temporary paths
             write_json_atomic(out / REPORT, report)
             return JobResult(payload.job.name, report, pack({".": out}))
 
@@ -380,11 +383,7 @@ def quality_figures(stages: dict) -> dict:
 # -- the driver's side: folders, resume, retries ----------------------------------------------------
 
 def job_report(out_dir: Path, name: str) -> dict | None:
-    path = Path(out_dir) / name / REPORT
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
+    return read_job_report(Path(out_dir) / name / REPORT)   # (data: a planted report reads as none)
 
 
 @dataclass
@@ -463,8 +462,8 @@ def run_batch(jobs: JobsFile, out_dir: str | Path, dispatcher: Dispatcher | None
     listed: what check_batch returned, when the caller checked already (each asset is listed once)."""
     listed = listed if listed is not None else check_batch(jobs, out_dir, reuse_from)
     with folder_in_place(out_dir, batch_inputs(jobs)) as out_dir:
-        return _run_jobs(jobs, out_dir, dispatcher or InProcessDispatcher(jobs.settings), on_event, redo, reuse_from,
-                         listed)
+        return _run_jobs(jobs, out_dir, CtrlCStops(dispatcher or InProcessDispatcher(jobs.settings)), on_event, redo,
+                         reuse_from, listed)
 
 
 def batch_inputs(jobs: JobsFile) -> list[Path]:

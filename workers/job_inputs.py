@@ -21,6 +21,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from ..core.base.errors import InputError
+from ..core.base.untrusted import Record, read_json
 from .jobs import Job
 
 # Files an .fbx may name for Blender's importer to read beside it (its images).
@@ -80,14 +81,18 @@ def job_files(job: Job, listed: dict[Path, dict[str, Path]] | None = None) -> di
 
 
 def _asset_files(job: Job) -> dict[str, Path]:
-    from ..core.data.asset_files import as_named
+    from ..core.data.asset_files import as_named, folder_files
 
-    if job.asset.is_dir():
+    if job.asset.is_dir():   # its files one by one: SceneFit's own output inside it neither travels nor counts
+        try:
+            files = folder_files(job.asset)
+        except InputError as error:
+            raise InputError(f"Job '{job.name}': {error}") from None
         inside = job.asset.resolve()
         for path in job.asset.rglob("*"):   # (a folder link could loop, or lead anywhere)
             if path.is_symlink() and (path.is_dir() or not path.resolve().is_relative_to(inside)):
                 _outside(job, path, job.asset, f", a link to '{path.resolve()}'")
-        return {f"asset/{job.asset.name}": job.asset}
+        return {f"asset/{job.asset.name}/{path.relative_to(job.asset).as_posix()}": path for path in files}
     folder, own = as_named(job.asset.parent), as_named(job.asset)   # (the file the jobs file names may be a link)
     files = {}
     for path in asset_references(job.asset):
@@ -124,3 +129,49 @@ def _file_sha(path: str, size: int, mtime_ns: int) -> bytes:
     """A file's SHA-256, read in chunks; kept while its size and modification time stay."""
     with open(path, "rb") as f:
         return hashlib.file_digest(f, "sha256").digest()
+
+
+def user_report(report, copy: Job, job: Job, folder: Path):
+    """A worker's job report naming the user's files: the inputs unpacked below `folder` (the worker's
+    temporary job folder) as the files the jobs file named (jobs.with_user_paths), the earlier run's
+    stages it carried as that run, so no report names a temporary folder that is gone once the job ends."""
+    from .jobs import with_user_paths
+
+    if isinstance(report, dict):
+        return {k: user_report(v, copy, job, folder) for k, v in report.items()}
+    if isinstance(report, (list, tuple)):
+        return [user_report(v, copy, job, folder) for v in report]
+    if isinstance(report, str) and str(folder) in report:
+        text = with_user_paths(report, copy, job)
+        return text.replace(str(folder / "in" / "earlier"), f"the earlier run of job '{job.name}'")
+    return report
+
+
+class _RunStages(Record):
+    stages: dict[str, dict] = {}
+
+
+class _JobStages(Record):
+    run: _RunStages = _RunStages()
+
+
+class JobReport(Record):
+    """What a later batch reads of DIR/<job>/report.json (data: the folder may come from anywhere)."""
+
+    status: str
+    digest: str = ""
+    attempts: int = 0
+    seconds: float = 0.0
+    quality: dict[str, object] = {}
+    stages: _JobStages = _JobStages()
+
+
+def read_job_report(path: Path) -> dict | None:
+    """The job report at `path` as a dict, or None where there is none or it does not read as one (the
+    job then runs again, as a job never run does)."""
+    if not path.is_file():
+        return None
+    try:
+        return read_json(path, JobReport, "job report").model_dump()
+    except InputError:
+        return None

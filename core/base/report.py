@@ -1,6 +1,8 @@
 """A stage's report.json: strict JSON, written atomically, paths inside its folder made relative."""
 from __future__ import annotations
 
+import os
+import re
 import time
 from pathlib import Path
 
@@ -17,6 +19,10 @@ def write_report(path: str | Path, report: dict) -> Path:
 
 
 def relative_paths(value, folder: Path):
+    """`value` with every path inside `folder` relative to it: whole strings (and Paths) as relative
+    paths, and inside text ("read asset folder '/x/.out.partial/asset'") too; a staging folder's name
+    anywhere (`.out.partial`, `.job.partial-1a2b`) is the name of the folder it becomes, which is where
+    the path leads once the run is swapped into place."""
     if isinstance(value, dict):
         return {k: relative_paths(v, folder) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -27,5 +33,17 @@ def relative_paths(value, folder: Path):
             try:
                 return candidate.absolute().relative_to(folder).as_posix()
             except ValueError:
-                return str(value) if isinstance(value, Path) else value
+                pass
+        return final_names(str(value).replace(f"{folder}{os.sep}", "")) if isinstance(value, Path) or \
+            "partial" in value or str(folder) in value else value
     return value
+
+
+# A staging folder's name: `.NAME.partial` (a run's, core/base/output_folder.staging_path) or
+# `.NAME.partial-XXXX` (a batch job's, install_folder), as a path component.
+_STAGING = re.compile(r"(?<![^/\\'\"])\.([^/\\'\"]+?)\.partial(?:-[A-Za-z0-9_]+)?(?=$|[/\\'\"])")
+
+
+def final_names(text: str) -> str:
+    """`text` with each staging folder's name in a path replaced by the name of the folder it becomes."""
+    return _STAGING.sub(r"\1", text)

@@ -14,17 +14,23 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 import zipfile
+import zlib
 from importlib import metadata
 from pathlib import Path
+from typing import Annotated, Literal
 
 import numpy as np
+from annotated_types import Len
 
 from .asset_files import asset_files
 from ..base.atomic import write_bytes_atomic
 from ..base.errors import InputError
+from ..base.untrusted import Record, checked, parse_json
 from .maps import PBRMaps
 from .mesh import Mesh
+from .uv_raster import WRAP_MODES
 from ..base.source_graph import reachable_sources
 
 CACHE_FILE = ".asset-read.npz"
@@ -54,28 +60,68 @@ def _blender_version() -> str:
         return "blender"
 
 
+# What a copy may inflate to: the arrays of an asset with 4096-pixel maps are about 600 MB.
+MAX_READ_BYTES = 2**30
+# The arrays a copy may hold, and the numbers they may be (never objects: those would need pickle).
+_ARRAYS = ("positions", "faces", "uvs", "base_color", "normals", "material_index", "normal", "roughness", "metallic")
+
+
+class _Meta(Record):
+    """The copy's JSON beside its arrays."""
+
+    key: str
+    name: str
+    wraps: list[Annotated[list[Literal[WRAP_MODES]], Len(2, 2)]]
+    atlas: bool
+    roughness: float | None = None
+    metallic: float | None = None
+
+
 def load_read(folder: str | Path, key: str | None) -> tuple[Mesh, PBRMaps] | None:
     """The (Mesh, PBRMaps) a run into `folder` saved under `key`, or None (no copy, another key, or a
-    copy that does not read)."""
+    copy that does not read: damaged, of another shape, or inflating past MAX_READ_BYTES)."""
     path = Path(folder) / CACHE_FILE
     if key is None or not path.is_file():
         return None
     try:
+        _check_inflated_size(path, MAX_READ_BYTES)
         with np.load(path, allow_pickle=False) as data:
-            meta = json.loads(str(data["meta"]))
-            if meta.get("key") != key:
+            meta = checked(parse_json(str(data["meta"]), f"the asset-read copy '{path}'"), _Meta,
+                           f"the asset-read copy '{path}'")
+            if meta.key != key:
                 return None
-            arrays = {name: data[name] for name in data.files if name != "meta"}
+            arrays = {name: data[name] for name in data.files if name in _ARRAYS}
+        if any(not np.issubdtype(a.dtype, np.number) or not np.isfinite(a).all() for a in arrays.values()):
+            return None
         mesh = Mesh(positions=arrays["positions"], faces=arrays["faces"], uvs=arrays["uvs"],
-                    normals=arrays.get("normals"), name=meta["name"], material_index=arrays.get("material_index"),
-                    wraps=tuple(tuple(w) for w in meta["wraps"]), atlas=meta["atlas"])
+                    normals=arrays.get("normals"), name=meta.name, material_index=arrays.get("material_index"),
+                    wraps=tuple(tuple(w) for w in meta.wraps), atlas=meta.atlas)
         maps = PBRMaps(base_color=arrays["base_color"], normal=arrays.get("normal"),
-                       roughness=arrays.get("roughness", meta["roughness"]),
-                       metallic=arrays.get("metallic", meta["metallic"]))
+                       roughness=arrays.get("roughness", meta.roughness),
+                       metallic=arrays.get("metallic", meta.metallic))
     # A copy that does not read whole is no copy: the asset is read again (JSONDecodeError is a ValueError).
-    except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile, InputError):
+    except (OSError, ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile, zlib.error, InputError):
         return None
     return mesh, maps
+
+
+def _check_inflated_size(path: Path, limit: int) -> None:
+    """ValueError unless the archive's members inflate to at most `limit` bytes in all and each array's
+    header asks for no more than its member holds (numpy allocates what the header says before reading)."""
+    with zipfile.ZipFile(path) as archive:
+        members = archive.infolist()
+        if sum(m.file_size for m in members) > limit:
+            raise ValueError(f"{path} inflates past {limit} bytes")
+        for member in members:
+            with archive.open(member) as stream:
+                version = np.lib.format.read_magic(stream)   # (numpy writes 1.0, or 2.0 for huge headers)
+                header = {(1, 0): np.lib.format.read_array_header_1_0,
+                          (2, 0): np.lib.format.read_array_header_2_0}.get(version)
+                if header is None:
+                    raise ValueError(f"{member.filename} is .npy version {version}")
+                shape, _, dtype = header(stream)
+                if dtype.hasobject or math.prod(shape) * dtype.itemsize > member.file_size:
+                    raise ValueError(f"{member.filename} asks for more than it holds")
 
 
 def save_read(folder: str | Path, key: str | None, mesh: Mesh, maps: PBRMaps) -> Path | None:

@@ -9,11 +9,14 @@ import struct
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Annotated, Any, Literal
 from urllib.parse import unquote
 
 import numpy as np
+from pydantic import Field
 
 from ..base.errors import InputError
+from ..base.untrusted import Record, checked
 from .glb import read_gltf, write_glb
 
 EXTENSION = "EXT_meshopt_compression"
@@ -21,14 +24,41 @@ _MIME = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".web
          ".ktx2": "image/ktx2"}
 
 
+class BufferView(Record):
+    buffer: Annotated[int, Field(ge=0)]
+    byteOffset: Annotated[int, Field(ge=0)] = 0
+    byteLength: Annotated[int, Field(ge=0)]
+    extensions: dict[str, Any] = {}
+
+
+class Buffer(Record):
+    uri: str = ""
+
+
+class Image(Record):
+    uri: str = ""
+    bufferView: Annotated[int, Field(ge=0)] | None = None
+
+
+class GltfParts(Record):
+    """The parts of a glTF document the decoder walks, typed (the meshopt objects: MeshoptView)."""
+
+    extensionsUsed: list[str] = []
+    extensionsRequired: list[str] = []
+    buffers: list[Buffer] = []
+    bufferViews: list[BufferView] = []
+    images: list[Image] = []
+
+
 def uses_meshopt(path: Path) -> bool:
     if path.suffix.lower() not in (".gltf", ".glb"):
         return False
     try:
         document, _ = read_gltf(path)
-    except (ValueError, struct.error, UnicodeDecodeError):
+    except (ValueError, struct.error, UnicodeDecodeError, RecursionError):
         return False  # not readable as glTF: the importer says why
-    return EXTENSION in document.get("extensionsUsed", [])
+    used = document.get("extensionsUsed") if isinstance(document, dict) else None
+    return isinstance(used, list) and EXTENSION in used
 
 
 def _uri_bytes(uri: str, folder: Path) -> bytes:
@@ -50,32 +80,73 @@ def _buffers(document: dict, chunk: bytes | None, folder: Path) -> list[bytes | 
     return found
 
 
-def _decoded_view(view: dict, buffers: list[bytes | None]) -> bytes:
+# What a file may decode to in all: a game asset's geometry is megabytes, a scanned one a few hundred.
+MAX_DECODED_BYTES = 2**31
+
+
+class MeshoptView(Record):
+    """A bufferView's EXT_meshopt_compression object, as the extension's schema types it."""
+
+    buffer: Annotated[int, Field(ge=0)]
+    byteOffset: Annotated[int, Field(ge=0)] = 0
+    byteLength: Annotated[int, Field(ge=0)]
+    byteStride: Annotated[int, Field(ge=1, le=256)]
+    count: Annotated[int, Field(ge=0)]
+    mode: Literal["ATTRIBUTES", "TRIANGLES", "INDICES"] = "ATTRIBUTES"
+    filter: Literal["NONE", "OCTAHEDRAL", "QUATERNION", "EXPONENTIAL"] = "NONE"
+
+
+def _checked_packing(view: dict, index: int, source: bytes | None, room: int) -> MeshoptView:
+    """The view's extension object with its counts checked against the view and its buffer: what the
+    decoder allocates (count x byteStride) is what the view says it holds and fits in `room` bytes (what
+    is left of MAX_DECODED_BYTES), and the bytes lie in the buffer."""
+    where = f"bufferView {index}'s {EXTENSION}"
+    packed = checked(view["extensions"][EXTENSION], MeshoptView, where)
+    rows = "attribute rows" if packed.mode == "ATTRIBUTES" else "indices"
+    if packed.mode == "ATTRIBUTES" and packed.byteStride % 4 or packed.mode != "ATTRIBUTES" and \
+            packed.byteStride not in (2, 4) or packed.mode == "TRIANGLES" and packed.count % 3:
+        raise InputError(f"{where} has {packed.count} {rows} of {packed.byteStride} bytes, which mode "
+                         f"{packed.mode} cannot hold.")
+    if packed.count * packed.byteStride != view.get("byteLength"):
+        raise InputError(f"{where} decodes to {packed.count} x {packed.byteStride} bytes, but the view holds "
+                         f"{view.get('byteLength')!r}.")
+    if packed.count * packed.byteStride > room:
+        raise InputError(f"{where} would decode past {MAX_DECODED_BYTES // 2**30} GiB for the file; it is not "
+                         "decoded.")
+    if source is None or packed.byteOffset + packed.byteLength > len(source):
+        raise InputError(f"{where} reads bytes {packed.byteOffset} to {packed.byteOffset + packed.byteLength} of "
+                         f"buffer {packed.buffer}, which holds {0 if source is None else len(source)}.")
+    return packed
+
+
+def _decoded_view(view: dict, index: int, buffers: list[bytes | None], room: int) -> bytes:
     """The bufferView's plain bytes, decoded where it is compressed."""
     import meshopt
 
-    packed = view.get("extensions", {}).get(EXTENSION)
-    if packed is None:
+    if EXTENSION not in view.get("extensions", {}):
         source = buffers[view["buffer"]]
         if source is None:
             raise InputError(f"A bufferView of the file points into an empty fallback buffer {view['buffer']}; "
                              f"give the file with its {EXTENSION} data.")
         start = view.get("byteOffset", 0)
         return source[start:start + view["byteLength"]]
-    source = buffers[packed["buffer"]]
-    start = packed.get("byteOffset", 0)
-    count, stride, mode = packed["count"], packed["byteStride"], packed.get("mode", "ATTRIBUTES")
-    rows = meshopt.decode_gltf_buffer(bytes(source[start:start + packed["byteLength"]]), count, stride, mode,
-                                      packed.get("filter", "NONE"))
+    packed = view["extensions"][EXTENSION]
+    source = buffers[packed["buffer"]] if isinstance(packed, dict) and isinstance(packed.get("buffer"), int) \
+        and 0 <= packed["buffer"] < len(buffers) else None
+    packed = _checked_packing(view, index, source, room)
+    start = packed.byteOffset
+    rows = meshopt.decode_gltf_buffer(bytes(source[start:start + packed.byteLength]), packed.count,
+                                      packed.byteStride, packed.mode, packed.filter)
     rows = np.asarray(rows)
-    if mode != "ATTRIBUTES":  # indices come back as integers, stored at the view's stride
-        rows = rows.astype(f"<u{stride}")
+    if packed.mode != "ATTRIBUTES":  # indices come back as integers, stored at the view's stride
+        rows = rows.astype(f"<u{packed.byteStride}")
     return rows.tobytes()
 
 
 def decoded_glb(path: Path, out: Path) -> Path:
     """`path` (a .glb or .gltf using EXT_meshopt_compression) written to `out` as a plain GLB."""
     document, chunk = read_gltf(path)
+    checked(document, GltfParts, f"'{path.name}'")
     buffers = _buffers(document, chunk, path.parent)
     blob = bytearray()
 
@@ -84,8 +155,8 @@ def decoded_glb(path: Path, out: Path) -> Path:
         blob.extend(data)
         return len(blob) - len(data), len(data)
 
-    for view in document.get("bufferViews", []):
-        offset, length = append(_decoded_view(view, buffers))
+    for index, view in enumerate(document.get("bufferViews", [])):
+        offset, length = append(_decoded_view(view, index, buffers, MAX_DECODED_BYTES - len(blob)))
         extensions = {k: v for k, v in view.pop("extensions", {}).items() if k != EXTENSION}
         view.update({"buffer": 0, "byteOffset": offset, "byteLength": length}, **({"extensions": extensions}
                                                                                if extensions else {}))
@@ -120,10 +191,15 @@ def importable(path: Path):
     with tempfile.TemporaryDirectory(prefix="scenefit-meshopt-") as folder:
         try:
             copy = decoded_glb(path, Path(folder) / f"{path.stem}.glb")
-        except (KeyError, IndexError, ValueError, RuntimeError, OSError) as error:
-            raise InputError(f"The {EXTENSION} data of '{path.name}' does not decode ({error}); check the file "
+        except (KeyError, IndexError, ValueError, RuntimeError, OSError, InputError) as error:
+            why = _lower_first(str(error).rstrip("."))
+            raise InputError(f"The {EXTENSION} data of '{path.name}' does not decode ({why}); check the file "
                              "with the Khronos glTF validator.") from None
         yield copy
+
+
+def _lower_first(text: str) -> str:
+    return text[:1].lower() + text[1:]
 
 
 _COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}

@@ -21,14 +21,18 @@ import hashlib
 import json
 import os
 import re
+import threading
 import time
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Annotated, Callable
+
+from pydantic import Field
 
 from ..base.atomic import write_json_atomic
 from ..base.errors import InputError, PromptServiceError
+from ..base.untrusted import Record, checked, parse_json, read_bytes, read_json
 
 MODE_TYPES = ("describe", "instruct")
 VISION_TYPES = ("auto", "yes", "no")
@@ -182,18 +186,30 @@ def default_cache_dir() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "scenefit" / "prompts"
 
 
+class PromptingTable(Record):
+    """The config file's [prompting] table: each setting of the type it is used as."""
+
+    endpoint: str = ""
+    model: str = ""
+    api_key: str = ""
+    timeout_s: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 60.0
+    vision: str = "auto"
+
+
 def read_config_file(path: Path | None = None) -> dict:
     """The [prompting] table of the config file ({} when there is none)."""
     path = Path(path) if path else default_config_path()
     if not path.is_file():
         return {}
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
-        raise InputError(f"The config file '{path}' is not valid TOML: {error}.") from error
+        data = tomllib.loads(read_bytes(path, 2**20, "config file").decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as error:
+        reason = "it nests too deep" if isinstance(error, RecursionError) else str(error)
+        raise InputError(f"The config file '{path}' is not valid TOML: {reason}.") from None
     table = data.get("prompting", {})
     if not isinstance(table, dict):
         raise InputError(f"In '{path}', 'prompting' must be a table ([prompting]).")
+    checked(table, PromptingTable, f"the config file '{path}'s [prompting] table")
     return table
 
 
@@ -395,9 +411,45 @@ def cache_key(service: ServiceConfig, request: PromptRequest, photo: bytes | Non
     return hashlib.sha256(json.dumps(parts, sort_keys=True).encode("utf-8")).hexdigest()
 
 
+# What an answer may be: a chat answer is a few kilobytes; a body larger than this is not read on.
+MAX_ANSWER_BYTES = 4 * 2**20
+
+
+class ChatMessage(Record):
+    content: str | None = None
+    refusal: str | None = None
+
+
+class ChatChoice(Record):
+    message: ChatMessage
+    finish_reason: str | None = None
+
+
+class ChatReply(Record):
+    """The part of a chat-completions answer SceneFit reads (the endpoint's body is data from elsewhere)."""
+
+    choices: list[ChatChoice]
+
+
+class ChunkDelta(Record):
+    content: str | None = None
+    refusal: str | None = None
+
+
+class ChunkChoice(Record):
+    delta: ChunkDelta = ChunkDelta()
+    finish_reason: str | None = None
+
+
+class ChatChunk(Record):
+    choices: list[ChunkChoice] = []
+
+
 class ChatClient:
     """One chat-completions conversation with an OpenAI-compatible endpoint (no automatic retries:
-    SceneFit retries once itself, with the problem stated)."""
+    SceneFit retries once itself, with the problem stated). The `openai` client sends the request and
+    turns HTTP errors into its exceptions; the body is read here, bounded in size and, with the
+    request, in total time (a server trickling its answer a byte at a time is stopped at timeout_s)."""
 
     def __init__(self, service: ServiceConfig, on_text: Callable[[str], None] | None = None):
         try:
@@ -418,24 +470,25 @@ class ChatClient:
 
         where = f"The language model '{self.service.model}' at {self.service.base_url}"
         self.requests += 1
+        answer = self._streamed if self.service.stream else self._plain
         try:
-            if self.service.stream:
-                text, refusal, finish = self._streamed(messages)
-            else:
-                reply = self.client.chat.completions.create(model=self.service.model, messages=messages)
-                if not reply.choices:
-                    raise PromptServiceError(f"{where} sent an answer with no choices; try another model or --offline.")
-                choice = reply.choices[0]
-                text, refusal, finish = choice.message.content or "", choice.message.refusal or "", choice.finish_reason
-        except openai.APITimeoutError as error:
+            text, refusal, finish = within_seconds(self.service.timeout_s, lambda: answer(messages), self.client.close)
+        except (openai.APITimeoutError, TimeoutError) as error:
             raise PromptServiceError(f"{where} did not answer within {self.service.timeout_s:g} s; raise the "
                                      "time-out (--timeout), check the server, or write the prompt with --prompt.") from error
         except openai.APIStatusError as error:
-            raise PromptServiceError(f"{where} answered HTTP {error.status_code} ({short(error.message)}); check the "
-                                     "endpoint, model name and API key, or use --offline.") from error
+            raise PromptServiceError(self.secret_free(
+                f"{where} answered HTTP {error.status_code} ({short(error.message)}); check the "
+                "endpoint, model name and API key, or use --offline.")) from None
         except openai.APIConnectionError as error:
-            raise PromptServiceError(f"{where} cannot be reached ({short(str(error.__cause__ or error))}); check "
-                                     "--endpoint or use --offline.") from error
+            why = short(str(error.__cause__ or error))
+            raise PromptServiceError(self.secret_free(
+                f"{where} cannot be reached ({why}); check --endpoint or use --offline.")) from None
+        except InputError as error:   # the body: not JSON, not a chat answer, too large
+            raise PromptServiceError(self.secret_free(
+                f"{where} sent an answer that is not a chat completion ({short(str(error).rstrip('.'), 200)}); "
+                "check --endpoint (it must be an OpenAI-compatible /v1 URL) or use --offline.")) from None
+        text, refusal = self.secret_free(text), self.secret_free(refusal)
         if refusal or finish == "content_filter" or (REFUSAL_START.match(text) and ":" not in text):
             raise PromptServiceError(f"{where} refused to write the prompt ({short(refusal or text or finish)}); "
                                      "rephrase the object or scene, or write the prompt with --prompt.")
@@ -443,21 +496,82 @@ class ChatClient:
             raise PromptServiceError(f"{where} sent an empty answer; try another model or --offline.")
         return text
 
+    def secret_free(self, text: str) -> str:
+        """`text` with the API key blanked: an endpoint may echo it, and answers go to reports and caches."""
+        key = self.service.api_key
+        return text.replace(key, "[API key]") if key and len(key) >= 4 else text
+
+    def _plain(self, messages: list[dict]) -> tuple[str, str, str | None]:
+        with self.client.chat.completions.with_streaming_response.create(
+                model=self.service.model, messages=messages) as response:
+            body = bounded_body(response.iter_bytes(), MAX_ANSWER_BYTES)
+        reply = checked(parse_json(body, "the answer", MAX_ANSWER_BYTES), ChatReply, "the answer")
+        if not reply.choices:
+            raise InputError("The answer has no choices.")
+        choice = reply.choices[0]
+        return choice.message.content or "", choice.message.refusal or "", choice.finish_reason
+
     def _streamed(self, messages: list[dict]) -> tuple[str, str, str | None]:
-        text, refusal, finish = [], [], None
-        stream = self.client.chat.completions.create(model=self.service.model, messages=messages, stream=True)
-        for chunk in stream:
-            if not chunk.choices:
-                continue
-            choice = chunk.choices[0]
-            if choice.delta.content:
-                text.append(choice.delta.content)
-                if self.on_text:
-                    self.on_text(choice.delta.content)
-            if choice.delta.refusal:
-                refusal.append(choice.delta.refusal)
-            finish = choice.finish_reason or finish
+        text, refusal, finish, size = [], [], None, 0
+        with self.client.chat.completions.with_streaming_response.create(
+                model=self.service.model, messages=messages, stream=True) as response:
+            for data in event_data(response.iter_lines()):
+                size += len(data)
+                if size > MAX_ANSWER_BYTES:
+                    raise InputError(f"The answer is over {MAX_ANSWER_BYTES // 2**20} MiB.")
+                for choice in checked(parse_json(data, "a streamed piece of the answer"), ChatChunk,
+                                      "a streamed piece of the answer").choices[:1]:
+                    if choice.delta.content:
+                        text.append(choice.delta.content)
+                        if self.on_text:
+                            self.on_text(self.secret_free(choice.delta.content))
+                    if choice.delta.refusal:
+                        refusal.append(choice.delta.refusal)
+                    finish = choice.finish_reason or finish
         return "".join(text), "".join(refusal), finish
+
+
+def bounded_body(chunks, max_bytes: int) -> bytes:
+    """A response body read in chunks, refused once it passes `max_bytes` (never held whole)."""
+    body = bytearray()
+    for chunk in chunks:
+        body += chunk
+        if len(body) > max_bytes:
+            raise InputError(f"The answer is over {max_bytes // 2**20} MiB.")
+    return bytes(body)
+
+
+def event_data(lines):
+    """The `data:` payloads of a server-sent event stream, up to `[DONE]` (comments, event names skipped)."""
+    for line in lines:
+        if line.startswith("data:"):
+            data = line[5:].strip()
+            if data == "[DONE]":
+                return
+            if data:
+                yield data
+
+
+def within_seconds(seconds: float, work: Callable, stop: Callable[[], None]):
+    """work() in a helper thread, given `seconds` in all (the HTTP client's time-out is per read, so a
+    trickling answer would never end); past them, stop() (closing the connection) and TimeoutError."""
+    box: dict = {}
+
+    def run() -> None:
+        try:
+            box["value"] = work()
+        except BaseException as error:   # handed to the caller's thread as it is
+            box["error"] = error
+
+    thread = threading.Thread(target=run, name="scenefit-chat", daemon=True)
+    thread.start()
+    thread.join(seconds)
+    if thread.is_alive():
+        stop()
+        raise TimeoutError(f"no whole answer within {seconds:g} s")
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
 
 
 def short(text: str, limit: int = 120) -> str:
@@ -532,18 +646,36 @@ def write_prompt(request: PromptRequest, service: ServiceConfig | None, *, offli
         warnings.append(f"photo not sent: '{service.model}' is not known to read images (--vision to send it)")
     photo = encode_photo(request.photo) if photo_sent else None
     path = Path(cache_dir or default_cache_dir()) / f"{cache_key(service, request, photo)}.json"
-    record, cached = None, False
-    if use_cache and path.is_file():
-        try:
-            record, cached = json.loads(path.read_text(encoding="utf-8")), True
-        except (OSError, json.JSONDecodeError):
-            record = None                     # a damaged cache entry is asked for again
+    record = read_cached(path) if use_cache else None   # a damaged entry is asked for again
+    cached = record is not None
     if record is None:
-        record = ask_model(request, service, photo, on_text)
+        record = CachedPrompt.model_validate(ask_model(request, service, photo, on_text))
         if use_cache:
-            write_json_atomic(path, record)
-    return PromptResult(prompt=record["prompt"], mode_type=request.mode_type, source="model",
-                        analysis=record["analysis"], answers=tuple(record["answers"]),
-                        repairs=tuple(record["repairs"]), warnings=tuple(warnings + list(record["warnings"])),
+            write_json_atomic(path, record.model_dump())
+    return PromptResult(prompt=record.prompt, mode_type=request.mode_type, source="model",
+                        analysis=record.analysis, answers=tuple(record.answers),
+                        repairs=tuple(record.repairs), warnings=tuple(warnings + list(record.warnings)),
                         model=service.model, endpoint=service.base_url, photo_sent=photo_sent, cached=cached,
-                        requests=0 if cached else record["requests"], seconds=time.perf_counter() - start)
+                        requests=0 if cached else record.requests, seconds=time.perf_counter() - start)
+
+
+class CachedPrompt(Record):
+    """A prompt cache entry: what ask_model returned."""
+
+    prompt: str
+    analysis: str
+    answers: list[str]
+    repairs: list[str]
+    warnings: list[str]
+    requests: int
+
+
+def read_cached(path: Path) -> CachedPrompt | None:
+    """The cache entry at `path`, or None where there is none or it does not read as one (damaged,
+    or written by something else): that prompt is asked for again."""
+    if not path.is_file():
+        return None
+    try:
+        return read_json(path, CachedPrompt, "prompt cache entry", max_bytes=MAX_ANSWER_BYTES)
+    except InputError:
+        return None

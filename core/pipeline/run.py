@@ -198,22 +198,26 @@ class StageRunner:
 def _finished_stage(folder: Path, key: str) -> dict | None:
     """The report of the stage finished in `folder` with `key` whose outputs all exist, else None. A
     stage.json is data from wherever the folder came from (an earlier run, a worker, someone else's run
-    folder): an output that leads out of the stage's folder ('..', an absolute path, a link) is not this
-    stage's, so the stage is not taken as finished and runs again."""
+    folder): one that does not read as a stage record, an output that leads out of the stage's folder
+    ('..', an absolute path, a link), or a float map that is not finite is not this stage's, so the
+    stage is not taken as finished and runs again."""
+    from ..base.untrusted import read_stage_record
+    from ..data.finite_maps import finite_images
+
     record = folder / STAGE_FILE
     if not record.is_file():
         return None
     try:
-        saved = json.loads(record.read_text())
-    except json.JSONDecodeError:
+        saved = read_stage_record(record)
+    except InputError:
         return None
-    report = dict(saved.get("report") or {})
+    report = saved.report.model_dump()
     report["outputs"] = _absolute_outputs(report.get("outputs", {}), folder)
     inside = folder.parent.resolve() / folder.name   # (a stage folder that is itself a link out is not inside)
-    if saved.get("key") != key or not all(Path(p).exists() and Path(p).resolve().is_relative_to(inside)
-                                          for p in _paths(report["outputs"])):
+    outputs = _paths(report["outputs"])
+    if saved.key != key or not all(Path(p).exists() and Path(p).resolve().is_relative_to(inside) for p in outputs):
         return None
-    return report
+    return report if finite_images(outputs) else None
 
 
 def _absolute_outputs(outputs, folder: Path):

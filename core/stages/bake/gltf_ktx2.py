@@ -28,6 +28,7 @@ from ...data.glb import read_gltf, write_glb
 
 EXTENSION = "KHR_texture_basisu"
 MIME = "image/ktx2"
+KTX2_MAGIC = b"\xabKTX 20\xbb\r\n\x1a\n"
 _ROOT = Path(__file__).resolve().parents[3]   # the repository (core/stages/bake/ is three below it)
 _NPM_PREFIXES = (_ROOT / ".venv" / "node", Path.home() / ".cache" / "scenefit" / "basisu")
 _PLATFORM = {("Linux", "x86_64"): "linux-x64", ("Linux", "aarch64"): "linux-arm64",
@@ -130,13 +131,26 @@ def encode_ktx2(image: bytes, suffix: str, role: str, folder: Path) -> bytes:
     source.write_bytes(image)
     png = _multiple_of_4(source)
     out = folder / "image.ktx2"
-    proc = subprocess.run([str(basisu_path()), str(png), "-ktx2", "-mipmap", *_encoder_arguments(role),
-                           "-output_file", str(out)], capture_output=True, text=True, timeout=_ENCODE_SECONDS,
-                          cwd=folder)
+    encoder = basisu_path()
+    failed = (f"basisu ('{encoder}') could not encode a {role} texture for --textures ktx2 ({{}}); check that it "
+              "is Basis Universal's encoder and runs here, or bake with --textures png.")
+    try:
+        proc = subprocess.run([str(encoder), str(png), "-ktx2", "-mipmap", *_encoder_arguments(role),
+                               "-output_file", str(out)], capture_output=True, text=True, errors="replace",
+                              timeout=_ENCODE_SECONDS, cwd=folder)
+    except subprocess.TimeoutExpired:
+        raise InputError(failed.format(f"it ran past {_ENCODE_SECONDS} s")) from None
+    except OSError as error:   # not executable, not a program for this machine
+        raise InputError(failed.format(f"it cannot be started: {error.strerror or error}")) from None
     if proc.returncode != 0 or not out.is_file():
-        lines = [line for line in (proc.stdout + proc.stderr).splitlines() if line.strip()]
-        raise RuntimeError(f"basisu could not encode a {role} texture: {lines[-1] if lines else proc.returncode}")
-    return out.read_bytes()
+        lines = [" ".join(line.split()) for line in (proc.stdout + proc.stderr).splitlines() if line.strip()]
+        said = f": {lines[-1][:160].rstrip('.')}" if lines else ""
+        raise InputError(failed.format(f"exit status {proc.returncode}{said}" if proc.returncode else
+                                       "it wrote no file"))
+    data = out.read_bytes()
+    if not data.startswith(KTX2_MAGIC):
+        raise InputError(failed.format("what it wrote is not a KTX2 file"))
+    return data
 
 
 _SUFFIX_OF_MIME = {"image/png": ".png", "image/jpeg": ".jpg", "image/webp": ".webp"}
