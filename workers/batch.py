@@ -16,7 +16,6 @@ holds a report with status "failed" and the error, the summary lists it, and the
 from __future__ import annotations
 
 import io
-import json
 import math
 import os
 import shutil

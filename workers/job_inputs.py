@@ -94,15 +94,15 @@ def _asset_files(job: Job) -> dict[str, Path]:
                 _outside(job, path, job.asset, f", a link to '{path.resolve()}'")
         return {f"asset/{job.asset.name}/{path.relative_to(job.asset).as_posix()}": path for path in files}
     folder, own = as_named(job.asset.parent), as_named(job.asset)   # (the file the jobs file names may be a link)
-    files = {}
+    named: dict[str, Path] = {}
     for path in asset_references(job.asset):
         try:
-            files[f"asset/{path.relative_to(folder).as_posix()}"] = path
+            named[f"asset/{path.relative_to(folder).as_posix()}"] = path
         except ValueError:
             _outside(job, path, folder)
         if path != own and path.resolve() != path and not path.resolve().is_relative_to(folder.resolve()):
             _outside(job, path, folder, f", a link to '{path.resolve()}'")
-    return files
+    return named
 
 
 def _outside(job: Job, path: Path, folder: Path, link: str = "") -> None:

@@ -19,7 +19,7 @@ import zipfile
 import zlib
 from importlib import metadata
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated
 
 import numpy as np
 from annotated_types import Len
@@ -30,7 +30,7 @@ from ..base.errors import InputError
 from ..base.untrusted import Record, checked, parse_json
 from .maps import PBRMaps
 from .mesh import Mesh
-from .uv_raster import WRAP_MODES
+from .uv_raster import WrapMode
 from ..base.source_graph import reachable_sources
 
 CACHE_FILE = ".asset-read.npz"
@@ -71,7 +71,7 @@ class _Meta(Record):
 
     key: str
     name: str
-    wraps: list[Annotated[list[Literal[WRAP_MODES]], Len(2, 2)]]
+    wraps: list[Annotated[list[WrapMode], Len(2, 2)]]
     atlas: bool
     roughness: float | None = None
     metallic: float | None = None

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..base.errors import InputError
+from .imageio import read_image
 
 # The outputs stored as floats; 8- and 16-bit images cannot hold a non-finite number.
 FLOAT_IMAGE_SUFFIXES = (".exr", ".hdr")
@@ -15,8 +16,6 @@ FLOAT_IMAGE_SUFFIXES = (".exr", ".hdr")
 
 def finite_images(paths: list[str | Path]) -> bool:
     """True when every float image among `paths` reads and holds only finite values."""
-    from .imageio import read_image
-
     for path in paths:
         if Path(path).suffix.lower() not in FLOAT_IMAGE_SUFFIXES:
             continue

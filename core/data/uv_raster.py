@@ -7,6 +7,7 @@ u = (j + 0.5) / W, v = 1 - (i + 0.5) / H, matching Mesh.uvs (OpenGL, v = 0 at th
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -17,7 +18,8 @@ from .mesh import Mesh
 # position, extrapolated from the nearest triangle, so bilinear lookups at UV seams read real values.
 DEFAULT_BORDER = 2.0
 # How UVs outside [0, 1] read the texture: glTF's REPEAT, MIRRORED_REPEAT and CLAMP_TO_EDGE.
-WRAP_MODES = ("repeat", "mirror", "clamp")
+WrapMode = Literal["repeat", "mirror", "clamp"]
+WRAP_MODES: tuple[str, ...] = get_args(WrapMode)
 # (triangle, texel) candidates, or rows of triangles, handled at once: what bounds the memory, however
 # large or repeated the UV triangles are (63k triangles each spanning the square asked for 124 GiB).
 CHUNK = 1 << 18

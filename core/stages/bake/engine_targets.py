@@ -86,7 +86,7 @@ def kept_extensions(target: EngineTarget, compress: str, textures: str) -> froze
     """The extensions a bake for `target` may write (None: any), the chosen compression's and format's among them."""
     if target.extensions is None:
         return None
-    chosen = {COMPRESSION_EXTENSION.get(compress), TEXTURE_EXTENSION.get(textures)} - {None}
+    chosen = {name for name in (COMPRESSION_EXTENSION.get(compress), TEXTURE_EXTENSION.get(textures)) if name is not None}
     return target.extensions | chosen
 
 
