@@ -6,6 +6,8 @@ exposed and clipped to 8 bits as a camera would.
 """
 from __future__ import annotations
 
+from .core.base.names import GUIDANCE_TYPES
+
 import shutil
 import subprocess
 import sys
@@ -66,7 +68,7 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     from .core.base.errors import InputError
     from .core.guidance import ModelConfig, locate_models
 
-    if guidance not in ("auto", "sd2", "none"):
+    if guidance not in GUIDANCE_TYPES:
         raise InputError(f"guidance must be 'auto', 'sd2' or 'none', got {guidance!r}.")
     if guidance == "sd2":
         locate_models(ModelConfig(), need_inpaint=True)

@@ -1,6 +1,8 @@
 """scenefit run: the whole pipeline (convert -> light -> adapt -> compose -> bake) for one asset and photo."""
 from __future__ import annotations
 
+from ..core.base.names import GUIDANCE_TYPES
+
 from pathlib import Path
 
 from .options import (add_asset_args, add_model_args, add_output_args, add_photo_camera_args, add_placement_args,
@@ -97,7 +99,7 @@ def add_parser(sub) -> None:
                                            "writes the prompt from it and --scene-prompt (or the photo)")
     p.add_argument("--scene-prompt", help="the scene, e.g. 'a swamp'")
     add_preset_args(p)
-    p.add_argument("--guidance", choices=("auto", "sd2", "none"), default="auto",
+    p.add_argument("--guidance", choices=GUIDANCE_TYPES, default="auto",
                    help="adapt with Stable Diffusion 2 (sd2), not at all (none), or when its weights are here (auto)")
     p.add_argument("--shadow", choices=SHADOW_TYPES, default="ratio")
     p.add_argument("--spp", type=int, help="compose: samples per pixel (default: from the preset's noise target)")

@@ -78,19 +78,6 @@ def camera_source(view: dict) -> tuple[str, str]:
     return "user", "given by the user"   # the panel's values, as the command line's --fov/--pitch/--roll
 
 
-def job_view(view: dict) -> dict:
-    """The view as a Job (workers/jobs.py) carries it, so a remote Run All sees the photo as a local one."""
-    source, why = camera_source(view)
-    from ..workers.jobs import CAMERA_KEYS
-
-    names = {ours: its for its, ours in CAMERA_KEYS.items()}
-    return {"at": tuple(view["placement"]), "object_size": view["size"],
-            "camera": {names[k]: v for k, v in (view["camera"] or {}).items()},
-            "camera_source": source, "camera_why": why, "turn": view["turn_deg"],
-            "sun": tuple(view["sun_deg"]) if view.get("sun_deg") else None,
-            "sun_uncertainty": float(view.get("sun_uncertainty_deg", 0.0)) or None}   # (None: left out of the job)
-
-
 def camera_values(camera) -> dict:
     """What the Cycles set-up takes from the camera a job used."""
     return {"fov_deg": camera.fov_deg, "pitch_deg": camera.pitch_deg, "roll_deg": camera.roll_deg}
@@ -196,17 +183,22 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
 
 def run_config(data: dict):
     """Run All's RunConfig from the operator's data: the panel's settings and the photo's view."""
+    return view_config(data["view"], preset=data["preset"], prompt=data["prompt"], guidance_type=data["guidance"],
+                       models=data["models"], scene_type=data.get("scene_type", "auto"),
+                       depth_model=data.get("depth_model"))
+
+
+def view_config(view: dict, **settings):
+    """A RunConfig of `settings` seeing the photo as `view` (operators/common.photo_view) says: the artist's
+    camera or the panel's values, the asset's size and turn, the artist's sun. Run All here and on a worker
+    (its job is this config's table, core/pipeline/run_table.py) build it here."""
     from ..core.pipeline.run import RunConfig
 
-    view = data["view"]
     source, why = camera_source(view)
-    return RunConfig(preset=data["preset"], prompt=data["prompt"], guidance_type=data["guidance"],
-                     size=view["size"], camera_overrides=dict(view["camera"] or {}), camera_source=source,
-                     camera_why=why,
-                     turn_deg=view["turn_deg"], models=data["models"],
+    return RunConfig(size=view["size"], camera_overrides=dict(view["camera"] or {}), camera_source=source,
+                     camera_why=why, turn_deg=view["turn_deg"],
                      sun_deg=tuple(view["sun_deg"]) if view.get("sun_deg") else None,
-                     sun_uncertainty_deg=float(view.get("sun_uncertainty_deg", 0.0)),
-                     scene_type=data.get("scene_type", "auto"), depth_model=data.get("depth_model"))
+                     sun_uncertainty_deg=float(view.get("sun_uncertainty_deg", 0.0)), **settings)
 
 
 def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:

@@ -103,11 +103,13 @@ def test_a_jobs_file_says_how_the_photo_is_seen_as_the_command_line_does(inputs,
 
 
 def test_a_remote_run_all_sees_the_photo_as_a_local_one(inputs, monkeypatch):
-    """Run All in a worker environment once sent only the panel's placement: the scene camera, the panel's
-    camera values, the asset's size and turn and Pick Sun's sun were dropped."""
+    """Run All on a worker: the RunConfig a local Run All builds (operators/work.view_config), sent as a job's
+    table (as operators/remote.remote_work sends it) and read back on the worker, is the same config: the scene
+    camera, the panel's camera values, the asset's size and turn and Pick Sun's sun all arrive."""
     from scenefit.core.data.asset_io import load_asset_folder
     from scenefit.core.guidance import ModelConfig
-    from scenefit.operators.work import job_view, run_config
+    from scenefit.core.pipeline.run_table import run_table
+    from scenefit.operators.work import run_config, view_config
     from scenefit.workers import remote
     from scenefit.workers.batch import run_pipeline_for_job
 
@@ -124,10 +126,11 @@ def test_a_remote_run_all_sees_the_photo_as_a_local_one(inputs, monkeypatch):
             "notes": ["the scene camera 'Camera' is used as it is"], "sun_deg": (-30.0, 45.0),
             "sun_uncertainty_deg": 12.0}
     mesh, maps = load_asset_folder(inputs["folder"])
+    sent = view_config(view, preset="draft", prompt="", guidance_type="none", scene_type="outdoor",
+                       depth_model="my/depth")
     remote.work_remotely({"mesh": mesh, "maps": maps, "photo": str(inputs["photo"]), "worker": "auto",
-                          "out": str(inputs["root"] / "remote"), "preset": "draft", "prompt": "",
-                          "stages": ["convert", "light", "compose"], "scene": "outdoor", "depth_model": "my/depth",
-                          **job_view(view)})
+                          "out": str(inputs["root"] / "remote"), "stages": ["convert", "light", "compose"],
+                          "at": view["placement"], **{k: v for k, v in run_table(sent).items() if v is not None}})
     run_pipeline_for_job(Job.from_dict(jobs[0].to_dict()), inputs["root"] / "worker")
     local = run_config({"preset": "draft", "prompt": "", "guidance": "none", "models": ModelConfig(), "view": view,
                         "scene_type": "outdoor", "depth_model": "my/depth"})

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import shutil
 import threading
 import time
@@ -38,15 +39,23 @@ from ..base.progress import ProgressCallback, check_cancel, emit
 from ..scene.camera import PhotoCamera
 from ..scene.placement import DEFAULT_OBJECT_SIZE
 
-GUIDANCE_TYPES = ("auto", "sd2", "none")
-STAGES = ("convert", "light", "adapt", "compose", "bake")
+from ..base.names import CAMERA_SOURCES, CONFIG_STAGES, GUIDANCE_TYPES, MODES, PRESETS, SCENE_TYPES, STAGES
 STAGE_FILE = "stage.json"
+CAMERA_KEYS = ("fov_deg", "pitch_deg", "roll_deg")
 
 
 @dataclass(frozen=True)
 class RunConfig:
+    """The one description of a run: the command line, a jobs file's job (core/pipeline/run_table.py, its TOML
+    view), Blender's Run All and a remote worker all build this, and run_pipeline takes nothing else."""
+
     preset: str = "balanced"                  # draft | balanced | final, for every stage
+    mode: str = "scene"                       # adapt: scene (fit the photo) | generate | edit (names.MODES)
     prompt: str = ""                          # adapt: what the asset should become in this scene
+    negative_prompt: str = ""                 # adapt: what it should not look like
+    object_prompt: str = ""                   # adapt, mode edit: what the asset is ...
+    instruction: str = ""                     # ... and how to change it (the prompt, when empty, is made of both)
+    seed: int | None = None                   # convert's fit and adapt's noise (None: each stage's default)
     guidance_type: str = "auto"               # adapt (and the light critic): sd2 | none | auto (sd2 when found)
     size: float = DEFAULT_OBJECT_SIZE         # compose: fraction of the photo's height the asset spans (--object-size)
     shadow_type: str = "ratio"
@@ -71,27 +80,77 @@ class RunConfig:
     stage_overrides: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if self.preset not in ("draft", "balanced", "final"):
-            raise InputError(f"preset must be draft, balanced or final, got {self.preset!r}.")
-        if self.guidance_type not in GUIDANCE_TYPES:
-            raise InputError(f"guidance_type must be one of {', '.join(GUIDANCE_TYPES)}, got {self.guidance_type!r}.")
-        wrong = sorted(set(self.camera_overrides) - {"fov_deg", "pitch_deg", "roll_deg"})
-        if wrong:
-            raise InputError(f"camera_overrides takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
+        _choice("preset", self.preset, PRESETS)
+        _choice("mode", self.mode, MODES)
+        _choice("guidance_type", self.guidance_type, GUIDANCE_TYPES)
+        _choice("scene_type", self.scene_type, SCENE_TYPES)
+        _choice("camera_source", self.camera_source, CAMERA_SOURCES)
+        if self.seed is not None and not (_whole(self.seed) and self.seed >= 0):
+            raise _refused("seed", f"seed must be a whole number >= 0, got {self.seed!r}.")
+        _check_view(self)
         if self.sun_deg is not None and self.sun_shadow is not None:
-            raise InputError("Give the sun as an azimuth and elevation or as a shadow's three points, not both.")
+            raise _refused("sun_shadow", "Give the sun as an azimuth and elevation or as a shadow's three points, not both.")
         if self.sun_shadow is not None:
             from ..stages.light.shadow_hint import check_point_count
 
             check_point_count(self.sun_shadow)
-        unknown = sorted(set(self.stage_overrides) - {"convert", "light", "adapt", "compose"})
+        unknown = sorted(set(self.stage_overrides) - set(CONFIG_STAGES))
         if unknown:
-            raise InputError(f"stage_overrides names unknown stage {unknown[0]!r}; it takes convert, light, adapt "
-                             f"and compose.")
+            raise _refused("stage_overrides", f"stage_overrides names unknown stage {unknown[0]!r}; it takes "
+                             f"{', '.join(CONFIG_STAGES)}.")
 
     def overrides(self, stage: str) -> dict:
         return dict(self.stage_overrides.get(stage, {}))
 
+
+
+def _choice(name: str, value, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise _refused(name, f"{name} must be one of {', '.join(choices)}, got {value!r}.")
+
+
+def _refused(field_name: str, sentence: str) -> InputError:
+    """The sentence as an InputError that names the RunConfig field it refuses (a jobs file says its key)."""
+    error = InputError(sentence)
+    error.field = field_name
+    return error
+
+
+def _whole(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _finite(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _check_view(config: RunConfig) -> None:
+    """How the run sees the photo, in range: numbers from any entry point (a jobs file, Blender, a worker)
+    are finite, a camera can look at the floor (pitch within +-90, field of view within (0, 180)), the
+    sun is above or below the horizon by at most 90 degrees."""
+    if not (_finite(config.size) and 0.0 < config.size <= 1.0):   # (as core/scene/placement.Placement takes it)
+        raise _refused("size", f"The object size must be a fraction of the photo's height in (0, 1], got {config.size!r}.")
+    if not _finite(config.turn_deg):
+        raise _refused("turn_deg", f"The turn must be a finite angle in degrees, got {config.turn_deg!r}.")
+    if config.compose_spp is not None and not (_whole(config.compose_spp) and 1 <= config.compose_spp <= 65536):
+        raise _refused("compose_spp", f"compose_spp must be a whole number from 1 to 65536, got {config.compose_spp!r}.")
+    wrong = sorted(set(config.camera_overrides) - set(CAMERA_KEYS))
+    if wrong:
+        raise _refused("camera_overrides", f"camera_overrides takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
+    camera = {k: v for k, v in config.camera_overrides.items() if v is not None}
+    if not all(_finite(v) for v in camera.values()):
+        raise _refused("camera_overrides", f"The camera's angles must be finite numbers of degrees, got {camera!r}.")
+    if "fov_deg" in camera and not 0.0 < camera["fov_deg"] < 180.0:
+        raise _refused("camera_overrides", f"The camera's field of view must be within (0, 180) degrees, got {camera['fov_deg']!r}.")
+    if "pitch_deg" in camera and not -90.0 < camera["pitch_deg"] < 90.0:
+        raise _refused("camera_overrides", f"The camera's pitch must be within (-90, 90) degrees (straight up or down shows no "
+                         f"horizon), got {camera['pitch_deg']!r}.")
+    sun = config.sun_deg
+    if sun is not None and not (len(sun) == 2 and all(_finite(v) for v in sun) and -90.0 <= sun[1] <= 90.0):
+        raise _refused("sun_deg", f"The sun must be (azimuth, elevation) in finite degrees, the elevation within +-90, "
+                         f"got {sun!r}.")
+    if not (_finite(config.sun_uncertainty_deg) and 0.0 <= config.sun_uncertainty_deg <= 180.0):
+        raise _refused("sun_uncertainty_deg", f"The sun's uncertainty must be degrees within 0 and 180, got {config.sun_uncertainty_deg!r}.")
 
 def light_settings(config: RunConfig) -> dict:
     """What a run's config gives the light stage's (the sun, the scene type, the models and where the depth
@@ -320,7 +379,7 @@ class PipelineRun:
         # Only what the scene needs: no more texels than the composite shows of the asset (the photo's
         # stored height, not the light stage's working copy, is what the composite is made at).
         screen_px = max(1, round(self.config.size * self.photo_info["size"][1]))
-        config = self.stage_config("convert", screen_px=screen_px)
+        config = self.stage_config("convert", screen_px=screen_px, seed=self.config.seed)
         self.keys["convert"] = _digest("convert", asdict(config), self.asset_key)
 
         def convert(folder: Path) -> dict:
@@ -441,9 +500,13 @@ class PipelineRun:
                 place_asset(self.normalized, camera, self.placement_px, size, turn)
 
     def adapt_config(self):
-        """The adapt stage's config: scene mode, the run's prompt (or one from the asset's name)."""
-        prompt = self.config.prompt or f"a {self.mesh.name} in this scene, photo"
-        return self.stage_config("adapt", mode_type="scene", prompt=prompt, models=self.config.models)
+        """The adapt stage's config: the run's mode, prompts and seed (a scene run without a prompt gets one
+        from the asset's name; an edit's prompt may be made of its object prompt and instruction)."""
+        run = self.config
+        prompt = run.prompt or (f"a {self.mesh.name} in this scene, photo" if run.mode == "scene" else "")
+        return self.stage_config("adapt", mode_type=run.mode, prompt=prompt, negative_prompt=run.negative_prompt,
+                                 object_prompt=run.object_prompt, instruction=run.instruction, seed=run.seed,
+                                 models=run.models)
 
     def adapt_placement(self):
         """Where adapt's global views place the asset: compose's point, at most the photo's height."""

@@ -9,6 +9,8 @@ light_preview.png (tone-mapped) and returns the report's fields.
 """
 from __future__ import annotations
 
+from ...base.names import SCENE_TYPES as NAMED_SCENE_TYPES
+
 import copy
 import functools
 import math
@@ -47,7 +49,7 @@ from .scene_type import scene_type_cue
 # draft's 64 rows are built at 64: at 128 it did balanced's work for a coarser map (benchmarks: same
 # seconds, same error). tests/test_stability.py finds a 1.5 deg lamp and a 2 px 1e6 spot at every preset.
 MIN_WORKING_HEIGHT = 64
-SCENE_TYPES = ("auto", "indoor", "outdoor")
+SCENE_TYPES = NAMED_SCENE_TYPES   # (core/base/names.py)
 CRITIC_TYPES = ("none", "reference", "diffusion")
 PRIOR_TYPES = ("cues", "inverse_tonemap")   # cues: cues.py (default); inverse_tonemap: the paper's prior
 
