@@ -103,7 +103,7 @@ def test_jobs_file_paths_defaults_and_order(tmp_path):
     a, b, c = jobs.jobs
     assert a.asset == (tmp_path / "ball").resolve() and a.photo == (tmp_path / "room.png").resolve()
     assert a.stages == ("convert", "light")          # pipeline order, whatever the file's order
-    assert c.stages == ("light",) and b.seed == 1 and a.preset == "draft" and a.at == (0.5, 0.7)
+    assert c.stages == ("light",) and b.run.seed == 1 and a.run.preset == "draft" and a.at == (0.5, 0.7)
     assert jobs.settings.retries == 1 and jobs.settings.num_gpus == "auto"
 
 
@@ -264,8 +264,8 @@ def test_remote_job_streams_progress_cancels_and_returns_its_folder(in_process, 
     # fit of many iterations: the exact start converts in a blink, so a plain convert could finish
     # before the cancel reached the worker, as it did under load.)
     cancel = threading.Event()
-    long_job = replace(job, name="long", preset="final", stages=("convert",),
-                       overrides={"convert": {"iterations": 100000}})
+    long_job = replace(job, name="long", stages=("convert",), run=replace(
+        job.run, preset="final", stage_overrides={"convert": {"iterations": 100000}}))
     with pytest.raises(Cancelled):
         run_remote(long_job, tmp_path / "back", progress=lambda event: cancel.set(), cancel=cancel)
     assert not (tmp_path / "back" / "long").exists()

@@ -134,17 +134,12 @@ def _check_view(config: RunConfig) -> None:
         raise _refused("turn_deg", f"The turn must be a finite angle in degrees, got {config.turn_deg!r}.")
     if config.compose_spp is not None and not (_whole(config.compose_spp) and 1 <= config.compose_spp <= 65536):
         raise _refused("compose_spp", f"compose_spp must be a whole number from 1 to 65536, got {config.compose_spp!r}.")
-    wrong = sorted(set(config.camera_overrides) - set(CAMERA_KEYS))
-    if wrong:
-        raise _refused("camera_overrides", f"camera_overrides takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
-    camera = {k: v for k, v in config.camera_overrides.items() if v is not None}
-    if not all(_finite(v) for v in camera.values()):
-        raise _refused("camera_overrides", f"The camera's angles must be finite numbers of degrees, got {camera!r}.")
-    if "fov_deg" in camera and not 0.0 < camera["fov_deg"] < 180.0:
-        raise _refused("camera_overrides", f"The camera's field of view must be within (0, 180) degrees, got {camera['fov_deg']!r}.")
-    if "pitch_deg" in camera and not -90.0 < camera["pitch_deg"] < 90.0:
-        raise _refused("camera_overrides", f"The camera's pitch must be within (-90, 90) degrees (straight up or down shows no "
-                         f"horizon), got {camera['pitch_deg']!r}.")
+    from ..stages.camera import check_camera_values
+
+    try:
+        check_camera_values(config.camera_overrides)
+    except InputError as error:
+        raise _refused("camera_overrides", str(error)) from None
     sun = config.sun_deg
     if sun is not None and not (len(sun) == 2 and all(_finite(v) for v in sun) and -90.0 <= sun[1] <= 90.0):
         raise _refused("sun_deg", f"The sun must be (azimuth, elevation) in finite degrees, the elevation within +-90, "

@@ -131,10 +131,7 @@ def photo_camera_estimate(photo_path: str | Path, fspy_path: str | Path | None =
                           why: str = "given by the user") -> CameraEstimate:
     """The camera every stage uses for a photo: `overrides` ({"fov_deg", "pitch_deg", "roll_deg"}, each
     from `source`) over the estimate. With all three given the photo's lines are not looked at."""
-    overrides = {k: float(v) for k, v in (overrides or {}).items() if v is not None}
-    wrong = sorted(set(overrides) - {"fov_deg", "pitch_deg", "roll_deg"})
-    if wrong:
-        raise InputError(f"A photo camera takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
+    overrides = check_camera_values(overrides or {})
     if len(overrides) == 3 and fspy_path is None:
         from .light.estimate import load_photo
 
@@ -143,6 +140,31 @@ def photo_camera_estimate(photo_path: str | Path, fspy_path: str | Path | None =
                          (1.0, 1.0, 1.0), width, height, None, ())
         return base.overridden(**overrides, source=source, why=why)
     return estimate_photo_camera(photo_path, fspy_path).overridden(**overrides, source=source, why=why)
+
+
+# The photo cameras SceneFit takes (the light stage's config holds the same bounds for its own fields).
+GIVEN_FOV_RANGE_DEG = (1.0, 170.0)
+MAX_PITCH_DEG = 89.0
+
+
+def check_camera_values(values: dict) -> dict:
+    """{"fov_deg", "pitch_deg", "roll_deg"} given over an estimate (None: not given) as floats, each finite and
+    one a camera can have: a field of view within GIVEN_FOV_RANGE_DEG, a pitch within +-MAX_PITCH_DEG (straight
+    up or down has no horizon to stand the asset on); one sentence otherwise. Every entry point's values pass here."""
+    wrong = sorted(set(values) - {"fov_deg", "pitch_deg", "roll_deg"})
+    if wrong:
+        raise InputError(f"A photo camera takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
+    given = {k: v for k, v in values.items() if v is not None}
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in given.values()):
+        raise InputError(f"The camera's angles must be finite numbers of degrees, got {given!r}.")
+    if "fov_deg" in given and not GIVEN_FOV_RANGE_DEG[0] <= given["fov_deg"] <= GIVEN_FOV_RANGE_DEG[1]:
+        low, high = GIVEN_FOV_RANGE_DEG
+        raise InputError(f"The camera's field of view must be between {low:g} and {high:g} degrees, got "
+                         f"{given['fov_deg']!r}.")
+    if "pitch_deg" in given and not -MAX_PITCH_DEG <= given["pitch_deg"] <= MAX_PITCH_DEG:
+        raise InputError(f"The camera's pitch must be within +-{MAX_PITCH_DEG:g} degrees (straight up or down shows "
+                         f"no horizon), got {given['pitch_deg']!r}.")
+    return {k: float(v) for k, v in given.items()}
 
 
 def estimate_photo_camera(photo_path: str | Path, fspy_path: str | Path | None = None) -> CameraEstimate:
@@ -224,7 +246,8 @@ def _estimate(fov: float, pitch: float, roll: float, sources: tuple[str, str, st
 
 # -- fSpy ------------------------------------------------------------------------------------------
 FSPY_MAGIC = b"fspy"
-FSPY_HEADER = struct.Struct("<4sIII")   # magic, version, state JSON bytes, image bytes (little-endian)
+FSPY_HEADER = struct.Struct("<4sIII")
+MAX_FSPY_SIDE = 1 << 20   # pixels: larger than any photo, so a larger image size is a damaged project   # magic, version, state JSON bytes, image bytes (little-endian)
 
 
 def read_fspy(path: str | Path) -> dict:
@@ -275,9 +298,12 @@ def _fspy_camera(state, path: Path) -> dict:
         size = (int(params["imageWidth"]), int(params["imageHeight"]))
         principal = params.get("principalPoint") or {"x": 0.0, "y": 0.0}
         principal = (float(principal["x"]), float(principal["y"]))
-    except (KeyError, TypeError, ValueError) as error:
+    except (KeyError, TypeError, ValueError, OverflowError) as error:   # (int(1e400): OverflowError)
         raise InputError(f"The fSpy project '{path}' has an incomplete camera ({type(error).__name__}: {error}); "
                          "save it again in fSpy.") from None
+    if not all(math.isfinite(v) for v in principal) or max(size) > MAX_FSPY_SIDE:
+        raise InputError(f"The fSpy project '{path}' has an unusable image size or principal point ({size[0]}x"
+                         f"{size[1]}, {principal}); solve it again in fSpy and save.")
     if matrix.shape != (4, 4) or not np.all(np.isfinite(matrix)) or not 0.0 < fov < 180.0 or min(size) < 1:
         raise InputError(f"The fSpy project '{path}' has an unusable camera (field of view {fov:.3g} deg, transform "
                          f"of shape {matrix.shape}); solve it again in fSpy and save.")
@@ -312,7 +338,7 @@ def _exif_fov(path: Path, info: dict, width: int, height: int) -> tuple[float | 
                                                                    "focal length"]
     focal, model = _exif_focal_and_model(path)
     if not focal:
-        return None, None, []
+        return None, None, [info["metadata_ignored"]] if info.get("metadata_ignored") else []
     sensor = sensor_width_mm(model)
     if sensor is None:
         return None, None, [f"EXIF focal length {focal:g} mm but the camera model '{model}' is not in SceneFit's "
@@ -341,8 +367,9 @@ def _exif_focal_and_model(path: Path) -> tuple[float | None, str]:
         model = str(spec.getattribute("Model") or "").strip()
     finally:
         inp.close()
-    focal = float(focal) if isinstance(focal, (int, float)) and math.isfinite(focal) and focal > 0 else None
-    return focal, model
+    from .light.estimate import plausible_focal_mm
+
+    return plausible_focal_mm(focal), model
 
 
 # -- geometry shared by the fit and the report -------------------------------------------------------

@@ -189,12 +189,27 @@ def _decoded_photo(path: Path, max_side: int | None) -> tuple[np.ndarray, dict]:
         info["decoded"] = "sRGB as stored"
         rgb = np.clip(rgb, 0.0, 1.0)
     focal35 = _metadata(path).get("focal35")
-    if focal35:
+    if focal35 is not None and plausible_focal_mm(focal35) is None:
+        info["metadata_ignored"] = f"EXIF FocalLengthIn35mmFilm {str(focal35)[:40]!r} is not a focal length " \
+                                   f"({FOCAL_RANGE_MM[0]:g} to {FOCAL_RANGE_MM[1]:g} mm)"
+    elif focal35:
         # The 35 mm equivalent is defined on the diagonal (43.27 mm); the width's share of it gives the
         # horizontal view of any aspect ratio, upright portrait photos included.
         film_width = 43.27 * w / np.hypot(w, h)
         info["fov_from_metadata_deg"] = round(float(np.degrees(2 * np.arctan(film_width / (2 * float(focal35))))), 3)
     return rgb, info
+
+
+# A focal length a photo's EXIF may give, in mm (35 mm equivalent or real): a fisheye's few mm to a
+# super-telephoto's few thousand. A value outside (zero, negative, text, 1e30) is data from elsewhere gone wrong.
+FOCAL_RANGE_MM = (1.0, 5000.0)
+
+
+def plausible_focal_mm(value) -> float | None:
+    """`value` as a focal length in mm when it is a finite number in FOCAL_RANGE_MM, else None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return None
+    return float(value) if FOCAL_RANGE_MM[0] <= value <= FOCAL_RANGE_MM[1] else None
 
 
 def _metadata(path: Path) -> dict:
