@@ -89,7 +89,8 @@ class RunConfig:
             raise _refused("seed", f"seed must be a whole number >= 0, got {self.seed!r}.")
         _check_view(self)
         if self.sun_deg is not None and self.sun_shadow is not None:
-            raise _refused("sun_shadow", "Give the sun as an azimuth and elevation or as a shadow's three points, not both.")
+            raise _refused("sun_shadow", "Give the sun as an azimuth and elevation or as a shadow's three points, "
+                                         "not both.")
         if self.sun_shadow is not None:
             from ..stages.light.shadow_hint import check_point_count
 
@@ -126,14 +127,16 @@ def _finite(value) -> bool:
 
 def _check_view(config: RunConfig) -> None:
     """How the run sees the photo, in range: numbers from any entry point (a jobs file, Blender, a worker)
-    are finite, a camera can look at the floor (pitch within +-90, field of view within (0, 180)), the
+    are finite, the camera's values are those of a camera (core/stages/camera.check_camera_values), the
     sun is above or below the horizon by at most 90 degrees."""
     if not (_finite(config.size) and 0.0 < config.size <= 1.0):   # (as core/scene/placement.Placement takes it)
-        raise _refused("size", f"The object size must be a fraction of the photo's height in (0, 1], got {config.size!r}.")
+        raise _refused("size", f"The object size must be a fraction of the photo's height in (0, 1], got "
+                               f"{config.size!r}.")
     if not _finite(config.turn_deg):
         raise _refused("turn_deg", f"The turn must be a finite angle in degrees, got {config.turn_deg!r}.")
     if config.compose_spp is not None and not (_whole(config.compose_spp) and 1 <= config.compose_spp <= 65536):
-        raise _refused("compose_spp", f"compose_spp must be a whole number from 1 to 65536, got {config.compose_spp!r}.")
+        raise _refused("compose_spp", f"compose_spp must be a whole number from 1 to 65536, got "
+                                      f"{config.compose_spp!r}.")
     from ..stages.camera import check_camera_values
 
     try:
@@ -142,10 +145,11 @@ def _check_view(config: RunConfig) -> None:
         raise _refused("camera_overrides", str(error)) from None
     sun = config.sun_deg
     if sun is not None and not (len(sun) == 2 and all(_finite(v) for v in sun) and -90.0 <= sun[1] <= 90.0):
-        raise _refused("sun_deg", f"The sun must be (azimuth, elevation) in finite degrees, the elevation within +-90, "
-                         f"got {sun!r}.")
+        raise _refused("sun_deg", f"The sun must be (azimuth, elevation) in finite degrees, the elevation within "
+                                  f"+-90, got {sun!r}.")
     if not (_finite(config.sun_uncertainty_deg) and 0.0 <= config.sun_uncertainty_deg <= 180.0):
-        raise _refused("sun_uncertainty_deg", f"The sun's uncertainty must be degrees within 0 and 180, got {config.sun_uncertainty_deg!r}.")
+        raise _refused("sun_uncertainty_deg", f"The sun's uncertainty must be degrees within 0 and 180, got "
+                                              f"{config.sun_uncertainty_deg!r}.")
 
 def light_settings(config: RunConfig) -> dict:
     """What a run's config gives the light stage's (the sun, the scene type, the models and where the depth

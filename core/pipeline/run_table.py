@@ -92,7 +92,8 @@ def _camera(value, where: str) -> dict:
 
 def _overrides(value, where: str) -> dict:
     if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
-        raise InputError(f"{where}: overrides must be a table of stage tables, e.g. {{ adapt = {{ iterations = 50 }} }}.")
+        raise InputError(f"{where}: overrides must be a table of stage tables, e.g. "
+                         "{ adapt = { iterations = 50 } }.")
     unknown = sorted(set(value) - set(CONFIG_STAGES))
     if unknown:
         raise InputError(f"{where}: overrides names unknown stage '{unknown[0]}'; it takes {', '.join(CONFIG_STAGES)}.")
