@@ -362,12 +362,24 @@ overrides = { convert = { iterations = 8 }, light = { map_height = 16, optimise 
 name = "first"
 [[job]]
 name = "second"
+[[job]]
+name = "edit"
+mode = "edit"
+prompt = ""
+object_prompt = "a rubber ball"
+instruction = "add moss"
+negative_prompt = "blurry"
+seed = 5
+overrides = { convert = { iterations = 4 }, light = { critic_type = "none", map_height = 16, apparatus = { render_size = 16, spp = 1 }, outpaint = { completion_type = "prior" } }, compose = { pilot_spp = 1, min_spp = 1, max_spp = 1 }, adapt = { iterations = 1, model_resolution = 32, views_per_step = 1, preview_every = 1, checkpoint_every = 100, stages = [[1.0, 16, 1, [500, 990]]] } }
 """
 
 
 def test_a_worker_loads_the_models_once_and_reuses_them_with_the_same_outputs(tmp_path, monkeypatch):
     """Two jobs with diffusion guidance in one worker: the tiny models load once (counted in the real
-    loader), the second job (reused models) writes the same bytes as the first (fresh models)."""
+    loader), the second job (reused models) writes the same bytes as the first (fresh models). A third job's
+    mode, object prompt, instruction, negative prompt and seed reach adapt: it adapts in mode edit with the
+    prompt made of its words, as `scenefit adapt --mode edit` does."""
+    from scenefit.core.stages.adapt.config import edit_prompt
     from scenefit.core.guidance import models as model_module
     from scenefit.devtools.tiny_models import build_tiny_pair
 
@@ -384,14 +396,23 @@ def test_a_worker_loads_the_models_once_and_reuses_them_with_the_same_outputs(tm
 
     monkeypatch.setattr(model_module, "load_guidance_models", counted_load)
     outcomes = run_batch(jobs, tmp_path / "out")
-    assert [(o.name, o.status) for o in outcomes] == [("first", "done"), ("second", "done")], outcomes
-    assert loads == [True]                     # one model set (with the inpainting UNet) for both jobs
+    assert [(o.name, o.status) for o in outcomes] == [("first", "done"), ("second", "done"), ("edit", "done")], \
+        outcomes
+    assert loads == [True]                     # one model set (with the inpainting UNet) for every job
     reports = [json.loads((tmp_path / "out" / name / "report.json").read_text()) for name in ("first", "second")]
     run = reports[1]["stages"]["run"]["stages"]
     assert {name: run[name]["status"] for name in ("convert", "light", "adapt", "compose")} == dict.fromkeys(
         ("convert", "light", "adapt", "compose"), "ran")
     assert run["light"]["report"]["decisions"]["critic"]["type"] == "diffusion"   # light used the models too
     assert [r["worker"]["model_loads_by_this_worker"] for r in reports] == [1, 1]
+    edit = json.loads((tmp_path / "out" / "edit" / "report.json").read_text())["stages"]["run"]
+    adapt = edit["stages"]["adapt"]["report"]
+    assert (adapt["config"]["mode_type"], adapt["config"]["object_prompt"], adapt["config"]["instruction"],
+            adapt["config"]["negative_prompt"], adapt["config"]["seed"], adapt["config"]["views_type"]) == (
+        "edit", "a rubber ball", "add moss", "blurry", 5, "local")
+    assert edit_prompt("a rubber ball", "add moss") == "a rubber ball, with moss"
+    assert "a rubber ball, with moss" in json.dumps(adapt["decisions"]["prompt"])
+    assert edit["config"]["mode"] == "edit" and edit["stages"]["convert"]["report"]["config"]["seed"] == 5
     # Every image and texture the same bytes (the JSON records differ in timings and temporary paths).
     first, second = (outputs(tmp_path / "out" / name) for name in ("first", "second"))
     assert {k for k in first if not k.endswith(".json")} >= {"adapt/maps/texture.pt", "compose/composite.png"}

@@ -138,3 +138,4 @@ def test_the_run_config_refuses_non_finite_numbers_from_any_entry_point():
         with pytest.raises(InputError):
             RunConfig(**values)
     assert RunConfig(sun_deg=(10.0, 90.0), camera_overrides={"pitch_deg": -89.0, "fov_deg": 170.0}).sun_deg[1] == 90.0
+
