@@ -55,7 +55,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 from ..core.base.errors import InputError
-from ..core.base.names import PHOTO_STAGES, STAGES
+from ..core.base.names import ALONE_STAGES, OPTIONAL_STAGES, PHOTO_STAGES, PIPELINE_STAGES, STAGES
 from ..core.guidance.models import ModelConfig
 from ..core.pipeline.run import RunConfig
 from ..core.pipeline.run_table import KEYS as RUN_KEYS, run_config, run_table
@@ -303,11 +303,11 @@ def _parse_stages(stages, where: str) -> tuple[str, ...]:
     if len(set(stages)) != len(stages):
         raise InputError(f"{where}: stages lists a stage twice.")
     stages = tuple(s for s in STAGES if s in stages)
-    whole = ("convert", "light", "compose")
-    if set(stages) <= {"convert", "light"} or set(whole) <= set(stages):
+    if set(stages) <= set(ALONE_STAGES) or set(PIPELINE_STAGES) <= set(stages):
         return stages
-    raise InputError(f"{where}: stages {', '.join(stages)} do not run together: list convert and/or light alone, "
-                     f"or convert, light and compose (adapt and bake optional), which the pipeline runs.")
+    raise InputError(f"{where}: stages {', '.join(stages)} do not run together: list {' and/or '.join(ALONE_STAGES)} "
+                     f"alone, or {', '.join(PIPELINE_STAGES)} ({' and '.join(OPTIONAL_STAGES)} optional), which the "
+                     "pipeline runs.")
 
 
 def _existing(text: str, path: Path, where: str, key: str, what: str) -> Path:

@@ -13,6 +13,11 @@ STAGES = ("convert", "light", "adapt", "compose", "bake")
 CONFIG_STAGES = ("convert", "light", "adapt", "compose")
 # The stages that read the photo and where the asset stands in it.
 PHOTO_STAGES = ("light", "compose")
+# What a job may list: stages that run on their own (each its stage function), or the pipeline, which runs
+# every stage but the optional ones (adapt when its guidance is found, the bake when asked for).
+ALONE_STAGES = ("convert", "light")
+OPTIONAL_STAGES = ("adapt", "bake")
+PIPELINE_STAGES = tuple(stage for stage in STAGES if stage not in OPTIONAL_STAGES)
 
 PRESETS = ("draft", "balanced", "final")
 # scene: restyle the asset to fit the photo; generate: a new appearance from the prompt; edit: change it as told.
