@@ -111,7 +111,7 @@ def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monk
     monkeypatch.setattr(compose, "compose_to_folder", _interrupted)   # Ctrl-C during the compose stage
     assert main(args) == 130
     message = capsys.readouterr().err
-    assert "stages finished so far (convert, light) are kept beside it" in message
+    assert "stages finished so far (convert, camera, light) are kept beside it" in message
     # Nothing is swapped in until the run is whole; the finished stages wait beside the folder.
     staging = staging_path(out)
     assert not out.exists()
@@ -200,7 +200,7 @@ def test_a_run_refused_mid_way_says_which_finished_stages_it_kept(tmp_path, monk
     monkeypatch.setattr(compose, "compose_to_folder", refused)
     assert main(args) == 2
     message = capsys.readouterr().err.strip()
-    assert message == (f"scenefit: error: Compose refused this. The finished stages (convert, light) are kept beside "
+    assert message == (f"scenefit: error: Compose refused this. The finished stages (convert, camera, light) are kept beside "
                        f"'{out}' in '.run.partial'; the next run into it reuses each whose inputs and settings are "
                        "the same.")
     assert not out.exists()

@@ -93,11 +93,12 @@ def make_payload(job: Job, attempt: int = 1, stages: list[Path] = (), files: dic
 def finished_stage_folders(folder: Path | None) -> list[Path]:
     """The stage folders of a run folder that hold a finished stage (its stage.json) and no link, which
     would be sent as the file it points at: those are run again instead."""
-    from ..core.pipeline.run import STAGE_FILE, STAGES
+    from ..core.base.names import RUN_ORDER
+    from ..core.pipeline.run import STAGE_FILE
 
     if folder is None or not folder.is_dir():
         return []
-    return [folder / name for name in STAGES if (folder / name / STAGE_FILE).is_file()
+    return [folder / name for name in RUN_ORDER if (folder / name / STAGE_FILE).is_file()
             and not (folder / name).is_symlink() and not any(p.is_symlink() for p in (folder / name).rglob("*"))]
 
 

@@ -7,8 +7,12 @@ may not import core/pipeline.
 """
 from __future__ import annotations
 
-# The pipeline's stages, in the order they run.
+# The pipeline's stages, in the order they run: those a job lists.
 STAGES = ("convert", "light", "adapt", "compose", "bake")
+# Every stage of a run in its order: the camera stage (the photo's camera, camera/camera.json, which light,
+# adapt and compose read) runs before light. A job does not list it: every run that reads the photo has it.
+CAMERA_STAGE = "camera"
+RUN_ORDER = ("convert", CAMERA_STAGE, "light", "adapt", "compose", "bake")
 # The stages whose config a preset resolves and a run's overrides reach (the bake is a child process).
 CONFIG_STAGES = ("convert", "light", "adapt", "compose")
 # The stages that read the photo and where the asset stands in it.

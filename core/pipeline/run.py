@@ -39,8 +39,10 @@ from ..base.progress import ProgressCallback, check_cancel, emit
 from ..scene.camera import PhotoCamera
 from ..scene.placement import DEFAULT_OBJECT_SIZE
 
-from ..base.names import CAMERA_SOURCES, CONFIG_STAGES, GUIDANCE_TYPES, MODES, PRESETS, SCENE_TYPES, STAGES
+from ..base.names import (CAMERA_SOURCES, CAMERA_STAGE, CONFIG_STAGES, GUIDANCE_TYPES, MODES, PRESETS, RUN_ORDER,
+                          SCENE_TYPES, STAGES)
 STAGE_FILE = "stage.json"
+# (The camera stage's report is the run report's "camera", beside the "stages" a job lists.)
 CAMERA_KEYS = ("fov_deg", "pitch_deg", "roll_deg")
 
 
@@ -206,7 +208,7 @@ class StageRunner:
         check_cancel(self.cancel)
         folder = self.out / name
         record = folder / STAGE_FILE
-        index = STAGES.index(name)
+        index = RUN_ORDER.index(name)
         report = None if self.fresh else _finished_stage(folder, key)
         source = ""
         if report is None and not self.fresh and self.earlier is not None and not folder.exists() \
@@ -217,7 +219,7 @@ class StageRunner:
             shutil.copytree(self.earlier / name, folder)
             report, source = _finished_stage(folder, key), f" from {self.earlier.name}"
         if report is not None:
-            emit(self.progress, "run", index + 1, len(STAGES), f"{name}: reused{source} (same settings and inputs)")
+            emit(self.progress, "run", index + 1, len(RUN_ORDER), f"{name}: reused{source} (same settings and inputs)")
             self.stages[name] = {"status": "reused", "key": key, "seconds": 0.0, "report": report}
             if source:
                 self.stages[name]["from"] = str(self.earlier)
@@ -226,7 +228,7 @@ class StageRunner:
             check, self.before_work = self.before_work, None
             check()
         self.fresh = self.fresh or later_stages_follow
-        emit(self.progress, "run", index, len(STAGES), f"{name}: running")
+        emit(self.progress, "run", index, len(RUN_ORDER), f"{name}: running")
         t0 = time.perf_counter()
         if folder.is_symlink():   # a link in the run folder: the stage writes its own folder, never through it
             folder.unlink()
@@ -243,14 +245,14 @@ class StageRunner:
             write_json_atomic(record, {"key": key, "report": dict(report, outputs=relative_paths(
                 report.get("outputs", {}), folder))})
             self.stages[name] = {"status": "ran", "key": key, "seconds": round(seconds, 3), "report": report}
-            emit(self.progress, "run", index + 1, len(STAGES), f"{name}: done in {seconds:.1f} s")
+            emit(self.progress, "run", index + 1, len(RUN_ORDER), f"{name}: done in {seconds:.1f} s")
             return report
 
         return finish
 
     def skip(self, name: str, status: str, why: str) -> None:
         self.stages[name] = {"status": status, "why": why}
-        emit(self.progress, "run", STAGES.index(name) + 1, len(STAGES), f"{name}: {status}")
+        emit(self.progress, "run", RUN_ORDER.index(name) + 1, len(RUN_ORDER), f"{name}: {status}")
 
 
 def _finished_stage(folder: Path, key: str) -> dict | None:
@@ -307,6 +309,7 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     run = PipelineRun(mesh, maps, photo_path, placement, out_dir, config, progress, cancel, models,  # 1. inputs
                       reuse_from)
     run.convert()                         # 2. the asset's maps -> neural texture
+    run.camera_stage()                    # 2b. the photo's camera -> camera/camera.json (light, adapt, compose)
     with run.baking(bake, bake_skipped_why):  # 6. the texture written into the asset's own file (glTF): a process
         run.light()                       # 3.    of its own, from when the texture is final (after 2, or after 4)
         run.adapt()                       # 4. the texture adapted to the scene (only with the SD2 weights)
@@ -360,7 +363,7 @@ class PipelineRun:
         self.normalized, _ = normalize_to_unit_sphere(mesh)
         self.runner = StageRunner(self.out, progress, cancel, Path(reuse_from).resolve() if reuse_from else None,
                                   before_work=self.check_the_view)
-        self.texture_path = self.light_path = None
+        self.texture_path = self.light_path = self.camera_path = None
         self.camera: tuple[PhotoCamera, dict] | None = None   # the photo's camera, once estimated
         self.keys: dict[str, str] = {}
         self.texture_final: Callable[[], None] = lambda: None   # what waits for the final texture (the bake)
@@ -370,6 +373,31 @@ class PipelineRun:
         from .presets import stage_config, with_overrides
 
         return stage_config(stage, self.config.preset, **with_overrides(values, self.config.overrides(stage)))
+
+    def camera_stage(self) -> None:
+        """The photo's camera, written as camera/camera.json: keyed by the photo and what was given about its
+        camera, and never making the stages after it run by itself (the keys of light, adapt (through light's)
+        and compose hold its key)."""
+        from ..stages.camera_stage import CAMERA_FILE, write_camera
+
+        given = self.config.photo_camera
+        camera_key = asdict(given) if given else ["estimated", _digest(Path(self.config.fspy).read_bytes())
+                                                  if self.config.fspy else None, self.config.camera_overrides,
+                                                  self.config.camera_source, self.config.camera_why]
+        self.keys[CAMERA_STAGE] = _digest(CAMERA_STAGE, camera_key, self.photo_key)
+
+        def begin(folder: Path) -> Callable[[], dict]:
+            report = write_camera(*self.photo_camera(), folder)
+            return lambda: report
+
+        self.runner.start(CAMERA_STAGE, self.keys[CAMERA_STAGE], begin, later_stages_follow=False)()
+        self.camera_path = self.out / CAMERA_STAGE / CAMERA_FILE
+
+    def stage_camera(self, width: int, height: int) -> tuple[PhotoCamera, dict]:
+        """The camera stage's camera at an image of `width` x `height`, and its estimate's record."""
+        from ..stages.camera_stage import read_camera
+
+        return read_camera(self.camera_path, width, height)
 
     def convert(self) -> None:
         from ..stages.convert import convert_and_bake
@@ -420,16 +448,13 @@ class PipelineRun:
         config, envmap_height = self.light_config()
         # The diffusion critic scores renders of the asset itself (as converted), not a stand-in sphere.
         critic_sees_asset = config.critic_type == "diffusion"
-        given = self.config.photo_camera
-        camera_key = asdict(given) if given else ["estimated", _digest(Path(self.config.fspy).read_bytes())
-                                                  if self.config.fspy else None, self.config.camera_overrides,
-                                                  self.config.camera_source]
-        self.keys["light"] = _digest("light", asdict(config), self.photo_key, self.placement_px, camera_key,
+        self.keys["light"] = _digest("light", asdict(config), self.photo_key, self.placement_px,
+                                     self.keys[CAMERA_STAGE],
                                      self.keys["convert"] if critic_sees_asset else None,
                                      *([self.config.sun_shadow] if self.config.sun_shadow else []))
 
         def light(folder: Path) -> dict:
-            camera, estimate = self.photo_camera()
+            camera, estimate = self.stage_camera(self.photo.shape[1], self.photo.shape[0])
             with_sun = config
             if self.config.sun_shadow is not None:   # the shadow's points need the camera
                 from ..stages.light.shadow_hint import sun_from_shadow_points
@@ -455,12 +480,14 @@ class PipelineRun:
         self.light_path = self.out / "light" / "light.exr"
 
     def photo_camera(self) -> tuple[PhotoCamera, dict]:
-        """The photo's camera for the light stage (whose report hands it to adapt and compose) and
-        where it came from: the caller's, else the estimate (fSpy, EXIF, the photo's lines, or the
-        defaults, each field saying which) with the user's values over it. Estimated once a run."""
+        """The photo's camera (at the light stage's working size) and where it came from: the camera stage's
+        once it is written (or reused), else the caller's, else the estimate (fSpy, EXIF, the photo's lines, or
+        the defaults, each field saying which) with the user's values over it. Estimated once a run."""
         if self.camera is None:
             h, w = self.photo.shape[:2]
-            if self.config.photo_camera is not None:
+            if self.camera_path is not None and self.camera_path.is_file():
+                self.camera = self.stage_camera(w, h)
+            elif self.config.photo_camera is not None:
                 self.camera = replace(self.config.photo_camera, width=w, height=h), {"source": "given by the caller"}
             else:
                 from ..stages.camera import photo_camera_estimate
@@ -479,12 +506,7 @@ class PipelineRun:
         from ..scene.asset_pose import place_asset
 
         h, w = self.photo.shape[:2]
-        if self.light_path is not None and self.light_path.is_file():   # the light stage's camera, as compose's
-            from ..stages.compose import light_camera
-
-            camera = light_camera(self.light_path, self.photo_info, w, h)[0]
-        else:
-            camera = self.photo_camera()[0]
+        camera = self.photo_camera()[0]   # (the camera stage's, once it ran: estimated once a run)
         if self.config.sun_shadow is not None:
             from ..stages.light.shadow_hint import sun_from_shadow_points
 
@@ -521,7 +543,6 @@ class PipelineRun:
 
     def adapt(self) -> None:
         from ..stages.adapt import adapt_and_bake
-        from ..stages.compose import light_camera
         from ..texture.bake import WEIGHTS_FILE, load_neural_texture
 
         if not self.found:
@@ -538,7 +559,7 @@ class PipelineRun:
         texture_path = self.texture_path
 
         def adapt(folder: Path) -> dict:
-            camera, _ = light_camera(self.light_path, self.photo_info, w, h)
+            camera, _ = self.stage_camera(w, h)
             return adapt_and_bake(self.mesh, load_neural_texture(texture_path), config, folder, photo=self.photo,
                                   placement=placement, photo_camera=camera, progress=self.progress,
                                   cancel=self.cancel, models=self.cache.get(config.models, True))[1]
@@ -548,7 +569,7 @@ class PipelineRun:
         self.texture_final()
 
     def compose(self) -> None:
-        from ..stages.compose import ComposeInputs, compose_to_folder, light_camera
+        from ..stages.compose import ComposeInputs, compose_to_folder
         from ..stages.light import load_photo
         from ..render.environment import load_environment
         from ..texture.surface_layout import texture_view
@@ -556,7 +577,7 @@ class PipelineRun:
 
         config = self.compose_config()
         self.keys["compose"] = _digest("compose", asdict(config), self.upstream, self.keys["light"], self.photo_key,
-                                       self.placement_px, self.config.turn_deg)
+                                       self.placement_px, self.config.turn_deg, self.keys[CAMERA_STAGE])
         texture_path, light_path = self.texture_path, self.light_path
 
         def compose(folder: Path) -> dict:
@@ -564,7 +585,7 @@ class PipelineRun:
             view = texture_view(texture, self.mesh)   # adaptation's new UV layout, when it made one
             full, _ = load_photo(self.photo_path, max_side=config.max_side)   # at the photo's size, up to max_side
             fh, fw = full.shape[:2]
-            camera, camera_from = light_camera(light_path, self.photo_info, fw, fh)
+            camera, camera_from = self.stage_camera(fw, fh)[0], f"the camera stage ({self.camera_path})"
             inputs = ComposeInputs(view.mesh, view.stack(texture), full, self.placement.pixel((fh, fw)),
                                    load_environment(light_path), camera, turn_deg=self.config.turn_deg)
             extra = {"inputs": {"texture": str(texture_path), "light": str(light_path), "camera_from": camera_from,
@@ -624,6 +645,7 @@ class PipelineRun:
             "inputs": {"asset": self.mesh.name, "asset_digest": self.asset_key, "photo": self.photo_info,
                        "photo_digest": self.photo_key, "placement_px": list(self.placement_px)},
             "stages": stages,
+            "camera": self.runner.stages.get(CAMERA_STAGE),   # (the camera stage: ran or reused, and its report)
             "composite": str(self.out / "compose" / "composite.png"),
             "reused": [name for name, s in stages.items() if s["status"] == "reused"],
             "environment": environment_info(),
