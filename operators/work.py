@@ -237,15 +237,16 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
 
     def write(folder: Path) -> dict:
         config = run_config(data)
-        report = run_pipeline(data["mesh"], data["maps"], data["photo"], tuple(data["view"]["placement"]), folder,
+        result = run_pipeline(data["mesh"], data["maps"], data["photo"], tuple(data["view"]["placement"]), folder,
                               config, progress=progress, cancel=cancel,
                               bake_skipped_why="in Blender the game file is written by Bake Asset",
                               reuse_from=data.get("reuse_from"))
+        report = result.to_report()
         stages = report["stages"]
-        if stages["adapt"]["status"] == "skipped" and data.get("why_no_adapt"):
+        if result.stages["adapt"].status == "skipped" and data.get("why_no_adapt"):
             stages["adapt"]["why"] = data["why_no_adapt"]
-        last = "adapt" if stages["adapt"]["status"] != "skipped" else "convert"
-        outputs = stages[last]["report"]["outputs"]
+        last = result.texture_stage
+        outputs = result.outputs(last)
         per_material = material_results(data, outputs["weights"], folder / "materials") \
             if data.get("materials") else []
         if per_material:
@@ -253,10 +254,10 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
         write_report(folder / "report.json", report)  # paths relative to the run folder, which moves
         return {"stage": last, "report": str(folder / "report.json"), "texture": outputs["weights"],
                 "maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
-                "hdr": str(folder / "light" / "light.exr"), "composite": report["composite"],
-                "camera": {k: stages["light"]["report"]["decisions"]["photo_camera"][k]
-                           for k in ("fov_deg", "pitch_deg", "roll_deg")},
-                "stages": {name: stage["status"] for name, stage in stages.items()},
+                "hdr": str(folder / "light" / "light.exr"), "composite": str(result.composite),
+                # the camera stage's (which light and compose used), for the Cycles set-up
+                "camera": {k: result.camera.report["photo_camera"][k] for k in ("fov_deg", "pitch_deg", "roll_deg")},
+                "stages": {name: stage.status for name, stage in result.stages.items()},
                 "adapt_skipped": stages["adapt"].get("why", ""), "material_maps": per_material}
 
     return written_whole(data["out"], write)

@@ -289,7 +289,7 @@ def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models
     bake, why_not = asset_file_bake(job.asset, job.object) if "bake" in job.stages else (None, "the job's stages "
                                                                                          "do not list bake")
     return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel, models=models,
-                        bake=bake, bake_skipped_why=why_not, reuse_from=reuse_from)
+                        bake=bake, bake_skipped_why=why_not, reuse_from=reuse_from).to_report()
 
 
 def job_run_config(job: Job):

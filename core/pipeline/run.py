@@ -1,14 +1,14 @@
 """The whole pipeline for one asset and one photo: convert -> light -> adapt -> compose -> bake.
 
-    report = run_pipeline(mesh, maps, photo_path, placement, out_dir, RunConfig(...), progress, cancel)
+    result = run_pipeline(mesh, maps, photo_path, placement, out_dir, RunConfig(...), progress, cancel)
 
 Each stage writes into its own folder under out_dir and, last, a `stage.json` holding its key: a
 digest of its settings, of the inputs it reads and of the keys of the stages it depends on. A later
 run whose key for a stage matches a finished stage.json (and whose listed outputs still exist)
 reuses that stage and says so; anything else runs it again, and with it every stage after it.
 Stages hand data to each other only through their files, so a reused stage and a fresh one look
-the same downstream. Plain data in (arrays, paths, a frozen config), a report dict out: the Ray
-batch runner calls this function as it is.
+the same downstream. Plain data in (arrays, paths, a frozen config), a RunResult out (core/pipeline/result.py;
+`to_report()` is report.json): the Ray batch runner calls this function as it is.
 """
 from __future__ import annotations
 
@@ -38,6 +38,7 @@ from ..data.mesh import Mesh
 from ..base.progress import ProgressCallback, check_cancel, emit
 from ..scene.camera import PhotoCamera
 from ..scene.placement import DEFAULT_OBJECT_SIZE
+from .result import RunResult, StageRecord
 
 from ..base.names import (CAMERA_SOURCES, CAMERA_STAGE, CONFIG_STAGES, GUIDANCE_TYPES, MODES, PRESETS, RUN_ORDER,
                           SCENE_TYPES, STAGES)
@@ -293,10 +294,10 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
                  config: RunConfig = RunConfig(), progress: ProgressCallback | None = None,
                  cancel: threading.Event | None = None, bake: GameBake | None = None,
                  bake_skipped_why: str = "no game bake was asked for", models: ModelCache | None = None,
-                 reuse_from: str | Path | None = None) -> dict:
+                 reuse_from: str | Path | None = None) -> RunResult:
     """Convert the asset, estimate the photo's light, adapt the texture (when the SD2 weights exist),
-    compose the asset into the photo, and bake (when `bake` is given); returns the run's report (also
-    out_dir/report.json).
+    compose the asset into the photo, and bake (when `bake` is given); returns the run's RunResult (its
+    to_report() is out_dir/report.json).
 
     placement: (x, y) as fractions of the photo's width and height (both <= 1) or pixels, or "X,Y".
     models: the loaded diffusion models to use (a ModelCache: a batch worker keeps one for its life,
@@ -632,27 +633,22 @@ class PipelineRun:
             self.texture_final = lambda: None
         finishes[0]()
 
-    def finish(self) -> dict:
+    def finish(self) -> RunResult:
         from dataclasses import replace
 
         from ..base.report import write_report
         from ..render.backend import environment_info
 
-        stages = {name: self.runner.stages[name] for name in STAGES if name in self.runner.stages}
-        report = {
-            "stage": "run",
-            "config": _plain(replace(self.config, models=self.config.models)),
-            "inputs": {"asset": self.mesh.name, "asset_digest": self.asset_key, "photo": self.photo_info,
-                       "photo_digest": self.photo_key, "placement_px": list(self.placement_px)},
-            "stages": stages,
-            "camera": self.runner.stages.get(CAMERA_STAGE),   # (the camera stage: ran or reused, and its report)
-            "composite": str(self.out / "compose" / "composite.png"),
-            "reused": [name for name, s in stages.items() if s["status"] == "reused"],
-            "environment": environment_info(),
-            "seconds_total": round(time.perf_counter() - self.started, 3),
-        }
-        write_report(self.out / "report.json", report)   # paths relative to the run's folder, which is swapped in
-        return report
+        recorded = self.runner.stages
+        result = RunResult(
+            folder=self.out, config=_plain(replace(self.config, models=self.config.models)),
+            inputs={"asset": self.mesh.name, "asset_digest": self.asset_key, "photo": self.photo_info,
+                    "photo_digest": self.photo_key, "placement_px": list(self.placement_px)},
+            stages={name: StageRecord.from_runner(name, recorded[name]) for name in STAGES if name in recorded},
+            camera=StageRecord.from_runner(CAMERA_STAGE, recorded[CAMERA_STAGE]) if CAMERA_STAGE in recorded else None,
+            seconds=round(time.perf_counter() - self.started, 3), environment=environment_info())
+        write_report(self.out / "report.json", result.to_report())   # paths relative to the run's folder
+        return result
 
 
 class _WithInpaint:
