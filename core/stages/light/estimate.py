@@ -10,6 +10,7 @@ light_preview.png (tone-mapped) and returns the report's fields.
 from __future__ import annotations
 
 from ...base.names import SCENE_TYPES as NAMED_SCENE_TYPES
+from ..camera_exif import FOCAL_RANGE_MM, plausible_focal_mm
 
 import copy
 import functools
@@ -198,18 +199,6 @@ def _decoded_photo(path: Path, max_side: int | None) -> tuple[np.ndarray, dict]:
         film_width = 43.27 * w / np.hypot(w, h)
         info["fov_from_metadata_deg"] = round(float(np.degrees(2 * np.arctan(film_width / (2 * float(focal35))))), 3)
     return rgb, info
-
-
-# A focal length a photo's EXIF may give, in mm (35 mm equivalent or real): a fisheye's few mm to a
-# super-telephoto's few thousand. A value outside (zero, negative, text, 1e30) is data from elsewhere gone wrong.
-FOCAL_RANGE_MM = (1.0, 5000.0)
-
-
-def plausible_focal_mm(value) -> float | None:
-    """`value` as a focal length in mm when it is a finite number in FOCAL_RANGE_MM, else None."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        return None
-    return float(value) if FOCAL_RANGE_MM[0] <= value <= FOCAL_RANGE_MM[1] else None
 
 
 def _metadata(path: Path) -> dict:

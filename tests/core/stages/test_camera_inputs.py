@@ -12,7 +12,7 @@ import pytest
 from scenefit.cli import main
 from scenefit.core.base.errors import InputError
 from scenefit.core.data.imageio import write_image
-from scenefit.core.stages import camera as camera_stage
+from scenefit.core.stages import camera_exif
 from scenefit.core.stages.camera import check_camera_values, estimate_photo_camera, read_fspy
 from scenefit.core.stages.light import estimate as light_estimate
 from scenefit.core.stages.light import load_photo
@@ -98,7 +98,7 @@ def test_an_exif_focal_length_with_a_sensor_is_in_range_too(monkeypatch, tmp_pat
 
     for focal, expected in ((1e30, None), (-3.0, None), ("50", None), (math.inf, None), (50.0, 50.0)):
         monkeypatch.setattr(oiio.ImageInput, "open", staticmethod(lambda path, focal=focal: Input(focal)))
-        assert camera_stage._exif_focal_and_model(tmp_path / "x.jpg")[0] == expected
+        assert camera_exif.exif_focal_and_model(tmp_path / "x.jpg")[0] == expected
 
 
 @pytest.mark.parametrize("values", [{"pitch_deg": 90.0}, {"pitch_deg": -89.5}, {"fov_deg": 0.5}, {"fov_deg": 171.0},
