@@ -586,7 +586,7 @@ class PipelineRun:
             view = texture_view(texture, self.mesh)   # adaptation's new UV layout, when it made one
             full, _ = load_photo(self.photo_path, max_side=config.max_side)   # at the photo's size, up to max_side
             fh, fw = full.shape[:2]
-            camera, camera_from = self.stage_camera(fw, fh)[0], f"the camera stage ({self.camera_path})"
+            camera, camera_from = self.stage_camera(fw, fh)[0], "the camera stage (camera/camera.json)"
             inputs = ComposeInputs(view.mesh, view.stack(texture), full, self.placement.pixel((fh, fw)),
                                    load_environment(light_path), camera, turn_deg=self.config.turn_deg)
             extra = {"inputs": {"texture": str(texture_path), "light": str(light_path), "camera_from": camera_from,

@@ -33,7 +33,7 @@ def test_run_writes_the_camera_stage_that_light_and_compose_read(tmp_path, capsy
     assert report["camera"]["status"] == "ran" and "camera" not in report["stages"]
     light = report["stages"]["light"]["report"]["decisions"]["photo_camera"]
     assert (light["pitch_deg"], light["fov_deg"]) == (-12.0, 50.0)
-    assert "camera stage" in report["stages"]["compose"]["report"]["inputs"]["camera_from"]
+    assert report["stages"]["compose"]["report"]["inputs"]["camera_from"] == "the camera stage (camera/camera.json)"
 
     # Another pitch: the camera and the stages that read it run again; convert is reused.
     assert main(args[:-4] + ["--pitch", "-20", "--fov", "50"]) == 0
