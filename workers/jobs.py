@@ -289,6 +289,8 @@ def _parse_job(entry: dict, index: int, path: Path, models: ModelConfig) -> Job:
         at = (float(at[0]), float(at[1]))
     elif needs_photo:
         raise InputError(f"{where}: stage '{needs_photo[0]}' needs the placement; add at = [x, y] (fractions).")
+    if run.sun_shadow is not None and photo is not None:
+        _check_shadow_points(run.sun_shadow, photo, where)
     return Job(name=name, asset=asset, stages=stages, photo=photo, at=at, object=obj, run=run)
 
 
@@ -308,6 +310,20 @@ def _parse_stages(stages, where: str) -> tuple[str, ...]:
     raise InputError(f"{where}: stages {', '.join(stages)} do not run together: list {' and/or '.join(ALONE_STAGES)} "
                      f"alone, or {', '.join(PIPELINE_STAGES)} ({' and '.join(OPTIONAL_STAGES)} optional), which the "
                      "pipeline runs.")
+
+
+def _check_shadow_points(points: tuple[str, str, str], photo: Path, where: str) -> None:
+    """The shadow's points inside the photo, now rather than when the job runs (and fails, and is retried)."""
+    from ..core.data.imageio import upright_size
+    from ..core.stages.light.shadow_hint import shadow_pixels
+
+    size = upright_size(photo)
+    if size is None:
+        return   # (a photo OpenImageIO cannot open is said when the job reads it)
+    try:
+        shadow_pixels(points, size, (size[1], size[0]))
+    except InputError as error:
+        raise InputError(f"{where}: sun_shadow: {error}") from None
 
 
 def _existing(text: str, path: Path, where: str, key: str, what: str) -> Path:

@@ -95,6 +95,8 @@ def test_a_jobs_file_job_is_the_run_and_travels_whole(tmp_path):
     ("stages = [\"light\", \"compose\"]", "stages light, compose do not run together"),
     ("fspy = \"missing.fspy\"", "the fSpy project"),
     ("sun_shadow = [\"0.5,0.5\", \"0.5,0.4\"]", "sun_shadow must be the shadow's foot, top and tip"),
+    ("sun_shadow = [\"500,40\", \"30,20\", \"40,45\"]", "sun_shadow: The shadow's foot (500, 40) lies outside the 64x48"),
+    ("sun_shadow = [\"0.5,0.8\", \"nan,0.5\", \"0.6,0.85\"]", "sun_shadow: The shadow's top takes two finite"),
 ])
 def test_what_the_run_cannot_take_is_one_sentence_naming_file_job_and_key(tmp_path, line, says):
     make_inputs(tmp_path)
