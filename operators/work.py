@@ -181,17 +181,10 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
     return written_whole(data["out"], write)
 
 
-def run_config(data: dict):
-    """Run All's RunConfig from the operator's data: the panel's settings and the photo's view."""
-    return view_config(data["view"], preset=data["preset"], prompt=data["prompt"], guidance_type=data["guidance"],
-                       models=data["models"], scene_type=data.get("scene_type", "auto"),
-                       depth_model=data.get("depth_model"))
-
-
 def view_config(view: dict, **settings):
     """A RunConfig of `settings` seeing the photo as `view` (operators/common.photo_view) says: the artist's
-    camera or the panel's values, the asset's size and turn, the artist's sun. Run All here and on a worker
-    (its job is this config's table, core/pipeline/run_table.py) build it here."""
+    camera or the panel's values, the asset's size and turn, the artist's sun. Run All's prepare() here and
+    on a worker (its job is this config's table, core/pipeline/run_table.py) build it here."""
     from ..core.pipeline.run import RunConfig
 
     source, why = camera_source(view)
@@ -231,14 +224,14 @@ def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:
 
 def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
     """The command line's pipeline (core.run.run_pipeline: convert -> light -> adapt -> compose; the
-    game bake is Bake Asset's, on the main thread) into data['out']; returns what Blender applies."""
+    game bake is Bake Asset's, on the main thread) into data['out'] with data['config'], the RunConfig
+    Run All built (view_config); returns what Blender applies."""
     from ..core.base.report import write_report
     from ..core.pipeline.run import run_pipeline
 
     def write(folder: Path) -> dict:
-        config = run_config(data)
-        result = run_pipeline(data["mesh"], data["maps"], data["photo"], tuple(data["view"]["placement"]), folder,
-                              config, progress=progress, cancel=cancel,
+        result = run_pipeline(data["mesh"], data["maps"], data["photo"], data["placement"], folder,
+                              data["config"], progress=progress, cancel=cancel,
                               bake_skipped_why="in Blender the game file is written by Bake Asset",
                               reuse_from=data.get("reuse_from"))
         report = result.to_report()
