@@ -632,7 +632,7 @@ def test_a_changed_job_that_fails_keeps_its_earlier_stages_for_the_next_try(tmp_
     jobs = load_jobs(tmp_path / "jobs.toml")
     assert [o.status for o in run_batch(jobs, out, InProcessDispatcher(jobs.settings, AlwaysFailingWorker))] == ["failed"]
     report = json.loads((out / "b" / "report.json").read_text())
-    assert report["status"] == "failed" and report["kept"]["stages"] == ["convert", "light", "compose"]
+    assert report["status"] == "failed" and report["kept"]["stages"] == ["convert", "camera", "light", "compose"]
     assert [o.status for o in run_batch(jobs, out)] == ["done"]
     stages = json.loads((out / "b" / "report.json").read_text())["stages"]["run"]["stages"]
     assert {name: stages[name]["status"] for name in ("convert", "light", "compose")} == \
