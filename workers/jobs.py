@@ -88,7 +88,9 @@ class Job:
     def to_dict(self) -> dict:
         """The job as plain data: its own keys, [models] as a table, and the run's keys that differ from
         the defaults (core/pipeline/run_table.py), as a jobs file would give them."""
-        defaults = run_table(RunConfig())
+        # (what equals the default is left out, guidance's default being the stages' (run_table.run_config): a
+        # worker of an earlier version takes a job that uses none of the keys it does not know)
+        defaults = run_table(RunConfig(guidance_type="auto" if "adapt" in self.stages else "none"))
         settings = {k: v for k, v in run_table(self.run).items() if v != defaults[k]}
         fspy = {"fspy": str(self.run.fspy)} if self.run.fspy else {}
         return {"name": self.name, "asset": str(self.asset), "photo": None if self.photo is None else str(self.photo),
