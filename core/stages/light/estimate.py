@@ -31,7 +31,7 @@ from ...data.mesh import Mesh, normalize_to_unit_sphere
 from ...render.photo import camera_exposure
 from ...data.primitives import uv_sphere
 from ...base.progress import ProgressCallback, check_cancel, emit
-from ...scene.camera import DEFAULT_PITCH_DEG, PhotoCamera
+from ...scene.camera import PhotoCamera
 from .cues import CueConfig, build_cues
 from .depth import DepthConfig, estimate_ray_distance
 from .diffusion_critic import DiffusionCriticConfig
@@ -62,8 +62,7 @@ class LightConfig:
     with a critic, i.e. with the SD2 weights; core/pipeline/preset_tables.py has shorter ones)."""
 
     scene_type: str = "auto"
-    fov_deg: float | None = None              # horizontal; None: the photo's metadata, else DEFAULT_FOV_DEG
-    camera_pitch_deg: float = DEFAULT_PITCH_DEG   # the photo camera looks this far up (negative: down)
+    # (The photo's camera is not a light setting: it is the camera stage's, a PhotoCamera given to estimate_light.)
     # The artist's dominant light (--sun AZ,EL), degrees: azimuth from the photo's view direction,
     # positive to the camera's right (clockwise seen from above), elevation above the horizon.
     sun_deg: tuple[float, float] | None = None
@@ -89,11 +88,6 @@ class LightConfig:
         check_choice("scene_type", self.scene_type, SCENE_TYPES)
         check_choice("critic_type", self.critic_type, CRITIC_TYPES)
         check_choice("prior_type", self.prior_type, PRIOR_TYPES)
-        if self.fov_deg is not None and not 1.0 <= self.fov_deg <= 170.0:
-            raise InputError(f"The photo's field of view must be between 1 and 170 degrees, got {self.fov_deg}.")
-        if not -89.0 <= self.camera_pitch_deg <= 89.0:
-            raise InputError(f"The photo camera's pitch must be within +-89 degrees (where it looks above the "
-                             f"horizon; negative looks down), got {self.camera_pitch_deg:g}; give another --pitch.")
         if self.sun_deg is not None and (len(self.sun_deg) != 2 or not all(map(math.isfinite, self.sun_deg))
                                          or not -90.0 <= self.sun_deg[1] <= 90.0):
             raise InputError(f"The sun direction must be two finite angles AZ,EL with the elevation within +-90 "
@@ -218,12 +212,12 @@ def _metadata(path: Path) -> dict:
         inp.close()
 
 
-def default_photo_camera(config: LightConfig, photo_info: dict, width: int, height: int) -> tuple[PhotoCamera, dict]:
-    """The camera the light stage assumes for a photo when none is given: core/scene/camera.py's, with the
-    config's field of view and pitch (the one definition of the frame and the defaults)."""
+def default_photo_camera(photo_info: dict, width: int, height: int) -> tuple[PhotoCamera, dict]:
+    """The camera the light stage assumes for a photo when none is given: core/scene/camera.py's (the one
+    definition of the frame and the defaults; the field of view from the photo's metadata where it has one)."""
     from ...scene.camera import photo_camera_for
 
-    return photo_camera_for(photo_info, width, height, config.fov_deg, config.camera_pitch_deg)
+    return photo_camera_for(photo_info, width, height)
 
 
 def sun_direction(sun_deg: tuple[float, float] | None, camera: PhotoCamera) -> np.ndarray | None:
@@ -250,7 +244,7 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     """Estimate an HDR environment map from a photo (sRGB-encoded float RGB) and the object's placement.
 
     photo_camera: the photo's orientation and FOV in the world (default: looking along +Y, the
-    composition's azimuth 0, pitched by config.camera_pitch_deg). mesh/maps: the object with its fixed
+    composition's azimuth 0, at the default pitch). mesh/maps: the object with its fixed
     appearance ((H, W, 5) base colour, roughness, metallic); default a grey sphere. critic: used when
     config.critic_type == "diffusion"; reference_envmap: the true map (photo exposure units) for "reference".
     models: where loaded diffusion models come from, `models.get(model_config, need_inpaint)` (a
@@ -282,7 +276,7 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     info = dict(photo_info or {})
     decisions: dict = {}
     if photo_camera is None:
-        photo_camera, decisions["fov"] = default_photo_camera(config, info, w, h)
+        photo_camera, decisions["fov"] = default_photo_camera(info, w, h)
     elif (photo_camera.width, photo_camera.height) != (w, h):
         photo_camera = replace(photo_camera, width=w, height=h)
     decisions["photo_camera"] = asdict(photo_camera)
