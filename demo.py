@@ -6,6 +6,8 @@ exposed and clipped to 8 bits as a camera would.
 """
 from __future__ import annotations
 
+from .core.base.names import GUIDANCE_TYPES
+
 import shutil
 import subprocess
 import sys
@@ -16,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from .core.data.asset_io import is_asset_folder, load_asset_folder
-from .core.stages.compose import ComposeInputs, compose_to_folder, light_camera
+from .core.stages.camera_stage import CAMERA_FILE, read_camera
+from .core.stages.compose import ComposeInputs, compose_to_folder
 from .core.data.imageio import read_image, write_image
 from .core.stages.light import load_photo
 from .core.render.photo import develop_photo, perspective_view, studiolight_path
@@ -66,7 +69,7 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     from .core.base.errors import InputError
     from .core.guidance import ModelConfig, locate_models
 
-    if guidance not in ("auto", "sd2", "none"):
+    if guidance not in GUIDANCE_TYPES:
         raise InputError(f"guidance must be 'auto', 'sd2' or 'none', got {guidance!r}.")
     if guidance == "sd2":
         locate_models(ModelConfig(), need_inpaint=True)
@@ -95,13 +98,13 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     t = time.perf_counter()
     estimated = load_environment(out / "light" / "light.exr")
     constant = constant_environment(estimated.reshape(-1, 3).mean(axis=0))
-    compose_stage = run["stages"]["compose"]["report"]
+    compose_stage = run.stages["compose"].report
     texture_path = Path(compose_stage["inputs"]["texture"])
     photo, photo_read = load_photo(inputs / "photo.png")
     texture = load_neural_texture(texture_path)
     view = texture_view(texture, mesh)
     mesh, stack = view.mesh, view.stack(texture)
-    camera, _ = light_camera(out / "light" / "light.exr", photo_read, photo.shape[1], photo.shape[0])
+    camera, _ = read_camera(out / "camera" / CAMERA_FILE, photo.shape[1], photo.shape[0])   # the run's camera stage
     placement = Placement.parse(DEMO_PLACEMENT, (photo.shape[1], photo.shape[0])).pixel(photo.shape[:2])
     constant_report = compose_to_folder(
         ComposeInputs(mesh, stack, photo, placement, constant, camera),
@@ -117,14 +120,15 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
         "stage": "demo",
         "preset": preset,
         "inputs": {"asset": example_origin, "photo": photo_info, "placement": DEMO_PLACEMENT},
-        "run": {name: {k: v for k, v in stage.items() if k != "report"} for name, stage in run["stages"].items()},
-        "convert": run["stages"]["convert"].get("report"),
-        "lighting": run["stages"]["light"].get("report"),
-        "adapt": run["stages"]["adapt"],
+        "run": {name: {k: v for k, v in stage.to_report().items() if k != "report"}
+                for name, stage in run.stages.items()},
+        "convert": run.stages["convert"].report,
+        "lighting": run.stages["light"].report,
+        "adapt": run.stages["adapt"].to_report(),
         "compose": compose_stage,
         "constant_light_compose": {k: constant_report[k] for k in ("spp", "shadow", "outputs", "timings_seconds")},
         "sheet": str(out / "sheet.png"),
-        "timings_seconds": {"inputs": round(inputs_seconds, 3), "run": run["seconds_total"],
+        "timings_seconds": {"inputs": round(inputs_seconds, 3), "run": run.seconds,
                             "constant_light_compose": round(constant_seconds, 3)},
         "environment": environment_info(),
     }

@@ -160,7 +160,7 @@ photo_path = write_image(OUT + "/photo.png", photo)
 mesh, maps = load_asset_folder(ASSET)
 t = time.perf_counter()
 report = run_pipeline(mesh, maps, photo_path, (160.0, 200.0), OUT + "/run",
-                      RunConfig(preset=PRESET, guidance_type="none", size=0.4, photo_camera=camera))
+                      RunConfig(preset=PRESET, guidance_type="none", size=0.4, photo_camera=camera)).to_report()
 seconds = time.perf_counter() - t
 peak = peak_mb()
 stages = report["stages"]

@@ -1,6 +1,8 @@
 """scenefit adapt: restyle a converted texture with diffusion guidance (or texture/edit from a prompt)."""
 from __future__ import annotations
 
+from ..core.base.names import MODES
+
 from dataclasses import replace
 from pathlib import Path
 
@@ -92,7 +94,7 @@ def add_parser(sub) -> None:
     add_asset_args(p, optional=True)
     add_output_args(p, help="output folder: maps/, checkpoint/, report.json (an interrupted run resumes when rerun)",
                     required=False)
-    p.add_argument("--mode", choices=("scene", "generate", "edit"), default="scene")
+    p.add_argument("--mode", choices=MODES, default="scene")
     p.add_argument("--texture", help="texture.pt from `scenefit convert` (required unless --mode generate)")
     p.add_argument("--prompt", help="appearance description, e.g. 'a leather sofa, soggy and stained with mud'")
     p.add_argument("--object-prompt", help="the object, e.g. 'a leather sofa' (edit mode, and for writing the prompt)")

@@ -1,6 +1,8 @@
 """scenefit demo: SceneFit on the bundled example (what `make demo` runs)."""
 from __future__ import annotations
 
+from ..core.base.names import GUIDANCE_TYPES
+
 import json
 import shutil
 from pathlib import Path
@@ -45,7 +47,7 @@ def add_parser(sub) -> None:
     add_output_args(p, default="out/demo", help="output folder (an earlier demo run there is replaced)")
     p.add_argument("--preset", choices=PRESETS, default="balanced")
     p.add_argument("--refresh", action="store_true", help="re-make the example asset and photo")
-    p.add_argument("--guidance", choices=("auto", "sd2", "none"), default="auto",
+    p.add_argument("--guidance", choices=GUIDANCE_TYPES, default="auto",
                    help="texture adaptation: sd2 (needs the Stable Diffusion 2 weights), none, or auto (sd2 when "
                         "its weights are on this machine)")
     p.add_argument("--quiet", action="store_true")

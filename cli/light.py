@@ -17,9 +17,8 @@ def resolve_config(args, critic: str):
     models = model_config(args)
     # The depth model follows the same --offline / --cache-dir as the diffusion models.
     depth = depth_config_for(models, args.depth, args.depth_model)
-    overrides = {k: v for k, v in (("scene_type", args.scene), ("fov_deg", args.fov), ("tint", args.tint),
-                                   ("sun_deg", args.sun),
-                                   ("camera_pitch_deg", photo_pitch(args)))
+    # (--fov, --pitch and --roll are the photo camera's, given to light_inputs: not light settings)
+    overrides = {k: v for k, v in (("scene_type", args.scene), ("tint", args.tint), ("sun_deg", args.sun))
                  if v is not None}
     config = stage_config("light", args.preset, depth=depth, critic_type=critic, models=models, **overrides)
     if args.iterations is not None:

@@ -2,6 +2,8 @@
 model options. Declared once so an option means the same thing in every command."""
 from __future__ import annotations
 
+from ..core.base.names import SCENE_TYPES
+
 import argparse
 import math
 
@@ -199,7 +201,7 @@ def sun_angles(text: str) -> tuple[float, float]:
 
 
 def add_scene_arg(p: argparse.ArgumentParser, default: str | None = None) -> None:
-    p.add_argument("--scene", choices=("auto", "indoor", "outdoor"), default=default,
+    p.add_argument("--scene", choices=SCENE_TYPES, default=default,
                    help="the photo's scene type for the light stage (default: decided from the photo)")
 
 

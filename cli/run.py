@@ -1,6 +1,8 @@
 """scenefit run: the whole pipeline (convert -> light -> adapt -> compose -> bake) for one asset and photo."""
 from __future__ import annotations
 
+from ..core.base.names import GUIDANCE_TYPES
+
 from pathlib import Path
 
 from .options import (add_asset_args, add_model_args, add_output_args, add_photo_camera_args, add_placement_args,
@@ -66,18 +68,18 @@ def run(args) -> int:
     # Written beside and swapped in whole, like every command's folder; an earlier run's folder is
     # taken up (its finished stages reused), never mixed with this run's files.
     with output(args, reuse=not args.replace) as staging:   # (--replace starts over)
-        report = run_pipeline(mesh, maps, args.photo, args.at, staging, config, progress=progress(args),
+        result = run_pipeline(mesh, maps, args.photo, args.at, staging, config, progress=progress(args),
                               bake=bake, bake_skipped_why=why_not)
         if how["source"] == "asset":
             save_read(staging, key, mesh, maps)
-        report["asset_read"] = how
+        report = dict(result.to_report(), asset_read=how)
         if written is not None:
             report["prompt_writing"] = written.to_report()
         write_report(staging / "report.json", report)
-    summary = ", ".join(f"{name} {stage['status']}" for name, stage in report["stages"].items())
-    decisions = report["stages"].get("light", {}).get("report", {}).get("decisions")
+    summary = ", ".join(f"{name} {stage.status}" for name, stage in result.stages.items())
+    decisions = result.stages["light"].report.get("decisions") if "light" in result.stages else None
     light = f"; {sun_words(decisions, '--sun AZ,EL or --sun-from-shadow')}" if decisions else ""
-    print(f"run done in {report['seconds_total']:.1f} s ({summary}{light}) -> "
+    print(f"run done in {result.seconds:.1f} s ({summary}{light}) -> "
           f"{Path(args.out) / 'compose' / 'composite.png'}")
     return 0
 
@@ -97,7 +99,7 @@ def add_parser(sub) -> None:
                                            "writes the prompt from it and --scene-prompt (or the photo)")
     p.add_argument("--scene-prompt", help="the scene, e.g. 'a swamp'")
     add_preset_args(p)
-    p.add_argument("--guidance", choices=("auto", "sd2", "none"), default="auto",
+    p.add_argument("--guidance", choices=GUIDANCE_TYPES, default="auto",
                    help="adapt with Stable Diffusion 2 (sd2), not at all (none), or when its weights are here (auto)")
     p.add_argument("--shadow", choices=SHADOW_TYPES, default="ratio")
     p.add_argument("--spp", type=int, help="compose: samples per pixel (default: from the preset's noise target)")

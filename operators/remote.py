@@ -15,12 +15,13 @@ from urllib.parse import urlparse
 import bpy
 
 from ..core.base.errors import InputError
+from ..core.base.names import STAGES
 from .common import (depth_model_preference, last_finished_run, model_settings, photo_view, preferences, run_folder,
                      scene_layout)
 from .results import apply_layout_results, materials_words, result_targets
 
-# What the worker runs for each operator: the whole pipeline (adapt needs convert and the light).
-REMOTE_STAGES = ("convert", "light", "adapt", "compose")
+# What the worker runs for each operator: the whole pipeline but the bake (Bake Asset writes the file here).
+REMOTE_STAGES = tuple(stage for stage in STAGES if stage != "bake")
 LOCAL_HOSTS = ("", "localhost", "127.0.0.1", "::1")
 
 
@@ -78,14 +79,18 @@ def remote_work(op, context, address: str) -> tuple:
     earlier = last_finished_run(folder)   # its stages with this run's settings and inputs are reused, as here
     # How the photo is seen, as Run All here sees it (operators/common.photo_view): the artist's camera or the
     # panel's values, where the asset stands, and the artist's sun.
-    from .work import job_view
+    from ..core.pipeline.run_table import run_table
+    from .work import view_config
 
+    view = photo_view(context, photo, objects)
+    # The run as a local Run All builds it (operators/work.view_config), sent as a job's table.
+    config = view_config(view, preset=settings.preset, prompt=settings.prompt, stage_overrides=quick_overrides(op),
+                         scene_type=settings.scene_type, depth_model=depth_model_preference(context))
     return (work_remotely if materials is None else work_remotely_per_material), {
-        "mesh": mesh, "maps": maps, "photo": str(photo), "worker": address,
-        "out": str(folder.parent), "name": folder.name, "preset": settings.preset,
-        "stages": REMOTE_STAGES, "prompt": settings.prompt, "models": models, "overrides": quick_overrides(op),
-        "scene": settings.scene_type, "depth_model": depth_model_preference(context), "materials": materials,
-        "earlier": str(earlier) if earlier else None, **job_view(photo_view(context, photo, objects))}
+        "mesh": mesh, "maps": maps, "photo": str(photo), "worker": address, "at": tuple(view["placement"]),
+        "out": str(folder.parent), "name": folder.name, "stages": REMOTE_STAGES, "models": models,
+        "materials": materials, "earlier": str(earlier) if earlier else None,
+        **{k: v for k, v in run_table(config).items() if v is not None}}
 
 
 def check_models_reach_the_worker(address: str, models: dict[str, str | None]) -> None:

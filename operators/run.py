@@ -53,12 +53,12 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         self._layout = result_targets(layout)
         out = run_folder(context, "run", layout.name)
         earlier = last_finished_run(out)   # its stages with this run's settings and inputs are reused
-        return work.run, {"mesh": mesh, "maps": maps, "photo": str(photo), "view": view,
-                          "preset": settings.preset, "prompt": settings.prompt, "guidance": guidance,
-                          "why_no_adapt": why_no_adapt, "models": model_settings(context)[0],
-                          "scene_type": settings.scene_type,
-                          "depth_model": depth_model_preference(context),
-                          "materials": materials,
+        # The run's settings as one frozen RunConfig, built here on the main thread, as `scenefit run` builds it.
+        config = work.view_config(view, preset=settings.preset, prompt=settings.prompt, guidance_type=guidance,
+                                  models=model_settings(context)[0], scene_type=settings.scene_type,
+                                  depth_model=depth_model_preference(context))
+        return work.run, {"mesh": mesh, "maps": maps, "photo": str(photo), "placement": tuple(view["placement"]),
+                          "config": config, "why_no_adapt": why_no_adapt, "materials": materials,
                           "out": str(out), "reuse_from": str(earlier) if earlier else None}
 
     def long_local_work(self, context) -> LocalWork | None:

@@ -78,19 +78,6 @@ def camera_source(view: dict) -> tuple[str, str]:
     return "user", "given by the user"   # the panel's values, as the command line's --fov/--pitch/--roll
 
 
-def job_view(view: dict) -> dict:
-    """The view as a Job (workers/jobs.py) carries it, so a remote Run All sees the photo as a local one."""
-    source, why = camera_source(view)
-    from ..workers.jobs import CAMERA_KEYS
-
-    names = {ours: its for its, ours in CAMERA_KEYS.items()}
-    return {"at": tuple(view["placement"]), "object_size": view["size"],
-            "camera": {names[k]: v for k, v in (view["camera"] or {}).items()},
-            "camera_source": source, "camera_why": why, "turn": view["turn_deg"],
-            "sun": tuple(view["sun_deg"]) if view.get("sun_deg") else None,
-            "sun_uncertainty": float(view.get("sun_uncertainty_deg", 0.0)) or None}   # (None: left out of the job)
-
-
 def camera_values(camera) -> dict:
     """What the Cycles set-up takes from the camera a job used."""
     return {"fov_deg": camera.fov_deg, "pitch_deg": camera.pitch_deg, "roll_deg": camera.roll_deg}
@@ -194,19 +181,17 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
     return written_whole(data["out"], write)
 
 
-def run_config(data: dict):
-    """Run All's RunConfig from the operator's data: the panel's settings and the photo's view."""
+def view_config(view: dict, **settings):
+    """A RunConfig of `settings` seeing the photo as `view` (operators/common.photo_view) says: the artist's
+    camera or the panel's values, the asset's size and turn, the artist's sun. Run All's prepare() here and
+    on a worker (its job is this config's table, core/pipeline/run_table.py) build it here."""
     from ..core.pipeline.run import RunConfig
 
-    view = data["view"]
     source, why = camera_source(view)
-    return RunConfig(preset=data["preset"], prompt=data["prompt"], guidance_type=data["guidance"],
-                     size=view["size"], camera_overrides=dict(view["camera"] or {}), camera_source=source,
-                     camera_why=why,
-                     turn_deg=view["turn_deg"], models=data["models"],
+    return RunConfig(size=view["size"], camera_overrides=dict(view["camera"] or {}), camera_source=source,
+                     camera_why=why, turn_deg=view["turn_deg"],
                      sun_deg=tuple(view["sun_deg"]) if view.get("sun_deg") else None,
-                     sun_uncertainty_deg=float(view.get("sun_uncertainty_deg", 0.0)),
-                     scene_type=data.get("scene_type", "auto"), depth_model=data.get("depth_model"))
+                     sun_uncertainty_deg=float(view.get("sun_uncertainty_deg", 0.0)), **settings)
 
 
 def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:
@@ -239,21 +224,22 @@ def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:
 
 def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
     """The command line's pipeline (core.run.run_pipeline: convert -> light -> adapt -> compose; the
-    game bake is Bake Asset's, on the main thread) into data['out']; returns what Blender applies."""
+    game bake is Bake Asset's, on the main thread) into data['out'] with data['config'], the RunConfig
+    Run All built (view_config); returns what Blender applies."""
     from ..core.base.report import write_report
     from ..core.pipeline.run import run_pipeline
 
     def write(folder: Path) -> dict:
-        config = run_config(data)
-        report = run_pipeline(data["mesh"], data["maps"], data["photo"], tuple(data["view"]["placement"]), folder,
-                              config, progress=progress, cancel=cancel,
+        result = run_pipeline(data["mesh"], data["maps"], data["photo"], data["placement"], folder,
+                              data["config"], progress=progress, cancel=cancel,
                               bake_skipped_why="in Blender the game file is written by Bake Asset",
                               reuse_from=data.get("reuse_from"))
+        report = result.to_report()
         stages = report["stages"]
-        if stages["adapt"]["status"] == "skipped" and data.get("why_no_adapt"):
+        if result.stages["adapt"].status == "skipped" and data.get("why_no_adapt"):
             stages["adapt"]["why"] = data["why_no_adapt"]
-        last = "adapt" if stages["adapt"]["status"] != "skipped" else "convert"
-        outputs = stages[last]["report"]["outputs"]
+        last = result.texture_stage
+        outputs = result.outputs(last)
         per_material = material_results(data, outputs["weights"], folder / "materials") \
             if data.get("materials") else []
         if per_material:
@@ -261,10 +247,10 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
         write_report(folder / "report.json", report)  # paths relative to the run folder, which moves
         return {"stage": last, "report": str(folder / "report.json"), "texture": outputs["weights"],
                 "maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
-                "hdr": str(folder / "light" / "light.exr"), "composite": report["composite"],
-                "camera": {k: stages["light"]["report"]["decisions"]["photo_camera"][k]
-                           for k in ("fov_deg", "pitch_deg", "roll_deg")},
-                "stages": {name: stage["status"] for name, stage in stages.items()},
+                "hdr": str(folder / "light" / "light.exr"), "composite": str(result.composite),
+                # the camera stage's (which light and compose used), for the Cycles set-up
+                "camera": {k: result.camera.report["photo_camera"][k] for k in ("fov_deg", "pitch_deg", "roll_deg")},
+                "stages": {name: stage.status for name, stage in result.stages.items()},
                 "adapt_skipped": stages["adapt"].get("why", ""), "material_maps": per_material}
 
     return written_whole(data["out"], write)

@@ -21,7 +21,6 @@ EXPECTED_SECONDS: dict[str, dict[str, float | None]] = {
 # Adapt with random-weight models of Stable Diffusion 2's size on the same CPU (bf16, each view's constant
 # work cached): seconds per iteration once the step's views have been met. None: not measured.
 ADAPT_SECONDS_PER_ITERATION: dict[str, float | None] = {"draft": 63.47, "balanced": 143.78, "final": 403.5}
-ADAPT_ITERATIONS = {"draft": 300, "balanced": 1500, "final": 4000}   # the presets' (core/pipeline/preset_tables.py)
 # The same on one GPU (`make gpu-check`: fp16, Mitsuba cuda_ad_rgb), the step without its constant work.
 GPU_BENCH_MACHINE = "one NVIDIA H200"
 ADAPT_GPU_SECONDS_PER_ITERATION: dict[str, float | None] = {"draft": 0.856, "balanced": 1.885, "final": 4.96}
@@ -48,7 +47,14 @@ def adapt_projection(preset: str, iterations: int | None = None, gpu: bool = Fal
     per_iteration = (ADAPT_GPU_SECONDS_PER_ITERATION if gpu else ADAPT_SECONDS_PER_ITERATION).get(preset)
     if per_iteration is None:
         return None
-    return per_iteration * (iterations or ADAPT_ITERATIONS[preset])
+    return per_iteration * (iterations or preset_iterations(preset))
+
+
+def preset_iterations(preset: str) -> int:
+    """The adapt preset's iterations, as the pipeline resolves them (core/pipeline/presets.py)."""
+    from ..core.pipeline.presets import stage_config
+
+    return stage_config("adapt", preset, prompt="-").iterations
 
 
 def duration_text(seconds: float) -> str:

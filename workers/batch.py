@@ -33,7 +33,7 @@ from ..core.base.errors import Cancelled, InputError, SceneFitError
 from .job_inputs import job_digest, job_files, read_job_report, user_report
 from ..core.base.report import relative_paths
 from .interrupt import CtrlCStops
-from .jobs import CAMERA_KEYS, BatchSettings, Job, JobsFile, with_user_paths
+from .jobs import BatchSettings, Job, JobsFile, with_user_paths
 from ..core.base.output_folder import (FINISHED_JOBS_ATTRIBUTE, check_output_folder, check_subfolder,
                                       folder_in_place, install_folder)
 
@@ -94,11 +94,12 @@ def make_payload(job: Job, attempt: int = 1, stages: Sequence[Path] = (), files:
 def finished_stage_folders(folder: Path | None) -> list[Path]:
     """The stage folders of a run folder that hold a finished stage (its stage.json) and no link, which
     would be sent as the file it points at: those are run again instead."""
-    from ..core.pipeline.run import STAGE_FILE, STAGES
+    from ..core.base.names import RUN_ORDER
+    from ..core.pipeline.run import STAGE_FILE
 
     if folder is None or not folder.is_dir():
         return []
-    return [folder / name for name in STAGES if (folder / name / STAGE_FILE).is_file()
+    return [folder / name for name in RUN_ORDER if (folder / name / STAGE_FILE).is_file()
             and not (folder / name).is_symlink() and not any(p.is_symlink() for p in (folder / name).rglob("*"))]
 
 
@@ -108,8 +109,10 @@ def unpacked_job(payload: JobPayload, folder: Path) -> tuple[Job, Path | None]:
     unpack(payload.inputs, folder)
     job = payload.job
     photo = None if job.photo is None else folder / "photo" / job.photo.name
+    run = job.run if job.run.fspy is None else replace(job.run, fspy=str(folder / "fspy" / Path(job.run.fspy).name))
     earlier = folder / EARLIER
-    return replace(job, asset=folder / "asset" / job.asset.name, photo=photo), earlier if earlier.is_dir() else None
+    return replace(job, asset=folder / "asset" / job.asset.name, photo=photo, run=run), \
+        earlier if earlier.is_dir() else None
 
 
 # -- one job on a worker ---------------------------------------------------------------------------
@@ -288,27 +291,12 @@ def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models
     bake, why_not = asset_file_bake(job.asset, job.object) if "bake" in job.stages else (None, "the job's stages "
                                                                                          "do not list bake")
     return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel, models=models,
-                        bake=bake, bake_skipped_why=why_not, reuse_from=reuse_from)
-
-
-def _stage_overrides(job: Job) -> dict:
-    """The job's overrides, its seed going to the convert stage's fit."""
-    overrides = {stage: dict(values) for stage, values in job.overrides.items()}
-    if job.seed is not None:
-        overrides.setdefault("convert", {}).setdefault("seed", job.seed)
-    return overrides
+                        bake=bake, bake_skipped_why=why_not, reuse_from=reuse_from).to_report()
 
 
 def job_run_config(job: Job):
-    """The job's settings as the pipeline takes them (core/pipeline/run.RunConfig), as `scenefit run` gives them."""
-    from ..core.pipeline.run import RunConfig
-
-    view = {} if job.object_size is None else {"size": job.object_size}
-    return RunConfig(preset=job.preset, prompt=job.prompt, guidance_type="auto" if "adapt" in job.stages else "none",
-                     models=job.models, stage_overrides=_stage_overrides(job),
-                     camera_overrides={CAMERA_KEYS[k]: v for k, v in job.camera.items()},
-                     camera_source=job.camera_source, camera_why=job.camera_why, turn_deg=job.turn,
-                     sun_deg=job.sun, sun_uncertainty_deg=job.sun_uncertainty, scene_type=job.scene, depth_model=job.depth_model, **view)
+    """The job's settings as the pipeline takes them: the RunConfig the jobs file's keys were read into."""
+    return job.run
 
 
 def _load_asset(job: Job):
@@ -318,30 +306,33 @@ def _load_asset(job: Job):
 
 
 def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
+    """A job of convert and/or light alone (the jobs file refuses every other subset without compose)."""
     from ..core.stages.light.stage import critic_choice, light_inputs, run_light, write_light
     from ..core.stages.convert import convert_and_bake
     from ..core.pipeline.presets import stage_config, with_overrides
     from ..core.pipeline.run import light_settings
 
-    if "adapt" in job.stages:
-        raise InputError(f"Job '{job.name}': stage adapt runs inside the whole pipeline in a batch; "
-                         f"list compose too, or use stages convert and light.")
+    run = job.run
     reports: dict = {}
     if "convert" in job.stages:   # every material at its own cell's size, as `scenefit convert` fits them
         from ..blender_io.asset_file import load_asset_materials
 
         asset = load_asset_materials(str(job.asset), job.object)
-        _, reports["convert"] = convert_and_bake(asset, None, out / "convert" / "maps",
-                                                 stage_config("convert", job.preset, **_stage_overrides(job).get(
-                                                     "convert", {})), progress, cancel)
+        config = stage_config("convert", run.preset, **with_overrides({"seed": run.seed}, run.overrides("convert")))
+        _, reports["convert"] = convert_and_bake(asset, None, out / "convert" / "maps", config, progress, cancel)
     if "light" in job.stages:   # as `scenefit light` lights it: the photo's own camera, the same files
-        run = job_run_config(job)
-        inputs = light_inputs(job.photo, job.at, None, run.camera_overrides, run.camera_source, run.camera_why)
+        inputs = light_inputs(job.photo, job.at, run.fspy, run.camera_overrides, run.camera_source, run.camera_why)
         # (what run_pipeline's light stage would be given, the job's own overrides over it)
-        overrides = dict(job.overrides.get("light", {}))
-        critic = critic_choice(overrides.pop("critic_type", "auto"), job.models)
-        config = stage_config("light", job.preset, critic_type=critic.choice,
+        overrides = run.overrides("light")
+        critic = critic_choice(overrides.pop("critic_type", "auto"), run.models)
+        config = stage_config("light", run.preset, critic_type=critic.choice,
                               **with_overrides(light_settings(run), overrides))
+        if run.sun_shadow is not None:   # the shadow's points through the photo's camera, as the pipeline does
+            from ..core.stages.light.shadow_hint import sun_from_shadow_points
+
+            sun, spread = sun_from_shadow_points(run.sun_shadow, inputs.camera, tuple(inputs.info["size"]),
+                                                 inputs.photo.shape[:2])
+            config = replace(config, sun_deg=sun, sun_uncertainty_deg=spread)
         reports["light"] = write_light(run_light(inputs, config, progress, cancel), out / "light")
     return _relative_outputs(reports, out)
 
@@ -466,7 +457,7 @@ def run_batch(jobs: JobsFile, out_dir: str | Path, dispatcher: Dispatcher | None
 
 
 def batch_inputs(jobs: JobsFile) -> list[Path]:
-    return [jobs.path, *(p for job in jobs.jobs for p in (job.asset, job.photo) if p is not None)]
+    return [jobs.path, *(Path(p) for job in jobs.jobs for p in (job.asset, job.photo, job.run.fspy) if p is not None)]
 
 
 def check_batch(jobs: JobsFile, out_dir: str | Path, reuse_from: Path | None = None) -> dict:

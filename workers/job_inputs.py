@@ -69,7 +69,8 @@ def _fbx_named_images(fbx: Path) -> list[Path]:
 
 def job_files(job: Job, listed: dict[Path, dict[str, Path]] | None = None) -> dict[str, Path]:
     """{name in the payload: file or folder}: an asset folder as asset/<its name>; an asset file and the
-    files it names below asset/, as they lie below its folder; the photo as photo/<its name>. One sentence
+    files it names below asset/, as they lie below its folder; the photo as photo/<its name>, an fSpy
+    project as fspy/<its name>. One sentence
     for a named file outside the asset's folder. `listed`: a batch's assets listed so far (each once)."""
     listed = {} if listed is None else listed
     if job.asset not in listed:
@@ -77,6 +78,8 @@ def job_files(job: Job, listed: dict[Path, dict[str, Path]] | None = None) -> di
     files = dict(listed[job.asset])
     if job.photo is not None:
         files[f"photo/{job.photo.name}"] = job.photo
+    if job.run.fspy is not None:
+        files[f"fspy/{Path(job.run.fspy).name}"] = Path(job.run.fspy)
     return files
 
 
@@ -113,7 +116,7 @@ def _outside(job: Job, path: Path, folder: Path, link: str = "") -> None:
 
 def job_digest(job: Job, files: dict[str, Path]) -> str:
     """The job's settings and the contents of `files` (job_files'), not where they lie."""
-    settings = {k: v for k, v in job.to_dict().items() if k not in ("asset", "photo")}
+    settings = {k: v for k, v in job.to_dict().items() if k not in ("asset", "photo", "fspy")}
     digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
     for name, path in sorted(files.items()):
         for file in sorted(path.rglob("*")) if path.is_dir() else [path]:

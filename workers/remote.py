@@ -322,27 +322,26 @@ def _read_preview(path: str):
 def work_remotely(data: dict, progress=None, cancel=None) -> dict:
     """A background-job work function for the add-on: plain data in (the asset as arrays, the photo,
     the placement), the job run in the worker environment `data["worker"]`, its folder back in
-    `data["out"]`. Keys: mesh, maps, photo, at, worker, out; optional name, preset, stages, prompt,
-    mode, object_prompt, instruction, negative_prompt, seed, models (a ModelConfig), overrides
-    (stage settings over the preset's), object_size, camera, camera_source, camera_why, sun, sun_uncertainty, scene,
-    depth_model, turn (how the
-    photo is seen, workers/jobs.py's Job), num_cpus, num_gpus, earlier (an earlier run's folder: its stages
-    with the same inputs and settings are reused).
+    `data["out"]`. Keys: mesh, maps, photo, at, worker, out; optional name, stages, models (a ModelConfig),
+    num_cpus, num_gpus, earlier (an earlier run's folder: its stages with the same inputs and settings are
+    reused), and the run's settings as a jobs file's job gives them (core/pipeline/run_table.py: preset,
+    mode, prompt, overrides, object_size, camera, sun, scene, ...), read by the same code.
     """
     import tempfile
 
+    from ..core.base.names import STAGES
     from ..core.data.asset_io import save_asset_folder
-    from .jobs import STAGE_TYPES
+    from ..core.guidance.models import ModelConfig
+    from ..core.pipeline.run_table import KEYS, run_config
 
+    name = data.get("name", "scenefit")
+    stages = tuple(data.get("stages", STAGES))
+    run = run_config({k: data[k] for k in KEYS if data.get(k) is not None}, f"The remote job '{name}'", stages,
+                     models=data.get("models") or ModelConfig())
     with tempfile.TemporaryDirectory(prefix="scenefit-asset-") as tmp:
         asset = save_asset_folder(data["mesh"], data["maps"], Path(tmp) / "asset")
-        optional = {k: data[k] for k in ("mode", "prompt", "object_prompt", "instruction", "negative_prompt", "seed",
-                                         "models", "overrides", "object_size", "camera", "camera_source",
-                                         "camera_why", "sun", "sun_uncertainty", "scene", "depth_model", "turn")
-                    if data.get(k) is not None}
-        job = Job(name=data.get("name", "scenefit"), asset=asset, stages=tuple(data.get("stages", STAGE_TYPES)),
-                  preset=data.get("preset", "balanced"), photo=Path(data["photo"]) if data.get("photo") else None,
-                  at=tuple(data["at"]) if data.get("at") is not None else None, **optional)
+        job = Job(name=name, asset=asset, stages=stages, photo=Path(data["photo"]) if data.get("photo") else None,
+                  at=tuple(data["at"]) if data.get("at") is not None else None, run=run)
         settings = BatchSettings(retries=0, num_cpus=float(data.get("num_cpus", 1.0)),
                                  num_gpus=data.get("num_gpus", "auto"))
         folder, report = run_remote(job, data["out"], data["worker"], settings, progress=progress, cancel=cancel,

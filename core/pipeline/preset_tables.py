@@ -6,14 +6,16 @@ convert row's "texture" names a texture preset, which stage_config turns into it
 """
 from __future__ import annotations
 
-PRESET_NAMES = ("draft", "balanced", "final")
+from ..base.names import CONFIG_STAGES, PRESETS
+
+PRESET_NAMES = PRESETS
 # What a person picking one should know (the Blender panel's choices say the same).
 PRESET_DESCRIPTIONS = {
     "draft": "Fewest iterations, small renders: a quick look",
     "balanced": "The default trade-off between time and quality",
     "final": "The paper's settings: slowest, best",
 }
-STAGES = ("texture", "convert", "light", "adapt", "compose")
+STAGES = ("texture", *CONFIG_STAGES)   # the neural texture's table, then each configured stage's
 
 TABLES: dict[str, dict[str, dict]] = {
     # The neural texture's hash grid: "final" is the paper's / Instant-NGP's (NeuralTextureConfig defaults).

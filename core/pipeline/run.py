@@ -1,19 +1,20 @@
 """The whole pipeline for one asset and one photo: convert -> light -> adapt -> compose -> bake.
 
-    report = run_pipeline(mesh, maps, photo_path, placement, out_dir, RunConfig(...), progress, cancel)
+    result = run_pipeline(mesh, maps, photo_path, placement, out_dir, RunConfig(...), progress, cancel)
 
 Each stage writes into its own folder under out_dir and, last, a `stage.json` holding its key: a
 digest of its settings, of the inputs it reads and of the keys of the stages it depends on. A later
 run whose key for a stage matches a finished stage.json (and whose listed outputs still exist)
 reuses that stage and says so; anything else runs it again, and with it every stage after it.
 Stages hand data to each other only through their files, so a reused stage and a fresh one look
-the same downstream. Plain data in (arrays, paths, a frozen config), a report dict out: the Ray
-batch runner calls this function as it is.
+the same downstream. Plain data in (arrays, paths, a frozen config), a RunResult out (core/pipeline/result.py;
+`to_report()` is report.json): the Ray batch runner calls this function as it is.
 """
 from __future__ import annotations
 
 import hashlib
 import json
+import math
 import shutil
 import threading
 import time
@@ -37,16 +38,27 @@ from ..data.mesh import Mesh
 from ..base.progress import ProgressCallback, check_cancel, emit
 from ..scene.camera import PhotoCamera
 from ..scene.placement import DEFAULT_OBJECT_SIZE
+from .result import RunResult, StageRecord
 
-GUIDANCE_TYPES = ("auto", "sd2", "none")
-STAGES = ("convert", "light", "adapt", "compose", "bake")
+from ..base.names import (CAMERA_SOURCES, CAMERA_STAGE, CONFIG_STAGES, GUIDANCE_TYPES, MODES, PRESETS, RUN_ORDER,
+                          SCENE_TYPES, STAGES)
 STAGE_FILE = "stage.json"
+# (The camera stage's report is the run report's "camera", beside the "stages" a job lists.)
+CAMERA_KEYS = ("fov_deg", "pitch_deg", "roll_deg")
 
 
 @dataclass(frozen=True)
 class RunConfig:
+    """The one description of a run: the command line, a jobs file's job (core/pipeline/run_table.py, its TOML
+    view), Blender's Run All and a remote worker all build this, and run_pipeline takes nothing else."""
+
     preset: str = "balanced"                  # draft | balanced | final, for every stage
+    mode: str = "scene"                       # adapt: scene (fit the photo) | generate | edit (names.MODES)
     prompt: str = ""                          # adapt: what the asset should become in this scene
+    negative_prompt: str = ""                 # adapt: what it should not look like
+    object_prompt: str = ""                   # adapt, mode edit: what the asset is ...
+    instruction: str = ""                     # ... and how to change it (the prompt, when empty, is made of both)
+    seed: int | None = None                   # convert's fit and adapt's noise (None: each stage's default)
     guidance_type: str = "auto"               # adapt (and the light critic): sd2 | none | auto (sd2 when found)
     size: float = DEFAULT_OBJECT_SIZE         # compose: fraction of the photo's height the asset spans (--object-size)
     shadow_type: str = "ratio"
@@ -71,27 +83,76 @@ class RunConfig:
     stage_overrides: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if self.preset not in ("draft", "balanced", "final"):
-            raise InputError(f"preset must be draft, balanced or final, got {self.preset!r}.")
-        if self.guidance_type not in GUIDANCE_TYPES:
-            raise InputError(f"guidance_type must be one of {', '.join(GUIDANCE_TYPES)}, got {self.guidance_type!r}.")
-        wrong = sorted(set(self.camera_overrides) - {"fov_deg", "pitch_deg", "roll_deg"})
-        if wrong:
-            raise InputError(f"camera_overrides takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
+        _choice("preset", self.preset, PRESETS)
+        _choice("mode", self.mode, MODES)
+        _choice("guidance_type", self.guidance_type, GUIDANCE_TYPES)
+        _choice("scene_type", self.scene_type, SCENE_TYPES)
+        _choice("camera_source", self.camera_source, CAMERA_SOURCES)
+        if self.seed is not None and not (_whole(self.seed) and self.seed >= 0):
+            raise _refused("seed", f"seed must be a whole number >= 0, got {self.seed!r}.")
+        _check_view(self)
         if self.sun_deg is not None and self.sun_shadow is not None:
-            raise InputError("Give the sun as an azimuth and elevation or as a shadow's three points, not both.")
+            raise _refused("sun_shadow", "Give the sun as an azimuth and elevation or as a shadow's three points, "
+                                         "not both.")
         if self.sun_shadow is not None:
             from ..stages.light.shadow_hint import check_point_count
 
             check_point_count(self.sun_shadow)
-        unknown = sorted(set(self.stage_overrides) - {"convert", "light", "adapt", "compose"})
+        unknown = sorted(set(self.stage_overrides) - set(CONFIG_STAGES))
         if unknown:
-            raise InputError(f"stage_overrides names unknown stage {unknown[0]!r}; it takes convert, light, adapt "
-                             f"and compose.")
+            raise _refused("stage_overrides", f"stage_overrides names unknown stage {unknown[0]!r}; it takes "
+                             f"{', '.join(CONFIG_STAGES)}.")
 
     def overrides(self, stage: str) -> dict:
         return dict(self.stage_overrides.get(stage, {}))
 
+
+
+def _choice(name: str, value, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise _refused(name, f"{name} must be one of {', '.join(choices)}, got {value!r}.")
+
+
+def _refused(field_name: str, sentence: str) -> InputError:
+    """The sentence as an InputError that names the RunConfig field it refuses (a jobs file says its key)."""
+    error = InputError(sentence)
+    error.field = field_name
+    return error
+
+
+def _whole(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _finite(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _check_view(config: RunConfig) -> None:
+    """How the run sees the photo, in range: numbers from any entry point (a jobs file, Blender, a worker)
+    are finite, the camera's values are those of a camera (core/stages/camera.check_camera_values), the
+    sun is above or below the horizon by at most 90 degrees."""
+    if not (_finite(config.size) and 0.0 < config.size <= 1.0):   # (as core/scene/placement.Placement takes it)
+        raise _refused("size", f"The object size must be a fraction of the photo's height in (0, 1], got "
+                               f"{config.size!r}.")
+    if not _finite(config.turn_deg):
+        raise _refused("turn_deg", f"The turn must be a finite angle in degrees, got {config.turn_deg!r}.")
+    if config.compose_spp is not None and not (_whole(config.compose_spp) and 1 <= config.compose_spp <= 65536):
+        raise _refused("compose_spp", f"compose_spp must be a whole number from 1 to 65536, got "
+                                      f"{config.compose_spp!r}.")
+    from ..stages.camera import check_camera_values
+
+    try:
+        check_camera_values(config.camera_overrides)
+    except InputError as error:
+        raise _refused("camera_overrides", str(error)) from None
+    sun = config.sun_deg
+    if sun is not None and not (len(sun) == 2 and all(_finite(v) for v in sun) and -90.0 <= sun[1] <= 90.0):
+        raise _refused("sun_deg", f"The sun must be (azimuth, elevation) in finite degrees, the elevation within "
+                                  f"+-90, got {sun!r}.")
+    if not (_finite(config.sun_uncertainty_deg) and 0.0 <= config.sun_uncertainty_deg <= 180.0):
+        raise _refused("sun_uncertainty_deg", f"The sun's uncertainty must be degrees within 0 and 180, got "
+                                              f"{config.sun_uncertainty_deg!r}.")
 
 def light_settings(config: RunConfig) -> dict:
     """What a run's config gives the light stage's (the sun, the scene type, the models and where the depth
@@ -148,7 +209,7 @@ class StageRunner:
         check_cancel(self.cancel)
         folder = self.out / name
         record = folder / STAGE_FILE
-        index = STAGES.index(name)
+        index = RUN_ORDER.index(name)
         report = None if self.fresh else _finished_stage(folder, key)
         source = ""
         if report is None and not self.fresh and self.earlier is not None and not folder.exists() \
@@ -159,7 +220,7 @@ class StageRunner:
             shutil.copytree(self.earlier / name, folder)
             report, source = _finished_stage(folder, key), f" from {self.earlier.name}"
         if report is not None:
-            emit(self.progress, "run", index + 1, len(STAGES), f"{name}: reused{source} (same settings and inputs)")
+            emit(self.progress, "run", index + 1, len(RUN_ORDER), f"{name}: reused{source} (same settings and inputs)")
             self.stages[name] = {"status": "reused", "key": key, "seconds": 0.0, "report": report}
             if source:
                 self.stages[name]["from"] = str(self.earlier)
@@ -168,7 +229,7 @@ class StageRunner:
             check, self.before_work = self.before_work, None
             check()
         self.fresh = self.fresh or later_stages_follow
-        emit(self.progress, "run", index, len(STAGES), f"{name}: running")
+        emit(self.progress, "run", index, len(RUN_ORDER), f"{name}: running")
         t0 = time.perf_counter()
         if folder.is_symlink():   # a link in the run folder: the stage writes its own folder, never through it
             folder.unlink()
@@ -185,14 +246,14 @@ class StageRunner:
             write_json_atomic(record, {"key": key, "report": dict(report, outputs=relative_paths(
                 report.get("outputs", {}), folder))})
             self.stages[name] = {"status": "ran", "key": key, "seconds": round(seconds, 3), "report": report}
-            emit(self.progress, "run", index + 1, len(STAGES), f"{name}: done in {seconds:.1f} s")
+            emit(self.progress, "run", index + 1, len(RUN_ORDER), f"{name}: done in {seconds:.1f} s")
             return report
 
         return finish
 
     def skip(self, name: str, status: str, why: str) -> None:
         self.stages[name] = {"status": status, "why": why}
-        emit(self.progress, "run", STAGES.index(name) + 1, len(STAGES), f"{name}: {status}")
+        emit(self.progress, "run", RUN_ORDER.index(name) + 1, len(RUN_ORDER), f"{name}: {status}")
 
 
 def _finished_stage(folder: Path, key: str) -> dict | None:
@@ -237,10 +298,10 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
                  config: RunConfig = RunConfig(), progress: ProgressCallback | None = None,
                  cancel: threading.Event | None = None, bake: GameBake | None = None,
                  bake_skipped_why: str = "no game bake was asked for", models: ModelCache | None = None,
-                 reuse_from: str | Path | None = None) -> dict:
+                 reuse_from: str | Path | None = None) -> RunResult:
     """Convert the asset, estimate the photo's light, adapt the texture (when the SD2 weights exist),
-    compose the asset into the photo, and bake (when `bake` is given); returns the run's report (also
-    out_dir/report.json).
+    compose the asset into the photo, and bake (when `bake` is given); returns the run's RunResult (its
+    to_report() is out_dir/report.json).
 
     placement: (x, y) as fractions of the photo's width and height (both <= 1) or pixels, or "X,Y".
     models: the loaded diffusion models to use (a ModelCache: a batch worker keeps one for its life,
@@ -253,6 +314,7 @@ def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, o
     run = PipelineRun(mesh, maps, photo_path, placement, out_dir, config, progress, cancel, models,  # 1. inputs
                       reuse_from)
     run.convert()                         # 2. the asset's maps -> neural texture
+    run.camera_stage()                    # 2b. the photo's camera -> camera/camera.json (light, adapt, compose)
     with run.baking(bake, bake_skipped_why):  # 6. the texture written into the asset's own file (glTF): a process
         run.light()                       # 3.    of its own, from when the texture is final (after 2, or after 4)
         run.adapt()                       # 4. the texture adapted to the scene (only with the SD2 weights)
@@ -306,7 +368,7 @@ class PipelineRun:
         self.normalized, _ = normalize_to_unit_sphere(mesh)
         self.runner = StageRunner(self.out, progress, cancel, Path(reuse_from).resolve() if reuse_from else None,
                                   before_work=self.check_the_view)
-        self.texture_path = self.light_path = None
+        self.texture_path = self.light_path = self.camera_path = None
         self.camera: tuple[PhotoCamera, dict] | None = None   # the photo's camera, once estimated
         self.keys: dict[str, str] = {}
         self.texture_final: Callable[[], None] = lambda: None   # what waits for the final texture (the bake)
@@ -317,6 +379,31 @@ class PipelineRun:
 
         return stage_config(stage, self.config.preset, **with_overrides(values, self.config.overrides(stage)))
 
+    def camera_stage(self) -> None:
+        """The photo's camera, written as camera/camera.json: keyed by the photo and what was given about its
+        camera, and never making the stages after it run by itself (the keys of light, adapt (through light's)
+        and compose hold its key)."""
+        from ..stages.camera_stage import CAMERA_FILE, write_camera
+
+        given = self.config.photo_camera
+        camera_key = asdict(given) if given else ["estimated", _digest(Path(self.config.fspy).read_bytes())
+                                                  if self.config.fspy else None, self.config.camera_overrides,
+                                                  self.config.camera_source, self.config.camera_why]
+        self.keys[CAMERA_STAGE] = _digest(CAMERA_STAGE, camera_key, self.photo_key)
+
+        def begin(folder: Path) -> Callable[[], dict]:
+            report = write_camera(*self.photo_camera(), folder)
+            return lambda: report
+
+        self.runner.start(CAMERA_STAGE, self.keys[CAMERA_STAGE], begin, later_stages_follow=False)()
+        self.camera_path = self.out / CAMERA_STAGE / CAMERA_FILE
+
+    def stage_camera(self, width: int, height: int) -> tuple[PhotoCamera, dict]:
+        """The camera stage's camera at an image of `width` x `height`, and its estimate's record."""
+        from ..stages.camera_stage import read_camera
+
+        return read_camera(self.camera_path, width, height)
+
     def convert(self) -> None:
         from ..stages.convert import convert_and_bake
         from ..texture.bake import WEIGHTS_FILE
@@ -324,7 +411,7 @@ class PipelineRun:
         # Only what the scene needs: no more texels than the composite shows of the asset (the photo's
         # stored height, not the light stage's working copy, is what the composite is made at).
         screen_px = max(1, round(self.config.size * self.photo_info["size"][1]))
-        config = self.stage_config("convert", screen_px=screen_px)
+        config = self.stage_config("convert", screen_px=screen_px, seed=self.config.seed)
         self.keys["convert"] = _digest("convert", asdict(config), self.asset_key)
 
         def convert(folder: Path) -> dict:
@@ -366,16 +453,13 @@ class PipelineRun:
         config, envmap_height = self.light_config()
         # The diffusion critic scores renders of the asset itself (as converted), not a stand-in sphere.
         critic_sees_asset = config.critic_type == "diffusion"
-        given = self.config.photo_camera
-        camera_key = asdict(given) if given else ["estimated", _digest(Path(self.config.fspy).read_bytes())
-                                                  if self.config.fspy else None, self.config.camera_overrides,
-                                                  self.config.camera_source]
-        self.keys["light"] = _digest("light", asdict(config), self.photo_key, self.placement_px, camera_key,
+        self.keys["light"] = _digest("light", asdict(config), self.photo_key, self.placement_px,
+                                     self.keys[CAMERA_STAGE],
                                      self.keys["convert"] if critic_sees_asset else None,
                                      *([self.config.sun_shadow] if self.config.sun_shadow else []))
 
         def light(folder: Path) -> dict:
-            camera, estimate = self.photo_camera()
+            camera, estimate = self.stage_camera(self.photo.shape[1], self.photo.shape[0])
             with_sun = config
             if self.config.sun_shadow is not None:   # the shadow's points need the camera
                 from ..stages.light.shadow_hint import sun_from_shadow_points
@@ -401,12 +485,14 @@ class PipelineRun:
         self.light_path = self.out / "light" / "light.exr"
 
     def photo_camera(self) -> tuple[PhotoCamera, dict]:
-        """The photo's camera for the light stage (whose report hands it to adapt and compose) and
-        where it came from: the caller's, else the estimate (fSpy, EXIF, the photo's lines, or the
-        defaults, each field saying which) with the user's values over it. Estimated once a run."""
+        """The photo's camera (at the light stage's working size) and where it came from: the camera stage's
+        once it is written (or reused), else the caller's, else the estimate (fSpy, EXIF, the photo's lines, or
+        the defaults, each field saying which) with the user's values over it. Estimated once a run."""
         if self.camera is None:
             h, w = self.photo.shape[:2]
-            if self.config.photo_camera is not None:
+            if self.camera_path is not None and self.camera_path.is_file():
+                self.camera = self.stage_camera(w, h)
+            elif self.config.photo_camera is not None:
                 self.camera = replace(self.config.photo_camera, width=w, height=h), {"source": "given by the caller"}
             else:
                 from ..stages.camera import photo_camera_estimate
@@ -425,12 +511,7 @@ class PipelineRun:
         from ..scene.asset_pose import place_asset
 
         h, w = self.photo.shape[:2]
-        if self.light_path is not None and self.light_path.is_file():   # the light stage's camera, as compose's
-            from ..stages.compose import light_camera
-
-            camera = light_camera(self.light_path, self.photo_info, w, h)[0]
-        else:
-            camera = self.photo_camera()[0]
+        camera = self.photo_camera()[0]   # (the camera stage's, once it ran: estimated once a run)
         if self.config.sun_shadow is not None:
             from ..stages.light.shadow_hint import sun_from_shadow_points
 
@@ -445,9 +526,13 @@ class PipelineRun:
                 place_asset(self.normalized, camera, self.placement_px, size, turn)
 
     def adapt_config(self):
-        """The adapt stage's config: scene mode, the run's prompt (or one from the asset's name)."""
-        prompt = self.config.prompt or f"a {self.mesh.name} in this scene, photo"
-        return self.stage_config("adapt", mode_type="scene", prompt=prompt, models=self.config.models)
+        """The adapt stage's config: the run's mode, prompts and seed (a scene run without a prompt gets one
+        from the asset's name; an edit's prompt may be made of its object prompt and instruction)."""
+        run = self.config
+        prompt = run.prompt or (f"a {self.mesh.name} in this scene, photo" if run.mode == "scene" else "")
+        return self.stage_config("adapt", mode_type=run.mode, prompt=prompt, negative_prompt=run.negative_prompt,
+                                 object_prompt=run.object_prompt, instruction=run.instruction, seed=run.seed,
+                                 models=run.models)
 
     def adapt_placement(self):
         """Where adapt's global views place the asset: compose's point, at most the photo's height."""
@@ -463,7 +548,6 @@ class PipelineRun:
 
     def adapt(self) -> None:
         from ..stages.adapt import adapt_and_bake
-        from ..stages.compose import light_camera
         from ..texture.bake import WEIGHTS_FILE, load_neural_texture
 
         if not self.found:
@@ -480,7 +564,7 @@ class PipelineRun:
         texture_path = self.texture_path
 
         def adapt(folder: Path) -> dict:
-            camera, _ = light_camera(self.light_path, self.photo_info, w, h)
+            camera, _ = self.stage_camera(w, h)
             return adapt_and_bake(self.mesh, load_neural_texture(texture_path), config, folder, photo=self.photo,
                                   placement=placement, photo_camera=camera, progress=self.progress,
                                   cancel=self.cancel, models=self.cache.get(config.models, True))[1]
@@ -490,7 +574,7 @@ class PipelineRun:
         self.texture_final()
 
     def compose(self) -> None:
-        from ..stages.compose import ComposeInputs, compose_to_folder, light_camera
+        from ..stages.compose import ComposeInputs, compose_to_folder
         from ..stages.light import load_photo
         from ..render.environment import load_environment
         from ..texture.surface_layout import texture_view
@@ -498,7 +582,7 @@ class PipelineRun:
 
         config = self.compose_config()
         self.keys["compose"] = _digest("compose", asdict(config), self.upstream, self.keys["light"], self.photo_key,
-                                       self.placement_px, self.config.turn_deg)
+                                       self.placement_px, self.config.turn_deg, self.keys[CAMERA_STAGE])
         texture_path, light_path = self.texture_path, self.light_path
 
         def compose(folder: Path) -> dict:
@@ -506,7 +590,7 @@ class PipelineRun:
             view = texture_view(texture, self.mesh)   # adaptation's new UV layout, when it made one
             full, _ = load_photo(self.photo_path, max_side=config.max_side)   # at the photo's size, up to max_side
             fh, fw = full.shape[:2]
-            camera, camera_from = light_camera(light_path, self.photo_info, fw, fh)
+            camera, camera_from = self.stage_camera(fw, fh)[0], "the camera stage (camera/camera.json)"
             inputs = ComposeInputs(view.mesh, view.stack(texture), full, self.placement.pixel((fh, fw)),
                                    load_environment(light_path), camera, turn_deg=self.config.turn_deg)
             extra = {"inputs": {"texture": str(texture_path), "light": str(light_path), "camera_from": camera_from,
@@ -553,26 +637,22 @@ class PipelineRun:
             self.texture_final = lambda: None
         finishes[0]()
 
-    def finish(self) -> dict:
+    def finish(self) -> RunResult:
         from dataclasses import replace
 
         from ..base.report import write_report
         from ..render.backend import environment_info
 
-        stages = {name: self.runner.stages[name] for name in STAGES if name in self.runner.stages}
-        report = {
-            "stage": "run",
-            "config": _plain(replace(self.config, models=self.config.models)),
-            "inputs": {"asset": self.mesh.name, "asset_digest": self.asset_key, "photo": self.photo_info,
-                       "photo_digest": self.photo_key, "placement_px": list(self.placement_px)},
-            "stages": stages,
-            "composite": str(self.out / "compose" / "composite.png"),
-            "reused": [name for name, s in stages.items() if s["status"] == "reused"],
-            "environment": environment_info(),
-            "seconds_total": round(time.perf_counter() - self.started, 3),
-        }
-        write_report(self.out / "report.json", report)   # paths relative to the run's folder, which is swapped in
-        return report
+        recorded = self.runner.stages
+        result = RunResult(
+            folder=self.out, config=_plain(replace(self.config, models=self.config.models)),
+            inputs={"asset": self.mesh.name, "asset_digest": self.asset_key, "photo": self.photo_info,
+                    "photo_digest": self.photo_key, "placement_px": list(self.placement_px)},
+            stages={name: StageRecord.from_runner(name, recorded[name]) for name in STAGES if name in recorded},
+            camera=StageRecord.from_runner(CAMERA_STAGE, recorded[CAMERA_STAGE]) if CAMERA_STAGE in recorded else None,
+            seconds=round(time.perf_counter() - self.started, 3), environment=environment_info())
+        write_report(self.out / "report.json", result.to_report())   # paths relative to the run's folder
+        return result
 
 
 class _WithInpaint:

@@ -28,34 +28,18 @@ from __future__ import annotations
 
 import json
 import math
-import struct
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from ..base.errors import InputError
-from ..scene.camera import (DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG, PHOTO_YAW_DEG, PhotoCamera,
-                           pitch_roll_from_camera_to_world)
+from ..scene.camera import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG, PHOTO_YAW_DEG, PhotoCamera
+# The fSpy and EXIF readers live in their own modules; their names are this module's too (what callers import).
+from .camera_exif import SENSOR_WIDTH_MM, exif_focal_and_model, fov_from_sensor, sensor_width_mm  # noqa: F401
+from .camera_fspy import FSPY_HEADER, FSPY_MAGIC, MAX_FSPY_SIDE, read_fspy  # noqa: F401
 
 SOURCES = ("user", "blender", "fspy", "exif_35mm", "exif_sensor", "lines", "default")
-# Sensor width (long side, mm) of common cameras whose JPEGs may lack the 35 mm equivalent, from the
-# makers' specification sheets; matched on the start of the EXIF Model, longest key first, where no
-# digit follows (so "CANON EOS R5" is not the APS-C R50, while "ILCE-7" covers the A7 III's ILCE-7M3).
-SENSOR_WIDTH_MM = {
-    "CANON EOS 5D": 36.0, "CANON EOS 6D": 35.8, "CANON EOS R5": 36.0, "CANON EOS R6": 35.9,
-    "CANON EOS 7D": 22.3, "CANON EOS 80D": 22.5, "CANON EOS 90D": 22.3, "CANON EOS 2000D": 22.3,
-    "CANON EOS REBEL": 22.3, "CANON EOS M50": 22.3,
-    "NIKON D850": 35.9, "NIKON D810": 35.9, "NIKON D750": 35.9, "NIKON D3500": 23.5, "NIKON D5600": 23.5,
-    "NIKON D7500": 23.5, "NIKON Z 6": 35.9, "NIKON Z 7": 35.9,
-    "ILCE-7": 35.8, "ILCE-9": 35.6,                           # Sony A7 and A9 families (full frame)
-    "ILCE-6000": 23.5, "ILCE-6100": 23.5, "ILCE-6400": 23.5, "ILCE-6600": 23.5,   # Sony A6xxx (APS-C)
-    "X-T3": 23.5, "X-T4": 23.5, "X-T30": 23.5, "X100": 23.6,   # Fujifilm
-    "DC-GH5": 17.3, "DMC-GH4": 17.3, "E-M1": 17.3, "E-M5": 17.3, "E-M10": 17.3,   # Micro Four Thirds
-    "DSC-RX100": 13.2,                                          # Sony 1-inch compacts
-}
-
-
 @dataclass(frozen=True)
 class CameraEstimate:
     """One photo's camera. Pixel positions (horizon, vanishing points) are in the upright photo at its
@@ -131,10 +115,7 @@ def photo_camera_estimate(photo_path: str | Path, fspy_path: str | Path | None =
                           why: str = "given by the user") -> CameraEstimate:
     """The camera every stage uses for a photo: `overrides` ({"fov_deg", "pitch_deg", "roll_deg"}, each
     from `source`) over the estimate. With all three given the photo's lines are not looked at."""
-    overrides = {k: float(v) for k, v in (overrides or {}).items() if v is not None}
-    wrong = sorted(set(overrides) - {"fov_deg", "pitch_deg", "roll_deg"})
-    if wrong:
-        raise InputError(f"A photo camera takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
+    overrides = check_camera_values(overrides or {})
     if len(overrides) == 3 and fspy_path is None:
         from .light.estimate import load_photo
 
@@ -143,6 +124,31 @@ def photo_camera_estimate(photo_path: str | Path, fspy_path: str | Path | None =
                          (1.0, 1.0, 1.0), width, height, None, ())
         return base.overridden(**overrides, source=source, why=why)
     return estimate_photo_camera(photo_path, fspy_path).overridden(**overrides, source=source, why=why)
+
+
+# The photo cameras SceneFit takes (the light stage's config holds the same bounds for its own fields).
+GIVEN_FOV_RANGE_DEG = (1.0, 170.0)
+MAX_PITCH_DEG = 89.0
+
+
+def check_camera_values(values: dict) -> dict:
+    """{"fov_deg", "pitch_deg", "roll_deg"} given over an estimate (None: not given) as floats, each finite and
+    one a camera can have: a field of view within GIVEN_FOV_RANGE_DEG, a pitch within +-MAX_PITCH_DEG (straight
+    up or down has no horizon to stand the asset on); one sentence otherwise. Every entry point's values pass here."""
+    wrong = sorted(set(values) - {"fov_deg", "pitch_deg", "roll_deg"})
+    if wrong:
+        raise InputError(f"A photo camera takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
+    given = {k: v for k, v in values.items() if v is not None}
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in given.values()):
+        raise InputError(f"The camera's angles must be finite numbers of degrees, got {given!r}.")
+    if "fov_deg" in given and not GIVEN_FOV_RANGE_DEG[0] <= given["fov_deg"] <= GIVEN_FOV_RANGE_DEG[1]:
+        low, high = GIVEN_FOV_RANGE_DEG
+        raise InputError(f"The camera's field of view must be between {low:g} and {high:g} degrees, got "
+                         f"{given['fov_deg']!r}.")
+    if "pitch_deg" in given and not -MAX_PITCH_DEG <= given["pitch_deg"] <= MAX_PITCH_DEG:
+        raise InputError(f"The camera's pitch must be within +-{MAX_PITCH_DEG:g} degrees (straight up or down shows "
+                         f"no horizon), got {given['pitch_deg']!r}.")
+    return {k: float(v) for k, v in given.items()}
 
 
 def estimate_photo_camera(photo_path: str | Path, fspy_path: str | Path | None = None) -> CameraEstimate:
@@ -222,69 +228,6 @@ def _estimate(fov: float, pitch: float, roll: float, sources: tuple[str, str, st
         segments=fit.inlier_segments(width, height) if fit is not None and "lines" in sources else ())
 
 
-# -- fSpy ------------------------------------------------------------------------------------------
-FSPY_MAGIC = b"fspy"
-FSPY_HEADER = struct.Struct("<4sIII")   # magic, version, state JSON bytes, image bytes (little-endian)
-
-
-def read_fspy(path: str | Path) -> dict:
-    """The solved camera of an fSpy project: fov_deg, pitch_deg, roll_deg, image size, principal point.
-
-    fSpy's documented layout: 'fspy', uint32 version (1), uint32 state length, uint32 image length,
-    the state as UTF-8 JSON, then the image. The state's cameraParameters holds horizontalFieldOfView
-    (radians) and cameraTransform.rows, a camera-to-world 4x4 matrix (the camera looks down its -Z with
-    +Y up; world Z is up with fSpy's default axes)."""
-    path = Path(path)
-    data = _fspy_bytes(path)
-    magic, version, state_len, image_len = FSPY_HEADER.unpack_from(data)
-    if magic != FSPY_MAGIC:
-        raise InputError(f"'{path}' is not an fSpy project (it does not start with 'fspy'); give the .fspy file "
-                         "fSpy saved.")
-    if version != 1:
-        raise InputError(f"The fSpy project '{path}' is format version {version}; SceneFit reads version 1, so "
-                         "save it again with fSpy 1.x.")
-    if FSPY_HEADER.size + state_len + image_len > len(data):
-        raise InputError(f"The fSpy project '{path}' is truncated (its header promises {state_len + image_len} "
-                         f"bytes of state and image, the file holds {len(data) - FSPY_HEADER.size}); save it again "
-                         "in fSpy.")
-    try:
-        state = json.loads(data[FSPY_HEADER.size:FSPY_HEADER.size + state_len].decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise InputError(f"The fSpy project '{path}' has a damaged state ({error}); save it again in fSpy.") from None
-    return _fspy_camera(state, path)
-
-
-def _fspy_bytes(path: Path) -> bytes:
-    if not path.is_file():
-        raise InputError(f"The fSpy project '{path}' does not exist; give the .fspy file fSpy saved.")
-    data = path.read_bytes()
-    if len(data) < FSPY_HEADER.size:
-        raise InputError(f"'{path}' is {len(data)} byte{'' if len(data) == 1 else 's'}, shorter than an fSpy "
-                         f"project's {FSPY_HEADER.size}-byte header; give the .fspy file fSpy saved.")
-    return data
-
-
-def _fspy_camera(state, path: Path) -> dict:
-    params = state.get("cameraParameters") if isinstance(state, dict) else None
-    if not isinstance(params, dict):
-        raise InputError(f"The fSpy project '{path}' holds no solved camera (cameraParameters is empty); adjust its "
-                         "vanishing lines in fSpy until it shows a camera, then save it again.")
-    try:
-        fov = math.degrees(float(params["horizontalFieldOfView"]))
-        matrix = np.asarray(params["cameraTransform"]["rows"], dtype=np.float64)
-        size = (int(params["imageWidth"]), int(params["imageHeight"]))
-        principal = params.get("principalPoint") or {"x": 0.0, "y": 0.0}
-        principal = (float(principal["x"]), float(principal["y"]))
-    except (KeyError, TypeError, ValueError) as error:
-        raise InputError(f"The fSpy project '{path}' has an incomplete camera ({type(error).__name__}: {error}); "
-                         "save it again in fSpy.") from None
-    if matrix.shape != (4, 4) or not np.all(np.isfinite(matrix)) or not 0.0 < fov < 180.0 or min(size) < 1:
-        raise InputError(f"The fSpy project '{path}' has an unusable camera (field of view {fov:.3g} deg, transform "
-                         f"of shape {matrix.shape}); solve it again in fSpy and save.")
-    pitch, roll = pitch_roll_from_camera_to_world(matrix[:3, :3], path)
-    return {"fov_deg": fov, "pitch_deg": pitch, "roll_deg": roll, "image_size": size, "principal_point": principal}
-
-
 def _from_fspy(camera: dict, width: int, height: int) -> CameraEstimate:
     notes = ["camera solved by fSpy (vanishing lines drawn by hand); world Z taken as up, fSpy's default axes"]
     fw, fh = camera["image_size"]
@@ -298,51 +241,20 @@ def _from_fspy(camera: dict, width: int, height: int) -> CameraEstimate:
                      width, height, None, tuple(notes))
 
 
-# -- EXIF ------------------------------------------------------------------------------------------
-def fov_from_sensor(focal_mm: float, sensor_width_mm: float, width: int, height: int) -> float:
-    """Horizontal field of view from the real focal length and the sensor's long side (the photo's long
-    side spans it; a portrait photo's width is the sensor's short side)."""
-    film_width = sensor_width_mm * width / max(width, height)
-    return math.degrees(2.0 * math.atan(film_width / (2.0 * float(focal_mm))))
-
-
+# -- EXIF (core/stages/camera_exif.py reads it) -------------------------------------------------------
 def _exif_fov(path: Path, info: dict, width: int, height: int) -> tuple[float | None, str | None, list[str]]:
     if info.get("fov_from_metadata_deg"):
         return float(info["fov_from_metadata_deg"]), "exif_35mm", ["field of view from the EXIF 35 mm equivalent "
                                                                    "focal length"]
-    focal, model = _exif_focal_and_model(path)
+    focal, model = exif_focal_and_model(path)
     if not focal:
-        return None, None, []
+        return None, None, [info["metadata_ignored"]] if info.get("metadata_ignored") else []
     sensor = sensor_width_mm(model)
     if sensor is None:
         return None, None, [f"EXIF focal length {focal:g} mm but the camera model '{model}' is not in SceneFit's "
                             "sensor table, so it gives no field of view"]
     return fov_from_sensor(focal, sensor, width, height), "exif_sensor", [
         f"field of view from the EXIF focal length {focal:g} mm and the {sensor:g} mm sensor of the {model}"]
-
-
-def sensor_width_mm(model: str) -> float | None:
-    model = " ".join(model.upper().split())
-    for key in sorted(SENSOR_WIDTH_MM, key=len, reverse=True):
-        if model.startswith(key) and not model[len(key):len(key) + 1].isdigit():
-            return SENSOR_WIDTH_MM[key]
-    return None
-
-
-def _exif_focal_and_model(path: Path) -> tuple[float | None, str]:
-    import OpenImageIO as oiio
-
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        return None, ""
-    try:
-        spec = inp.spec()
-        focal = spec.getattribute("Exif:FocalLength")
-        model = str(spec.getattribute("Model") or "").strip()
-    finally:
-        inp.close()
-    focal = float(focal) if isinstance(focal, (int, float)) and math.isfinite(focal) and focal > 0 else None
-    return focal, model
 
 
 # -- geometry shared by the fit and the report -------------------------------------------------------

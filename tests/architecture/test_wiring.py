@@ -54,10 +54,12 @@ class Recorder:
         self.calls: list[dict] = []
 
     def __call__(self, mesh, maps, photo_path, placement, out_dir, config, progress=None, cancel=None, bake=None,
-                 bake_skipped_why="", models=None, reuse_from=None) -> dict:
+                 bake_skipped_why="", models=None, reuse_from=None):
+        from scenefit.core.pipeline.result import RunResult
+
         self.calls.append({"config": config, "placement": tuple(placement), "bake": bake is not None,
                            "mesh_faces": len(mesh.faces)})
-        return {"stages": {}, "seconds_total": 0.0, "composite": str(Path(out_dir) / "compose" / "composite.png")}
+        return RunResult(Path(out_dir), {}, {}, {}, None, 0.0)
 
 
 def test_the_command_line_and_a_batch_job_give_the_pipeline_the_same_settings(inputs, monkeypatch, capsys):
@@ -103,11 +105,13 @@ def test_a_jobs_file_says_how_the_photo_is_seen_as_the_command_line_does(inputs,
 
 
 def test_a_remote_run_all_sees_the_photo_as_a_local_one(inputs, monkeypatch):
-    """Run All in a worker environment once sent only the panel's placement: the scene camera, the panel's
-    camera values, the asset's size and turn and Pick Sun's sun were dropped."""
+    """Run All on a worker: the RunConfig a local Run All builds (operators/work.view_config), sent as a job's
+    table (as operators/remote.remote_work sends it) and read back on the worker, is the same config: the scene
+    camera, the panel's camera values, the asset's size and turn and Pick Sun's sun all arrive."""
     from scenefit.core.data.asset_io import load_asset_folder
     from scenefit.core.guidance import ModelConfig
-    from scenefit.operators.work import job_view, run_config
+    from scenefit.core.pipeline.run_table import run_table
+    from scenefit.operators.work import view_config
     from scenefit.workers import remote
     from scenefit.workers.batch import run_pipeline_for_job
 
@@ -124,13 +128,14 @@ def test_a_remote_run_all_sees_the_photo_as_a_local_one(inputs, monkeypatch):
             "notes": ["the scene camera 'Camera' is used as it is"], "sun_deg": (-30.0, 45.0),
             "sun_uncertainty_deg": 12.0}
     mesh, maps = load_asset_folder(inputs["folder"])
+    sent = view_config(view, preset="draft", prompt="", guidance_type="none", scene_type="outdoor",
+                       depth_model="my/depth")
     remote.work_remotely({"mesh": mesh, "maps": maps, "photo": str(inputs["photo"]), "worker": "auto",
-                          "out": str(inputs["root"] / "remote"), "preset": "draft", "prompt": "",
-                          "stages": ["convert", "light", "compose"], "scene": "outdoor", "depth_model": "my/depth",
-                          **job_view(view)})
+                          "out": str(inputs["root"] / "remote"), "stages": ["convert", "light", "compose"],
+                          "at": view["placement"], **{k: v for k, v in run_table(sent).items() if v is not None}})
     run_pipeline_for_job(Job.from_dict(jobs[0].to_dict()), inputs["root"] / "worker")
-    local = run_config({"preset": "draft", "prompt": "", "guidance": "none", "models": ModelConfig(), "view": view,
-                        "scene_type": "outdoor", "depth_model": "my/depth"})
+    local = view_config(view, preset="draft", prompt="", guidance_type="none", models=ModelConfig(),
+                        scene_type="outdoor", depth_model="my/depth")
     remote_call = recorder.calls[0]
     assert remote_call["config"] == local and remote_call["placement"] == (0.4, 0.7)
     assert local.scene_type == "outdoor" and local.sun_deg == (-30.0, 45.0) and local.camera_source == "blender"
@@ -339,7 +344,7 @@ def _panel_view(camera: dict | None = None) -> dict:
 def test_run_all_in_blender_and_the_command_line_give_the_pipeline_the_same_settings(inputs, monkeypatch):
     """Run All once sent a placeholder camera (60 deg, 1x1 pixels) where the command line estimated it."""
     from scenefit.core.guidance import ModelConfig
-    from scenefit.operators.work import run_config
+    from scenefit.operators.work import view_config
 
     recorder = Recorder()
     monkeypatch.setattr(run_module, "run_pipeline", recorder)
@@ -348,11 +353,11 @@ def test_run_all_in_blender_and_the_command_line_give_the_pipeline_the_same_sett
                      "--out", str(inputs["root"] / f"cli{len(recorder.calls)}"), "--preset", "draft", "--guidance",
                      "none", "--quiet", *camera]) == 0
     estimated, given, sun = (call["config"] for call in recorder.calls)
-    data = {"preset": "draft", "prompt": "", "guidance": "none", "models": ModelConfig()}
-    assert run_config({**data, "view": _panel_view()}) == estimated
-    assert run_config({**data, "view": _panel_view({"fov_deg": 50.0, "pitch_deg": -14.0, "roll_deg": 2.0})}) == given
+    data = {"preset": "draft", "prompt": "", "guidance_type": "none", "models": ModelConfig()}   # (Run All's prepare())
+    assert view_config(_panel_view(), **data) == estimated
+    assert view_config(_panel_view({"fov_deg": 50.0, "pitch_deg": -14.0, "roll_deg": 2.0}), **data) == given
     # Pick Sun's (azimuth, elevation) reaches the pipeline as --sun's does.
-    assert run_config({**data, "view": {**_panel_view(), "sun_deg": (-30.0, 45.0)}}) == sun and sun.sun_deg
+    assert view_config({**_panel_view(), "sun_deg": (-30.0, 45.0)}, **data) == sun and sun.sun_deg
     assert recorder.calls[0]["placement"] == DEFAULT_AT
 
 

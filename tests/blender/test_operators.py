@@ -422,7 +422,9 @@ def test_hours_of_local_adaptation_are_said_before_they_start(operated):
     _, out, _ = operated
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location("quality", ROOT / "panels" / "quality.py")
+    # (by path, named as in the package so its relative import of the presets resolves)
+    spec = importlib.util.spec_from_file_location("scenefit.panels.quality",
+                                                  ROOT / "panels" / "quality.py")
     quality = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(quality)
     sentence, short, preset = out["long_work"]

@@ -103,7 +103,7 @@ def test_jobs_file_paths_defaults_and_order(tmp_path):
     a, b, c = jobs.jobs
     assert a.asset == (tmp_path / "ball").resolve() and a.photo == (tmp_path / "room.png").resolve()
     assert a.stages == ("convert", "light")          # pipeline order, whatever the file's order
-    assert c.stages == ("light",) and b.seed == 1 and a.preset == "draft" and a.at == (0.5, 0.7)
+    assert c.stages == ("light",) and b.run.seed == 1 and a.run.preset == "draft" and a.at == (0.5, 0.7)
     assert jobs.settings.retries == 1 and jobs.settings.num_gpus == "auto"
 
 
@@ -264,8 +264,8 @@ def test_remote_job_streams_progress_cancels_and_returns_its_folder(in_process, 
     # fit of many iterations: the exact start converts in a blink, so a plain convert could finish
     # before the cancel reached the worker, as it did under load.)
     cancel = threading.Event()
-    long_job = replace(job, name="long", preset="final", stages=("convert",),
-                       overrides={"convert": {"iterations": 100000}})
+    long_job = replace(job, name="long", stages=("convert",), run=replace(
+        job.run, preset="final", stage_overrides={"convert": {"iterations": 100000}}))
     with pytest.raises(Cancelled):
         run_remote(long_job, tmp_path / "back", progress=lambda event: cancel.set(), cancel=cancel)
     assert not (tmp_path / "back" / "long").exists()
@@ -362,12 +362,24 @@ overrides = { convert = { iterations = 8 }, light = { map_height = 16, optimise 
 name = "first"
 [[job]]
 name = "second"
+[[job]]
+name = "edit"
+mode = "edit"
+prompt = ""
+object_prompt = "a rubber ball"
+instruction = "add moss"
+negative_prompt = "blurry"
+seed = 5
+overrides = { convert = { iterations = 4 }, light = { critic_type = "none", map_height = 16, apparatus = { render_size = 16, spp = 1 }, outpaint = { completion_type = "prior" } }, compose = { pilot_spp = 1, min_spp = 1, max_spp = 1 }, adapt = { iterations = 1, model_resolution = 32, views_per_step = 1, preview_every = 1, checkpoint_every = 100, stages = [[1.0, 16, 1, [500, 990]]] } }
 """
 
 
 def test_a_worker_loads_the_models_once_and_reuses_them_with_the_same_outputs(tmp_path, monkeypatch):
     """Two jobs with diffusion guidance in one worker: the tiny models load once (counted in the real
-    loader), the second job (reused models) writes the same bytes as the first (fresh models)."""
+    loader), the second job (reused models) writes the same bytes as the first (fresh models). A third job's
+    mode, object prompt, instruction, negative prompt and seed reach adapt: it adapts in mode edit with the
+    prompt made of its words, as `scenefit adapt --mode edit` does."""
+    from scenefit.core.stages.adapt.config import edit_prompt
     from scenefit.core.guidance import models as model_module
     from scenefit.devtools.tiny_models import build_tiny_pair
 
@@ -384,14 +396,23 @@ def test_a_worker_loads_the_models_once_and_reuses_them_with_the_same_outputs(tm
 
     monkeypatch.setattr(model_module, "load_guidance_models", counted_load)
     outcomes = run_batch(jobs, tmp_path / "out")
-    assert [(o.name, o.status) for o in outcomes] == [("first", "done"), ("second", "done")], outcomes
-    assert loads == [True]                     # one model set (with the inpainting UNet) for both jobs
+    assert [(o.name, o.status) for o in outcomes] == [("first", "done"), ("second", "done"), ("edit", "done")], \
+        outcomes
+    assert loads == [True]                     # one model set (with the inpainting UNet) for every job
     reports = [json.loads((tmp_path / "out" / name / "report.json").read_text()) for name in ("first", "second")]
     run = reports[1]["stages"]["run"]["stages"]
     assert {name: run[name]["status"] for name in ("convert", "light", "adapt", "compose")} == dict.fromkeys(
         ("convert", "light", "adapt", "compose"), "ran")
     assert run["light"]["report"]["decisions"]["critic"]["type"] == "diffusion"   # light used the models too
     assert [r["worker"]["model_loads_by_this_worker"] for r in reports] == [1, 1]
+    edit = json.loads((tmp_path / "out" / "edit" / "report.json").read_text())["stages"]["run"]
+    adapt = edit["stages"]["adapt"]["report"]
+    assert (adapt["config"]["mode_type"], adapt["config"]["object_prompt"], adapt["config"]["instruction"],
+            adapt["config"]["negative_prompt"], adapt["config"]["seed"], adapt["config"]["views_type"]) == (
+        "edit", "a rubber ball", "add moss", "blurry", 5, "local")
+    assert edit_prompt("a rubber ball", "add moss") == "a rubber ball, with moss"
+    assert "a rubber ball, with moss" in json.dumps(adapt["decisions"]["prompt"])
+    assert edit["config"]["mode"] == "edit" and edit["stages"]["convert"]["report"]["config"]["seed"] == 5
     # Every image and texture the same bytes (the JSON records differ in timings and temporary paths).
     first, second = (outputs(tmp_path / "out" / name) for name in ("first", "second"))
     assert {k for k in first if not k.endswith(".json")} >= {"adapt/maps/texture.pt", "compose/composite.png"}
@@ -611,7 +632,7 @@ def test_a_changed_job_that_fails_keeps_its_earlier_stages_for_the_next_try(tmp_
     jobs = load_jobs(tmp_path / "jobs.toml")
     assert [o.status for o in run_batch(jobs, out, InProcessDispatcher(jobs.settings, AlwaysFailingWorker))] == ["failed"]
     report = json.loads((out / "b" / "report.json").read_text())
-    assert report["status"] == "failed" and report["kept"]["stages"] == ["convert", "light", "compose"]
+    assert report["status"] == "failed" and report["kept"]["stages"] == ["convert", "camera", "light", "compose"]
     assert [o.status for o in run_batch(jobs, out)] == ["done"]
     stages = json.loads((out / "b" / "report.json").read_text())["stages"]["run"]["stages"]
     assert {name: stages[name]["status"] for name in ("convert", "light", "compose")} == \

@@ -10,6 +10,8 @@ The paper does not say how many global-view crops it scores per view; we take 2 
 """
 from __future__ import annotations
 
+from ...base.names import MODES
+
 from dataclasses import asdict, dataclass, field
 
 from ..compose import SHADOW_TYPES
@@ -19,7 +21,7 @@ from ...guidance.models import ModelConfig
 from ...guidance.weighting import ANNEAL_TYPES, NORMAL_WEIGHT_TYPES
 from ...texture.neural_texture import BALANCED_TEXTURE, NeuralTextureConfig
 
-MODE_TYPES = ("scene", "generate", "edit")
+MODE_TYPES = MODES   # (core/base/names.py)
 VIEWS_TYPES = ("local+global", "local")
 LIGHT_TYPES = ("ambient", "envmap", "random")
 

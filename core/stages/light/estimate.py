@@ -9,6 +9,9 @@ light_preview.png (tone-mapped) and returns the report's fields.
 """
 from __future__ import annotations
 
+from ...base.names import SCENE_TYPES as NAMED_SCENE_TYPES
+from ..camera_exif import FOCAL_RANGE_MM, plausible_focal_mm
+
 import copy
 import functools
 import math
@@ -29,7 +32,7 @@ from ...data.mesh import Mesh, normalize_to_unit_sphere
 from ...render.photo import camera_exposure
 from ...data.primitives import uv_sphere
 from ...base.progress import ProgressCallback, check_cancel, emit
-from ...scene.camera import DEFAULT_PITCH_DEG, PhotoCamera, photo_camera_for
+from ...scene.camera import PhotoCamera, photo_camera_for
 from .cues import CueConfig, build_cues
 from .depth import DepthConfig, estimate_ray_distance
 from .diffusion_critic import DiffusionCriticConfig, DiffusionLightCritic
@@ -49,7 +52,7 @@ from .scene_type import scene_type_cue
 # draft's 64 rows are built at 64: at 128 it did balanced's work for a coarser map (benchmarks: same
 # seconds, same error). tests/core/stages/test_stability.py finds a 1.5 deg lamp and a 2 px 1e6 spot at every preset.
 MIN_WORKING_HEIGHT = 64
-SCENE_TYPES = ("auto", "indoor", "outdoor")
+SCENE_TYPES = NAMED_SCENE_TYPES   # (core/base/names.py)
 CRITIC_TYPES = ("none", "reference", "diffusion")
 PRIOR_TYPES = ("cues", "inverse_tonemap")   # cues: cues.py (default); inverse_tonemap: the paper's prior
 
@@ -60,9 +63,8 @@ class LightConfig:
     except the critic's optimisation, which keeps the paper's 2000 iterations at lr 0.01 (it runs only
     with a critic, i.e. with the SD2 weights; core/pipeline/preset_tables.py has shorter ones)."""
 
-    scene_type: str = "auto"                  # indoor | outdoor | auto (decided from the photo; unsure: both)
-    fov_deg: float | None = None              # horizontal; None: the photo's metadata, else DEFAULT_FOV_DEG
-    camera_pitch_deg: float = DEFAULT_PITCH_DEG   # the photo camera looks this far up (negative: down)
+    scene_type: str = "auto"
+    # (The photo's camera is not a light setting: it is the camera stage's, a PhotoCamera given to estimate_light.)
     # The artist's dominant light (--sun AZ,EL), degrees: azimuth from the photo's view direction,
     # positive to the camera's right (clockwise seen from above), elevation above the horizon.
     sun_deg: tuple[float, float] | None = None
@@ -88,11 +90,6 @@ class LightConfig:
         check_choice("scene_type", self.scene_type, SCENE_TYPES)
         check_choice("critic_type", self.critic_type, CRITIC_TYPES)
         check_choice("prior_type", self.prior_type, PRIOR_TYPES)
-        if self.fov_deg is not None and not 1.0 <= self.fov_deg <= 170.0:
-            raise InputError(f"The photo's field of view must be between 1 and 170 degrees, got {self.fov_deg}.")
-        if not -89.0 <= self.camera_pitch_deg <= 89.0:
-            raise InputError(f"The photo camera's pitch must be within +-89 degrees (where it looks above the "
-                             f"horizon; negative looks down), got {self.camera_pitch_deg:g}; give another --pitch.")
         if self.sun_deg is not None and (len(self.sun_deg) != 2 or not all(map(math.isfinite, self.sun_deg))
                                          or not -90.0 <= self.sun_deg[1] <= 90.0):
             raise InputError(f"The sun direction must be two finite angles AZ,EL with the elevation within +-90 "
@@ -189,7 +186,10 @@ def _decoded_photo(path: Path, max_side: int | None) -> tuple[np.ndarray, dict]:
         info["decoded"] = "sRGB as stored"
         rgb = np.clip(rgb, 0.0, 1.0)
     focal35 = _metadata(path).get("focal35")
-    if focal35:
+    if focal35 is not None and plausible_focal_mm(focal35) is None:
+        info["metadata_ignored"] = f"EXIF FocalLengthIn35mmFilm {str(focal35)[:40]!r} is not a focal length " \
+                                   f"({FOCAL_RANGE_MM[0]:g} to {FOCAL_RANGE_MM[1]:g} mm)"
+    elif focal35:
         # The 35 mm equivalent is defined on the diagonal (43.27 mm); the width's share of it gives the
         # horizontal view of any aspect ratio, upright portrait photos included.
         film_width = 43.27 * w / np.hypot(w, h)
@@ -214,10 +214,10 @@ def _metadata(path: Path) -> dict:
         inp.close()
 
 
-def default_photo_camera(config: LightConfig, photo_info: dict, width: int, height: int) -> tuple[PhotoCamera, dict]:
-    """The camera the light stage assumes for a photo when none is given: core/scene/camera.py's, with the
-    config's field of view and pitch (the one definition of the frame and the defaults)."""
-    return photo_camera_for(photo_info, width, height, config.fov_deg, config.camera_pitch_deg)
+def default_photo_camera(photo_info: dict, width: int, height: int) -> tuple[PhotoCamera, dict]:
+    """The camera the light stage assumes for a photo when none is given: core/scene/camera.py's (the one
+    definition of the frame and the defaults; the field of view from the photo's metadata where it has one)."""
+    return photo_camera_for(photo_info, width, height)
 
 
 def sun_direction(sun_deg: tuple[float, float] | None, camera: PhotoCamera) -> np.ndarray | None:
@@ -244,7 +244,7 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     """Estimate an HDR environment map from a photo (sRGB-encoded float RGB) and the object's placement.
 
     photo_camera: the photo's orientation and FOV in the world (default: looking along +Y, the
-    composition's azimuth 0, pitched by config.camera_pitch_deg). mesh/maps: the object with its fixed
+    composition's azimuth 0, at the default pitch). mesh/maps: the object with its fixed
     appearance ((H, W, 5) base colour, roughness, metallic); default a grey sphere. critic: used when
     config.critic_type == "diffusion"; reference_envmap: the true map (photo exposure units) for "reference".
     models: where loaded diffusion models come from, `models.get(model_config, need_inpaint)` (a
@@ -275,7 +275,7 @@ def estimate_light(photo_srgb: np.ndarray, placement_px: tuple[float, float], co
     info = dict(photo_info or {})
     decisions: dict = {}
     if photo_camera is None:
-        photo_camera, decisions["fov"] = default_photo_camera(config, info, w, h)
+        photo_camera, decisions["fov"] = default_photo_camera(info, w, h)
     elif (photo_camera.width, photo_camera.height) != (w, h):
         photo_camera = replace(photo_camera, width=w, height=h)
     decisions["photo_camera"] = asdict(photo_camera)

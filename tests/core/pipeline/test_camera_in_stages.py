@@ -38,7 +38,7 @@ def test_a_photo_without_lines_keeps_the_default_camera_and_says_so(tmp_path, in
     camera = got["light"]["camera"]
     assert camera["fallback"] is True and camera["pitch_source"] == "default" and camera["fov_source"] == "default"
     assert got["light"]["photo_camera"]["pitch_deg"] == -10.0 and got["light"]["photo_camera"]["roll_deg"] == 0.0
-    assert "the light stage's report" in got["compose"]["inputs"]["camera_from"]
+    assert got["compose"]["inputs"]["camera_from"] == "the camera stage (camera/camera.json)"
 
 
 def test_the_users_pitch_roll_and_fov_win_and_reach_compose(tmp_path, inputs, monkeypatch):

@@ -111,7 +111,7 @@ def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monk
     monkeypatch.setattr(compose, "compose_to_folder", _interrupted)   # Ctrl-C during the compose stage
     assert main(args) == 130
     message = capsys.readouterr().err
-    assert "stages finished so far (convert, light) are kept beside it" in message
+    assert "stages finished so far (convert, camera, light) are kept beside it" in message
     # Nothing is swapped in until the run is whole; the finished stages wait beside the folder.
     staging = staging_path(out)
     assert not out.exists()
@@ -200,7 +200,7 @@ def test_a_run_refused_mid_way_says_which_finished_stages_it_kept(tmp_path, monk
     monkeypatch.setattr(compose, "compose_to_folder", refused)
     assert main(args) == 2
     message = capsys.readouterr().err.strip()
-    assert message == (f"scenefit: error: Compose refused this. The finished stages (convert, light) are kept beside "
+    assert message == (f"scenefit: error: Compose refused this. The finished stages (convert, camera, light) are kept beside "
                        f"'{out}' in '.run.partial'; the next run into it reuses each whose inputs and settings are "
                        "the same.")
     assert not out.exists()
@@ -355,15 +355,15 @@ def test_a_new_run_folder_reuses_an_earlier_runs_stages_by_copy_and_leaves_that_
                                                         + np.zeros((48, 64, 3)), 0, 1))
     config = RunConfig(preset="draft", guidance_type="none", compose_spp=2)
     first = run_pipeline(mesh, maps, photo, (0.5, 0.8), tmp_path / "run-1", config)
-    assert first["reused"] == []
+    assert first.reused == ()
     files = lambda folder: {p: p.stat().st_mtime_ns for p in sorted(folder.rglob("*")) if p.is_file()}
     before = files(tmp_path / "run-1")
 
     second = run_pipeline(mesh, maps, photo, (0.5, 0.8), tmp_path / "run-2", config, reuse_from=tmp_path / "run-1")
-    assert second["reused"] == ["convert", "light", "compose"]
+    assert second.reused == ("convert", "light", "compose")
     for name in ("convert", "light", "compose"):
         assert (tmp_path / "run-2" / name / "stage.json").is_file()
-        assert second["stages"][name]["from"] == str((tmp_path / "run-1").resolve())
+        assert second.stages[name].source == str((tmp_path / "run-1").resolve())
     assert np.array_equal(read_image(tmp_path / "run-2" / "compose" / "composite.png"),
                           read_image(tmp_path / "run-1" / "compose" / "composite.png"))
     # copies, not links: Blender opens these images and may save an edit into one in place
@@ -375,8 +375,8 @@ def test_a_new_run_folder_reuses_an_earlier_runs_stages_by_copy_and_leaves_that_
 
     # Another placement: the light and what follows it run again; the texture is still the earlier one's
     third = run_pipeline(mesh, maps, photo, (0.3, 0.8), tmp_path / "run-3", config, reuse_from=tmp_path / "run-2")
-    assert third["reused"] == ["convert"]
-    assert [third["stages"][n]["status"] for n in ("light", "compose")] == ["ran", "ran"]
+    assert third.reused == ("convert",)
+    assert [third.stages[n].status for n in ("light", "compose")] == ["ran", "ran"]
     assert files(tmp_path / "run-1") == before   # nothing of the first run was changed
 
 

@@ -1,0 +1,228 @@
+"""A RunConfig as a table of plain values: a jobs file's [[job]] (TOML) and a job sent to a worker (JSON).
+
+Each RunConfig field has one key here (`RUN_KEYS`), spelled as `scenefit run`'s option says it
+(`object_size` for --object-size, `sun` for --sun, `camera = { fov, pitch, roll }` for --fov, --pitch,
+--roll); the two fields a table cannot hold are named in `NOT_IN_A_TABLE` with the reason. So a key the
+run does not take is refused, and a key it takes reaches it: `run_config(table)` builds the config,
+`run_table(config)` writes it back, and a test walks RunConfig's fields against both.
+
+Overrides are checked against the stage configs' own fields and types here, when the table is read,
+so a misspelt or mistyped setting is one sentence before any job runs.
+"""
+from __future__ import annotations
+
+import math
+import types
+import typing
+from dataclasses import dataclass, fields, is_dataclass
+from typing import Any, Callable
+
+from ..base.errors import InputError
+from ..base.names import CONFIG_STAGES
+from .run import CAMERA_KEYS, RunConfig
+
+# Fields a table does not carry: photo_camera is a PhotoCamera object a Python caller already holds (a table
+# gives camera values instead); models come from the jobs file's [models] table, shared by its jobs.
+NOT_IN_A_TABLE = {"photo_camera": "a PhotoCamera object; a table gives camera = { fov, pitch, roll } instead",
+                  "models": "the jobs file's [models] table, shared by every job"}
+CAMERA_TABLE = {"fov": "fov_deg", "pitch": "pitch_deg", "roll": "roll_deg"}   # camera = { fov, pitch, roll }
+assert set(CAMERA_TABLE.values()) == set(CAMERA_KEYS)
+
+
+@dataclass(frozen=True)
+class RunKey:
+    """A table key and the RunConfig field it gives: `read(value, where)` checks the value's shape and returns
+    the field's value; `write(field value)` gives the table's value back."""
+
+    key: str
+    field: str
+    read: Callable[[Any, str], Any]
+    write: Callable[[Any], Any] = lambda value: value
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _text(key: str, optional: bool = False) -> Callable[[Any, str], Any]:
+    def read(value, where: str):
+        if optional and value is None:
+            return None
+        if not isinstance(value, str):
+            raise InputError(f"{where}: {key} must be a string, got {_shown(value)}.")
+        return value
+    return read
+
+
+def _number(key: str) -> Callable[[Any, str], float]:
+    def read(value, where: str) -> float:
+        if not (_is_number(value) and math.isfinite(value)):
+            raise InputError(f"{where}: {key} must be a finite number, got {_shown(value)}.")
+        return float(value)
+    return read
+
+
+def _whole(key: str) -> Callable[[Any, str], int | None]:
+    def read(value, where: str) -> int | None:
+        if value is not None and not (isinstance(value, int) and not isinstance(value, bool)):
+            raise InputError(f"{where}: {key} must be a whole number, got {_shown(value)}.")
+        return value
+    return read
+
+
+def _sun(value, where: str) -> tuple[float, float]:
+    if not (isinstance(value, (list, tuple)) and len(value) == 2 and all(_is_number(v) for v in value)):
+        raise InputError(f"{where}: sun must be [azimuth, elevation] in degrees, e.g. [-30, 45], got {_shown(value)}.")
+    return float(value[0]), float(value[1])
+
+
+def _shadow(value, where: str) -> tuple[str, str, str]:
+    if not (isinstance(value, (list, tuple)) and len(value) == 3 and all(isinstance(v, str) for v in value)):
+        raise InputError(f"{where}: sun_shadow must be the shadow's foot, top and tip, three points as --at takes "
+                         f"them, e.g. [\"0.4,0.8\", \"0.4,0.5\", \"0.6,0.85\"], got {_shown(value)}.")
+    return tuple(value)
+
+
+def _camera(value, where: str) -> dict:
+    if not isinstance(value, dict) or set(value) - set(CAMERA_TABLE) or not all(_is_number(v) for v in value.values()):
+        raise InputError(f"{where}: camera must be a table of fov, pitch and roll in degrees, e.g. "
+                         f"{{ fov = 50, pitch = -14 }}, got {_shown(value)}.")
+    return {CAMERA_TABLE[k]: float(v) for k, v in value.items()}
+
+
+def _overrides(value, where: str) -> dict:
+    if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
+        raise InputError(f"{where}: overrides must be a table of stage tables, e.g. "
+                         "{ adapt = { iterations = 50 } }.")
+    unknown = sorted(set(value) - set(CONFIG_STAGES))
+    if unknown:
+        raise InputError(f"{where}: overrides names unknown stage '{unknown[0]}'; it takes {', '.join(CONFIG_STAGES)}.")
+    return {stage: dict(settings) for stage, settings in value.items()}
+
+
+RUN_KEYS: tuple[RunKey, ...] = (
+    RunKey("preset", "preset", _text("preset")),
+    RunKey("mode", "mode", _text("mode")),
+    *(RunKey(k, k, _text(k)) for k in ("prompt", "negative_prompt", "object_prompt", "instruction")),
+    RunKey("seed", "seed", _whole("seed")),
+    RunKey("guidance_type", "guidance_type", _text("guidance_type")),
+    RunKey("object_size", "size", _number("object_size")),
+    RunKey("shadow_type", "shadow_type", _text("shadow_type")),
+    RunKey("compose_spp", "compose_spp", _whole("compose_spp")),
+    RunKey("fspy", "fspy", _text("fspy", optional=True)),
+    RunKey("camera", "camera_overrides", _camera,
+           lambda value: {k: value[f] for k, f in CAMERA_TABLE.items() if value.get(f) is not None}),
+    RunKey("camera_source", "camera_source", _text("camera_source")),
+    RunKey("camera_why", "camera_why", _text("camera_why")),
+    RunKey("turn", "turn_deg", _number("turn")),
+    RunKey("sun", "sun_deg", lambda value, where: None if value is None else _sun(value, where),
+           lambda value: None if value is None else list(value)),
+    RunKey("sun_shadow", "sun_shadow", lambda value, where: None if value is None else _shadow(value, where),
+           lambda value: None if value is None else list(value)),
+    RunKey("sun_uncertainty", "sun_uncertainty_deg", _number("sun_uncertainty")),
+    RunKey("scene", "scene_type", _text("scene")),
+    RunKey("depth_model", "depth_model", _text("depth_model", optional=True)),
+    RunKey("overrides", "stage_overrides", _overrides),
+)
+KEYS = tuple(k.key for k in RUN_KEYS)
+_BY_KEY = {k.key: k for k in RUN_KEYS}
+
+
+def run_config(table: dict, where: str, stages: tuple[str, ...] = CONFIG_STAGES, **given) -> RunConfig:
+    """The RunConfig of `table` (keys of RUN_KEYS; others are the caller's to refuse), with `given` fields
+    (models) over it; every problem one sentence beginning with `where`. The settings of `stages` (those
+    the run will resolve) are checked against the stage configs they go to."""
+    values = {_BY_KEY[k].field: _BY_KEY[k].read(v, where) for k, v in table.items() if k in _BY_KEY}
+    # Guidance is adapt's (and the light critic's beside it): a run without adapt has none.
+    values.setdefault("guidance_type", "auto" if "adapt" in stages else "none")
+    if "adapt" not in stages and values["guidance_type"] != "none":
+        raise InputError(f"{where}: guidance_type {values['guidance_type']!r} is for stage adapt, which is not "
+                         "listed; add adapt to the stages or leave guidance_type out.")
+    try:
+        config = RunConfig(**values, **given)
+    except InputError as error:   # (its field's key, where RunConfig says which)
+        key = next((k.key for k in RUN_KEYS if k.field == getattr(error, "field", None)), None)
+        raise InputError(f"{where}: {key + ': ' if key else ''}{error}") from None
+    check_stage_settings(config, where, stages)
+    return config
+
+
+def run_table(config: RunConfig) -> dict:
+    """`config` as a table `run_config` reads back to the same config (models aside: NOT_IN_A_TABLE)."""
+    if config.photo_camera is not None:
+        raise InputError("A run given a PhotoCamera object has no table; give its angles as camera values.")
+    return {k.key: k.write(getattr(config, k.field)) for k in RUN_KEYS}
+
+
+def check_stage_settings(config: RunConfig, where: str, stages: tuple[str, ...] = CONFIG_STAGES) -> None:
+    """The config of each of `stages` as the run resolves it, built now: an override the stage config does not
+    have, or of the wrong type, and a mode without its prompts, are one sentence naming `where` and the key."""
+    from .presets import stage_config, with_overrides
+
+    for stage in (s for s in CONFIG_STAGES if s in stages or s in config.stage_overrides):
+        overrides = config.overrides(stage)
+        # (a scene run without a prompt is given one from the asset's name: any text stands for it here)
+        own = {"adapt": {"mode_type": config.mode, "prompt": config.prompt or ("x" if config.mode == "scene" else ""),
+                         "object_prompt": config.object_prompt, "instruction": config.instruction},
+               "compose": {"size": config.size, "shadow_type": config.shadow_type, "spp": config.compose_spp},
+               }.get(stage, {})
+        try:
+            _check_types(overrides, stage_config(stage, config.preset, **own), f"{where}: overrides.{stage}")
+            stage_config(stage, config.preset, **with_overrides(own, overrides))
+        except (TypeError, ValueError) as error:
+            raise InputError(f"{where}: the {stage} stage's settings are refused ({error}).") from None
+        except InputError as error:
+            text = str(error)
+            raise InputError(text if text.startswith(where) else f"{where}: {stage}: {text}") from None
+
+
+def _check_types(overrides: dict, config, where: str) -> None:
+    """Each override a field of `config` (a stage config, or one nested in it), of that field's type."""
+    hints = typing.get_type_hints(type(config))
+    names = [f.name for f in fields(config)]
+    for key, value in overrides.items():
+        if key not in names:
+            raise InputError(f"{where}: {type(config).__name__} has no setting '{key}'; its settings are "
+                             f"{', '.join(names)}.")
+        current = getattr(config, key)
+        if isinstance(value, dict) and is_dataclass(current):
+            _check_types(value, current, f"{where}.{key}")
+        elif value is not None and not _fits(value, hints.get(key, Any)):
+            raise InputError(f"{where}.{key} must be {_type_words(hints.get(key))}, got {_shown(value)}.")
+
+
+def _fits(value, hint) -> bool:
+    """Whether a plain (TOML/JSON) value can stand for a field of type `hint`: numbers finite, a tuple as a list,
+    a nested config as a table; types it does not know are left to the config's own checks."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return any(_fits(value, a) for a in args)
+    if hint is type(None):
+        return value is None
+    if hint is bool:
+        return isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if hint is float:
+        return _is_number(value) and math.isfinite(value)
+    if hint is str:
+        return isinstance(value, str)
+    if hint is tuple or origin is tuple:
+        return isinstance(value, (list, tuple))
+    if isinstance(hint, type) and is_dataclass(hint):
+        return isinstance(value, (dict, hint))
+    return True
+
+
+def _type_words(hint) -> str:
+    words = {bool: "true or false", int: "a whole number", float: "a finite number", str: "a string"}
+    union = typing.get_origin(hint) in (typing.Union, types.UnionType)
+    args = [a for a in typing.get_args(hint) if a is not type(None)] if union else [hint]
+    return " or ".join(words.get(a, "a list" if a is tuple or typing.get_origin(a) is tuple else
+                                 getattr(a, "__name__", str(a))) for a in args)
+
+
+def _shown(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
