@@ -8,6 +8,8 @@ class SceneFitError(Exception):
 class InputError(SceneFitError):
     """The asset, photo, placement or an option given by the user cannot be used."""
 
+    field: str | None = None   # the setting refused, where one is (a jobs file names its key)
+
 
 class ModelMissingError(SceneFitError):
     """Model weights were not found where they were looked for."""

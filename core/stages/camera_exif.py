@@ -40,7 +40,7 @@ def sensor_width_mm(model: str) -> float | None:
 
 
 def exif_focal_and_model(path: Path) -> tuple[float | None, str]:
-    import OpenImageIO as oiio
+    import OpenImageIO as oiio  # lazy: Blender may lack it (missing_modules)
 
     inp = oiio.ImageInput.open(str(path))
     if inp is None:

@@ -144,9 +144,14 @@ def _type(annotation) -> str:
     return annotation.__name__ if isinstance(annotation, type) else str(annotation).replace("typing.", "")
 
 
-def dataclass_rows(cls: type, exclude: set[str] = frozenset()) -> list[list[str]]:
-    """[name, type, default, meaning] per field of dataclass `cls`, in declaration order."""
+def dataclass_rows(cls: type, exclude: set[str] = frozenset(), keys=None) -> list[list[str]]:
+    """[name, type, default, meaning] per field of dataclass `cls`, in declaration order; with `keys` (items
+    with `.key` and `.field`: a table's spelling of the fields), one row per key, named as the table names it."""
     docs = field_docs(cls)
+    by_name = {f.name: f for f in dataclasses.fields(cls)}
+    if keys is not None:
+        return [[k.key, _type(by_name[k.field].type), _default(by_name[k.field]), docs.get(k.field, "")]
+                for k in keys]
     return [[f.name, _type(f.type), _default(f), docs.get(f.name, "")]
             for f in dataclasses.fields(cls) if f.name not in exclude]
 
@@ -158,7 +163,7 @@ def import_object(path: str):
 
 class DataclassFields(SphinxDirective):
     required_arguments = 1
-    option_spec = {"exclude": directives.unchanged}
+    option_spec = {"exclude": directives.unchanged, "keys": directives.unchanged}
 
     def run(self) -> list[nodes.Node]:
         cls = import_object(self.arguments[0])
@@ -169,9 +174,13 @@ class DataclassFields(SphinxDirective):
         unknown = exclude - {f.name for f in dataclasses.fields(cls)}
         if unknown:
             raise self.error(f"{self.arguments[0]} has no field {', '.join(sorted(unknown))} to exclude")
+        keys = import_object(self.options["keys"]) if "keys" in self.options else None
+        missing = [k.field for k in keys or () if k.field not in {f.name for f in dataclasses.fields(cls)}]
+        if missing:
+            raise self.error(f"{self.arguments[0]} has no field {', '.join(missing)} that its keys name")
         paragraphs = (inspect.getdoc(cls) or "").split("\n\n")
         result: list[nodes.Node] = [inline(" ".join(p.split())) for p in paragraphs if p.strip()]
-        return result + [table(["key", "type", "default", "meaning"], dataclass_rows(cls, exclude),
+        return result + [table(["key", "type", "default", "meaning"], dataclass_rows(cls, exclude, keys),
                                widths=[2, 2, 2, 6], literal_columns=(0, 1, 2))]
 
 
