@@ -82,12 +82,14 @@ def test_a_copy_inflating_past_a_gigabyte_is_refused_without_inflating_it(tmp_pa
     proc = run_python(f"""
 import json, resource
 from scenefit.core.data.asset_read_cache import load_read
+before_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 found = load_read({str(tmp_path)!r}, "k")
-peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-print("JSON", json.dumps({{"found": found is not None, "peak_mb": peak_mb}}))
+grown_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 - before_mb
+print("JSON", json.dumps({{"found": found is not None, "grown_mb": grown_mb}}))
 """)
     result = printed_json(proc)
-    assert not result["found"] and result["peak_mb"] < 900, result   # the array alone is 1152 MB
+    # The peak grows by less than a quarter of the array (1152 MB), whatever the imports themselves take.
+    assert not result["found"] and result["grown_mb"] < 288, result
 
 
 def test_a_header_asking_for_more_than_it_holds_is_no_copy(tmp_path):
