@@ -67,7 +67,7 @@ def read_image(path: str | os.PathLike, max_side: int | None = None, upright: bo
     pixels = np.asarray(pixels, dtype=np.float32)
     if pixels.ndim == 2:
         pixels = pixels[..., None]
-    if upright and orientation != 1:
+    if upright and orientation in TURNED_ORIENTATIONS:
         pixels = _reoriented(pixels, orientation)
     return pixels
 
@@ -106,6 +106,12 @@ def _check_file(path: Path, shown: str) -> None:
         raise InputError(str(error).replace(str(path), shown)) from None
 
 
+# EXIF Orientation 2-8 turn or mirror the stored pixels (5-8 swap width and height); 1 is upright, and any
+# other value (0, a file's own invention) is read as stored, as photo viewers do.
+TURNED_ORIENTATIONS = range(2, 9)
+SWAPPED_ORIENTATIONS = range(5, 9)
+
+
 def _reoriented(pixels: np.ndarray, orientation: int) -> np.ndarray:
     import OpenImageIO as oiio  # lazy: Blender may lack it (missing_modules)
 
@@ -114,7 +120,7 @@ def _reoriented(pixels: np.ndarray, orientation: int) -> np.ndarray:
     buf.set_pixels(oiio.ROI(), np.ascontiguousarray(pixels))
     buf.specmod().attribute("Orientation", int(orientation))
     return np.asarray(oiio.ImageBufAlgo.reorient(buf).get_pixels(oiio.FLOAT), np.float32).reshape(
-        (w, h, c) if orientation >= 5 else (h, w, c))   # 5-8 swap width and height
+        (w, h, c) if orientation in SWAPPED_ORIENTATIONS else (h, w, c))
 
 
 def stored_orientation(path: str | os.PathLike) -> int:
@@ -141,7 +147,7 @@ def upright_size(path: str | os.PathLike) -> tuple[int, int] | None:
     try:
         spec = inp.spec()
         size = (int(spec.width), int(spec.height))
-        return size[::-1] if spec.get_int_attribute("Orientation", 1) >= 5 else size
+        return size[::-1] if spec.get_int_attribute("Orientation", 1) in SWAPPED_ORIENTATIONS else size
     finally:
         inp.close()
 

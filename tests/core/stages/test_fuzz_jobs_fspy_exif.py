@@ -77,11 +77,6 @@ GOOD_STATE = {"cameraParameters": {"horizontalFieldOfView": 1.0, "imageWidth": 6
                                    "cameraTransform": {"rows": np.eye(4).tolist()}}}
 
 
-# Found by these tests on the code before `joins` (whose brief holds the fSpy and EXIF rows of issue 53):
-# strict, so each tells the integrator the day it passes, and its mark comes off.
-@pytest.mark.xfail(strict=True, raises=(ValueError, OverflowError, ExceptionGroup), reason=(
-    "issue 53, joins' rows: read_fspy turns imageWidth 1e400 into OverflowError and a 5000-digit size into "
-    "ValueError (core/stages/camera._fspy_camera)"))
 @FAILING
 @given(st.data())
 def test_fuzz_fspy_projects_give_a_camera_or_one_sentence(tmp_path, data):
@@ -107,9 +102,6 @@ def test_fuzz_fspy_projects_give_a_camera_or_one_sentence(tmp_path, data):
         one_sentence(error)
 
 
-@pytest.mark.xfail(strict=True, raises=(ValueError, ExceptionGroup), reason=(
-    "issue 53: an EXIF Orientation of 0 (or any value outside 1..8) ends in ValueError 'cannot reshape array of "
-    "size 0' in core/data/imageio._reoriented, from load_photo and every command that reads the photo"))
 @FAILING
 @given(st.sampled_from(["Exif:FocalLengthIn35mmFilm", "Exif:FocalLength", "FocalLength", "Model", "Orientation"]),
        st.one_of(st.integers(-2**31, 2**31 - 1), st.floats(width=32), st.text(max_size=10)))
