@@ -1,10 +1,10 @@
 """`make bench`: speed against accuracy per preset for every stage and end to end, and the building blocks.
 
-Writes benchmarks/results/bench.md (every table, the README links it), bench.json, and per stage
+Writes benchmarks/results/bench.md (every table; the docs link it), bench.json, and per stage
 trade_<stage>.md/.json/.png (convert, light, compose, adapt, run: seconds and peak memory against the
 stage's quality for draft / balanced / final; benchmarks/trade.py), plus batch.md, compose.md and
 light.md from the detailed benches. About 35 minutes on a quiet 2-core machine; `--quick` is a smoke
-run of a few minutes that writes into benchmarks/results/quick instead (not for the README).
+run of a few minutes that writes into benchmarks/results/quick instead (not for the docs).
 Run on the machine named in the output; numbers from other machines are not comparable.
 """
 from __future__ import annotations
@@ -218,7 +218,7 @@ SEPARATE = (  # (part, script and arguments, results stem, paragraphs before its
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true",
-                        help="a smoke run for development (minutes; results in benchmarks/results/quick, not for the README)")
+                        help="a smoke run for development (minutes; results in benchmarks/results/quick, not for the docs)")
     parser.add_argument("--inverse", action="store_true",
                         help="also compare the paper's inverse-rendering conversion with the direct fit (+~10 min)")
     parser.add_argument("--light-study", choices=("short", "full", "skip"), default="short",
@@ -237,7 +237,7 @@ def main() -> int:
     started = time.perf_counter()
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     log = lambda message: print(f"[{time.perf_counter() - started:6.0f} s] {message}", flush=True)
-    mode = ("QUICK MODE (a smoke run: cut iterations, photos and samples; not the figures the README quotes)"
+    mode = ("QUICK MODE (a smoke run: cut iterations, photos and samples; not the figures the docs quote)"
             if args.quick else "Full `make bench`")
     env = environment_info()
     sections: list[str] = []

@@ -14,7 +14,7 @@ Why a thread and not a child process: Mitsuba and torch release the GIL inside t
 Blender's main thread keeps drawing while a stage runs; a child process would first spend seconds
 importing torch and Mitsuba and recompiling Mitsuba's kernels, and Blender's Python cannot always
 start one (its `sys.executable` and the `bl_ext` package path differ between Blender and the bpy
-module). The README quotes the measurement.
+module). benchmarks/FINDINGS.md has the measurement.
 """
 from __future__ import annotations
 

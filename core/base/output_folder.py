@@ -5,7 +5,7 @@ never anything but SceneFit's own folder replaced.
         ...write everything into `staging`...
     # now "out" holds exactly this run's files
 
-The contract (README "Output folders"):
+The contract (docs/technical/output-folder.md):
 - Before any work: an `out` that is a file, a symbolic link, a place that cannot be written, the
   root, the home folder, the working folder or an ancestor of one of them, or a folder that holds
   any input of the run, is refused in one sentence.

@@ -50,7 +50,7 @@ TABLES: dict[str, dict[str, dict]] = {
         "final": {},
     },
     # Compose: the final render's noise target and sample cap (the paper renders evaluation at 1024 spp;
-    # here a denoised render aims at a noise level, see README "Composition"). A draft is a quick look:
+    # here a denoised render aims at a noise level, see benchmarks/FINDINGS.md). A draft is a quick look:
     # at most 2048 px on the long side (a 12 MP photo's composite costs a quarter), the others at the
     # photo's size up to COMPOSE_MAX_SIDE.
     "compose": {

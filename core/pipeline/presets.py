@@ -3,7 +3,7 @@
 "final" is the paper's setting wherever the paper gives one (appendix "Implementation Details");
 "balanced" and "draft" trade quality for speed on one machine without a big GPU. A table says what a
 preset changes from the stage's config defaults; `stage_config` applies it, then the caller's own
-overrides. The README's table and `scenefit adapt|light --dry-run` show the result.
+overrides. The docs' presets table (docs/technical/presets.md) and `scenefit adapt|light --dry-run` show the result.
 """
 from __future__ import annotations
 

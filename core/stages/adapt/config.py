@@ -6,7 +6,7 @@ Where a value comes from (appendix "Texture Adaptation" and "Scene-Agnostic Text
   paper's 4 GPUs, one view each); 24 azimuths at the user's elevation; λ_FOV in [1.0, 1.21].
 - generate: the coarse-to-fine schedule (20% at 256 px, 64 spp, t in [30, 990]; then 512 px,
   128 spp, t in [500, 990]); 72 views over elevations {20, 30, 45}; λ_FOV in [0.6, 1.21].
-The paper does not say how many global-view crops it scores per view; we take 2 (see README).
+The paper does not say how many global-view crops it scores per view; we take 2 (docs/engineers/method.md).
 """
 from __future__ import annotations
 

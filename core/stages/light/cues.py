@@ -61,7 +61,7 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
 class CueConfig:
     # Mean albedo of the photo's surfaces (energy cue). 0.4: at 0.25 the unseen light was ~2x too bright
     # on the corpus's real views (map mean 4x off on 15 of 48 photos, 11 at 0.4). 0.25 for outdoor photos
-    # only suits Blender's city and forest but loses on the real views and 3 of 4 held-out maps (README).
+    # only suits Blender's city and forest but loses on the real views and 3 of 4 held-out maps (benchmarks/FINDINGS.md).
     albedo: float = 0.4
     albedo_range: tuple[float, float] = (0.15, 0.5)   # reported as the bound on the unseen light
     lobe_sharpness: float = 4.0        # cos^k lobe of the unseen light around its centroid direction
@@ -69,7 +69,7 @@ class CueConfig:
     # The artist's sun (--sun, the shadow pick) is a known direction, not a guess to hedge: its lobe is
     # narrower and its floor lower. Hinted, on the corpus's 24 real views, the matte sphere's si-RMSE
     # median falls to 22% / 30% below the constant's (median / log-average metering) from 14% / 16% with
-    # the guess's lobe; unhinted, the same lobe loses 2-3 of 13-14 both-wins (README, light on real photos).
+    # the guess's lobe; unhinted, the same lobe loses 2-3 of 13-14 both-wins (benchmarks/FINDINGS.md, light on real photos).
     sun_lobe_floor: float = 0.05
     sun_lobe_sharpness: float = 8.0
     mean_bound: float = 4.0            # the map's mean radiance stays within this factor of the photo's mean
@@ -212,7 +212,7 @@ def _unseen_light(ldr: np.ndarray, hidden: np.ndarray, omega: np.ndarray, dirs: 
 
 
 # A given direction within SURE_DEG of the truth keeps most of the narrow lobe's gain; at UNSURE_DEG off it
-# is no better than the guess (README: turned 15 and 30 deg off on the corpus's views and Blender's maps).
+# is no better than the guess (benchmarks/FINDINGS.md: turned 15 and 30 deg off on the corpus's views and Blender's maps).
 SURE_DEG, UNSURE_DEG = 15.0, 30.0
 
 

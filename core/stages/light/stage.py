@@ -88,7 +88,7 @@ def write_light(result: LightResult, folder: str | Path, extra: dict | None = No
 
 def sun_words(decisions: dict, setter: str) -> str:
     """The light's direction in a few words for a summary: the artist's sun as given, or a guess that
-    `setter` (the flags or buttons that set it) would make truer (README: 22-30% lower matte error)."""
+    `setter` (the flags or buttons that set it) would make truer (benchmarks/FINDINGS.md: 22-30% lower matte error)."""
     sun = decisions.get("sun")
     if not sun:
         return f"light direction guessed ({setter} sets it)"
