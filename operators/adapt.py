@@ -56,24 +56,36 @@ def gather_adapt(op, context, texture: str) -> dict:
 
 
 def adapt_seconds_here(context, iterations: int | None = None) -> LocalWork | None:
-    """The projected work of an adaptation at the panel's preset when it would run in this Blender with the
-    diffusion models present (panels/quality.py's measurements: the bench CPU, or an H200 when torch
-    works on CUDA here); None otherwise."""
-    from ..core.base.errors import SceneFitError
-    from ..core.guidance.models import locate_models
+    """The projected work of an adaptation at the panel's preset when it would run in this Blender
+    (panels/quality.py's measurements: the bench CPU, or an H200 on CUDA); None when not measured.
+
+    Main thread, at a click: no model lookup (the job looks the models up, and downloads them, itself),
+    no network, and torch is not imported for it (`device_here`)."""
     from ..panels.quality import LocalWork, adapt_projection
 
     models, _ = model_settings(context)
-    try:
-        device = models.device().type
-        if device not in ("cpu", "cuda"):
-            return None   # measured on neither
-        on_gpu = device == "cuda"
-        locate_models(models, need_inpaint=context.scene.scenefit.mode == "scene")
-    except (SceneFitError, ImportError):
-        return None   # no models (the job says so at its start) or no torch (the dependency check does)
-    seconds = adapt_projection(context.scene.scenefit.preset, iterations, gpu=on_gpu)
-    return None if seconds is None else LocalWork(seconds, on_gpu)
+    device = device_here(models.device_type)
+    if device is None:
+        return None   # measured on neither
+    seconds = adapt_projection(context.scene.scenefit.preset, iterations, gpu=device == "cuda")
+    return None if seconds is None else LocalWork(seconds, device == "cuda")
+
+
+def device_here(preference: str) -> str | None:
+    """"cpu" or "cuda" as an adaptation here would run, without importing torch: the preference when it
+    names one; for "auto", torch's answer once a job has imported it, else CUDA when the machine shows an
+    NVIDIA driver, else the CPU. None for a device the bench has not measured."""
+    import os
+    import sys
+
+    if preference in ("cpu", "cuda"):
+        return preference
+    if preference != "auto":
+        return None
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return "cuda" if os.path.exists("/proc/driver/nvidia/version") else "cpu"
 
 
 class SCENEFIT_OT_adapt(OnMesh, JobOperator):

@@ -10,6 +10,8 @@ Runtime state lives on the WindowManager (never saved into the .blend); the live
 """
 from __future__ import annotations
 
+import atexit
+import time
 from typing import TYPE_CHECKING
 
 import bpy
@@ -64,11 +66,13 @@ def show_preview(image: np.ndarray) -> None:
     item.image_pixels_float = rgba[::-1].ravel()  # Blender's first row is the bottom one
 
 
-def update_runtime(context, state: background.JobState) -> None:
+def update_runtime(context, state: background.JobState, cancelling: bool = False) -> None:
+    """The panel's and status bar's copy of a job's state; "cancelling…" stays until the worker has stopped."""
     global _preview_serial
     rt = runtime(context)
     rt.running = not state.finished
-    rt.job, rt.stage, rt.status = state.name, state.stage, state.status_line()
+    rt.job, rt.stage = state.name, state.stage
+    rt.status = f"{state.name}: cancelling…" if cancelling and not state.finished else state.status_line()
     rt.progress = state.fraction
     if state.preview is not None and _preview_serial != (id(state), state.preview_serial):
         show_preview(state.preview)
@@ -105,10 +109,50 @@ def long_work_warning(context, label: str, work: LocalWork | None, runs_remotely
             "preferences (Jobs), runs it far sooner.")
 
 
-class JobOperator(bpy.types.Operator):
-    """Base of the operators that run a long stage. Subclasses set job_name and define prepare/apply."""
+# A job that has run longer than this asks before Esc cancels it (a stray Esc must not end hours of work).
+CONFIRM_CANCEL_AFTER = 60.0
+# How long loading another file (or quitting) waits for a job's worker to stop.
+END_JOB_SECONDS = 2.0
 
-    bl_options = {"REGISTER", "UNDO"}
+
+def esc_action(over_progress: bool, seconds: float) -> str:
+    """What Esc does during a job: "pass" (not meant for SceneFit: the pointer is elsewhere), "ask" (a
+    job longer than CONFIRM_CANCEL_AFTER: confirm first) or "cancel"."""
+    if not over_progress:
+        return "pass"
+    return "ask" if seconds > CONFIRM_CANCEL_AFTER else "cancel"
+
+
+def pointer_over_progress(context, event) -> bool:
+    """Whether the pointer is over a place SceneFit's progress shows: the status bar, or a 3D Viewport's
+    sidebar (where the SceneFit panel is)."""
+    x, y = event.mouse_x, event.mouse_y
+    screen = context.window.screen if context.window is not None else None
+    for area in screen.areas if screen is not None else ():
+        if area.type == "STATUSBAR":
+            boxes = [area]
+        elif area.type == "VIEW_3D":
+            boxes = [r for r in area.regions if r.type == "UI" and r.width > 1]
+        else:
+            continue
+        if any(b.x <= x < b.x + b.width and b.y <= y < b.y + b.height for b in boxes):
+            return True
+    return False
+
+
+def job_seconds(job: background.Job) -> float:
+    """How long `job` has run so far."""
+    return time.perf_counter() - job.state.started
+
+
+class JobSteps:
+    """What a job operator does, apart from Blender's Operator type (so it can be driven without a window).
+
+    invoke returns to Blender at once: the long-work question (from the bench's tables, no model lookup,
+    no network) or the job's bar; gathering the inputs (`prepare`) happens on the first tick after, and
+    the model lookup and download inside the job. execute with a window starts the same background job
+    (Repeat Last never freezes Blender); only without one (scripts under `blender -b`) is it inline."""
+
     job_name = "job"
     # True: when the preferences name a worker environment, the job runs there (operators/remote.py).
     runs_remotely = False
@@ -135,7 +179,7 @@ class JobOperator(bpy.types.Operator):
         return self.prepare(context)
 
     def long_local_work(self, context) -> LocalWork | None:
-        """Projected work this job does when it runs here (None: short, or unknown)."""
+        """Projected work this job does when it runs here (None: short, or unknown). Never looks models up."""
         return None
 
     def long_work_warning(self, context) -> str | None:
@@ -148,10 +192,10 @@ class JobOperator(bpy.types.Operator):
             return apply_remote(self, context, result)
         return self.apply(context, result)
 
-    # -- synchronous: scripts and `blender -b` -------------------------------------------------------
+    # -- inline: scripts and `blender -b` ------------------------------------------------------------
     def execute(self, context):
-        if getattr(self, "_long_confirmed", False) and context.window is not None and not bpy.app.background:
-            return self._start_job(context)   # confirmed in invoke's dialog: as the background job
+        if context.window is not None and not bpy.app.background:
+            return self._begin(context)   # Repeat Last, a dialog's confirmation: the background job
         try:
             check_dependencies()
             warning = self.long_work_warning(context)
@@ -175,36 +219,61 @@ class JobOperator(bpy.types.Operator):
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        if warning:
-            self._long_confirmed = True    # the dialog's confirmation calls execute, which starts the job
+        if warning:   # the dialog's confirmation calls execute, which starts the job
             return context.window_manager.invoke_confirm(self, event, title=f"{self.bl_label}: hours of work",
                                                          message=warning, confirm_text="Start here",
                                                          icon="WARNING")
-        return self._start_job(context)
+        return self._begin(context)
 
-    def _start_job(self, context):
-        try:
-            check_dependencies()
-            work, data = self.job_work(context)
-            self._job = background.start_job(background.Job(self.job_name, work, data))
-        except SceneFitError as error:
-            self.report({"ERROR"}, str(error))
+    def _begin(self, context):
+        """The bar at once; the inputs are gathered on the first timer tick (`_start_job`)."""
+        active = background.active_job()
+        if active is not None and not active.state.finished:
+            self.report({"ERROR"}, f"A SceneFit job ('{active.name}') is already running; wait for it or cancel it "
+                                   "first.")
             return {"CANCELLED"}
-        update_runtime(context, self._job.state)
-        runtime(context).has_preview = False
+        self._job = None
+        rt = runtime(context)
+        rt.running, rt.job, rt.stage, rt.progress = True, self.job_name, "prepare", 0.0
+        rt.status, rt.has_preview = f"{self.bl_label}: reading the asset…", False
         wm = context.window_manager
         self._timer = wm.event_timer_add(TIMER_SECONDS, window=context.window)
         wm.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
+    def _start_job(self, context) -> bool:
+        """Gather the inputs and start the worker; False (said) when the inputs are refused."""
+        try:
+            check_dependencies()
+            work, data = self.job_work(context)
+            self._job = background.start_job(background.Job(self.job_name, work, data))
+        except SceneFitError as error:
+            self._remove_timer(context)
+            rt = runtime(context)
+            rt.running, rt.status = False, str(error)
+            self.report({"ERROR"}, str(error))
+            return False
+        update_runtime(context, self._job.state)
+        return True
+
     def modal(self, context, event):
-        if event.type == "ESC" and event.value == "PRESS":
-            self._job.cancel()
-            runtime(context).status = f"{self.job_name}: cancelling…"
+        job = getattr(self, "_job", None)
+        if event.type == "ESC" and event.value == "PRESS" and job is not None:
+            action = esc_action(pointer_over_progress(context, event), job_seconds(job))
+            if action == "pass":
+                return {"PASS_THROUGH"}
+            if action == "ask":
+                bpy.ops.scenefit.cancel_job("INVOKE_DEFAULT")
+            else:
+                job.cancel()
+            update_runtime(context, job.state, job.cancel_requested)
+            return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
-        state = self._job.poll()
-        update_runtime(context, state)
+        if job is None:   # the first tick: gather the inputs, start the worker
+            return {"RUNNING_MODAL"} if self._start_job(context) else {"CANCELLED"}
+        state = job.poll()
+        update_runtime(context, state, job.cancel_requested)
         redraw(context)
         if not state.finished:
             return {"RUNNING_MODAL"}
@@ -238,16 +307,40 @@ class JobOperator(bpy.types.Operator):
                 return {"CANCELLED"}
             rt.status = message
             self.report({"INFO"}, message)
+            undo_step(f"SceneFit {self.bl_label}")
             return {"FINISHED"}
+        self.job_ended(context, state)
         if state.details:
             print(state.details)  # the traceback of an unexpected failure, for the console
         rt.status = state.status_line()
         self.report({"WARNING"} if state.status == background.CANCELLED else {"ERROR"}, rt.status)
         return {"CANCELLED"}
 
+    def job_ended(self, context, state: background.JobState) -> None:
+        """A cancelled or failed job: what the operator keeps of it (a resumable run's record)."""
+
+
+def undo_step(message: str) -> None:
+    """One undo step for what a job wrote into the file (job operators carry no UNDO flag: Blender would
+    redo them by calling execute), so Ctrl+Z takes the results out again."""
+    if bpy.app.background or bpy.context.window is None:
+        return
+    try:
+        bpy.ops.ed.undo_push(message=message)
+    except RuntimeError:   # no undo stack in this context
+        pass
+
+
+class JobOperator(JobSteps, bpy.types.Operator):
+    """Base of the operators that run a long stage. Subclasses set job_name and define prepare/apply.
+    REGISTER without UNDO: Adjust Last Operation would redo a job by calling execute."""
+
+    bl_options = {"REGISTER"}
+
 
 class SCENEFIT_OT_cancel_job(bpy.types.Operator):
-    """Stop the running SceneFit job after its current step (results written so far are kept)"""
+    """Stop the running SceneFit job within seconds; an adaptation keeps its folder and checkpoint, and
+    Resume in the Results section continues it"""
 
     bl_idname = "scenefit.cancel_job"
     bl_label = "Cancel"
@@ -257,6 +350,14 @@ class SCENEFIT_OT_cancel_job(bpy.types.Operator):
     def poll(cls, context):
         job = background.active_job()
         return job is not None and not job.state.finished
+
+    def invoke(self, context, event):
+        job = background.active_job()
+        if job is not None and job_seconds(job) > CONFIRM_CANCEL_AFTER:
+            return context.window_manager.invoke_confirm(self, event, title=f"Cancel {job.name}?",
+                                                         message="It has run for a while; an adaptation can be "
+                                                                 "resumed later.", confirm_text="Cancel it")
+        return self.execute(context)
 
     def execute(self, context):
         job = background.active_job()
@@ -275,10 +376,12 @@ def draw_status_bar(self, context) -> None:
 
 @persistent
 def _end_job_before_load(*_args) -> None:
-    """Loading a file frees the data a job would write into: cancel it and wait for its worker."""
-    state = background.end_active_job(timeout=30.0)
+    """Loading a file frees the data a job would write into: cancel it and wait (briefly) for its worker,
+    which writes only into its own run folder and stops at its next check."""
+    state = background.end_active_job(timeout=END_JOB_SECONDS)
     if state is not None:
-        print(f"SceneFit: '{state.name}' ended because another file is being loaded ({state.status}).")
+        print(f"SceneFit: '{state.name}' was stopped because another file is being loaded ({state.status}); "
+              "an adaptation can be resumed from its run folder.")
 
 
 @persistent
@@ -291,10 +394,18 @@ def _reset_after_load(*_args) -> None:
 classes = (SceneFitRuntime, SCENEFIT_OT_cancel_job)
 
 
+def _end_job_at_exit() -> None:
+    """Quitting Blender during a job: stop its worker within END_JOB_SECONDS (its folder keeps what it wrote)."""
+    state = background.end_active_job(timeout=END_JOB_SECONDS)
+    if state is not None:
+        print(f"SceneFit: '{state.name}' was stopped because Blender is quitting ({state.status}).")
+
+
 def register() -> None:
     global _previews
     import bpy.utils.previews
 
+    atexit.register(_end_job_at_exit)
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.WindowManager.scenefit_runtime = PointerProperty(type=SceneFitRuntime)
@@ -308,7 +419,8 @@ def unregister() -> None:
     global _previews
     import bpy.utils.previews
 
-    background.end_active_job(timeout=30.0)
+    atexit.unregister(_end_job_at_exit)
+    background.end_active_job(timeout=END_JOB_SECONDS)
     bpy.app.handlers.load_post.remove(_reset_after_load)
     bpy.app.handlers.load_pre.remove(_end_job_before_load)
     bpy.types.STATUSBAR_HT_header.remove(draw_status_bar)

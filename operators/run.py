@@ -64,6 +64,11 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
     def long_local_work(self, context) -> LocalWork | None:
         if self.guidance == "none" or (self.guidance == "auto" and not context.scene.scenefit.prompt.strip()):
             return None   # no adaptation: the rest takes seconds
+        if self.guidance == "auto":   # adapts only with the weights here: looked for on disk, never fetched
+            from ..core.guidance.models import models_available
+
+            if not models_available(model_settings(context)[0])[0]:
+                return None
         return adapt_seconds_here(context)
 
     def apply(self, context, result) -> str:
@@ -79,8 +84,9 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
             objects = [bpy.data.objects[name] for name in self._layout["objects"] if name in bpy.data.objects]
             made = setup_composite(context, objects, photo_path(context),
                                    tuple(settings.placement), settings.size, PhotoCamera(**result["camera"]),
-                                   scene_camera=scene_camera)
-            lines.append(f"Cycles composite set up through '{made['camera'].name}' (F12 renders it)")
+                                   scene_camera=scene_camera, world=world)
+            lines.append(f"Cycles composite set up in the scene '{made['scene'].name}' through "
+                         f"'{made['camera'].name}' (F12 there renders it)")
         except SceneFitError as error:
             lines.append(f"no Cycles composite: {error}")
         reused = [name for name, status in result["stages"].items() if status == "reused"]
