@@ -5,12 +5,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import bpy
-from bpy.props import IntProperty
+from bpy.props import IntProperty, StringProperty
 
 from ..blender_io import mesh_from_object
 from ..core.base.errors import InputError
 from . import work
-from .common import OnMesh, asset_layout, model_settings, photo_path, photo_view, run_folder
+from .common import OnMesh, asset_layout, asset_texture, model_settings, photo_path, photo_view, run_folder
 from .jobs import JobOperator
 from .results import apply_layout_results, apply_result_material, materials_words, result_targets
 
@@ -52,7 +52,9 @@ def gather_adapt(op, context, texture: str) -> dict:
         "view": view,
         "envmap": light if light and Path(light).is_file() else "", "preset": settings.preset,
         "models": models, "iterations": op.iterations, "model_resolution": op.model_resolution,
-        "render_size": op.render_size, "out": str(run_folder(context, "adapt", op._object_name))}
+        "render_size": op.render_size,
+        # Resume: the cancelled run's folder, whose hidden sibling holds its checkpoint (else a new folder)
+        "out": op.resume or str(run_folder(context, "adapt", op._object_name))}
 
 
 def adapt_seconds_here(context, iterations: int | None = None) -> LocalWork | None:
@@ -95,19 +97,23 @@ class SCENEFIT_OT_adapt(OnMesh, JobOperator):
     bl_label = "Adapt"
     job_name = "adapt"
     runs_remotely = True
+    records_runs = True
 
     # For scripts and quick looks; 0 keeps the preset's value.
-    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE"})
-    model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE"})
-    render_size: IntProperty(name="Render size", default=0, min=0, options={"SKIP_SAVE"})
+    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"})
+    model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"})
+    render_size: IntProperty(name="Render size", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"})
+    resume: StringProperty(name="Resume", default="", options={"SKIP_SAVE", "HIDDEN"}, subtype="DIR_PATH",
+                           description="A cancelled adaptation's folder to continue (Resume in the run list)")
 
     def prepare(self, context):
         settings = context.scene.scenefit
         texture = ""
         if settings.mode != "generate":
-            texture = bpy.path.abspath(settings.texture_path) if settings.texture_path else ""
-            if not texture or not Path(texture).is_file():
-                raise InputError("Adapt starts from the converted texture; run Convert on this asset first.")
+            try:
+                texture = str(asset_texture(context, asset_layout(context)))
+            except InputError as error:
+                raise InputError(f"Adapt starts from the asset's converted texture: {error}") from None
         return work.adapt, gather_adapt(self, context, texture)
 
     def long_local_work(self, context) -> LocalWork | None:

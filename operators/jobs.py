@@ -156,6 +156,10 @@ class JobSteps:
     job_name = "job"
     # True: when the preferences name a worker environment, the job runs there (operators/remote.py).
     runs_remotely = False
+    # True: each run is kept in the asset's run history (operators/history.py), finished or not.
+    records_runs = False
+    # True: the operator's options are shown in a dialog before the job starts (never in a redo panel).
+    asks_options = False
 
     # -- to override ---------------------------------------------------------------------------------
     def prepare(self, context) -> tuple:
@@ -202,8 +206,10 @@ class JobSteps:
             if warning:
                 self.report({"WARNING"}, warning)
             work, data = self.job_work(context)
+            self._out = data.get("out", "") if isinstance(data, dict) else ""
             result = background.run_inline(work, data, TerminalProgress())
             message = self.apply_result(context, result)
+            self.keep_run(context, "finished", result)
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
@@ -223,6 +229,8 @@ class JobSteps:
             return context.window_manager.invoke_confirm(self, event, title=f"{self.bl_label}: hours of work",
                                                          message=warning, confirm_text="Start here",
                                                          icon="WARNING")
+        if self.asks_options:   # its OK calls execute, which starts the job
+            return context.window_manager.invoke_props_dialog(self, title=self.bl_label, confirm_text="Start")
         return self._begin(context)
 
     def _begin(self, context):
@@ -246,6 +254,7 @@ class JobSteps:
         try:
             check_dependencies()
             work, data = self.job_work(context)
+            self._out = data.get("out", "") if isinstance(data, dict) else ""
             self._job = background.start_job(background.Job(self.job_name, work, data))
         except SceneFitError as error:
             self._remove_timer(context)
@@ -305,19 +314,24 @@ class JobSteps:
                 rt.status = str(error)
                 self.report({"ERROR"}, rt.status)
                 return {"CANCELLED"}
+            self.keep_run(context, "finished", state.result)
             rt.status = message
             self.report({"INFO"}, message)
             undo_step(f"SceneFit {self.bl_label}")
             return {"FINISHED"}
-        self.job_ended(context, state)
+        self.keep_run(context, "cancelled" if state.status == background.CANCELLED else "failed", None)
         if state.details:
             print(state.details)  # the traceback of an unexpected failure, for the console
         rt.status = state.status_line()
         self.report({"WARNING"} if state.status == background.CANCELLED else {"ERROR"}, rt.status)
         return {"CANCELLED"}
 
-    def job_ended(self, context, state: background.JobState) -> None:
-        """A cancelled or failed job: what the operator keeps of it (a resumable run's record)."""
+    def keep_run(self, context, state: str, result) -> None:
+        """The run in the asset's history (finished, cancelled or failed), for operators that record runs."""
+        if self.records_runs and not getattr(self, "_remote", False) and getattr(self, "_out", ""):
+            from .history import record_run
+
+            record_run(self, context, state, result)
 
 
 def undo_step(message: str) -> None:
@@ -386,9 +400,14 @@ def _end_job_before_load(*_args) -> None:
 
 @persistent
 def _reset_after_load(*_args) -> None:
+    from .common import remember_photo_size
+
     wm = bpy.context.window_manager
     if wm is not None and hasattr(wm, "scenefit_runtime"):
         wm.scenefit_runtime.running = False
+    for scene in bpy.data.scenes:   # the panel draws the photo's camera from sizes read here, not in draw()
+        if getattr(scene, "scenefit", None) is not None and scene.scenefit.photo_path:
+            remember_photo_size(scene.scenefit.photo_path)
 
 
 classes = (SceneFitRuntime, SCENEFIT_OT_cancel_job)

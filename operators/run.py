@@ -15,15 +15,13 @@ from .adapt import adapt_seconds_here
 from .common import (OnMesh, depth_model_preference, last_finished_run, model_settings, photo_path, photo_view,
                      run_folder, scene_layout)
 from .jobs import JobOperator
+from .properties import GUIDANCE
 from .results import (apply_composite_image, apply_layout_results, apply_result_world, materials_words,
                       result_targets)
 
 if TYPE_CHECKING:
     from ..panels.quality import LocalWork
 
-GUIDANCE = (("auto", "Auto", "Adapt with Stable Diffusion 2 when its weights are on this machine"),
-            ("sd2", "Stable Diffusion 2", "Adapt; fail when the weights are missing"),
-            ("none", "None", "No adaptation: compose the converted texture"))
 
 
 class SCENEFIT_OT_run(OnMesh, JobOperator):
@@ -35,15 +33,20 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
     bl_label = "Run All"
     job_name = "run"
     runs_remotely = True
+    records_runs = True
 
-    guidance: EnumProperty(name="Guidance", items=GUIDANCE, default="auto", options={"SKIP_SAVE"})
+    # Scripts may set it; else the Run section's Adaptation (properties.SceneFitSettings.guidance).
+    guidance: EnumProperty(name="Guidance", items=GUIDANCE, default="auto", options={"SKIP_SAVE", "HIDDEN"})
+
+    def chosen_guidance(self, context) -> str:
+        return self.guidance if self.properties.is_property_set("guidance") else context.scene.scenefit.guidance
 
     def prepare(self, context):
         settings = context.scene.scenefit
         photo, layout = scene_layout(self, context, "Run All fits the asset into the photo; use Convert and "
                                                     "Adapt for the other modes")
         mesh, maps, materials = layout.fitting(context)
-        guidance, why_no_adapt = self.guidance, ""
+        guidance, why_no_adapt = self.chosen_guidance(context), ""
         if not settings.prompt.strip() and guidance == "auto":
             guidance, why_no_adapt = "none", "the Style section has no prompt"
         # The artist's camera when it shows the photo, else the panel's or the estimate; the Cycles set-up
@@ -62,9 +65,10 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
                           "out": str(out), "reuse_from": str(earlier) if earlier else None}
 
     def long_local_work(self, context) -> LocalWork | None:
-        if self.guidance == "none" or (self.guidance == "auto" and not context.scene.scenefit.prompt.strip()):
+        guidance = self.chosen_guidance(context)
+        if guidance == "none" or (guidance == "auto" and not context.scene.scenefit.prompt.strip()):
             return None   # no adaptation: the rest takes seconds
-        if self.guidance == "auto":   # adapts only with the weights here: looked for on disk, never fetched
+        if guidance == "auto":   # adapts only with the weights here: looked for on disk, never fetched
             from ..core.guidance.models import models_available
 
             if not models_available(model_settings(context)[0])[0]:
@@ -75,6 +79,7 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         mats = apply_layout_results(context, self._layout, result, result["stage"])
         world = apply_result_world(context, result["hdr"], "run")
         image = apply_composite_image(context, result["composite"], "run")
+        self._made = {"world": world, "composite": image}   # the run history's (operators/history.py)
         lines = [materials_words(mats),
                  f"World '{world.name}'", f"composite image '{image.name}'"]
         settings = context.scene.scenefit
