@@ -64,9 +64,10 @@ def adapt_seconds_here(context, iterations: int | None = None) -> LocalWork | No
     Main thread, at a click: no model lookup (the job looks the models up, and downloads them, itself),
     no network, and torch is not imported for it (`device_here`)."""
     from ..panels.quality import LocalWork, adapt_projection
+    from .common import preferences
 
-    models, _ = model_settings(context)
-    device = device_here(models.device_type)
+    prefs = preferences(context)   # (not model_settings: its ModelConfig imports torch)
+    device = device_here(prefs.device if prefs is not None else "auto")
     if device is None:
         return None   # measured on neither
     seconds = adapt_projection(context.scene.scenefit.preset, iterations, gpu=device == "cuda")

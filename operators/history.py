@@ -14,7 +14,7 @@ from bpy.props import BoolProperty, IntProperty
 from ..blender_io.world import assign_world
 from ..core.base.errors import InputError, SceneFitError
 from .common import TAG, relative_if_saved
-from .properties import asset_owner, asset_state
+from .common import asset_owner, asset_state
 
 
 def record_run(op, context, state: str, result) -> None:
@@ -23,7 +23,8 @@ def record_run(op, context, state: str, result) -> None:
     settings = context.scene.scenefit
     layout = getattr(op, "_layout", None) or {}
     names = list(layout.get("objects") or [getattr(op, "_object_name", "")])
-    obj = bpy.data.objects.get(names[0]) if names and names[0] else None
+    owner = layout.get("owner") or names[0]
+    obj = bpy.data.objects.get(owner) if owner else None
     if obj is None:
         return   # the asset was deleted while the run went on
     runs = asset_state(obj).runs

@@ -140,6 +140,11 @@ def pointer_over_progress(context, event) -> bool:
     return False
 
 
+def has_ui(context) -> bool:
+    """Whether a job runs in the background with a bar (a window), rather than inline (`blender -b`, scripts)."""
+    return context.window is not None and not bpy.app.background
+
+
 def job_seconds(job: background.Job) -> float:
     """How long `job` has run so far."""
     return time.perf_counter() - job.state.started
@@ -198,7 +203,7 @@ class JobSteps:
 
     # -- inline: scripts and `blender -b` ------------------------------------------------------------
     def execute(self, context):
-        if context.window is not None and not bpy.app.background:
+        if has_ui(context):
             return self._begin(context)   # Repeat Last, a dialog's confirmation: the background job
         try:
             check_dependencies()
@@ -218,7 +223,7 @@ class JobSteps:
 
     # -- background job from the UI ------------------------------------------------------------------
     def invoke(self, context, event):
-        if context.window is None or bpy.app.background:
+        if not has_ui(context):
             return self.execute(context)
         try:
             warning = self.long_work_warning(context)

@@ -68,12 +68,15 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         guidance = self.chosen_guidance(context)
         if guidance == "none" or (guidance == "auto" and not context.scene.scenefit.prompt.strip()):
             return None   # no adaptation: the rest takes seconds
-        if guidance == "auto":   # adapts only with the weights here: looked for on disk, never fetched
-            from ..core.guidance.models import models_available
-
-            if not models_available(model_settings(context)[0])[0]:
-                return None
+        # "auto" adapts only when the job finds the weights (on disk, or downloaded with online access): the
+        # question is asked without looking (a look imports torch and may touch the network).
         return adapt_seconds_here(context)
+
+    def long_work_warning(self, context) -> str | None:
+        from .jobs import long_work_warning
+
+        return long_work_warning(context, "Run All's adaptation (when Stable Diffusion 2's weights are found)",
+                                 self.long_local_work(context), self.runs_remotely)
 
     def apply(self, context, result) -> str:
         mats = apply_layout_results(context, self._layout, result, result["stage"])
