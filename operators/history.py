@@ -31,7 +31,8 @@ def record_run(op, context, state: str, result) -> None:
     folder = relative_if_saved(op._out)
     run = next((r for r in runs if r.folder == folder), None) or runs.add()   # a resumed run updates its entry
     run.folder, run.stage, run.state = folder, op.job_name, state
-    run.preset, run.prompt, run.when = settings.preset, settings.prompt, time.strftime("%Y-%m-%d %H:%M")
+    preset = op.run_preset(context) if hasattr(op, "run_preset") else settings.preset   # (Draft at the question)
+    run.preset, run.prompt, run.when = preset, settings.prompt, time.strftime("%Y-%m-%d %H:%M")
     run.mesh_digest = layout.get("digest", "")
     for name in ("iterations", "model_resolution", "render_size"):
         setattr(run, name, int(getattr(op, name, 0) or 0))

@@ -14,7 +14,7 @@ from . import work
 from .adapt import adapt_seconds_here
 from .common import (OnMesh, depth_model_preference, last_finished_run, model_settings, photo_path, photo_view,
                      run_folder, scene_layout)
-from .jobs import JobOperator
+from .jobs import CHOICES, CostFirst, JobOperator
 from .properties import GUIDANCE
 from .results import (apply_composite_image, apply_layout_results, apply_result_world, materials_words,
                       result_targets)
@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
 
 
-class SCENEFIT_OT_run(OnMesh, JobOperator):
+class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
     """Run the whole pipeline on the asset as `scenefit run` does (the selected objects, or the active one with
     all its materials): convert, estimate the photo's light, adapt (when the diffusion models are here and
     there is a prompt), compose; then apply the results to every material slot"""
@@ -34,11 +34,15 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
     job_name = "run"
     runs_remotely = True
     records_runs = True
+    skippable = True
+    choice: EnumProperty(name="Choice", items=CHOICES, default="ask", options={"SKIP_SAVE", "HIDDEN"})
 
     # Scripts may set it; else the Run section's Adaptation (properties.SceneFitSettings.guidance).
     guidance: EnumProperty(name="Guidance", items=GUIDANCE, default="auto", options={"SKIP_SAVE", "HIDDEN"})
 
     def chosen_guidance(self, context) -> str:
+        if self.choice == "skip":
+            return "none"
         return self.guidance if self.properties.is_property_set("guidance") else context.scene.scenefit.guidance
 
     def prepare(self, context):
@@ -49,6 +53,8 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         guidance, why_no_adapt = self.chosen_guidance(context), ""
         if not settings.prompt.strip() and guidance == "auto":
             guidance, why_no_adapt = "none", "the Style section has no prompt"
+        if self.choice == "skip":
+            why_no_adapt = "skipped at the question before the run (Skip adaptation)"
         # The artist's camera when it shows the photo, else the panel's or the estimate; the Cycles set-up
         # takes the camera the run used, so both composites agree.
         view = photo_view(context, photo, [bpy.data.objects[name] for name in layout.objects])
@@ -57,7 +63,7 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         out = run_folder(context, "run", layout.name)
         earlier = last_finished_run(out)   # its stages with this run's settings and inputs are reused
         return work.run, {"mesh": mesh, "maps": maps, "photo": str(photo), "view": view,
-                          "preset": settings.preset, "prompt": settings.prompt, "guidance": guidance,
+                          "preset": self.run_preset(context), "prompt": settings.prompt, "guidance": guidance,
                           "why_no_adapt": why_no_adapt, "models": model_settings(context)[0],
                           "scene_type": settings.scene_type,
                           "depth_model": depth_model_preference(context),

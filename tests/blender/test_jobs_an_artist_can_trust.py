@@ -67,6 +67,17 @@ class FakeWM:   # the window manager's calls a job operator makes; the runtime i
     def modal_handler_add(self, op): self.handlers.append(op)
     def invoke_confirm(self, op, event, **kw): self.dialogs.append(kw.get("message", "")); return {"RUNNING_MODAL"}
     def invoke_props_dialog(self, op, **kw): self.dialogs.append("options"); return {"RUNNING_MODAL"}
+    def invoke_popup(self, op, **kw): self.dialogs.append(op._warning); return {"RUNNING_MODAL"}
+
+class Layout:   # what a dialog draws, recorded
+    def __init__(self): self.buttons = []
+    def column(self, **kw): return self
+    def row(self, **kw): return self
+    def label(self, **kw): pass
+    def operator(self, idname, text=""):
+        button = SimpleNamespace(idname=idname, text=text)
+        self.buttons.append(button)
+        return button
 
 class Ctx:      # bpy.context with a window: a status bar along the bottom, a 3D Viewport with its sidebar
     def __init__(self):
@@ -123,8 +134,9 @@ socket.socket.connect = no_connect
 had_torch = "torch" in sys.modules
 seconds, dialogs, results = {}, {}, {}
 from scenefit.operators import adapt, bake, convert, light, run
-classes = {"run": (run.SCENEFIT_OT_run, {}), "adapt": (adapt.SCENEFIT_OT_adapt, {"iterations": 0, "model_resolution": 0,
-           "render_size": 0, "resume": ""}), "convert": (convert.SCENEFIT_OT_convert, {"iterations": 0}),
+classes = {"run": (run.SCENEFIT_OT_run, {"choice": "ask", "guidance": "auto"}),
+           "adapt": (adapt.SCENEFIT_OT_adapt, {"iterations": 0, "model_resolution": 0, "render_size": 0, "resume": "",
+                                               "choice": "ask"}), "convert": (convert.SCENEFIT_OT_convert, {"iterations": 0}),
            "light": (light.SCENEFIT_OT_estimate_light, {})}
 settings.prompt = "a mossy figure"
 for name in roots:
@@ -139,7 +151,17 @@ for name in roots:
             sys.setprofile(None)
         seconds[f"{name}/{label}"] = round(time.perf_counter() - t, 4)
         dialogs[f"{name}/{label}"] = ctx.window_manager.dialogs
+        if label in ("run", "adapt"):   # the question's buttons
+            op.layout = Layout()
+            op.draw(bpy.context)
+            dialogs[f"{name}/{label}/buttons"] = [(b.text, b.choice) for b in op.layout.buttons]
         bpy.context.window_manager.scenefit_runtime.running = False
+# Run All's one bar: stage k of n from the stage running and its own fraction
+JobState = background.JobState
+stages = ("convert", "light", "adapt", "compose", "bake")
+out["whole_run"] = [jobs.whole_run(JobState("run", stage="adapt", step=3, total=4, fraction=0.75), stages),
+                    jobs.whole_run(JobState("run", stage="run", step=1, total=5, fraction=0.2), stages),
+                    jobs.whole_run(JobState("adapt", stage="adapt", step=3, total=4, fraction=0.75), stages)]
 out["invoke"] = {"seconds": seconds, "results": results, "dialogs": dialogs, "touched": sorted(set(touched)),
                  "torch_before": had_torch, "online": bpy.app.online_access}
 """
@@ -152,7 +174,7 @@ fox = select(roots[1])
 settings.prompt = "a mossy fox"
 out["convert"] = sorted(bpy.ops.scenefit.convert(iterations=3))
 rt = bpy.context.window_manager.scenefit_runtime
-ADAPT = {"iterations": 12, "model_resolution": 32, "render_size": 16, "resume": ""}
+ADAPT = {"iterations": 12, "model_resolution": 32, "render_size": 16, "resume": "", "choice": "ask"}
 
 def started(props):
     op, ctx = probe(adapt_ops.SCENEFIT_OT_adapt, **props), Ctx()
@@ -201,6 +223,34 @@ out["resumed"] = {"resumed_from": report.get("resumed_from", report.get("stages"
                   "partial_left": partial.exists()}
 """
 
+# Each answer to the question runs what it says: Skip adaptation runs Run All without adapting, Draft at the
+# draft preset (the panel's stays).
+CHOICES = r"""
+from scenefit.operators import run as run_ops
+fox = select(roots[1])
+settings.prompt, settings.guidance = "a mossy fox", "auto"
+
+def finished(props):
+    op, ctx = probe(run_ops.SCENEFIT_OT_run, **props), Ctx()
+    first = sorted(ui_invoke(op, ctx, event("LEFTMOUSE")))
+    result = ["RUNNING_MODAL"]
+    while result == ["RUNNING_MODAL"]:
+        result = sorted(op.modal(ctx, event("TIMER")))
+        time.sleep(0.05)
+    report = json.loads((Path(op._out) / "report.json").read_text()) if result == ["FINISHED"] else {}
+    return first, result, report, op.reported
+
+settings.preset = "draft"
+first, result, report, said = finished({"choice": "skip", "guidance": "auto"})
+out["skip"] = [first, result, report.get("stages", {}).get("adapt", {}).get("status"),
+               report.get("stages", {}).get("adapt", {}).get("why"), said[-1:]]
+settings.preset, settings.guidance = "final", "none"
+first, result, report, said = finished({"choice": "draft"})
+out["draft"] = [first, result, report.get("config", {}).get("preset"), settings.preset, said[-1:],
+                fox.scenefit_asset.runs[len(fox.scenefit_asset.runs) - 1].preset]
+settings.preset = "draft"
+"""
+
 LOAD = r"""
 op, ctx, *_ = started(dict(ADAPT, iterations=50))
 while op._job.poll().step < 1 and not op._job.state.finished:
@@ -208,7 +258,10 @@ while op._job.poll().step < 1 and not op._job.state.finished:
 job = op._job
 t = time.perf_counter()
 jobs._end_job_at_exit()                     # what quitting runs
-out["quit"] = [round(time.perf_counter() - t, 2), job.alive, job.poll().status]
+waited = round(time.perf_counter() - t, 2)
+asked = job.cancel_requested
+job.wait(10)                                # (a quitting Blender ends here; the worker stops at its next check)
+out["quit"] = [waited, asked, round(time.perf_counter() - t, 2), job.alive, job.poll().status]
 background.release_job(job)
 op, ctx, *_ = started(dict(ADAPT, iterations=50))
 while op._job.poll().step < 1 and not op._job.state.finished:
@@ -216,7 +269,9 @@ while op._job.poll().step < 1 and not op._job.state.finished:
 job = op._job
 t = time.perf_counter()
 bpy.ops.wm.open_mainfile(filepath=str(tmp / "scene.blend"))   # another file (load_pre ends the job)
-out["load"] = [round(time.perf_counter() - t, 2), job.alive, job.poll().status, background.active_job() is None]
+loaded, freed, asked = round(time.perf_counter() - t, 2), background.active_job() is None, job.cancel_requested
+job.wait(10)
+out["load"] = [loaded, freed, asked, round(time.perf_counter() - t, 2), job.alive, job.poll().status]
 """
 
 ASSETS_STATE = r"""
@@ -276,7 +331,11 @@ def _step(session, code: str, name: str) -> dict:
 
 
 def test_a_click_returns_at_once_without_network_or_models(session):
-    out = _step(session, INVOKE, "invoke")["invoke"]
+    step = _step(session, INVOKE, "invoke")
+    adapt, between, alone = step["whole_run"]
+    assert adapt == [pytest.approx((2 + 0.75) / 5), "stage 3 of 5 (adapt)"]   # one bar for the whole run
+    assert between == [pytest.approx(1 / 5), "stage 2 of 5 (light)"] and alone is None
+    out = step["invoke"]
     assert out["touched"] == [], out["touched"]          # no torch, hub, socket or image file at the click
     assert all(r == ["RUNNING_MODAL"] for r in out["results"].values()), out["results"]
     assert max(out["seconds"].values()) < 0.2, out["seconds"]
@@ -284,6 +343,9 @@ def test_a_click_returns_at_once_without_network_or_models(session):
     for name in session.setup["roots"]:
         assert "hours" not in out["dialogs"][f"{name}/convert"] and out["dialogs"][f"{name}/light"] == ["options"]
         assert any("would run" in d for d in out["dialogs"][f"{name}/adapt"])
+        assert out["dialogs"][f"{name}/run/buttons"] == [("Draft", "draft"), ("Skip adaptation", "skip"),
+                                                         ("Start anyway", "start")]
+        assert out["dialogs"][f"{name}/adapt/buttons"] == [("Draft", "draft"), ("Start anyway", "start")]
 
 
 def test_esc_cancels_only_over_the_progress_and_resume_continues_the_count(session):
@@ -302,13 +364,25 @@ def test_esc_cancels_only_over_the_progress_and_resume_continues_the_count(sessi
     assert resumed["run"] == ["finished", modal["run"][2]] and not resumed["partial_left"]
 
 
+def test_each_answer_to_the_cost_question_runs_what_it_says(session):
+    out = _step(session, CHOICES, "choices")
+    first, result, adapt_status, why, said = out["skip"]
+    assert first == ["RUNNING_MODAL"] and result == ["FINISHED"], said
+    assert adapt_status == "skipped" and "Skip adaptation" in why
+    first, result, preset, panel_preset, said, recorded = out["draft"]
+    assert result == ["FINISHED"], said
+    assert preset == "draft" and panel_preset == "final" and recorded == "draft"
+
+
 def test_quitting_or_loading_a_file_stops_a_job_within_two_seconds(session):
     out = _step(session, LOAD, "load")
-    seconds, alive, status = out["quit"]
-    assert seconds < 2.5 and not alive and status == "cancelled"
-    seconds, alive, status, freed = out["load"]
-    assert not alive and status == "cancelled" and freed
-    assert seconds < 2.0 + 3.0   # the wait for the worker, and the file's own loading
+    # Blender waits at most 2 s for the worker, which was told to stop and ends at its next check (between
+    # the halves of a view: seconds on a loaded CPU), cancelled, its checkpoint kept.
+    waited, asked, ended, alive, status = out["quit"]
+    assert waited < 2.5 and asked and not alive and status == "cancelled" and ended < waited + 5.0
+    loaded, freed, asked, ended, alive, status = out["load"]
+    assert loaded < 2.0 + 3.0 and freed and asked   # the wait for the worker, and the file's own loading
+    assert not alive and status == "cancelled" and ended < loaded + 5.0
 
 
 def test_each_asset_keeps_its_own_state_and_runs(session):
