@@ -1,9 +1,13 @@
 """The composite set up in Blender: a camera matched to the photo, the photo behind the render, a
-shadow-catcher floor under the asset. After `setup_composite`, F12 in Cycles renders the composite.
+shadow-catcher floor under the asset, all in SceneFit's own scene ("SceneFit Composite"), which links
+the asset's objects: F12 there renders the composite in Cycles.
 
-Only new objects and data are made (tagged ["scenefit"]); the asset is not moved: the camera is
-placed around it (core/scene/asset_pose.py `camera_for_placement`) looking along +Y, the direction the light stage takes
-for the photo, so the estimated World lights the asset from the right side.
+The artist's scene is theirs: its render engine, resolution, film, colour management, scene camera
+and compositor are never changed (the composite scene has its own). Only new objects and data are
+made (tagged ["scenefit"]); the asset is not moved: the camera is placed around it
+(core/scene/asset_pose.py `camera_for_placement`) looking along +Y, the direction the light stage
+takes for the photo, so the estimated World lights the asset from the right side. Deleting the
+composite scene deletes all of it.
 """
 from __future__ import annotations
 
@@ -22,6 +26,8 @@ from .world import world_controls
 CAMERA_NAME = "SceneFit Camera"
 FLOOR_NAME = "SceneFit Shadow Catcher"
 COMPOSITOR_NAME = "SceneFit Composite"
+SCENE_NAME = "SceneFit Composite"
+COMPOSITE_SAMPLES = 128   # a new composite scene's Cycles samples (the artist's scene's are for their engine)
 
 
 def load_photo_image(path: str | Path):
@@ -100,20 +106,54 @@ def transparent_cycles(scene) -> None:
     scene.view_settings.view_transform = "Standard"
 
 
-def ensure_photo_camera(scene, image, fov_deg: float, pitch_deg: float, roll_deg: float = 0.0):
-    """SceneFit's camera (made once per file): the photo's aspect and field of view (horizontal), at
-    pitch_deg above the horizon and turned by roll_deg as core's PhotoCamera, the photo as its
-    background. Becomes the scene camera; the artist's camera object is untouched."""
+def composite_scene():
+    """SceneFit's own scene for the Cycles composite (made once per file, tagged): Cycles, a transparent
+    film and the Standard view, so the photo's pixels come out as they went in. The artist's scenes are
+    never switched to it; F12 with it active renders the composite."""
     import bpy
 
+    scene = _tagged(bpy.data.scenes, SCENE_NAME)
+    if scene is None:
+        scene = bpy.data.scenes.new(SCENE_NAME)
+        scene[TAG] = "composite"
+        scene.cycles.samples = COMPOSITE_SAMPLES
+    transparent_cycles(scene)
+    return scene
+
+
+def settle(scene) -> None:
+    """The scene's objects' world matrices brought up to date: the composite scene is not the window's, so
+    Blender does not evaluate it by itself (SceneFit's camera there would keep an old matrix_world)."""
+    for layer in scene.view_layers:
+        layer.update()
+
+
+def is_composite_scene(scene) -> bool:
+    return scene is not None and scene.get(TAG) == "composite"
+
+
+def link_into(scene, objects) -> None:
+    """The objects linked (not copied) into `scene`'s own collection: one object, several scenes."""
+    for obj in objects:
+        if scene not in obj.users_scene:
+            scene.collection.objects.link(obj)
+
+
+def ensure_photo_camera(scene, image, fov_deg: float, pitch_deg: float, roll_deg: float = 0.0):
+    """SceneFit's camera (made once per file) in the composite scene (`composite_scene`): the photo's
+    aspect and field of view (horizontal), at pitch_deg above the horizon and turned by roll_deg as
+    core's PhotoCamera, the photo as its background; the composite scene's camera and resolution.
+    `scene` is the artist's: neither its camera nor its resolution changes."""
+    import bpy
+
+    own = composite_scene()
     cam = _tagged(bpy.data.objects, CAMERA_NAME)
     if cam is None:
         data = bpy.data.cameras.new(CAMERA_NAME)
         cam = bpy.data.objects.new(CAMERA_NAME, data)
         cam[TAG] = "camera"
         data[TAG] = "camera"
-    if cam.name not in scene.collection.objects and scene not in cam.users_scene:
-        scene.collection.objects.link(cam)
+    link_into(own, [cam])
     data = cam.data
     data.sensor_fit = "HORIZONTAL"
     data.angle = math.radians(fov_deg)
@@ -121,9 +161,10 @@ def ensure_photo_camera(scene, image, fov_deg: float, pitch_deg: float, roll_deg
     # The light stage's photo camera: looking along +Y (yaw 90) at the photo's pitch and roll.
     forward, _, up, _, _ = PhotoCamera(pitch_deg=pitch_deg, roll_deg=roll_deg).basis()
     cam.rotation_euler = camera_rotation(forward, up).to_euler("XYZ")
-    set_photo_resolution(scene, image)
+    set_photo_resolution(own, image)
     show_photo(data, image)
-    scene.camera = cam
+    own.camera = cam
+    settle(own)
     return cam
 
 
@@ -165,7 +206,8 @@ def _vector(values):
 
 
 def ensure_shadow_catcher(scene, base: np.ndarray, extent: float):
-    """A large plane under the asset that only catches shadows (Cycles), made once per file."""
+    """A large plane under the asset that only catches shadows (Cycles), made once per file, in `scene`
+    (the composite scene)."""
     import bpy
 
     floor = _tagged(bpy.data.objects, FLOOR_NAME)
@@ -173,8 +215,7 @@ def ensure_shadow_catcher(scene, base: np.ndarray, extent: float):
         floor = new_plane(FLOOR_NAME, 1.0)
         floor.data[TAG] = "floor"
         floor[TAG] = "floor"
-    if scene not in floor.users_scene:
-        scene.collection.objects.link(floor)
+    link_into(scene, [floor])
     floor.location = (float(base[0]), float(base[1]), float(base[2]))
     floor.scale = (extent, extent, 1.0)
     floor.is_shadow_catcher = True
@@ -183,28 +224,14 @@ def ensure_shadow_catcher(scene, base: np.ndarray, extent: float):
 
 def photo_behind_render(scene, image) -> None:
     """Film transparent, and the compositor puts the render over the photo (Standard view: the photo's
-    pixels come out as they went in)."""
-    import bpy
-
+    pixels come out as they went in). Only ever on the composite scene: its compositor is SceneFit's
+    own to rebuild, on Blender 5 (a node group per scene) as on 4.x (the scene's own tree)."""
+    if not is_composite_scene(scene):   # an artist's compositor is never cleared
+        raise ValueError(f"photo_behind_render sets up SceneFit's composite scene only, not '{scene.name}'.")
     transparent_cycles(scene)
     scene.view_settings.look = "None"
     scene.view_settings.exposure, scene.view_settings.gamma = 0.0, 1.0
-    if hasattr(scene, "compositing_node_group"):  # Blender 5: a compositor node group per scene
-        tree = _tagged(bpy.data.node_groups, COMPOSITOR_NAME)
-        if tree is None:
-            tree = bpy.data.node_groups.new(COMPOSITOR_NAME, "CompositorNodeTree")
-            tree[TAG] = "compositor"
-            tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
-        tree.nodes.clear()
-        output = tree.nodes.new("NodeGroupOutput")
-        image_socket = output.inputs[0]
-        scene.compositing_node_group = tree
-    else:  # Blender 4.x
-        scene.use_nodes = True
-        tree = scene.node_tree
-        tree.nodes.clear()
-        output = tree.nodes.new("CompositorNodeComposite")
-        image_socket = output.inputs["Image"]
+    tree, output, image_socket = _own_compositor(scene)
     layers = tree.nodes.new("CompositorNodeRLayers")
     layers.scene = scene
     photo = tree.nodes.new("CompositorNodeImage")
@@ -217,35 +244,68 @@ def photo_behind_render(scene, image) -> None:
     tree.links.new(over.outputs[0], image_socket)
 
 
+def _own_compositor(scene) -> tuple:
+    """(tree, its output node, the output's image socket) of the composite scene's compositor, emptied."""
+    import bpy
+
+    if hasattr(scene, "compositing_node_group"):  # Blender 5: a compositor node group per scene
+        tree = _tagged(bpy.data.node_groups, COMPOSITOR_NAME)
+        if tree is None:
+            tree = bpy.data.node_groups.new(COMPOSITOR_NAME, "CompositorNodeTree")
+            tree[TAG] = "compositor"
+            tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+        tree.nodes.clear()
+        output = tree.nodes.new("NodeGroupOutput")
+        scene.compositing_node_group = tree
+        return tree, output, output.inputs[0]
+    scene.use_nodes = True   # Blender 4.x: the scene's own tree (this scene is SceneFit's)
+    tree = scene.node_tree
+    tree.nodes.clear()
+    output = tree.nodes.new("CompositorNodeComposite")
+    return tree, output, output.inputs["Image"]
+
+
 def setup_composite(context, obj, photo_path: str | Path, placement: tuple[float, float], size: float,
-                    camera: PhotoCamera, scene_camera=None) -> dict:
+                    camera: PhotoCamera, scene_camera=None, world=None) -> dict:
     """Camera, photo background, shadow catcher and compositing for `obj` (an object, or a list of the
     objects of one asset) in the photo; returns them.
 
     scene_camera: the artist's camera that shows the photo (blender_io/scene_camera.py), used as it is;
     else SceneFit's camera, with `camera`'s field of view, pitch and roll, is placed around the asset
     for `placement` and `size`. The World SceneFit made is turned to the camera's heading, since the
-    light map's azimuth 0 is the photo camera's view."""
-    scene = context.scene
+    light map's azimuth 0 is the photo camera's view.
+
+    Everything goes into the composite scene (`composite_scene`), which links the asset's objects, the
+    camera and the floor, and is lit by `world` (else the artist's scene's World); the artist's scene
+    keeps its engine, resolution, film, colour management, camera and compositor. The artist's camera
+    is linked there as it is (not changed)."""
+    artist = context.scene
+    objects = list(obj) if isinstance(obj, (list, tuple)) else [obj]
     image = load_photo_image(photo_path)
     w, h = image.size
-    base, height = object_base(obj)
+    base, height = object_base(objects)
+    own = composite_scene()
     if scene_camera is None:
         position = camera_for_placement(base, height, placement, size, camera.fov_deg, camera.pitch_deg, w / h,
                                         camera.roll_deg)
-        cam = ensure_photo_camera(scene, image, camera.fov_deg, camera.pitch_deg, camera.roll_deg)
+        cam = ensure_photo_camera(artist, image, camera.fov_deg, camera.pitch_deg, camera.roll_deg)
         cam.location = tuple(float(v) for v in position)
         yaw = PHOTO_YAW_DEG
     else:
-        cam = scene.camera = scene_camera
-        set_photo_resolution(scene, image)
+        cam = scene_camera
+        link_into(own, [cam])
+        own.camera = cam
+        set_photo_resolution(own, image)
         position = np.array(cam.matrix_world.translation, np.float64)
         yaw = camera_pose(np.array(cam.matrix_world, np.float64))[0]
-    turn_world_to(scene.world, yaw)
+    link_into(own, objects)
+    own.world = world if world is not None else artist.world
+    turn_world_to(own.world, yaw)
     reach = float(np.linalg.norm(position - base))
-    floor = ensure_shadow_catcher(scene, base, extent=4.0 * reach)
-    photo_behind_render(scene, image)
-    return {"camera": cam, "floor": floor, "photo": image}
+    floor = ensure_shadow_catcher(own, base, extent=4.0 * reach)
+    photo_behind_render(own, image)
+    settle(own)
+    return {"camera": cam, "floor": floor, "photo": image, "scene": own}
 
 
 def turn_world_to(world, yaw_deg: float) -> None:

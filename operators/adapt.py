@@ -5,13 +5,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import bpy
-from bpy.props import IntProperty
+from bpy.props import EnumProperty, IntProperty, StringProperty
 
 from ..blender_io import mesh_from_object
 from ..core.base.errors import InputError
 from . import work
-from .common import OnMesh, asset_layout, model_settings, photo_path, photo_view, run_folder
-from .jobs import JobOperator
+from .common import OnMesh, asset_layout, asset_texture, model_settings, photo_path, photo_view, run_folder
+from .jobs import CHOICES, CostFirst, JobOperator
 from .results import apply_layout_results, apply_result_material, materials_words, result_targets
 
 if TYPE_CHECKING:
@@ -50,52 +50,72 @@ def gather_adapt(op, context, texture: str) -> dict:
         # camera is the light stage's (beside light.exr), else the scene's, the panel's or the estimate.
         "placement": view["placement"] if view else (x, y), "size": view["size"] if view else settings.size,
         "view": view,
-        "envmap": light if light and Path(light).is_file() else "", "preset": settings.preset,
+        "envmap": light if light and Path(light).is_file() else "", "preset": op.run_preset(context),
         "models": models, "iterations": op.iterations, "model_resolution": op.model_resolution,
-        "render_size": op.render_size, "out": str(run_folder(context, "adapt", op._object_name))}
+        "render_size": op.render_size,
+        # Resume: the cancelled run's folder, whose hidden sibling holds its checkpoint (else a new folder)
+        "out": op.resume or str(run_folder(context, "adapt", op._object_name))}
 
 
 def adapt_seconds_here(context, iterations: int | None = None) -> LocalWork | None:
-    """The projected work of an adaptation at the panel's preset when it would run in this Blender with the
-    diffusion models present (panels/quality.py's measurements: the bench CPU, or an H200 when torch
-    works on CUDA here); None otherwise."""
-    from ..core.base.errors import SceneFitError
-    from ..core.guidance.models import locate_models
+    """The projected work of an adaptation at the panel's preset when it would run in this Blender
+    (panels/quality.py's measurements: the bench CPU, or an H200 on CUDA); None when not measured.
+
+    Main thread, at a click: no model lookup (the job looks the models up, and downloads them, itself),
+    no network, and torch is not imported for it (`device_here`)."""
     from ..panels.quality import LocalWork, adapt_projection
+    from .common import preferences
 
-    models, _ = model_settings(context)
-    try:
-        device = models.device().type
-        if device not in ("cpu", "cuda"):
-            return None   # measured on neither
-        on_gpu = device == "cuda"
-        locate_models(models, need_inpaint=context.scene.scenefit.mode == "scene")
-    except (SceneFitError, ImportError):
-        return None   # no models (the job says so at its start) or no torch (the dependency check does)
-    seconds = adapt_projection(context.scene.scenefit.preset, iterations, gpu=on_gpu)
-    return None if seconds is None else LocalWork(seconds, on_gpu)
+    prefs = preferences(context)   # (not model_settings: its ModelConfig imports torch)
+    device = device_here(prefs.device if prefs is not None else "auto")
+    if device is None:
+        return None   # measured on neither
+    seconds = adapt_projection(context.scene.scenefit.preset, iterations, gpu=device == "cuda")
+    return None if seconds is None else LocalWork(seconds, device == "cuda")
 
 
-class SCENEFIT_OT_adapt(OnMesh, JobOperator):
+def device_here(preference: str) -> str | None:
+    """"cpu" or "cuda" as an adaptation here would run, without importing torch: the preference when it
+    names one; for "auto", torch's answer once a job has imported it, else CUDA when the machine shows an
+    NVIDIA driver, else the CPU. None for a device the bench has not measured."""
+    import os
+    import sys
+
+    if preference in ("cpu", "cuda"):
+        return preference
+    if preference != "auto":
+        return None
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return "cuda" if os.path.exists("/proc/driver/nvidia/version") else "cpu"
+
+
+class SCENEFIT_OT_adapt(OnMesh, CostFirst, JobOperator):
     """Restyle the asset's converted texture with diffusion guidance so it fits the photo (Esc cancels)"""
 
     bl_idname = "scenefit.adapt"
     bl_label = "Adapt"
     job_name = "adapt"
     runs_remotely = True
+    records_runs = True
+    choice: EnumProperty(name="Choice", items=CHOICES, default="ask", options={"SKIP_SAVE", "HIDDEN"})
 
     # For scripts and quick looks; 0 keeps the preset's value.
-    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE"})
-    model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE"})
-    render_size: IntProperty(name="Render size", default=0, min=0, options={"SKIP_SAVE"})
+    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"})
+    model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"})
+    render_size: IntProperty(name="Render size", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"})
+    resume: StringProperty(name="Resume", default="", options={"SKIP_SAVE", "HIDDEN"}, subtype="DIR_PATH",
+                           description="A cancelled adaptation's folder to continue (Resume in the run list)")
 
     def prepare(self, context):
         settings = context.scene.scenefit
         texture = ""
         if settings.mode != "generate":
-            texture = bpy.path.abspath(settings.texture_path) if settings.texture_path else ""
-            if not texture or not Path(texture).is_file():
-                raise InputError("Adapt starts from the converted texture; run Convert on this asset first.")
+            try:
+                texture = str(asset_texture(context, asset_layout(context)))
+            except InputError as error:
+                raise InputError(f"Adapt starts from the asset's converted texture: {error}") from None
         return work.adapt, gather_adapt(self, context, texture)
 
     def long_local_work(self, context) -> LocalWork | None:

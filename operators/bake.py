@@ -21,7 +21,7 @@ from ..core.stages.bake.engine_targets import TARGETS
 from ..core.stages.bake.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TEXTURE_FORMATS, GltfOutput
 from ..core.base.report import write_report
 from . import work
-from .common import OnMesh, asset_layout, run_folder
+from .common import OnMesh, asset_layout, asset_texture, run_folder
 from .jobs import JobOperator
 from .properties import PATH
 
@@ -79,15 +79,6 @@ def bake_output(compress: str, textures: str, max_texture: int, file_format: str
     return replace(like, tangents=like.tangents or normal_maps, skins_at_root=True)
 
 
-def texture_file(context) -> Path:
-    """The neural texture of the last Convert / Adapt / Run All; one sentence when there is none."""
-    text = context.scene.scenefit.texture_path
-    path = Path(bpy.path.abspath(text)) if text else None
-    if path is None or not path.is_file():
-        raise InputError("There is no SceneFit texture to bake; run Convert (or Adapt, Run All) on this object first.")
-    return path
-
-
 class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
     """Write the asset (the selected objects, or the active one) with its SceneFit texture baked into every
     material as a game asset (glTF 2.0); the objects, their materials and the scene are left as they are"""
@@ -95,6 +86,7 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
     bl_idname = "scenefit.bake_asset"
     bl_label = "Bake Asset"
     job_name = "bake"
+    asks_options = True   # the file, format, compression, textures... in a dialog before it starts
 
     filepath: StringProperty(name="File", subtype="FILE_PATH", options={"SKIP_SAVE"} | PATH, default="",
                              description="Where to write; empty: a new run folder next to the .blend")
@@ -122,8 +114,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         if size and (size < 4 or size & (size - 1)):
             raise InputError(f"Texture size must be a power of two from 4 to 8192 (or 0 for each material's own "
                              f"images' size), got {size}.")
-        texture = texture_file(context)
         layout = asset_layout(context)   # the selected objects, or the active one with all its materials
+        texture = asset_texture(context, layout)   # this asset's, made for its mesh
         artists = layout.artists   # what is exported: the artist's materials with the baked maps
         objects = [bpy.data.objects[n] for n in layout.objects]
         source = imported_from(objects)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import bpy
 
-from ..blender_io.compose import ensure_photo_camera, load_photo_image, object_base
+from ..blender_io.compose import composite_scene, ensure_photo_camera, load_photo_image, object_base, settle
 from ..blender_io.tag import TAG
 from ..core.base.errors import InputError, SceneFitError
 from ..core.scene.asset_pose import camera_for_placement
@@ -72,6 +72,7 @@ class SCENEFIT_OT_match_camera(bpy.types.Operator):
                 data.background_images.remove(background)
         shown = data.background_images.new()
         shown.image, shown.alpha, shown.display_depth, shown.frame_method = lines, 1.0, "FRONT", "FIT"
+        settle(composite_scene())
         return cam
 
 

@@ -150,6 +150,62 @@ def recorded_originals(settings) -> dict:
     return {(settings.result_object.name, settings.result_object.active_material_index): settings.original_material}
 
 
+def asset_owner(scene):
+    """The object whose SceneFitAsset the panel edits: the active object's root (the top of its parents:
+    an imported file's root, or the object itself); None without an active object or for SceneFit's own."""
+    try:
+        layer = bpy.context.view_layer if bpy.context.scene == scene else scene.view_layers[0]
+    except AttributeError:   # a restricted context (registering, loading)
+        layer = scene.view_layers[0] if scene.view_layers else None
+    obj = layer.objects.active if layer is not None else None
+    if obj is None or TAG in obj:
+        return None
+    while obj.parent is not None:
+        obj = obj.parent
+    return obj
+
+
+def asset_state(obj):
+    """The SceneFitAsset of `obj`'s root (see asset_owner)."""
+    while obj.parent is not None:
+        obj = obj.parent
+    return obj.scenefit_asset
+
+
+def asset_digest(layout) -> str:
+    """Names the asset's mesh as a texture is fitted to it (its fitting mesh: faces and own UVs, no pixels)."""
+    from ..core.texture.surface_layout import mesh_digest
+
+    return mesh_digest(layout.fitting_mesh())
+
+
+def texture_mesh_digest(text: str) -> str:
+    """The mesh digest SceneFit recorded for the texture file `text` (any asset's run that made it), or ""."""
+    if not text:
+        return ""
+    wanted = bpy.path.abspath(text)
+    for obj in bpy.data.objects:
+        state = getattr(obj, "scenefit_asset", None)
+        for run in state.runs if state is not None else ():
+            if run.texture_path and run.mesh_digest and bpy.path.abspath(run.texture_path) == wanted:
+                return run.mesh_digest
+    return ""
+
+
+def asset_texture(context, layout) -> Path:
+    """The active asset's neural texture (its last Convert / Adapt / Run All), refused in one sentence when
+    there is none or it was made for another mesh."""
+    state = asset_state(bpy.data.objects[layout.name])   # (the active object's, when it is in the asset)
+    text = state.texture_path
+    path = Path(bpy.path.abspath(text)) if text else None
+    if path is None or not path.is_file():
+        raise InputError(f"'{layout.name}' has no SceneFit texture yet; run Convert (or Adapt, Run All) on it first.")
+    if state.texture_mesh and state.texture_mesh != asset_digest(layout):
+        raise InputError(f"The texture '{path.name}' was made for another mesh than '{layout.name}'; convert this "
+                         "asset first.")
+    return path
+
+
 def flat_parts(objects: list) -> list[tuple[str, float]]:
     """(name, width / height) of the parts that make a selection too flat to place (a ground plane under a
     tree: the asset is then FLAT_RATIO or more times as wide as tall, and Run All refuses it at most sizes):
@@ -264,13 +320,31 @@ def photo_path(context) -> Path:
 
 
 # -- the photo's camera ------------------------------------------------------------------------------
-def artist_camera(context, photo: Path):
-    """(camera object, why) when the scene's active camera is the artist's and shows the photo (matched
-    with the fSpy importer or by eye): SceneFit then composes through it. (None, "") otherwise."""
-    from ..blender_io.scene_camera import matched_scene_camera
+_photo_sizes: dict[str, tuple[int, int] | None] = {}   # resolved photo path -> its upright size
+
+
+def remember_photo_size(text: str) -> tuple[int, int] | None:
+    """Read (once per path) and keep the upright size of the photo `text` names: what the panel draws from."""
     from ..core.data.imageio import upright_size
 
-    size = upright_size(photo)
+    if not text:
+        return None
+    path = str(Path(bpy.path.abspath(text)))
+    try:
+        _photo_sizes[path] = upright_size(Path(path)) if Path(path).is_file() else None
+    except (OSError, ValueError):
+        _photo_sizes[path] = None
+    return _photo_sizes[path]
+
+
+def artist_camera(context, photo: Path, read: bool = True):
+    """(camera object, why) when the scene's active camera is the artist's and shows the photo (matched
+    with the fSpy importer or by eye): SceneFit then composes through it. (None, "") otherwise.
+    read=False (drawing): only a size already read is used, the file is never opened."""
+    from ..blender_io.scene_camera import matched_scene_camera
+
+    key = str(photo)
+    size = remember_photo_size(key) if read else _photo_sizes.get(key)
     return matched_scene_camera(context.scene, photo, size) if size else (None, "")
 
 
@@ -285,7 +359,7 @@ def photo_view(context, photo: Path, obj=None) -> dict:
     the arrangement through the artist's camera, else the panel's); notes: what is not modelled."""
     settings = context.scene.scenefit
     view = {"camera": None, "camera_source": "estimate", "scene_camera": "", "placement": tuple(settings.placement),
-            "size": float(settings.size), "turn_deg": 0.0, "notes": []}
+            "size": float(settings.size), "turn_deg": math.degrees(settings.turn), "notes": []}
     camera, why = artist_camera(context, photo)
     if camera is not None:
         from ..blender_io.scene_camera import horizontal_fov_deg, scene_view

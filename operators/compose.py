@@ -14,8 +14,9 @@ from .work import written_whole
 
 
 class SCENEFIT_OT_compose(OnMesh, bpy.types.Operator):
-    """Set up a camera matched to the photo, the photo behind the render and a shadow-catcher floor under
-    the asset (lit by the estimated World when there is one); F12 in Cycles then renders the composite"""
+    """Set up the composite in SceneFit's own scene ("SceneFit Composite": a camera matched to the photo,
+    the photo behind the render, a shadow-catcher floor, the asset linked, lit by the estimated World when
+    there is one) and render it there; your scene's settings, camera and compositor stay as they are"""
 
     bl_idname = "scenefit.compose"
     bl_label = "Compose"
@@ -35,23 +36,24 @@ class SCENEFIT_OT_compose(OnMesh, bpy.types.Operator):
             view = photo_view(context, photo, objects)
             scene_camera = bpy.data.objects.get(view["scene_camera"]) if view["scene_camera"] else None
             made = setup_composite(context, objects, photo, tuple(settings.placement), settings.size,
-                                   composite_camera(context, photo, view), scene_camera=scene_camera)
-            if settings.result_world is not None:
-                context.scene.world = settings.result_world
+                                   composite_camera(context, photo, view), scene_camera=scene_camera,
+                                   world=settings.result_world)
+            own = made["scene"]
             if not self.render:
-                self.report({"INFO"}, f"Composite set up with '{made['camera'].name}': F12 renders it")
+                self.report({"INFO"}, f"Composite set up in the scene '{own.name}' with '{made['camera'].name}': "
+                                      "F12 there renders it")
                 return {"FINISHED"}
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
         if context.window is not None and not bpy.app.background:
             # In the UI Blender's own render job runs it (progress, Esc); the artist saves it from there.
-            bpy.ops.render.render("INVOKE_DEFAULT")
+            bpy.ops.render.render("INVOKE_DEFAULT", scene=own.name)
             return {"FINISHED"}
         try:
             active = context.active_object
             folder = run_folder(context, "compose", (active if active in objects else objects[0]).name)
-            out = written_whole(str(folder), lambda staging: {"composite": self._render(context, staging)})["composite"]
+            out = written_whole(str(folder), lambda staging: {"composite": self._render(own, staging)})["composite"]
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
@@ -59,19 +61,19 @@ class SCENEFIT_OT_compose(OnMesh, bpy.types.Operator):
         self.report({"INFO"}, f"Composite rendered: {out}")
         return {"FINISHED"}
 
-    def _render(self, context, folder: Path) -> str:
-        """F12 with write_still into `folder`, the scene's samples and output path put back after."""
-        scene = context.scene
+    def _render(self, scene, folder: Path) -> str:
+        """F12 of the composite scene with write_still into `folder`, its samples and output put back after."""
         out = folder / "composite.png"
-        samples_before, path_before = scene.cycles.samples, scene.render.filepath
+        settings = scene.render.image_settings
+        before = scene.cycles.samples, scene.render.filepath, settings.file_format
         try:
             if self.samples:
                 scene.cycles.samples = self.samples
             scene.render.filepath = str(out)
-            scene.render.image_settings.file_format = "PNG"
-            bpy.ops.render.render(write_still=True)
+            settings.file_format = "PNG"
+            bpy.ops.render.render(write_still=True, scene=scene.name)
         finally:
-            scene.cycles.samples, scene.render.filepath = samples_before, path_before
+            scene.cycles.samples, scene.render.filepath, settings.file_format = before
         return str(out)
 
 

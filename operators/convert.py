@@ -17,8 +17,9 @@ class SCENEFIT_OT_convert(OnMesh, JobOperator):
     bl_idname = "scenefit.convert"
     bl_label = "Convert"
     job_name = "convert"
+    records_runs = True
 
-    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE"},
+    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"},
                             description="For scripts and quick looks; 0 keeps the preset's")
 
     def prepare(self, context):

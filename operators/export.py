@@ -37,7 +37,11 @@ def photo_look_at(context):
     origin = m.translation
     forward = (m.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
     up = (m.to_3x3() @ Vector((0.0, 1.0, 0.0))).normalized()
-    render = context.scene.render
+    # The photo's frame: SceneFit's composite scene has the photo's resolution (the artist's scene keeps theirs).
+    from ..blender_io.compose import SCENE_NAME
+
+    own = bpy.data.scenes.get(SCENE_NAME)
+    render = own.render if own is not None and TAG in own else context.scene.render
     return LookAt(origin=tuple(origin), target=tuple(origin + forward), up=tuple(up),
                   fov_deg=math.degrees(cam.data.angle_x), width=render.resolution_x, height=render.resolution_y)
 

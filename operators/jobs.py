@@ -10,6 +10,9 @@ Runtime state lives on the WindowManager (never saved into the .blend); the live
 """
 from __future__ import annotations
 
+import atexit
+import sys
+import time
 from typing import TYPE_CHECKING
 
 import bpy
@@ -64,12 +67,38 @@ def show_preview(image: np.ndarray) -> None:
     item.image_pixels_float = rgba[::-1].ravel()  # Blender's first row is the bottom one
 
 
-def update_runtime(context, state: background.JobState) -> None:
+def whole_run(state: background.JobState, stages: tuple[str, ...]) -> tuple[float, str] | None:
+    """(fraction, words) of a job that runs several stages in order (Run All: core.pipeline.run.STAGES) as one
+    bar, stage k of n, from the stage now running and its own fraction; None for a one-stage job."""
+    if state.name != "run" or state.finished:
+        return None
+    n = len(stages)
+    if state.stage in stages:
+        k, inner = stages.index(state.stage), state.fraction
+    elif state.stage == "run" and state.total:   # between stages: the pipeline's own count
+        k, inner = min(state.step, n - 1), 0.0
+    else:
+        return None
+    return (k + inner) / n, f"stage {k + 1} of {n} ({stages[k]})"
+
+
+def update_runtime(context, state: background.JobState, cancelling: bool = False) -> None:
+    """The panel's and status bar's copy of a job's state; "cancelling…" stays until the worker has stopped.
+    Run All shows one bar for the whole run (stage k of n)."""
     global _preview_serial
     rt = runtime(context)
     rt.running = not state.finished
-    rt.job, rt.stage, rt.status = state.name, state.stage, state.status_line()
+    rt.job, rt.stage = state.name, state.stage
+    rt.status = f"{state.name}: cancelling…" if cancelling and not state.finished else state.status_line()
     rt.progress = state.fraction
+    # The pipeline's stage order, once the job has imported it (importing it here would import torch on the
+    # main thread).
+    pipeline = sys.modules.get(__package__.rpartition(".")[0] + ".core.pipeline.run")
+    stages = getattr(pipeline, "STAGES", None)   # (None while the job thread is still importing it)
+    whole = None if cancelling or stages is None else whole_run(state, stages)
+    if whole is not None:
+        rt.progress = whole[0]
+        rt.status = f"{state.name}: {whole[1]}, {state.status_line().split(': ', 1)[-1]}"
     if state.preview is not None and _preview_serial != (id(state), state.preview_serial):
         show_preview(state.preview)
         _preview_serial = (id(state), state.preview_serial)
@@ -105,13 +134,62 @@ def long_work_warning(context, label: str, work: LocalWork | None, runs_remotely
             "preferences (Jobs), runs it far sooner.")
 
 
-class JobOperator(bpy.types.Operator):
-    """Base of the operators that run a long stage. Subclasses set job_name and define prepare/apply."""
+# A job that has run longer than this asks before Esc cancels it (a stray Esc must not end hours of work).
+CONFIRM_CANCEL_AFTER = 60.0
+# How long loading another file (or quitting) waits for a job's worker to stop.
+END_JOB_SECONDS = 2.0
 
-    bl_options = {"REGISTER", "UNDO"}
+
+def esc_action(over_progress: bool, seconds: float) -> str:
+    """What Esc does during a job: "pass" (not meant for SceneFit: the pointer is elsewhere), "ask" (a
+    job longer than CONFIRM_CANCEL_AFTER: confirm first) or "cancel"."""
+    if not over_progress:
+        return "pass"
+    return "ask" if seconds > CONFIRM_CANCEL_AFTER else "cancel"
+
+
+def pointer_over_progress(context, event) -> bool:
+    """Whether the pointer is over a place SceneFit's progress shows: the status bar, or a 3D Viewport's
+    sidebar (where the SceneFit panel is)."""
+    x, y = event.mouse_x, event.mouse_y
+    screen = context.window.screen if context.window is not None else None
+    for area in screen.areas if screen is not None else ():
+        if area.type == "STATUSBAR":
+            boxes = [area]
+        elif area.type == "VIEW_3D":
+            boxes = [r for r in area.regions if r.type == "UI" and r.width > 1]
+        else:
+            continue
+        if any(b.x <= x < b.x + b.width and b.y <= y < b.y + b.height for b in boxes):
+            return True
+    return False
+
+
+def has_ui(context) -> bool:
+    """Whether a job runs in the background with a bar (a window), rather than inline (`blender -b`, scripts)."""
+    return context.window is not None and not bpy.app.background
+
+
+def job_seconds(job: background.Job) -> float:
+    """How long `job` has run so far."""
+    return time.perf_counter() - job.state.started
+
+
+class JobSteps:
+    """What a job operator does, apart from Blender's Operator type (so it can be driven without a window).
+
+    invoke returns to Blender at once: the long-work question (from the bench's tables, no model lookup,
+    no network) or the job's bar; gathering the inputs (`prepare`) happens on the first tick after, and
+    the model lookup and download inside the job. execute with a window starts the same background job
+    (Repeat Last never freezes Blender); only without one (scripts under `blender -b`) is it inline."""
+
     job_name = "job"
     # True: when the preferences name a worker environment, the job runs there (operators/remote.py).
     runs_remotely = False
+    # True: each run is kept in the asset's run history (operators/history.py), finished or not.
+    records_runs = False
+    # True: the operator's options are shown in a dialog before the job starts (never in a redo panel).
+    asks_options = False
 
     # -- to override ---------------------------------------------------------------------------------
     def prepare(self, context) -> tuple:
@@ -135,7 +213,7 @@ class JobOperator(bpy.types.Operator):
         return self.prepare(context)
 
     def long_local_work(self, context) -> LocalWork | None:
-        """Projected work this job does when it runs here (None: short, or unknown)."""
+        """Projected work this job does when it runs here (None: short, or unknown). Never looks models up."""
         return None
 
     def long_work_warning(self, context) -> str | None:
@@ -148,18 +226,20 @@ class JobOperator(bpy.types.Operator):
             return apply_remote(self, context, result)
         return self.apply(context, result)
 
-    # -- synchronous: scripts and `blender -b` -------------------------------------------------------
+    # -- inline: scripts and `blender -b` ------------------------------------------------------------
     def execute(self, context):
-        if getattr(self, "_long_confirmed", False) and context.window is not None and not bpy.app.background:
-            return self._start_job(context)   # confirmed in invoke's dialog: as the background job
+        if has_ui(context):
+            return self._begin(context)   # Repeat Last, a dialog's confirmation: the background job
         try:
             check_dependencies()
             warning = self.long_work_warning(context)
             if warning:
                 self.report({"WARNING"}, warning)
             work, data = self.job_work(context)
+            self._out = data.get("out", "") if isinstance(data, dict) else ""
             result = background.run_inline(work, data, TerminalProgress())
             message = self.apply_result(context, result)
+            self.keep_run(context, "finished", result)
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
@@ -168,43 +248,74 @@ class JobOperator(bpy.types.Operator):
 
     # -- background job from the UI ------------------------------------------------------------------
     def invoke(self, context, event):
-        if context.window is None or bpy.app.background:
+        if not has_ui(context):
             return self.execute(context)
         try:
             warning = self.long_work_warning(context)
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        if warning:
-            self._long_confirmed = True    # the dialog's confirmation calls execute, which starts the job
+        if warning and getattr(self, "choice", "ask") == "ask":   # the cost before the click, with real choices
+            self._warning = warning
+            return context.window_manager.invoke_popup(self, width=480)
+        if warning and not hasattr(self, "choice"):   # the dialog's confirmation calls execute, which starts the job
             return context.window_manager.invoke_confirm(self, event, title=f"{self.bl_label}: hours of work",
                                                          message=warning, confirm_text="Start here",
                                                          icon="WARNING")
-        return self._start_job(context)
+        if self.asks_options:   # its OK calls execute, which starts the job
+            return context.window_manager.invoke_props_dialog(self, title=self.bl_label, confirm_text="Start")
+        return self._begin(context)
 
-    def _start_job(self, context):
-        try:
-            check_dependencies()
-            work, data = self.job_work(context)
-            self._job = background.start_job(background.Job(self.job_name, work, data))
-        except SceneFitError as error:
-            self.report({"ERROR"}, str(error))
+    def _begin(self, context):
+        """The bar at once; the inputs are gathered on the first timer tick (`_start_job`)."""
+        active = background.active_job()
+        if active is not None and not active.state.finished:
+            self.report({"ERROR"}, f"A SceneFit job ('{active.name}') is already running; wait for it or cancel it "
+                                   "first.")
             return {"CANCELLED"}
-        update_runtime(context, self._job.state)
-        runtime(context).has_preview = False
+        self._job = None
+        rt = runtime(context)
+        rt.running, rt.job, rt.stage, rt.progress = True, self.job_name, "prepare", 0.0
+        rt.status, rt.has_preview = f"{self.bl_label}: reading the asset…", False
         wm = context.window_manager
         self._timer = wm.event_timer_add(TIMER_SECONDS, window=context.window)
         wm.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
+    def _start_job(self, context) -> bool:
+        """Gather the inputs and start the worker; False (said) when the inputs are refused."""
+        try:
+            check_dependencies()
+            work, data = self.job_work(context)
+            self._out = data.get("out", "") if isinstance(data, dict) else ""
+            self._job = background.start_job(background.Job(self.job_name, work, data))
+        except SceneFitError as error:
+            self._remove_timer(context)
+            rt = runtime(context)
+            rt.running, rt.status = False, str(error)
+            self.report({"ERROR"}, str(error))
+            return False
+        update_runtime(context, self._job.state)
+        return True
+
     def modal(self, context, event):
-        if event.type == "ESC" and event.value == "PRESS":
-            self._job.cancel()
-            runtime(context).status = f"{self.job_name}: cancelling…"
+        job = getattr(self, "_job", None)
+        if event.type == "ESC" and event.value == "PRESS" and job is not None:
+            action = esc_action(pointer_over_progress(context, event), job_seconds(job))
+            if action == "pass":
+                return {"PASS_THROUGH"}
+            if action == "ask":
+                bpy.ops.scenefit.cancel_job("INVOKE_DEFAULT")
+            else:
+                job.cancel()
+            update_runtime(context, job.state, job.cancel_requested)
+            return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
-        state = self._job.poll()
-        update_runtime(context, state)
+        if job is None:   # the first tick: gather the inputs, start the worker
+            return {"RUNNING_MODAL"} if self._start_job(context) else {"CANCELLED"}
+        state = job.poll()
+        update_runtime(context, state, job.cancel_requested)
         redraw(context)
         if not state.finished:
             return {"RUNNING_MODAL"}
@@ -236,18 +347,84 @@ class JobOperator(bpy.types.Operator):
                 rt.status = str(error)
                 self.report({"ERROR"}, rt.status)
                 return {"CANCELLED"}
+            self.keep_run(context, "finished", state.result)
             rt.status = message
             self.report({"INFO"}, message)
+            undo_step(f"SceneFit {self.bl_label}")
             return {"FINISHED"}
+        self.keep_run(context, "cancelled" if state.status == background.CANCELLED else "failed", None)
         if state.details:
             print(state.details)  # the traceback of an unexpected failure, for the console
         rt.status = state.status_line()
         self.report({"WARNING"} if state.status == background.CANCELLED else {"ERROR"}, rt.status)
         return {"CANCELLED"}
 
+    def keep_run(self, context, state: str, result) -> None:
+        """The run in the asset's history (finished, cancelled or failed), for operators that record runs."""
+        if self.records_runs and not getattr(self, "_remote", False) and getattr(self, "_out", ""):
+            from .history import record_run
+
+            record_run(self, context, state, result)
+
+
+def undo_step(message: str) -> None:
+    """One undo step for what a job wrote into the file (job operators carry no UNDO flag: Blender would
+    redo them by calling execute), so Ctrl+Z takes the results out again."""
+    if bpy.app.background or bpy.context.window is None:
+        return
+    try:
+        bpy.ops.ed.undo_push(message=message)
+    except RuntimeError:   # no undo stack in this context
+        pass
+
+
+CHOICES = (("ask", "Ask", "Ask before long work (the button's own)"),
+           ("draft", "Draft", "Run at the Draft preset this time (the panel's preset stays)"),
+           ("skip", "Skip adaptation", "Estimate the light and compose now, without adapting the texture"),
+           ("start", "Start anyway", "Run as set, however long it takes here"))
+
+
+class CostFirst:
+    """Operator mixin: long local work asks first, offering what the run could be instead (Draft, Skip
+    adaptation where the operator can skip it, Start anyway); each button runs the operator again with its
+    `choice`, which its prepare honours (`run_preset`, and Run All's guidance)."""
+
+    skippable = False   # True: the operator can run without adapting (Run All)
+
+    def run_preset(self, context) -> str:
+        return "draft" if getattr(self, "choice", "ask") == "draft" else context.scene.scenefit.preset
+
+    def draw(self, context):
+        layout = self.layout
+        layout.label(text=f"{self.bl_label}: long work here", icon="WARNING")
+        col = layout.column(align=True)
+        for line in wrapped(getattr(self, "_warning", "") or "", 80):
+            col.label(text=line)
+        row = layout.row(align=True)
+        shown = [c for c in CHOICES if c[0] != "ask" and (c[0] != "skip" or self.skippable)]
+        if context.scene.scenefit.preset == "draft":
+            shown = [c for c in shown if c[0] != "draft"]
+        for key, text, _ in shown:
+            row.operator(self.bl_idname, text=text).choice = key
+
+
+def wrapped(text: str, width: int) -> list[str]:
+    """`text` in lines of at most `width` characters, broken between words (labels do not wrap)."""
+    import textwrap
+
+    return textwrap.wrap(text, width) or [""]
+
+
+class JobOperator(JobSteps, bpy.types.Operator):
+    """Base of the operators that run a long stage. Subclasses set job_name and define prepare/apply.
+    REGISTER without UNDO: Adjust Last Operation would redo a job by calling execute."""
+
+    bl_options = {"REGISTER"}
+
 
 class SCENEFIT_OT_cancel_job(bpy.types.Operator):
-    """Stop the running SceneFit job after its current step (results written so far are kept)"""
+    """Stop the running SceneFit job within seconds; an adaptation keeps its folder and checkpoint, and
+    Resume in the Results section continues it"""
 
     bl_idname = "scenefit.cancel_job"
     bl_label = "Cancel"
@@ -257,6 +434,14 @@ class SCENEFIT_OT_cancel_job(bpy.types.Operator):
     def poll(cls, context):
         job = background.active_job()
         return job is not None and not job.state.finished
+
+    def invoke(self, context, event):
+        job = background.active_job()
+        if job is not None and job_seconds(job) > CONFIRM_CANCEL_AFTER:
+            return context.window_manager.invoke_confirm(self, event, title=f"Cancel {job.name}?",
+                                                         message="It has run for a while; an adaptation can be "
+                                                                 "resumed later.", confirm_text="Cancel it")
+        return self.execute(context)
 
     def execute(self, context):
         job = background.active_job()
@@ -275,26 +460,41 @@ def draw_status_bar(self, context) -> None:
 
 @persistent
 def _end_job_before_load(*_args) -> None:
-    """Loading a file frees the data a job would write into: cancel it and wait for its worker."""
-    state = background.end_active_job(timeout=30.0)
+    """Loading a file frees the data a job would write into: cancel it and wait (briefly) for its worker,
+    which writes only into its own run folder and stops at its next check."""
+    state = background.end_active_job(timeout=END_JOB_SECONDS)
     if state is not None:
-        print(f"SceneFit: '{state.name}' ended because another file is being loaded ({state.status}).")
+        print(f"SceneFit: '{state.name}' was stopped because another file is being loaded ({state.status}); "
+              "an adaptation can be resumed from its run folder.")
 
 
 @persistent
 def _reset_after_load(*_args) -> None:
+    from .common import remember_photo_size
+
     wm = bpy.context.window_manager
     if wm is not None and hasattr(wm, "scenefit_runtime"):
         wm.scenefit_runtime.running = False
+    for scene in bpy.data.scenes:   # the panel draws the photo's camera from sizes read here, not in draw()
+        if getattr(scene, "scenefit", None) is not None and scene.scenefit.photo_path:
+            remember_photo_size(scene.scenefit.photo_path)
 
 
 classes = (SceneFitRuntime, SCENEFIT_OT_cancel_job)
+
+
+def _end_job_at_exit() -> None:
+    """Quitting Blender during a job: stop its worker within END_JOB_SECONDS (its folder keeps what it wrote)."""
+    state = background.end_active_job(timeout=END_JOB_SECONDS)
+    if state is not None:
+        print(f"SceneFit: '{state.name}' was stopped because Blender is quitting ({state.status}).")
 
 
 def register() -> None:
     global _previews
     import bpy.utils.previews
 
+    atexit.register(_end_job_at_exit)
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.WindowManager.scenefit_runtime = PointerProperty(type=SceneFitRuntime)
@@ -308,7 +508,8 @@ def unregister() -> None:
     global _previews
     import bpy.utils.previews
 
-    background.end_active_job(timeout=30.0)
+    atexit.unregister(_end_job_at_exit)
+    background.end_active_job(timeout=END_JOB_SECONDS)
     bpy.app.handlers.load_post.remove(_reset_after_load)
     bpy.app.handlers.load_pre.remove(_end_job_before_load)
     bpy.types.STATUSBAR_HT_header.remove(draw_status_bar)

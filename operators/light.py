@@ -17,6 +17,7 @@ class SCENEFIT_OT_estimate_light(JobOperator):
     bl_idname = "scenefit.estimate_light"
     bl_label = "Estimate Light"
     job_name = "light"
+    asks_options = True   # Critic and Outpaint in a dialog before it starts
 
     critic: EnumProperty(name="Critic", default="auto", items=(
         ("auto", "Auto", "The diffusion critic when Stable Diffusion 2 is on this machine, else the prior alone"),
@@ -27,8 +28,8 @@ class SCENEFIT_OT_estimate_light(JobOperator):
         ("sd2", "SD2", "Complete the unseen map with Stable Diffusion 2 inpainting"),
         ("prior", "Prior", "Complete the unseen map with the sky/ground prior (fast)")))
     # For scripts and quick looks; 0 keeps the preset's value.
-    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE"})
-    model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE"})
+    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"})
+    model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"})
 
     def prepare(self, context):
         settings = context.scene.scenefit

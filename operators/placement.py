@@ -24,11 +24,19 @@ def window_region(area):
     return region, (region.data if region is not None else None)
 
 
-def camera_frame_in_region(scene, region, rv3d):
-    """(x_min, y_min, x_max, y_max) of the scene camera's frame in the region, or None."""
+def viewed_camera(context):
+    """The camera a 3D Viewport looks through: its own (local) camera when set, else the scene's."""
+    space = context.space_data
+    if space is not None and getattr(space, "type", "") == "VIEW_3D" and space.use_local_camera and space.camera:
+        return space.camera
+    return context.scene.camera
+
+
+def camera_frame_in_region(scene, region, rv3d, cam=None):
+    """(x_min, y_min, x_max, y_max) of the camera's (else the scene camera's) frame in the region, or None."""
     from bpy_extras.view3d_utils import location_3d_to_region_2d
 
-    cam = scene.camera
+    cam = cam if cam is not None else scene.camera
     if cam is None or region is None or rv3d is None:
         return None
     corners = [cam.matrix_world @ c for c in cam.data.view_frame(scene=scene)]
@@ -43,10 +51,11 @@ def draw_marker() -> None:
     context = bpy.context
     rv3d = context.region_data
     scene = context.scene
-    if rv3d is None or rv3d.view_perspective != "CAMERA" or scene.camera is None or \
-            scene.camera.name != CAMERA_NAME or not scene.scenefit.photo_path:
+    cam = viewed_camera(context)
+    if rv3d is None or rv3d.view_perspective != "CAMERA" or cam is None or \
+            cam.name != CAMERA_NAME or not scene.scenefit.photo_path:
         return
-    rect = camera_frame_in_region(scene, context.region, rv3d)
+    rect = camera_frame_in_region(scene, context.region, rv3d, cam)
     if rect is None:
         return
     import gpu
@@ -63,18 +72,20 @@ def draw_marker() -> None:
 
 
 class PhotoClicks:
-    """Operator mixin: clicks in the photo seen through the scene camera, modal in a 3D Viewport. The
-    view goes into the camera; each left click inside the photo's frame is handed to `clicked(context,
-    point)` (point: fractions of the photo, y from the top), which returns the operator's result when
-    done or None for another click; Esc or a right click cancels and restores the view."""
+    """Operator mixin: clicks in the photo seen through its camera, modal in a 3D Viewport. The view
+    goes into the camera (SceneFit's as this viewport's own camera, so the scene camera stays the
+    artist's); each left click inside the photo's frame is handed to `clicked(context, point)` (point:
+    fractions of the photo, y from the top), which returns the operator's result when done or None for
+    another click; Esc or a right click cancels and restores the view."""
 
     def start_clicks(self, context, prepare, first_prompt: str) -> set:
-        """invoke's body: prepare(context) sets up the camera (or raises SceneFitError), then clicking begins."""
+        """invoke's body: prepare(context) returns the camera showing the photo (or raises SceneFitError),
+        then clicking begins."""
         if context.area is None or context.area.type != "VIEW_3D":
             self.report({"ERROR"}, f"{self.bl_label} works in a 3D Viewport; run it from the SceneFit panel there.")
             return {"CANCELLED"}
         try:
-            prepare(context)
+            camera = prepare(context)
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
@@ -82,7 +93,11 @@ class PhotoClicks:
         if rv3d is None:
             self.report({"ERROR"}, "This 3D Viewport has no view to click in.")
             return {"CANCELLED"}
+        space = context.space_data
         self._view_before = rv3d.view_perspective
+        self._local_before = (space.use_local_camera, space.camera)
+        if camera is not None and camera != context.scene.camera:
+            space.use_local_camera, space.camera = True, camera
         rv3d.view_perspective = "CAMERA"
         self.ask(context, first_prompt)
         context.window.cursor_modal_set("CROSSHAIR")
@@ -103,7 +118,7 @@ class PhotoClicks:
             return {"RUNNING_MODAL"} if event.type in ("LEFTMOUSE", "RIGHTMOUSE") else {"PASS_THROUGH"}
         # The click is in window coordinates; the frame is in the viewport region's.
         mouse = (event.mouse_x - region.x, event.mouse_y - region.y)
-        rect = camera_frame_in_region(context.scene, region, rv3d)
+        rect = camera_frame_in_region(context.scene, region, rv3d, viewed_camera(context))
         point = placement_from_click(mouse, rect) if rect is not None else None
         if point is None:
             self.report({"WARNING"}, "Click inside the photo's frame.")
@@ -118,6 +133,11 @@ class PhotoClicks:
         self._end(context)
 
     def _end(self, context):
+        before = getattr(self, "_local_before", None)
+        space = context.space_data
+        if before is not None and space is not None and getattr(space, "type", "") == "VIEW_3D":
+            space.use_local_camera, space.camera = before
+            self._local_before = None
         if context.area is not None:
             context.area.header_text_set(None)
             context.area.tag_redraw()

@@ -10,6 +10,7 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
                        PointerProperty, StringProperty)
 
 from ..core.pipeline.presets import PRESET_DESCRIPTIONS, PRESET_NAMES
+from .common import asset_owner, remember_photo_size, texture_mesh_digest
 from ..core.scene.camera import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG
 from ..core.scene.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
 
@@ -29,6 +30,10 @@ SUN_SOURCES = (
     ("set", "As set here", "The azimuth and elevation below (Pick Sun sets them from a shadow in the photo, "
                            "Sun from Light from a Sun light turned until its shadows match the photo's)"),
 )
+GUIDANCE = (("auto", "Auto", "Adapt with Stable Diffusion 2 when its weights are on this machine (or downloaded, "
+                               "with online access) and there is a prompt"),
+            ("sd2", "Stable Diffusion 2", "Adapt; fail when the weights cannot be found"),
+            ("none", "None", "No adaptation: compose the converted texture (seconds instead of hours)"))
 MODES = (
     ("scene", "Scene", "Restyle the asset so it fits the photo (the prompt describes how it should look there)"),
     ("generate", "Generate", "Make a new texture from the prompt alone"),
@@ -74,14 +79,99 @@ class SceneFitSlot(bpy.types.PropertyGroup):
     job: IntProperty(name="Job", min=0, description="Which result this is: a later job has a higher number")
 
 
-class SceneFitSettings(bpy.types.PropertyGroup):
-    # Scene
-    photo_path: StringProperty(name="Photo", subtype="FILE_PATH", options=PATH, description="Photo to fit the asset into")
+RUN_STATES = (("finished", "Finished", "The run finished; Apply puts its results in the asset's slots and World"),
+              ("cancelled", "Cancelled", "The run was cancelled; an adaptation can be resumed from its checkpoint"),
+              ("failed", "Failed", "The run failed; its folder keeps what it wrote"))
+
+
+class SceneFitRun(bpy.types.PropertyGroup):
+    """One run on an asset (the Results section's history): where its files are, what it was asked, what it made."""
+
+    folder: StringProperty(name="Folder", subtype="DIR_PATH", options=PATH,
+                           description="The run's folder (a cancelled adaptation's work waits beside it, hidden)")
+    stage: StringProperty(name="Stage", description="Which button made it: run, convert or adapt")
+    preset: StringProperty(name="Preset")
+    prompt: StringProperty(name="Prompt")
+    when: StringProperty(name="Time", description="When the run ended")
+    state: EnumProperty(name="State", items=RUN_STATES, default="finished")
+    composite: PointerProperty(name="Composite", type=bpy.types.Image)
+    world: PointerProperty(name="World", type=bpy.types.World)
+    slots: CollectionProperty(name="Slots", type=SceneFitSlot)
+    texture_path: StringProperty(name="Neural texture", subtype="FILE_PATH", options=PATH)
+    mesh_digest: StringProperty(name="Mesh", options={"HIDDEN"}, description="Which mesh its texture was made for")
+    iterations: IntProperty(name="Iterations", min=0, options={"HIDDEN"})
+    model_resolution: IntProperty(name="Model resolution", min=0, options={"HIDDEN"})
+    render_size: IntProperty(name="Render size", min=0, options={"HIDDEN"})
+
+
+def _texture_typed(state, _context) -> None:
+    """A texture path set by hand names the mesh it was made for when SceneFit made it (any asset's run)."""
+    digest = texture_mesh_digest(state.texture_path)
+    if state.texture_mesh != digest:
+        state.texture_mesh = digest
+
+
+class SceneFitAsset(bpy.types.PropertyGroup):
+    """What belongs to one asset (on its object, or its selection's root): switching the active object
+    switches these. The Scene and Style sections' Prompt, Placement, Size and the texture read and write them."""
+
+    prompt: StringProperty(name="Prompt", description="How the asset should look, e.g. 'a leather sofa, soggy and "
+                                                      "stained with mud'")
     placement: FloatVectorProperty(name="Placement", size=2, min=0.0, max=1.0, default=DEFAULT_AT,
                                    description="Where the asset stands in the photo: x from the left, y from "
                                                "the top, as fractions (Pick Placement sets it by a click)")
     size: FloatProperty(name="Size", min=0.02, max=1.0, default=DEFAULT_OBJECT_SIZE, subtype="FACTOR",
                         description="The asset's height as a fraction of the photo's height")
+    turn: FloatProperty(name="Turn", subtype="ANGLE", default=0.0, min=-math.pi, max=math.pi,
+                        description="How far the asset is turned about its up axis, seen from the photo's camera")
+    texture_path: StringProperty(name="Neural texture", subtype="FILE_PATH", options=PATH, update=_texture_typed,
+                                 description="texture.pt of this asset's last conversion or adaptation (adapt and "
+                                             "Bake Asset start here)")
+    texture_mesh: StringProperty(name="Texture's mesh", options={"HIDDEN"},
+                                 description="Which mesh the texture was made for (a texture of another is refused)")
+    runs: CollectionProperty(name="Runs", type=SceneFitRun)
+    run_index: IntProperty(name="Run", min=0, description="The run chosen in the Results section's list")
+
+
+PER_ASSET = ("prompt", "placement", "size", "turn", "texture_path")
+
+
+def _holder(settings):
+    """Where the per-asset values live: the active asset's state, else the scene's (no active object)."""
+    owner = asset_owner(settings.id_data)
+    return (owner.scenefit_asset, "") if owner is not None else (settings, "loose_")
+
+
+def _per_asset(name: str) -> dict:
+    def get(settings):
+        holder, prefix = _holder(settings)
+        value = getattr(holder, prefix + name)
+        return tuple(value) if name == "placement" else value
+
+    def set_(settings, value):
+        holder, prefix = _holder(settings)
+        setattr(holder, prefix + name, value)
+
+    return {"get": get, "set": set_}
+
+
+class SceneFitSettings(bpy.types.PropertyGroup):
+    # Scene
+    photo_path: StringProperty(name="Photo", subtype="FILE_PATH", options=PATH, description="Photo to fit the asset into",
+                               update=lambda settings, _context: _photo_chosen(settings))
+    # The active asset's own (SceneFitAsset); the loose_ ones hold them while no object is active.
+    placement: FloatVectorProperty(name="Placement", size=2, min=0.0, max=1.0, **_per_asset("placement"),
+                                   description="Where the asset stands in the photo: x from the left, y from "
+                                               "the top, as fractions (Pick Placement sets it by a click)")
+    size: FloatProperty(name="Size", min=0.02, max=1.0, subtype="FACTOR", **_per_asset("size"),
+                        description="The asset's height as a fraction of the photo's height")
+    turn: FloatProperty(name="Turn", subtype="ANGLE", min=-math.pi, max=math.pi, **_per_asset("turn"),
+                        description="How far the asset is turned about its up axis, seen from the photo's camera")
+    loose_placement: FloatVectorProperty(size=2, min=0.0, max=1.0, default=DEFAULT_AT, options={"HIDDEN"})
+    loose_size: FloatProperty(min=0.02, max=1.0, default=DEFAULT_OBJECT_SIZE, options={"HIDDEN"})
+    loose_turn: FloatProperty(default=0.0, options={"HIDDEN"})
+    loose_prompt: StringProperty(options={"HIDDEN"})
+    loose_texture_path: StringProperty(options={"HIDDEN"} | PATH, subtype="FILE_PATH")
     scene_type: EnumProperty(name="Scene type", items=SCENE_TYPES, default="auto")
     camera_from: EnumProperty(name="Camera", items=CAMERA_SOURCES, default="estimate",
                               description="Where the photo's camera comes from when the scene's camera does not "
@@ -114,8 +204,9 @@ class SceneFitSettings(bpy.types.PropertyGroup):
                                                      "resets it) rather than the artist's (kept)")
     # Style
     mode: EnumProperty(name="Mode", items=MODES, default="scene")
-    prompt: StringProperty(name="Prompt", description="How the asset should look, e.g. 'a leather sofa, "
-                                                      "soggy and stained with mud'")
+    prompt: StringProperty(name="Prompt", **_per_asset("prompt"),
+                           description="How the asset should look, e.g. 'a leather sofa, soggy and stained with mud' "
+                                       "(each asset keeps its own)")
     object_prompt: StringProperty(name="Object", description="What the asset is, e.g. 'a leather sofa' (edit mode, "
                                                              "and for Write Prompt)")
     scene_prompt: StringProperty(name="Scene", description="What the scene is, e.g. 'a swamp': Write Prompt turns the "
@@ -125,6 +216,8 @@ class SceneFitSettings(bpy.types.PropertyGroup):
     instruction: StringProperty(name="Instruction", description="Edit mode: e.g. 'add dust to the sofa'")
     # Quality and output
     preset: EnumProperty(name="Preset", items=PRESETS, default="balanced")
+    guidance: EnumProperty(name="Adaptation", items=GUIDANCE, default="auto",
+                           description="Whether Run All restyles the texture with Stable Diffusion 2")
     output_dir: StringProperty(name="Output", subtype="DIR_PATH", options=PATH, default="//scenefit/",
                                description="Each run writes a new folder here ('//' is the .blend's folder)")
     # Results (datablocks SceneFit made, and the originals they replaced)
@@ -135,13 +228,19 @@ class SceneFitSettings(bpy.types.PropertyGroup):
     result_slots: CollectionProperty(name="Result slots", type=SceneFitSlot)
     result_world: PointerProperty(name="SceneFit World", type=bpy.types.World)
     original_world: PointerProperty(name="Original World", type=bpy.types.World)
-    texture_path: StringProperty(name="Neural texture", subtype="FILE_PATH", options=PATH,
-                                 description="texture.pt of the last conversion or adaptation (adapt starts here)")
+    texture_path: StringProperty(name="Neural texture", subtype="FILE_PATH", options=PATH, **_per_asset("texture_path"),
+                                 description="texture.pt of the active asset's last conversion or adaptation (adapt "
+                                             "and Bake Asset start here)")
     light_path: StringProperty(name="Light", subtype="FILE_PATH", options=PATH, description="light.exr of the last estimate")
     composite_path: StringProperty(name="Composite", subtype="FILE_PATH", options=PATH, description="The last composite render")
 
 
-classes = (SceneFitSlot, SceneFitSettings)
+def _photo_chosen(settings) -> None:
+    """The photo's size read once when it is chosen (the panel draws from that, never from the file)."""
+    remember_photo_size(settings.photo_path)
+
+
+classes = (SceneFitSlot, SceneFitRun, SceneFitAsset, SceneFitSettings)
 
 
 def _import_marks() -> dict:
@@ -159,6 +258,7 @@ def register() -> None:
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.scenefit = PointerProperty(type=SceneFitSettings)
+    bpy.types.Object.scenefit_asset = PointerProperty(type=SceneFitAsset)
     for name, prop in _import_marks().items():
         setattr(bpy.types.Object, name, prop)
 
@@ -166,6 +266,7 @@ def register() -> None:
 def unregister() -> None:
     for name in _import_marks():
         delattr(bpy.types.Object, name)
+    del bpy.types.Object.scenefit_asset
     del bpy.types.Scene.scenefit
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

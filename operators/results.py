@@ -14,7 +14,7 @@ from bpy.props import EnumProperty
 from ..blender_io import write_result_material
 from ..blender_io.world import assign_world, world_from_hdr
 from ..core.base.errors import InputError
-from .common import (ORIGINAL_PROPERTY, TAG, artists_material_behind, keep_image, needs_setting,
+from .common import (ORIGINAL_PROPERTY, TAG, artists_material_behind, asset_state, keep_image, needs_setting,
                      recorded_originals, relative_if_saved)
 
 
@@ -41,7 +41,8 @@ def apply_result_material(context, object_name: str, result: dict, stage: str):
 
 
 def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: list[dict], result: dict, stage: str,
-                           names: list[str] | None = None, wraps: list | None = None) -> list:
+                           names: list[str] | None = None, wraps: list | None = None, digest: str = "",
+                           owner: str = "") -> list:
     """A new material per material of the asset, from maps[i], in every slot slots[i] names ((object name,
     slot number) pairs); returns them. What each slot held is kept as its original (a fake user, so saving
     keeps it) for the Results section's switch; a slot that held an earlier SceneFit result keeps the
@@ -93,8 +94,10 @@ def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: li
     settings.result_material, settings.result_object = made[0], records[0][0]
     if records[0][2] is not None:
         settings.original_material = records[0][2]
-    if result.get("texture"):
-        settings.texture_path = relative_if_saved(result["texture"])
+    if result.get("texture"):   # the asset's own texture, and the mesh it was made for (digest)
+        state = asset_state(bpy.data.objects.get(owner) or records[0][0])   # the asset's (its active object's)
+        state.texture_path = relative_if_saved(result["texture"])
+        state.texture_mesh = digest
     return made
 
 
@@ -110,9 +113,12 @@ def result_targets(layout) -> dict:
     (as ever: '<object> SceneFit <stage>'; else each is named after the artist's material it replaces)."""
     from ..blender_io.material import material_wrap
 
+    from .common import asset_digest
+
     one = len(layout.objects) == 1 and len(layout.materials) == 1
     return {"objects": list(layout.objects), "slots": [list(pairs) for pairs in layout.slots],
-            "wraps": [material_wrap(m) for m in layout.artists], "name": layout.objects[0] if one else None}
+            "wraps": [material_wrap(m) for m in layout.artists], "name": layout.objects[0] if one else None,
+            "digest": asset_digest(layout), "owner": layout.name}
 
 
 def apply_layout_results(context, targets: dict, result: dict, stage: str) -> list:
@@ -121,7 +127,8 @@ def apply_layout_results(context, targets: dict, result: dict, stage: str) -> li
     per_material = result.get("material_maps") or [result["maps"]]
     maps = [{k: m[k] for k in ("base_color", "roughness", "metallic")} for m in per_material]
     names = [f"{targets['name']} SceneFit {stage}"] if targets["name"] else None
-    return apply_result_materials(context, targets["slots"], maps, result, stage, names=names, wraps=targets["wraps"])
+    return apply_result_materials(context, targets["slots"], maps, result, stage, names=names, wraps=targets["wraps"],
+                                  digest=targets.get("digest", ""), owner=targets.get("owner", ""))
 
 
 def apply_result_world(context, hdr_path: str, stage: str = "light"):

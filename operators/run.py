@@ -14,19 +14,17 @@ from . import work
 from .adapt import adapt_seconds_here
 from .common import (OnMesh, depth_model_preference, last_finished_run, model_settings, photo_path, photo_view,
                      run_folder, scene_layout)
-from .jobs import JobOperator
+from .jobs import CHOICES, CostFirst, JobOperator
+from .properties import GUIDANCE
 from .results import (apply_composite_image, apply_layout_results, apply_result_world, materials_words,
                       result_targets)
 
 if TYPE_CHECKING:
     from ..panels.quality import LocalWork
 
-GUIDANCE = (("auto", "Auto", "Adapt with Stable Diffusion 2 when its weights are on this machine"),
-            ("sd2", "Stable Diffusion 2", "Adapt; fail when the weights are missing"),
-            ("none", "None", "No adaptation: compose the converted texture"))
 
 
-class SCENEFIT_OT_run(OnMesh, JobOperator):
+class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
     """Run the whole pipeline on the asset as `scenefit run` does (the selected objects, or the active one with
     all its materials): convert, estimate the photo's light, adapt (when the diffusion models are here and
     there is a prompt), compose; then apply the results to every material slot"""
@@ -35,17 +33,28 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
     bl_label = "Run All"
     job_name = "run"
     runs_remotely = True
+    records_runs = True
+    skippable = True
+    choice: EnumProperty(name="Choice", items=CHOICES, default="ask", options={"SKIP_SAVE", "HIDDEN"})
 
-    guidance: EnumProperty(name="Guidance", items=GUIDANCE, default="auto", options={"SKIP_SAVE"})
+    # Scripts may set it; else the Run section's Adaptation (properties.SceneFitSettings.guidance).
+    guidance: EnumProperty(name="Guidance", items=GUIDANCE, default="auto", options={"SKIP_SAVE", "HIDDEN"})
+
+    def chosen_guidance(self, context) -> str:
+        if self.choice == "skip":
+            return "none"
+        return self.guidance if self.properties.is_property_set("guidance") else context.scene.scenefit.guidance
 
     def prepare(self, context):
         settings = context.scene.scenefit
         photo, layout = scene_layout(self, context, "Run All fits the asset into the photo; use Convert and "
                                                     "Adapt for the other modes")
         mesh, maps, materials = layout.fitting(context)
-        guidance, why_no_adapt = self.guidance, ""
+        guidance, why_no_adapt = self.chosen_guidance(context), ""
         if not settings.prompt.strip() and guidance == "auto":
             guidance, why_no_adapt = "none", "the Style section has no prompt"
+        if self.choice == "skip":
+            why_no_adapt = "skipped at the question before the run (Skip adaptation)"
         # The artist's camera when it shows the photo, else the panel's or the estimate; the Cycles set-up
         # takes the camera the run used, so both composites agree.
         view = photo_view(context, photo, [bpy.data.objects[name] for name in layout.objects])
@@ -54,7 +63,7 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         out = run_folder(context, "run", layout.name)
         earlier = last_finished_run(out)   # its stages with this run's settings and inputs are reused
         # The run's settings as one frozen RunConfig, built here on the main thread, as `scenefit run` builds it.
-        config = work.view_config(view, preset=settings.preset, prompt=settings.prompt, guidance_type=guidance,
+        config = work.view_config(view, preset=self.run_preset(context), prompt=settings.prompt, guidance_type=guidance,
                                   models=model_settings(context)[0], scene_type=settings.scene_type,
                                   depth_model=depth_model_preference(context))
         return work.run, {"mesh": mesh, "maps": maps, "photo": str(photo), "placement": tuple(view["placement"]),
@@ -62,14 +71,24 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
                           "out": str(out), "reuse_from": str(earlier) if earlier else None}
 
     def long_local_work(self, context) -> LocalWork | None:
-        if self.guidance == "none" or (self.guidance == "auto" and not context.scene.scenefit.prompt.strip()):
+        guidance = self.chosen_guidance(context)
+        if guidance == "none" or (guidance == "auto" and not context.scene.scenefit.prompt.strip()):
             return None   # no adaptation: the rest takes seconds
+        # "auto" adapts only when the job finds the weights (on disk, or downloaded with online access): the
+        # question is asked without looking (a look imports torch and may touch the network).
         return adapt_seconds_here(context)
+
+    def long_work_warning(self, context) -> str | None:
+        from .jobs import long_work_warning
+
+        return long_work_warning(context, "Run All's adaptation (when Stable Diffusion 2's weights are found)",
+                                 self.long_local_work(context), self.runs_remotely)
 
     def apply(self, context, result) -> str:
         mats = apply_layout_results(context, self._layout, result, result["stage"])
         world = apply_result_world(context, result["hdr"], "run")
         image = apply_composite_image(context, result["composite"], "run")
+        self._made = {"world": world, "composite": image}   # the run history's (operators/history.py)
         lines = [materials_words(mats),
                  f"World '{world.name}'", f"composite image '{image.name}'"]
         settings = context.scene.scenefit
@@ -79,8 +98,9 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
             objects = [bpy.data.objects[name] for name in self._layout["objects"] if name in bpy.data.objects]
             made = setup_composite(context, objects, photo_path(context),
                                    tuple(settings.placement), settings.size, PhotoCamera(**result["camera"]),
-                                   scene_camera=scene_camera)
-            lines.append(f"Cycles composite set up through '{made['camera'].name}' (F12 renders it)")
+                                   scene_camera=scene_camera, world=world)
+            lines.append(f"Cycles composite set up in the scene '{made['scene'].name}' through "
+                         f"'{made['camera'].name}' (F12 there renders it)")
         except SceneFitError as error:
             lines.append(f"no Cycles composite: {error}")
         reused = [name for name, status in result["stages"].items() if status == "reused"]

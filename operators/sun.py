@@ -93,13 +93,20 @@ def set_sun(op, context, azimuth: float, elevation: float, source: str, uncertai
     return {"FINISHED"}
 
 
-def _check_camera(context, why: str = "Pick Sun clicks in the photo seen through the camera") -> None:
-    """The photo behind the scene camera: SceneFit's, or the artist's that shows it."""
+def _check_camera(context, why: str = "Pick Sun clicks in the photo seen through the camera"):
+    """The camera that shows the photo: the artist's scene camera when it does, else SceneFit's (made by
+    Match Camera or Pick Placement, in SceneFit's composite scene)."""
+    from ..blender_io.compose import CAMERA_NAME
+
     photo = photo_path(context)
-    camera = context.scene.camera
-    if camera is None or (TAG not in camera and artist_camera(context, photo)[0] is None):
+    camera = artist_camera(context, photo)[0]
+    if camera is None:
+        ours = bpy.data.objects.get(CAMERA_NAME)
+        camera = ours if ours is not None and TAG in ours else None
+    if camera is None:
         raise InputError(f"{why}: set it up first (Match Camera or Pick Placement), or make the camera that shows "
                          "the photo active.")
+    return camera
 
 
 def sun_lamp(context):
@@ -128,10 +135,10 @@ class SCENEFIT_OT_sun_from_lamp(bpy.types.Operator):
         from ..core.stages.light.shadow_hint import sun_deg_from_direction
 
         try:
-            _check_camera(context, "The sun's azimuth is measured from the camera that shows the photo")
+            camera = _check_camera(context, "The sun's azimuth is measured from the camera that shows the photo")
             lamp = sun_lamp(context)
             towards = lamp.matrix_world.to_3x3() @ Vector((0.0, 0.0, 1.0))   # a Sun light shines along its -Z
-            forward = context.scene.camera.matrix_world.to_3x3() @ Vector((0.0, 0.0, -1.0))
+            forward = camera.matrix_world.to_3x3() @ Vector((0.0, 0.0, -1.0))
             azimuth, elevation = sun_deg_from_direction(tuple(towards), tuple(forward))
             if elevation <= 0.0:
                 raise InputError(f"The Sun light '{lamp.name}' shines from {elevation:.0f}° below the horizon; turn "

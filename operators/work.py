@@ -12,13 +12,14 @@ from pathlib import Path
 from ..core.base.progress import ProgressCallback
 
 
-def written_whole(out: str, write) -> dict:
+def written_whole(out: str, write, resume: bool = False) -> dict:
     """Run `write(folder)` into the hidden sibling of `out` and swap it in whole when it returns
-    (core.output_folder: a cancelled or failed run leaves nothing); the paths it returns are moved
+    (core.output_folder: a cancelled or failed run leaves nothing, except with `resume`: a stage that
+    checkpoints keeps its sibling, which the same `out` continues from); the paths it returns are moved
     along to `out`."""
     from ..core.base.output_folder import output_folder
 
-    with output_folder(out) as staging:
+    with output_folder(out, resume=resume) as staging:
         result = write(staging)
     target = str(Path(out).absolute())
     return _moved(_moved(result, str(staging.resolve()), target), str(staging), target)
@@ -178,7 +179,7 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
                 "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
                 "iterations": result.iterations, "material_maps": per_material}
 
-    return written_whole(data["out"], write)
+    return written_whole(data["out"], write, resume=True)   # a cancelled adaptation keeps its checkpoint
 
 
 def view_config(view: dict, **settings):

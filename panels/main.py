@@ -101,6 +101,7 @@ class SCENEFIT_PT_scene(_Subsection, bpy.types.Panel):
         row.prop(settings, "placement", text="")
         row.operator("scenefit.pick_placement", text="", icon="RESTRICT_SELECT_OFF")
         col.prop(settings, "size")
+        col.prop(settings, "turn")
         col.prop(settings, "scene_type")
         draw_camera(settings, context, self.layout.column(align=True))
         draw_choice(self.layout.column(align=True), settings, "sun_from", "Sun", "scenefit.pick_sun", "LIGHT_SUN",
@@ -113,7 +114,7 @@ def draw_camera(settings, context, col) -> None:
     camera = None
     if settings.photo_path:
         try:
-            camera = artist_camera(context, Path(bpy.path.abspath(settings.photo_path)))[0]
+            camera = artist_camera(context, Path(bpy.path.abspath(settings.photo_path)), read=False)[0]
         except SceneFitError:
             camera = None
     if camera is not None:
@@ -168,6 +169,7 @@ class SCENEFIT_PT_run(_Subsection, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
+        layout.prop(context.scene.scenefit, "guidance")
         layout.operator("scenefit.run", icon="PLAY")
         col = layout.column(align=True)
         col.operator("scenefit.convert", icon="TEXTURE")
@@ -208,9 +210,53 @@ class SCENEFIT_PT_results(_Subsection, bpy.types.Panel):
                 layout.prop(mapping.inputs["Rotation"], "default_value", index=2, text="Light rotation")
             if background is not None:
                 layout.prop(background.inputs["Strength"], "default_value", text="Light strength")
+        draw_runs(layout, context)
 
 
-classes = (SCENEFIT_PT_main, SCENEFIT_PT_asset, SCENEFIT_PT_scene, SCENEFIT_PT_style, SCENEFIT_PT_quality,
+RUN_STATE_ICONS = {"finished": "CHECKMARK", "cancelled": "PAUSE", "failed": "ERROR"}
+
+
+class SCENEFIT_UL_runs(bpy.types.UIList):
+    """The active asset's runs: the composite's thumbnail, what made it, when, and how it ended."""
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_property, index=0, flt_flag=0):
+        preview = item.composite.preview if item.composite is not None else None   # made when the run ended
+        row = layout.row(align=True)
+        if preview is not None:
+            row.label(text="", icon_value=preview.icon_id)
+        else:
+            row.label(text="", icon="RENDER_RESULT")
+        state = "cancelled, resumable" if item.state == "cancelled" and item.stage == "adapt" else item.state
+        row.label(text=f"{item.stage} · {item.preset} · {item.when}")
+        row.label(text=state, icon=RUN_STATE_ICONS.get(item.state, "NONE"))
+
+
+def draw_runs(layout, context) -> None:
+    """The active asset's run history and what can be done with the chosen run."""
+    from ..operators.common import asset_owner
+
+    owner = asset_owner(context.scene)
+    if owner is None or not owner.scenefit_asset.runs:
+        return
+    state = owner.scenefit_asset
+    layout.label(text=f"Runs of '{owner.name}'")
+    layout.template_list("SCENEFIT_UL_runs", "", state, "runs", state, "run_index", rows=3)
+    if not 0 <= state.run_index < len(state.runs):
+        return
+    run = state.runs[state.run_index]
+    if run.prompt:
+        layout.label(text=run.prompt, icon="TEXT")
+    row = layout.row(align=True)
+    row.operator("scenefit.apply_run", text="Apply", icon="CHECKMARK").index = state.run_index
+    row.operator("scenefit.open_run_folder", text="", icon="FILE_FOLDER").index = state.run_index
+    if run.stage == "adapt" and run.state != "finished":
+        row.operator("scenefit.resume_run", text="Resume", icon="PLAY").index = state.run_index
+    row.operator("scenefit.delete_run", text="", icon="X").index = state.run_index
+    op = row.operator("scenefit.delete_run", text="", icon="TRASH")
+    op.index, op.folder = state.run_index, True
+
+
+classes = (SCENEFIT_UL_runs, SCENEFIT_PT_main, SCENEFIT_PT_asset, SCENEFIT_PT_scene, SCENEFIT_PT_style, SCENEFIT_PT_quality,
            SCENEFIT_PT_run, SCENEFIT_PT_results)
 
 __all__ = ["classes", "dependency_sentence", "missing_modules"]

@@ -173,7 +173,8 @@ s = bpy.context.scene.scenefit
 out["placement"] = list(s.placement)
 out["materials"] = [first_convert, s.result_material.name, obj.active_material.name]
 out["world"] = bpy.context.scene.world.name
-out["camera"] = bpy.context.scene.camera.name
+out["camera"] = [bpy.context.scene.camera.name if bpy.context.scene.camera else None,
+                 bpy.data.scenes["SceneFit Composite"].camera.name]
 out["shadow_catcher"] = bpy.data.objects["SceneFit Shadow Catcher"].is_shadow_catcher
 out["paths"] = {"composite": s.composite_path, "texture": s.texture_path, "light": s.light_path}
 out["run_folders"] = sorted(str(p.relative_to(tmp)) for p in (tmp / "scenefit").glob("*/*"))
@@ -332,7 +333,7 @@ out["run_composite"] = [composite is not None and composite.get("scenefit"), lis
 run_dir = Path(bpy.path.abspath(s.composite_path)).parent.parent
 out["run_report"] = json.loads((run_dir / "report.json").read_text())
 out["run_folder_siblings"] = sorted(p.name for p in run_dir.parent.iterdir())
-out["run_all"] = [bpy.context.scene.camera.name if bpy.context.scene.camera else None,
+out["run_all"] = [bpy.data.scenes["SceneFit Composite"].camera.name,
                   bpy.context.scene.world.name, bpy.context.active_object.active_material.name]
 made = [i for i in bpy.data.images if "scenefit" in i]
 out["unsaved_packed"] = [(i.name, i.packed_file is not None) for i in made]
@@ -406,7 +407,7 @@ def test_every_operator_finishes_with_exec_default(blender, operated):
     first, last, active = out["materials"]
     assert first != last and active == last and "adapt" in last
     assert out["after_revert"] == "AssetMaterial" and out["world_after_revert"] == "User World"
-    assert out["world"] == "SceneFit Light" and out["camera"] == "SceneFit Camera" and out["shadow_catcher"]
+    assert out["world"] == "SceneFit Light" and out["camera"] == [None, "SceneFit Camera"] and out["shadow_catcher"]
     kinds = sorted(Path(f).name.split("-")[0] for f in out["run_folders"])
     assert kinds == ["adapt", "compose", "convert", "convert", "light", "mitsuba"], out["run_folders"]
     # Constant channels stay constants: the sphere's roughness 0.5 and metallic 0 are socket values, not images.

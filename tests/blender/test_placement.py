@@ -200,7 +200,7 @@ def test_blender_shows_a_sideways_stored_photo_upright_like_the_pipeline(tmp_pat
         ensure_photo_camera(bpy.context.scene, image, 57.3, -11.5)
         bpy.ops.wm.save_as_mainfile(filepath={str(tmp_path / 'scene.blend')!r})
         bpy.ops.wm.open_mainfile(filepath={str(tmp_path / 'scene.blend')!r})
-        cam = bpy.context.scene.camera.data
+        cam = bpy.data.scenes["SceneFit Composite"].camera.data
         shown = cam.background_images[0].image
         w, h = shown.size
         px = np.array(shown.pixels[:]).reshape(h, w, 4)[::-1, :, :3]

@@ -162,7 +162,8 @@ def test_match_camera_makes_scenefits_camera_from_the_photos_lines(run_py, tmp_p
         settings = bpy.context.scene.scenefit
         settings.photo_path = {str(photo)!r}
         out = {{"ops": [list(bpy.ops.scenefit.match_camera()), list(bpy.ops.scenefit.match_camera())]}}
-        cam = bpy.context.scene.camera
+        out["scene_camera"] = bpy.context.scene.camera.name if bpy.context.scene.camera else None   # the artist's stays (none)
+        cam = bpy.data.scenes["SceneFit Composite"].camera
         out["panel"] = [settings.camera_from, math.degrees(settings.fov), math.degrees(settings.pitch),
                         math.degrees(settings.roll)]
         out["camera"] = [cam.name, math.degrees(cam.data.angle_x), *camera_pose(np.array(cam.matrix_world))[1:]]
@@ -190,7 +191,7 @@ def test_match_camera_makes_scenefits_camera_from_the_photos_lines(run_py, tmp_p
     assert (fov, pitch, roll) == (pytest.approx(65.0, abs=2.0), pytest.approx(-14.0, abs=0.5),
                                   pytest.approx(3.0, abs=0.3))
     name, cam_fov, cam_pitch, cam_roll = out["camera"]
-    assert name == "SceneFit Camera"
+    assert name == "SceneFit Camera" and out["scene_camera"] is None
     assert (cam_fov, cam_pitch, cam_roll) == (pytest.approx(fov, abs=1e-3), pytest.approx(pitch, abs=1e-3),
                                               pytest.approx(roll, abs=1e-3))
     # The photo behind, the lines in front: one overlay however often the camera is matched.

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from ...base.decision import Decision, decisions_to_dict
-from ...base.errors import InputError
+from ...base.errors import Cancelled, InputError
 from ...guidance.critics import ScoreCritic
 from ...guidance.injection import ReferenceInjector
 from ...guidance.lora import LoraCritic, camera_condition
@@ -157,6 +157,7 @@ class AdaptSystem:
         self.optimizer = torch.optim.Adam(texture.parameters(), lr=config.lr_texture)
         self.my_views = views_of_rank(config.views_per_step, rank, world.choice)
         self.checkpoint_path = checkpoint_path
+        self.cancel: threading.Event | None = None   # seen between views (one rank), set by step
         self.history: list[dict] = []
         self.start = 0
         self.last_image: torch.Tensor | None = None
@@ -205,11 +206,17 @@ class AdaptSystem:
 
     # -- step --------------------------------------------------------------------------------------
 
-    def step(self, iteration: int) -> dict:
-        """One optimisation step: this rank's views, gradients summed over ranks, Adam on texture and ε_ψ."""
+    def step(self, iteration: int, cancel: threading.Event | None = None) -> dict:
+        """One optimisation step: this rank's views, gradients summed over ranks, Adam on texture and ε_ψ.
+        Alone (one rank), a cancel is seen between views, so a step on a CPU stops within seconds; the
+        half-made step is dropped (the texture and optimiser change only at its end)."""
         self.timer.restart()
         self.optimizer.zero_grad(set_to_none=True)
-        per_view = [self.train_view(self.sample(iteration, j)) for j in self.my_views]
+        self.cancel = cancel if self.world.choice == 1 else None   # (ranks must finish a step together)
+        per_view = []
+        for j in self.my_views:
+            check_cancel(self.cancel)
+            per_view.append(self.train_view(self.sample(iteration, j)))
         params = list(self.texture.parameters())
         for p in params:
             if p.grad is not None:
@@ -243,11 +250,13 @@ class AdaptSystem:
                                               view.stage.spp, view.render_seed + 1)
             rendered.append(torch.cat([placed.rgb, placed.alpha], dim=-1))
         self.timer.lap("render")
+        check_cancel(self.cancel)   # between the render and the critics (the view's heaviest half)
         # Gradients stop at the leaves, so the two halves of backward can be timed.
         leaves = [r.detach().to(self.device).requires_grad_(True) for r in rendered]
         share = 0.5 * weight if view.crops else weight   # local and global weighed equally
         image, latents, metrics = self._local(view, leaves[0], constants, share)
         if view.crops:
+            check_cancel(self.cancel)   # between the local and the global half of a view
             self._global(view, leaves[1], placed, constants, share, metrics)
         grads = [torch.nan_to_num(leaf.grad if leaf.grad is not None else torch.zeros_like(leaf),
                                   nan=0.0, posinf=0.0, neginf=0.0).to(r.device) for leaf, r in zip(leaves, rendered)]
@@ -318,6 +327,19 @@ class AdaptSystem:
                 done % config.checkpoint_every == 0 or done == config.iterations):
             save_checkpoint(self.checkpoint_path, done, config, self.texture, self.optimizer, self.critics.lora,
                             self.history)
+
+    def checkpointed(self, done: int) -> bool:
+        """Whether after_step wrote a checkpoint after `done` iterations."""
+        every = self.config.checkpoint_every
+        return self.checkpoint_path is not None and bool(every) and (done % every == 0 or done == self.config.iterations)
+
+    def keep(self, done: int, saved: int) -> None:
+        """A cancelled run's checkpoint at its last finished step (when newer than the last one written), so
+        a resume continues the step count from there (rank 0; one rank only: others may be mid-step)."""
+        if self.rank != 0 or self.world.choice != 1 or self.checkpoint_path is None or done <= saved:
+            return
+        save_checkpoint(self.checkpoint_path, done, self.config, self.texture, self.optimizer, self.critics.lora,
+                        self.history)
 
     def finish(self) -> AdaptResult:
         return AdaptResult(texture=self.texture, iterations=self.config.iterations,
@@ -443,10 +465,17 @@ def adapt_texture(inputs: AdaptInputs, config: AdaptConfig, progress: ProgressCa
     resumes from it.
     """
     system = AdaptSystem.build(inputs, config, models, checkpoint_dir, cache_constants)
-    for iteration in range(system.start, config.iterations):
-        check_cancel(cancel)
-        metrics = system.step(iteration)
-        system.after_step(iteration, metrics, progress)
+    done = saved = system.start
+    try:
+        for iteration in range(system.start, config.iterations):
+            check_cancel(cancel)
+            metrics = system.step(iteration, cancel)
+            done = iteration + 1
+            system.after_step(iteration, metrics, progress)
+            saved = done if system.checkpointed(done) else saved
+    except Cancelled:
+        system.keep(done, saved)   # the steps made so far, for a resume
+        raise
     return system.finish()
 
 
