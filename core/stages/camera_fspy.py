@@ -2,7 +2,6 @@
 sentence naming the file (core/stages/camera.py turns it into the photo's camera estimate)."""
 from __future__ import annotations
 
-import json
 import math
 import struct
 from pathlib import Path
@@ -10,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..base.errors import InputError
+from ..base.untrusted import parse_json
 from ..scene.camera import pitch_roll_from_camera_to_world
 
 FSPY_MAGIC = b"fspy"
@@ -38,9 +38,9 @@ def read_fspy(path: str | Path) -> dict:
                          f"bytes of state and image, the file holds {len(data) - FSPY_HEADER.size}); save it again "
                          "in fSpy.")
     try:
-        state = json.loads(data[FSPY_HEADER.size:FSPY_HEADER.size + state_len].decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise InputError(f"The fSpy project '{path}' has a damaged state ({error}); save it again in fSpy.") from None
+        state = parse_json(data[FSPY_HEADER.size:FSPY_HEADER.size + state_len], f"the fSpy project '{path}': its state")
+    except InputError as error:
+        raise InputError(f"{error} Save it again in fSpy.") from None
     return _fspy_camera(state, path)
 
 

@@ -63,7 +63,7 @@ def test_fspy_project_round_trips_to_the_same_camera(tmp_path, fov, pitch, roll)
     (b"PK\x03\x04" + bytes(40), "not an fSpy project"),
     (struct.pack("<4sIII", b"fspy", 2, 2, 0) + b"{}", "version 2"),
     (struct.pack("<4sIII", b"fspy", 1, 5000, 10) + b"{}", "truncated"),
-    (struct.pack("<4sIII", b"fspy", 1, 9, 0) + b"{not json", "damaged state"),
+    (struct.pack("<4sIII", b"fspy", 1, 9, 0) + b"{not json", "its state is not valid JSON"),
     (struct.pack("<4sIII", b"fspy", 1, 26, 0) + b'{"cameraParameters": null}', "no solved camera"),
 ])
 def test_a_damaged_fspy_file_is_one_sentence(tmp_path, content, words, capsys):
