@@ -286,12 +286,18 @@ def test_the_command_line_and_the_panel_share_one_set_of_defaults():
         assert defaults["object_size"] == DEFAULT_OBJECT_SIZE
     # The panel's properties name the same constants (read from the source: registering them needs bpy).
     source = (Path(run_module.__file__).parents[2] / "operators" / "properties.py").read_text()
-    settings = next(node for node in ast.walk(ast.parse(source))
-                    if isinstance(node, ast.ClassDef) and node.name == "SceneFitSettings")
-    default_of = {node.target.id: next((k.value for k in node.annotation.keywords if k.arg == "default"), None)
-                  for node in settings.body if isinstance(node, ast.AnnAssign) and isinstance(node.annotation, ast.Call)}
-    assert ast.unparse(default_of["placement"]) == "DEFAULT_AT"
-    assert ast.unparse(default_of["size"]) == "DEFAULT_OBJECT_SIZE"
+    classes = {node.name: node for node in ast.walk(ast.parse(source)) if isinstance(node, ast.ClassDef)}
+
+    def default_of(class_name: str) -> dict:
+        return {node.target.id: next((k.value for k in node.annotation.keywords if k.arg == "default"), None)
+                for node in classes[class_name].body
+                if isinstance(node, ast.AnnAssign) and isinstance(node.annotation, ast.Call)}
+
+    # Each asset's own placement and size, and the scene's for a selection that is no asset yet.
+    asset, scene = default_of("SceneFitAsset"), default_of("SceneFitSettings")
+    for at, size in ((asset["placement"], asset["size"]), (scene["loose_placement"], scene["loose_size"])):
+        assert ast.unparse(at) == "DEFAULT_AT"
+        assert ast.unparse(size) == "DEFAULT_OBJECT_SIZE"
 
 
 def test_every_stage_config_defaults_to_the_balanced_preset_or_says_why_not():
