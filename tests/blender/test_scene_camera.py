@@ -79,15 +79,18 @@ def test_run_all_composes_through_the_artists_matched_camera(run_py, tmp_path):
         world = scene.world
         rotation = world.node_tree.nodes["SceneFit Rotation"].inputs["Rotation"].default_value[2]
 
-        # Cycles through the same camera: the asset alone over a transparent film.
+        # Cycles through the same camera, in SceneFit's composite scene (the artist's scene keeps its own
+        # engine and film): the asset alone over a transparent film.
+        composite = bpy.data.scenes["SceneFit Composite"]
         bpy.data.objects["SceneFit Shadow Catcher"].hide_render = True
-        scene.render.use_compositing = False
-        scene.cycles.samples = 4
-        scene.render.image_settings.file_format, scene.render.image_settings.color_mode = "PNG", "RGBA"
-        scene.render.filepath = {str(mask)!r}
-        bpy.ops.render.render(write_still=True)
+        composite.render.use_compositing = False
+        composite.cycles.samples = 4
+        composite.render.image_settings.file_format, composite.render.image_settings.color_mode = "PNG", "RGBA"
+        composite.render.filepath = {str(mask)!r}
+        bpy.ops.render.render(write_still=True, scene=composite.name)
         print("JSON" + json.dumps({{
-            "ops": ops, "camera": scene.camera.name, "moved": float(np.abs(np.array(cam.matrix_world) - np.array(before)).max()),
+            "ops": ops, "camera": scene.camera.name, "composite_camera": composite.camera.name,
+            "composite_engine": composite.render.engine, "moved": float(np.abs(np.array(cam.matrix_world) - np.array(before)).max()),
             "ours": [o.name for o in bpy.data.objects if o.type == "CAMERA" and "scenefit" in o],
             "yaw": yaw, "pitch": pitch, "fov": math.degrees(data.angle_x), "world_rotation": rotation,
             "light": report["stages"]["light"]["report"]["decisions"],
@@ -96,6 +99,7 @@ def test_run_all_composes_through_the_artists_matched_camera(run_py, tmp_path):
     out = printed_json(proc)
     assert out["ops"] == ["FINISHED"]
     assert out["camera"] == "Camera" and out["moved"] < 1e-6 and out["ours"] == []
+    assert out["composite_camera"] == "Camera" and out["composite_engine"] == "CYCLES"
     camera, used = out["light"]["camera"], out["light"]["photo_camera"]
     assert camera["source"] == "blender" and any("'Camera'" in note for note in camera["notes"])
     assert (used["fov_deg"], used["pitch_deg"], used["roll_deg"]) == pytest.approx((out["fov"], out["pitch"], 3.0),
