@@ -11,7 +11,6 @@ Runtime state lives on the WindowManager (never saved into the .blend); the live
 from __future__ import annotations
 
 import atexit
-import sys
 import time
 from typing import TYPE_CHECKING
 
@@ -22,6 +21,7 @@ from bpy.props import BoolProperty, FloatProperty, PointerProperty, StringProper
 
 from ..workers import background
 from ..core.base.errors import SceneFitError
+from ..core.base.names import RUN_ORDER
 from ..core.base.progress import TerminalProgress
 from .common import check_dependencies
 
@@ -68,7 +68,7 @@ def show_preview(image: np.ndarray) -> None:
 
 
 def whole_run(state: background.JobState, stages: tuple[str, ...]) -> tuple[float, str] | None:
-    """(fraction, words) of a job that runs several stages in order (Run All: core.pipeline.run.STAGES) as one
+    """(fraction, words) of a job that runs several stages in order (Run All: core.base.names.RUN_ORDER) as one
     bar, stage k of n, from the stage now running and its own fraction; None for a one-stage job."""
     if state.name != "run" or state.finished:
         return None
@@ -91,11 +91,7 @@ def update_runtime(context, state: background.JobState, cancelling: bool = False
     rt.job, rt.stage = state.name, state.stage
     rt.status = f"{state.name}: cancelling…" if cancelling and not state.finished else state.status_line()
     rt.progress = state.fraction
-    # The pipeline's stage order, once the job has imported it (importing it here would import torch on the
-    # main thread).
-    pipeline = sys.modules.get(__package__.rpartition(".")[0] + ".core.pipeline.run")
-    stages = getattr(pipeline, "STAGES", None)   # (None while the job thread is still importing it)
-    whole = None if cancelling or stages is None else whole_run(state, stages)
+    whole = None if cancelling else whole_run(state, RUN_ORDER)
     if whole is not None:
         rt.progress = whole[0]
         rt.status = f"{state.name}: {whole[1]}, {state.status_line().split(': ', 1)[-1]}"

@@ -139,6 +139,9 @@ classes = {"run": (run.SCENEFIT_OT_run, {"choice": "ask", "guidance": "auto"}),
                                                "choice": "ask"}), "convert": (convert.SCENEFIT_OT_convert, {"iterations": 0}),
            "light": (light.SCENEFIT_OT_estimate_light, {})}
 settings.preset = "balanced"   # (at Draft, Draft is not offered)
+# The panel an artist clicks in has been drawn: its expected time (the Quality section, the cost beside Run
+# All) has read the preset tables once, as every redraw does, before any click.
+import_module(MODULE + ".panels.quality").expected_line("adapt", settings.preset)
 for name in roots:
     select(name)
     settings.prompt = "a mossy figure"   # (each asset its own)
@@ -159,7 +162,7 @@ for name in roots:
         bpy.context.window_manager.scenefit_runtime.running = False
 # Run All's one bar: stage k of n from the stage running and its own fraction
 JobState = background.JobState
-stages = ("convert", "light", "adapt", "compose", "bake")
+stages = import_module(MODULE + ".core.base.names").RUN_ORDER   # what update_runtime gives it
 out["whole_run"] = [jobs.whole_run(JobState("run", stage="adapt", step=3, total=4, fraction=0.75), stages),
                     jobs.whole_run(JobState("run", stage="run", step=1, total=5, fraction=0.2), stages),
                     jobs.whole_run(JobState("adapt", stage="adapt", step=3, total=4, fraction=0.75), stages)]
@@ -336,8 +339,9 @@ def _step(session, code: str, name: str) -> dict:
 def test_a_click_returns_at_once_without_network_or_models(session):
     step = _step(session, INVOKE, "invoke")
     adapt, between, alone = step["whole_run"]
-    assert adapt == [pytest.approx((2 + 0.75) / 5), "stage 3 of 5 (adapt)"]   # one bar for the whole run
-    assert between == [pytest.approx(1 / 5), "stage 2 of 5 (light)"] and alone is None
+    # one bar for the whole run: convert, camera, light, adapt, compose, bake
+    assert adapt == [pytest.approx((3 + 0.75) / 6), "stage 4 of 6 (adapt)"]
+    assert between == [pytest.approx(1 / 6), "stage 2 of 6 (camera)"] and alone is None
     out = step["invoke"]
     assert out["touched"] == [], out["touched"]          # no torch, hub, socket or image file at the click
     assert all(r == ["RUNNING_MODAL"] for r in out["results"].values()), out["results"]
