@@ -274,8 +274,18 @@ def _light_terms(scene, si, normal, shading, wi, options: GBufferOptions, rng, e
             weights += weight
         specular[:, k] = _visible_share(seen, total, np.maximum(weights, 1e-12))
         if prefiltered is not None:
-            specular[:, k] *= prefiltered.specular(mirror, roughness)
+            specular[:, k] *= prefiltered.specular(_dominant(normal, mirror, roughness), roughness)
     return diffuse, specular
+
+
+def _dominant(normal: np.ndarray, mirror: np.ndarray, roughness: float) -> np.ndarray:
+    """Where a rough lobe's light mostly comes from: the mirror direction pulled towards the normal
+    (Lagarde and de Rousiers 2014, "Moving Frostbite to PBR", the specular dominant direction)."""
+    alpha = roughness ** 2
+    smooth = 1.0 - alpha
+    pull = smooth * (np.sqrt(smooth) + alpha)
+    d = normal + pull * (mirror - normal)
+    return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
 
 
 def _visible_share(seen: np.ndarray, total: np.ndarray, count) -> np.ndarray:
@@ -328,7 +338,8 @@ class PrefilteredEnvironment:
             a2 = max(1e-3, roughness ** 2) ** 2
             cos = (self.nodes @ self.dirs.T)
             cos_h2 = ((1 + cos) / 2).clamp(min=0)
-            weight = cos.clamp(min=0) / (cos_h2 * (a2 - 1) + 1) ** 2
+            # D(h) (n.l) / (4 v.h) with n = v = the mirror direction: the lobe over directions l.
+            weight = cos.clamp(min=0) / (cos_h2 * (a2 - 1) + 1) ** 2 / cos_h2.sqrt().clamp(min=1e-6)
             self._specular[roughness] = ((weight @ self.radiance) / (weight @ self.solid).clamp(min=1e-30)
                                          ).numpy().reshape(*self.grid, 3)
         return self._specular[roughness]

@@ -29,6 +29,18 @@ from ..base.errors import InputError
 from ..data.mesh import Mesh
 
 RENDERER_TYPES = ("loop", "path")
+MAX_CACHED_VIEWS = 256   # adapt's bank: 48 views, plus a global view per turn and render size
+
+
+def asset_renderer(renderer_type: str, mesh: Mesh, maps_shape: tuple[int, int], envmap: np.ndarray,
+                   options: SceneOptions = SceneOptions(), normal_map: np.ndarray | None = None):
+    """The renderer `renderer_type` names: "loop" (this module) or "path" (Mitsuba's path tracing, with
+    the integrator `options` names); both render(camera, base_color, roughness, metallic, envmap, spp, seed)."""
+    if renderer_type not in RENDERER_TYPES:
+        raise InputError(f"The renderer must be one of {RENDERER_TYPES}, got {renderer_type!r}.")
+    if renderer_type == "loop":
+        return LoopRenderer(mesh, maps_shape, envmap, options, normal_map=normal_map)
+    return AssetRenderer(mesh, maps_shape, envmap, options, normal_map=normal_map)
 
 
 class LoopRenderer:
@@ -61,9 +73,14 @@ class LoopRenderer:
         self.tracer.params.update()
         traced = trace_gbuffer(self.tracer, camera, self.gbuffer_options, self.normal_map, env, constant)
         colour = torch.from_numpy(env.reshape(-1, 3)[0].copy()) if constant else torch.ones(3)
+        if len(self._cache) >= MAX_CACHED_VIEWS:   # views that never come back (a random light) must not pile up
+            self._cache.pop(next(iter(self._cache)))
         self._cache[key] = (traced, colour)
         self.traced += 1
         return self._cache[key]
+
+    def render_aovs(self, camera) -> dict[str, np.ndarray]:
+        return self.tracer.render_aovs(camera)
 
     def cached_bytes(self) -> int:
         return sum(g.nbytes() for g, _ in self._cache.values())

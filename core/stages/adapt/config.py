@@ -17,6 +17,7 @@ from ...base.errors import InputError
 from ...guidance.critics import CriticConfig
 from ...guidance.models import ModelConfig
 from ...guidance.weighting import ANNEAL_TYPES, NORMAL_WEIGHT_TYPES
+from ...render.loop_renderer import RENDERER_TYPES
 from ...texture.neural_texture import BALANCED_TEXTURE, NeuralTextureConfig
 
 MODE_TYPES = ("scene", "generate", "edit")
@@ -63,6 +64,8 @@ class AdaptConfig:
     view_variants: scene and edit modes draw from a fixed bank of views x view_variants views (each
     with its λ_FOV, background and crops), so what depends only on a view is computed once.
     shadow_type / shadow_spp: the global views' shadow, made by the compose stage's floor passes.
+    renderer: "loop" (G-buffers traced once per view, shaded in torch: core/render/loop_renderer.py) or
+    "path" (the paper's differentiable path tracing, Mitsuba `prb`, every step).
     """
 
     mode_type: str = "scene"
@@ -96,6 +99,7 @@ class AdaptConfig:
     normal_weight_type: str = "cosine"
     timestep_anneal_type: str = "linear"
     max_depth: int = 3
+    renderer: str = "loop"                        # "loop" | "path" (core/render/loop_renderer.RENDERER_TYPES)
     texture: NeuralTextureConfig = BALANCED_TEXTURE   # "generate": the fresh texture (resolution: the raster's)
     seed: int = 0
     preview_every: int = 50
@@ -142,6 +146,7 @@ class AdaptConfig:
         need(self.shadow_spp >= 1, f"shadow_spp must be at least 1, got {self.shadow_spp}.")
         need(self.ambient > 0, "ambient radiance must be positive.")
         need(self.max_depth >= 2, "max_depth must be at least 2.")
+        need(self.renderer in RENDERER_TYPES, f"renderer must be one of {RENDERER_TYPES}, got {self.renderer!r}.")
         need(self.preview_every >= 0 and self.checkpoint_every >= 0, "preview/checkpoint intervals must be >= 0.")
         need(isinstance(self.texture, NeuralTextureConfig),
              f"texture must be a NeuralTextureConfig, got {type(self.texture).__name__}.")
