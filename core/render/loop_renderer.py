@@ -24,11 +24,10 @@ import torch
 
 from .brdf_tables import brdf_tables
 from .gbuffer import LEVELS, GBuffer, GBufferOptions, trace_gbuffer
-from .renderer import AssetRenderer, RenderOutput, SceneOptions, pad_envmap, ENVMAP_KEY
+from .renderer import ENVMAP_KEY, RENDERER_TYPES, AssetRenderer, RenderOutput, SceneOptions, pad_envmap
 from ..base.errors import InputError
 from ..data.mesh import Mesh
 
-RENDERER_TYPES = ("loop", "path")
 MAX_CACHED_VIEWS = 256   # adapt's bank: 48 views, plus a global view per turn and render size
 
 

@@ -17,7 +17,7 @@ from ...base.errors import InputError
 from ...guidance.critics import CriticConfig
 from ...guidance.models import ModelConfig
 from ...guidance.weighting import ANNEAL_TYPES, NORMAL_WEIGHT_TYPES
-from ...render.loop_renderer import RENDERER_TYPES
+from ...render.renderer import RENDERER_TYPES
 from ...texture.neural_texture import BALANCED_TEXTURE, NeuralTextureConfig
 
 MODE_TYPES = ("scene", "generate", "edit")
@@ -99,7 +99,7 @@ class AdaptConfig:
     normal_weight_type: str = "cosine"
     timestep_anneal_type: str = "linear"
     max_depth: int = 3
-    renderer: str = "loop"                        # "loop" | "path" (core/render/loop_renderer.RENDERER_TYPES)
+    renderer: str = "loop"                        # "loop" | "path" (core/render/renderer.RENDERER_TYPES)
     texture: NeuralTextureConfig = BALANCED_TEXTURE   # "generate": the fresh texture (resolution: the raster's)
     seed: int = 0
     preview_every: int = 50
