@@ -34,14 +34,14 @@ PHASES = (("constant work", "constants"), ("render", "render"), ("VAE encode", "
 
 
 def _run(base: Path, inpaint: Path, model_resolution: int, stages, iterations: int, views_type: str,
-         dtype_type: str = "auto", views_per_step: int = 1, warmup: int = 2) -> dict:
+         dtype_type: str = "auto", views_per_step: int = 1, warmup: int = 2, renderer: str = "loop") -> dict:
     mesh = uv_sphere(segments=32, rings=16)
     raster = rasterize_uv(mesh, 128)
     texture = NeuralTexture(stage_config("texture", "draft", resolution=128), seed=0)
     photo = np.random.default_rng(0).uniform(0.2, 0.8, (96, 128, 3)).astype(np.float32)
     config = AdaptConfig(prompt="a mossy sphere in a swamp", iterations=iterations, stages=stages,
                          model_resolution=model_resolution, views_type=views_type, checkpoint_every=0, preview_every=0,
-                         views_per_step=views_per_step,
+                         views_per_step=views_per_step, renderer=renderer,
                          models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint), dtype_type=dtype_type))
     inputs = AdaptInputs(mesh=mesh, raster=raster, texture=texture, photo=photo, placement=Placement((0.5, 0.6), 0.5))
     if warmup:
@@ -85,10 +85,11 @@ def bench_adapt(quick: bool = False) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         base, inpaint = build_tiny_pair(tmp)
         for size, views, per_step in ((32, "local", 1), (64, "local+global", 1), (64, "local+global", 4)):
-            stages = (StageSpec(1.0, size, 8, (500, 990)),)
-            row = _run(base, inpaint, size, stages, iterations, views, views_per_step=per_step)
-            row["setup"] = f"tiny models, CPU, {size} px, {views}, {per_step} view(s)/step, 2 crops"
-            rows.append(row)
+            for renderer in ("loop", "path"):
+                stages = (StageSpec(1.0, size, 8, (500, 990)),)
+                row = _run(base, inpaint, size, stages, iterations, views, views_per_step=per_step, renderer=renderer)
+                row["setup"] = f"tiny models, CPU, {size} px, {views}, {per_step} view(s)/step, 2 crops, {renderer} renderer"
+                rows.append(row)
         if torch.cuda.is_available():
             sd2 = build_tiny_sd(Path(tmp) / "sd2-sized", 4, **SD2_UNET)
             sd2_inpaint = build_tiny_sd(Path(tmp) / "sd2-sized-inpaint", 9, seed=1, **SD2_UNET)
@@ -106,6 +107,67 @@ def bench_adapt(quick: bool = False) -> dict:
     markdown = "\n".join(["Adapt stage, seconds per iteration by phase (after a warm-up run):", "", head, rule,
                           *body, "", note])
     return {"rows": rows, "markdown": markdown}
+
+
+def final_step_renderers(iterations: int = 2, spp_cut: int = 8) -> dict:
+    """The final preset's step (512 px renders, 4 views, local + global with 2 crops) with tiny models,
+    rendered by the loop renderer and by path tracing, in one process so the two are compared under the
+    same load: seconds per step by phase once each view's G-buffer is traced (a one-view bank, so every
+    step after the first meets it again). Path tracing runs at spp / `spp_cut` and its render phases are
+    projected to the preset's spp (rendering is linear in samples); the loop renderer's do not depend on spp."""
+    from dataclasses import replace
+
+    from scenefit.core.stages.adapt import AdaptSystem
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        base, inpaint = build_tiny_pair(tmp)
+        mesh = uv_sphere(segments=64, rings=32)
+        photo = np.random.default_rng(0).uniform(0.2, 0.8, (480, 640, 3)).astype(np.float32)
+        for renderer in ("loop", "path"):
+            config = stage_config("adapt", "final", prompt="a mossy sphere in a swamp", checkpoint_every=0,
+                                  preview_every=0, views=1, view_variants=1, model_resolution=64, renderer=renderer,
+                                  models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint)))
+            cut = spp_cut if renderer == "path" else 1
+            config = replace(config, stages=tuple(replace(s, spp=max(1, s.spp // cut)) for s in config.stages))
+            inputs = AdaptInputs(mesh=mesh, raster=rasterize_uv(mesh, 512), photo=photo,
+                                 placement=Placement((0.5, 0.6), 0.5),
+                                 texture=NeuralTexture(stage_config("texture", "final", resolution=512), seed=0))
+            system = AdaptSystem.build(inputs, config)
+            t = time.perf_counter()
+            system.step(0)                                   # cold: the view's constant work and G-buffers
+            cold = time.perf_counter() - t
+            before = dict(system.timer.totals)
+            for i in range(iterations):
+                system.step(i + 1)
+            per = {k: (v - before.get(k, 0.0)) / iterations for k, v in system.timer.totals.items()}
+            render = (per.get("render", 0.0) + per.get("render_backward", 0.0)) * cut
+            rows.append({"renderer": renderer, "render_size": config.stages[0].render_size,
+                         "spp": config.stages[0].spp * cut, "measured_spp": config.stages[0].spp,
+                         "views_per_step": config.views_per_step, "phases": per, "cold_step_s": cold,
+                         "render_and_backward_s": render,
+                         "step_s": sum(per.values()) + render - per.get("render", 0.0) - per.get("render_backward", 0.0),
+                         "gbuffer_mb": (system.renderer.cached_bytes() + system.global_scene.renderer.cached_bytes())
+                         / 2 ** 20 if renderer == "loop" else None, "load": machine_load()})
+    lines = ["# The final preset's step: loop renderer vs path tracing (tiny models, this CPU)", "",
+             "`python benchmarks/bench_adapt.py --renderers`: final (512 px, 128 spp, 4 views/step, local + global, "
+             "2 crops), tiny random-weight models at 64 px, one process (same load for both). Path tracing measured at "
+             f"128 / {spp_cut} spp, its render phases projected x{spp_cut}. Seconds per step once the view's G-buffers "
+             "are traced ('cold step': the first, which traces them).", "",
+             "| renderer | render s | render backward s | render + backward s | step s | cold step s | G-buffers MB | load |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        cut = r["spp"] // r["measured_spp"] if r["renderer"] == "path" else 1
+        lines.append(f"| {r['renderer']} | {r['phases'].get('render', 0) * cut:.2f} | "
+                     f"{r['phases'].get('render_backward', 0) * cut:.2f} | {r['render_and_backward_s']:.2f} | "
+                     f"{r['step_s']:.2f} | {r['cold_step_s']:.1f} | "
+                     f"{'' if r['gbuffer_mb'] is None else round(r['gbuffer_mb'])} | "
+                     f"{r['load'].split('load average:')[-1].strip()} |")
+    loop, path = rows
+    lines += ["", f"Render + backward per step: loop {loop['render_and_backward_s']:.2f} s, path "
+              f"{path['render_and_backward_s']:.1f} s: {path['render_and_backward_s'] / loop['render_and_backward_s']:.0f}x "
+              "less with the loop renderer, measured under the same load."]
+    return {"rows": rows, "markdown": "\n".join(lines) + "\n"}
 
 
 def sd2_row(models: Path, preset: str, dtype_type: str, cache: bool) -> dict:
@@ -212,7 +274,14 @@ def sd2_bench(presets: tuple[str, ...] = ("draft", "balanced")) -> Path:
 
 
 if __name__ == "__main__":
-    if "--sd2-bench" in sys.argv:   # python benchmarks/bench_adapt.py --sd2-bench (-> results/adapt_sd2)
+    if "--renderers" in sys.argv:   # python benchmarks/bench_adapt.py --renderers (-> results/adapt_renderers)
+        from results_files import write_results
+
+        out = final_step_renderers()
+        print(write_results(Path(__file__).resolve().parent / "results", "adapt_renderers", out["markdown"],
+                            {"rows": out["rows"]}))
+        print(out["markdown"])
+    elif "--sd2-bench" in sys.argv:   # python benchmarks/bench_adapt.py --sd2-bench (-> results/adapt_sd2)
         print(sd2_bench())
     elif "--sd2-table" in sys.argv:   # python benchmarks/bench_adapt.py --sd2-table ROW.json ... (-> results/adapt_sd2)
         import json
