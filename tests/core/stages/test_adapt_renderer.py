@@ -1,5 +1,6 @@
-"""The adapt stage's renderer choice: the loop renderer by default (each bank view's G-buffer traced once,
-then shaded every step), the paper's path tracing when asked; the report says which ran and why."""
+"""The adapt stage's renderer choice: by default ("auto") the loop renderer where it was measured to agree
+with path tracing (the global views), path tracing elsewhere; "loop" (each bank view's G-buffer traced
+once, then shaded every step) or "path" everywhere when asked; the report says which ran and why."""
 from __future__ import annotations
 
 import numpy as np
@@ -39,10 +40,21 @@ def config(models, **overrides) -> AdaptConfig:
     return AdaptConfig(**values)
 
 
-def test_the_loop_renderer_is_the_default_and_traces_each_view_once(setup):
+def test_auto_uses_the_loop_renderer_where_it_agrees(setup):
     inputs, models = setup
-    cfg = config(models)
-    assert cfg.renderer == "loop"
+    cfg = config(models, iterations=1)
+    assert cfg.renderer == "auto" and (cfg.renderer_of("local"), cfg.renderer_of("global")) == ("path", "loop")
+    system = AdaptSystem.build(inputs, cfg)
+    system.step(0)
+    assert not isinstance(system.renderer, LoopRenderer) and isinstance(system.global_scene.renderer, LoopRenderer)
+    decision = system.decisions()["renderer"]
+    assert decision.choice["local"] == "path" and decision.choice["global"] == "loop"
+    assert "35 dB" in decision.reason and "loop_render.md" in decision.reason
+
+
+def test_the_loop_renderer_traces_each_view_once(setup):
+    inputs, models = setup
+    cfg = config(models, renderer="loop")
     system = AdaptSystem.build(inputs, cfg)
     start = [p.detach().clone() for p in system.texture.parameters()]
     for i in range(cfg.iterations):
@@ -50,7 +62,7 @@ def test_the_loop_renderer_is_the_default_and_traces_each_view_once(setup):
     assert isinstance(system.renderer, LoopRenderer) and isinstance(system.global_scene.renderer, LoopRenderer)
     decision = system.decisions()["renderer"]
     # Three steps over a bank of two views: at most two local and two global G-buffers, the rest reused.
-    assert decision.choice["type"] == "loop" and decision.choice["traced"] <= 4
+    assert decision.choice["local"] == decision.choice["global"] == "loop" and decision.choice["traced"] <= 4
     assert decision.choice["reused"] >= 2 and "traced once" in decision.reason
     assert any((a - b).abs().max() > 0 for a, b in zip(start, system.texture.parameters()))
     assert all(torch.isfinite(p).all() for p in system.texture.parameters())
@@ -60,7 +72,8 @@ def test_path_tracing_when_asked_and_a_bad_name_refused(setup):
     inputs, models = setup
     system = AdaptSystem.build(inputs, config(models, renderer="path", iterations=1))
     system.step(0)
-    assert system.decisions()["renderer"].choice == "path"
+    choice = system.decisions()["renderer"].choice
+    assert choice["local"] == choice["global"] == "path" and "traced" not in choice
     assert not isinstance(system.renderer, LoopRenderer)
     with pytest.raises(InputError, match="renderer"):
         config(models, renderer="raster")
@@ -72,7 +85,7 @@ def test_loop_and_path_steps_point_the_same_way(setup):
     own noise does not hide the direction)."""
     inputs, models = setup
     grads = {}
-    for renderer in ("loop", "path"):
+    for renderer in ("loop", "path"):   # local views only: "auto" would path-trace both
         system = AdaptSystem.build(inputs, config(models, renderer=renderer, views_type="local",
                                                   stages=(StageSpec(1.0, 32, 256, (500, 990)),)))
         system.optimizer.zero_grad(set_to_none=True)
