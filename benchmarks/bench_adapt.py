@@ -170,6 +170,60 @@ def final_step_renderers(iterations: int = 2, spp_cut: int = 8) -> dict:
     return {"rows": rows, "markdown": "\n".join(lines) + "\n"}
 
 
+def render_phases(size: int = 512, views: int = 4, spp: int = 128, spp_cut: int = 8, repeats: int = 2) -> dict:
+    """The final preset's render phases alone (no models): per step, `views` local views and as many global
+    ones (2 x `views` renders of `size` px, as a final step renders), forward and backward to a 512²
+    texture, by the loop renderer (G-buffers traced once, before timing) and by path tracing (Mitsuba
+    prb at spp / `spp_cut`, projected to `spp`: rendering is linear in samples), in one process."""
+    from scenefit.core.render.loop_renderer import LoopRenderer
+    from scenefit.core.render.orbit_camera import Camera
+    from scenefit.core.render.renderer import AssetRenderer, SceneOptions
+
+    mesh = uv_sphere(segments=64, rings=32)
+    env = np.ones((16, 32, 3), np.float32)
+    cameras = [Camera(360.0 * i / (2 * views), 15.0, 1.1, width=size, height=size) for i in range(2 * views)]
+    options = SceneOptions(max_depth=3, hide_emitters=True)
+    maps = torch.rand(512, 512, 5, generator=torch.Generator().manual_seed(0)).requires_grad_(True)
+    rows = []
+    for name in ("loop", "path"):
+        renderer = (LoopRenderer(mesh, (512, 512), env, options) if name == "loop"
+                    else AssetRenderer(mesh, (512, 512), env, options))
+        t = time.perf_counter()
+        if name == "loop":
+            for camera in cameras:
+                renderer.gbuffer(camera, torch.from_numpy(env))
+        trace = time.perf_counter() - t
+        cut = spp_cut if name == "path" else 1
+        forward = backward = 0.0
+        for _ in range(repeats):
+            for camera in cameras:
+                t = time.perf_counter()
+                out = renderer.render(camera, maps[..., 0:3], maps[..., 3:4], maps[..., 4:5], torch.from_numpy(env),
+                                      spp=spp // cut, seed=1)
+                t1 = time.perf_counter()
+                out.rgb.sum().backward()
+                forward, backward = forward + t1 - t, backward + time.perf_counter() - t1
+        rows.append({"renderer": name, "renders_per_step": len(cameras), "size": size, "spp": spp,
+                     "measured_spp": spp // cut, "render_s": forward / repeats * cut,
+                     "render_backward_s": backward / repeats * cut, "trace_s": trace, "load": machine_load()})
+    loop, path = rows
+    lines = ["# The final preset's render phases: loop renderer vs path tracing (this CPU)", "",
+             f"`python benchmarks/bench_adapt.py --render-phases`: per step {2 * views} renders of {size} px (4 local "
+             "views and 4 global ones, as final renders), forward and backward to a 512² texture, one process (same "
+             f"load for both). Path tracing (prb, max_depth 3) measured at {spp // spp_cut} spp and projected to {spp}; "
+             "the loop renderer's G-buffers traced once before timing ('trace s', once per view for a whole run).", "",
+             "| renderer | render s / step | render backward s / step | render + backward s / step | trace s (once) | load |",
+             "|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['renderer']} | {r['render_s']:.2f} | {r['render_backward_s']:.2f} | "
+                     f"{r['render_s'] + r['render_backward_s']:.2f} | {r['trace_s']:.1f} | "
+                     f"{r['load'].split('load average:')[-1].strip()} |")
+    ratio = (path["render_s"] + path["render_backward_s"]) / (loop["render_s"] + loop["render_backward_s"])
+    lines += ["", f"The loop renderer's render + backward per step is {ratio:.0f}x less than path tracing's under the "
+              "same load."]
+    return {"rows": rows, "markdown": "\n".join(lines) + "\n"}
+
+
 def sd2_row(models: Path, preset: str, dtype_type: str, cache: bool) -> dict:
     """A preset's scene-mode step with SD2-sized random models (devtools SD2_SIZED, built in
     `models`/sd2-base and sd2-inpaint): step 0 run twice, the first with the view's constant work
@@ -274,7 +328,14 @@ def sd2_bench(presets: tuple[str, ...] = ("draft", "balanced")) -> Path:
 
 
 if __name__ == "__main__":
-    if "--renderers" in sys.argv:   # python benchmarks/bench_adapt.py --renderers (-> results/adapt_renderers)
+    if "--render-phases" in sys.argv:   # python benchmarks/bench_adapt.py --render-phases (-> results/render_phases)
+        from results_files import write_results
+
+        out = render_phases()
+        print(write_results(Path(__file__).resolve().parent / "results", "render_phases", out["markdown"],
+                            {"rows": out["rows"]}))
+        print(out["markdown"])
+    elif "--renderers" in sys.argv:   # python benchmarks/bench_adapt.py --renderers (-> results/adapt_renderers)
         from results_files import write_results
 
         out = final_step_renderers()
