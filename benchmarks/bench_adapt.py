@@ -34,7 +34,7 @@ PHASES = (("constant work", "constants"), ("render", "render"), ("VAE encode", "
 
 
 def _run(base: Path, inpaint: Path, model_resolution: int, stages, iterations: int, views_type: str,
-         dtype_type: str = "auto", views_per_step: int = 1, warmup: int = 2, renderer: str = "loop") -> dict:
+         dtype_type: str = "auto", views_per_step: int = 1, warmup: int = 2, renderer: str = "path") -> dict:
     mesh = uv_sphere(segments=32, rings=16)
     raster = rasterize_uv(mesh, 128)
     texture = NeuralTexture(stage_config("texture", "draft", resolution=128), seed=0)
