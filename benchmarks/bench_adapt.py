@@ -170,18 +170,21 @@ def final_step_renderers(iterations: int = 2, spp_cut: int = 8) -> dict:
     return {"rows": rows, "markdown": "\n".join(lines) + "\n"}
 
 
-def render_phases(size: int = 512, views: int = 4, spp: int = 128, spp_cut: int = 8, repeats: int = 2) -> dict:
+def render_phases(size: int = 512, views: int = 4, spp: int = 128, spp_cut: int = 8, repeats: int = 2,
+                  measured: int = 1) -> dict:
     """The final preset's render phases alone (no models): per step, `views` local views and as many global
     ones (2 x `views` renders of `size` px, as a final step renders), forward and backward to a 512²
     texture, by the loop renderer (G-buffers traced once, before timing) and by path tracing (Mitsuba
-    prb at spp / `spp_cut`, projected to `spp`: rendering is linear in samples), in one process."""
+    prb at spp / `spp_cut`, projected to `spp`: rendering is linear in samples), in one process.
+    `measured` of the renders are timed and the step projected from them (each render costs the same)."""
     from scenefit.core.render.loop_renderer import LoopRenderer
     from scenefit.core.render.orbit_camera import Camera
     from scenefit.core.render.renderer import AssetRenderer, SceneOptions
 
     mesh = uv_sphere(segments=64, rings=32)
     env = np.ones((16, 32, 3), np.float32)
-    cameras = [Camera(360.0 * i / (2 * views), 15.0, 1.1, width=size, height=size) for i in range(2 * views)]
+    cameras = [Camera(360.0 * i / (2 * views), 15.0, 1.1, width=size, height=size) for i in range(measured)]
+    per_step = 2 * views / measured
     options = SceneOptions(max_depth=3, hide_emitters=True)
     maps = torch.rand(512, 512, 5, generator=torch.Generator().manual_seed(0)).requires_grad_(True)
     rows = []
@@ -193,25 +196,26 @@ def render_phases(size: int = 512, views: int = 4, spp: int = 128, spp_cut: int 
             for camera in cameras:
                 renderer.gbuffer(camera, torch.from_numpy(env))
         trace = time.perf_counter() - t
-        cut = spp_cut if name == "path" else 1
+        cut = (spp_cut if name == "path" else 1) * per_step
         forward = backward = 0.0
         for _ in range(repeats):
             for camera in cameras:
                 t = time.perf_counter()
                 out = renderer.render(camera, maps[..., 0:3], maps[..., 3:4], maps[..., 4:5], torch.from_numpy(env),
-                                      spp=spp // cut, seed=1)
+                                      spp=spp // spp_cut, seed=1)
                 t1 = time.perf_counter()
                 out.rgb.sum().backward()
                 forward, backward = forward + t1 - t, backward + time.perf_counter() - t1
-        rows.append({"renderer": name, "renders_per_step": len(cameras), "size": size, "spp": spp,
-                     "measured_spp": spp // cut, "render_s": forward / repeats * cut,
+        rows.append({"renderer": name, "renders_per_step": 2 * views, "measured_renders": measured, "size": size,
+                     "spp": spp, "measured_spp": spp // spp_cut if name == "path" else None, "render_s": forward / repeats * cut,
                      "render_backward_s": backward / repeats * cut, "trace_s": trace, "load": machine_load()})
     loop, path = rows
     lines = ["# The final preset's render phases: loop renderer vs path tracing (this CPU)", "",
              f"`python benchmarks/bench_adapt.py --render-phases`: per step {2 * views} renders of {size} px (4 local "
              "views and 4 global ones, as final renders), forward and backward to a 512² texture, one process (same "
              f"load for both). Path tracing (prb, max_depth 3) measured at {spp // spp_cut} spp and projected to {spp}; "
-             "the loop renderer's G-buffers traced once before timing ('trace s', once per view for a whole run).", "",
+             "the loop renderer's G-buffers traced once before timing ('trace s', once per view for a whole run). "
+             f"{measured} of the {2 * views} renders timed ({repeats} times), the step projected from it.", "",
              "| renderer | render s / step | render backward s / step | render + backward s / step | trace s (once) | load |",
              "|---|---|---|---|---|---|"]
     for r in rows:
