@@ -34,14 +34,14 @@ PHASES = (("constant work", "constants"), ("render", "render"), ("VAE encode", "
 
 
 def _run(base: Path, inpaint: Path, model_resolution: int, stages, iterations: int, views_type: str,
-         dtype_type: str = "auto", views_per_step: int = 1, warmup: int = 2) -> dict:
+         dtype_type: str = "auto", views_per_step: int = 1, warmup: int = 2, renderer: str = "path") -> dict:
     mesh = uv_sphere(segments=32, rings=16)
     raster = rasterize_uv(mesh, 128)
     texture = NeuralTexture(stage_config("texture", "draft", resolution=128), seed=0)
     photo = np.random.default_rng(0).uniform(0.2, 0.8, (96, 128, 3)).astype(np.float32)
     config = AdaptConfig(prompt="a mossy sphere in a swamp", iterations=iterations, stages=stages,
                          model_resolution=model_resolution, views_type=views_type, checkpoint_every=0, preview_every=0,
-                         views_per_step=views_per_step,
+                         views_per_step=views_per_step, renderer=renderer,
                          models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint), dtype_type=dtype_type))
     inputs = AdaptInputs(mesh=mesh, raster=raster, texture=texture, photo=photo, placement=Placement((0.5, 0.6), 0.5))
     if warmup:
@@ -85,10 +85,11 @@ def bench_adapt(quick: bool = False) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         base, inpaint = build_tiny_pair(tmp)
         for size, views, per_step in ((32, "local", 1), (64, "local+global", 1), (64, "local+global", 4)):
-            stages = (StageSpec(1.0, size, 8, (500, 990)),)
-            row = _run(base, inpaint, size, stages, iterations, views, views_per_step=per_step)
-            row["setup"] = f"tiny models, CPU, {size} px, {views}, {per_step} view(s)/step, 2 crops"
-            rows.append(row)
+            for renderer in ("loop", "path"):
+                stages = (StageSpec(1.0, size, 8, (500, 990)),)
+                row = _run(base, inpaint, size, stages, iterations, views, views_per_step=per_step, renderer=renderer)
+                row["setup"] = f"tiny models, CPU, {size} px, {views}, {per_step} view(s)/step, 2 crops, {renderer} renderer"
+                rows.append(row)
         if torch.cuda.is_available():
             sd2 = build_tiny_sd(Path(tmp) / "sd2-sized", 4, **SD2_UNET)
             sd2_inpaint = build_tiny_sd(Path(tmp) / "sd2-sized-inpaint", 9, seed=1, **SD2_UNET)
@@ -106,6 +107,125 @@ def bench_adapt(quick: bool = False) -> dict:
     markdown = "\n".join(["Adapt stage, seconds per iteration by phase (after a warm-up run):", "", head, rule,
                           *body, "", note])
     return {"rows": rows, "markdown": markdown}
+
+
+def final_step_renderers(iterations: int = 2, spp_cut: int = 8) -> dict:
+    """The final preset's step (512 px renders, 4 views, local + global with 2 crops) with tiny models,
+    rendered by the loop renderer and by path tracing, in one process so the two are compared under the
+    same load: seconds per step by phase once each view's G-buffer is traced (a one-view bank, so every
+    step after the first meets it again). Path tracing runs at spp / `spp_cut` and its render phases are
+    projected to the preset's spp (rendering is linear in samples); the loop renderer's do not depend on spp."""
+    from dataclasses import replace
+
+    from scenefit.core.stages.adapt import AdaptSystem
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        base, inpaint = build_tiny_pair(tmp)
+        mesh = uv_sphere(segments=64, rings=32)
+        photo = np.random.default_rng(0).uniform(0.2, 0.8, (480, 640, 3)).astype(np.float32)
+        for renderer in ("loop", "path"):
+            config = stage_config("adapt", "final", prompt="a mossy sphere in a swamp", checkpoint_every=0,
+                                  preview_every=0, views=1, view_variants=1, model_resolution=64, renderer=renderer,
+                                  models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint)))
+            cut = spp_cut if renderer == "path" else 1
+            config = replace(config, stages=tuple(replace(s, spp=max(1, s.spp // cut)) for s in config.stages))
+            inputs = AdaptInputs(mesh=mesh, raster=rasterize_uv(mesh, 512), photo=photo,
+                                 placement=Placement((0.5, 0.6), 0.5),
+                                 texture=NeuralTexture(stage_config("texture", "final", resolution=512), seed=0))
+            system = AdaptSystem.build(inputs, config)
+            t = time.perf_counter()
+            system.step(0)                                   # cold: the view's constant work and G-buffers
+            cold = time.perf_counter() - t
+            before = dict(system.timer.totals)
+            for i in range(iterations):
+                system.step(i + 1)
+            per = {k: (v - before.get(k, 0.0)) / iterations for k, v in system.timer.totals.items()}
+            render = (per.get("render", 0.0) + per.get("render_backward", 0.0)) * cut
+            rows.append({"renderer": renderer, "render_size": config.stages[0].render_size,
+                         "spp": config.stages[0].spp * cut, "measured_spp": config.stages[0].spp,
+                         "views_per_step": config.views_per_step, "phases": per, "cold_step_s": cold,
+                         "render_and_backward_s": render,
+                         "step_s": sum(per.values()) + render - per.get("render", 0.0) - per.get("render_backward", 0.0),
+                         "gbuffer_mb": (system.renderer.cached_bytes() + system.global_scene.renderer.cached_bytes())
+                         / 2 ** 20 if renderer == "loop" else None, "load": machine_load()})
+    lines = ["# The final preset's step: loop renderer vs path tracing (tiny models, this CPU)", "",
+             "`python benchmarks/bench_adapt.py --renderers`: final (512 px, 128 spp, 4 views/step, local + global, "
+             "2 crops), tiny random-weight models at 64 px, one process (same load for both). Path tracing measured at "
+             f"128 / {spp_cut} spp, its render phases projected x{spp_cut}. Seconds per step once the view's G-buffers "
+             "are traced ('cold step': the first, which traces them).", "",
+             "| renderer | render s | render backward s | render + backward s | step s | cold step s | G-buffers MB | load |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        cut = r["spp"] // r["measured_spp"] if r["renderer"] == "path" else 1
+        lines.append(f"| {r['renderer']} | {r['phases'].get('render', 0) * cut:.2f} | "
+                     f"{r['phases'].get('render_backward', 0) * cut:.2f} | {r['render_and_backward_s']:.2f} | "
+                     f"{r['step_s']:.2f} | {r['cold_step_s']:.1f} | "
+                     f"{'' if r['gbuffer_mb'] is None else round(r['gbuffer_mb'])} | "
+                     f"{r['load'].split('load average:')[-1].strip()} |")
+    loop, path = rows
+    lines += ["", f"Render + backward per step: loop {loop['render_and_backward_s']:.2f} s, path "
+              f"{path['render_and_backward_s']:.1f} s: {path['render_and_backward_s'] / loop['render_and_backward_s']:.0f}x "
+              "less with the loop renderer, measured under the same load."]
+    return {"rows": rows, "markdown": "\n".join(lines) + "\n"}
+
+
+def render_phases(size: int = 512, views: int = 4, spp: int = 128, spp_cut: int = 8, repeats: int = 2,
+                  measured: int = 1) -> dict:
+    """The final preset's render phases alone (no models): per step, `views` local views and as many global
+    ones (2 x `views` renders of `size` px, as a final step renders), forward and backward to a 512²
+    texture, by the loop renderer (G-buffers traced once, before timing) and by path tracing (Mitsuba
+    prb at spp / `spp_cut`, projected to `spp`: rendering is linear in samples), in one process.
+    `measured` of the renders are timed and the step projected from them (each render costs the same)."""
+    from scenefit.core.render.loop_renderer import LoopRenderer
+    from scenefit.core.render.orbit_camera import Camera
+    from scenefit.core.render.renderer import AssetRenderer, SceneOptions
+
+    mesh = uv_sphere(segments=64, rings=32)
+    env = np.ones((16, 32, 3), np.float32)
+    cameras = [Camera(360.0 * i / (2 * views), 15.0, 1.1, width=size, height=size) for i in range(measured)]
+    per_step = 2 * views / measured
+    options = SceneOptions(max_depth=3, hide_emitters=True)
+    maps = torch.rand(512, 512, 5, generator=torch.Generator().manual_seed(0)).requires_grad_(True)
+    rows = []
+    for name in ("loop", "path"):
+        renderer = (LoopRenderer(mesh, (512, 512), env, options) if name == "loop"
+                    else AssetRenderer(mesh, (512, 512), env, options))
+        t = time.perf_counter()
+        if name == "loop":
+            for camera in cameras:
+                renderer.gbuffer(camera, torch.from_numpy(env))
+        trace = time.perf_counter() - t
+        cut = (spp_cut if name == "path" else 1) * per_step
+        forward = backward = 0.0
+        for _ in range(repeats):
+            for camera in cameras:
+                t = time.perf_counter()
+                out = renderer.render(camera, maps[..., 0:3], maps[..., 3:4], maps[..., 4:5], torch.from_numpy(env),
+                                      spp=spp // spp_cut, seed=1)
+                t1 = time.perf_counter()
+                out.rgb.sum().backward()
+                forward, backward = forward + t1 - t, backward + time.perf_counter() - t1
+        rows.append({"renderer": name, "renders_per_step": 2 * views, "measured_renders": measured, "size": size,
+                     "spp": spp, "measured_spp": spp // spp_cut if name == "path" else None, "render_s": forward / repeats * cut,
+                     "render_backward_s": backward / repeats * cut, "trace_s": trace, "load": machine_load()})
+    loop, path = rows
+    lines = ["# The final preset's render phases: loop renderer vs path tracing (this CPU)", "",
+             f"`python benchmarks/bench_adapt.py --render-phases`: per step {2 * views} renders of {size} px (4 local "
+             "views and 4 global ones, as final renders), forward and backward to a 512² texture, one process (same "
+             f"load for both). Path tracing (prb, max_depth 3) measured at {spp // spp_cut} spp and projected to {spp}; "
+             "the loop renderer's G-buffers traced once before timing ('trace s', once per view for a whole run). "
+             f"{measured} of the {2 * views} renders timed ({repeats} times), the step projected from it.", "",
+             "| renderer | render s / step | render backward s / step | render + backward s / step | trace s (once) | load |",
+             "|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['renderer']} | {r['render_s']:.2f} | {r['render_backward_s']:.2f} | "
+                     f"{r['render_s'] + r['render_backward_s']:.2f} | {r['trace_s']:.1f} | "
+                     f"{r['load'].split('load average:')[-1].strip()} |")
+    ratio = (path["render_s"] + path["render_backward_s"]) / (loop["render_s"] + loop["render_backward_s"])
+    lines += ["", f"The loop renderer's render + backward per step is {ratio:.0f}x less than path tracing's under the "
+              "same load."]
+    return {"rows": rows, "markdown": "\n".join(lines) + "\n"}
 
 
 def sd2_row(models: Path, preset: str, dtype_type: str, cache: bool) -> dict:
@@ -212,7 +332,21 @@ def sd2_bench(presets: tuple[str, ...] = ("draft", "balanced")) -> Path:
 
 
 if __name__ == "__main__":
-    if "--sd2-bench" in sys.argv:   # python benchmarks/bench_adapt.py --sd2-bench (-> results/adapt_sd2)
+    if "--render-phases" in sys.argv:   # python benchmarks/bench_adapt.py --render-phases (-> results/render_phases)
+        from results_files import write_results
+
+        out = render_phases()
+        print(write_results(Path(__file__).resolve().parent / "results", "render_phases", out["markdown"],
+                            {"rows": out["rows"]}))
+        print(out["markdown"])
+    elif "--renderers" in sys.argv:   # python benchmarks/bench_adapt.py --renderers (-> results/adapt_renderers)
+        from results_files import write_results
+
+        out = final_step_renderers()
+        print(write_results(Path(__file__).resolve().parent / "results", "adapt_renderers", out["markdown"],
+                            {"rows": out["rows"]}))
+        print(out["markdown"])
+    elif "--sd2-bench" in sys.argv:   # python benchmarks/bench_adapt.py --sd2-bench (-> results/adapt_sd2)
         print(sd2_bench())
     elif "--sd2-table" in sys.argv:   # python benchmarks/bench_adapt.py --sd2-table ROW.json ... (-> results/adapt_sd2)
         import json

@@ -39,8 +39,9 @@ def build_models(folder: Path, dry_run: bool) -> tuple[Path, Path]:
             build_tiny_sd(folder / "sd2-inpaint", 9, seed=1, **SD2_SIZED))
 
 
-def measure(base: Path, inpaint: Path, preset: str, dry_run: bool) -> dict:
-    """One preset's seconds per iteration by phase and peak memory (after a warm-up iteration)."""
+def measure(base: Path, inpaint: Path, preset: str, dry_run: bool, renderer: str = "path") -> dict:
+    """One preset's seconds per iteration by phase and peak memory (after a warm-up iteration), rendered
+    by `renderer` ("path": the paper's path tracing; "loop": cached G-buffers shaded in torch)."""
     from scenefit.core.pipeline.presets import stage_config
 
     config = stage_config("adapt", preset, prompt="x")
@@ -50,8 +51,9 @@ def measure(base: Path, inpaint: Path, preset: str, dry_run: bool) -> dict:
         stages = tuple(replace(s, render_size=min(s.render_size, 32), spp=min(s.spp, 8)) for s in stages)
         resolution, iterations, warmup, views = 32, 1, 0, 1
     started = time.perf_counter()
-    row = _run(base, inpaint, resolution, stages, iterations, config.views_type, views_per_step=views, warmup=warmup)
-    return {"preset": preset, "render_size": stages[0].render_size, "spp": stages[0].spp,
+    row = _run(base, inpaint, resolution, stages, iterations, config.views_type, views_per_step=views, warmup=warmup,
+               renderer=renderer)
+    return {"preset": preset, "renderer": renderer, "render_size": stages[0].render_size, "spp": stages[0].spp,
             "model_resolution": resolution, "views_per_step": views, "iterations": iterations,
             "seconds": round(time.perf_counter() - started, 1), **row}
 
@@ -95,7 +97,8 @@ def measure_light(base: Path, inpaint: Path, preset: str, dry_run: bool, folder:
             "critic": report["decisions"]["critic"].get("dtype", "?"), "peak_memory_mb": peak}
 
 
-def markdown(rows: list[dict], machine: dict, light_rows: list[dict] | None = None) -> str:
+def markdown(rows: list[dict], machine: dict, light_rows: list[dict] | None = None,
+             loop_rows: list[dict] | None = None) -> str:
     head = "| preset | render px / spp | views / step | " + " | ".join(t for t, _ in PHASES) + \
            " | s / iteration | peak memory MB |"
     lines = ["# `make gpu-check` (benchmarks/gpu_check.py)", "", " ".join(__doc__.split("\n\n")[1].split()), "",
@@ -107,6 +110,13 @@ def markdown(rows: list[dict], machine: dict, light_rows: list[dict] | None = No
         lines.append(f"| {r['preset']} | {r['render_size']} / {r['spp']} | {r['views_per_step']} | "
                      + " | ".join(f"{r['phases'][k]:.3f}" for _, k in PHASES)
                      + f" | {r['iteration_s']:.3f} | {r['peak_memory_mb'] or 0:.0f} |")
+    if loop_rows:
+        lines += ["", "The same with the loop renderer (the adapt stage's default: each view's G-buffers traced "
+                  "once, then shaded in torch; its one-off tracing is in the first iterations' constant work):", "",
+                  head.replace("render px / spp", "render px"), "|" + "---|" * (len(PHASES) + 5)]
+        lines += [f"| {r['preset']} | {r['render_size']} | {r['views_per_step']} | "
+                  + " | ".join(f"{r['phases'][k]:.3f}" for _, k in PHASES)
+                  + f" | {r['iteration_s']:.3f} | {r['peak_memory_mb'] or 0:.0f} |" for r in loop_rows]
     if light_rows:
         lines += ["", "The light stage's diffusion critic with the same models (`scenefit light --critic diffusion`, "
                   "a made-up outdoor photo, after a one-iteration warm-up run):", "",
@@ -149,16 +159,20 @@ def main(argv: list[str] | None = None) -> int:
         machine["model_build_s"] = round(time.perf_counter() - started, 1)
         print(f"gpu-check: models built in {machine['model_build_s']} s", flush=True)
         light_rows: list[dict] = []
+        loop_rows: list[dict] = []
 
         def write() -> None:   # after each row: a lease that ends mid-run still leaves what was measured
-            (out / "gpu.md").write_text(markdown(rows, machine, light_rows))
-            (out / "gpu.json").write_text(json.dumps({"machine": machine, "rows": rows, "light_rows": light_rows},
-                                                     indent=1, default=str) + "\n")
+            (out / "gpu.md").write_text(markdown(rows, machine, light_rows, loop_rows))
+            (out / "gpu.json").write_text(json.dumps({"machine": machine, "rows": rows, "light_rows": light_rows,
+                                                      "loop_rows": loop_rows}, indent=1, default=str) + "\n")
 
         for preset in args.presets.split(","):
-            rows.append(measure(base, inpaint, preset, args.dry_run))
+            loop_rows.append(measure(base, inpaint, preset, args.dry_run, "loop"))
             write()
-            print(f"gpu-check: adapt {preset} done ({rows[-1]['seconds']} s)", flush=True)
+            print(f"gpu-check: adapt {preset}, loop renderer done ({loop_rows[-1]['seconds']} s)", flush=True)
+            rows.append(measure(base, inpaint, preset, args.dry_run, "path"))
+            write()
+            print(f"gpu-check: adapt {preset}, path tracing done ({rows[-1]['seconds']} s)", flush=True)
         for preset in args.light_presets.split(",") if args.light_presets else ():
             light_rows.append(measure_light(base, inpaint, preset, args.dry_run, folder))
             write()

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..core.render.renderer import RENDERER_TYPES
 from .options import (add_asset_args, add_lighting_args, add_orbit_camera_args, add_output_args, environment,
                       load_asset, positive_float, output, positive_int, progress)
 
@@ -43,17 +44,38 @@ def _render(args, out: Path, mesh, normalized, maps, stack, label: str) -> int:
 
     env, env_label = environment(args)
     cameras = orbit_cameras(args.views, args.elevation, fov_multiplier=1.1, size=args.size)
-    images = render_views(normalized, {label: stack}, env, cameras, args.spp, progress=progress(args),
-                          normal_map=None if args.no_normal_map else maps.normal)[label]
+    normal_map = None if args.no_normal_map else maps.normal
+    if args.renderer == "loop":
+        images = _loop_views(normalized, stack, env, cameras, normal_map)
+    else:
+        images = render_views(normalized, {label: stack}, env, cameras, args.spp, progress=progress(args),
+                              normal_map=normal_map)[label]
     files = []
     for camera, image in zip(cameras, images):
         path = out / f"view_az{int(round(camera.azimuth_deg)):03d}.png"
         write_image(path, tonemap_srgb(image, args.exposure))
         files.append(str(path))
+    renderer = ("loop: G-buffers traced by Mitsuba, shaded in torch (the adapt stage's renderer)"
+                if args.renderer == "loop" else f"path: Mitsuba path tracing at {args.spp} spp")
     write_report(out / "report.json", {"stage": "render", "source": label, "lighting": env_label,
-                                       "views": files, "spp": args.spp, "environment": environment_info()})
-    print(f"rendered {len(files)} views of '{mesh.name}' ({label}, {env_label}) -> {args.out}")
+                                       "views": files, "spp": args.spp if args.renderer == "path" else None,
+                                       "renderer": renderer, "environment": environment_info()})
+    print(f"rendered {len(files)} views of '{mesh.name}' ({label}, {env_label}, {args.renderer} renderer) -> {args.out}")
     return 0
+
+
+def _loop_views(normalized, stack, env, cameras, normal_map) -> list:
+    """The views drawn by the loop renderer (core/render/loop_renderer.py), as adapt draws them."""
+    import torch
+
+    from ..core.render.loop_renderer import LoopRenderer
+    from ..core.render.renderer import SceneOptions
+
+    renderer = LoopRenderer(normalized, tuple(stack.shape[:2]), env, SceneOptions(hide_emitters=False),
+                            normal_map=normal_map)
+    channels = (stack[..., 0:3], stack[..., 3:4], stack[..., 4:5])
+    with torch.no_grad():
+        return [renderer.render(camera, *channels, torch.from_numpy(env)).rgb.numpy() for camera in cameras]
 
 
 def add_parser(sub) -> None:
@@ -66,4 +88,7 @@ def add_parser(sub) -> None:
     add_orbit_camera_args(p, size=256, spp=64)
     p.add_argument("--exposure", type=positive_float, default=1.0)
     p.add_argument("--no-normal-map", action="store_true", help="render without the asset's normal map")
+    p.add_argument("--renderer", choices=RENDERER_TYPES, default="path",
+                   help="path: Mitsuba path tracing at --spp (the reference); loop: the adapt stage's renderer "
+                        "(G-buffers traced once, shaded in torch; the asset alone on black) - draw both to compare")
     p.set_defaults(func=run)

@@ -34,6 +34,9 @@ from ..data.uv_raster import wrap_modes
 # Each material's BSDF's maps, under its shape's id; with a normal map the principled BSDF sits inside
 # Mitsuba's `normalmap` BSDF, one level down.
 MAP_NAMES = ("base_color", "roughness", "metallic")
+# The renderers a differentiable render can be asked of: the loop renderer (core/render/loop_renderer.py:
+# cached G-buffers shaded in torch) and Mitsuba's path tracing (this module).
+RENDERER_TYPES = ("loop", "path")
 ENVMAP_KEY = "environment.data"
 
 

@@ -36,8 +36,12 @@ def test_the_dry_run_measures_every_preset_with_tiny_models(tmp_path):
     assert [row["preset"] for row in data["light_rows"]] == ["draft", "balanced", "final"]
     for row in data["light_rows"]:
         assert row["iterations"] == 1 and math.isfinite(row["per_iteration_s"]) and row["per_iteration_s"] > 0
+    # Both renderers: the loop renderer (adapt's default) and the paper's path tracing, per preset.
+    assert [row["preset"] for row in data["loop_rows"]] == ["final", "draft", "balanced"]
+    assert {row["renderer"] for row in data["loop_rows"]} == {"loop"} and {row["renderer"] for row in data["rows"]} == {"path"}
+    assert all(row["phases"]["render"] > 0 for row in data["loop_rows"])
     table = (tmp_path / "gpu.md").read_text()
-    assert "| final |" in table and "| balanced |" in table and "DRY RUN" in table
+    assert "| final |" in table and "| balanced |" in table and "DRY RUN" in table and "loop renderer" in table
     assert "s per critic iteration" in table
 
 

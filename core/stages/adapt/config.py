@@ -19,11 +19,17 @@ from ...base.errors import InputError
 from ...guidance.critics import CriticConfig
 from ...guidance.models import ModelConfig
 from ...guidance.weighting import ANNEAL_TYPES, NORMAL_WEIGHT_TYPES
+from ...render.renderer import RENDERER_TYPES
 from ...texture.neural_texture import BALANCED_TEXTURE, NeuralTextureConfig
 
 MODE_TYPES = MODES   # (core/base/names.py)
 VIEWS_TYPES = ("local+global", "local")
 LIGHT_TYPES = ("ambient", "envmap", "random")
+ADAPT_RENDERERS = ("auto", *RENDERER_TYPES)
+# Where the loop renderer agrees with path tracing to >= 35 dB on every corpus view measured
+# (benchmarks/results/loop_render.md, 256 px, 128 spp): the global views, under an HDR map (38.8-41.8
+# dB). The local views' constant ambient light: 34.2-38.6 dB, 2 of 4 views under 35: path traced.
+LOOP_AGREES = {"local": False, "global": True}
 
 
 @dataclass(frozen=True)
@@ -65,6 +71,10 @@ class AdaptConfig:
     view_variants: scene and edit modes draw from a fixed bank of views x view_variants views (each
     with its λ_FOV, background and crops), so what depends only on a view is computed once.
     shadow_type / shadow_spp: the global views' shadow, made by the compose stage's floor passes.
+    renderer: "loop" (G-buffers traced once per view, shaded in torch: core/render/loop_renderer.py),
+    "path" (the paper's differentiable path tracing, Mitsuba `prb`, every step), or "auto": the loop
+    renderer for the views whose light it was measured to agree with path tracing on to >= 35 dB on the
+    corpus (LOOP_AGREES), path tracing for the others.
     """
 
     mode_type: str = "scene"                      # scene (setup m) | generate (a) | edit (c)
@@ -98,6 +108,7 @@ class AdaptConfig:
     normal_weight_type: str = "cosine"            # w_t weighted by ⟨camera, normal⟩ (cosine) or not
     timestep_anneal_type: str = "linear"          # how the timestep window slides from high to low
     max_depth: int = 3                            # light bounces per path in the renders
+    renderer: str = "auto"                        # "auto" | "loop" | "path" (ADAPT_RENDERERS)
     texture: NeuralTextureConfig = BALANCED_TEXTURE   # "generate": the fresh texture (resolution: the raster's)
     seed: int = 0                                 # the views, timesteps and noise (the same on one device or four)
     preview_every: int = 50                       # iterations between previews
@@ -144,6 +155,7 @@ class AdaptConfig:
         need(self.shadow_spp >= 1, f"shadow_spp must be at least 1, got {self.shadow_spp}.")
         need(self.ambient > 0, "ambient radiance must be positive.")
         need(self.max_depth >= 2, "max_depth must be at least 2.")
+        need(self.renderer in ADAPT_RENDERERS, f"renderer must be one of {ADAPT_RENDERERS}, got {self.renderer!r}.")
         need(self.preview_every >= 0 and self.checkpoint_every >= 0, "preview/checkpoint intervals must be >= 0.")
         need(isinstance(self.texture, NeuralTextureConfig),
              f"texture must be a NeuralTextureConfig, got {type(self.texture).__name__}.")
@@ -155,6 +167,13 @@ class AdaptConfig:
     @property
     def uses_reference(self) -> bool:
         return self.mode_type in ("scene", "edit") and self.critic.reference_type == "inject"
+
+    def renderer_of(self, views: str) -> str:
+        """The renderer of the "local" or "global" views: the one asked for, or under "auto" the loop
+        renderer where it was measured to agree (LOOP_AGREES)."""
+        if self.renderer != "auto":
+            return self.renderer
+        return "loop" if LOOP_AGREES[views] else "path"
 
     def to_dict(self) -> dict:
         return asdict(self)

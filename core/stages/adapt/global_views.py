@@ -22,7 +22,8 @@ from ..compose import ComposeConfig, ComposeInputs, shadow_matte
 from ...scene.asset_pose import (ObjectPlacement, envmap_in_object_frame, photo_camera_in_object_frame,
                                 place_asset)
 from ...data.mesh import Mesh, normalize_to_unit_sphere
-from ...render.renderer import AssetRenderer, SceneOptions, WindowCamera
+from ...render.loop_renderer import asset_renderer
+from ...render.renderer import SceneOptions, WindowCamera
 from ...scene.camera import PhotoCamera
 from ...scene.placement import Placement
 
@@ -52,7 +53,7 @@ class GlobalScene:
 
     def __init__(self, mesh: Mesh, maps_shape: tuple[int, int], photo: np.ndarray, placement: Placement,
                  camera: PhotoCamera, envmap: np.ndarray, azimuths: list[float], max_depth: int,
-                 shadow_type: str, shadow_spp: int, seed: int = 0) -> None:
+                 shadow_type: str, shadow_spp: int, seed: int = 0, renderer_type: str = "path") -> None:
         h, w = photo.shape[:2]
         # As ComposeJob does, so both place exactly the same mesh.
         self.mesh, _ = normalize_to_unit_sphere(mesh)
@@ -68,8 +69,8 @@ class GlobalScene:
             for turn in placement_turns(azimuths)}
         boxes = np.array([p.pixel_box for p in self.placements.values()])
         self.window = (int(boxes[:, 0].min()), int(boxes[:, 1].min()), int(boxes[:, 2].max()), int(boxes[:, 3].max()))
-        self.renderer = AssetRenderer(self.mesh, maps_shape, self.envmap,
-                                      SceneOptions(max_depth=max_depth, hide_emitters=True))
+        self.renderer = asset_renderer(renderer_type, self.mesh, maps_shape, self.envmap,
+                                       SceneOptions(max_depth=max_depth, hide_emitters=True))
         self._mattes: dict[float, np.ndarray] = {}
 
     @property

@@ -31,6 +31,7 @@ from ...guidance.models import GuidanceModels, load_guidance_models, locate_mode
 from ...guidance.views import global_view, local_view
 from ...data.mesh import Mesh
 from ...base.progress import ProgressCallback, check_cancel, emit
+from ...render.loop_renderer import LoopRenderer, asset_renderer
 from ...render.renderer import AssetRenderer, SceneOptions
 from ...scene.camera import PhotoCamera, photo_camera_for
 from ...scene.placement import Placement
@@ -137,6 +138,7 @@ class AdaptSystem:
                  checkpoint_path: Path | None, cache_constants: bool = True) -> None:
         self.inputs, self.config, self.models = inputs, config, models
         self.texture, self.renderer, self.critics = texture, renderer, critics
+        self._path_renderer: AssetRenderer | None = None
         self.rank, self.world = rank, world
         self.device = models.device
         raster = inputs.raster
@@ -184,8 +186,9 @@ class AdaptSystem:
         _embed_prompts(models, config)
         texture = _working_texture(inputs, config).to(models.device)
         resolution = inputs.raster.resolution[0]
-        renderer = AssetRenderer(inputs.mesh, (resolution, resolution), renderer_environment(inputs, config),
-                                 SceneOptions(max_depth=config.max_depth, hide_emitters=True))
+        renderer = asset_renderer(config.renderer_of("local"), inputs.mesh, (resolution, resolution),
+                                  renderer_environment(inputs, config),
+                                  SceneOptions(max_depth=config.max_depth, hide_emitters=True))
         checkpoint_path = Path(checkpoint_dir) / CHECKPOINT_FILE if checkpoint_dir is not None else None
         system = cls(inputs, config, models, texture, renderer, _build_critics(models, config), rank,
                      world, checkpoint_path, cache_constants)
@@ -242,7 +245,7 @@ class AdaptSystem:
         constants = self.constants.get(view, env)
         self.timer.lap("constants")
         maps = split_channels(self.texture.texture_from_plan(self.plan, self.base_logit))
-        out = self.renderer.render(view.camera, *maps, env, spp=view.stage.spp, seed=view.render_seed)
+        out = self.renderer_for(view).render(view.camera, *maps, env, spp=view.stage.spp, seed=view.render_seed)
         rendered = [torch.cat([out.rgb, out.alpha], dim=-1)]
         placed = None
         if view.crops:
@@ -272,6 +275,16 @@ class AdaptSystem:
             self.last_image = image.detach()
         metrics.update({"t": view.t, "lambda": round(view.lam, 4), "stage_size": view.stage.render_size})
         return metrics
+
+    def renderer_for(self, view: ViewSample):
+        """The configured renderer; path tracing for a view with its own random light under the loop
+        renderer (its G-buffer would serve one step only)."""
+        if view.envmap is None or not isinstance(self.renderer, LoopRenderer):
+            return self.renderer
+        if self._path_renderer is None:
+            self._path_renderer = AssetRenderer(self.inputs.mesh, self.renderer.maps_shape,
+                                                np.asarray(self.base_env), self.renderer.tracer.options)
+        return self._path_renderer
 
     def _condition(self, view: ViewSample) -> torch.Tensor:
         return camera_condition(view.camera.origin, view.camera.forward, view.light)
@@ -347,6 +360,26 @@ class AdaptSystem:
                            timings=dict(self.timer.totals), resumed_from=self.start, decisions=self.decisions(),
                            peak_memory_mb=_peak_memory_mb(self.device))
 
+    def _renderer_decision(self) -> Decision:
+        glob = self.global_scene.renderer if self.global_scene is not None else None
+        loops = [r for r in (self.renderer, glob) if isinstance(r, LoopRenderer)]
+        choice = {"asked": self.config.renderer, "local": "loop" if isinstance(self.renderer, LoopRenderer) else "path"}
+        if glob is not None:
+            choice["global"] = "loop" if isinstance(glob, LoopRenderer) else "path"
+        if loops:
+            choice.update(traced=sum(r.traced for r in loops), reused=sum(r.reused for r in loops))
+        why = {"auto": "the loop renderer where it agrees with path tracing to >= 35 dB on the corpus (global views, "
+                       "HDR light), path tracing where it was not shown to (local views, ambient light): "
+                       "benchmarks/results/loop_render.md",
+               "loop": "the loop renderer, as asked", "path": "Mitsuba's differentiable path tracing (prb), as asked"}
+        reason = why[self.config.renderer]
+        if loops:
+            reason += "; loop: mesh, cameras and light are fixed, so each view's G-buffer is traced once by Mitsuba " \
+                      "and every step shaded in torch"
+        if self._path_renderer is not None:
+            reason += "; views with their own random light path-traced"
+        return Decision(choice, reason)
+
     def decisions(self) -> dict[str, Decision]:
         config, world = self.config, self.world.choice
         mine = len(self.my_views)
@@ -361,6 +394,7 @@ class AdaptSystem:
                               "local+global" else "local views only (no photo)"),
             "reference_injection": Decision(injected, f"the reference's keys and values injected into {injected} "
                                             "attention layers" if injected else "no reference injection"),
+            "renderer": self._renderer_decision(),
             "world_size": self.world,
             "constant_work": Decision(
                 {"cached": self.constants.cache, "bank": len(self.bank or ()), "computed": self.constants.misses,
@@ -381,7 +415,7 @@ def _global_scene(inputs: AdaptInputs, config: AdaptConfig, photo: np.ndarray, e
     camera = inputs.photo_camera or photo_camera_for({}, w, h)[0]
     azimuths = view_azimuths(config.views)  # sample_camera's choices
     return GlobalScene(inputs.mesh, inputs.raster.resolution, photo, inputs.placement, camera, envmap, azimuths,
-                       config.max_depth, config.shadow_type, config.shadow_spp, config.seed)
+                       config.max_depth, config.shadow_type, config.shadow_spp, config.seed, config.renderer_of("global"))
 
 
 def renderer_environment(inputs: AdaptInputs, config: AdaptConfig) -> np.ndarray:
