@@ -364,7 +364,6 @@ def _seen(scene, si, direction: np.ndarray, shading: np.ndarray, constant_light:
     """Whether each hit sees the environment along `direction` ((n, 1): not blocked by the asset and
     above the interpolated normal), and the environment's radiance there ((n, 3); ones for a constant
     environment, (n, 1))."""
-    import drjit as dr
     import mitsuba as mi
 
     d = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)

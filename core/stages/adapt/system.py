@@ -363,7 +363,8 @@ class AdaptSystem:
     def _renderer_decision(self) -> Decision:
         glob = self.global_scene.renderer if self.global_scene is not None else None
         loops = [r for r in (self.renderer, glob) if isinstance(r, LoopRenderer)]
-        choice = {"asked": self.config.renderer, "local": "loop" if isinstance(self.renderer, LoopRenderer) else "path"}
+        choice: dict[str, str | int] = {"asked": self.config.renderer,
+                                        "local": "loop" if isinstance(self.renderer, LoopRenderer) else "path"}
         if glob is not None:
             choice["global"] = "loop" if isinstance(glob, LoopRenderer) else "path"
         if loops:
