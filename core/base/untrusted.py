@@ -116,7 +116,9 @@ def _first_line(error) -> str:
 
 
 def _lower_first(text: str) -> str:
-    return text[:1].lower() + text[1:]
+    """A sentence's first word in lower case to go mid-sentence, but a name kept as written (NaN, JSON)."""
+    first_word = text.split(" ", 1)[0]
+    return text if any(c.isupper() for c in first_word[1:]) else text[:1].lower() + text[1:]
 
 
 def _cap(text: str) -> str:

@@ -39,8 +39,9 @@ def test_an_fspy_number_out_of_range_is_one_sentence(tmp_path, key, raw):
 
 def test_a_principal_point_that_is_not_a_number_is_one_sentence(tmp_path):
     text = json.dumps({"cameraParameters": dict(PARAMS, principalPoint={"x": 12345, "y": 0})}).replace("12345", "NaN")
-    with pytest.raises(InputError, match="principal point"):
+    with pytest.raises(InputError, match="NaN is not a number") as refused:
         read_fspy(fspy_file(tmp_path / "p.fspy", text))
+    assert "p.fspy" in str(refused.value) and len(str(refused.value).splitlines()) == 1
 
 
 def test_the_camera_command_says_an_fspy_overflow_in_one_sentence(tmp_path, capsys):
