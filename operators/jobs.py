@@ -35,12 +35,13 @@ _preview_serial = (None, 0)  # (job, serial) of the preview shown
 class SceneFitRuntime(bpy.types.PropertyGroup):
     """What the panel and the status bar show while a job runs (WindowManager: not saved)."""
 
-    running: BoolProperty(default=False)
-    job: StringProperty(name="Job")
-    stage: StringProperty(name="Stage")
-    status: StringProperty(name="Status")
-    progress: FloatProperty(name="Progress", min=0.0, max=1.0, subtype="FACTOR")
-    has_preview: BoolProperty(default=False)
+    running: BoolProperty(default=False, description="Whether a SceneFit job is running")
+    job: StringProperty(name="Job", description="The running job")
+    stage: StringProperty(name="Stage", description="The step the job is at")
+    status: StringProperty(name="Status", description="What the job is doing, or how it ended")
+    progress: FloatProperty(name="Progress", min=0.0, max=1.0, subtype="FACTOR", description="How far the job is")
+    has_preview: BoolProperty(default=False, description="Whether the job has shown a preview")
+    details: StringProperty(name="Details", description="What went wrong in the last job, in full (Copy Details)")
 
 
 def runtime(context=None) -> SceneFitRuntime:
@@ -244,6 +245,7 @@ class JobSteps:
         rt = runtime(context)
         rt.running, rt.job, rt.stage, rt.progress = True, self.job_name, "prepare", 0.0
         rt.status, rt.has_preview = f"{self.bl_label}: reading the asset…", False
+        rt.details = ""
         wm = context.window_manager
         self._timer = wm.event_timer_add(TIMER_SECONDS, window=context.window)
         wm.modal_handler_add(self)
@@ -323,6 +325,9 @@ class JobSteps:
         if state.details:
             print(state.details)  # the traceback of an unexpected failure, for the console
         rt.status = state.status_line()
+        # The whole story for Copy Details; the report below puts the line in the Info editor.
+        rt.details = "" if state.status == background.CANCELLED else "\n".join(
+            part for part in (rt.status, state.details or "") if part)
         self.report({"WARNING"} if state.status == background.CANCELLED else {"ERROR"}, rt.status)
         return {"CANCELLED"}
 
@@ -363,7 +368,10 @@ class SCENEFIT_OT_cancel_job(bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         job = background.active_job()
-        return job is not None and not job.state.finished
+        if job is not None and not job.state.finished:
+            return True
+        cls.poll_message_set("No SceneFit job is running")
+        return False
 
     def invoke(self, context, event):
         job = background.active_job()
@@ -400,6 +408,7 @@ def _end_job_before_load(*_args) -> None:
 
 @persistent
 def _reset_after_load(*_args) -> None:
+    from ..panels.thumbnail import load_thumbnail
     from .common import remember_photo_size
 
     wm = bpy.context.window_manager
@@ -408,6 +417,7 @@ def _reset_after_load(*_args) -> None:
     for scene in bpy.data.scenes:   # the panel draws the photo's camera from sizes read here, not in draw()
         if getattr(scene, "scenefit", None) is not None and scene.scenefit.photo_path:
             remember_photo_size(scene.scenefit.photo_path)
+            load_thumbnail(scene.scenefit.photo_path)
 
 
 classes = (SceneFitRuntime, SCENEFIT_OT_cancel_job)

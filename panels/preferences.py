@@ -34,7 +34,8 @@ class SceneFitPreferences(bpy.types.AddonPreferences):
     offline: BoolProperty(name="Offline", default=False,
                           description="Never use the network: models must already be in the cache. Blender's "
                                       "'Allow Online Access' must also be on for any download")
-    device: EnumProperty(name="Device", items=DEVICES, default="auto")
+    device: EnumProperty(name="Device", items=DEVICES, default="auto",
+                         description="Where the diffusion and depth models run")
     worker_type: EnumProperty(name="Run jobs on", items=WORKER_TYPES, default="LOCAL",
                               description="Where Run All and Adapt run; progress and previews come back to the panel")
     ray_address: StringProperty(name="Ray address", default="local",
