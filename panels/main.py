@@ -15,7 +15,7 @@ from bpy.app.translations import pgettext_iface as iface_
 from ..core.base.errors import SceneFitError
 from ..operators.common import artist_camera, asset_objects, dependency_sentence, flat_parts, missing_modules
 from .quality import BENCH_MACHINE, EXPECTED_SECONDS, expected_line
-from .thumbnail import thumbnail_icon
+from .thumbnail import thumbnail
 
 
 def warning(layout, short: str, details: str, icon: str = "ERROR") -> None:
@@ -117,9 +117,9 @@ class SCENEFIT_PT_scene(_Subsection, bpy.types.Panel):
     def draw(self, context):
         settings, col = settings_column(self, context)
         col.prop(settings, "photo_path")
-        icon = thumbnail_icon(settings.photo_path)   # read when the photo was chosen
-        if icon:
-            col.template_icon(icon_value=icon, scale=6.0)
+        preview = thumbnail(settings.photo_path)   # read when the photo was chosen
+        if preview is not None:
+            col.template_icon(icon_value=preview.icon_id, scale=6.0)
         row = col.row(align=True)
         row.prop(settings, "placement")
         row.operator("scenefit.pick_placement", text="", icon="EYEDROPPER")

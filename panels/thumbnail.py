@@ -8,7 +8,7 @@ import numpy as np
 
 THUMBNAIL_SIDE = 128
 _previews = None                       # bpy.utils.previews collection, made on first use
-_icons: dict[str, int] = {}            # resolved photo path -> icon id (0: the file could not be read)
+_icons: dict[str, bool] = {}           # resolved photo path -> whether its preview holds the photo
 
 
 def _resolved(text: str) -> str:
@@ -17,8 +17,8 @@ def _resolved(text: str) -> str:
     return str(Path(bpy.path.abspath(text)))
 
 
-def load_thumbnail(text: str) -> int:
-    """Read the photo `text` names (at most THUMBNAIL_SIDE a side, upright) into its icon; its id, 0 when
+def load_thumbnail(text: str) -> bool:
+    """Read the photo `text` names (at most THUMBNAIL_SIDE a side, upright) into its preview; False when
     the file cannot be read. Called when the photo is chosen, never while drawing."""
     global _previews
     import bpy.utils.previews
@@ -27,13 +27,13 @@ def load_thumbnail(text: str) -> int:
     from ..core.data.imageio import read_image
 
     if not text:
-        return 0
+        return False
     path = _resolved(text)
     try:
         pixels = read_image(path, max_side=THUMBNAIL_SIDE, upright=True)
     except (SceneFitError, OSError, ValueError):
-        _icons[path] = 0
-        return 0
+        _icons[path] = False
+        return False
     if _previews is None:
         _previews = bpy.utils.previews.new()
     item = _previews.get(path) or _previews.new(path)
@@ -44,17 +44,16 @@ def load_thumbnail(text: str) -> int:
                             np.repeat(pixels.reshape(h, w, channels)[..., :1], 3, axis=2), 0.0, 1.0)
     item.image_size = (w, h)
     item.image_pixels_float = rgba[::-1].ravel()   # Blender's first row is the bottom one
-    _icons[path] = item.icon_id
-    return item.icon_id
+    _icons[path] = True
+    return True
 
 
-def thumbnail_icon(text: str) -> int:
-    """The icon of the photo `text` names when it was read (0 otherwise): no file access."""
-    if not text:
-        return 0
-    import bpy
-
-    return _icons.get(str(Path(bpy.path.abspath(text))), 0)
+def thumbnail(text: str):
+    """The preview of the photo `text` names when it was read (None otherwise): no file access."""
+    if not text or _previews is None:
+        return None
+    path = _resolved(text)
+    return _previews[path] if _icons.get(path) else None
 
 
 def clear_thumbnails() -> None:

@@ -10,6 +10,8 @@ _FRENCH_OPERATORS = {
     "Pick Placement": "Choisir l'emplacement", "Pick Sun": "Choisir le soleil", "Match Camera": "Caler la caméra",
     "Write Prompt": "Écrire le prompt", "Open Folder": "Ouvrir le dossier", "Copy Details": "Copier les détails",
     "Cancel": "Annuler", "Resume": "Reprendre", "Apply Run": "Appliquer l'essai", "Delete Run": "Supprimer l'essai",
+    "Export to Mitsuba": "Exporter vers Mitsuba", "Open Composite": "Ouvrir le composite",
+    "Sun from Light": "Soleil depuis la lampe", "Use Result": "Utiliser le résultat",
 }
 _FRENCH = {
     "Asset": "Asset", "Scene": "Scène", "Style": "Style", "Quality": "Qualité", "Run": "Lancer",
@@ -27,6 +29,22 @@ _FRENCH = {
     "adapt: about {} on a CPU, {} on an H200 (SD2 size)": "adaptation : environ {} sur un CPU, {} sur une H200 "
                                                           "(taille SD2)",
     "{}: stage {} of {}": "{} : étape {} sur {}", "about {} left": "encore environ {}",
+    "Results are packed into the unsaved file; save it first to keep them as files beside it.":
+        "Les résultats sont intégrés au fichier non enregistré ; enregistrez-le d'abord pour les garder en fichiers "
+        "à côté.",
+    "The mesh has no UV map: unwrap it first (UV > Smart UV Project).":
+        "Le maillage n'a pas de carte UV : dépliez-le d'abord (UV > Smart UV Project).",
+    "flat": "plat", "Not read: {}": "Non lu : {}", "{:.0f} times as wide as tall": "{:.0f} fois plus large que haut",
+    "'{}' is {} (a ground plane?): deselect it to fit the rest":
+        "« {} » est {} (un plan de sol ?) : désélectionnez-le pour ajuster le reste",
+    "The scene camera '{}' shows the photo: the asset is composed where it stands in its view":
+        "La caméra de la scène « {} » montre la photo : l'asset est composé là où il se trouve dans sa vue",
+    "on this GPU for about {} (measured on {} with models of Stable Diffusion 2's size; smaller GPUs take longer)":
+        "sur ce GPU pendant environ {} (mesuré sur {} avec des modèles de la taille de Stable Diffusion 2 ; les GPU "
+        "plus petits prennent plus longtemps)",
+    "on this CPU for about {} (measured with models of Stable Diffusion 2's size on a 2-core CPU)":
+        "sur ce CPU pendant environ {} (mesuré avec des modèles de la taille de Stable Diffusion 2 sur un CPU à 2 "
+        "cœurs)",
     "finished": "terminé", "cancelled": "annulé", "failed": "échoué", "cancelled, resumable": "annulé, reprenable",
 }
 
