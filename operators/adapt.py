@@ -5,13 +5,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import bpy
-from bpy.props import IntProperty, StringProperty
+from bpy.props import EnumProperty, IntProperty, StringProperty
 
 from ..blender_io import mesh_from_object
 from ..core.base.errors import InputError
 from . import work
 from .common import OnMesh, asset_layout, asset_texture, model_settings, photo_path, photo_view, run_folder
-from .jobs import JobOperator
+from .jobs import CHOICES, CostFirst, JobOperator
 from .results import apply_layout_results, apply_result_material, materials_words, result_targets
 
 if TYPE_CHECKING:
@@ -50,7 +50,7 @@ def gather_adapt(op, context, texture: str) -> dict:
         # camera is the light stage's (beside light.exr), else the scene's, the panel's or the estimate.
         "placement": view["placement"] if view else (x, y), "size": view["size"] if view else settings.size,
         "view": view,
-        "envmap": light if light and Path(light).is_file() else "", "preset": settings.preset,
+        "envmap": light if light and Path(light).is_file() else "", "preset": op.run_preset(context),
         "models": models, "iterations": op.iterations, "model_resolution": op.model_resolution,
         "render_size": op.render_size,
         # Resume: the cancelled run's folder, whose hidden sibling holds its checkpoint (else a new folder)
@@ -64,9 +64,10 @@ def adapt_seconds_here(context, iterations: int | None = None) -> LocalWork | No
     Main thread, at a click: no model lookup (the job looks the models up, and downloads them, itself),
     no network, and torch is not imported for it (`device_here`)."""
     from ..panels.quality import LocalWork, adapt_projection
+    from .common import preferences
 
-    models, _ = model_settings(context)
-    device = device_here(models.device_type)
+    prefs = preferences(context)   # (not model_settings: its ModelConfig imports torch)
+    device = device_here(prefs.device if prefs is not None else "auto")
     if device is None:
         return None   # measured on neither
     seconds = adapt_projection(context.scene.scenefit.preset, iterations, gpu=device == "cuda")
@@ -90,7 +91,7 @@ def device_here(preference: str) -> str | None:
     return "cuda" if os.path.exists("/proc/driver/nvidia/version") else "cpu"
 
 
-class SCENEFIT_OT_adapt(OnMesh, JobOperator):
+class SCENEFIT_OT_adapt(OnMesh, CostFirst, JobOperator):
     """Restyle the asset's converted texture with diffusion guidance so it fits the photo (Esc cancels)"""
 
     bl_idname = "scenefit.adapt"
@@ -98,6 +99,7 @@ class SCENEFIT_OT_adapt(OnMesh, JobOperator):
     job_name = "adapt"
     runs_remotely = True
     records_runs = True
+    choice: EnumProperty(name="Choice", items=CHOICES, default="ask", options={"SKIP_SAVE", "HIDDEN"})
 
     # For scripts and quick looks; 0 keeps the preset's value.
     iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"},

@@ -150,6 +150,28 @@ def recorded_originals(settings) -> dict:
     return {(settings.result_object.name, settings.result_object.active_material_index): settings.original_material}
 
 
+def asset_owner(scene):
+    """The object whose SceneFitAsset the panel edits: the active object's root (the top of its parents:
+    an imported file's root, or the object itself); None without an active object or for SceneFit's own."""
+    try:
+        layer = bpy.context.view_layer if bpy.context.scene == scene else scene.view_layers[0]
+    except AttributeError:   # a restricted context (registering, loading)
+        layer = scene.view_layers[0] if scene.view_layers else None
+    obj = layer.objects.active if layer is not None else None
+    if obj is None or TAG in obj:
+        return None
+    while obj.parent is not None:
+        obj = obj.parent
+    return obj
+
+
+def asset_state(obj):
+    """The SceneFitAsset of `obj`'s root (see asset_owner)."""
+    while obj.parent is not None:
+        obj = obj.parent
+    return obj.scenefit_asset
+
+
 def asset_digest(layout) -> str:
     """Names the asset's mesh as a texture is fitted to it (its fitting mesh: faces and own UVs, no pixels)."""
     from ..core.texture.surface_layout import mesh_digest
@@ -173,9 +195,7 @@ def texture_mesh_digest(text: str) -> str:
 def asset_texture(context, layout) -> Path:
     """The active asset's neural texture (its last Convert / Adapt / Run All), refused in one sentence when
     there is none or it was made for another mesh."""
-    from .properties import asset_state
-
-    state = asset_state(bpy.data.objects[layout.objects[0]])
+    state = asset_state(bpy.data.objects[layout.name])   # (the active object's, when it is in the asset)
     text = state.texture_path
     path = Path(bpy.path.abspath(text)) if text else None
     if path is None or not path.is_file():

@@ -14,7 +14,7 @@ from bpy.props import BoolProperty, IntProperty
 from ..blender_io.world import assign_world
 from ..core.base.errors import InputError, SceneFitError
 from .common import TAG, relative_if_saved
-from .properties import asset_owner, asset_state
+from .common import asset_owner, asset_state
 
 
 def record_run(op, context, state: str, result) -> None:
@@ -23,14 +23,16 @@ def record_run(op, context, state: str, result) -> None:
     settings = context.scene.scenefit
     layout = getattr(op, "_layout", None) or {}
     names = list(layout.get("objects") or [getattr(op, "_object_name", "")])
-    obj = bpy.data.objects.get(names[0]) if names and names[0] else None
+    owner = layout.get("owner") or names[0]
+    obj = bpy.data.objects.get(owner) if owner else None
     if obj is None:
         return   # the asset was deleted while the run went on
     runs = asset_state(obj).runs
     folder = relative_if_saved(op._out)
     run = next((r for r in runs if r.folder == folder), None) or runs.add()   # a resumed run updates its entry
     run.folder, run.stage, run.state = folder, op.job_name, state
-    run.preset, run.prompt, run.when = settings.preset, settings.prompt, time.strftime("%Y-%m-%d %H:%M")
+    preset = op.run_preset(context) if hasattr(op, "run_preset") else settings.preset   # (Draft at the question)
+    run.preset, run.prompt, run.when = preset, settings.prompt, time.strftime("%Y-%m-%d %H:%M")
     run.mesh_digest = layout.get("digest", "")
     for name in ("iterations", "model_resolution", "render_size"):
         setattr(run, name, int(getattr(op, name, 0) or 0))

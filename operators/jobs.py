@@ -11,6 +11,7 @@ Runtime state lives on the WindowManager (never saved into the .blend); the live
 from __future__ import annotations
 
 import atexit
+import sys
 import time
 from typing import TYPE_CHECKING
 
@@ -67,14 +68,37 @@ def show_preview(image: np.ndarray) -> None:
     item.image_pixels_float = rgba[::-1].ravel()  # Blender's first row is the bottom one
 
 
+def whole_run(state: background.JobState, stages: tuple[str, ...]) -> tuple[float, str] | None:
+    """(fraction, words) of a job that runs several stages in order (Run All: core.pipeline.run.STAGES) as one
+    bar, stage k of n, from the stage now running and its own fraction; None for a one-stage job."""
+    if state.name != "run" or state.finished:
+        return None
+    n = len(stages)
+    if state.stage in stages:
+        k, inner = stages.index(state.stage), state.fraction
+    elif state.stage == "run" and state.total:   # between stages: the pipeline's own count
+        k, inner = min(state.step, n - 1), 0.0
+    else:
+        return None
+    return (k + inner) / n, f"stage {k + 1} of {n} ({stages[k]})"
+
+
 def update_runtime(context, state: background.JobState, cancelling: bool = False) -> None:
-    """The panel's and status bar's copy of a job's state; "cancelling…" stays until the worker has stopped."""
+    """The panel's and status bar's copy of a job's state; "cancelling…" stays until the worker has stopped.
+    Run All shows one bar for the whole run (stage k of n)."""
     global _preview_serial
     rt = runtime(context)
     rt.running = not state.finished
     rt.job, rt.stage = state.name, state.stage
     rt.status = f"{state.name}: cancelling…" if cancelling and not state.finished else state.status_line()
     rt.progress = state.fraction
+    # The pipeline's stage order, once the job has imported it (importing it here would import torch on the
+    # main thread).
+    pipeline = sys.modules.get(__package__.rpartition(".")[0] + ".core.pipeline.run")
+    whole = None if cancelling or pipeline is None else whole_run(state, pipeline.STAGES)
+    if whole is not None:
+        rt.progress = whole[0]
+        rt.status = f"{state.name}: {whole[1]}, {state.status_line().split(': ', 1)[-1]}"
     if state.preview is not None and _preview_serial != (id(state), state.preview_serial):
         show_preview(state.preview)
         _preview_serial = (id(state), state.preview_serial)
@@ -141,6 +165,11 @@ def pointer_over_progress(context, event) -> bool:
     return False
 
 
+def has_ui(context) -> bool:
+    """Whether a job runs in the background with a bar (a window), rather than inline (`blender -b`, scripts)."""
+    return context.window is not None and not bpy.app.background
+
+
 def job_seconds(job: background.Job) -> float:
     """How long `job` has run so far."""
     return time.perf_counter() - job.state.started
@@ -199,7 +228,7 @@ class JobSteps:
 
     # -- inline: scripts and `blender -b` ------------------------------------------------------------
     def execute(self, context):
-        if context.window is not None and not bpy.app.background:
+        if has_ui(context):
             return self._begin(context)   # Repeat Last, a dialog's confirmation: the background job
         try:
             check_dependencies()
@@ -219,14 +248,17 @@ class JobSteps:
 
     # -- background job from the UI ------------------------------------------------------------------
     def invoke(self, context, event):
-        if context.window is None or bpy.app.background:
+        if not has_ui(context):
             return self.execute(context)
         try:
             warning = self.long_work_warning(context)
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        if warning:   # the dialog's confirmation calls execute, which starts the job
+        if warning and getattr(self, "choice", "ask") == "ask":   # the cost before the click, with real choices
+            self._warning = warning
+            return context.window_manager.invoke_popup(self, width=480)
+        if warning and not hasattr(self, "choice"):   # the dialog's confirmation calls execute, which starts the job
             return context.window_manager.invoke_confirm(self, event, title=f"{self.bl_label}: hours of work",
                                                          message=warning, confirm_text="Start here",
                                                          icon="WARNING")
@@ -348,6 +380,43 @@ def undo_step(message: str) -> None:
         bpy.ops.ed.undo_push(message=message)
     except RuntimeError:   # no undo stack in this context
         pass
+
+
+CHOICES = (("ask", "Ask", "Ask before long work (the button's own)"),
+           ("draft", "Draft", "Run at the Draft preset this time (the panel's preset stays)"),
+           ("skip", "Skip adaptation", "Estimate the light and compose now, without adapting the texture"),
+           ("start", "Start anyway", "Run as set, however long it takes here"))
+
+
+class CostFirst:
+    """Operator mixin: long local work asks first, offering what the run could be instead (Draft, Skip
+    adaptation where the operator can skip it, Start anyway); each button runs the operator again with its
+    `choice`, which its prepare honours (`run_preset`, and Run All's guidance)."""
+
+    skippable = False   # True: the operator can run without adapting (Run All)
+
+    def run_preset(self, context) -> str:
+        return "draft" if getattr(self, "choice", "ask") == "draft" else context.scene.scenefit.preset
+
+    def draw(self, context):
+        layout = self.layout
+        layout.label(text=f"{self.bl_label}: long work here", icon="WARNING")
+        col = layout.column(align=True)
+        for line in wrapped(getattr(self, "_warning", "") or "", 80):
+            col.label(text=line)
+        row = layout.row(align=True)
+        shown = [c for c in CHOICES if c[0] != "ask" and (c[0] != "skip" or self.skippable)]
+        if context.scene.scenefit.preset == "draft":
+            shown = [c for c in shown if c[0] != "draft"]
+        for key, text, _ in shown:
+            row.operator(self.bl_idname, text=text).choice = key
+
+
+def wrapped(text: str, width: int) -> list[str]:
+    """`text` in lines of at most `width` characters, broken between words (labels do not wrap)."""
+    import textwrap
+
+    return textwrap.wrap(text, width) or [""]
 
 
 class JobOperator(JobSteps, bpy.types.Operator):

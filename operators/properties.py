@@ -10,6 +10,7 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
                        PointerProperty, StringProperty)
 
 from ..core.pipeline.presets import PRESET_DESCRIPTIONS, PRESET_NAMES
+from .common import asset_owner, remember_photo_size, texture_mesh_digest
 from ..core.scene.camera import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG
 from ..core.scene.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
 
@@ -105,8 +106,6 @@ class SceneFitRun(bpy.types.PropertyGroup):
 
 def _texture_typed(state, _context) -> None:
     """A texture path set by hand names the mesh it was made for when SceneFit made it (any asset's run)."""
-    from .common import texture_mesh_digest
-
     digest = texture_mesh_digest(state.texture_path)
     if state.texture_mesh != digest:
         state.texture_mesh = digest
@@ -135,30 +134,6 @@ class SceneFitAsset(bpy.types.PropertyGroup):
 
 
 PER_ASSET = ("prompt", "placement", "size", "turn", "texture_path")
-
-
-def asset_owner(scene):
-    """The object whose SceneFitAsset the panel edits: the active object's root (the top of its parents:
-    an imported file's root, or the object itself); None without an active object or for SceneFit's own."""
-    from ..blender_io.tag import TAG
-
-    try:
-        layer = bpy.context.view_layer if bpy.context.scene == scene else scene.view_layers[0]
-    except AttributeError:   # a restricted context (registering, loading)
-        layer = scene.view_layers[0] if scene.view_layers else None
-    obj = layer.objects.active if layer is not None else None
-    if obj is None or TAG in obj:
-        return None
-    while obj.parent is not None:
-        obj = obj.parent
-    return obj
-
-
-def asset_state(obj):
-    """The SceneFitAsset of `obj`'s root (see asset_owner)."""
-    while obj.parent is not None:
-        obj = obj.parent
-    return obj.scenefit_asset
 
 
 def _holder(settings):
@@ -266,7 +241,6 @@ def _photo_chosen(settings) -> None:
     """The photo's size and thumbnail read once when it is chosen (the panel draws from those, never from
     the file)."""
     from ..panels.thumbnail import load_thumbnail
-    from .common import remember_photo_size
 
     remember_photo_size(settings.photo_path)
     load_thumbnail(settings.photo_path)

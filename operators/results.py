@@ -14,9 +14,8 @@ from bpy.props import EnumProperty
 from ..blender_io import write_result_material
 from ..blender_io.world import assign_world, world_from_hdr
 from ..core.base.errors import InputError
-from .common import (ORIGINAL_PROPERTY, TAG, artists_material_behind, keep_image, needs_setting,
+from .common import (ORIGINAL_PROPERTY, TAG, artists_material_behind, asset_state, keep_image, needs_setting,
                      recorded_originals, relative_if_saved)
-from .properties import asset_state
 
 
 
@@ -42,7 +41,8 @@ def apply_result_material(context, object_name: str, result: dict, stage: str):
 
 
 def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: list[dict], result: dict, stage: str,
-                           names: list[str] | None = None, wraps: list | None = None, digest: str = "") -> list:
+                           names: list[str] | None = None, wraps: list | None = None, digest: str = "",
+                           owner: str = "") -> list:
     """A new material per material of the asset, from maps[i], in every slot slots[i] names ((object name,
     slot number) pairs); returns them. What each slot held is kept as its original (a fake user, so saving
     keeps it) for the Results section's switch; a slot that held an earlier SceneFit result keeps the
@@ -95,7 +95,7 @@ def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: li
     if records[0][2] is not None:
         settings.original_material = records[0][2]
     if result.get("texture"):   # the asset's own texture, and the mesh it was made for (digest)
-        state = asset_state(records[0][0])
+        state = asset_state(bpy.data.objects.get(owner) or records[0][0])   # the asset's (its active object's)
         state.texture_path = relative_if_saved(result["texture"])
         state.texture_mesh = digest
     return made
@@ -118,7 +118,7 @@ def result_targets(layout) -> dict:
     one = len(layout.objects) == 1 and len(layout.materials) == 1
     return {"objects": list(layout.objects), "slots": [list(pairs) for pairs in layout.slots],
             "wraps": [material_wrap(m) for m in layout.artists], "name": layout.objects[0] if one else None,
-            "digest": asset_digest(layout)}
+            "digest": asset_digest(layout), "owner": layout.name}
 
 
 def apply_layout_results(context, targets: dict, result: dict, stage: str) -> list:
@@ -128,7 +128,7 @@ def apply_layout_results(context, targets: dict, result: dict, stage: str) -> li
     maps = [{k: m[k] for k in ("base_color", "roughness", "metallic")} for m in per_material]
     names = [f"{targets['name']} SceneFit {stage}"] if targets["name"] else None
     return apply_result_materials(context, targets["slots"], maps, result, stage, names=names, wraps=targets["wraps"],
-                                  digest=targets.get("digest", ""))
+                                  digest=targets.get("digest", ""), owner=targets.get("owner", ""))
 
 
 def apply_result_world(context, hdr_path: str, stage: str = "light"):

@@ -14,7 +14,7 @@ from . import work
 from .adapt import adapt_seconds_here
 from .common import (OnMesh, depth_model_preference, last_finished_run, model_settings, photo_path, photo_view,
                      run_folder, scene_layout)
-from .jobs import JobOperator
+from .jobs import CHOICES, CostFirst, JobOperator
 from .properties import GUIDANCE
 from .results import (apply_composite_image, apply_layout_results, apply_result_world, materials_words,
                       result_targets)
@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
 
 
-class SCENEFIT_OT_run(OnMesh, JobOperator):
+class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
     """Fit the asset into the photo in one go (the selected objects, or the active one with all its
     materials): convert, estimate the photo's light, restyle (when the diffusion models are here and there
     is a prompt), compose; then put the results in every material slot"""
@@ -34,12 +34,16 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
     job_name = "run"
     runs_remotely = True
     records_runs = True
+    skippable = True
+    choice: EnumProperty(name="Choice", items=CHOICES, default="ask", options={"SKIP_SAVE", "HIDDEN"})
 
     # Scripts may set it; else the Run section's Adaptation (properties.SceneFitSettings.guidance).
     guidance: EnumProperty(name="Guidance", items=GUIDANCE, default="auto", options={"SKIP_SAVE", "HIDDEN"},
                            description="Whether the texture is restyled with Stable Diffusion 2")
 
     def chosen_guidance(self, context) -> str:
+        if self.choice == "skip":
+            return "none"
         return self.guidance if self.properties.is_property_set("guidance") else context.scene.scenefit.guidance
 
     def prepare(self, context):
@@ -50,6 +54,8 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         guidance, why_no_adapt = self.chosen_guidance(context), ""
         if not settings.prompt.strip() and guidance == "auto":
             guidance, why_no_adapt = "none", "the Style section has no prompt"
+        if self.choice == "skip":
+            why_no_adapt = "skipped at the question before the run (Skip adaptation)"
         # The artist's camera when it shows the photo, else the panel's or the estimate; the Cycles set-up
         # takes the camera the run used, so both composites agree.
         view = photo_view(context, photo, [bpy.data.objects[name] for name in layout.objects])
@@ -58,7 +64,7 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         out = run_folder(context, "run", layout.name)
         earlier = last_finished_run(out)   # its stages with this run's settings and inputs are reused
         return work.run, {"mesh": mesh, "maps": maps, "photo": str(photo), "view": view,
-                          "preset": settings.preset, "prompt": settings.prompt, "guidance": guidance,
+                          "preset": self.run_preset(context), "prompt": settings.prompt, "guidance": guidance,
                           "why_no_adapt": why_no_adapt, "models": model_settings(context)[0],
                           "scene_type": settings.scene_type,
                           "depth_model": depth_model_preference(context),
@@ -69,12 +75,15 @@ class SCENEFIT_OT_run(OnMesh, JobOperator):
         guidance = self.chosen_guidance(context)
         if guidance == "none" or (guidance == "auto" and not context.scene.scenefit.prompt.strip()):
             return None   # no adaptation: the rest takes seconds
-        if guidance == "auto":   # adapts only with the weights here: looked for on disk, never fetched
-            from ..core.guidance.models import models_available
-
-            if not models_available(model_settings(context)[0])[0]:
-                return None
+        # "auto" adapts only when the job finds the weights (on disk, or downloaded with online access): the
+        # question is asked without looking (a look imports torch and may touch the network).
         return adapt_seconds_here(context)
+
+    def long_work_warning(self, context) -> str | None:
+        from .jobs import long_work_warning
+
+        return long_work_warning(context, "Run All's adaptation (when Stable Diffusion 2's weights are found)",
+                                 self.long_local_work(context), self.runs_remotely)
 
     def apply(self, context, result) -> str:
         mats = apply_layout_results(context, self._layout, result, result["stage"])

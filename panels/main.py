@@ -258,7 +258,7 @@ class SCENEFIT_UL_runs(bpy.types.UIList):
 
 def draw_runs(layout, context) -> None:
     """The active asset's run history and what can be done with the chosen run."""
-    from ..operators.properties import asset_owner
+    from ..operators.common import asset_owner
 
     owner = asset_owner(context.scene)
     if owner is None or not owner.scenefit_asset.runs:

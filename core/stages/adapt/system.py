@@ -157,6 +157,7 @@ class AdaptSystem:
         self.optimizer = torch.optim.Adam(texture.parameters(), lr=config.lr_texture)
         self.my_views = views_of_rank(config.views_per_step, rank, world.choice)
         self.checkpoint_path = checkpoint_path
+        self.cancel: threading.Event | None = None   # seen between views (one rank), set by step
         self.history: list[dict] = []
         self.start = 0
         self.last_image: torch.Tensor | None = None
@@ -211,10 +212,10 @@ class AdaptSystem:
         half-made step is dropped (the texture and optimiser change only at its end)."""
         self.timer.restart()
         self.optimizer.zero_grad(set_to_none=True)
+        self.cancel = cancel if self.world.choice == 1 else None   # (ranks must finish a step together)
         per_view = []
         for j in self.my_views:
-            if self.world.choice == 1:
-                check_cancel(cancel)
+            check_cancel(self.cancel)
             per_view.append(self.train_view(self.sample(iteration, j)))
         params = list(self.texture.parameters())
         for p in params:
@@ -254,6 +255,7 @@ class AdaptSystem:
         share = 0.5 * weight if view.crops else weight   # local and global weighed equally
         image, latents, metrics = self._local(view, leaves[0], constants, share)
         if view.crops:
+            check_cancel(self.cancel)   # between the local and the global half of a view
             self._global(view, leaves[1], placed, constants, share, metrics)
         grads = [torch.nan_to_num(leaf.grad if leaf.grad is not None else torch.zeros_like(leaf),
                                   nan=0.0, posinf=0.0, neginf=0.0).to(r.device) for leaf, r in zip(leaves, rendered)]

@@ -1,0 +1,399 @@
+"""The job operators as an artist meets them, on corpus assets, driven through their own invoke / modal code
+with a stand-in window (bpy has none): a click returns at once without touching the network or loading
+a model; Esc elsewhere is the artist's, Esc over SceneFit's progress cancels within seconds and
+"cancelling…" stays until the worker stops; a cancelled adaptation keeps its checkpoint and Resume
+continues its step count; loading a file or quitting stops a job within 2 s; each asset keeps its own
+prompt and texture (another mesh's is refused); runs are listed, applied and deleted with their folder."""
+import json
+import os
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+from conftest import PythonSession
+
+pytestmark = pytest.mark.blender
+
+CORPUS = Path(os.environ.get("SCENEFIT_CORPUS", Path(__file__).resolve().parents[2].parent / "shared" / "corpus")) / "assets"
+ASSETS = (CORPUS / "kenney_blocky_character" / "character.glb", CORPUS / "kenney_cube_pets_obj" / "animal-fox.obj")
+
+SETUP = r"""
+import json, math, socket, sys, time, threading
+from importlib import import_module
+from pathlib import Path
+from types import SimpleNamespace
+import numpy as np
+import bpy, addon_utils
+
+tmp = Path(TMP)
+bpy.ops.wm.read_factory_settings(use_empty=True)
+addon_utils.enable("scenefit", default_set=True)
+MODULE = "scenefit"
+jobs, background = import_module(MODULE + ".operators.jobs"), import_module(MODULE + ".workers.background")
+history = import_module(MODULE + ".operators.history")
+prefs = bpy.context.preferences.addons[MODULE].preferences
+bpy.context.preferences.system.use_online_access = True
+# Online access on, the default hub ids and an empty model cache: a click must not look for them.
+prefs.base_model, prefs.inpaint_model = "stabilityai/stable-diffusion-2-base", "stabilityai/stable-diffusion-2-inpainting"
+prefs.model_cache, prefs.offline = str(tmp / "empty_cache"), False
+(tmp / "empty_cache").mkdir(exist_ok=True)
+import_module(MODULE + ".core.data.imageio").write_image(
+    tmp / "photo.png", np.random.default_rng(1).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32))
+roots = []
+for path in ASSETS:
+    before = set(bpy.data.objects)
+    bpy.ops.scenefit.import_asset(filepath=path)
+    made = [o for o in bpy.data.objects if o not in before]
+    meshes = sorted((o for o in made if o.type == "MESH"), key=lambda o: -len(o.data.vertices))
+    roots.append(meshes[0].name)
+settings = bpy.context.scene.scenefit
+settings.photo_path, settings.preset = str(tmp / "photo.png"), "draft"
+bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "scene.blend"))
+
+def select(name):
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    obj = bpy.data.objects[name]
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    return obj
+
+class FakeWM:   # the window manager's calls a job operator makes; the runtime is Blender's own
+    def __init__(self): self.timers, self.handlers, self.dialogs = [], [], []
+    scenefit_runtime = property(lambda self: bpy.context.window_manager.scenefit_runtime)
+    windows = ()
+    def event_timer_add(self, seconds, window=None): self.timers.append(seconds); return len(self.timers)
+    def event_timer_remove(self, timer): self.timers.pop()
+    def modal_handler_add(self, op): self.handlers.append(op)
+    def invoke_confirm(self, op, event, **kw): self.dialogs.append(kw.get("message", "")); return {"RUNNING_MODAL"}
+    def invoke_props_dialog(self, op, **kw): self.dialogs.append("options"); return {"RUNNING_MODAL"}
+    def invoke_popup(self, op, **kw): self.dialogs.append(op._warning); return {"RUNNING_MODAL"}
+
+class Layout:   # what a dialog draws, recorded
+    def __init__(self): self.buttons = []
+    def column(self, **kw): return self
+    def row(self, **kw): return self
+    def label(self, **kw): pass
+    def operator(self, idname, text=""):
+        button = SimpleNamespace(idname=idname, text=text)
+        self.buttons.append(button)
+        return button
+
+class Ctx:      # bpy.context with a window: a status bar along the bottom, a 3D Viewport with its sidebar
+    def __init__(self):
+        bar = SimpleNamespace(type="STATUSBAR", x=0, y=0, width=1000, height=20, regions=())
+        side = SimpleNamespace(type="UI", x=700, y=20, width=300, height=600)
+        view = SimpleNamespace(type="VIEW_3D", x=0, y=20, width=1000, height=600, regions=(side,))
+        self.window, self.window_manager = SimpleNamespace(screen=SimpleNamespace(areas=(bar, view))), FakeWM()
+    def __getattr__(self, name): return getattr(bpy.context, name)
+
+def probe(cls, **props):
+    # the operator's own methods on a plain object (Blender makes operator instances only for a window)
+    attrs = {}
+    for klass in reversed(cls.__mro__):
+        if klass.__module__.startswith(MODULE):
+            attrs.update({k: v for k, v in vars(klass).items() if not k.startswith("__") and k != "bl_rna"})
+    attrs.update(props, properties=SimpleNamespace(is_property_set=lambda name: name in props))
+    op = type("Probe", (), attrs)()
+    op.reported = []
+    op.report = lambda kind, text: op.reported.append(text)
+    return op
+
+def event(kind, x=0, y=0):
+    return SimpleNamespace(type=kind, value="PRESS", mouse_x=x, mouse_y=y)
+
+real_has_ui = jobs.has_ui
+
+def ui_invoke(op, ctx, ev):
+    jobs.has_ui = lambda context: True   # the stand-in window counts as one
+    try:
+        return op.invoke(ctx, ev)
+    finally:
+        jobs.has_ui = real_has_ui
+out["roots"] = roots
+"""
+
+INVOKE = r"""
+ops = import_module(MODULE + ".operators")
+# (torch.cuda.is_available, once torch is imported, is allowed: it loads nothing)
+FORBIDDEN = ("torch.serialization", "torch.hub", "diffusers", "transformers", "huggingface_hub", "socket", "http.",
+             "urllib.request", "requests", "safetensors", "OpenImageIO")
+touched = []
+def guard(frame, kind, arg):
+    if kind == "call":
+        name = frame.f_globals.get("__name__", "") or ""
+    elif kind == "c_call":
+        name = getattr(arg, "__module__", None) or type(getattr(arg, "__self__", None)).__module__ or ""
+    else:
+        return
+    if name.startswith(FORBIDDEN):
+        touched.append(name)
+def no_connect(*args):
+    raise RuntimeError("invoke touched the network")
+socket.socket.connect = no_connect
+had_torch = "torch" in sys.modules
+seconds, dialogs, results = {}, {}, {}
+from scenefit.operators import adapt, bake, convert, light, run
+classes = {"run": (run.SCENEFIT_OT_run, {"choice": "ask", "guidance": "auto"}),
+           "adapt": (adapt.SCENEFIT_OT_adapt, {"iterations": 0, "model_resolution": 0, "render_size": 0, "resume": "",
+                                               "choice": "ask"}), "convert": (convert.SCENEFIT_OT_convert, {"iterations": 0}),
+           "light": (light.SCENEFIT_OT_estimate_light, {})}
+settings.prompt = "a mossy figure"
+for name in roots:
+    select(name)
+    for label, (cls, props) in classes.items():
+        op, ctx = probe(cls, **props), Ctx()
+        sys.setprofile(guard)
+        t = time.perf_counter()
+        try:
+            results[f"{name}/{label}"] = sorted(ui_invoke(op, ctx, event("LEFTMOUSE")))
+        finally:
+            sys.setprofile(None)
+        seconds[f"{name}/{label}"] = round(time.perf_counter() - t, 4)
+        dialogs[f"{name}/{label}"] = ctx.window_manager.dialogs
+        if label in ("run", "adapt"):   # the question's buttons
+            op.layout = Layout()
+            op.draw(bpy.context)
+            dialogs[f"{name}/{label}/buttons"] = [(b.text, b.choice) for b in op.layout.buttons]
+        bpy.context.window_manager.scenefit_runtime.running = False
+# Run All's one bar: stage k of n from the stage running and its own fraction
+JobState = background.JobState
+stages = ("convert", "light", "adapt", "compose", "bake")
+out["whole_run"] = [jobs.whole_run(JobState("run", stage="adapt", step=3, total=4, fraction=0.75), stages),
+                    jobs.whole_run(JobState("run", stage="run", step=1, total=5, fraction=0.2), stages),
+                    jobs.whole_run(JobState("adapt", stage="adapt", step=3, total=4, fraction=0.75), stages)]
+out["invoke"] = {"seconds": seconds, "results": results, "dialogs": dialogs, "touched": sorted(set(touched)),
+                 "torch_before": had_torch, "online": bpy.app.online_access}
+"""
+
+MODAL = r"""
+from scenefit.operators import adapt as adapt_ops
+prefs.base_model, prefs.inpaint_model = str(tiny[0]), str(tiny[1])
+prefs.offline = True
+fox = select(roots[1])
+settings.prompt = "a mossy fox"
+out["convert"] = sorted(bpy.ops.scenefit.convert(iterations=3))
+rt = bpy.context.window_manager.scenefit_runtime
+ADAPT = {"iterations": 12, "model_resolution": 32, "render_size": 16, "resume": "", "choice": "ask"}
+
+def started(props):
+    op, ctx = probe(adapt_ops.SCENEFIT_OT_adapt, **props), Ctx()
+    t = time.perf_counter()
+    first = sorted(ui_invoke(op, ctx, event("LEFTMOUSE")))
+    invoke_s = time.perf_counter() - t
+    t = time.perf_counter()
+    tick = sorted(op.modal(ctx, event("TIMER")))
+    return op, ctx, first, invoke_s, tick, time.perf_counter() - t
+
+op, ctx, first, invoke_s, tick, tick_s = started(ADAPT)
+steps = []
+while op._job.poll().step < 2 and not op._job.state.finished:
+    op.modal(ctx, event("TIMER")); time.sleep(0.05)
+steps.append(op._job.state.step)
+elsewhere = sorted(op.modal(ctx, event("ESC", 300, 300)))       # over the viewport: the artist's Esc
+still = not op._job.cancel_requested
+t_cancel = time.perf_counter()
+over_bar = sorted(op.modal(ctx, event("ESC", 500, 10)))          # over the status bar's progress
+statuses = [rt.status]
+result = None
+while result is None or result == ["RUNNING_MODAL"]:
+    time.sleep(0.05)
+    result = sorted(op.modal(ctx, event("TIMER")))
+    if result == ["RUNNING_MODAL"]:
+        statuses.append(rt.status)
+stopped_s = time.perf_counter() - t_cancel
+runs = fox.scenefit_asset.runs
+run = runs[len(runs) - 1]
+folder = Path(bpy.path.abspath(run.folder))
+partial = folder.parent / f".{folder.name}.partial"
+checkpoint = partial / "checkpoint" / "adapt_checkpoint.pt"
+import torch
+done = int(torch.load(checkpoint, map_location="cpu", weights_only=True)["iteration"]) if checkpoint.is_file() else -1
+out["modal"] = {"first": first, "invoke_s": round(invoke_s, 4), "tick": tick, "tick_s": round(tick_s, 2),
+                "esc_elsewhere": [elsewhere, still], "esc_over_bar": over_bar, "statuses": sorted(set(statuses)),
+                "end": result, "stopped_s": round(stopped_s, 2), "steps_seen": steps,
+                "run": [run.stage, run.state, len(runs)], "checkpoint_iteration": done,
+                "folder_exists": folder.exists(), "partial_exists": partial.is_dir()}
+# Resume (inline here: no window) continues the count from the checkpoint and finishes the same entry.
+index = len(runs) - 1
+out["resume"] = sorted(bpy.ops.scenefit.resume_run(index=index))
+report = json.loads((folder / "report.json").read_text())
+out["resumed"] = {"resumed_from": report.get("resumed_from", report.get("stages", {}).get("adapt", {}).get("resumed_from")),
+                  "iterations": report.get("iterations"), "run": [runs[index].state, len(runs)],
+                  "partial_left": partial.exists()}
+"""
+
+# Each answer to the question runs what it says: Skip adaptation runs Run All without adapting, Draft at the
+# draft preset (the panel's stays).
+CHOICES = r"""
+from scenefit.operators import run as run_ops
+fox = select(roots[1])
+settings.prompt, settings.guidance = "a mossy fox", "auto"
+
+def finished(props):
+    op, ctx = probe(run_ops.SCENEFIT_OT_run, **props), Ctx()
+    first = sorted(ui_invoke(op, ctx, event("LEFTMOUSE")))
+    result = ["RUNNING_MODAL"]
+    while result == ["RUNNING_MODAL"]:
+        result = sorted(op.modal(ctx, event("TIMER")))
+        time.sleep(0.05)
+    report = json.loads((Path(op._out) / "report.json").read_text()) if result == ["FINISHED"] else {}
+    return first, result, report, op.reported
+
+settings.preset = "draft"
+first, result, report, said = finished({"choice": "skip", "guidance": "auto"})
+out["skip"] = [first, result, report.get("stages", {}).get("adapt", {}).get("status"),
+               report.get("stages", {}).get("adapt", {}).get("why"), said[-1:]]
+settings.preset, settings.guidance = "final", "none"
+first, result, report, said = finished({"choice": "draft"})
+out["draft"] = [first, result, report.get("config", {}).get("preset"), settings.preset, said[-1:],
+                fox.scenefit_asset.runs[len(fox.scenefit_asset.runs) - 1].preset]
+settings.preset = "draft"
+"""
+
+LOAD = r"""
+op, ctx, *_ = started(dict(ADAPT, iterations=50))
+while op._job.poll().step < 1 and not op._job.state.finished:
+    time.sleep(0.05)
+job = op._job
+t = time.perf_counter()
+jobs._end_job_at_exit()                     # what quitting runs
+waited = round(time.perf_counter() - t, 2)
+asked = job.cancel_requested
+job.wait(10)                                # (a quitting Blender ends here; the worker stops at its next check)
+out["quit"] = [waited, asked, round(time.perf_counter() - t, 2), job.alive, job.poll().status]
+background.release_job(job)
+op, ctx, *_ = started(dict(ADAPT, iterations=50))
+while op._job.poll().step < 1 and not op._job.state.finished:
+    time.sleep(0.05)
+job = op._job
+t = time.perf_counter()
+bpy.ops.wm.open_mainfile(filepath=str(tmp / "scene.blend"))   # another file (load_pre ends the job)
+loaded, freed, asked = round(time.perf_counter() - t, 2), background.active_job() is None, job.cancel_requested
+job.wait(10)
+out["load"] = [loaded, freed, asked, round(time.perf_counter() - t, 2), job.alive, job.poll().status]
+"""
+
+ASSETS_STATE = r"""
+bpy.ops.wm.open_mainfile(filepath=str(tmp / "scene.blend"))
+settings = bpy.context.scene.scenefit
+character, fox = roots
+select(character); settings.prompt, settings.placement = "a bronze statue", (0.3, 0.7)
+select(fox); fox_prompt = settings.prompt
+settings.prompt = "a mossy fox"
+select(character)
+out["state"] = [fox_prompt, settings.prompt, list(map(lambda v: round(v, 3), settings.placement)),
+                bpy.data.objects[fox].scenefit_asset.prompt]
+select(fox)
+out["fox_convert"] = sorted(bpy.ops.scenefit.convert(iterations=3))
+fox_texture = settings.texture_path
+select(character)
+settings.texture_path = fox_texture      # another asset's texture, typed in
+try:
+    bpy.ops.scenefit.bake_asset(filepath=str(tmp / "wrong.glb"))
+    out["refused"] = "baked"
+except RuntimeError as error:
+    out["refused"] = str(error).splitlines()[0]
+select(fox)
+runs = bpy.data.objects[fox].scenefit_asset.runs
+out["runs"] = [(r.stage, r.state, r.preset, r.prompt, bool(r.when), len(r.slots)) for r in runs]
+out["apply"] = sorted(bpy.ops.scenefit.apply_run(index=0))
+folder = Path(bpy.path.abspath(runs[0].folder))
+material = runs[0].slots[0].result.name
+out["delete"] = sorted(bpy.ops.scenefit.delete_run(index=0, folder=True))
+out["deleted"] = [folder.exists(), material in bpy.data.materials, len(runs),
+                  bpy.data.objects[fox].material_slots[0].material.name]
+"""
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    missing = [p for p in ASSETS if not p.is_file()]
+    if missing:
+        pytest.skip(f"the corpus asset {missing[0]} is not here")
+    from scenefit.devtools.tiny_models import build_tiny_pair
+
+    tmp = tmp_path_factory.mktemp("trust_jobs")
+    tiny = build_tiny_pair(tmp / "tiny")
+    python = PythonSession()
+    try:
+        setup = python.run(SETUP.replace("TMP", repr(str(tmp))).replace("ASSETS", repr([str(p) for p in ASSETS]))
+                           + f"\ntiny = {[str(p) for p in tiny]!r}\n")
+        yield SimpleNamespace(run=python.run, tmp=tmp, setup=setup)
+    finally:
+        python.close()
+
+
+def _step(session, code: str, name: str) -> dict:
+    out = session.run(code)
+    (session.tmp / f"{name}.json").write_text(json.dumps(out, default=str))
+    return out
+
+
+def test_a_click_returns_at_once_without_network_or_models(session):
+    step = _step(session, INVOKE, "invoke")
+    adapt, between, alone = step["whole_run"]
+    assert adapt == [pytest.approx((2 + 0.75) / 5), "stage 3 of 5 (adapt)"]   # one bar for the whole run
+    assert between == [pytest.approx(1 / 5), "stage 2 of 5 (light)"] and alone is None
+    out = step["invoke"]
+    assert out["touched"] == [], out["touched"]          # no torch, hub, socket or image file at the click
+    assert all(r == ["RUNNING_MODAL"] for r in out["results"].values()), out["results"]
+    assert max(out["seconds"].values()) < 0.2, out["seconds"]
+    # The draft preset's 300 CPU iterations (hours) ask first; Estimate Light shows its options.
+    for name in session.setup["roots"]:
+        assert "hours" not in out["dialogs"][f"{name}/convert"] and out["dialogs"][f"{name}/light"] == ["options"]
+        assert any("would run" in d for d in out["dialogs"][f"{name}/adapt"])
+        assert out["dialogs"][f"{name}/run/buttons"] == [("Draft", "draft"), ("Skip adaptation", "skip"),
+                                                         ("Start anyway", "start")]
+        assert out["dialogs"][f"{name}/adapt/buttons"] == [("Draft", "draft"), ("Start anyway", "start")]
+
+
+def test_esc_cancels_only_over_the_progress_and_resume_continues_the_count(session):
+    out = _step(session, MODAL, "modal")
+    modal = out["modal"]
+    assert out["convert"] == ["FINISHED"]
+    assert modal["first"] == ["RUNNING_MODAL"] and modal["invoke_s"] < 0.2 and modal["tick"] == ["RUNNING_MODAL"]
+    assert modal["esc_elsewhere"] == [["PASS_THROUGH"], True]
+    assert modal["esc_over_bar"] == ["RUNNING_MODAL"] and modal["statuses"] == ["adapt: cancelling…"]
+    assert modal["end"] == ["CANCELLED"] and modal["stopped_s"] < 5.0
+    assert modal["run"][:2] == ["adapt", "cancelled"]
+    assert modal["partial_exists"] and not modal["folder_exists"] and modal["checkpoint_iteration"] >= 2
+    assert out["resume"] == ["FINISHED"]
+    resumed = out["resumed"]
+    assert resumed["resumed_from"] == modal["checkpoint_iteration"] and resumed["iterations"] == 12
+    assert resumed["run"] == ["finished", modal["run"][2]] and not resumed["partial_left"]
+
+
+def test_each_answer_to_the_cost_question_runs_what_it_says(session):
+    out = _step(session, CHOICES, "choices")
+    first, result, adapt_status, why, said = out["skip"]
+    assert first == ["RUNNING_MODAL"] and result == ["FINISHED"], said
+    assert adapt_status == "skipped" and "Skip adaptation" in why
+    first, result, preset, panel_preset, said, recorded = out["draft"]
+    assert result == ["FINISHED"], said
+    assert preset == "draft" and panel_preset == "final" and recorded == "draft"
+
+
+def test_quitting_or_loading_a_file_stops_a_job_within_two_seconds(session):
+    out = _step(session, LOAD, "load")
+    # Blender waits at most 2 s for the worker, which was told to stop and ends at its next check (between
+    # the halves of a view: seconds on a loaded CPU), cancelled, its checkpoint kept.
+    waited, asked, ended, alive, status = out["quit"]
+    assert waited < 2.5 and asked and not alive and status == "cancelled" and ended < waited + 5.0
+    loaded, freed, asked, ended, alive, status = out["load"]
+    assert loaded < 2.0 + 3.0 and freed and asked   # the wait for the worker, and the file's own loading
+    assert not alive and status == "cancelled" and ended < loaded + 5.0
+
+
+def test_each_asset_keeps_its_own_state_and_runs(session):
+    out = _step(session, ASSETS_STATE, "assets")
+    fox_prompt, character_prompt, placement, fox_now = out["state"]
+    assert character_prompt == "a bronze statue" and placement == [0.3, 0.7] and fox_now == "a mossy fox"
+    assert "made for another mesh" in out["refused"], out["refused"]
+    assert out["fox_convert"] == ["FINISHED"]
+    stage, state, preset, prompt, when, slots = out["runs"][-1]
+    assert (stage, state, preset, prompt, when) == ("convert", "finished", "draft", "a mossy fox", True) and slots >= 1
+    assert out["apply"] == ["FINISHED"] and out["delete"] == ["FINISHED"]
+    folder_left, material_left, runs_left, slot_material = out["deleted"]
+    assert not folder_left and not material_left and runs_left == len(out["runs"]) - 1
+    assert "SceneFit" not in slot_material
