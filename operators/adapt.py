@@ -99,7 +99,8 @@ class SCENEFIT_OT_adapt(OnMesh, CostFirst, JobOperator):
     job_name = "adapt"
     runs_remotely = True
     records_runs = True
-    choice: EnumProperty(name="Choice", items=CHOICES, default="ask", options={"SKIP_SAVE", "HIDDEN"})
+    choice: EnumProperty(name="Choice", items=CHOICES, default="ask", options={"SKIP_SAVE", "HIDDEN"},
+                         description="What the artist chose when asked about long work")
 
     # For scripts and quick looks; 0 keeps the preset's value.
     iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"},

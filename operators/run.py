@@ -35,7 +35,8 @@ class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
     runs_remotely = True
     records_runs = True
     skippable = True
-    choice: EnumProperty(name="Choice", items=CHOICES, default="ask", options={"SKIP_SAVE", "HIDDEN"})
+    choice: EnumProperty(name="Choice", items=CHOICES, default="ask", options={"SKIP_SAVE", "HIDDEN"},
+                         description="What the artist chose when asked about long work")
 
     # Scripts may set it; else the Run section's Adaptation (properties.SceneFitSettings.guidance).
     guidance: EnumProperty(name="Guidance", items=GUIDANCE, default="auto", options={"SKIP_SAVE", "HIDDEN"},
