@@ -43,6 +43,8 @@ class SceneFitRuntime(bpy.types.PropertyGroup):
     progress: FloatProperty(name="Progress", min=0.0, max=1.0, subtype="FACTOR", description="How far the job is")
     has_preview: BoolProperty(default=False, description="Whether the job has shown a preview")
     details: StringProperty(name="Details", description="What went wrong in the last job, in full (Copy Details)")
+    expected_seconds: FloatProperty(name="Expected", min=0.0, description="How long the job was projected to take "
+                                                                          "from the bench's timings (0: unknown)")
 
 
 def runtime(context=None) -> SceneFitRuntime:
@@ -66,6 +68,28 @@ def show_preview(image: np.ndarray) -> None:
     rgba[..., :3] = np.asarray(image, np.float32)[..., :3] / 255.0
     item.image_size = (w, h)
     item.image_pixels_float = rgba[::-1].ravel()  # Blender's first row is the bottom one
+    preview_image(rgba[::-1])
+
+
+# The job's latest preview as an image the artist can open in an Image Editor (no users: not saved).
+PREVIEW_IMAGE = "SceneFit Preview"
+
+
+def preview_image(rgba_bottom_up: np.ndarray):
+    """Write a preview (rows bottom first, RGBA in [0, 1], sRGB) into the PREVIEW_IMAGE datablock, made once
+    and resized in place, so an Image Editor showing it follows the job."""
+    from ..blender_io.tag import TAG
+
+    h, w = rgba_bottom_up.shape[:2]
+    image = bpy.data.images.get(PREVIEW_IMAGE)
+    if image is None or TAG not in image:
+        image = bpy.data.images.new(PREVIEW_IMAGE, w, h)
+        image[TAG] = "preview"
+    elif tuple(image.size) != (w, h):
+        image.scale(w, h)
+    image.pixels.foreach_set(np.ascontiguousarray(rgba_bottom_up, np.float32).ravel())
+    image.update()
+    return image
 
 
 def whole_run(state: background.JobState, stages: tuple[str, ...]) -> tuple[float, str] | None:
@@ -81,6 +105,24 @@ def whole_run(state: background.JobState, stages: tuple[str, ...]) -> tuple[floa
     else:
         return None
     return (k + inner) / n, f"stage {k + 1} of {n} ({stages[k]})"
+
+
+def show_time_left(rt, state: background.JobState, cancelling: bool) -> None:
+    """The status's time left from the job's first moment: the bench's projection for this preset and device
+    (rt.expected_seconds, set when the job starts), refined by the job's own pace as it goes."""
+    from ..panels.quality import duration_text, eta_from_start
+
+    if cancelling or state.finished or rt.expected_seconds <= 0.0:
+        return
+    left = eta_from_start(rt.expected_seconds, time.perf_counter() - state.started, rt.progress)
+    if left is None:
+        return
+    said = state.status_line()
+    stage_eta = said.rfind(", about ")
+    if state.eta_seconds is not None and stage_eta >= 0 and rt.status.endswith(said[stage_eta:]):
+        rt.status = rt.status[:len(rt.status) - (len(said) - stage_eta)]   # the stage's own guess gives way
+    rt.status = "{}, {}".format(rt.status, bpy.app.translations.pgettext_iface("about {} left").format(
+        duration_text(left)))
 
 
 def update_runtime(context, state: background.JobState, cancelling: bool = False) -> None:
@@ -99,6 +141,7 @@ def update_runtime(context, state: background.JobState, cancelling: bool = False
     if whole is not None:
         rt.progress = whole[0]
         rt.status = f"{state.name}: {whole[1]}, {state.status_line().split(': ', 1)[-1]}"
+    show_time_left(rt, state, cancelling)
     if state.preview is not None and _preview_serial != (id(state), state.preview_serial):
         show_preview(state.preview)
         _preview_serial = (id(state), state.preview_serial)
@@ -276,6 +319,11 @@ class JobSteps:
         self._job = None
         rt = runtime(context)
         rt.running, rt.job, rt.stage, rt.progress = True, self.job_name, "prepare", 0.0
+        try:   # the bench's projection (no model lookup): the time left shows from the first moment
+            work = self.long_local_work(context)
+        except SceneFitError:
+            work = None
+        rt.expected_seconds = work.seconds if work is not None else 0.0
         rt.status, rt.has_preview = f"{self.bl_label}: reading the asset…", False
         rt.details = ""
         wm = context.window_manager
@@ -290,6 +338,8 @@ class JobSteps:
             work, data = self.job_work(context)
             self._out = data.get("out", "") if isinstance(data, dict) else ""
             self._job = background.start_job(background.Job(self.job_name, work, data))
+            if getattr(self, "_remote", False):   # the projection is this machine's, not the worker's
+                runtime(context).expected_seconds = 0.0
         except SceneFitError as error:
             self._remove_timer(context)
             rt = runtime(context)

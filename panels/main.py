@@ -64,9 +64,11 @@ class SCENEFIT_PT_main(_Section, bpy.types.Panel):
                 if rt.details:
                     row.operator("scenefit.copy_details", text="", icon="COPYDOWN")
             if rt.has_preview:
-                from ..operators.jobs import preview_icon_id
+                from ..operators.jobs import PREVIEW_IMAGE, preview_icon_id
 
                 box.template_icon(icon_value=preview_icon_id(), scale=8.0)
+                warning(box, PREVIEW_IMAGE, iface_("The latest preview is the image '{}': open it in an Image Editor "
+                                                   "to see it larger").format(PREVIEW_IMAGE), icon="IMAGE_DATA")
         if not bpy.data.is_saved:
             warning(layout, iface_("Unsaved file"), iface_("Results are packed into the unsaved file; save it first "
                                                            "to keep them as files beside it."), icon="INFO")

@@ -80,3 +80,25 @@ def expected_line(stage: str, preset: str) -> str:
     if seconds >= 1:
         return iface_("{}: about {:.0f} s").format(iface_(stage), seconds)
     return iface_("{}: under 1 s").format(iface_(stage))
+
+
+# The run's own pace fully replaces the bench's projection once this much of it is done.
+OWN_PACE_FROM = 0.1
+
+
+def eta_from_start(expected_total: float | None, elapsed: float, fraction: float,
+                   measured_left: float | None = None) -> float | None:
+    """Seconds left of a job from its first moment: the bench's projection of the whole (`expected_total`)
+    for what is not done yet, weighed against the job's own pace (the time so far over the fraction done,
+    or the stage's own `measured_left`) as more of it is done, wholly its own from OWN_PACE_FROM on.
+    None when there is neither a projection nor a pace yet."""
+    fraction = min(max(fraction, 0.0), 1.0)
+    own = measured_left if measured_left is not None else (
+        elapsed * (1.0 - fraction) / fraction if fraction > 0.0 else None)
+    if expected_total is None or expected_total <= 0.0:
+        return own
+    projected = expected_total * (1.0 - fraction)
+    if own is None:
+        return projected
+    weight = min(fraction / OWN_PACE_FROM, 1.0)
+    return (1.0 - weight) * projected + weight * own

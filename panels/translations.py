@@ -45,6 +45,8 @@ _FRENCH = {
     "on this CPU for about {} (measured with models of Stable Diffusion 2's size on a 2-core CPU)":
         "sur ce CPU pendant environ {} (mesuré avec des modèles de la taille de Stable Diffusion 2 sur un CPU à 2 "
         "cœurs)",
+    "The latest preview is the image '{}': open it in an Image Editor to see it larger":
+        "Le dernier aperçu est l'image « {} » : ouvrez-la dans un éditeur d'images pour la voir en grand",
     "finished": "terminé", "cancelled": "annulé", "failed": "échoué", "cancelled, resumable": "annulé, reprenable",
 }
 

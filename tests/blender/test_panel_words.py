@@ -145,6 +145,30 @@ for fit in ("AUTO", "HORIZONTAL", "VERTICAL"):
 out["rows"] = rows
 """
 
+PROGRESS = r"""
+import time
+from importlib import import_module
+jobs, background = import_module("scenefit.operators.jobs"), import_module("scenefit.workers.background")
+pipeline = import_module("scenefit.core.pipeline.run")   # the stage order Run All's bar counts
+rt = bpy.context.window_manager.scenefit_runtime
+said = {}
+rt.expected_seconds = 7200.0                         # the bench's projection, set when the job starts
+state = background.JobState("adapt", stage="adapt", fraction=0.0, started=time.perf_counter())
+jobs.update_runtime(bpy.context, state)
+said["adapt_at_start"] = rt.status
+rt.expected_seconds = 0.0
+stages = list(pipeline.STAGES)
+state = background.JobState("run", stage=stages[1], fraction=0.5, total=len(stages), started=time.perf_counter())
+frame = np.zeros((6, 8, 3), np.uint8); frame[0, 0] = (255, 0, 0)     # the top-left pixel red
+state.preview, state.preview_serial = frame, 1
+jobs.update_runtime(bpy.context, state)
+said["run"], said["progress"], said["stages"] = rt.status, rt.progress, stages
+image = bpy.data.images.get(jobs.PREVIEW_IMAGE)
+pixels = np.array(image.pixels[:]).reshape(6, 8, 4)
+said["image"] = [list(image.size), pixels[-1, 0].tolist(), pixels[0, 0].tolist(), image.users]
+out.update(said)
+"""
+
 
 @pytest.fixture(scope="module")
 def blender(tmp_path_factory):
@@ -235,3 +259,26 @@ def test_lens_shift_moves_the_principal_point_and_the_placement_as_blender_proje
             assert max(abs(v) for v in moved) > 0.05
             assert row["size"] == pytest.approx(level["size"], rel=1e-9)
             assert any("lens shift" in note for note in row["notes"])
+
+
+def test_time_left_starts_from_the_projection_and_goes_over_to_the_runs_own_pace():
+    from scenefit.panels.quality import eta_from_start
+
+    assert eta_from_start(3600.0, 0.0, 0.0) == pytest.approx(3600.0)            # the first moment: the bench
+    assert eta_from_start(100.0, 50.0, 0.5) == pytest.approx(50.0)              # past a tenth: its own pace
+    assert eta_from_start(100.0, 10.0, 0.02) == pytest.approx(0.8 * 98.0 + 0.2 * 490.0)   # slow: weighed in
+    assert eta_from_start(None, 10.0, 0.25) == pytest.approx(30.0)             # no projection: the pace
+    assert eta_from_start(None, 0.0, 0.0) is None
+    assert eta_from_start(100.0, 80.0, 1.0) == pytest.approx(0.0)
+
+
+def test_progress_says_the_stage_the_time_left_from_the_start_and_keeps_a_preview_image(blender):
+    session, _ = blender
+    out = session.run(PROGRESS)
+    assert out["adapt_at_start"].endswith("about 2.0 h left"), out["adapt_at_start"]
+    n = len(out["stages"])
+    assert f"stage 2 of {n} ({out['stages'][1]})" in out["run"]
+    assert out["progress"] == pytest.approx(1.5 / n)
+    size, top_left, bottom_left, users = out["image"]
+    assert size == [8, 6] and top_left[:3] == pytest.approx([1.0, 0.0, 0.0]) and bottom_left[:3] == [0.0, 0.0, 0.0]
+    assert users == 0   # SceneFit's own preview is not saved into the artist's file
