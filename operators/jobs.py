@@ -343,7 +343,7 @@ class JobSteps:
         except SceneFitError as error:
             self._remove_timer(context)
             rt = runtime(context)
-            rt.running, rt.status = False, str(error)
+            rt.running, rt.status, rt.details = False, str(error), str(error)
             self.report({"ERROR"}, str(error))
             return False
         update_runtime(context, self._job.state)
@@ -395,7 +395,7 @@ class JobSteps:
             try:
                 message = self.apply_result(context, state.result)
             except SceneFitError as error:
-                rt.status = str(error)
+                rt.status = rt.details = str(error)
                 self.report({"ERROR"}, rt.status)
                 return {"CANCELLED"}
             self.keep_run(context, "finished", state.result)

@@ -20,7 +20,7 @@ from .thumbnail import thumbnail
 
 def warning(layout, short: str, details: str, icon: str = "ERROR") -> None:
     """A short label whose tooltip (and click) gives the whole sentence, which a sidebar would cut off."""
-    op = layout.operator("scenefit.show_details", text=short, icon=icon, emboss=False)
+    op = layout.operator("scenefit.show_details", text=short, icon=icon, emboss=False, translate=False)
     op.details = details
 
 
