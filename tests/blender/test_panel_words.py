@@ -169,6 +169,19 @@ said["image"] = [list(image.size), pixels[-1, 0].tolist(), pixels[0, 0].tolist()
 out.update(said)
 """
 
+BAKE_BROWSER = r"""
+bake = operators.bake.SCENEFIT_OT_bake_asset
+chosen = SimpleNamespace(filepath="/somewhere/chair.glb", file_format="gltf")
+out["changed"] = [bake.check(chosen, bpy.context), chosen.filepath]
+out["unchanged"] = [bake.check(chosen, bpy.context), chosen.filepath]
+out["has_invoke"] = "invoke" in bake.__dict__
+rt = bpy.context.window_manager.scenefit_runtime
+rt.details = ""
+out["copy_greyed"] = operators.details.SCENEFIT_OT_copy_details.poll(bpy.context)
+rt.details = "Adapt failed: CUDA out of memory\nTraceback ..."
+out["copy"] = [operators.details.SCENEFIT_OT_copy_details.poll(bpy.context), sorted(bpy.ops.scenefit.copy_details())]
+"""
+
 
 @pytest.fixture(scope="module")
 def blender(tmp_path_factory):
@@ -282,3 +295,13 @@ def test_progress_says_the_stage_the_time_left_from_the_start_and_keeps_a_previe
     size, top_left, bottom_left, users = out["image"]
     assert size == [8, 6] and top_left[:3] == pytest.approx([1.0, 0.0, 0.0]) and bottom_left[:3] == [0.0, 0.0, 0.0]
     assert users == 0   # SceneFit's own preview is not saved into the artist's file
+
+
+def test_bake_asset_names_its_file_in_a_browser_and_copy_details_is_offered_after_a_failure(blender):
+    session, _ = blender
+    out = session.run(BAKE_BROWSER)
+    assert out["changed"] == [True, "/somewhere/chair.gltf"]      # the ending follows the chosen format
+    assert out["unchanged"] == [False, "/somewhere/chair.gltf"]
+    assert out["has_invoke"]
+    assert out["copy_greyed"] is False
+    assert out["copy"] == [True, ["FINISHED"]]   # (bpy without a window has no clipboard to read back)
