@@ -107,14 +107,28 @@ def whole_run(state: background.JobState, stages: tuple[str, ...]) -> tuple[floa
     return (k + inner) / n, f"stage {k + 1} of {n} ({stages[k]})"
 
 
+def time_left(expected: float, state: background.JobState, stages: tuple[str, ...]) -> float | None:
+    """Seconds left of a job whose adaptation the bench projects at `expected` seconds: the projection until
+    the adaptation starts, then weighed over to its own pace (panels/quality.eta_from_start); None once it is
+    done (a run's later stages take seconds, their own guess stands)."""
+    from ..panels.quality import eta_from_start
+
+    if state.stage == "adapt":
+        return eta_from_start(expected, time.perf_counter() - state.started, state.fraction, state.eta_seconds)
+    if "adapt" in stages and state.stage in stages and stages.index(state.stage) > stages.index("adapt"):
+        return None
+    return expected
+
+
 def show_time_left(rt, state: background.JobState, cancelling: bool) -> None:
     """The status's time left from the job's first moment: the bench's projection for this preset and device
     (rt.expected_seconds, set when the job starts), refined by the job's own pace as it goes."""
-    from ..panels.quality import duration_text, eta_from_start
+    from ..panels.quality import duration_text
 
     if cancelling or state.finished or rt.expected_seconds <= 0.0:
         return
-    left = eta_from_start(rt.expected_seconds, time.perf_counter() - state.started, rt.progress)
+    pipeline = sys.modules.get(__package__.rpartition(".")[0] + ".core.pipeline.run")
+    left = time_left(rt.expected_seconds, state, tuple(pipeline.STAGES) if pipeline is not None else ())
     if left is None:
         return
     said = state.status_line()

@@ -156,8 +156,13 @@ rt.expected_seconds = 7200.0                         # the bench's projection, s
 state = background.JobState("adapt", stage="adapt", fraction=0.0, started=time.perf_counter())
 jobs.update_runtime(bpy.context, state)
 said["adapt_at_start"] = rt.status
-rt.expected_seconds = 0.0
 stages = list(pipeline.STAGES)
+later = stages[stages.index("adapt") + 1]
+for stage in ("convert", later):                     # Run All before its adaptation, and after it
+    jobs.update_runtime(bpy.context, background.JobState("run", stage=stage, fraction=0.5, total=len(stages)))
+    said["run_" + stage] = rt.status
+said["later"] = later
+rt.expected_seconds = 0.0
 state = background.JobState("run", stage=stages[1], fraction=0.5, total=len(stages), started=time.perf_counter())
 frame = np.zeros((6, 8, 3), np.uint8); frame[0, 0] = (255, 0, 0)     # the top-left pixel red
 state.preview, state.preview_serial = frame, 1
@@ -289,6 +294,8 @@ def test_progress_says_the_stage_the_time_left_from_the_start_and_keeps_a_previe
     session, _ = blender
     out = session.run(PROGRESS)
     assert out["adapt_at_start"].endswith("about 2.0 h left"), out["adapt_at_start"]
+    assert out["run_convert"].endswith("about 2.0 h left"), out["run_convert"]   # the adaptation still to come
+    assert "2.0 h" not in out["run_" + out["later"]]                             # done: no projection left
     n = len(out["stages"])
     assert f"stage 2 of {n} ({out['stages'][1]})" in out["run"]
     assert out["progress"] == pytest.approx(1.5 / n)
