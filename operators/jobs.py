@@ -151,7 +151,8 @@ def update_runtime(context, state: background.JobState, cancelling: bool = False
     # The pipeline's stage order, once the job has imported it (importing it here would import torch on the
     # main thread).
     pipeline = sys.modules.get(__package__.rpartition(".")[0] + ".core.pipeline.run")
-    whole = None if cancelling or pipeline is None else whole_run(state, pipeline.STAGES)
+    stages = getattr(pipeline, "STAGES", None)   # (None while the job thread is still importing it)
+    whole = None if cancelling or stages is None else whole_run(state, stages)
     if whole is not None:
         rt.progress = whole[0]
         rt.status = f"{state.name}: {whole[1]}, {state.status_line().split(': ', 1)[-1]}"

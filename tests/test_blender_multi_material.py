@@ -261,6 +261,7 @@ lone.data.materials.append(colour_material("Yellow"))
 for poly in lone.data.polygons:
     poly.material_index = 1
 lone.active_material_index = 0
+s.prompt = "a mossy cube"   # each asset has its own prompt (Lone is another asset than Cube)
 out["lone"] = [sorted(bpy.ops.scenefit.convert(iterations=5)),
                sorted(bpy.ops.scenefit.adapt(iterations=2, model_resolution=32, render_size=16))]
 out["lone_slots"] = [[sl.material.name, sl.material.get("scenefit")] for sl in lone.material_slots]

@@ -138,7 +138,7 @@ classes = {"run": (run.SCENEFIT_OT_run, {"choice": "ask", "guidance": "auto"}),
            "adapt": (adapt.SCENEFIT_OT_adapt, {"iterations": 0, "model_resolution": 0, "render_size": 0, "resume": "",
                                                "choice": "ask"}), "convert": (convert.SCENEFIT_OT_convert, {"iterations": 0}),
            "light": (light.SCENEFIT_OT_estimate_light, {})}
-settings.prompt = "a mossy figure"
+settings.prompt, settings.preset = "a mossy figure", "balanced"   # (at Draft, Draft is not offered)
 for name in roots:
     select(name)
     for label, (cls, props) in classes.items():
@@ -162,6 +162,7 @@ stages = ("convert", "light", "adapt", "compose", "bake")
 out["whole_run"] = [jobs.whole_run(JobState("run", stage="adapt", step=3, total=4, fraction=0.75), stages),
                     jobs.whole_run(JobState("run", stage="run", step=1, total=5, fraction=0.2), stages),
                     jobs.whole_run(JobState("adapt", stage="adapt", step=3, total=4, fraction=0.75), stages)]
+settings.preset = "draft"
 out["invoke"] = {"seconds": seconds, "results": results, "dialogs": dialogs, "touched": sorted(set(touched)),
                  "torch_before": had_torch, "online": bpy.app.online_access}
 """
@@ -174,7 +175,7 @@ fox = select(roots[1])
 settings.prompt = "a mossy fox"
 out["convert"] = sorted(bpy.ops.scenefit.convert(iterations=3))
 rt = bpy.context.window_manager.scenefit_runtime
-ADAPT = {"iterations": 12, "model_resolution": 32, "render_size": 16, "resume": "", "choice": "ask"}
+ADAPT = {"iterations": 6, "model_resolution": 32, "render_size": 16, "resume": "", "choice": "ask"}
 
 def started(props):
     op, ctx = probe(adapt_ops.SCENEFIT_OT_adapt, **props), Ctx()
@@ -252,7 +253,8 @@ settings.preset = "draft"
 """
 
 LOAD = r"""
-op, ctx, *_ = started(dict(ADAPT, iterations=50))
+settings.preset = "draft"
+op, ctx, *_ = started(dict(ADAPT, iterations=50, choice="start"))
 while op._job.poll().step < 1 and not op._job.state.finished:
     time.sleep(0.05)
 job = op._job
@@ -263,7 +265,7 @@ asked = job.cancel_requested
 job.wait(10)                                # (a quitting Blender ends here; the worker stops at its next check)
 out["quit"] = [waited, asked, round(time.perf_counter() - t, 2), job.alive, job.poll().status]
 background.release_job(job)
-op, ctx, *_ = started(dict(ADAPT, iterations=50))
+op, ctx, *_ = started(dict(ADAPT, iterations=50, choice="start"))
 while op._job.poll().step < 1 and not op._job.state.finished:
     time.sleep(0.05)
 job = op._job
@@ -360,7 +362,7 @@ def test_esc_cancels_only_over_the_progress_and_resume_continues_the_count(sessi
     assert modal["partial_exists"] and not modal["folder_exists"] and modal["checkpoint_iteration"] >= 2
     assert out["resume"] == ["FINISHED"]
     resumed = out["resumed"]
-    assert resumed["resumed_from"] == modal["checkpoint_iteration"] and resumed["iterations"] == 12
+    assert resumed["resumed_from"] == modal["checkpoint_iteration"] and resumed["iterations"] == 6
     assert resumed["run"] == ["finished", modal["run"][2]] and not resumed["partial_left"]
 
 
