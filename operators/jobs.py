@@ -128,7 +128,7 @@ def show_time_left(rt, state: background.JobState, cancelling: bool) -> None:
     if cancelling or state.finished or rt.expected_seconds <= 0.0:
         return
     pipeline = sys.modules.get(__package__.rpartition(".")[0] + ".core.pipeline.run")
-    left = time_left(rt.expected_seconds, state, tuple(pipeline.STAGES) if pipeline is not None else ())
+    left = time_left(rt.expected_seconds, state, tuple(getattr(pipeline, "STAGES", ())))   # (() while importing)
     if left is None:
         return
     said = state.status_line()
