@@ -116,7 +116,9 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
 
             objects = asset_objects(context)
             name = bpy.path.clean_name(objects[0].name if objects else "asset")
-            self.filepath = str(output_root(context) / f"{name}.{self.file_format}")
+            # beside the .blend, as Blender's own exporters start; an unsaved file's runs folder otherwise
+            folder = Path(bpy.data.filepath).parent if bpy.data.is_saved else output_root(context)
+            self.filepath = str(folder / f"{name}.{self.file_format}")
         context.window_manager.fileselect_add(self)
         return {"RUNNING_MODAL"}
 
