@@ -21,7 +21,7 @@ from ..core.stages.bake.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TE
 from ..core.base.report import write_report
 from . import work
 from .common import OnMesh, asset_layout, asset_texture, run_folder
-from .jobs import JobOperator
+from .jobs import JobOperator, has_ui
 from .properties import PATH
 
 FORMAT_ITEMS = (("glb", "glTF Binary (.glb)", "One file holding the mesh, materials and images"),
@@ -109,7 +109,7 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
     def invoke(self, context, event):
         """The file browser first (with the options beside it), as Blender's own exporters do; its
         Bake Asset button starts the job."""
-        if context.window is None or bpy.app.background:
+        if not has_ui(context):
             return self.execute(context)
         if not self.filepath:
             from .common import output_root, asset_objects

@@ -179,7 +179,27 @@ bake = operators.bake.SCENEFIT_OT_bake_asset
 chosen = SimpleNamespace(filepath="/somewhere/chair.glb", file_format="gltf")
 out["changed"] = [bake.check(chosen, bpy.context), chosen.filepath]
 out["unchanged"] = [bake.check(chosen, bpy.context), chosen.filepath]
-out["has_invoke"] = "invoke" in bake.__dict__
+# Its own invoke on a stand-in window: the browser opens on a file beside the .blend, no job starts yet.
+bpy.ops.wm.read_homefile(use_empty=True)
+bpy.ops.mesh.primitive_cube_add()
+bpy.context.active_object.name = "Chair"
+bpy.ops.wm.save_as_mainfile(filepath=str(__import__("pathlib").Path(TMP) / "scene.blend"))
+attrs = {}
+for klass in reversed(bake.__mro__):
+    if klass.__module__.startswith("scenefit"):
+        attrs.update({k: v for k, v in vars(klass).items() if not k.startswith("__") and k != "bl_rna"})
+op = type("Probe", (), dict(attrs, filepath="", file_format="glb"))()
+browsed = []
+class Ctx:
+    window = object()
+    window_manager = SimpleNamespace(fileselect_add=lambda o: browsed.append(o.filepath))
+    def __getattr__(self, name): return getattr(bpy.context, name)
+operators.bake.has_ui = lambda context: True
+try:
+    out["invoke"] = [sorted(op.invoke(Ctx(), None)), browsed]
+finally:
+    operators.bake.has_ui = operators.jobs.has_ui
+out["blend_folder"] = str(__import__("pathlib").Path(TMP))
 rt = bpy.context.window_manager.scenefit_runtime
 rt.details = ""
 out["copy_greyed"] = operators.details.SCENEFIT_OT_copy_details.poll(bpy.context)
@@ -305,10 +325,10 @@ def test_progress_says_the_stage_the_time_left_from_the_start_and_keeps_a_previe
 
 
 def test_bake_asset_names_its_file_in_a_browser_and_copy_details_is_offered_after_a_failure(blender):
-    session, _ = blender
-    out = session.run(BAKE_BROWSER)
+    session, tmp = blender
+    out = session.run(BAKE_BROWSER.replace("TMP", repr(str(tmp))))
     assert out["changed"] == [True, "/somewhere/chair.gltf"]      # the ending follows the chosen format
     assert out["unchanged"] == [False, "/somewhere/chair.gltf"]
-    assert out["has_invoke"]
+    assert out["invoke"] == [["RUNNING_MODAL"], [str(Path(out["blend_folder"]) / "Chair.glb")]]
     assert out["copy_greyed"] is False
     assert out["copy"] == [True, ["FINISHED"]]   # (bpy without a window has no clipboard to read back)
