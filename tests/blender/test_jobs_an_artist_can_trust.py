@@ -138,9 +138,10 @@ classes = {"run": (run.SCENEFIT_OT_run, {"choice": "ask", "guidance": "auto"}),
            "adapt": (adapt.SCENEFIT_OT_adapt, {"iterations": 0, "model_resolution": 0, "render_size": 0, "resume": "",
                                                "choice": "ask"}), "convert": (convert.SCENEFIT_OT_convert, {"iterations": 0}),
            "light": (light.SCENEFIT_OT_estimate_light, {})}
-settings.prompt, settings.preset = "a mossy figure", "balanced"   # (at Draft, Draft is not offered)
+settings.preset = "balanced"   # (at Draft, Draft is not offered)
 for name in roots:
     select(name)
+    settings.prompt = "a mossy figure"   # (each asset its own)
     for label, (cls, props) in classes.items():
         op, ctx = probe(cls, **props), Ctx()
         sys.setprofile(guard)

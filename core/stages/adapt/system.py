@@ -262,6 +262,7 @@ class AdaptSystem:
                                               view.stage.spp, view.render_seed + 1)
             rendered.append(torch.cat([placed.rgb, placed.alpha], dim=-1))
         self.timer.lap("render")
+        check_cancel(self.cancel)   # between the render and the critics (the view's heaviest half)
         # Gradients stop at the leaves, so the two halves of backward can be timed.
         leaves = [r.detach().to(self.device).requires_grad_(True) for r in rendered]
         share = 0.5 * weight if view.crops else weight   # local and global weighed equally
