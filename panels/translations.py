@@ -47,6 +47,7 @@ _FRENCH = {
         "cœurs)",
     "The latest preview is the image '{}': open it in an Image Editor to see it larger":
         "Le dernier aperçu est l'image « {} » : ouvrez-la dans un éditeur d'images pour la voir en grand",
+    "adapt: about {} on a CPU": "adaptation : environ {} sur un CPU",
     "finished": "terminé", "cancelled": "annulé", "failed": "échoué", "cancelled, resumable": "annulé, reprenable",
 }
 

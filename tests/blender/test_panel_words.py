@@ -33,6 +33,8 @@ class Layout:   # what a panel draws, recorded: panels cannot draw without a win
         return SimpleNamespace()
     def label(self, text="", **kw): self.drawn.append(("label", text))
     def template_icon(self, icon_value=0, **kw): self.drawn.append(("icon", icon_value))
+    def template_list(self, *args, **kw): self.drawn.append(("list",))
+    def progress(self, **kw): self.drawn.append(("progress", kw.get("text")))
 
 def drawn(panel_class):
     layout = Layout()
@@ -105,11 +107,15 @@ def refuse(*args, **kw):
 builtins.open, oiio.ImageInput.open = refuse, refuse
 try:
     frames = [drawn(panels.main.SCENEFIT_PT_scene) for _ in range(3)]
+    bpy.ops.mesh.primitive_cube_add()   # an asset for the Asset section to describe
+    sections = {cls.__name__: drawn(cls) for cls in panels.main.classes if issubclass(cls, bpy.types.Panel)}
 finally:
     builtins.open, oiio.ImageInput.open = real_open, real_oiio
 icons = [[d[1] for d in frame if d[0] == "icon"] for frame in frames]
 preview = panels.thumbnail._previews[str(path)]
 pixels = np.array(preview.image_pixels_float[:]).reshape(preview.image_size[1], preview.image_size[0], 4)
+out["sections"] = {name: len(lines) for name, lines in sections.items()}
+out["quality"] = [d for d in sections["SCENEFIT_PT_quality"] if d[0] in ("label", "operator")]
 out.update(reads=reads, opened=opened, icons=icons, icon_id=preview.icon_id, size=list(preview.image_size),
            top_left=pixels[-1, 0].tolist(), top_right=pixels[-1, -1].tolist(),
            pickers=[d for d in frames[0] if d[0] == "operator" and d[1] in ("scenefit.pick_placement", "scenefit.pick_sun")])
@@ -280,6 +286,10 @@ def test_the_photos_thumbnail_is_read_once_and_drawing_opens_no_file(blender):
     # the preview is the photo the right way up: red on the left, black on the right
     assert out["top_left"][:3] == pytest.approx([1.0, 0.0, 0.0]) and out["top_right"][:3] == pytest.approx([0.0, 0.0, 0.0])
     assert {d[3] for d in out["pickers"]} == {"EYEDROPPER"} and len(out["pickers"]) == 2
+    # every section draws from what was read before, none of them opening a file
+    assert all(n > 0 for n in out["sections"].values()) and len(out["sections"]) == 7, out["sections"]
+    adapt = [d for d in out["quality"] if d[0] == "operator" and d[1] == "scenefit.show_details"]
+    assert len(adapt) == 1 and adapt[0][2].startswith("adapt: about") and len(adapt[0][2]) <= 40   # short label
 
 
 def test_lens_shift_moves_the_principal_point_and_the_placement_as_blender_projects(blender):
