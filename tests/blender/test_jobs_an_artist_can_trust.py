@@ -346,9 +346,9 @@ def test_a_click_returns_at_once_without_network_or_models(session):
     for name in session.setup["roots"]:
         assert "hours" not in out["dialogs"][f"{name}/convert"] and out["dialogs"][f"{name}/light"] == ["options"]
         assert any("would run" in d for d in out["dialogs"][f"{name}/adapt"])
-        assert out["dialogs"][f"{name}/run/buttons"] == [("Draft", "draft"), ("Skip adaptation", "skip"),
-                                                         ("Start anyway", "start")]
-        assert out["dialogs"][f"{name}/adapt/buttons"] == [("Draft", "draft"), ("Start anyway", "start")]
+        assert out["dialogs"][f"{name}/run/buttons"] == [["Draft", "draft"], ["Skip adaptation", "skip"],
+                                                         ["Start anyway", "start"]]
+        assert out["dialogs"][f"{name}/adapt/buttons"] == [["Draft", "draft"], ["Start anyway", "start"]]
 
 
 def test_esc_cancels_only_over_the_progress_and_resume_continues_the_count(session):
