@@ -7,6 +7,7 @@ artist's is changed: the camera is read, never moved.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -68,15 +69,29 @@ def horizontal_fov_deg(camera, width: int, height: int) -> float:
     return math.degrees(2.0 * math.atan(half))
 
 
+def shift_unit_pixels(camera, width: int, height: int) -> float:
+    """The frame side, in pixels, that Blender measures a camera's lens shift in: the side its sensor fits
+    (AUTO: the longer one)."""
+    fit = camera.data.sensor_fit
+    if fit == "AUTO":
+        return float(max(width, height))
+    return float(width if fit == "HORIZONTAL" else height)
+
+
+def principal_point(camera, width: int, height: int) -> tuple[float, float]:
+    """Where the camera's optical axis meets a width x height frame, in pixels (x right, y down): the centre
+    moved by the lens shift (fSpy's importer sets the shift from the principal point it solved). A shift
+    to the right moves the view right, so the axis's pixel moves left."""
+    unit = shift_unit_pixels(camera, width, height)
+    return width / 2.0 - camera.data.shift_x * unit, height / 2.0 + camera.data.shift_y * unit
+
+
 def scene_view(camera, obj, photo_size: tuple[int, int], depsgraph) -> tuple[SceneView, list[str]]:
     """The arrangement of `obj` seen through the artist's `camera` (core/scene/asset_pose.SceneView) and
     notes on what SceneFit does not model (lens shift, a tilted or unevenly scaled asset). `obj` may be a
     list of the objects of one asset: read in world space, they stand as they are (no turn of their own)."""
     width, height = photo_size
     notes = []
-    if abs(camera.data.shift_x) > 1e-4 or abs(camera.data.shift_y) > 1e-4:
-        notes.append(f"the camera's lens shift ({camera.data.shift_x:.3f}, {camera.data.shift_y:.3f}) is not "
-                     "modelled: the composite keeps the principal point at the photo's centre")
     objects = list(obj) if isinstance(obj, (list, tuple)) else [obj]
     clouds = []
     for part in objects:
@@ -99,4 +114,13 @@ def scene_view(camera, obj, photo_size: tuple[int, int], depsgraph) -> tuple[Sce
     camera_matrix = np.array(camera.matrix_world, np.float64)
     seen = asset_in_view(camera_matrix, horizontal_fov_deg(camera, width, height), width, height, points, yaw,
                          f"The scene camera '{camera.name}'")
+    # A lens shift moves the whole picture by one offset (the optical axis's pixel): the asset stands
+    # where the shifted camera shows it, and its size is the same.
+    axis_x, axis_y = principal_point(camera, width, height)
+    if abs(axis_x - width / 2.0) > 1e-6 or abs(axis_y - height / 2.0) > 1e-6:
+        seen = replace(seen, placement=(seen.placement[0] + (axis_x - width / 2.0) / width,
+                                        seen.placement[1] + (axis_y - height / 2.0) / height))
+        notes.append(f"the camera's lens shift ({camera.data.shift_x:.3f}, {camera.data.shift_y:.3f}) puts its "
+                     f"optical axis at pixel ({axis_x:.0f}, {axis_y:.0f}): the asset is placed where that camera "
+                     "shows it, and rendered with the axis at the photo's centre")
     return seen, notes

@@ -1,9 +1,9 @@
 """Operators: gather inputs from Blender, run core on them (as background jobs), write results back as new data."""
-from . import (adapt, bake, camera, compose, convert, export, history, import_asset, jobs, light, models, placement,
-               prompt, properties, results, run, sun)
+from . import (adapt, bake, camera, compose, convert, details, export, history, import_asset, jobs, light, models,
+               placement, prompt, properties, results, run, sun)
 
 _modules = (properties, jobs, results, import_asset, placement, camera, sun, export, convert, light, prompt, adapt, compose,
-            run, bake, history, models)
+            run, bake, history, details, models)
 classes = tuple(cls for module in _modules for cls in module.classes)
 
 

@@ -99,12 +99,16 @@ class SCENEFIT_OT_adapt(OnMesh, CostFirst, JobOperator):
     job_name = "adapt"
     runs_remotely = True
     records_runs = True
-    choice: EnumProperty(name="Choice", items=CHOICES, default="ask", options={"SKIP_SAVE", "HIDDEN"})
+    choice: EnumProperty(name="Choice", items=CHOICES, default="ask", options={"SKIP_SAVE", "HIDDEN"},
+                         description="What the artist chose when asked about long work")
 
     # For scripts and quick looks; 0 keeps the preset's value.
-    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"})
-    model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"})
-    render_size: IntProperty(name="Render size", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"})
+    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"},
+                            description="Restyling steps (0: the quality preset's)")
+    model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"},
+                                  description="Image size the diffusion model works at (0: the quality preset's)")
+    render_size: IntProperty(name="Render size", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"},
+                             description="Size of the views of the asset it looks at (0: the quality preset's)")
     resume: StringProperty(name="Resume", default="", options={"SKIP_SAVE", "HIDDEN"}, subtype="DIR_PATH",
                            description="A cancelled adaptation's folder to continue (Resume in the run list)")
 

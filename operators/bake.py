@@ -22,7 +22,7 @@ from ..core.stages.bake.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TE
 from ..core.base.report import write_report
 from . import work
 from .common import OnMesh, asset_layout, asset_texture, run_folder
-from .jobs import JobOperator
+from .jobs import JobOperator, has_ui
 from .properties import PATH
 
 FORMAT_ITEMS = (("glb", "glTF Binary (.glb)", "One file holding the mesh, materials and images"),
@@ -86,28 +86,64 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
     bl_idname = "scenefit.bake_asset"
     bl_label = "Bake Asset"
     job_name = "bake"
-    asks_options = True   # the file, format, compression, textures... in a dialog before it starts
 
     filepath: StringProperty(name="File", subtype="FILE_PATH", options={"SKIP_SAVE"} | PATH, default="",
                              description="Where to write; empty: a new run folder next to the .blend")
-    file_format: EnumProperty(name="Format", items=FORMAT_ITEMS, default="glb")
+    filter_glob: StringProperty(default="*.glb;*.gltf", options={"HIDDEN"},
+                                description="The kinds of file the browser lists")
+    file_format: EnumProperty(name="Format", items=FORMAT_ITEMS, default="glb",
+                              description="One .glb file, or a .gltf with its data and images beside it")
     texture_size: IntProperty(name="Texture size", default=0, min=0, max=8192, options={"SKIP_SAVE"},
                               description="Pixels per side (a power of two) for every material; 0: each "
                                           "material's own images' size")
     target: EnumProperty(name="Target", items=TARGET_ITEMS, default="as-imported",
                          description="The engine the file is for: only what its importer reads")
-    compress: EnumProperty(name="Compression", items=COMPRESS_ITEMS, default=AS_IMPORTED)
-    textures: EnumProperty(name="Textures", items=TEXTURE_ITEMS, default=AS_IMPORTED)
+    compress: EnumProperty(name="Compression", items=COMPRESS_ITEMS, default=AS_IMPORTED,
+                           description="How the mesh data is compressed in the file")
+    textures: EnumProperty(name="Textures", items=TEXTURE_ITEMS, default=AS_IMPORTED,
+                           description="The image format of the baked textures")
     max_texture: IntProperty(name="Max texture", default=DEFAULT_MAX_TEXTURE, min=4, max=8192,
                              description="Largest baked texture side, a power of two")
     cameras_and_lights: BoolProperty(name="Cameras and Lights", default=True,
                                      description="Also write the cameras and lights imported with the asset (Import "
                                                  "Asset, or File > Import > glTF) from the "
-                                                 "asset's file, as they are (scenefit bake writes the whole file)")
+                                                 "asset's file, as they are")
 
     @classmethod
     def poll(cls, context):
-        return super().poll(context) and bool(context.scene.scenefit.texture_path)
+        if not super().poll(context):
+            return False
+        if context.scene.scenefit.texture_path:
+            return True
+        cls.poll_message_set("This asset has no SceneFit texture yet: Run All, Convert or Adapt makes one")
+        return False
+
+    def invoke(self, context, event):
+        """The file browser first (with the options beside it), as Blender's own exporters do; its
+        Bake Asset button starts the job."""
+        if not has_ui(context):
+            return self.execute(context)
+        if not self.filepath:
+            from .common import output_root, asset_objects
+
+            objects = asset_objects(context)
+            name = bpy.path.clean_name(objects[0].name if objects else "asset")
+            # beside the .blend, as Blender's own exporters start; an unsaved file's runs folder otherwise
+            folder = Path(bpy.data.filepath).parent if bpy.data.is_saved else output_root(context)
+            self.filepath = str(folder / f"{name}.{self.file_format}")
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def check(self, _context) -> bool:
+        """The file's ending follows the chosen format (True: the browser shows the new name)."""
+        if not self.filepath:
+            return False
+        path = Path(self.filepath)
+        wanted = path.with_suffix(f".{self.file_format}") if path.suffix or path.name else path
+        if str(wanted) == self.filepath:
+            return False
+        self.filepath = str(wanted)
+        return True
 
     def prepare(self, context):
         size = self.texture_size
@@ -168,6 +204,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
 
         # A run folder is written whole; a chosen file is moved into place once the exporter has finished.
         report = export(None) if self._folder is None else work.written_whole(str(self._folder), export)
+        context.scene.scenefit.bake_path = str(self._out_file if self._folder is None else
+                                               Path(self._folder) / self._out_file)
         unlike = "".join(f"; {why}" for why in self._output.unlike_input)   # (a .gltf cannot hold meshopt, KTX2)
         return f"Baked '{shown}' at up to {result['size']} px a side into {report['file']}{unlike}"
 
@@ -202,6 +240,31 @@ def new_uv_map(context, layout, texture) -> tuple[frozenset, object, dict]:
     return remap, remapped, loops
 
 
-classes = (SCENEFIT_OT_bake_asset,)
+
+
+class SCENEFIT_OT_open_bake_folder(bpy.types.Operator):
+    """Open the folder of the last file Bake Asset wrote in the system's file browser"""
+
+    bl_idname = "scenefit.open_bake_folder"
+    bl_label = "Open Folder"
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context):
+        if getattr(context.scene, "scenefit", None) is not None and context.scene.scenefit.bake_path:
+            return True
+        cls.poll_message_set("Nothing baked yet")
+        return False
+
+    def execute(self, context):
+        folder = Path(bpy.path.abspath(context.scene.scenefit.bake_path)).parent
+        if not folder.is_dir():
+            self.report({"ERROR"}, f"The folder '{folder}' is gone.")
+            return {"CANCELLED"}
+        bpy.ops.wm.path_open(filepath=str(folder))
+        return {"FINISHED"}
+
+
+classes = (SCENEFIT_OT_bake_asset, SCENEFIT_OT_open_bake_folder)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

@@ -295,15 +295,21 @@ class OnMesh:
     @classmethod
     def poll(cls, context) -> bool:
         obj = context.active_object
-        return obj is not None and obj.type == "MESH"
+        if obj is not None and obj.type == "MESH":
+            return True
+        cls.poll_message_set("Select the asset: a mesh object")
+        return False
 
 
-def needs_setting(name: str) -> classmethod:
+def needs_setting(name: str, why: str) -> classmethod:
     """An operator poll: available when the scene's SceneFit setting `name` is filled in."""
 
     def poll(cls, context) -> bool:
         settings = getattr(context.scene, "scenefit", None)
-        return settings is not None and bool(getattr(settings, name).strip())
+        if settings is not None and bool(getattr(settings, name).strip()):
+            return True
+        cls.poll_message_set(why)
+        return False
 
     return classmethod(poll)
 

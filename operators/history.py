@@ -72,7 +72,10 @@ class _RunOperator:
     @classmethod
     def poll(cls, context):
         owner = asset_owner(context.scene)
-        return owner is not None and len(owner.scenefit_asset.runs) > 0
+        if owner is not None and len(owner.scenefit_asset.runs) > 0:
+            return True
+        cls.poll_message_set("The active asset has no runs yet")
+        return False
 
 
 class SCENEFIT_OT_apply_run(_RunOperator, bpy.types.Operator):

@@ -1,6 +1,6 @@
 """Import Asset: an asset file into the open scene, as File > Import does, including the files Blender's
 own importers refuse and the command line reads (a meshopt-compressed glTF, an ASCII FBX): an artist
-can bring into Blender every asset `scenefit run` takes. In File > Import and in the Asset section."""
+can bring into Blender every asset SceneFit reads. In File > Import and in the Asset section."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -20,7 +20,7 @@ class SCENEFIT_OT_import_asset(bpy.types.Operator, ImportHelper):
     bl_options = {"REGISTER", "UNDO"}
 
     filter_glob: bpy.props.StringProperty(default="*.glb;*.gltf;*.fbx;*.obj;*.ply;*.usd;*.usda;*.usdc;*.usdz",
-                                          options={"HIDDEN"})
+                                          options={"HIDDEN"}, description="The kinds of file the browser lists")
 
     def execute(self, context):
         from ..blender_io.asset_file import import_into_open_scene

@@ -36,12 +36,15 @@ _preview_serial = (None, 0)  # (job, serial) of the preview shown
 class SceneFitRuntime(bpy.types.PropertyGroup):
     """What the panel and the status bar show while a job runs (WindowManager: not saved)."""
 
-    running: BoolProperty(default=False)
-    job: StringProperty(name="Job")
-    stage: StringProperty(name="Stage")
-    status: StringProperty(name="Status")
-    progress: FloatProperty(name="Progress", min=0.0, max=1.0, subtype="FACTOR")
-    has_preview: BoolProperty(default=False)
+    running: BoolProperty(default=False, description="Whether a SceneFit job is running")
+    job: StringProperty(name="Job", description="The running job")
+    stage: StringProperty(name="Stage", description="The step the job is at")
+    status: StringProperty(name="Status", description="What the job is doing, or how it ended")
+    progress: FloatProperty(name="Progress", min=0.0, max=1.0, subtype="FACTOR", description="How far the job is")
+    has_preview: BoolProperty(default=False, description="Whether the job has shown a preview")
+    details: StringProperty(name="Details", description="What went wrong in the last job, in full (Copy Details)")
+    expected_seconds: FloatProperty(name="Expected", min=0.0, description="How long the job was projected to take "
+                                                                          "from the bench's timings (0: unknown)")
 
 
 def runtime(context=None) -> SceneFitRuntime:
@@ -65,6 +68,28 @@ def show_preview(image: np.ndarray) -> None:
     rgba[..., :3] = np.asarray(image, np.float32)[..., :3] / 255.0
     item.image_size = (w, h)
     item.image_pixels_float = rgba[::-1].ravel()  # Blender's first row is the bottom one
+    preview_image(rgba[::-1])
+
+
+# The job's latest preview as an image the artist can open in an Image Editor (no users: not saved).
+PREVIEW_IMAGE = "SceneFit Preview"
+
+
+def preview_image(rgba_bottom_up: np.ndarray):
+    """Write a preview (rows bottom first, RGBA in [0, 1], sRGB) into the PREVIEW_IMAGE datablock, made once
+    and resized in place, so an Image Editor showing it follows the job."""
+    from ..blender_io.tag import TAG
+
+    h, w = rgba_bottom_up.shape[:2]
+    image = bpy.data.images.get(PREVIEW_IMAGE)
+    if image is None or TAG not in image:
+        image = bpy.data.images.new(PREVIEW_IMAGE, w, h)
+        image[TAG] = "preview"
+    elif tuple(image.size) != (w, h):
+        image.scale(w, h)
+    image.pixels.foreach_set(np.ascontiguousarray(rgba_bottom_up, np.float32).ravel())
+    image.update()
+    return image
 
 
 def whole_run(state: background.JobState, stages: tuple[str, ...]) -> tuple[float, str] | None:
@@ -82,6 +107,37 @@ def whole_run(state: background.JobState, stages: tuple[str, ...]) -> tuple[floa
     return (k + inner) / n, f"stage {k + 1} of {n} ({stages[k]})"
 
 
+def time_left(expected: float, state: background.JobState, stages: tuple[str, ...]) -> float | None:
+    """Seconds left of a job whose adaptation the bench projects at `expected` seconds: the projection until
+    the adaptation starts, then weighed over to its own pace (panels/quality.eta_from_start); None once it is
+    done (a run's later stages take seconds, their own guess stands)."""
+    from ..panels.quality import eta_from_start
+
+    if state.stage == "adapt":
+        return eta_from_start(expected, time.perf_counter() - state.started, state.fraction, state.eta_seconds)
+    if "adapt" in stages and state.stage in stages and stages.index(state.stage) > stages.index("adapt"):
+        return None
+    return expected
+
+
+def show_time_left(rt, state: background.JobState, cancelling: bool) -> None:
+    """The status's time left from the job's first moment: the bench's projection for this preset and device
+    (rt.expected_seconds, set when the job starts), refined by the job's own pace as it goes."""
+    from ..panels.quality import duration_text
+
+    if cancelling or state.finished or rt.expected_seconds <= 0.0:
+        return
+    left = time_left(rt.expected_seconds, state, RUN_ORDER)
+    if left is None:
+        return
+    said = state.status_line()
+    stage_eta = said.rfind(", about ")
+    if state.eta_seconds is not None and stage_eta >= 0 and rt.status.endswith(said[stage_eta:]):
+        rt.status = rt.status[:len(rt.status) - (len(said) - stage_eta)]   # the stage's own guess gives way
+    rt.status = "{}, {}".format(rt.status, bpy.app.translations.pgettext_iface("about {} left").format(
+        duration_text(left)))
+
+
 def update_runtime(context, state: background.JobState, cancelling: bool = False) -> None:
     """The panel's and status bar's copy of a job's state; "cancelling…" stays until the worker has stopped.
     Run All shows one bar for the whole run (stage k of n)."""
@@ -95,6 +151,7 @@ def update_runtime(context, state: background.JobState, cancelling: bool = False
     if whole is not None:
         rt.progress = whole[0]
         rt.status = f"{state.name}: {whole[1]}, {state.status_line().split(': ', 1)[-1]}"
+    show_time_left(rt, state, cancelling)
     if state.preview is not None and _preview_serial != (id(state), state.preview_serial):
         show_preview(state.preview)
         _preview_serial = (id(state), state.preview_serial)
@@ -272,7 +329,13 @@ class JobSteps:
         self._job = None
         rt = runtime(context)
         rt.running, rt.job, rt.stage, rt.progress = True, self.job_name, "prepare", 0.0
+        try:   # the bench's projection (no model lookup): the time left shows from the first moment
+            work = self.long_local_work(context)
+        except SceneFitError:
+            work = None
+        rt.expected_seconds = work.seconds if work is not None else 0.0
         rt.status, rt.has_preview = f"{self.bl_label}: reading the asset…", False
+        rt.details = ""
         wm = context.window_manager
         self._timer = wm.event_timer_add(TIMER_SECONDS, window=context.window)
         wm.modal_handler_add(self)
@@ -285,10 +348,12 @@ class JobSteps:
             work, data = self.job_work(context)
             self._out = data.get("out", "") if isinstance(data, dict) else ""
             self._job = background.start_job(background.Job(self.job_name, work, data))
+            if getattr(self, "_remote", False):   # the projection is this machine's, not the worker's
+                runtime(context).expected_seconds = 0.0
         except SceneFitError as error:
             self._remove_timer(context)
             rt = runtime(context)
-            rt.running, rt.status = False, str(error)
+            rt.running, rt.status, rt.details = False, str(error), str(error)
             self.report({"ERROR"}, str(error))
             return False
         update_runtime(context, self._job.state)
@@ -340,7 +405,7 @@ class JobSteps:
             try:
                 message = self.apply_result(context, state.result)
             except SceneFitError as error:
-                rt.status = str(error)
+                rt.status = rt.details = str(error)
                 self.report({"ERROR"}, rt.status)
                 return {"CANCELLED"}
             self.keep_run(context, "finished", state.result)
@@ -352,6 +417,9 @@ class JobSteps:
         if state.details:
             print(state.details)  # the traceback of an unexpected failure, for the console
         rt.status = state.status_line()
+        # The whole story for Copy Details; the report below puts the line in the Info editor.
+        rt.details = "" if state.status == background.CANCELLED else "\n".join(
+            part for part in (rt.status, state.details or "") if part)
         self.report({"WARNING"} if state.status == background.CANCELLED else {"ERROR"}, rt.status)
         return {"CANCELLED"}
 
@@ -429,7 +497,10 @@ class SCENEFIT_OT_cancel_job(bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         job = background.active_job()
-        return job is not None and not job.state.finished
+        if job is not None and not job.state.finished:
+            return True
+        cls.poll_message_set("No SceneFit job is running")
+        return False
 
     def invoke(self, context, event):
         job = background.active_job()
@@ -466,6 +537,7 @@ def _end_job_before_load(*_args) -> None:
 
 @persistent
 def _reset_after_load(*_args) -> None:
+    from ..panels.thumbnail import load_thumbnail
     from .common import remember_photo_size
 
     wm = bpy.context.window_manager
@@ -474,6 +546,7 @@ def _reset_after_load(*_args) -> None:
     for scene in bpy.data.scenes:   # the panel draws the photo's camera from sizes read here, not in draw()
         if getattr(scene, "scenefit", None) is not None and scene.scenefit.photo_path:
             remember_photo_size(scene.scenefit.photo_path)
+            load_thumbnail(scene.scenefit.photo_path)
 
 
 classes = (SceneFitRuntime, SCENEFIT_OT_cancel_job)

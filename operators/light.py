@@ -19,17 +19,20 @@ class SCENEFIT_OT_estimate_light(JobOperator):
     job_name = "light"
     asks_options = True   # Critic and Outpaint in a dialog before it starts
 
-    critic: EnumProperty(name="Critic", default="auto", items=(
+    critic: EnumProperty(name="Critic", default="auto", description="What sets how bright the light is", items=(
         ("auto", "Auto", "The diffusion critic when Stable Diffusion 2 is on this machine, else the prior alone"),
         ("diffusion", "Diffusion", "Refine the light scales with Stable Diffusion 2 (VSD)"),
         ("none", "Prior only", "The inverse-tone-mapping prior sets the scales (fast)")))
-    outpaint: EnumProperty(name="Outpaint", default="auto", items=(
+    outpaint: EnumProperty(name="Outpaint", default="auto", description="How the light map is completed where "
+                                                                       "the photo does not show it", items=(
         ("auto", "Auto", "Outdoor: SD2 inpainting when it is on this machine, else the sky/ground prior"),
         ("sd2", "SD2", "Complete the unseen map with Stable Diffusion 2 inpainting"),
         ("prior", "Prior", "Complete the unseen map with the sky/ground prior (fast)")))
     # For scripts and quick looks; 0 keeps the preset's value.
-    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"})
-    model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"})
+    iterations: IntProperty(name="Iterations", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"},
+                            description="Refinement steps of the light (0: the quality preset's)")
+    model_resolution: IntProperty(name="Model resolution", default=0, min=0, options={"SKIP_SAVE", "HIDDEN"},
+                                  description="Image size the diffusion model works at (0: the quality preset's)")
 
     def prepare(self, context):
         settings = context.scene.scenefit

@@ -63,7 +63,7 @@ class SCENEFIT_OT_generate_prompt(bpy.types.Operator):
     bl_label = "Write Prompt"
     bl_options = {"REGISTER"}
 
-    poll = needs_setting("object_prompt")
+    poll = needs_setting("object_prompt", "Say what the asset is first (the Object field above)")
 
     def execute(self, context):
         try:

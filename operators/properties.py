@@ -72,10 +72,10 @@ class SceneFitSlot(bpy.types.PropertyGroup):
     """One material slot a result went to: what it held before (the artist's), SceneFit's latest material
     there, and the job that made it (the Results switch acts on the selection's slots, else the last job's)."""
 
-    asset_object: PointerProperty(name="Object", type=bpy.types.Object)
-    slot: IntProperty(name="Slot", min=0)
-    original: PointerProperty(name="Original material", type=bpy.types.Material)
-    result: PointerProperty(name="SceneFit material", type=bpy.types.Material)
+    asset_object: PointerProperty(name="Object", type=bpy.types.Object, description="The object whose slot it is")
+    slot: IntProperty(name="Slot", min=0, description="Which of its material slots")
+    original: PointerProperty(name="Original material", type=bpy.types.Material, description="The material that was in the slot before SceneFit's")
+    result: PointerProperty(name="SceneFit material", type=bpy.types.Material, description="SceneFit's latest material for the slot")
     job: IntProperty(name="Job", min=0, description="Which result this is: a later job has a higher number")
 
 
@@ -90,18 +90,18 @@ class SceneFitRun(bpy.types.PropertyGroup):
     folder: StringProperty(name="Folder", subtype="DIR_PATH", options=PATH,
                            description="The run's folder (a cancelled adaptation's work waits beside it, hidden)")
     stage: StringProperty(name="Stage", description="Which button made it: run, convert or adapt")
-    preset: StringProperty(name="Preset")
-    prompt: StringProperty(name="Prompt")
+    preset: StringProperty(name="Preset", description="The quality preset it ran at")
+    prompt: StringProperty(name="Prompt", description="The prompt it was given")
     when: StringProperty(name="Time", description="When the run ended")
-    state: EnumProperty(name="State", items=RUN_STATES, default="finished")
-    composite: PointerProperty(name="Composite", type=bpy.types.Image)
-    world: PointerProperty(name="World", type=bpy.types.World)
-    slots: CollectionProperty(name="Slots", type=SceneFitSlot)
-    texture_path: StringProperty(name="Neural texture", subtype="FILE_PATH", options=PATH)
+    state: EnumProperty(name="State", items=RUN_STATES, default="finished", description="How the run ended")
+    composite: PointerProperty(name="Composite", type=bpy.types.Image, description="Its composite picture")
+    world: PointerProperty(name="World", type=bpy.types.World, description="The World (light) it made")
+    slots: CollectionProperty(name="Slots", type=SceneFitSlot, description="The material slots its materials went to")
+    texture_path: StringProperty(name="Neural texture", subtype="FILE_PATH", options=PATH, description="The texture it made (texture.pt)")
     mesh_digest: StringProperty(name="Mesh", options={"HIDDEN"}, description="Which mesh its texture was made for")
-    iterations: IntProperty(name="Iterations", min=0, options={"HIDDEN"})
-    model_resolution: IntProperty(name="Model resolution", min=0, options={"HIDDEN"})
-    render_size: IntProperty(name="Render size", min=0, options={"HIDDEN"})
+    iterations: IntProperty(name="Iterations", min=0, options={"HIDDEN"}, description="Restyling steps it was asked for (Resume goes on with them)")
+    model_resolution: IntProperty(name="Model resolution", min=0, options={"HIDDEN"}, description="Image size its diffusion model worked at")
+    render_size: IntProperty(name="Render size", min=0, options={"HIDDEN"}, description="Size of the views of the asset it looked at")
 
 
 def _texture_typed(state, _context) -> None:
@@ -129,7 +129,7 @@ class SceneFitAsset(bpy.types.PropertyGroup):
                                              "Bake Asset start here)")
     texture_mesh: StringProperty(name="Texture's mesh", options={"HIDDEN"},
                                  description="Which mesh the texture was made for (a texture of another is refused)")
-    runs: CollectionProperty(name="Runs", type=SceneFitRun)
+    runs: CollectionProperty(name="Runs", type=SceneFitRun, description="Every run on this asset, finished, cancelled or failed")
     run_index: IntProperty(name="Run", min=0, description="The run chosen in the Results section's list")
 
 
@@ -167,12 +167,12 @@ class SceneFitSettings(bpy.types.PropertyGroup):
                         description="The asset's height as a fraction of the photo's height")
     turn: FloatProperty(name="Turn", subtype="ANGLE", min=-math.pi, max=math.pi, **_per_asset("turn"),
                         description="How far the asset is turned about its up axis, seen from the photo's camera")
-    loose_placement: FloatVectorProperty(size=2, min=0.0, max=1.0, default=DEFAULT_AT, options={"HIDDEN"})
-    loose_size: FloatProperty(min=0.02, max=1.0, default=DEFAULT_OBJECT_SIZE, options={"HIDDEN"})
-    loose_turn: FloatProperty(default=0.0, options={"HIDDEN"})
-    loose_prompt: StringProperty(options={"HIDDEN"})
-    loose_texture_path: StringProperty(options={"HIDDEN"} | PATH, subtype="FILE_PATH")
-    scene_type: EnumProperty(name="Scene type", items=SCENE_TYPES, default="auto")
+    loose_placement: FloatVectorProperty(size=2, min=0.0, max=1.0, default=DEFAULT_AT, options={"HIDDEN"}, description="Placement while no object is active")
+    loose_size: FloatProperty(min=0.02, max=1.0, default=DEFAULT_OBJECT_SIZE, options={"HIDDEN"}, description="Size while no object is active")
+    loose_turn: FloatProperty(default=0.0, options={"HIDDEN"}, description="Turn while no object is active")
+    loose_prompt: StringProperty(options={"HIDDEN"}, description="Prompt while no object is active")
+    loose_texture_path: StringProperty(options={"HIDDEN"} | PATH, subtype="FILE_PATH", description="Texture while no object is active")
+    scene_type: EnumProperty(name="Scene type", items=SCENE_TYPES, default="auto", description="Indoor or outdoor: how the light beyond the photo's edges is completed")
     camera_from: EnumProperty(name="Camera", items=CAMERA_SOURCES, default="estimate",
                               description="Where the photo's camera comes from when the scene's camera does not "
                                           "show the photo")
@@ -203,7 +203,7 @@ class SceneFitSettings(bpy.types.PropertyGroup):
                                          description="Whether Uncertainty is Pick Sun's (a typed direction "
                                                      "resets it) rather than the artist's (kept)")
     # Style
-    mode: EnumProperty(name="Mode", items=MODES, default="scene")
+    mode: EnumProperty(name="Mode", items=MODES, default="scene", description="What the prompt asks for: fit the photo, a new look, or a change")
     prompt: StringProperty(name="Prompt", **_per_asset("prompt"),
                            description="How the asset should look, e.g. 'a leather sofa, soggy and stained with mud' "
                                        "(each asset keeps its own)")
@@ -215,29 +215,35 @@ class SceneFitSettings(bpy.types.PropertyGroup):
                                                                     "offline template")
     instruction: StringProperty(name="Instruction", description="Edit mode: e.g. 'add dust to the sofa'")
     # Quality and output
-    preset: EnumProperty(name="Preset", items=PRESETS, default="balanced")
+    preset: EnumProperty(name="Preset", items=PRESETS, default="balanced", description="Draft is quick, Final is best; the times below say how long each takes")
     guidance: EnumProperty(name="Adaptation", items=GUIDANCE, default="auto",
                            description="Whether Run All restyles the texture with Stable Diffusion 2")
     output_dir: StringProperty(name="Output", subtype="DIR_PATH", options=PATH, default="//scenefit/",
                                description="Each run writes a new folder here ('//' is the .blend's folder)")
     # Results (datablocks SceneFit made, and the originals they replaced)
-    result_material: PointerProperty(name="SceneFit material", type=bpy.types.Material)
-    original_material: PointerProperty(name="Original material", type=bpy.types.Material)
-    result_object: PointerProperty(name="Asset", type=bpy.types.Object)
+    result_material: PointerProperty(name="SceneFit material", type=bpy.types.Material, description="SceneFit's latest material")
+    original_material: PointerProperty(name="Original material", type=bpy.types.Material, description="The material it replaced")
+    result_object: PointerProperty(name="Asset", type=bpy.types.Object, description="The object the latest result went to")
     # Every slot of every object the last result went to (the Results section switches them all).
-    result_slots: CollectionProperty(name="Result slots", type=SceneFitSlot)
-    result_world: PointerProperty(name="SceneFit World", type=bpy.types.World)
-    original_world: PointerProperty(name="Original World", type=bpy.types.World)
+    result_slots: CollectionProperty(name="Result slots", type=SceneFitSlot, description="Every slot the latest result went to")
+    result_world: PointerProperty(name="SceneFit World", type=bpy.types.World, description="SceneFit's latest World (the photo's light)")
+    original_world: PointerProperty(name="Original World", type=bpy.types.World, description="The World it replaced")
     texture_path: StringProperty(name="Neural texture", subtype="FILE_PATH", options=PATH, **_per_asset("texture_path"),
                                  description="texture.pt of the active asset's last conversion or adaptation (adapt "
                                              "and Bake Asset start here)")
     light_path: StringProperty(name="Light", subtype="FILE_PATH", options=PATH, description="light.exr of the last estimate")
     composite_path: StringProperty(name="Composite", subtype="FILE_PATH", options=PATH, description="The last composite render")
+    bake_path: StringProperty(name="Last bake", subtype="FILE_PATH", options=PATH,
+                              description="The file Bake Asset wrote last")
 
 
 def _photo_chosen(settings) -> None:
-    """The photo's size read once when it is chosen (the panel draws from that, never from the file)."""
+    """The photo's size and thumbnail read once when it is chosen (the panel draws from those, never from
+    the file)."""
+    from ..panels.thumbnail import load_thumbnail
+
     remember_photo_size(settings.photo_path)
+    load_thumbnail(settings.photo_path)
 
 
 classes = (SceneFitSlot, SceneFitRun, SceneFitAsset, SceneFitSettings)

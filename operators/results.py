@@ -178,9 +178,11 @@ class SCENEFIT_OT_use_result(bpy.types.Operator):
     bl_label = "Use Result"
     bl_options = {"REGISTER", "UNDO"}
 
-    target: EnumProperty(items=(("MATERIAL", "Material", ""), ("WORLD", "World", "")), default="MATERIAL")
-    which: EnumProperty(items=(("RESULT", "SceneFit", "SceneFit's result"), ("ORIGINAL", "Original", "The artist's")),
-                        default="RESULT")
+    target: EnumProperty(name="What", default="MATERIAL", description="The asset's materials or the scene's World",
+                         items=(("MATERIAL", "Material", "The asset's materials"),
+                                ("WORLD", "World", "The scene's World (its light)")))
+    which: EnumProperty(name="Show", default="RESULT", description="SceneFit's result or what was there before",
+                        items=(("RESULT", "SceneFit", "SceneFit's result"), ("ORIGINAL", "Original", "The artist's")))
 
     def execute(self, context):
         settings = context.scene.scenefit
@@ -223,7 +225,7 @@ class SCENEFIT_OT_use_result(bpy.types.Operator):
 class SCENEFIT_OT_open_composite(bpy.types.Operator):
     """Open the last composite in an Image Editor (or load it as an image)"""
 
-    poll = needs_setting("composite_path")  # there is a composite to open
+    poll = needs_setting("composite_path", "No composite yet: Run All or Compose makes one")
     bl_idname = "scenefit.open_composite"
     bl_label = "Open Composite"
     bl_options = {"REGISTER"}

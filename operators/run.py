@@ -25,9 +25,9 @@ if TYPE_CHECKING:
 
 
 class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
-    """Run the whole pipeline on the asset as `scenefit run` does (the selected objects, or the active one with
-    all its materials): convert, estimate the photo's light, adapt (when the diffusion models are here and
-    there is a prompt), compose; then apply the results to every material slot"""
+    """Fit the asset into the photo in one go (the selected objects, or the active one with all its
+    materials): convert, estimate the photo's light, restyle (when the diffusion models are here and there
+    is a prompt), compose; then put the results in every material slot"""
 
     bl_idname = "scenefit.run"
     bl_label = "Run All"
@@ -35,10 +35,12 @@ class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
     runs_remotely = True
     records_runs = True
     skippable = True
-    choice: EnumProperty(name="Choice", items=CHOICES, default="ask", options={"SKIP_SAVE", "HIDDEN"})
+    choice: EnumProperty(name="Choice", items=CHOICES, default="ask", options={"SKIP_SAVE", "HIDDEN"},
+                         description="What the artist chose when asked about long work")
 
     # Scripts may set it; else the Run section's Adaptation (properties.SceneFitSettings.guidance).
-    guidance: EnumProperty(name="Guidance", items=GUIDANCE, default="auto", options={"SKIP_SAVE", "HIDDEN"})
+    guidance: EnumProperty(name="Guidance", items=GUIDANCE, default="auto", options={"SKIP_SAVE", "HIDDEN"},
+                           description="Whether the texture is restyled with Stable Diffusion 2")
 
     def chosen_guidance(self, context) -> str:
         if self.choice == "skip":

@@ -47,9 +47,13 @@ class SCENEFIT_OT_pick_sun(PhotoClicks, bpy.types.Operator):
     bl_label = "Pick Sun"
     bl_options = {"REGISTER", "UNDO"}
 
-    foot: FloatVectorProperty(name="Foot", size=2, min=0.0, max=1.0, default=(0.5, 0.8))
-    top: FloatVectorProperty(name="Top", size=2, min=0.0, max=1.0, default=(0.5, 0.6))
-    tip: FloatVectorProperty(name="Tip", size=2, min=0.0, max=1.0, default=(0.6, 0.85))
+    foot: FloatVectorProperty(name="Foot", size=2, min=0.0, max=1.0, default=(0.5, 0.8),
+                              description="Where the thing casting the shadow meets the ground (fractions of the "
+                                          "photo, y from the top)")
+    top: FloatVectorProperty(name="Top", size=2, min=0.0, max=1.0, default=(0.5, 0.6),
+                             description="The top of the thing casting the shadow (fractions of the photo)")
+    tip: FloatVectorProperty(name="Tip", size=2, min=0.0, max=1.0, default=(0.6, 0.85),
+                             description="The tip of its shadow on the ground (fractions of the photo)")
 
     def execute(self, context):
         try:

@@ -1,11 +1,24 @@
-"""The SceneFit N-panel (panels/main.py) and the add-on preferences (panels/preferences.py)."""
+"""The SceneFit N-panel (panels/main.py), the add-on preferences (panels/preferences.py) and the add-on's
+translations (panels/translations.py)."""
 import bpy
 
-from . import main, preferences
+from . import main, preferences, thumbnail, translations
 from .preferences import ADDON_PACKAGE
 
 classes = preferences.classes + main.classes
 
-register, unregister = bpy.utils.register_classes_factory(classes)
+_register_classes, _unregister_classes = bpy.utils.register_classes_factory(classes)
+
+
+def register() -> None:
+    _register_classes()
+    translations.register()
+
+
+def unregister() -> None:
+    translations.unregister()
+    thumbnail.clear_thumbnails()
+    _unregister_classes()
+
 
 __all__ = ["ADDON_PACKAGE", "classes", "register", "unregister"]

@@ -1,17 +1,28 @@
 """The SceneFit N-panel in the 3D viewport: Asset, Scene, Style, Quality, Run, Results.
 
 Drawing only reads: the material summary looks at node links (no pixels), the dependency check
-asks importlib where modules are (once), and runtime state comes from the WindowManager.
+asks importlib where modules are (once), the photo's thumbnail and size were read when it was chosen,
+and runtime state comes from the WindowManager. Labels built in code go through Blender's translation
+(iface_ with str.format, never an f-string); long sentences are short labels whose tooltip says it all.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
 import bpy
+from bpy.app.translations import pgettext_iface as iface_
 
 from ..core.base.errors import SceneFitError
 from ..operators.common import artist_camera, asset_objects, dependency_sentence, flat_parts, missing_modules
-from .quality import BENCH_MACHINE, EXPECTED_SECONDS, expected_line
+from .quality import BENCH_MACHINE, EXPECTED_SECONDS, adapt_projection, duration_text, expected_line
+from .thumbnail import thumbnail
+
+
+def warning(layout, short: str, details: str, icon: str = "ERROR") -> None:
+    """A short label whose tooltip (and click) gives the whole sentence, which a sidebar would cut off."""
+    op = layout.operator("scenefit.show_details", text=short, icon=icon, emboss=False, translate=False)
+    op.details = details
+
 
 class _Section:
     bl_space_type = "VIEW_3D"
@@ -24,7 +35,10 @@ class _Subsection(_Section):
 
 
 def settings_column(panel, context):
-    """The scene's SceneFit settings and a column to draw them in."""
+    """The scene's SceneFit settings and a column to draw them in, labels on the left as Blender's own
+    property panels have them."""
+    panel.layout.use_property_split = True
+    panel.layout.use_property_decorate = False
     return context.scene.scenefit, panel.layout.column()
 
 
@@ -36,7 +50,7 @@ class SCENEFIT_PT_main(_Section, bpy.types.Panel):
         layout = self.layout
         sentence = dependency_sentence()
         if sentence:
-            layout.label(text=sentence, icon="ERROR")
+            warning(layout, iface_("Modules missing"), sentence)
         rt = context.window_manager.scenefit_runtime
         if rt.running or rt.status:
             box = layout.box()
@@ -45,14 +59,19 @@ class SCENEFIT_PT_main(_Section, bpy.types.Panel):
                 row.progress(factor=rt.progress, type="BAR", text=rt.status)
                 row.operator("scenefit.cancel_job", text="", icon="X")
             else:
-                box.label(text=rt.status)
+                row = box.row(align=True)
+                row.label(text=rt.status, translate=False)
+                if rt.details:
+                    row.operator("scenefit.copy_details", text="", icon="COPYDOWN")
             if rt.has_preview:
-                from ..operators.jobs import preview_icon_id
+                from ..operators.jobs import PREVIEW_IMAGE, preview_icon_id
 
                 box.template_icon(icon_value=preview_icon_id(), scale=8.0)
+                warning(box, PREVIEW_IMAGE, iface_("The latest preview is the image '{}': open it in an Image Editor "
+                                                   "to see it larger").format(PREVIEW_IMAGE), icon="IMAGE_DATA")
         if not bpy.data.is_saved:
-            layout.label(text="Unsaved file: results are packed into it (save first to keep them as files).",
-                         icon="INFO")
+            warning(layout, iface_("Unsaved file"), iface_("Results are packed into the unsaved file; save it first "
+                                                           "to keep them as files beside it."), icon="INFO")
 
 
 class SCENEFIT_PT_asset(_Subsection, bpy.types.Panel):
@@ -69,26 +88,29 @@ class SCENEFIT_PT_asset(_Subsection, bpy.types.Panel):
             row.operator("scenefit.import_asset", text="", icon="IMPORT")
             return
         row = layout.row()
-        row.label(text=obj.name, icon="OBJECT_DATA")
+        row.label(text=obj.name, icon="OBJECT_DATA", translate=False)
         row.operator("scenefit.import_asset", text="", icon="IMPORT")
         objects = asset_objects(context)
         if len(objects) > 1:   # what Run All, Convert, Adapt, Compose and Bake Asset will take
-            layout.label(text=f"{len(objects)} selected objects, fitted as one asset", icon="GROUP")
+            layout.label(text=iface_("{} objects, one asset").format(len(objects)), icon="GROUP")
             for name, ratio in flat_parts(objects):   # said before Run All refuses the whole selection
-                shape = "flat" if ratio > 1000 else f"{ratio:.0f} times as wide as tall"
-                layout.label(text=f"'{name}' is {shape} (a ground plane?): deselect it to fit the rest", icon="ERROR")
+                shape = iface_("flat") if ratio > 1000 else iface_("{:.0f} times as wide as tall").format(ratio)
+                warning(layout, iface_("'{}' is flat").format(name),
+                        iface_("'{}' is {} (a ground plane?): deselect it to fit the rest").format(name, shape))
         try:
             found, dropped = material_summary(obj.active_material)
         except SceneFitError as error:
-            layout.label(text=str(error), icon="ERROR")
+            warning(layout, iface_("Material not readable"), str(error))
             return
         col = layout.column(align=True)
         for line in found:
             col.label(text=line, icon="CHECKMARK")
         if dropped:
-            col.label(text=f"Dropped: {', '.join(dropped)}", icon="TRASH")
+            warning(col, iface_("{} inputs dropped").format(len(dropped)),
+                    iface_("Not read: {}").format(", ".join(dropped)), icon="TRASH")
         if not obj.data.uv_layers:
-            layout.label(text="No UV map: unwrap it first (UV > Smart UV Project).", icon="ERROR")
+            warning(layout, iface_("No UV map"), iface_("The mesh has no UV map: unwrap it first "
+                                                        "(UV > Smart UV Project)."))
 
 
 class SCENEFIT_PT_scene(_Subsection, bpy.types.Panel):
@@ -97,14 +119,17 @@ class SCENEFIT_PT_scene(_Subsection, bpy.types.Panel):
     def draw(self, context):
         settings, col = settings_column(self, context)
         col.prop(settings, "photo_path")
+        preview = thumbnail(settings.photo_path)   # read when the photo was chosen
+        if preview is not None:
+            col.template_icon(icon_value=preview.icon_id, scale=6.0)
         row = col.row(align=True)
-        row.prop(settings, "placement", text="")
-        row.operator("scenefit.pick_placement", text="", icon="RESTRICT_SELECT_OFF")
+        row.prop(settings, "placement")
+        row.operator("scenefit.pick_placement", text="", icon="EYEDROPPER")
         col.prop(settings, "size")
         col.prop(settings, "turn")
         col.prop(settings, "scene_type")
         draw_camera(settings, context, self.layout.column(align=True))
-        draw_choice(self.layout.column(align=True), settings, "sun_from", "Sun", "scenefit.pick_sun", "LIGHT_SUN",
+        draw_choice(self.layout.column(align=True), settings, "sun_from", "Sun", "scenefit.pick_sun", "EYEDROPPER",
                     ("sun_azimuth", "sun_elevation", "sun_uncertainty") if settings.sun_from == "set" else (),
                     more=(("scenefit.sun_from_lamp", "OUTLINER_OB_LIGHT"),))
 
@@ -118,8 +143,9 @@ def draw_camera(settings, context, col) -> None:
         except SceneFitError:
             camera = None
     if camera is not None:
-        col.label(text=f"Camera: '{camera.name}' (it shows the photo)", icon="CAMERA_DATA")
-        col.label(text="The asset is composed where it stands in its view.")
+        warning(col, iface_("Camera: {}").format(camera.name),
+                iface_("The scene camera '{}' shows the photo: the asset is composed where it stands in its "
+                       "view").format(camera.name), icon="CAMERA_DATA")
         return
     draw_choice(col, settings, "camera_from", "Camera", "scenefit.match_camera", "VIEW_CAMERA",
                 ("fov", "pitch", "roll") if settings.camera_from == "panel" else ())
@@ -159,9 +185,14 @@ class SCENEFIT_PT_quality(_Subsection, bpy.types.Panel):
         col.prop(settings, "preset", expand=True)
         col.prop(settings, "output_dir")
         sub = col.column(align=True)
-        for stage in (*EXPECTED_SECONDS, "adapt"):
+        measured = iface_("(the example asset on a {})").format(BENCH_MACHINE)
+        for stage in EXPECTED_SECONDS:
             sub.label(text=expected_line(stage, settings.preset))
-        sub.label(text=f"(the example asset on a {BENCH_MACHINE})")
+        # adapt's line names two machines: short here, the whole of it and where it was measured in the tooltip
+        cpu = adapt_projection(settings.preset)
+        short = (iface_("adapt: about {} on a CPU").format(duration_text(cpu)) if cpu is not None
+                 else expected_line("adapt", settings.preset))
+        warning(sub, short, "{} {}".format(expected_line("adapt", settings.preset), measured), icon="TIME")
 
 
 class SCENEFIT_PT_run(_Subsection, bpy.types.Panel):
@@ -169,6 +200,7 @@ class SCENEFIT_PT_run(_Subsection, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
+        layout.use_property_split, layout.use_property_decorate = True, False
         layout.prop(context.scene.scenefit, "guidance")
         layout.operator("scenefit.run", icon="PLAY")
         col = layout.column(align=True)
@@ -198,8 +230,8 @@ class SCENEFIT_PT_results(_Subsection, bpy.types.Panel):
         layout = self.layout
         layout.operator("scenefit.open_composite", icon="IMAGE")
         row = layout.row(align=True)
-        for file_format in ("glb", "gltf"):  # greyed out until there is a SceneFit texture to bake
-            row.operator("scenefit.bake_asset", text=f"Bake Asset (.{file_format})", icon="EXPORT").file_format = file_format
+        row.operator("scenefit.bake_asset", text=iface_("Bake Asset…"), icon="EXPORT")   # a file browser
+        row.operator("scenefit.open_bake_folder", text="", icon="FILE_FOLDER")
         for label, target, result in (("Material", "MATERIAL", settings.result_material),
                                       ("World", "WORLD", settings.result_world)):
             if result is not None:
@@ -227,8 +259,8 @@ class SCENEFIT_UL_runs(bpy.types.UIList):
         else:
             row.label(text="", icon="RENDER_RESULT")
         state = "cancelled, resumable" if item.state == "cancelled" and item.stage == "adapt" else item.state
-        row.label(text=f"{item.stage} · {item.preset} · {item.when}")
-        row.label(text=state, icon=RUN_STATE_ICONS.get(item.state, "NONE"))
+        row.label(text="{} · {} · {}".format(iface_(item.stage), iface_(item.preset), item.when), translate=False)
+        row.label(text=iface_(state), icon=RUN_STATE_ICONS.get(item.state, "NONE"), translate=False)
 
 
 def draw_runs(layout, context) -> None:
@@ -239,13 +271,13 @@ def draw_runs(layout, context) -> None:
     if owner is None or not owner.scenefit_asset.runs:
         return
     state = owner.scenefit_asset
-    layout.label(text=f"Runs of '{owner.name}'")
+    layout.label(text=iface_("Runs of '{}'").format(owner.name), translate=False)
     layout.template_list("SCENEFIT_UL_runs", "", state, "runs", state, "run_index", rows=3)
     if not 0 <= state.run_index < len(state.runs):
         return
     run = state.runs[state.run_index]
     if run.prompt:
-        layout.label(text=run.prompt, icon="TEXT")
+        warning(layout, run.prompt, run.prompt, icon="TEXT")
     row = layout.row(align=True)
     row.operator("scenefit.apply_run", text="Apply", icon="CHECKMARK").index = state.run_index
     row.operator("scenefit.open_run_folder", text="", icon="FILE_FOLDER").index = state.run_index

@@ -9,6 +9,12 @@ one H200 (benchmarks/results/gpu.json, `make gpu-check`) minutes to hours; both 
 """
 from dataclasses import dataclass
 
+try:   # the panel's words go through Blender's translation; plain text where bpy is absent
+    from bpy.app.translations import pgettext_iface as iface_
+except ImportError:
+    def iface_(text: str) -> str:
+        return text
+
 BENCH_MACHINE = "2-core AMD EPYC, no GPU"
 
 # stage -> preset -> seconds for the bundled example (Suzanne) in a 320x240 photo
@@ -35,10 +41,10 @@ class LocalWork:
     on_gpu: bool
 
     def where(self) -> str:
-        return (f"on this GPU for about {duration_text(self.seconds)} (measured on {GPU_BENCH_MACHINE} with "
-                "models of Stable Diffusion 2's size; smaller GPUs take longer)" if self.on_gpu else
-                f"on this CPU for about {duration_text(self.seconds)} (measured with models of Stable "
-                "Diffusion 2's size on a 2-core CPU)")
+        return (iface_("on this GPU for about {} (measured on {} with models of Stable Diffusion 2's size; smaller "
+                       "GPUs take longer)").format(duration_text(self.seconds), GPU_BENCH_MACHINE) if self.on_gpu else
+                iface_("on this CPU for about {} (measured with models of Stable Diffusion 2's size on a 2-core "
+                       "CPU)").format(duration_text(self.seconds)))
 
 
 def adapt_projection(preset: str, iterations: int | None = None, gpu: bool = False) -> float | None:
@@ -59,21 +65,46 @@ def preset_iterations(preset: str) -> int:
 
 def duration_text(seconds: float) -> str:
     if seconds < 90:
-        return f"{seconds:.0f} s"
+        return iface_("{:.0f} s").format(seconds)
     if seconds < 5400:
-        return f"{seconds / 60:.0f} min"
+        return iface_("{:.0f} min").format(seconds / 60)
     if seconds < 2 * 86400:
-        return f"{seconds / 3600:.1f} h"
-    return f"{seconds / 86400:.1f} days"
+        return iface_("{:.1f} h").format(seconds / 3600)
+    return iface_("{:.1f} days").format(seconds / 86400)
 
 
 def expected_line(stage: str, preset: str) -> str:
     if stage == "adapt":
         cpu, gpu = adapt_projection(preset), adapt_projection(preset, gpu=True)
         if cpu is None or gpu is None:
-            return "adapt: not measured yet"
-        return f"adapt: about {duration_text(cpu)} on a CPU, {duration_text(gpu)} on an H200 (SD2 size)"
+            return iface_("adapt: not measured yet")
+        return iface_("adapt: about {} on a CPU, {} on an H200 (SD2 size)").format(duration_text(cpu),
+                                                                                   duration_text(gpu))
     seconds = EXPECTED_SECONDS.get(stage, {}).get(preset)
     if seconds is None:
-        return f"{stage}: not measured yet"
-    return f"{stage}: about {seconds:.0f} s" if seconds >= 1 else f"{stage}: under 1 s"
+        return iface_("{}: not measured yet").format(iface_(stage))
+    if seconds >= 1:
+        return iface_("{}: about {:.0f} s").format(iface_(stage), seconds)
+    return iface_("{}: under 1 s").format(iface_(stage))
+
+
+# The run's own pace fully replaces the bench's projection once this much of it is done.
+OWN_PACE_FROM = 0.1
+
+
+def eta_from_start(expected_total: float | None, elapsed: float, fraction: float,
+                   measured_left: float | None = None) -> float | None:
+    """Seconds left of a job from its first moment: the bench's projection of the whole (`expected_total`)
+    for what is not done yet, weighed against the job's own pace (the time so far over the fraction done,
+    or the stage's own `measured_left`) as more of it is done, wholly its own from OWN_PACE_FROM on.
+    None when there is neither a projection nor a pace yet."""
+    fraction = min(max(fraction, 0.0), 1.0)
+    own = measured_left if measured_left is not None else (
+        elapsed * (1.0 - fraction) / fraction if fraction > 0.0 else None)
+    if expected_total is None or expected_total <= 0.0:
+        return own
+    projected = expected_total * (1.0 - fraction)
+    if own is None:
+        return projected
+    weight = min(fraction / OWN_PACE_FROM, 1.0)
+    return (1.0 - weight) * projected + weight * own

@@ -48,8 +48,15 @@ class Layout:   # what a panel draws, recorded: panels cannot draw without a win
     def column(self, **kw): return self
     def row(self, **kw): return self
     def prop(self, *args, **kw): pass
-    def operator(self, idname, **kw): self.drawn.append(idname)
+    def operator(self, idname, **kw):
+        self.drawn.append(idname)
+        return Shown(self.drawn)
     def label(self, text="", **kw): self.drawn.append(text)
+
+class Shown:   # an operator button's properties; a warning's whole sentence (its tooltip) is recorded
+    def __init__(self, drawn): object.__setattr__(self, "drawn", drawn)
+    def __setattr__(self, name, value):
+        if name == "details": self.drawn.append(value)
 
 def panel_lines(panel):
     from types import SimpleNamespace
@@ -614,7 +621,7 @@ def test_import_asset_reads_a_file_blenders_importer_refuses_into_the_artists_sc
     assert out["broken"].rstrip().count("\n") == 0 and "Traceback" not in out["broken"]
     assert out["after_broken"] == ["MyCube", "Painted"]
     assert out["in_file_import"]
-    assert out["asset_section"][:3] == ["Painted", "scenefit.import_asset", "2 selected objects, fitted as one asset"]
+    assert out["asset_section"][:3] == ["Painted", "scenefit.import_asset", "2 objects, one asset"]
     assert out["source"] == str((blender.tmp / "packed.glb").resolve())
     assert out["import_convert"] == out["import_bake"] == ["FINISHED"]
     assert "EXT_meshopt_compression" in out["import_bake_extensions"]   # as imported (else plain: "none")

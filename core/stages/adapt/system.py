@@ -103,6 +103,17 @@ class AdaptResult:
         return {k: v / n for k, v in self.timings.items()}
 
 
+# A preview also goes out when this long has passed since the last one (one a step at most), so a slow
+# machine shows the texture changing about this often, not only every preview_every steps.
+PREVIEW_SECONDS = 30.0
+
+
+def preview_due(done: int, every: int, iterations: int, since_last: float) -> bool:
+    """Whether step `done` sends a preview: every `every` steps, the last step, or PREVIEW_SECONDS after the
+    last one; never with previews off (every = 0)."""
+    return bool(every) and (done % every == 0 or done == iterations or since_last >= PREVIEW_SECONDS)
+
+
 class _Timer:
     """Seconds per phase, summed; waits for the GPU so a phase is charged its own kernels."""
 
@@ -163,6 +174,7 @@ class AdaptSystem:
         self.history: list[dict] = []
         self.start = 0
         self.last_image: torch.Tensor | None = None
+        self.last_preview = time.monotonic()
         self.timer = _Timer(self.device)
         self.started = time.perf_counter()
 
@@ -331,9 +343,10 @@ class AdaptSystem:
             return
         config, done = self.config, iteration + 1
         preview = None
-        if config.preview_every and (done % config.preview_every == 0 or done == config.iterations):
+        if preview_due(done, config.preview_every, config.iterations, time.monotonic() - self.last_preview):
             image = self.last_image[0].permute(1, 2, 0).clamp(0, 1).cpu().numpy()
             preview = (image * 255).round().astype(np.uint8)
+            self.last_preview = time.monotonic()
         emit(progress, "adapt", done, config.iterations,
              f"{config.mode_type}: {metrics['stage_size']} px, t={metrics['t']}", metrics, preview)
         if self.checkpoint_path is not None and config.checkpoint_every and (
