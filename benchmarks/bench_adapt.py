@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import sys
 import tempfile
+import subprocess
+import platform
+import os
 import time
 from pathlib import Path
 
@@ -210,7 +213,11 @@ def render_phases(size: int = 512, views: int = 4, spp: int = 128, spp_cut: int 
                      "spp": spp, "measured_spp": spp // spp_cut if name == "path" else None, "render_s": forward / repeats * cut,
                      "render_backward_s": backward / repeats * cut, "trace_s": trace, "load": machine_load()})
     loop, path = rows
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                            cwd=Path(__file__).resolve().parent).stdout.strip()
     lines = ["# The final preset's render phases: loop renderer vs path tracing (this CPU)", "",
+             f"Commit {commit}, {platform.machine()} with {os.cpu_count()} cores, "
+             f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}.", "",
              f"`python benchmarks/bench_adapt.py --render-phases`: per step {2 * views} renders of {size} px (4 local "
              "views and 4 global ones, as final renders), forward and backward to a 512² texture, one process (same "
              f"load for both). Path tracing (prb, max_depth 3) measured at {spp // spp_cut} spp and projected to {spp}; "
