@@ -24,6 +24,7 @@ from .batch import finished_stage_folders, make_payload, unpack
 from ..core.base.output_folder import install_folder
 from .batch_ray import connect, import_ray, job_resources
 from ..core.base.errors import Cancelled, SceneFitError
+from .job_inputs import read_job_report
 from .jobs import BatchSettings, Job
 
 # What the worker environment imports SceneFit as (a pip install of it).
@@ -190,7 +191,8 @@ class LocalProcessJob:
         import tempfile
         import threading
 
-        self.job, self.report = job, None
+        self.job = job
+        self.report: dict | None = None
         self.tmp = tempfile.TemporaryDirectory(prefix="scenefit-remote-")
         root = Path(self.tmp.name)
         entry = {k: v for k, v in job.to_dict().items() if v not in (None, "", {})}
@@ -255,8 +257,7 @@ class LocalProcessJob:
         error = self.process.stderr.read().strip()  # type: ignore[union-attr]
         if code == 130:
             raise Cancelled("Cancelled by the user; the worker stopped and nothing came back.")
-        report = json.loads((self.out / self.job.name / "report.json").read_text()) if (
-            self.out / self.job.name / "report.json").is_file() else None
+        report = read_job_report(self.out / self.job.name / "report.json")   # (None: absent or unreadable)
         self.report = report
         if code != 0 or report is None or report.get("status") != "done":
             why = (report or {}).get("error") or (error.splitlines()[-1] if error else f"exit code {code}")

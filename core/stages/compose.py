@@ -29,7 +29,6 @@ The shadow (appendix "Scene Composition" of the paper, and the shadow-catcher de
 """
 from __future__ import annotations
 
-import json
 import math
 import threading
 import time
@@ -43,6 +42,7 @@ from ..render.backend import init_mitsuba
 from ..render.denoise import DENOISER_TYPES, denoise, oidn_available
 from ..base.atomic import write_json_atomic
 from ..base.errors import InputError, check_choice
+from ..base.untrusted import parse_json, read_bytes
 from ..data.imageio import linear_to_srgb, srgb_to_linear, write_image
 from ..data.mesh import Mesh, normalize_to_unit_sphere
 from ..base.progress import ProgressCallback, check_cancel, emit
@@ -526,11 +526,12 @@ def light_camera(light_path, photo_info: dict, width: int, height: int, fov_deg:
     camera = None
     if report_path.is_file():
         try:
-            saved = json.loads(report_path.read_text())["decisions"]["photo_camera"]
+            saved = parse_json(read_bytes(report_path, what="light report"),
+                               f"the light report '{report_path}'")["decisions"]["photo_camera"]
             camera = PhotoCamera(**{k: saved[k] for k in ("yaw_deg", "pitch_deg", "fov_deg", "width", "height")},
                                  roll_deg=float(saved.get("roll_deg", 0.0)))   # reports before roll have none
             source = f"the light stage's report ({report_path})"
-        except (KeyError, TypeError, ValueError, json.JSONDecodeError):
+        except (KeyError, TypeError, ValueError, InputError):   # (a report from elsewhere: the default camera)
             camera = None
     if camera is None:
         camera, fov_why = photo_camera_for(photo_info, width, height)

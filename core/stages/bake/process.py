@@ -5,7 +5,6 @@ while the run composes (core/pipeline/run.py); the pipeline waits for it, or sto
 is cancelled."""
 from __future__ import annotations
 
-import json
 import signal
 import subprocess
 import sys
@@ -15,7 +14,8 @@ from pathlib import Path
 from typing import Callable
 
 from ...data.asset_io import is_asset_folder
-from ...base.errors import SceneFitError
+from ...base.errors import InputError, SceneFitError
+from ...base.untrusted import parse_json, read_bytes
 from ...base.progress import check_cancel
 
 CLI_MODULE = f"{__package__.rpartition('.core.')[0]}.cli"   # scenefit.cli, or the add-on's own package name
@@ -51,7 +51,13 @@ class BakeProcess:
         if returncode != 0:
             reason = (messages.strip().splitlines() or ["no message"])[-1].removeprefix("scenefit: error: ")
             raise SceneFitError(f"The game bake of '{self.asset}' failed: {reason}")
-        report = json.loads(self.report_file.read_text())
+        try:
+            report = parse_json(read_bytes(self.report_file, what="game bake's report"),
+                                f"the game bake's report '{self.report_file}'")
+        except InputError as error:
+            raise SceneFitError(f"The game bake of '{self.asset}' wrote no usable report: {error}") from None
+        if not isinstance(report, dict):
+            raise SceneFitError(f"The game bake of '{self.asset}' wrote a report that is not a JSON object.")
         report["outputs"] = {"glb": str(self.glb), "report": str(self.report_file)}
         return report
 
