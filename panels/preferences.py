@@ -1,5 +1,6 @@
 """The add-on preferences: where models come from, the cache, offline, the device, where jobs run."""
 import bpy
+from bpy.app.translations import pgettext_iface as iface_
 from bpy.props import BoolProperty, EnumProperty, StringProperty
 
 # The add-on's own module name: `bl_ext.<repo>.scenefit` installed, `scenefit` in development.
@@ -122,7 +123,7 @@ def draw_models(box, context) -> None:
     earlier = earlier_model_cache()
     if earlier and not preferences_of(context).model_cache:
         row = box.row()
-        row.label(text=f"An earlier SceneFit downloaded models into {earlier}", icon="INFO")
+        row.label(text=iface_("An earlier SceneFit downloaded models into {}").format(earlier), icon="INFO")
         row.operator("scenefit.use_earlier_model_cache")
     try:
         states = model_states(context)

@@ -17,6 +17,7 @@ _FRENCH = {
     "Asset": "Asset", "Scene": "Scène", "Style": "Style", "Quality": "Qualité", "Run": "Lancer",
     "Results": "Résultats", "Photo": "Photo", "Placement": "Emplacement", "Size": "Taille", "Turn": "Rotation",
     "Camera": "Caméra", "Sun": "Soleil", "Prompt": "Prompt", "Preset": "Préréglage", "Output": "Sortie",
+    "An earlier SceneFit downloaded models into {}": "Une version antérieure de SceneFit a téléchargé des modèles dans {}",
     "Material": "Matériau", "World": "Monde", "Original": "Original", "Details": "Détails",
     "Bake Asset…": "Cuire l'asset…", "Modules missing": "Modules manquants", "Unsaved file": "Fichier non enregistré",
     "No UV map": "Pas de carte UV", "Material not readable": "Matériau illisible",
