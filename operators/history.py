@@ -15,6 +15,7 @@ from ..blender_io.world import assign_world
 from ..core.base.errors import InputError, SceneFitError
 from .common import TAG, relative_if_saved
 from .common import asset_owner, asset_state
+from .results import put_in_slots
 
 
 def record_run(op, context, state: str, result) -> None:
@@ -91,16 +92,7 @@ class SCENEFIT_OT_apply_run(_RunOperator, bpy.types.Operator):
             state, run = chosen_run(context, self.index)
             if run.state != "finished":
                 raise InputError(f"The run of {run.when} was {run.state}; it made no materials to apply.")
-            switched = 0
-            for entry in run.slots:
-                obj, mat = entry.asset_object, entry.result
-                if obj is None or mat is None or entry.slot >= len(obj.material_slots):
-                    continue
-                current = obj.material_slots[entry.slot].material
-                if current is not None:
-                    current.use_fake_user = True   # whichever is swapped out survives saving
-                obj.material_slots[entry.slot].material = mat
-                switched += 1
+            switched = put_in_slots(run.slots)
             if not switched and run.world is None:
                 raise InputError(f"The run of {run.when} has no materials or World left in this file.")
         except SceneFitError as error:

@@ -170,6 +170,22 @@ def switched_entries(context, entries) -> tuple[list, str]:
     return [e for e in entries if e.job == last], "the last result's asset"
 
 
+def put_in_slots(entries, result: bool = True) -> int:
+    """Each entry's result (or original) material into its object's slot; how many were switched. Whichever
+    material is swapped out gets a fake user, so it survives saving."""
+    switched = 0
+    for entry in entries:
+        obj, mat = entry.asset_object, entry.result if result else entry.original
+        if obj is None or mat is None or entry.slot >= len(obj.material_slots):
+            continue
+        current = obj.material_slots[entry.slot].material
+        if current is not None:
+            current.use_fake_user = True
+        obj.material_slots[entry.slot].material = mat
+        switched += 1
+    return switched
+
+
 class SCENEFIT_OT_use_result(bpy.types.Operator):
     """Switch the materials of the selected objects (else of the last result's asset) or the scene's World
     between SceneFit's result and the original"""
@@ -195,16 +211,7 @@ class SCENEFIT_OT_use_result(bpy.types.Operator):
             return {"FINISHED"}
         if settings.result_slots:
             entries, whose = switched_entries(context, settings.result_slots)
-            switched = 0
-            for entry in entries:
-                obj, mat = entry.asset_object, entry.result if self.which == "RESULT" else entry.original
-                if obj is None or mat is None or entry.slot >= len(obj.material_slots):
-                    continue
-                current = obj.material_slots[entry.slot].material
-                if current is not None:
-                    current.use_fake_user = True  # whichever is swapped out survives saving
-                obj.material_slots[entry.slot].material = mat
-                switched += 1
+            switched = put_in_slots(entries, result=self.which == "RESULT")
             if not switched:
                 self.report({"ERROR"}, "There is no such material; convert or adapt the asset first.")
                 return {"CANCELLED"}
