@@ -263,7 +263,7 @@ def _finished_stage(folder: Path, key: str) -> dict | None:
     ('..', an absolute path, a link), or a float map that is not finite is not this stage's, so the
     stage is not taken as finished and runs again."""
     from ..base.untrusted import read_stage_record
-    from ..data.finite_maps import finite_images
+    from ..data.finite_maps import finite_outputs
 
     record = folder / STAGE_FILE
     if not record.is_file():
@@ -278,7 +278,7 @@ def _finished_stage(folder: Path, key: str) -> dict | None:
     outputs = _paths(report["outputs"])
     if saved.key != key or not all(Path(p).exists() and Path(p).resolve().is_relative_to(inside) for p in outputs):
         return None
-    return report if finite_images(outputs) else None
+    return report if finite_outputs(outputs) else None
 
 
 def _absolute_outputs(outputs, folder: Path):

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+import torch
 
 from scenefit.core.data.imageio import write_image
 from scenefit.core.pipeline.run import STAGE_FILE, _finished_stage
@@ -31,6 +32,22 @@ def test_a_light_map_that_is_not_finite_is_not_reused(tmp_path, bad):
     pixels = np.full((8, 16, 3), 2.0, np.float32)
     pixels[3, 5, 1] = bad
     assert _finished_stage(light_stage(tmp_path, pixels), "k") is None
+
+
+def texture_stage(tmp_path, value: float):
+    folder = tmp_path / "convert"
+    folder.mkdir(parents=True)
+    weights = {"residual": torch.zeros(4, 8, 8), "base": torch.full((3, 8, 8), 0.5), "step": torch.tensor(3)}
+    weights["residual"][1, 2, 3] = value
+    torch.save(weights, folder / "texture.pt")
+    (folder / STAGE_FILE).write_text(json.dumps({"key": "k", "report": {"outputs": {"weights": "texture.pt"}}}))
+    return folder
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_a_texture_that_is_not_finite_is_not_reused(tmp_path, bad):
+    assert _finished_stage(texture_stage(tmp_path / "good", 0.25), "k") is not None
+    assert _finished_stage(texture_stage(tmp_path / "bad", bad), "k") is None
 
 
 @pytest.mark.parametrize("raw", [b"[]", b"[" * 100_000, b"\xff\xfe", b'{"key": "k", "report": []}',
