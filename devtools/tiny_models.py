@@ -100,3 +100,20 @@ def build_tiny_pair(folder: str | Path) -> tuple[Path, Path]:
     """A tiny text-to-image model and a tiny inpainting model: (base, inpaint) folders."""
     folder = Path(folder)
     return build_tiny_sd(folder / "sd2-base", 4, seed=0), build_tiny_sd(folder / "sd2-inpaint", 9, seed=1)
+
+
+def build_tiny_depth(folder: str | Path) -> Path:
+    """A random-weight Depth Anything (a few kB) saved as the depth model's folder, for tests of the real
+    loading code."""
+    import torch
+    from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config, DPTImageProcessor
+
+    backbone = Dinov2Config(hidden_size=16, num_hidden_layers=2, num_attention_heads=2, intermediate_size=32,
+                            image_size=28, patch_size=14, out_features=["stage1", "stage2"], out_indices=[1, 2],
+                            reshape_hidden_states=False)
+    config = DepthAnythingConfig(backbone_config=backbone, reassemble_hidden_size=16, neck_hidden_sizes=[8, 16],
+                                 fusion_hidden_size=8, head_hidden_size=8, reassemble_factors=[2, 1])
+    torch.manual_seed(0)
+    DepthAnythingForDepthEstimation(config).save_pretrained(folder)
+    DPTImageProcessor(size={"height": 28, "width": 28}, keep_aspect_ratio=False, ensure_multiple_of=14).save_pretrained(folder)
+    return Path(folder)

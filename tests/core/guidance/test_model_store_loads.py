@@ -6,7 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-import torch
+
+from scenefit.devtools.tiny_models import build_tiny_depth
 
 from hub_server import HubServer
 from scenefit.core.guidance import model_store as store
@@ -16,18 +17,6 @@ from scenefit.core.stages.light.depth import DepthConfig, load_depth_model
 from scenefit.devtools.tiny_models import build_tiny_pair
 
 
-def _tiny_depth(folder: Path) -> Path:
-    from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config, DPTImageProcessor
-
-    backbone = Dinov2Config(hidden_size=16, num_hidden_layers=2, num_attention_heads=2, intermediate_size=32,
-                            image_size=28, patch_size=14, out_features=["stage1", "stage2"], out_indices=[1, 2],
-                            reshape_hidden_states=False)
-    config = DepthAnythingConfig(backbone_config=backbone, reassemble_hidden_size=16, neck_hidden_sizes=[8, 16],
-                                 fusion_hidden_size=8, head_hidden_size=8, reassemble_factors=[2, 1])
-    torch.manual_seed(0)
-    DepthAnythingForDepthEstimation(config).save_pretrained(folder)
-    DPTImageProcessor(size={"height": 28, "width": 28}, keep_aspect_ratio=False, ensure_multiple_of=14).save_pretrained(folder)
-    return folder
 
 
 def _repo(folder: Path) -> dict[str, bytes]:
@@ -37,7 +26,7 @@ def _repo(folder: Path) -> dict[str, bytes]:
 def test_downloaded_models_load_offline(tmp_path, monkeypatch):
     monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
     base, inpaint = build_tiny_pair(tmp_path / "built")
-    depth = _tiny_depth(tmp_path / "built" / "depth")
+    depth = build_tiny_depth(tmp_path / "built" / "depth")
     server = HubServer({"tiny/base": _repo(base), "tiny/inpaint": _repo(inpaint), "tiny/depth": _repo(depth)}).start()
     cache = tmp_path / "hub"
     config = ModelConfig(base_model="tiny/base", inpaint_model="tiny/inpaint", cache_dir=str(cache), dtype_type="fp32")

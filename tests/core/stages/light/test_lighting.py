@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+
+from scenefit.devtools.tiny_models import build_tiny_depth
 import torch
 
 from scenefit.core.base.errors import InputError, ModelMissingError
@@ -218,22 +220,10 @@ def test_exr_round_trips_bit_exactly_for_float32(tmp_path):
 
 
 # -- depth ------------------------------------------------------------------------------------------
-def tiny_depth_model(folder):
-    from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config, DPTImageProcessor
-
-    backbone = Dinov2Config(hidden_size=16, num_hidden_layers=2, num_attention_heads=2, intermediate_size=32,
-                            image_size=28, patch_size=14, out_features=["stage1", "stage2"], out_indices=[1, 2],
-                            reshape_hidden_states=False)
-    config = DepthAnythingConfig(backbone_config=backbone, reassemble_hidden_size=16, neck_hidden_sizes=[8, 16],
-                                 fusion_hidden_size=8, head_hidden_size=8, reassemble_factors=[2, 1])
-    torch.manual_seed(0)
-    DepthAnythingForDepthEstimation(config).save_pretrained(folder)
-    DPTImageProcessor(size={"height": 28, "width": 28}, keep_aspect_ratio=False, ensure_multiple_of=14).save_pretrained(folder)
-    return folder
 
 
 def test_depth_model_from_a_local_folder_goes_through_the_same_code_path(tmp_path):
-    folder = tiny_depth_model(tmp_path / "tiny-depth")
+    folder = build_tiny_depth(tmp_path / "tiny-depth")
     camera = PhotoCamera(yaw_deg=90.0, pitch_deg=-10.0, fov_deg=60.0, width=45, height=31)
     photo = np.random.default_rng(1).uniform(size=(31, 45, 3)).astype(np.float32)
     placement = place_on_floor(camera, (22.0, 27.0))
