@@ -12,6 +12,7 @@ composite scene deletes all of it.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -139,11 +140,11 @@ def link_into(scene, objects) -> None:
             scene.collection.objects.link(obj)
 
 
-def ensure_photo_camera(scene, image, fov_deg: float, pitch_deg: float, roll_deg: float = 0.0):
-    """SceneFit's camera (made once per file) in the composite scene (`composite_scene`): the photo's
-    aspect and field of view (horizontal), at pitch_deg above the horizon and turned by roll_deg as
-    core's PhotoCamera, the photo as its background; the composite scene's camera and resolution.
-    `scene` is the artist's: neither its camera nor its resolution changes."""
+def ensure_photo_camera(scene, image, camera: PhotoCamera):
+    """SceneFit's camera (made once per file) in the composite scene (`composite_scene`): core's `camera`
+    (its horizontal field of view, pitch, roll and lens shift) at the photo's aspect, the photo as its
+    background; the composite scene's camera and resolution. `scene` is the artist's: neither its camera
+    nor its resolution changes."""
     import bpy
 
     own = composite_scene()
@@ -156,10 +157,14 @@ def ensure_photo_camera(scene, image, fov_deg: float, pitch_deg: float, roll_deg
     link_into(own, [cam])
     data = cam.data
     data.sensor_fit = "HORIZONTAL"
-    data.angle = math.radians(fov_deg)
+    data.angle = math.radians(camera.fov_deg)
+    w, h = image.size
+    # Blender measures the shift in the side its sensor fits (the width here), PhotoCamera in the longer side.
+    data.shift_x = camera.shift_x * max(w, h) / w
+    data.shift_y = camera.shift_y * max(w, h) / w
     cam.rotation_mode = "XYZ"
     # The light stage's photo camera: looking along +Y (yaw 90) at the photo's pitch and roll.
-    forward, _, up, _, _ = PhotoCamera(pitch_deg=pitch_deg, roll_deg=roll_deg).basis()
+    forward, _, up, _, _ = PhotoCamera(pitch_deg=camera.pitch_deg, roll_deg=camera.roll_deg).basis()
     cam.rotation_euler = camera_rotation(forward, up).to_euler("XYZ")
     set_photo_resolution(own, image)
     show_photo(data, image)
@@ -286,9 +291,9 @@ def setup_composite(context, obj, photo_path: str | Path, placement: tuple[float
     base, height = object_base(objects)
     own = composite_scene()
     if scene_camera is None:
-        position = camera_for_placement(base, height, placement, size, camera.fov_deg, camera.pitch_deg, w / h,
-                                        camera.roll_deg)
-        cam = ensure_photo_camera(artist, image, camera.fov_deg, camera.pitch_deg, camera.roll_deg)
+        at_photo = replace(camera, width=w, height=h)
+        position = camera_for_placement(base, height, placement, size, at_photo)
+        cam = ensure_photo_camera(artist, image, at_photo)
         cam.location = tuple(float(v) for v in position)
         yaw = PHOTO_YAW_DEG
     else:

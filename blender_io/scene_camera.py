@@ -86,9 +86,15 @@ def principal_point(camera, width: int, height: int) -> tuple[float, float]:
     return width / 2.0 - camera.data.shift_x * unit, height / 2.0 + camera.data.shift_y * unit
 
 
+def lens_shift(camera, width: int, height: int) -> dict:
+    """The camera's lens shift as core's PhotoCamera holds it (fractions of the frame's longer side)."""
+    unit = shift_unit_pixels(camera, width, height) / max(width, height)
+    return {"shift_x": float(camera.data.shift_x) * unit, "shift_y": float(camera.data.shift_y) * unit}
+
+
 def scene_view(camera, obj, photo_size: tuple[int, int], depsgraph) -> tuple[SceneView, list[str]]:
     """The arrangement of `obj` seen through the artist's `camera` (core/scene/asset_pose.SceneView) and
-    notes on what SceneFit does not model (lens shift, a tilted or unevenly scaled asset). `obj` may be a
+    notes on how it is read (a lens shift) and what SceneFit does not model (a tilted or unevenly scaled asset). `obj` may be a
     list of the objects of one asset: read in world space, they stand as they are (no turn of their own)."""
     width, height = photo_size
     notes = []
@@ -121,6 +127,6 @@ def scene_view(camera, obj, photo_size: tuple[int, int], depsgraph) -> tuple[Sce
         seen = replace(seen, placement=(seen.placement[0] + (axis_x - width / 2.0) / width,
                                         seen.placement[1] + (axis_y - height / 2.0) / height))
         notes.append(f"the camera's lens shift ({camera.data.shift_x:.3f}, {camera.data.shift_y:.3f}) puts its "
-                     f"optical axis at pixel ({axis_x:.0f}, {axis_y:.0f}): the asset is placed where that camera "
-                     "shows it, and rendered with the axis at the photo's centre")
+                     f"optical axis at pixel ({axis_x:.0f}, {axis_y:.0f}): the asset is placed and rendered as that "
+                     "shifted camera shows it")
     return seen, notes

@@ -52,15 +52,15 @@ class SCENEFIT_OT_match_camera(bpy.types.Operator):
 
     def _make_camera(self, context, photo: Path, estimate, overlay: str):
         image = load_photo_image(photo)
-        cam = ensure_photo_camera(context.scene, image, estimate.fov_deg, estimate.pitch_deg, estimate.roll_deg)
+        w, h = image.size
+        camera = estimate.photo_camera(width=w, height=h)
+        cam = ensure_photo_camera(context.scene, image, camera)
         obj = context.active_object
         if obj is not None and obj.type == "MESH":   # placed as Compose will place it, so the view is the same
             base, height = object_base(obj)
             settings = context.scene.scenefit
-            w, h = image.size
             cam.location = tuple(float(v) for v in camera_for_placement(
-                base, height, tuple(settings.placement), settings.size, estimate.fov_deg, estimate.pitch_deg,
-                w / h, estimate.roll_deg))
+                base, height, tuple(settings.placement), settings.size, camera))
         lines = bpy.data.images.load(overlay, check_existing=False)
         lines.name = OVERLAY_NAME
         lines[TAG] = "camera"

@@ -357,7 +357,7 @@ def artist_camera(context, photo: Path, read: bool = True):
 def photo_view(context, photo: Path, obj=None) -> dict:
     """How a job sees the photo, decided once for every operator:
 
-    camera: {"fov_deg", "pitch_deg", "roll_deg"} to use, or None to estimate it from the photo in the job;
+    camera: {"fov_deg", "pitch_deg", "roll_deg", and the artist's camera's "shift_x", "shift_y"} to use, or None to estimate it from the photo in the job;
     sun_deg: the dominant light's (azimuth, elevation) the artist set (Pick Sun), or None, and
     sun_uncertainty_deg how far off it may be;
     camera_source: "blender" (the artist's camera shows the photo), "user" (the panel's values), or
@@ -368,7 +368,7 @@ def photo_view(context, photo: Path, obj=None) -> dict:
             "size": float(settings.size), "turn_deg": math.degrees(settings.turn), "notes": []}
     camera, why = artist_camera(context, photo)
     if camera is not None:
-        from ..blender_io.scene_camera import horizontal_fov_deg, scene_view
+        from ..blender_io.scene_camera import horizontal_fov_deg, lens_shift, scene_view
         from ..core.data.imageio import upright_size
 
         size = upright_size(photo)
@@ -383,7 +383,8 @@ def photo_view(context, photo: Path, obj=None) -> dict:
 
             _, pitch, roll = camera_pose(np.array(camera.matrix_world), f"The scene camera '{camera.name}'")
             fov = horizontal_fov_deg(camera, *size)
-        view.update(camera={"fov_deg": fov, "pitch_deg": pitch, "roll_deg": roll}, camera_source="blender",
+        view.update(camera={"fov_deg": fov, "pitch_deg": pitch, "roll_deg": roll, **lens_shift(camera, *size)},
+                    camera_source="blender",
                     scene_camera=camera.name)
         view["notes"].insert(0, f"the scene camera '{camera.name}' is used as it is: {why}")
     elif settings.camera_from == "panel":

@@ -162,8 +162,7 @@ class SCENEFIT_OT_pick_placement(PhotoClicks, bpy.types.Operator):
             raise InputError(f"The scene camera '{artist.name}' shows the photo, so SceneFit composes the asset where "
                              "it stands in that camera's view; move the asset instead of picking a point.")
         camera = composite_camera(context, photo, photo_view(context, photo))
-        return ensure_photo_camera(context.scene, load_photo_image(photo), camera.fov_deg, camera.pitch_deg,
-                                   camera.roll_deg)
+        return ensure_photo_camera(context.scene, load_photo_image(photo), camera)
 
     def execute(self, context):
         try:

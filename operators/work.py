@@ -81,7 +81,8 @@ def camera_source(view: dict) -> tuple[str, str]:
 
 def camera_values(camera) -> dict:
     """What the Cycles set-up takes from the camera a job used."""
-    return {"fov_deg": camera.fov_deg, "pitch_deg": camera.pitch_deg, "roll_deg": camera.roll_deg}
+    return {"fov_deg": camera.fov_deg, "pitch_deg": camera.pitch_deg, "roll_deg": camera.roll_deg,
+            "shift_x": camera.shift_x, "shift_y": camera.shift_y}
 
 
 def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:

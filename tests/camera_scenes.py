@@ -41,3 +41,37 @@ def box_room(camera: PhotoCamera, n: int = 140, seed: int = 0) -> np.ndarray:
         cv2.line(img, a, b, (0.1, 0.1, 0.1), 2, cv2.LINE_AA, shift=4)
         drawn += 1
     return img
+
+
+def lineless_photo(path, size=(96, 64), seed=0):
+    """A smooth, lineless photo: a vertical gradient with faint noise."""
+    from scenefit.core.data.imageio import write_image
+
+    w, h = size
+    rng = np.random.default_rng(seed)
+    ramp = np.linspace(0.2, 0.8, h, dtype=np.float32)[:, None, None] * np.ones((h, w, 3), np.float32)
+    write_image(path, np.clip(ramp + rng.normal(0, 0.01, (h, w, 3)), 0, 1))
+    return path
+
+
+def fspy_project_bytes(camera: PhotoCamera, image: bytes = b"\x89PNG fake", principal=(0.0, 0.0),
+                       **overrides) -> bytes:
+    """An fSpy project as fSpy documents it: 'fspy', version 1, state length, image length (uint32 LE),
+    the state JSON, the image. The camera-to-world matrix's columns are right, up and -forward;
+    `principal` is the solved principal point (fSpy's units: half the longer side, y up)."""
+    import json
+    import math
+    import struct
+
+    forward, right, up, _, _ = camera.basis()
+    rotation = np.stack([right, up, -forward], axis=1)
+    rows = np.eye(4)
+    rows[:3, :3] = rotation
+    rows[:3, 3] = (1.0, -4.0, 1.5)
+    params = {"principalPoint": {"x": principal[0], "y": principal[1]},
+              "horizontalFieldOfView": math.radians(camera.fov_deg),
+              "verticalFieldOfView": 1.0, "cameraTransform": {"rows": rows.tolist()},
+              "viewTransform": {"rows": np.linalg.inv(rows).tolist()}, "imageWidth": camera.width,
+              "imageHeight": camera.height, "relativeFocalLength": 1.0}
+    state = json.dumps({"cameraParameters": params, "calibrationSettingsBase": {}, **overrides}).encode()
+    return struct.pack("<4sIII", b"fspy", 1, len(state), len(image)) + state + image

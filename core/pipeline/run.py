@@ -44,7 +44,6 @@ from ..base.names import (CAMERA_SOURCES, CAMERA_STAGE, CONFIG_STAGES, GUIDANCE_
                           SCENE_TYPES, STAGES)
 STAGE_FILE = "stage.json"
 # (The camera stage's report is the run report's "camera", beside the "stages" a job lists.)
-CAMERA_KEYS = ("fov_deg", "pitch_deg", "roll_deg")
 
 
 @dataclass(frozen=True)

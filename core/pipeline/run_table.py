@@ -19,14 +19,16 @@ from typing import Any, Callable
 
 from ..base.errors import InputError
 from ..base.names import CONFIG_STAGES
-from .run import CAMERA_KEYS, RunConfig
+from ..stages.camera import CAMERA_VALUES
+from .run import RunConfig
 
 # Fields a table does not carry: photo_camera is a PhotoCamera object a Python caller already holds (a table
 # gives camera values instead); models come from the jobs file's [models] table, shared by its jobs.
-NOT_IN_A_TABLE = {"photo_camera": "a PhotoCamera object; a table gives camera = { fov, pitch, roll } instead",
+NOT_IN_A_TABLE = {"photo_camera": "a PhotoCamera object; a table gives camera = { fov, pitch, roll, shift_x, shift_y } instead",
                   "models": "the jobs file's [models] table, shared by every job"}
-CAMERA_TABLE = {"fov": "fov_deg", "pitch": "pitch_deg", "roll": "roll_deg"}   # camera = { fov, pitch, roll }
-assert set(CAMERA_TABLE.values()) == set(CAMERA_KEYS)
+# camera = { fov, pitch, roll, shift_x, shift_y }: degrees, and the lens shift in the photo's longer side
+CAMERA_TABLE = {"fov": "fov_deg", "pitch": "pitch_deg", "roll": "roll_deg", "shift_x": "shift_x", "shift_y": "shift_y"}
+assert set(CAMERA_TABLE.values()) == set(CAMERA_VALUES)
 
 
 @dataclass(frozen=True)
@@ -85,7 +87,7 @@ def _shadow(value, where: str) -> tuple[str, str, str]:
 
 def _camera(value, where: str) -> dict:
     if not isinstance(value, dict) or set(value) - set(CAMERA_TABLE) or not all(_is_number(v) for v in value.values()):
-        raise InputError(f"{where}: camera must be a table of fov, pitch and roll in degrees, e.g. "
+        raise InputError(f"{where}: camera must be a table of fov, pitch and roll in degrees (and shift_x, shift_y), e.g. "
                          f"{{ fov = 50, pitch = -14 }}, got {_shown(value)}.")
     return {CAMERA_TABLE[k]: float(v) for k, v in value.items()}
 

@@ -157,25 +157,24 @@ def envmap_in_object_frame(envmap, placement: ObjectPlacement):
 
 
 def camera_for_placement(base: np.ndarray, height: float, placement: tuple[float, float], size: float,
-                         fov_deg: float, pitch_deg: float, aspect: float, roll_deg: float = 0.0) -> np.ndarray:
+                         camera: PhotoCamera) -> np.ndarray:
     """Where SceneFit's photo camera stands so the asset's base point lands on `placement`, `size` tall.
 
-    The camera is core's photo camera (core/scene/camera.PhotoCamera: looking along +Y, the light map's azimuth
-    0, at pitch_deg above the horizon, turned by roll_deg) with the horizontal field of view fov_deg and
-    width/height `aspect`. base: the asset's bottom centre in world space; height: its height. The
-    asset is not moved: the camera is placed around it.
+    `camera` is core's photo camera (looking along +Y, the light map's azimuth 0; its field of view, pitch,
+    roll, lens shift and aspect are used). base: the asset's bottom centre in world space; height: its height.
+    The asset is not moved: the camera is placed around it.
     """
     if not 0.0 < size <= 1.0 or height <= 0.0:
         raise InputError("The asset's size in the photo must be in (0, 1] and the asset must have a height.")
-    forward, right, up, tan_w, tan_h = PhotoCamera(pitch_deg=pitch_deg, fov_deg=fov_deg, width=1000,
-                                                   height=max(1, round(1000 / aspect)), roll_deg=roll_deg).basis()
+    forward, right, up, _, tan_h = camera.basis()
     # Depth along the view at which `height` fills `size` of the frame's height.
     depth = height / (size * 2.0 * tan_h)
-    ray = forward + (2.0 * placement[0] - 1.0) * tan_w * right + (1.0 - 2.0 * placement[1]) * tan_h * up
+    plane_x, plane_y = camera.plane_xy(placement[0] * camera.width, placement[1] * camera.height)
+    ray = forward + plane_x * right + plane_y * up
     position = np.asarray(base, np.float64) - depth * ray
     if position[2] <= base[2]:
         raise InputError(f"The placement ({placement[0]:.2f}, {placement[1]:.2f}) is above the horizon of a camera "
-                         f"at pitch {pitch_deg:.0f}°; pick a point on the ground or lower the Pitch.")
+                         f"at pitch {camera.pitch_deg:.0f}°; pick a point on the ground or lower the Pitch.")
     return position
 
 

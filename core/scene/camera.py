@@ -35,7 +35,10 @@ class PhotoCamera:
     """A pinhole looking along (yaw, pitch) in Blender's Z-up world; fov is horizontal, in degrees.
 
     roll_deg turns the camera counter-clockwise about its view axis as the photographer sees it, so
-    the horizon appears turned clockwise in the image (last, so positional construction still works)."""
+    the horizon appears turned clockwise in the image (last, so positional construction still works).
+    shift_x, shift_y: the lens shift as Blender measures it (fractions of the image's longer side; fSpy's
+    off-centre principal point is one): the view moves right and up by that much, the direction it looks
+    along stays, so the optical axis meets the image at `principal_px()` rather than the centre."""
 
     yaw_deg: float = PHOTO_YAW_DEG
     pitch_deg: float = DEFAULT_PITCH_DEG
@@ -43,6 +46,8 @@ class PhotoCamera:
     width: int = 640
     height: int = 480
     roll_deg: float = 0.0
+    shift_x: float = 0.0
+    shift_y: float = 0.0
 
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
         """forward, right, up unit vectors and the half extents of the image plane at distance 1."""
@@ -54,22 +59,44 @@ class PhotoCamera:
         half_w = float(np.tan(np.radians(self.fov_deg) / 2))
         return forward, right, up, half_w, half_w * self.height / self.width
 
-    def ray_directions(self) -> np.ndarray:
+    def plane_offset(self) -> tuple[float, float]:
+        """Where the image's centre lies on the image plane at distance 1 (right, up): the lens shift."""
+        per_side = 2.0 * float(np.tan(np.radians(self.fov_deg) / 2)) * max(self.width, self.height) / self.width
+        return self.shift_x * per_side, self.shift_y * per_side
+
+    def principal_px(self) -> tuple[float, float]:
+        """The pixel (x right, y down) the optical axis meets: the centre, moved against the lens shift."""
+        side = max(self.width, self.height)
+        return self.width / 2.0 - self.shift_x * side, self.height / 2.0 + self.shift_y * side
+
+    def plane_xy(self, x_px, y_px) -> tuple[np.ndarray, np.ndarray]:
+        """Image-plane coordinates (right, up, at distance 1) of pixel positions (x right, y down)."""
+        _, _, _, half_w, half_h = self.basis()
+        off_x, off_y = self.plane_offset()
+        return ((np.asarray(x_px) / self.width * 2 - 1) * half_w + off_x,
+                (1 - np.asarray(y_px) / self.height * 2) * half_h + off_y)
+
+    def image_xy(self, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(sx, sy, depth) of world directions: sx, sy in [-1, 1] across the image (x right, y up), and
+        each direction's component along the view (positive: in front)."""
         forward, right, up, half_w, half_h = self.basis()
-        xs = ((np.arange(self.width) + 0.5) / self.width * 2 - 1) * half_w
-        ys = (1 - (np.arange(self.height) + 0.5) / self.height * 2) * half_h
-        x, y = np.meshgrid(xs, ys)
+        off_x, off_y = self.plane_offset()
+        directions = np.asarray(directions, dtype=np.float64)
+        depth = directions @ forward
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return ((directions @ right) / depth - off_x) / half_w, ((directions @ up) / depth - off_y) / half_h, depth
+
+    def ray_directions(self) -> np.ndarray:
+        forward, right, up, _, _ = self.basis()
+        x, y = np.meshgrid(*self.plane_xy(np.arange(self.width) + 0.5, np.arange(self.height) + 0.5))
         d = forward + x[..., None] * right + y[..., None] * up
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
     def project(self, points: np.ndarray, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
         """Pixel coordinates (x right, y down, pixel centres at +0.5) of world points seen from
         `origin`; the inverse of `ray_directions` (points must lie in front of the camera)."""
-        forward, right, up, half_w, half_h = self.basis()
         rel = np.asarray(points, dtype=np.float64) - np.asarray(origin, dtype=np.float64)
-        depth = rel @ forward
-        x = (rel @ right) / (depth * half_w)
-        y = (rel @ up) / (depth * half_h)
+        x, y, _ = self.image_xy(rel)
         return np.stack([(x + 1) / 2 * self.width, (1 - y) / 2 * self.height], axis=-1)
 
 
@@ -90,8 +117,9 @@ CAMERA_HEIGHT = 1.0
 
 def pixel_ray(camera: PhotoCamera, x: float, y: float) -> np.ndarray:
     """World direction through photo pixel coordinates (x right, y down, pixel centres at +0.5)."""
-    forward, right, up, half_w, half_h = camera.basis()
-    d = forward + (x / camera.width * 2 - 1) * half_w * right + (1 - y / camera.height * 2) * half_h * up
+    forward, right, up, _, _ = camera.basis()
+    plane_x, plane_y = camera.plane_xy(x, y)
+    d = forward + plane_x * right + plane_y * up
     return d / np.linalg.norm(d)
 
 

@@ -60,6 +60,8 @@ class CameraEstimate:
     vanishing_points: dict = field(default_factory=dict)
     lines: dict = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    shift_x: float = 0.0     # the lens shift (PhotoCamera's): an off-centre principal point, as fSpy solves
+    shift_y: float = 0.0
     # (x1, y1, x2, y2, direction: 0 vertical, 1-2 horizontal) of the segments that point at a vanishing
     # point, for drawing over the photo; left out of to_dict/--json, which stay short.
     segments: tuple[tuple[float, float, float, float, int], ...] = field(default=(), repr=False)
@@ -78,25 +80,26 @@ class CameraEstimate:
                      height: int | None = None) -> PhotoCamera:
         """The camera as the stages use it (looking along +Y by default, the composition's azimuth 0)."""
         return PhotoCamera(yaw_deg=yaw_deg, pitch_deg=self.pitch_deg, fov_deg=self.fov_deg,
-                           width=width or self.width, height=height or self.height, roll_deg=self.roll_deg)
+                           width=width or self.width, height=height or self.height, roll_deg=self.roll_deg,
+                           shift_x=self.shift_x, shift_y=self.shift_y)
 
     def overridden(self, fov_deg: float | None = None, pitch_deg: float | None = None,
-                   roll_deg: float | None = None, source: str = "user", why: str = "given by the user"
-                   ) -> "CameraEstimate":
+                   roll_deg: float | None = None, source: str = "user", why: str = "given by the user",
+                   shift_x: float | None = None, shift_y: float | None = None) -> "CameraEstimate":
         """This estimate with the fields given (`source`, confidence 1) and its horizon moved to match;
         the vanishing points are dropped once the camera is no longer the lines'."""
         if source not in SOURCES:
             raise InputError(f"A camera's source is one of {', '.join(SOURCES)}, not {source!r}.")
         given = {k: v for k, v in (("fov", fov_deg), ("pitch", pitch_deg), ("roll", roll_deg)) if v is not None}
-        if not given:
+        shifts = {k: float(v) for k, v in (("shift_x", shift_x), ("shift_y", shift_y)) if v is not None}
+        if not given and not shifts:
             return self
-        changes = {}
+        changes: dict = dict(shifts)
         for name, value in given.items():
             changes.update({f"{name}_deg": float(value), f"{name}_source": source, f"{name}_confidence": 1.0})
         out = replace(self, **changes)
-        up = camera_frame(out.pitch_deg, out.roll_deg, 0.0)[0]
-        return replace(out, horizon=horizon_points(up, focal_from_fov(out.fov_deg), self.width, self.height),
-                       vanishing_points={}, notes=self.notes + (f"{why}: {', '.join(given)}",))
+        return replace(out, horizon=horizon_points(out.photo_camera()), vanishing_points={},
+                       notes=self.notes + (f"{why}: {', '.join([*given, *(['lens shift'] if shifts else [])])}",))
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -116,7 +119,7 @@ def photo_camera_estimate(photo_path: str | Path, fspy_path: str | Path | None =
     """The camera every stage uses for a photo: `overrides` ({"fov_deg", "pitch_deg", "roll_deg"}, each
     from `source`) over the estimate. With all three given the photo's lines are not looked at."""
     overrides = check_camera_values(overrides or {})
-    if len(overrides) == 3 and fspy_path is None:
+    if {"fov_deg", "pitch_deg", "roll_deg"} <= set(overrides) and fspy_path is None:
         from .light.estimate import load_photo
 
         width, height = (int(v) for v in load_photo(photo_path)[1]["size"])
@@ -129,18 +132,23 @@ def photo_camera_estimate(photo_path: str | Path, fspy_path: str | Path | None =
 # The photo cameras SceneFit takes (the light stage's config holds the same bounds for its own fields).
 GIVEN_FOV_RANGE_DEG = (1.0, 170.0)
 MAX_PITCH_DEG = 89.0
+MAX_SHIFT = 2.0   # an optical axis more than two frames off the photo is a mistake, not a lens
+CAMERA_VALUES = ("fov_deg", "pitch_deg", "roll_deg", "shift_x", "shift_y")
 
 
 def check_camera_values(values: dict) -> dict:
-    """{"fov_deg", "pitch_deg", "roll_deg"} given over an estimate (None: not given) as floats, each finite and
-    one a camera can have: a field of view within GIVEN_FOV_RANGE_DEG, a pitch within +-MAX_PITCH_DEG (straight
-    up or down has no horizon to stand the asset on); one sentence otherwise. Every entry point's values pass here."""
-    wrong = sorted(set(values) - {"fov_deg", "pitch_deg", "roll_deg"})
+    """CAMERA_VALUES given over an estimate (None: not given) as floats, each finite and one a camera can have:
+    a field of view within GIVEN_FOV_RANGE_DEG, a pitch within +-MAX_PITCH_DEG (straight up or down has no
+    horizon to stand the asset on), a lens shift within +-MAX_SHIFT; one sentence otherwise. Every entry point's values pass here."""
+    wrong = sorted(set(values) - set(CAMERA_VALUES))
     if wrong:
-        raise InputError(f"A photo camera takes fov_deg, pitch_deg and roll_deg, not {wrong[0]!r}.")
+        raise InputError(f"A photo camera takes {', '.join(CAMERA_VALUES)}, not {wrong[0]!r}.")
     given = {k: v for k, v in values.items() if v is not None}
     if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in given.values()):
-        raise InputError(f"The camera's angles must be finite numbers of degrees, got {given!r}.")
+        raise InputError(f"The camera's angles and shift must be finite numbers, got {given!r}.")
+    if any(abs(given.get(k, 0.0)) > MAX_SHIFT for k in ("shift_x", "shift_y")):
+        raise InputError(f"The camera's lens shift must be within +-{MAX_SHIFT:g} of the photo's longer side, got "
+                         f"({given.get('shift_x', 0.0)!r}, {given.get('shift_y', 0.0)!r}).")
     if "fov_deg" in given and not GIVEN_FOV_RANGE_DEG[0] <= given["fov_deg"] <= GIVEN_FOV_RANGE_DEG[1]:
         low, high = GIVEN_FOV_RANGE_DEG
         raise InputError(f"The camera's field of view must be between {low:g} and {high:g} degrees, got "
@@ -215,16 +223,17 @@ def _unit(confidence: float) -> float:
 
 def _estimate(fov: float, pitch: float, roll: float, sources: tuple[str, str, str],
               confidences: tuple[float, float, float], width: int, height: int, fit: "LinesFit | None",
-              notes: tuple[str, ...]) -> CameraEstimate:
-    frame = camera_frame(pitch, roll, 0.0)
+              notes: tuple[str, ...], shift: tuple[float, float] = (0.0, 0.0)) -> CameraEstimate:
+    camera = PhotoCamera(pitch_deg=pitch, fov_deg=fov, width=width, height=height, roll_deg=roll,
+                         shift_x=shift[0], shift_y=shift[1])
     vps = fit.vanishing_points(width, height) if fit is not None and "lines" in sources else {}
     return CameraEstimate(
         fov_deg=round(fov, 3), pitch_deg=round(pitch, 3), roll_deg=round(roll, 3),
         fov_source=sources[0], pitch_source=sources[1], roll_source=sources[2],
         fov_confidence=_unit(confidences[0]), pitch_confidence=_unit(confidences[1]),
         roll_confidence=_unit(confidences[2]), width=width, height=height,
-        horizon=horizon_points(frame[0], focal_from_fov(fov), width, height), vanishing_points=vps,
-        lines=fit.counts if fit is not None else {}, notes=notes,
+        horizon=horizon_points(camera), vanishing_points=vps,
+        lines=fit.counts if fit is not None else {}, notes=notes, shift_x=shift[0], shift_y=shift[1],
         segments=fit.inlier_segments(width, height) if fit is not None and "lines" in sources else ())
 
 
@@ -234,11 +243,15 @@ def _from_fspy(camera: dict, width: int, height: int) -> CameraEstimate:
     if abs(fw / fh - width / height) > 0.01 * width / height:
         notes.append(f"the fSpy project's image is {fw}x{fh} but the photo is {width}x{height}: the camera was solved "
                      "for another framing")
+    # fSpy's principal point is in units of half the longer side, y up; Blender's shift (and
+    # PhotoCamera's) in the longer side, the other way round (fSpy's own Blender importer does the same).
     px, py = camera["principal_point"]
+    shift = (-px / 2.0, -py / 2.0)
     if max(abs(px), abs(py)) > 0.01:
-        notes.append(f"fSpy's principal point is off centre ({px:.3f}, {py:.3f}); SceneFit's cameras keep it centred")
+        notes.append(f"fSpy's principal point is off centre ({px:.3f}, {py:.3f}): the camera has the lens shift "
+                     f"({shift[0]:.3f}, {shift[1]:.3f}) that puts it there")
     return _estimate(camera["fov_deg"], camera["pitch_deg"], camera["roll_deg"], ("fspy",) * 3, (1.0, 1.0, 1.0),
-                     width, height, None, tuple(notes))
+                     width, height, None, tuple(notes), shift)
 
 
 # -- EXIF (core/stages/camera_exif.py reads it) -------------------------------------------------------
@@ -280,12 +293,15 @@ def camera_frame(pitch_deg, roll_deg, theta_deg) -> np.ndarray:
     return np.stack([up, ct * across + st * ahead, ct * ahead - st * across], axis=-2)
 
 
-def horizon_points(up: np.ndarray, focal: float, width: int, height: int) -> tuple[tuple[float, float], ...]:
-    """Where the horizon (rays at right angles to world up) meets the photo's left and right edges."""
+def horizon_points(camera: PhotoCamera) -> tuple[tuple[float, float], ...]:
+    """Where the horizon (level rays) meets the photo's left and right edges, in pixels (y down)."""
+    forward, right, up, half_w, half_h = camera.basis()
+    off_y = camera.plane_offset()[1]
     points = []
-    for x_n in (-1.0, 1.0):
-        y_n = -(up[0] * x_n + up[2] * focal) / up[1]
-        points.append((round((x_n + 1.0) * width / 2.0, 2), round(height / 2.0 - y_n * width / 2.0, 2)))
+    for x in (0.0, float(camera.width)):
+        plane_x = float(camera.plane_xy(x, 0.0)[0])
+        plane_y = -(forward[2] + plane_x * right[2]) / up[2]   # the ray forward + x right + y up is level
+        points.append((round(x, 2), round((1.0 - (plane_y - off_y) / half_h) / 2.0 * camera.height, 2)))
     return tuple(points)
 
 

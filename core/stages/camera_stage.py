@@ -22,6 +22,7 @@ from .camera import check_camera_values
 CAMERA_FILE = "camera.json"
 MAX_CAMERA_FILE_BYTES = 1 << 20   # a camera and its estimate's record are a few kilobytes
 _ANGLES = ("yaw_deg", "pitch_deg", "fov_deg", "roll_deg")
+_SHIFTS = ("shift_x", "shift_y")   # optional: a camera.json without them has no lens shift
 
 
 def write_camera(camera: PhotoCamera, estimate: dict, folder: str | Path) -> dict:
@@ -44,11 +45,11 @@ def read_camera(path: str | Path, width: int, height: int) -> tuple[PhotoCamera,
             raise ValueError(f"it is over {MAX_CAMERA_FILE_BYTES} bytes")
         saved = json.loads(path.read_text(encoding="utf-8"), parse_constant=_no_constant)
         camera, estimate = saved["photo_camera"], saved.get("estimate", {})
-        values = {k: camera[k] for k in _ANGLES}
+        values = {**{k: camera[k] for k in _ANGLES}, **{k: camera.get(k, 0.0) for k in _SHIFTS}}
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
                    for v in values.values()) or not isinstance(estimate, dict):
-            raise ValueError("its angles are not all finite numbers")
-        check_camera_values({k: values[k] for k in ("fov_deg", "pitch_deg", "roll_deg")})
+            raise ValueError("its angles and shift are not all finite numbers")
+        check_camera_values({k: values[k] for k in ("fov_deg", "pitch_deg", "roll_deg", *_SHIFTS)})
     except (OSError, UnicodeDecodeError, RecursionError, ValueError, KeyError, TypeError, InputError) as error:
         raise InputError(f"The camera stage's '{path}' cannot be used ({_why(error)}); run again with --replace "
                          "to find the camera anew.") from None

@@ -1,7 +1,6 @@
 """Pick Placement's click handling and the composite camera, as plain maths (no window, no bpy)."""
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -54,7 +53,7 @@ def _project(point, camera, fov_deg, elevation_deg, aspect):
 
 def test_the_camera_puts_the_asset_base_on_the_placement_at_the_asked_size():
     base, height = np.array([1.0, 2.0, 0.5]), 2.0
-    camera = camera_for_placement(base, height, (0.3, 0.8), 0.25, 60.0, -10.0, 4 / 3)
+    camera = camera_for_placement(base, height, (0.3, 0.8), 0.25, PhotoCamera(pitch_deg=-10.0, fov_deg=60.0, width=400, height=300))
     assert _project(base, camera, 60.0, 10.0, 4 / 3) == pytest.approx((0.3, 0.8))
     # At the base's depth, the asset's height spans `size` of the frame (the top is nearer the centre).
     top = base + np.array([0.0, 0.0, height])
@@ -65,7 +64,7 @@ def test_the_camera_puts_the_asset_base_on_the_placement_at_the_asked_size():
 
 def test_a_placement_above_the_horizon_is_refused_with_a_sentence():
     with pytest.raises(InputError, match="above the horizon"):
-        camera_for_placement(np.zeros(3), 1.0, (0.5, 0.1), 0.3, 60.0, -10.0, 1.5)
+        camera_for_placement(np.zeros(3), 1.0, (0.5, 0.1), 0.3, PhotoCamera(pitch_deg=-10.0, fov_deg=60.0, width=300, height=200))
 
 
 def _blender_camera(yaw: float, pitch: float, roll: float, location) -> np.ndarray:
@@ -192,12 +191,13 @@ def test_blender_shows_a_sideways_stored_photo_upright_like_the_pipeline(tmp_pat
         import json
         import bpy, numpy as np
         from scenefit.blender_io.compose import ensure_photo_camera, load_photo_image
+        from scenefit.core.scene.camera import PhotoCamera
         from scenefit.core.stages.light import load_photo
 
         bpy.ops.wm.read_factory_settings(use_empty=True)
         image = load_photo_image({str(photo)!r})
         assert load_photo_image({str(photo)!r}) == image            # loaded once
-        ensure_photo_camera(bpy.context.scene, image, 57.3, -11.5)
+        ensure_photo_camera(bpy.context.scene, image, PhotoCamera(pitch_deg=-11.5, fov_deg=57.3))
         bpy.ops.wm.save_as_mainfile(filepath={str(tmp_path / 'scene.blend')!r})
         bpy.ops.wm.open_mainfile(filepath={str(tmp_path / 'scene.blend')!r})
         cam = bpy.data.scenes["SceneFit Composite"].camera.data
@@ -211,3 +211,45 @@ def test_blender_shows_a_sideways_stored_photo_upright_like_the_pipeline(tmp_pat
     result = printed_json(proc)
     assert result["size"] == [40, 60] and result["packed"]
     assert result["diff"] < 2 / 255
+
+
+def test_blenders_cameras_and_the_photo_camera_agree_on_a_lens_shift(run_py, tmp_path):
+    """SceneFit's camera made from a shifted PhotoCamera shows a point where the PhotoCamera projects it
+    (Blender's own projection), landscape and portrait; an artist's shifted camera read back as a PhotoCamera
+    has its optical axis on the pixel Blender's shift puts it."""
+    from scenefit.core.data.imageio import write_image
+
+    for name, size in (("wide", (60, 40)), ("tall", (40, 60))):
+        write_image(tmp_path / f"{name}.png", np.full((size[1], size[0], 3), 0.5, np.float32))
+    proc = run_py(f"""
+        import json
+        import bpy
+        from bpy_extras.object_utils import world_to_camera_view
+        from mathutils import Vector
+        from scenefit.blender_io.compose import ensure_photo_camera, load_photo_image
+        from scenefit.blender_io.scene_camera import lens_shift, principal_point
+        from scenefit.core.scene.camera import PhotoCamera, camera_origin, pixel_ray
+
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        seen = {{}}
+        for name in ("wide", "tall"):
+            image = load_photo_image({str(tmp_path)!r} + "/" + name + ".png")
+            w, h = image.size
+            camera = PhotoCamera(pitch_deg=-8.0, fov_deg=52.0, roll_deg=4.0, width=w, height=h, shift_x=0.12,
+                                 shift_y=-0.07)
+            cam = ensure_photo_camera(bpy.context.scene, image, camera)
+            cam.location = tuple(camera_origin())
+            own = bpy.data.scenes["SceneFit Composite"]
+            own.view_layers[0].update()
+            point = camera_origin() + 5.0 * pixel_ray(camera, 21.0, 13.0)
+            co = world_to_camera_view(own, cam, Vector(tuple(point)))
+            artist = bpy.data.objects.new("Artist" + name, bpy.data.cameras.new("Artist" + name))
+            artist.data.sensor_fit, artist.data.shift_x, artist.data.shift_y = "AUTO", 0.2, 0.05
+            read = PhotoCamera(width=w, height=h, **lens_shift(artist, w, h))
+            seen[name] = {{"drawn": [co.x * w, (1.0 - co.y) * h], "axis": list(read.principal_px()),
+                          "blender_axis": list(principal_point(artist, w, h))}}
+        print("JSON" + json.dumps(seen))
+    """)
+    for name, result in printed_json(proc).items():
+        assert result["drawn"] == pytest.approx([21.0, 13.0], abs=1e-3), name
+        assert result["axis"] == pytest.approx(result["blender_axis"], abs=1e-9), name

@@ -22,7 +22,7 @@ Values are the photo's, sRGB-encoded in [0, 1]; `srgb_to_linear` gives radiance 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -183,7 +183,7 @@ def indoor_panorama(photo: np.ndarray, ray_distance: np.ndarray, camera: PhotoCa
         raise InputError(f"Photo {photo.shape[:2]} and depth {ray_distance.shape} differ in size.")
     long_side = splat_long_side or int(np.clip(6 * 2 * height * camera.fov_deg / 360.0, 96, 768))
     photo_r, dist_r = _resize_for_splat(photo.astype(np.float32), ray_distance.astype(np.float32), long_side)
-    cam_r = PhotoCamera(camera.yaw_deg, camera.pitch_deg, camera.fov_deg, photo_r.shape[1], photo_r.shape[0])
+    cam_r = replace(camera, width=photo_r.shape[1], height=photo_r.shape[0])   # its roll and shift kept
     dirs = cam_r.ray_directions()
     origin = np.array([0.0, 0.0, height_above_floor])
     points = origin + dirs * dist_r[..., None]
@@ -227,11 +227,7 @@ def outdoor_panorama(photo: np.ndarray, camera: PhotoCamera, height: int = 128,
 
     width = 2 * height
     dirs = equirect_directions(height, width)
-    forward, right, up, half_w, half_h = camera.basis()
-    z = dirs @ forward
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sx = (dirs @ right) / z / half_w
-        sy = (dirs @ up) / z / half_h
+    sx, sy, z = camera.image_xy(dirs)
     inside = (z > 1e-6) & (np.abs(sx) <= 1) & (np.abs(sy) <= 1)
     h, w = photo.shape[:2]
     map_x = np.where(inside, (sx + 1) / 2 * w - 0.5, -1).astype(np.float32)

@@ -13,35 +13,9 @@ from scenefit.core.data.imageio import write_image
 from scenefit.core.stages.camera import estimate_photo_camera, sensor_width_mm
 from scenefit.core.scene.camera import PhotoCamera
 from scenefit.core.scene.frame import look_frame
-from camera_scenes import box_room, jpeg_with_exif
+from camera_scenes import box_room, fspy_project_bytes as _fspy_bytes, jpeg_with_exif, lineless_photo as _photo
 
 SIZE = (96, 64)
-
-
-def _photo(path, size=SIZE, seed=0):
-    """A smooth, lineless photo: a vertical gradient with faint noise."""
-    w, h = size
-    rng = np.random.default_rng(seed)
-    ramp = np.linspace(0.2, 0.8, h, dtype=np.float32)[:, None, None] * np.ones((h, w, 3), np.float32)
-    write_image(path, np.clip(ramp + rng.normal(0, 0.01, (h, w, 3)), 0, 1))
-    return path
-
-
-# -- fSpy ------------------------------------------------------------------------------------------
-def _fspy_bytes(camera: PhotoCamera, image: bytes = b"\x89PNG fake", **overrides) -> bytes:
-    """An fSpy project as fSpy documents it: 'fspy', version 1, state length, image length (uint32 LE),
-    the state JSON, the image. The camera-to-world matrix's columns are right, up and -forward."""
-    forward, right, up, _, _ = camera.basis()
-    rotation = np.stack([right, up, -forward], axis=1)
-    rows = np.eye(4)
-    rows[:3, :3] = rotation
-    rows[:3, 3] = (1.0, -4.0, 1.5)
-    params = {"principalPoint": {"x": 0.0, "y": 0.0}, "horizontalFieldOfView": math.radians(camera.fov_deg),
-              "verticalFieldOfView": 1.0, "cameraTransform": {"rows": rows.tolist()},
-              "viewTransform": {"rows": np.linalg.inv(rows).tolist()}, "imageWidth": camera.width,
-              "imageHeight": camera.height, "relativeFocalLength": 1.0}
-    state = json.dumps({"cameraParameters": params, "calibrationSettingsBase": {}, **overrides}).encode()
-    return struct.pack("<4sIII", b"fspy", 1, len(state), len(image)) + state + image
 
 
 @pytest.mark.parametrize("fov, pitch, roll", [(55.0, -12.5, 0.0), (83.2, 7.25, -4.4), (40.0, -31.0, 12.0)])

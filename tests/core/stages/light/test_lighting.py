@@ -43,8 +43,11 @@ def room_hit(origins: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndar
     return t, color.astype(np.float32)
 
 
-def test_synthetic_room_unwraps_to_the_known_panorama():
-    camera = PhotoCamera(yaw_deg=90.0, pitch_deg=-15.0, fov_deg=70.0, width=160, height=120)
+@pytest.mark.parametrize("roll, shift", [(0.0, (0.0, 0.0)), (12.0, (0.1, -0.05))])
+def test_synthetic_room_unwraps_to_the_known_panorama(roll, shift):
+    # (a turned, shifted camera: the unwrap uses the camera's own rays, roll and lens shift included)
+    camera = PhotoCamera(yaw_deg=90.0, pitch_deg=-15.0, fov_deg=70.0, width=160, height=120, roll_deg=roll,
+                         shift_x=shift[0], shift_y=shift[1])
     eye = np.array([0.0, 0.0, 1.0])
     dirs = camera.ray_directions()
     distance, photo = room_hit(np.broadcast_to(eye, dirs.shape), dirs)
