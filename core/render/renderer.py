@@ -78,6 +78,7 @@ class WindowCamera:
     fov_x_deg: float
     film: tuple[int, int]
     crop: tuple[int, int, int, int]
+    film_offset: tuple[float, float] = (0.0, 0.0)   # the lens shift: PhotoCamera.film_offset
 
     @property
     def width(self) -> int:
@@ -329,11 +330,12 @@ class AssetRenderer:
         """One sensor per film and crop; its pose and field of view are updated in place (no recompile)."""
         import mitsuba as mi
 
-        key = ("window", camera.film, camera.crop)
+        key = ("window", camera.film, camera.crop, camera.film_offset)
         if key not in self._sensors:
             x0, y0, w, h = camera.crop
             self._sensors[key] = mi.load_dict({
                 "type": "perspective", "fov": 40.0, "fov_axis": "x",
+                "principal_point_offset_x": camera.film_offset[0], "principal_point_offset_y": camera.film_offset[1],
                 "film": {"type": "hdrfilm", "width": camera.film[0], "height": camera.film[1], "pixel_format": "rgba",
                          "rfilter": {"type": "box"}, "crop_offset_x": x0, "crop_offset_y": y0,
                          "crop_width": w, "crop_height": h},

@@ -69,6 +69,12 @@ class PhotoCamera:
         side = max(self.width, self.height)
         return self.width / 2.0 - self.shift_x * side, self.height / 2.0 + self.shift_y * side
 
+    def film_offset(self) -> tuple[float, float]:
+        """The image centre's offset from the optical axis's pixel in fractions of the width and height (x right,
+        y down): what Mitsuba's perspective sensor takes as its principal point offset."""
+        side = max(self.width, self.height)
+        return self.shift_x * side / self.width, -self.shift_y * side / self.height
+
     def plane_xy(self, x_px, y_px) -> tuple[np.ndarray, np.ndarray]:
         """Image-plane coordinates (right, up, at distance 1) of pixel positions (x right, y down)."""
         _, _, _, half_w, half_h = self.basis()

@@ -130,9 +130,7 @@ def _sensor(mi, camera: PhotoCamera, window: tuple[int, int, int, int], sampler_
     x0, y0, x1, y1 = window
     return mi.load_dict({
         "type": "perspective", "fov": float(camera.fov_deg), "fov_axis": "x",
-        # Mitsuba's principal point offset is in fractions of the film, y down; the lens shift in the longer side's
-        "principal_point_offset_x": camera.shift_x * max(camera.width, camera.height) / camera.width,
-        "principal_point_offset_y": -camera.shift_y * max(camera.width, camera.height) / camera.height,
+        "principal_point_offset_x": camera.film_offset()[0], "principal_point_offset_y": camera.film_offset()[1],
         "to_world": mi.ScalarTransform4f().look_at(origin=origin.tolist(), target=(origin + forward).tolist(),
                                                    up=up.tolist()),
         "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height, "pixel_format": "rgba",

@@ -104,7 +104,7 @@ class GlobalScene:
         cx1, cy1 = min(math.ceil(x1 * sx), film[0]), min(math.ceil(y1 * sy), film[1])
         origin, forward, up = photo_camera_in_object_frame(self.camera, self.mesh, self.placements[turn])
         window = WindowCamera(tuple(origin), tuple(origin + forward), tuple(up), self.camera.fov_deg, film,
-                              (cx0, cy0, cx1 - cx0, cy1 - cy0))
+                              (cx0, cy0, cx1 - cx0, cy1 - cy0), self.camera.film_offset())
         return window, (cx0 / sx, cy0 / sy, (cx1 - cx0) / sx, (cy1 - cy0) / sy)
 
     def render(self, base_color: torch.Tensor, roughness: torch.Tensor, metallic: torch.Tensor,

@@ -102,3 +102,25 @@ def test_a_turned_view_shows_the_side_the_orbit_camera_sees_and_turns_the_light_
     rows = np.clip(np.floor(uv[:, 1] * 8).astype(int), 0, 7)
     np.testing.assert_array_equal(turned.reshape(-1, 3), env[rows, cols])
     assert torch.equal(envmap_in_object_frame(torch.from_numpy(env), placement), torch.from_numpy(turned))
+
+
+def test_a_shifted_photo_camera_covers_the_same_pixels_in_the_global_view_as_in_the_composite():
+    # A lens shift of a tenth of the frame moves the asset's pixels by 6 px: a view that ignored it would
+    # cover other pixels than the composite does.
+    shifted = PhotoCamera(yaw_deg=90.0, pitch_deg=-15.0, fov_deg=60.0, width=64, height=48, shift_x=0.1, shift_y=-0.08)
+    photo = np.full((48, 64, 3), 0.5, np.float32)
+    placement = Placement((0.45, 0.7), 0.35)
+    mesh = uv_sphere(0.5, 24, 12)
+    scene = GlobalScene(mesh, (16, 16), photo, placement, shifted, _env(), [0.0], max_depth=2,
+                        shadow_type="none", shadow_spp=4, seed=0)
+    maps = torch.from_numpy(_maps())
+    x0, y0, x1, y1 = scene.window
+    side = max(x1 - x0, y1 - y0)
+    placed = scene.render(maps[..., 0:3], maps[..., 3:4], maps[..., 4:5], torch.from_numpy(_env()), 0.0, side, 16, 0)
+    composed = compose(ComposeInputs(mesh, _maps(), photo, placement.pixel(photo.shape[:2]), _env(), shifted),
+                       ComposeConfig(size=placement.size, spp=16, max_depth=2, shadow_type="none"))
+    cx, cy, cw, ch = (int(v) for v in placed.rect)
+    ours = placed.alpha[..., 0].detach().numpy()[:ch, :cw] > 0.5
+    theirs = composed.alpha[cy:cy + ch, cx:cx + cw] > 0.5
+    assert ours.sum() > 100
+    assert (ours & theirs).sum() / (ours | theirs).sum() > 0.95
