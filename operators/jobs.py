@@ -434,8 +434,6 @@ class JobSteps:
 def undo_step(message: str) -> None:
     """One undo step for what a job wrote into the file (job operators carry no UNDO flag: Blender would
     redo them by calling execute), so Ctrl+Z takes the results out again."""
-    if bpy.app.background or bpy.context.window is None:
-        return
     try:
         bpy.ops.ed.undo_push(message=message)
     except RuntimeError:   # no undo stack in this context

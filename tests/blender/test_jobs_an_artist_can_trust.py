@@ -256,6 +256,38 @@ out["draft"] = [first, result, report.get("config", {}).get("preset"), settings.
 settings.preset = "draft"
 """
 
+# Ctrl+Z after a job takes its results out of the file (the job's one undo step), and after Apply puts the
+# asset's slots and World back. Undo replaces Blender's data, so names are looked up again afterwards.
+UNDO = r"""
+def snapshot():
+    obj = bpy.data.objects[roots[1]]
+    scene = bpy.data.scenes[artist_scene]
+    return {"slots": [s.material.name if s.material else None for s in obj.material_slots],
+            "world": scene.world.name if scene.world else None, "scenes": sorted(s.name for s in bpy.data.scenes),
+            "materials": sorted(m.name for m in bpy.data.materials), "worlds": sorted(w.name for w in bpy.data.worlds),
+            "images": sorted(i.name for i in bpy.data.images), "runs": len(obj.scenefit_asset.runs)}
+
+artist_scene = bpy.context.scene.name
+select(roots[1])
+settings.preset, settings.guidance = "draft", "auto"
+bpy.ops.ed.undo_push(message="the artist's last action")
+before = snapshot()
+first, result, report, said = finished({"choice": "skip", "guidance": "auto"})
+after_run = snapshot()
+bpy.ops.ed.undo()
+after_undo = snapshot()
+settings = bpy.context.scene.scenefit
+runs = bpy.data.objects[roots[1]].scenefit_asset.runs
+bpy.ops.ed.undo_push(message="before apply")
+before_apply = snapshot()
+applied = sorted(bpy.ops.scenefit.apply_run("EXEC_DEFAULT", True, index=0))   # undo=True: as a click pushes
+after_apply = snapshot()
+bpy.ops.ed.undo()
+settings = bpy.context.scene.scenefit
+out["undo"] = {"run": [result, said[-1:]], "before": before, "after_run": after_run, "after_undo": after_undo,
+               "apply": applied, "before_apply": before_apply, "after_apply": after_apply, "apply_undone": snapshot()}
+"""
+
 LOAD = r"""
 settings.preset = "draft"
 op, ctx, *_ = started(dict(ADAPT, iterations=50, choice="start"))
@@ -379,6 +411,17 @@ def test_each_answer_to_the_cost_question_runs_what_it_says(session):
     first, result, preset, panel_preset, said, recorded = out["draft"]
     assert result == ["FINISHED"], said
     assert preset == "draft" and panel_preset == "final" and recorded == "draft"
+
+
+def test_undo_takes_a_job_or_an_apply_out_of_the_file(session):
+    out = _step(session, UNDO, "undo")["undo"]
+    assert out["run"][0] == ["FINISHED"], out["run"]
+    before, after = out["before"], out["after_run"]
+    # The run added a World, a composite scene and image, and a history entry; Ctrl+Z takes all of it out.
+    assert after["runs"] == before["runs"] + 1 and after["images"] != before["images"], after
+    assert out["after_undo"] == before
+    assert out["apply"] == ["FINISHED"] and out["after_apply"] != out["before_apply"]
+    assert out["apply_undone"] == out["before_apply"]
 
 
 def test_quitting_or_loading_a_file_stops_a_job_within_two_seconds(session):
