@@ -167,19 +167,21 @@ def redraw(context) -> None:
 
 def long_work_warning(context, label: str, work: LocalWork | None, runs_remotely: bool) -> str | None:
     """One sentence when a job would run here for longer than LONG_LOCAL_SECONDS; None when it is short,
-    unknown, or goes to the worker environment the preferences name."""
+    unknown, or goes to the worker environment the preferences name for every job."""
     from ..panels.quality import LONG_LOCAL_SECONDS
 
     if work is None or work.seconds < LONG_LOCAL_SECONDS:
         return None
     if runs_remotely:
-        from .remote import worker_address
+        from .remote import sends_every_job
 
         try:
-            if worker_address(context) is not None:
+            if sends_every_job(context):
                 return None
         except SceneFitError:
             pass   # a worker set up wrongly: the job's start says so
+        if offers_worker(context, runs_remotely):
+            return f"{label} would run {work.where()}; the worker set in the preferences runs it sooner."
     if work.on_gpu:
         return (f"{label} would run {work.where()}; a worker environment with more GPUs, set in the add-on's "
                 "preferences (Jobs), runs it sooner.")
@@ -257,10 +259,10 @@ class JobSteps:
         """(work, data): the operator's own, or the hand-off to the worker environment when one is chosen."""
         self._remote = False
         if self.runs_remotely:
-            from .remote import remote_work, worker_address
+            from .remote import remote_work, sends_every_job, worker_address
 
             address = worker_address(context)
-            if address is not None:
+            if address is not None and (sends_every_job(context) or getattr(self, "choice", "") == "worker"):
                 self._remote = True
                 return remote_work(self, context, address)
         return self.prepare(context)
@@ -443,7 +445,21 @@ def undo_step(message: str) -> None:
 CHOICES = (("ask", "Ask", "Ask before long work (the button's own)"),
            ("draft", "Draft", "Run at the Draft preset this time (the panel's preset stays)"),
            ("skip", "Skip adaptation", "Estimate the light and compose now, without adapting the texture"),
+           ("worker", "Send to worker", "Run it in the worker environment set in the preferences (Jobs)"),
            ("start", "Start anyway", "Run as set, however long it takes here"))
+
+
+def offers_worker(context, runs_remotely: bool) -> bool:
+    """Whether the question before long work offers Send to Worker: the operator can run there and the
+    preferences name a worker that takes jobs when asked."""
+    if not runs_remotely:
+        return False
+    from .remote import worker_address
+
+    try:
+        return worker_address(context) is not None
+    except SceneFitError:
+        return False
 
 
 class CostFirst:
@@ -463,7 +479,8 @@ class CostFirst:
         for line in wrapped(getattr(self, "_warning", "") or "", 80):
             col.label(text=line)
         row = layout.row(align=True)
-        shown = [c for c in CHOICES if c[0] != "ask" and (c[0] != "skip" or self.skippable)]
+        shown = [c for c in CHOICES if c[0] != "ask" and (c[0] != "skip" or self.skippable)
+                 and (c[0] != "worker" or offers_worker(context, self.runs_remotely))]
         if context.scene.scenefit.preset == "draft":
             shown = [c for c in shown if c[0] != "draft"]
         for key, text, _ in shown:

@@ -46,6 +46,12 @@ def worker_address(context) -> str | None:
     return address
 
 
+def sends_every_job(context) -> bool:
+    """Whether every Run All and Adapt goes to the worker (else only those sent from the question)."""
+    prefs = preferences(context)
+    return worker_address(context) is not None and getattr(prefs, "worker_when", "ALWAYS") == "ALWAYS"
+
+
 def is_local_address(address: str) -> bool:
     """'local' (a cluster started here) or an address on this machine."""
     if address == "local":

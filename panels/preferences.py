@@ -19,6 +19,10 @@ WORKER_TYPES = (
     ("INSTALL", "SceneFit install", "Run All and Adapt go to another SceneFit install on this machine (e.g. one "
                                     "with CUDA torch), run by its Python"),
 )
+WORKER_WHEN = (
+    ("ALWAYS", "Every Job", "Every Run All and Adapt goes to the worker"),
+    ("ASK", "When Asked", "Jobs run in this Blender; long work asks first and offers Send to Worker"),
+)
 
 
 class SceneFitPreferences(bpy.types.AddonPreferences):
@@ -49,6 +53,9 @@ class SceneFitPreferences(bpy.types.AddonPreferences):
                                           "only while it runs: far less GPU memory, slower")
     worker_type: EnumProperty(name="Run jobs on", items=WORKER_TYPES, default="LOCAL",
                               description="Where Run All and Adapt run; progress and previews come back to the panel")
+    worker_when: EnumProperty(name="Send", items=WORKER_WHEN, default="ALWAYS",
+                              description="Whether every Run All and Adapt goes to the worker, or only those you "
+                                          "send from the question before long work")
     ray_address: StringProperty(name="Ray address", default="local",
                                 description="'local' starts a Ray cluster on this machine; else the cluster's "
                                             "address, e.g. ray://head:10001 (needs Blender's Allow Online Access)")
@@ -84,6 +91,8 @@ class SceneFitPreferences(bpy.types.AddonPreferences):
             col.prop(self, "ray_address")
         elif self.worker_type == "INSTALL":
             col.prop(self, "worker_python")
+        if self.worker_type != "LOCAL":
+            col.prop(self, "worker_when")
         col = layout.column(heading="Prompts")
         col.prop(self, "prompt_endpoint")
         col.prop(self, "prompt_model")

@@ -171,6 +171,42 @@ out["invoke"] = {"seconds": seconds, "results": results, "dialogs": dialogs, "to
                  "torch_before": had_torch, "online": bpy.app.online_access}
 """
 
+# A worker set to take jobs when asked: long work asks and offers Send to Worker, which hands the job to it;
+# a worker that takes every job is used without asking.
+WORKER = r"""
+from scenefit.operators import run as run_ops
+select(roots[1])
+settings.preset, settings.prompt = "balanced", "a mossy fox"
+prefs.worker_type, prefs.worker_python, prefs.worker_when = "INSTALL", sys.executable, "ASK"
+seen = {}
+try:
+    op, ctx = probe(run_ops.SCENEFIT_OT_run, choice="ask", guidance="auto"), Ctx()
+    seen["ask"] = [sorted(ui_invoke(op, ctx, event("LEFTMOUSE"))), len(ctx.window_manager.dialogs)]
+    op.layout = Layout()
+    op.draw(bpy.context)
+    seen["buttons"] = [b.choice for b in op.layout.buttons]
+    bpy.context.window_manager.scenefit_runtime.running = False
+    sent = probe(run_ops.SCENEFIT_OT_run, choice="worker", guidance="auto")
+    work, data = sent.job_work(bpy.context)
+    here = probe(run_ops.SCENEFIT_OT_run, choice="start", guidance="auto")
+    here_work, _ = here.job_work(bpy.context)
+    seen["sent"] = [sent._remote, work.__module__, data.get("worker"), here._remote, here_work.__module__]
+    prefs.worker_when = "ALWAYS"
+    op, ctx = probe(run_ops.SCENEFIT_OT_run, choice="ask", guidance="auto"), Ctx()
+    ui_invoke(op, ctx, event("LEFTMOUSE"))
+    seen["always"] = [len(ctx.window_manager.dialogs), op.long_work_warning(bpy.context)]
+    bpy.context.window_manager.scenefit_runtime.running = False
+    prefs.worker_type = "LOCAL"
+    op.layout = Layout()
+    op.draw(bpy.context)
+    seen["no_worker_buttons"] = [b.choice for b in op.layout.buttons]
+finally:
+    prefs.worker_type, prefs.worker_when = "LOCAL", "ALWAYS"
+    settings.preset = "draft"
+    bpy.context.window_manager.scenefit_runtime.running = False
+out["worker"] = seen
+"""
+
 MODAL = r"""
 from scenefit.operators import adapt as adapt_ops
 prefs.base_model, prefs.inpaint_model = str(tiny[0]), str(tiny[1])
@@ -385,6 +421,16 @@ def test_a_click_returns_at_once_without_network_or_models(session):
         assert out["dialogs"][f"{name}/run/buttons"] == [["Draft", "draft"], ["Skip adaptation", "skip"],
                                                          ["Start anyway", "start"]]
         assert out["dialogs"][f"{name}/adapt/buttons"] == [["Draft", "draft"], ["Start anyway", "start"]]
+
+
+def test_the_question_sends_long_work_to_a_worker_set_to_take_it_when_asked(session):
+    out = _step(session, WORKER, "worker")["worker"]
+    assert out["ask"] == [["RUNNING_MODAL"], 1] and "worker" in out["buttons"] and "start" in out["buttons"]
+    sent_remote, sent_module, address, here_remote, here_module = out["sent"]
+    assert sent_remote and sent_module.endswith("workers.remote") and address
+    assert not here_remote and not here_module.endswith("workers.remote")
+    assert out["always"] == [0, None]   # every job goes there: nothing to ask
+    assert "worker" not in out["no_worker_buttons"] and "draft" in out["no_worker_buttons"]
 
 
 def test_esc_cancels_only_over_the_progress_and_resume_continues_the_count(session):
