@@ -111,6 +111,62 @@ class SCENEFIT_OT_apply_run(_RunOperator, bpy.types.Operator):
         return {"FINISHED"}
 
 
+def compared_slots(run) -> list[tuple[str, object, object]]:
+    """(slot label, the artist's material, this run's) for each slot the run filled, each slot once."""
+    seen, rows = set(), []
+    for entry in run.slots:
+        if entry.asset_object is None or entry.result is None or (entry.asset_object.name, entry.slot) in seen:
+            continue
+        seen.add((entry.asset_object.name, entry.slot))
+        rows.append((f"{entry.asset_object.name} · {entry.slot + 1}", entry.original, entry.result))
+    return rows
+
+
+class SCENEFIT_OT_compare_run(_RunOperator, bpy.types.Operator):
+    """Show this run's composite, and each of the asset's materials before and after it, side by side"""
+
+    bl_idname = "scenefit.compare_run"
+    bl_label = "Compare"
+    bl_options = {"REGISTER"}
+
+    def invoke(self, context, event):
+        try:
+            _, run = chosen_run(context, self.index)
+            self._rows = compared_slots(run)
+            if not self._rows and run.composite is None:
+                raise InputError(f"The run of {run.when} left no materials or composite in this file to compare.")
+        except SceneFitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        for _, original, result in self._rows:   # Blender renders the previews; the popup shows them as they come
+            for material in (original, result):
+                if material is not None:
+                    material.preview_ensure()
+        self._composite = run.composite
+        return context.window_manager.invoke_popup(self, width=520)
+
+    def draw(self, context):
+        layout = self.layout
+        if self._composite is not None and self._composite.preview is not None:
+            layout.label(text="Composite")
+            layout.template_icon(icon_value=self._composite.preview.icon_id, scale=10.0)
+        grid = layout.grid_flow(columns=3, even_columns=True, align=True)
+        for text in ("Slot", "Original", "Result"):
+            grid.label(text=text)
+        for label, original, result in self._rows:
+            grid.label(text=label, translate=False)
+            for material in (original, result):
+                column = grid.column(align=True)
+                if material is None:
+                    column.label(text="(empty)")
+                    continue
+                column.template_icon(icon_value=material.preview.icon_id, scale=5.0)
+                column.label(text=material.name, translate=False)
+
+    def execute(self, context):
+        return {"FINISHED"}
+
+
 class SCENEFIT_OT_open_run_folder(_RunOperator, bpy.types.Operator):
     """Open this run's folder in the system's file browser"""
 
@@ -245,6 +301,7 @@ class SCENEFIT_OT_resume_run(_RunOperator, bpy.types.Operator):
                                       model_resolution=run.model_resolution, render_size=run.render_size)
 
 
-classes = (SCENEFIT_OT_apply_run, SCENEFIT_OT_open_run_folder, SCENEFIT_OT_delete_run, SCENEFIT_OT_resume_run)
+classes = (SCENEFIT_OT_apply_run, SCENEFIT_OT_compare_run, SCENEFIT_OT_open_run_folder, SCENEFIT_OT_delete_run,
+           SCENEFIT_OT_resume_run)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

@@ -280,6 +280,7 @@ def draw_runs(layout, context) -> None:
         warning(layout, run.prompt, run.prompt, icon="TEXT")
     row = layout.row(align=True)
     row.operator("scenefit.apply_run", text="Apply", icon="CHECKMARK").index = state.run_index
+    row.operator("scenefit.compare_run", text="Compare", icon="SPLIT_HORIZONTAL").index = state.run_index
     row.operator("scenefit.open_run_folder", text="", icon="FILE_FOLDER").index = state.run_index
     if run.stage == "adapt" and run.state != "finished":
         row.operator("scenefit.resume_run", text="Resume", icon="PLAY").index = state.run_index

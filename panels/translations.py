@@ -11,14 +11,15 @@ _FRENCH_OPERATORS = {
     "Write Prompt": "Écrire le prompt", "Open Folder": "Ouvrir le dossier", "Copy Details": "Copier les détails",
     "Cancel": "Annuler", "Resume": "Reprendre", "Apply Run": "Appliquer l'essai", "Delete Run": "Supprimer l'essai",
     "Export to Mitsuba": "Exporter vers Mitsuba", "Open Composite": "Ouvrir le composite",
-    "Sun from Light": "Soleil depuis la lampe", "Use Result": "Utiliser le résultat",
+    "Sun from Light": "Soleil depuis la lampe", "Use Result": "Utiliser le résultat", "Compare": "Comparer",
 }
 _FRENCH = {
     "Asset": "Asset", "Scene": "Scène", "Style": "Style", "Quality": "Qualité", "Run": "Lancer",
     "Results": "Résultats", "Photo": "Photo", "Placement": "Emplacement", "Size": "Taille", "Turn": "Rotation",
     "Camera": "Caméra", "Sun": "Soleil", "Prompt": "Prompt", "Preset": "Préréglage", "Output": "Sortie",
     "An earlier SceneFit downloaded models into {}": "Une version antérieure de SceneFit a téléchargé des modèles dans {}",
-    "Material": "Matériau", "World": "Monde", "Original": "Original", "Details": "Détails",
+    "Material": "Matériau", "World": "Monde", "Original": "Original", "Details": "Détails", "Result": "Résultat",
+    "Composite": "Composite", "Slot": "Emplacement de matériau", "(empty)": "(vide)",
     "Bake Asset…": "Cuire l'asset…", "Modules missing": "Modules manquants", "Unsaved file": "Fichier non enregistré",
     "No UV map": "Pas de carte UV", "Material not readable": "Matériau illisible",
     "{} objects, one asset": "{} objets, un seul asset", "'{}' is flat": "« {} » est plat",

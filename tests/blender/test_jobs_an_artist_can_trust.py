@@ -67,13 +67,15 @@ class FakeWM:   # the window manager's calls a job operator makes; the runtime i
     def modal_handler_add(self, op): self.handlers.append(op)
     def invoke_confirm(self, op, event, **kw): self.dialogs.append(kw.get("message", "")); return {"RUNNING_MODAL"}
     def invoke_props_dialog(self, op, **kw): self.dialogs.append("options"); return {"RUNNING_MODAL"}
-    def invoke_popup(self, op, **kw): self.dialogs.append(op._warning); return {"RUNNING_MODAL"}
+    def invoke_popup(self, op, **kw): self.dialogs.append(getattr(op, "_warning", "popup")); return {"RUNNING_MODAL"}
 
 class Layout:   # what a dialog draws, recorded
-    def __init__(self): self.buttons = []
+    def __init__(self): self.buttons, self.icons, self.texts = [], [], []
     def column(self, **kw): return self
     def row(self, **kw): return self
-    def label(self, **kw): pass
+    def grid_flow(self, **kw): return self
+    def label(self, text="", **kw): self.texts.append(text)
+    def template_icon(self, icon_value=0, scale=1.0): self.icons.append(icon_value)
     def operator(self, idname, text=""):
         button = SimpleNamespace(idname=idname, text=text)
         self.buttons.append(button)
@@ -371,6 +373,16 @@ except RuntimeError as error:
 select(fox)
 runs = bpy.data.objects[fox].scenefit_asset.runs
 out["runs"] = [(r.stage, r.state, r.preset, r.prompt, bool(r.when), len(r.slots)) for r in runs]
+from scenefit.operators import history as history_ops
+compare, ctx = probe(history_ops.SCENEFIT_OT_compare_run, index=0), Ctx()
+shown = sorted(compare.invoke(ctx, event("LEFTMOUSE")))
+compare.layout = Layout()
+compare.draw(bpy.context)
+first = runs[0]
+out["compare"] = {"shown": shown, "drawn": compare.layout.icons, "texts": compare.layout.texts,
+                  "expected": [first.composite.preview.icon_id if first.composite else None] + [
+                      m.preview.icon_id for e in first.slots for m in (e.original, e.result)],
+                  "names": [m.name for e in first.slots for m in (e.original, e.result)]}
 out["apply"] = sorted(bpy.ops.scenefit.apply_run(index=0))
 folder = Path(bpy.path.abspath(runs[0].folder))
 material = runs[0].slots[0].result.name
@@ -489,6 +501,11 @@ def test_each_asset_keeps_its_own_state_and_runs(session):
     assert out["fox_convert"] == ["FINISHED"]
     stage, state, preset, prompt, when, slots = out["runs"][-1]
     assert (stage, state, preset, prompt, when) == ("convert", "finished", "draft", "a mossy fox", True) and slots >= 1
+    # Compare shows the run's materials before and after, side by side, as Blender previews them.
+    compare = out["compare"]
+    expected = [icon for icon in compare["expected"] if icon is not None]
+    assert compare["shown"] == ["RUNNING_MODAL"] and compare["drawn"] == expected and len(expected) >= 2
+    assert all(name in compare["texts"] for name in compare["names"]) and len(set(compare["names"])) == 2
     assert out["apply"] == ["FINISHED"] and out["delete"] == ["FINISHED"]
     folder_left, material_left, runs_left, slot_material = out["deleted"]
     assert not folder_left and not material_left and runs_left == len(out["runs"]) - 1
