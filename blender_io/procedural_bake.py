@@ -59,7 +59,7 @@ def bake_socket(obj, slot: int, socket, size: int, pixels_of,
             raise InputError(f"No face of '{obj.name}' uses material '{material.name}'; nothing to bake.")
         if mesh.uv_layers.active is None:   # the bake writes through UVs
             raise InputError(f"Object '{obj.name}' has no UV map, which reading the procedural inputs of its material "
-                             f"'{material.name}' needs; unwrap it (UV > Smart UV Project) first.")
+                             f"'{material.name}' needs; unwrap it first (Add UV Map in SceneFit's panel, or UV > Smart UV Project).")
         mesh.materials.clear()
         mesh.materials.append(mat)
         tmp.matrix_world = obj.matrix_world

@@ -111,6 +111,7 @@ class SCENEFIT_PT_asset(_Subsection, bpy.types.Panel):
         if not obj.data.uv_layers:
             warning(layout, iface_("No UV map"), iface_("The mesh has no UV map: unwrap it first "
                                                         "(UV > Smart UV Project)."))
+            layout.operator("scenefit.add_uv_map", icon="UV")
 
 
 class SCENEFIT_PT_scene(_Subsection, bpy.types.Panel):

@@ -12,6 +12,7 @@ _FRENCH_OPERATORS = {
     "Cancel": "Annuler", "Resume": "Reprendre", "Apply Run": "Appliquer l'essai", "Delete Run": "Supprimer l'essai",
     "Export to Mitsuba": "Exporter vers Mitsuba", "Open Composite": "Ouvrir le composite",
     "Sun from Light": "Soleil depuis la lampe", "Use Result": "Utiliser le résultat", "Compare": "Comparer",
+    "Add UV Map": "Ajouter une carte UV",
 }
 _FRENCH = {
     "Asset": "Asset", "Scene": "Scène", "Style": "Style", "Quality": "Qualité", "Run": "Lancer",

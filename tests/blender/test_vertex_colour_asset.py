@@ -81,3 +81,48 @@ def test_a_vertex_coloured_mesh_without_uvs_converts_with_each_corners_colour(tm
                             "--quiet")
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert validator(str(baked))["issues"]["numErrors"] == 0
+
+
+def test_an_artists_vertex_coloured_mesh_gets_a_uv_map_at_their_word_and_then_converts(tmp_path, run_py):
+    """In Blender the artist's mesh is theirs: Convert asks for a UV map rather than making one, Add UV Map
+    (their click) makes it without moving a vertex, and Convert then holds each corner's colour."""
+    asset = tmp_path / "painted.glb"
+    vertex_colour_asset(asset)
+    proc = run_py(f"""
+        import json
+        from pathlib import Path
+        import bpy
+        import addon_utils
+
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        addon_utils.enable("scenefit", default_set=True)
+        bpy.ops.import_scene.gltf(filepath={str(asset)!r})   # Blender's own importer, as an artist imports it
+        obj = next(o for o in bpy.data.objects if o.type == "MESH")
+        bpy.context.view_layer.objects.active = obj
+        obj.select_set(True)
+        bpy.context.scene.scenefit.preset = "draft"
+        bpy.context.scene.scenefit.output_dir = {str(tmp_path / "runs")!r}
+        shape = [tuple(v.co) for v in obj.data.vertices]
+        out = {{"uvs_before": len(obj.data.uv_layers)}}
+        try:
+            bpy.ops.scenefit.convert()
+            out["refused"] = ""
+        except RuntimeError as error:
+            out["refused"] = str(error).strip().splitlines()[-1]
+        out["add"] = sorted(bpy.ops.scenefit.add_uv_map())
+        out["uvs_after"] = [layer.name for layer in obj.data.uv_layers]
+        out["shape_kept"] = shape == [tuple(v.co) for v in obj.data.vertices]
+        out["again"] = bpy.ops.scenefit.add_uv_map.poll()
+        out["convert"] = sorted(bpy.ops.scenefit.convert())
+        run = obj.scenefit_asset.runs[len(obj.scenefit_asset.runs) - 1]
+        report = json.loads((Path(bpy.path.abspath(run.folder)) / "report.json").read_text())
+        out["psnr"] = report["psnr_covered_texels_db"]
+        print("JSON" + json.dumps(out))
+    """)
+    from conftest import printed_json
+
+    out = printed_json(proc)
+    assert out["uvs_before"] == 0 and "no UV map" in out["refused"] and "Add UV Map" in out["refused"], out["refused"]
+    assert out["add"] == ["FINISHED"] and out["uvs_after"] == ["SceneFit UV"] and out["shape_kept"]
+    assert not out["again"]   # one map is enough: the button greys out
+    assert out["convert"] == ["FINISHED"] and out["psnr"] > 40.0, out
