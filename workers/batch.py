@@ -179,6 +179,7 @@ class JobWorker:
             except SceneFitError as error:   # name the user's files, not the unpacked copies
                 raise type(error)(with_user_paths(str(error), job, payload.job)) from None
             self.jobs_run += 1
+            name_user_files(out, job, payload.job, Path(tmp))
             report = {"status": "done", "job": payload.job.to_dict(), "digest": payload.digest, "attempts": payload.attempt,
                       "seconds": round(time.perf_counter() - started, 3), "quality": quality_figures(stages),
                       "stages": stages, "worker": worker_info(self.jobs_run, self.models.loads)}
@@ -192,6 +193,18 @@ class JobWorker:
 
     def ping(self) -> str:
         return "ready"
+
+
+def name_user_files(out: Path, copy: Job, job: Job, folder: Path) -> None:
+    """The stages' records and reports (stage.json, report.json) naming the user's files, not the copies
+    unpacked in the worker's temporary `folder` (job_inputs.user_report): a job's folder is the same
+    wherever it ran, and names no folder that is gone once the job ends."""
+    import json
+
+    for path in out.rglob("*.json"):
+        text = path.read_text()
+        if str(folder) in text:
+            write_json_atomic(path, user_report(json.loads(text), copy, job, folder))
 
 
 def run_plain(worker: JobWorker, job: dict, inputs: bytes, progress_sink=None) -> dict:
@@ -261,80 +274,29 @@ def worker_info(jobs_run: int, model_loads: int) -> dict:
 
 
 def run_job_stages(job: Job, out: Path, progress=None, cancel=None, models=None, reuse_from: Path | None = None) -> dict:
-    """Run the job's stages into `out`; returns each stage's report.
-
-    A job that composes runs `scenefit run`'s pipeline (core/pipeline/run.py, adapt included when its stages
-    list it), reusing the stages of `reuse_from` (an earlier run of the job) whose inputs and settings are
-    the same; a job of convert and/or light alone runs those stage functions. `models`: the worker's
-    ModelCache (None: the pipeline loads what it needs for this job alone).
-    """
-    if runs_pipeline(job):
-        return _relative_outputs({"run": run_pipeline_for_job(job, out, progress, cancel, models, reuse_from)}, out)
-    return _available_stages(job, out, progress, cancel)
-
-
-def runs_pipeline(job: Job) -> bool:
-    """A job that composes or bakes runs `scenefit run`'s pipeline (and reuses earlier stages); one of
-    convert and/or light alone runs those stage functions."""
-    return "compose" in job.stages or "bake" in job.stages
+    """Run the job's stages into `out` through core/pipeline/run.py's run_pipeline (the subset it lists:
+    convert and/or light alone, or the pipeline, adapt when listed and its weights are found), reusing the
+    stages of `reuse_from` (an earlier run of the job) whose inputs and settings are the same; returns
+    {"run": the run's report}. `models`: the worker's ModelCache (None: the pipeline loads what it needs
+    for this job alone)."""
+    return _relative_outputs({"run": run_pipeline_for_job(job, out, progress, cancel, models, reuse_from)}, out)
 
 
 def run_pipeline_for_job(job: Job, out: Path, progress=None, cancel=None, models=None,
                          reuse_from: Path | None = None) -> dict:
-    """The job through core/pipeline/run.py's run_pipeline: adapt when listed (and its weights are found)."""
+    """The job through run_pipeline, its settings the RunConfig the jobs file's keys were read into. A job
+    that converts without composing fits every material at its own cell's size, as `scenefit convert`
+    does; one that composes fits their atlas, as `scenefit run` does."""
+    from ..blender_io.asset_file import load_asset_materials   # a Blender/glTF file: bpy in this worker
     from ..core.pipeline.run import run_pipeline
-
     from ..core.stages.bake.process import asset_file_bake
 
-    mesh, maps = _load_asset(job)
-    config = job_run_config(job)
+    asset = load_asset_materials(str(job.asset), job.object)
+    mesh, maps = (asset, None) if "compose" not in job.stages else asset.fitting_view()
     bake, why_not = asset_file_bake(job.asset, job.object) if "bake" in job.stages else (None, "the job's stages "
                                                                                          "do not list bake")
-    return run_pipeline(mesh, maps, job.photo, job.at, out, config, progress=progress, cancel=cancel, models=models,
-                        bake=bake, bake_skipped_why=why_not, reuse_from=reuse_from).to_report()
-
-
-def job_run_config(job: Job):
-    """The job's settings as the pipeline takes them: the RunConfig the jobs file's keys were read into."""
-    return job.run
-
-
-def _load_asset(job: Job):
-    from ..blender_io.asset_file import load_asset   # a Blender/glTF file: bpy in this worker
-
-    return load_asset(str(job.asset), job.object)
-
-
-def _available_stages(job: Job, out: Path, progress, cancel) -> dict:
-    """A job of convert and/or light alone (the jobs file refuses every other subset without compose)."""
-    from ..core.stages.light.stage import critic_choice, light_inputs, run_light, write_light
-    from ..core.stages.convert import convert_and_bake
-    from ..core.pipeline.presets import stage_config, with_overrides
-    from ..core.pipeline.run import light_settings
-
-    run = job.run
-    reports: dict = {}
-    if "convert" in job.stages:   # every material at its own cell's size, as `scenefit convert` fits them
-        from ..blender_io.asset_file import load_asset_materials
-
-        asset = load_asset_materials(str(job.asset), job.object)
-        config = stage_config("convert", run.preset, **with_overrides({"seed": run.seed}, run.overrides("convert")))
-        _, reports["convert"] = convert_and_bake(asset, None, out / "convert" / "maps", config, progress, cancel)
-    if "light" in job.stages:   # as `scenefit light` lights it: the photo's own camera, the same files
-        inputs = light_inputs(job.photo, job.at, run.fspy, run.camera_overrides, run.camera_source, run.camera_why)
-        # (what run_pipeline's light stage would be given, the job's own overrides over it)
-        overrides = run.overrides("light")
-        critic = critic_choice(overrides.pop("critic_type", "auto"), run.models)
-        config = stage_config("light", run.preset, critic_type=critic.choice,
-                              **with_overrides(light_settings(run), overrides))
-        if run.sun_shadow is not None:   # the shadow's points through the photo's camera, as the pipeline does
-            from ..core.stages.light.shadow_hint import sun_from_shadow_points
-
-            sun, spread = sun_from_shadow_points(run.sun_shadow, inputs.camera, tuple(inputs.info["size"]),
-                                                 inputs.photo.shape[:2])
-            config = replace(config, sun_deg=sun, sun_uncertainty_deg=spread)
-        reports["light"] = write_light(run_light(inputs, config, progress, cancel), out / "light")
-    return _relative_outputs(reports, out)
+    return run_pipeline(mesh, maps, job.photo, job.at, out, job.run, progress=progress, cancel=cancel, models=models,
+                        bake=bake, bake_skipped_why=why_not, reuse_from=reuse_from, stages=job.stages).to_report()
 
 
 def _relative_outputs(value, out: Path):
@@ -350,7 +312,7 @@ def _relative_outputs(value, out: Path):
 
 def quality_figures(stages: dict) -> dict:
     """The numbers the summary shows per job, from whichever stages ran."""
-    if "run" in stages:   # the whole pipeline's report: each stage's own report inside
+    if "run" in stages:   # the pipeline's report: each stage's own report inside
         run = stages["run"].get("stages", {})
         stages = {name: s["report"] for name, s in run.items() if isinstance(s, dict) and "report" in s}
     q: dict = {}
@@ -388,7 +350,7 @@ class JobOutcome:
 
 
 def reused_stages(report: dict) -> tuple[str, ...]:
-    """The stages a job's report says were reused (a pipeline job's; none for convert/light alone)."""
+    """The stages a job's report says were reused."""
     stages = report.get("stages", {}).get("run", {}).get("stages", {})
     return tuple(name for name, stage in stages.items() if isinstance(stage, dict) and stage.get("status") == "reused")
 
@@ -497,10 +459,8 @@ def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: E
                 continue
             # Changed since an earlier run, or failed after one (not --replace): its finished stages go
             # along, to be reused by a job that runs the pipeline.
-            stages = []
-            if runs_pipeline(job):   # (convert or light alone reuses nothing)
-                stages = (finished_stage_folders(out_dir / job.name) if not redo else []) or \
-                    finished_stage_folders(reuse_from / job.name if reuse_from else None)
+            stages = (finished_stage_folders(out_dir / job.name) if not redo else []) or \
+                finished_stage_folders(reuse_from / job.name if reuse_from else None)
             dispatcher.submit(make_payload(job, stages=stages, files=files, digest=digest))
             pending += 1
             say(job.name, ("changed since the earlier run (settings or input files): queued" if done_before and not redo

@@ -19,7 +19,7 @@ from typing import Any, Callable
 
 from ..base.errors import InputError
 from ..base.names import CONFIG_STAGES
-from .run import CAMERA_KEYS, RunConfig
+from .run_config import CAMERA_KEYS, RunConfig
 
 # Fields a table does not carry: photo_camera is a PhotoCamera object a Python caller already holds (a table
 # gives camera values instead); models come from the jobs file's [models] table, shared by its jobs.

@@ -54,7 +54,7 @@ class Recorder:
         self.calls: list[dict] = []
 
     def __call__(self, mesh, maps, photo_path, placement, out_dir, config, progress=None, cancel=None, bake=None,
-                 bake_skipped_why="", models=None, reuse_from=None):
+                 bake_skipped_why="", models=None, reuse_from=None, stages=None):
         from scenefit.core.pipeline.result import RunResult
 
         self.calls.append({"config": config, "placement": tuple(placement), "bake": bake is not None,
@@ -156,7 +156,7 @@ def test_a_light_only_job_looks_for_the_depth_model_where_a_whole_run_does(input
                       '"geometric" } } }\n')
     out = inputs["root"] / "out"
     out.mkdir()
-    light = run_job_stages(load_jobs(path).jobs[0], out)["light"]
+    light = run_job_stages(load_jobs(path).jobs[0], out)["run"]["stages"]["light"]["report"]
     depth = light["config"]["depth"]
     assert (depth["cache_dir"], depth["local_files_only"], depth["model"]) == (str(cache), True, "my/depth")
     assert depth["depth_type"] == "geometric" and light["decisions"]["scene_type"]["chosen"] == "indoor"
@@ -181,8 +181,7 @@ def test_a_batch_convert_job_keeps_constant_channels_as_numbers(inputs):
     job = load_jobs(_jobs(inputs["root"], inputs["folder"], inputs["photo"], ["convert"])).jobs[0]
     out = inputs["root"] / "out"
     out.mkdir()
-    stages = run_job_stages(job, out)
-    convert = stages["convert"]
+    convert = run_job_stages(job, out)["run"]["stages"]["convert"]["report"]
     assert convert["decisions"]["channels"]["roughness"]["value"] == 0.5
     assert convert["outputs"]["roughness"] == 0.5 and not (out / "convert" / "maps" / "roughness.png").exists()
 
