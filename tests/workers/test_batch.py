@@ -10,7 +10,8 @@ import pytest
 
 from scenefit.cli import main
 from scenefit.core.data.asset_io import save_asset_folder
-from scenefit.workers.batch import JOB_FOLDER_PREFIX, InProcessDispatcher, JobWorker, run_batch
+from scenefit.workers.batch import InProcessDispatcher, run_batch
+from scenefit.workers.job_worker import JOB_FOLDER_PREFIX, JobWorker
 from scenefit.core.base.errors import InputError
 from scenefit.core.data.imageio import read_image, write_image
 from scenefit.workers.jobs import load_jobs
@@ -428,7 +429,7 @@ def test_a_killed_workers_job_folder_is_removed_by_the_next_worker_and_nothing_e
     import os
     import subprocess
 
-    from scenefit.workers.batch import JOB_FOLDER_PREFIX, remove_orphaned_job_folders
+    from scenefit.workers.job_worker import JOB_FOLDER_PREFIX, remove_orphaned_job_folders
 
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait()
@@ -608,7 +609,7 @@ def test_blend_tiles_and_frames_and_an_unreadable_blend(tmp_path):
 def test_an_earlier_stage_holding_a_link_is_not_sent(tmp_path):
     """Earlier stages travel as files: one holding a link (to anything) would send what it points at, so
     it runs again instead."""
-    from scenefit.workers.batch import finished_stage_folders
+    from scenefit.workers.payload import finished_stage_folders
 
     for stage in ("convert", "light"):
         (tmp_path / "run" / stage).mkdir(parents=True)
