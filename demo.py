@@ -21,7 +21,7 @@ from .core.data.asset_io import is_asset_folder, load_asset_folder
 from .core.stages.camera_stage import CAMERA_FILE, read_camera
 from .core.stages.compose import ComposeInputs, compose_to_folder
 from .core.data.imageio import read_image, write_image
-from .core.stages.light import load_photo
+from .core.data.photo import load_photo
 from .core.render.photo import develop_photo, perspective_view, studiolight_path
 from .core.base.report import write_report
 from .core.render.backend import environment_info

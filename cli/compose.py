@@ -10,7 +10,7 @@ from .options import (PRESETS, add_asset_args, add_old_photo_elevation_arg, add_
 def run(args) -> int:
     from ..core.stages.compose import ComposeInputs, compose_to_folder, light_camera
     from ..core.stages.convert import asset_stack
-    from ..core.stages.light import load_photo
+    from ..core.data.photo import load_photo
     from ..core.render.backend import environment_info
     from ..core.render.environment import load_environment
     from ..core.scene.placement import Placement

@@ -1,7 +1,7 @@
 """scenefit light: an HDR environment map from a photo and the object's placement."""
 from __future__ import annotations
 
-from dataclasses import asdict, replace
+from dataclasses import asdict
 from pathlib import Path
 
 from .options import (add_dry_run_arg, add_model_args, add_old_photo_elevation_arg, add_output_args,
@@ -9,25 +9,24 @@ from .options import (add_dry_run_arg, add_model_args, add_old_photo_elevation_a
                       model_config, output, photo_pitch, positive_int, progress, require)
 
 
-def resolve_config(args, critic: str):
-    """The LightConfig the arguments ask for: the preset, then the options given."""
-    from ..core.stages.light.depth import depth_config_for
-    from ..core.pipeline.presets import stage_config
+def light_run(args):
+    """The run the arguments ask for (core/pipeline/run.RunConfig): the light options that are a run's
+    settings as its fields, the others as the light stage's overrides."""
+    from ..core.pipeline.run_config import RunConfig
 
-    models = model_config(args)
-    # The depth model follows the same --offline / --cache-dir as the diffusion models.
-    depth = depth_config_for(models, args.depth, args.depth_model)
-    # (--fov, --pitch and --roll are the photo camera's, given to light_inputs: not light settings)
-    overrides = {k: v for k, v in (("scene_type", args.scene), ("tint", args.tint), ("sun_deg", args.sun))
-                 if v is not None}
-    config = stage_config("light", args.preset, depth=depth, critic_type=critic, models=models, **overrides)
+    light = {"critic_type": args.critic, "tint": args.tint, "depth": {"depth_type": args.depth},
+             "outpaint": {"completion_type": args.outpaint}}
     if args.iterations is not None:
-        config = replace(config, optimise=replace(config.optimise, iterations=args.iterations))
-    config = replace(config, outpaint=replace(config.outpaint, completion_type=args.outpaint))
+        light["optimise"] = {"iterations": args.iterations}
     if args.model_resolution is not None:
-        config = replace(config, diffusion=replace(config.diffusion, model_resolution=args.model_resolution),
-                         outpaint=replace(config.outpaint, resolution=args.model_resolution))
-    return config
+        light["diffusion"] = {"model_resolution": args.model_resolution}
+        light["outpaint"]["resolution"] = args.model_resolution
+    camera = {k: v for k, v in (("fov_deg", args.fov), ("pitch_deg", photo_pitch(args)), ("roll_deg", args.roll))
+              if v is not None}
+    return RunConfig(preset=args.preset, scene_type=args.scene or "auto", sun_deg=args.sun,
+                     sun_shadow=tuple(args.sun_from_shadow) if args.sun_from_shadow else None, fspy=args.fspy,
+                     camera_overrides=camera, depth_model=args.depth_model, models=model_config(args),
+                     stage_overrides={"light": {k: v for k, v in light.items() if v is not None}})
 
 
 def print_strict_json(config: dict) -> int:
@@ -43,7 +42,9 @@ def print_strict_json(config: dict) -> int:
 
 def run(args) -> int:
     if args.dry_run:
-        config = resolve_config(args, "diffusion" if args.critic == "auto" else args.critic)
+        from ..core.pipeline.stage_configs import light_config
+
+        config = light_config(light_run(args), "diffusion" if args.critic == "auto" else args.critic)
         return print_strict_json({"stage": "light", "preset": args.preset, "config": asdict(config),
                                   "note": "--critic auto resolves to diffusion when the SD2 weights are found"
                                   if args.critic == "auto" else ""})
@@ -53,19 +54,16 @@ def run(args) -> int:
 
 
 def _light(args, out: Path) -> int:
+    from ..core.pipeline.stage_configs import light_config, light_critic, with_shadow_sun
     from ..core.stages.light.scene_type import is_blended, scene_type_words
-    from ..core.stages.light.shadow_hint import sun_from_shadow_points
-    from ..core.stages.light.stage import critic_choice, light_inputs, run_light, sun_words, write_light
+    from ..core.stages.light.stage import light_inputs, run_light, sun_words, write_light
     from ..core.render.backend import environment_info
 
-    critic = critic_choice(args.critic, model_config(args))
-    config = resolve_config(args, critic.choice)
-    inputs = light_inputs(args.photo, args.at, args.fspy, {"fov_deg": args.fov, "pitch_deg": photo_pitch(args),
-                                                           "roll_deg": args.roll})
-    if args.sun_from_shadow:
-        sun, spread = sun_from_shadow_points(args.sun_from_shadow, inputs.camera, tuple(inputs.info["size"]),
-                                             inputs.photo.shape[:2])
-        config = replace(config, sun_deg=sun, sun_uncertainty_deg=spread)
+    run = light_run(args)
+    critic = light_critic(run)
+    inputs = light_inputs(args.photo, args.at, run.fspy, run.camera_overrides)
+    config = with_shadow_sun(light_config(run, critic.choice), run, inputs.camera, tuple(inputs.info["size"]),
+                             inputs.photo.shape[:2])
     result = run_light(inputs, config, progress(args))
     if args.sun_from_shadow:
         result.decisions["sun"]["from"] = "the shadow given by --sun-from-shadow (foot, top, tip)"

@@ -14,7 +14,7 @@ from .options import (add_asset_args, add_model_args, add_output_args, add_photo
 def run_config(args):
     """(RunConfig, prompt record or None): the prompt is --prompt, else written from --object-prompt
     and --scene-prompt (and the photo, for a vision model)."""
-    from ..core.pipeline.run import RunConfig
+    from ..core.pipeline.run_config import RunConfig
 
     prompt, _, written = scene_conditional_prompt(args, "scene")
     camera = {k: v for k, v in (("fov_deg", args.fov), ("pitch_deg", args.pitch), ("roll_deg", args.roll))

@@ -6,7 +6,7 @@ import bpy
 from bpy.props import EnumProperty, IntProperty
 
 from . import work
-from .common import model_settings, photo_path, photo_view, run_folder
+from .common import depth_model_preference, model_settings, photo_path, photo_view, run_folder
 from .jobs import JobOperator
 from .results import apply_result_world
 
@@ -37,12 +37,16 @@ class SCENEFIT_OT_estimate_light(JobOperator):
     def prepare(self, context):
         settings = context.scene.scenefit
         photo = photo_path(context)
-        models, depth = model_settings(context)
         out = run_folder(context, "light", photo.stem)
-        return work.estimate_light, {
-            "photo": str(photo), "placement": tuple(settings.placement), "scene_type": settings.scene_type,
-            "preset": settings.preset, "view": photo_view(context, photo), "models": models, "depth": depth,
-            "critic": self.critic, "outpaint": self.outpaint, "iterations": self.iterations, "model_resolution": self.model_resolution, "out": str(out)}
+        # The light's settings as one frozen RunConfig, as Run All builds it (the Critic and Outpaint asked in
+        # the dialog, and a script's quick look, are the light stage's overrides).
+        light = dict(work.quick_overrides(self).get("light", {}), critic_type=self.critic)
+        light["outpaint"] = dict(light.get("outpaint", {}), completion_type=self.outpaint)
+        config = work.view_config(photo_view(context, photo), preset=settings.preset, scene_type=settings.scene_type,
+                                  models=model_settings(context)[0], depth_model=depth_model_preference(context),
+                                  stage_overrides={"light": light})
+        return work.estimate_light, {"photo": str(photo), "placement": tuple(settings.placement), "config": config,
+                                     "out": str(out)}
 
     def apply(self, context, result) -> str:
         world = apply_result_world(context, result["hdr"])

@@ -86,7 +86,7 @@ def remote_work(op, context, address: str) -> tuple:
     # How the photo is seen, as Run All here sees it (operators/common.photo_view): the artist's camera or the
     # panel's values, where the asset stands, and the artist's sun.
     from ..core.pipeline.run_table import run_table
-    from .work import view_config
+    from .work import quick_overrides, view_config
 
     view = photo_view(context, photo, objects)
     # The run as a local Run All builds it (operators/work.view_config), sent as a job's table.
@@ -123,27 +123,6 @@ def work_remotely_per_material(data: dict, progress=None, cancel=None) -> dict:
     texture = run_result(result["folder"], result["report"])["texture"]
     result["material_maps"] = material_results(data, texture, Path(result["folder"]) / "materials")
     return result
-
-
-def quick_overrides(op) -> dict:
-    """The operator's iterations / model_resolution / render_size (0: the preset's) as stage overrides:
-    a quick look. render_size also caps the light's apparatus renders and the composite's samples."""
-    overrides: dict = {}
-    iterations = getattr(op, "iterations", 0)
-    if iterations:
-        overrides = {"convert": {"iterations": iterations}, "light": {"optimise": {"iterations": iterations}},
-                     "adapt": {"iterations": iterations}}
-    size = getattr(op, "model_resolution", 0)
-    if size:
-        overrides.setdefault("adapt", {})["model_resolution"] = size
-        overrides.setdefault("light", {}).update(diffusion={"model_resolution": size},
-                                                 outpaint={"resolution": size})
-    render = getattr(op, "render_size", 0)
-    if render:
-        overrides.setdefault("adapt", {})["stages"] = [[1.0, render, 2, [500, 990]]]
-        overrides.setdefault("light", {}).update(map_height=render, apparatus={"render_size": render, "spp": 2})
-        overrides["compose"] = {"pilot_spp": 1, "min_spp": 1, "max_spp": 2}
-    return overrides
 
 
 def run_result(folder: str | Path, report: dict) -> dict:

@@ -86,34 +86,19 @@ def camera_values(camera) -> dict:
 
 
 def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
-    """Photo + placement -> light.exr (Blender's equirectangular convention) in data['out']."""
-    from dataclasses import replace
-
-    from ..core.stages.light import load_photo
+    """Photo + placement -> light.exr (Blender's equirectangular convention) in data['out'], with
+    data['config'], the RunConfig Estimate Light's prepare() built (view_config): its light config is
+    resolved where every entry point's is (core/pipeline/stage_configs.py)."""
+    from ..core.pipeline.stage_configs import light_config, light_critic, with_shadow_sun
     from ..core.stages.light.scene_type import is_blended, scene_type_words
-    from ..core.stages.light.stage import LightInputs, critic_choice, run_light, sun_words, write_light
-    from ..core.pipeline.presets import stage_config
-    from ..core.scene.placement import Placement
+    from ..core.stages.light.stage import light_inputs, run_light, sun_words, write_light
 
-    photo, info = load_photo(data["photo"])
-    h, w = photo.shape[:2]
-    placement = Placement.parse(tuple(data["placement"]), tuple(info["size"])).pixel((h, w))
-    critic = critic_choice(data.get("critic", "auto"), data["models"]).choice
-    overrides = {"scene_type": data["scene_type"], "critic_type": critic, "models": data["models"],
-                 "depth": data["depth"]}
-    if data["view"].get("sun_deg"):   # the artist's sun (Pick Sun), as --sun
-        overrides["sun_deg"] = tuple(data["view"]["sun_deg"])
-        overrides["sun_uncertainty_deg"] = float(data["view"].get("sun_uncertainty_deg", 0.0))
-    config = stage_config("light", data["preset"], **overrides)
-    config = replace(config, outpaint=replace(config.outpaint, completion_type=data.get("outpaint", "auto")))
-    if data.get("iterations"):  # quick looks and tests
-        config = replace(config, optimise=replace(config.optimise, iterations=int(data["iterations"])))
-    if data.get("model_resolution"):
-        size = int(data["model_resolution"])
-        config = replace(config, diffusion=replace(config.diffusion, model_resolution=size),
-                         outpaint=replace(config.outpaint, resolution=size))
-    camera, record = view_camera(data["photo"], data["view"], w, h)   # the artist's camera, the panel's or the photo's
-    inputs = LightInputs(photo, info, placement, camera, record)
+    run = data["config"]
+    # the photo's camera: the artist's, the panel's values, or the photo's own (operators/common.photo_view)
+    inputs = light_inputs(data["photo"], tuple(data["placement"]), run.fspy, run.camera_overrides, run.camera_source,
+                          run.camera_why)
+    config = with_shadow_sun(light_config(run, light_critic(run).choice), run, inputs.camera,
+                             tuple(inputs.info["size"]), inputs.photo.shape[:2])
     result = run_light(inputs, config, progress, cancel)
 
     def write(out: Path) -> dict:
@@ -187,13 +172,34 @@ def view_config(view: dict, **settings):
     """A RunConfig of `settings` seeing the photo as `view` (operators/common.photo_view) says: the artist's
     camera or the panel's values, the asset's size and turn, the artist's sun. Run All's prepare() here and
     on a worker (its job is this config's table, core/pipeline/run_table.py) build it here."""
-    from ..core.pipeline.run import RunConfig
+    from ..core.pipeline.run_config import RunConfig
 
     source, why = camera_source(view)
     return RunConfig(size=view["size"], camera_overrides=dict(view["camera"] or {}), camera_source=source,
                      camera_why=why, turn_deg=view["turn_deg"],
                      sun_deg=tuple(view["sun_deg"]) if view.get("sun_deg") else None,
                      sun_uncertainty_deg=float(view.get("sun_uncertainty_deg", 0.0)), **settings)
+
+
+def quick_overrides(op) -> dict:
+    """The operator's iterations / model_resolution / render_size (0: the preset's) as stage overrides:
+    a quick look. render_size also caps the light's apparatus renders and the composite's samples."""
+    overrides: dict = {}
+    iterations = getattr(op, "iterations", 0)
+    if iterations:
+        overrides = {"convert": {"iterations": iterations}, "light": {"optimise": {"iterations": iterations}},
+                     "adapt": {"iterations": iterations}}
+    size = getattr(op, "model_resolution", 0)
+    if size:
+        overrides.setdefault("adapt", {})["model_resolution"] = size
+        overrides.setdefault("light", {}).update(diffusion={"model_resolution": size},
+                                                 outpaint={"resolution": size})
+    render = getattr(op, "render_size", 0)
+    if render:
+        overrides.setdefault("adapt", {})["stages"] = [[1.0, render, 2, [500, 990]]]
+        overrides.setdefault("light", {}).update(map_height=render, apparatus={"render_size": render, "spp": 2})
+        overrides["compose"] = {"pilot_spp": 1, "min_spp": 1, "max_spp": 2}
+    return overrides
 
 
 def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:

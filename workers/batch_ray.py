@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import math
 
-from .batch import Dispatcher, JobPayload, JobWorker, job_threads
+from .batch import Dispatcher
+from .job_worker import JobWorker, job_threads
+from .payload import JobPayload
 from ..core.base.errors import InputError
 from .jobs import BatchSettings
 

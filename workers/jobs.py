@@ -39,8 +39,9 @@
 
 A job's keys other than name, asset, object, photo, at and stages are `scenefit run`'s settings, its
 RunConfig (core/pipeline/run_table.py holds the one table of them); a key the run does not take is
-refused. A job lists its stages in any order; the subsets that run are a prefix of the pipeline with
-compose (the pipeline, bake optional), or convert and/or light alone; any other is refused.
+refused. A job lists its stages in any order; the subsets that run (core/pipeline/run.stage_subset) are
+convert and/or light alone, or the pipeline (convert, light, compose; adapt and bake optional); any
+other is refused.
 
 Relative paths are relative to the jobs file. Everything is checked when the file is read, and a
 problem is one sentence naming the job and the key.
@@ -55,9 +56,9 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from ..core.base.errors import InputError
-from ..core.base.names import ALONE_STAGES, OPTIONAL_STAGES, PHOTO_STAGES, PIPELINE_STAGES, STAGES
+from ..core.base.names import PHOTO_STAGES, STAGES
 from ..core.guidance.models import ModelConfig
-from ..core.pipeline.run import RunConfig
+from ..core.pipeline.run_config import RunConfig, stage_subset
 from ..core.pipeline.run_table import KEYS as RUN_KEYS, run_config, run_table
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
@@ -297,21 +298,14 @@ def _parse_job(entry: dict, index: int, path: Path, models: ModelConfig) -> Job:
 
 
 def _parse_stages(stages, where: str) -> tuple[str, ...]:
-    """The job's stages in pipeline order: a subset that runs (convert and/or light alone, or the pipeline up
-    to compose with bake optional); any other is refused now, not failed and retried later."""
-    if not isinstance(stages, list) or not stages or not all(isinstance(s, str) for s in stages):
+    """The job's stages in the run's order when they run together (core/pipeline/run.stage_subset, what
+    run_pipeline takes); any other subset is refused now, not failed and retried later."""
+    if not isinstance(stages, list) or not all(isinstance(s, str) for s in stages):
         raise InputError(f"{where}: stages must be a non-empty list from {', '.join(STAGES)}.")
-    bad = [s for s in stages if s not in STAGES]
-    if bad:
-        raise InputError(f"{where}: unknown stage '{bad[0]}'; the stages are {', '.join(STAGES)}.")
-    if len(set(stages)) != len(stages):
-        raise InputError(f"{where}: stages lists a stage twice.")
-    stages = tuple(s for s in STAGES if s in stages)
-    if set(stages) <= set(ALONE_STAGES) or set(PIPELINE_STAGES) <= set(stages):
-        return stages
-    raise InputError(f"{where}: stages {', '.join(stages)} do not run together: list {' and/or '.join(ALONE_STAGES)} "
-                     f"alone, or {', '.join(PIPELINE_STAGES)} ({' and '.join(OPTIONAL_STAGES)} optional), which the "
-                     "pipeline runs.")
+    try:
+        return stage_subset(stages)
+    except InputError as error:
+        raise InputError(f"{where}: {error}") from None
 
 
 def _check_shadow_points(points: tuple[str, str, str], photo: Path, where: str) -> None:

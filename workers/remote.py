@@ -20,7 +20,8 @@ import json
 from pathlib import Path
 
 from ..core.base import errors
-from .batch import finished_stage_folders, make_payload, unpack
+from .packing import unpack
+from .payload import finished_stage_folders, make_payload
 from ..core.base.output_folder import install_folder
 from .batch_ray import connect, import_ray, job_resources
 from ..core.base.errors import Cancelled, SceneFitError
@@ -39,11 +40,11 @@ def worker_actor_class(package: str = WORKER_PACKAGE):
         def __init__(self, threads: int) -> None:
             import importlib
 
-            self.batch = importlib.import_module(package + ".workers.batch")
-            self.worker = self.batch.JobWorker(threads=threads)
+            self.job_worker = importlib.import_module(package + ".workers.job_worker")
+            self.worker = self.job_worker.JobWorker(threads=threads)
 
         def run(self, job: dict, inputs: bytes, progress_sink=None) -> dict:
-            return self.batch.run_plain(self.worker, job, inputs, progress_sink)
+            return self.job_worker.run_plain(self.worker, job, inputs, progress_sink)
 
         def cancel(self) -> None:
             self.worker.cancel()
@@ -205,7 +206,7 @@ class LocalProcessJob:
         self.out = root / "out"
         reuse = []
         if earlier is not None and install_takes_reuse_from(python, env):   # (an older install runs all again)
-            from .batch import finished_stage_folders
+            from .payload import finished_stage_folders
 
             for stage in finished_stage_folders(earlier):   # copied as an earlier batch's job folder
                 shutil.copytree(stage, root / "earlier" / job.name / stage.name)

@@ -75,5 +75,5 @@ class RunResult:
         return {"stage": "run", "config": self.config, "inputs": self.inputs,
                 "stages": {name: stage.to_report() for name, stage in self.stages.items()},
                 "camera": None if self.camera is None else self.camera.to_report(),
-                "composite": str(self.composite), "reused": list(self.reused),
+                "composite": str(self.composite) if "compose" in self.stages else None, "reused": list(self.reused),
                 "environment": self.environment, "seconds_total": self.seconds}

@@ -14,12 +14,11 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import shutil
 import threading
 import time
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Callable
 
@@ -34,134 +33,15 @@ from ..stages.bake.process import GameBake
 from ..base.errors import InputError
 from ..guidance.models import GuidanceModels, ModelCache, ModelConfig
 from ..data.maps import PBRMaps
+from ..data.materials import AssetMaterials
 from ..data.mesh import Mesh
 from ..base.progress import ProgressCallback, check_cancel, emit
 from ..scene.camera import PhotoCamera
-from ..scene.placement import DEFAULT_OBJECT_SIZE
 from .result import RunResult, StageRecord
+from .run_config import RunConfig, stage_subset
 
-from ..base.names import (CAMERA_SOURCES, CAMERA_STAGE, CONFIG_STAGES, GUIDANCE_TYPES, MODES, PRESETS, RUN_ORDER,
-                          SCENE_TYPES, STAGES)
+from ..base.names import (CAMERA_STAGE, PHOTO_STAGES, RUN_ORDER, STAGES)
 STAGE_FILE = "stage.json"
-# (The camera stage's report is the run report's "camera", beside the "stages" a job lists.)
-
-
-@dataclass(frozen=True)
-class RunConfig:
-    """The one description of a run: the command line, a jobs file's job (core/pipeline/run_table.py, its TOML
-    view), Blender's Run All and a remote worker all build this, and run_pipeline takes nothing else."""
-
-    preset: str = "balanced"                  # draft | balanced | final, for every stage
-    mode: str = "scene"                       # adapt: scene (fit the photo) | generate | edit (names.MODES)
-    prompt: str = ""                          # adapt: what the asset should become in this scene
-    negative_prompt: str = ""                 # adapt: what it should not look like
-    object_prompt: str = ""                   # adapt, mode edit: what the asset is ...
-    instruction: str = ""                     # ... and how to change it (the prompt, when empty, is made of both)
-    seed: int | None = None                   # convert's fit and adapt's noise (None: each stage's default)
-    guidance_type: str = "auto"               # adapt (and the light critic): sd2 | none | auto (sd2 when found)
-    size: float = DEFAULT_OBJECT_SIZE         # compose: fraction of the photo's height the asset spans (--object-size)
-    shadow_type: str = "ratio"
-    compose_spp: int | None = None
-    photo_camera: PhotoCamera | None = None   # None: the photo's camera as estimated (core/stages/camera.py)
-    fspy: str | None = None                   # an fSpy project of the photo: its solved camera is used
-    camera_overrides: dict = field(default_factory=dict)   # {"fov_deg"|"pitch_deg"|"roll_deg": value} over the estimate
-    camera_source: str = "user"               # where camera_overrides come from: "user", or "blender" (the scene camera)
-    camera_why: str = "given by the user"     # ... said in the report's camera notes
-    turn_deg: float = 0.0                     # compose: the asset turned about Z after facing the camera
-    # The artist's dominant light (light stage): (azimuth, elevation) in degrees as --sun takes it, or a shadow's
-    # FOOT, TOP, TIP (each as --at takes a point) that gives it through the photo's camera; None: guessed.
-    sun_deg: tuple[float, float] | None = None
-    sun_shadow: tuple[str, str, str] | None = None
-    sun_uncertainty_deg: float = 0.0          # how far off sun_deg may be (Pick Sun's clicks); a shadow gives its own
-    scene_type: str = "auto"                  # light: indoor | outdoor | auto (decided from the photo, or unsure)
-    depth_model: str | None = None            # light: hub id or folder of the depth model (None: the default),
-                                              # looked for where `models` are (their cache and offline switch)
-    models: ModelConfig = field(default_factory=ModelConfig)
-    # Settings over the preset's, per stage ("convert", "light", "adapt", "compose"), as the stage's config takes them:
-    # quick looks, tests and benchmarks (e.g. {"adapt": {"iterations": 4}}). Part of each stage's key.
-    stage_overrides: dict = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        _choice("preset", self.preset, PRESETS)
-        _choice("mode", self.mode, MODES)
-        _choice("guidance_type", self.guidance_type, GUIDANCE_TYPES)
-        _choice("scene_type", self.scene_type, SCENE_TYPES)
-        _choice("camera_source", self.camera_source, CAMERA_SOURCES)
-        if self.seed is not None and not (_whole(self.seed) and self.seed >= 0):
-            raise _refused("seed", f"seed must be a whole number >= 0, got {self.seed!r}.")
-        _check_view(self)
-        if self.sun_deg is not None and self.sun_shadow is not None:
-            raise _refused("sun_shadow", "Give the sun as an azimuth and elevation or as a shadow's three points, "
-                                         "not both.")
-        if self.sun_shadow is not None:
-            from ..stages.light.shadow_hint import check_point_count
-
-            check_point_count(self.sun_shadow)
-        unknown = sorted(set(self.stage_overrides) - set(CONFIG_STAGES))
-        if unknown:
-            raise _refused("stage_overrides", f"stage_overrides names unknown stage {unknown[0]!r}; it takes "
-                             f"{', '.join(CONFIG_STAGES)}.")
-
-    def overrides(self, stage: str) -> dict:
-        return dict(self.stage_overrides.get(stage, {}))
-
-
-
-def _choice(name: str, value, choices: tuple[str, ...]) -> None:
-    if value not in choices:
-        raise _refused(name, f"{name} must be one of {', '.join(choices)}, got {value!r}.")
-
-
-def _refused(field_name: str, sentence: str) -> InputError:
-    """The sentence as an InputError that names the RunConfig field it refuses (a jobs file says its key)."""
-    error = InputError(sentence)
-    error.field = field_name
-    return error
-
-
-def _whole(value) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def _finite(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def _check_view(config: RunConfig) -> None:
-    """How the run sees the photo, in range: numbers from any entry point (a jobs file, Blender, a worker)
-    are finite, the camera's values are those of a camera (core/stages/camera.check_camera_values), the
-    sun is above or below the horizon by at most 90 degrees."""
-    if not (_finite(config.size) and 0.0 < config.size <= 1.0):   # (as core/scene/placement.Placement takes it)
-        raise _refused("size", f"The object size must be a fraction of the photo's height in (0, 1], got "
-                               f"{config.size!r}.")
-    if not _finite(config.turn_deg):
-        raise _refused("turn_deg", f"The turn must be a finite angle in degrees, got {config.turn_deg!r}.")
-    if config.compose_spp is not None and not (_whole(config.compose_spp) and 1 <= config.compose_spp <= 65536):
-        raise _refused("compose_spp", f"compose_spp must be a whole number from 1 to 65536, got "
-                                      f"{config.compose_spp!r}.")
-    from ..stages.camera import check_camera_values
-
-    try:
-        check_camera_values(config.camera_overrides)
-    except InputError as error:
-        raise _refused("camera_overrides", str(error)) from None
-    sun = config.sun_deg
-    if sun is not None and not (len(sun) == 2 and all(_finite(v) for v in sun) and -90.0 <= sun[1] <= 90.0):
-        raise _refused("sun_deg", f"The sun must be (azimuth, elevation) in finite degrees, the elevation within "
-                                  f"+-90, got {sun!r}.")
-    if not (_finite(config.sun_uncertainty_deg) and 0.0 <= config.sun_uncertainty_deg <= 180.0):
-        raise _refused("sun_uncertainty_deg", f"The sun's uncertainty must be degrees within 0 and 180, got "
-                                              f"{config.sun_uncertainty_deg!r}.")
-
-def light_settings(config: RunConfig) -> dict:
-    """What a run's config gives the light stage's (the sun, the scene type, the models and where the depth
-    model is looked for): the pipeline's light stage and a batch job of light alone take the same."""
-    from ..stages.light.depth import depth_config_for
-
-    return {"sun_deg": None if config.sun_deg is None else tuple(config.sun_deg),
-            "sun_uncertainty_deg": float(config.sun_uncertainty_deg), "scene_type": config.scene_type,
-            "models": config.models, "depth": depth_config_for(config.models, model=config.depth_model)}
-
 
 def _digest(*parts) -> str:
     h = hashlib.sha256()
@@ -293,30 +173,41 @@ def _paths(outputs) -> list[str]:
     return [outputs] if isinstance(outputs, str) else []
 
 
-def run_pipeline(mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, out_dir: str | Path,
-                 config: RunConfig = RunConfig(), progress: ProgressCallback | None = None,
+def run_pipeline(mesh: Mesh | AssetMaterials, maps: PBRMaps | None, photo_path: str | Path | None, placement,
+                 out_dir: str | Path, config: RunConfig = RunConfig(), progress: ProgressCallback | None = None,
                  cancel: threading.Event | None = None, bake: GameBake | None = None,
                  bake_skipped_why: str = "no game bake was asked for", models: ModelCache | None = None,
-                 reuse_from: str | Path | None = None) -> RunResult:
+                 reuse_from: str | Path | None = None, stages: tuple[str, ...] = STAGES) -> RunResult:
     """Convert the asset, estimate the photo's light, adapt the texture (when the SD2 weights exist),
     compose the asset into the photo, and bake (when `bake` is given); returns the run's RunResult (its
     to_report() is out_dir/report.json).
 
+    mesh, maps: the asset, or (maps None) every material of it (core/data/materials.AssetMaterials), which
+    convert fits each at its own cell's size, as `scenefit convert` does.
     placement: (x, y) as fractions of the photo's width and height (both <= 1) or pixels, or "X,Y".
     models: the loaded diffusion models to use (a ModelCache: a batch worker keeps one for its life,
     so its jobs load them once); default a cache for this run, so light and adapt share one load.
     reuse_from: a finished run's folder (Blender's Run All makes a new folder per run): each of its stages
     whose key this run shares is copied into out_dir and reused, as a stage already in out_dir is.
+    stages: the subset to run (stage_subset: convert and/or light alone, or the pipeline, adapt and bake
+    optional); a run without light or compose reads no photo.
     This is the one place the stages are strung together: the command line, batch jobs, remote
     workers, the Blender operators and the demo all call it.
     """
+    stages = stage_subset(stages)
     run = PipelineRun(mesh, maps, photo_path, placement, out_dir, config, progress, cancel, models,  # 1. inputs
-                      reuse_from)
-    run.convert()                         # 2. the asset's maps -> neural texture
-    run.camera_stage()                    # 2b. the photo's camera -> camera/camera.json (light, adapt, compose)
-    with run.baking(bake, bake_skipped_why):  # 6. the texture written into the asset's own file (glTF): a process
-        run.light()                       # 3.    of its own, from when the texture is final (after 2, or after 4)
-        run.adapt()                       # 4. the texture adapted to the scene (only with the SD2 weights)
+                      reuse_from, stages)
+    if "convert" in stages:
+        run.convert()                     # 2. the asset's maps -> neural texture
+    if run.photo_path is not None:
+        run.camera_stage()                # 2b. the photo's camera -> camera/camera.json (light, adapt, compose)
+    if "compose" not in stages:           # convert and/or light alone
+        if "light" in stages:
+            run.light()
+        return run.finish()
+    with run.baking(bake if "bake" in stages else None, bake_skipped_why):  # 6. the texture written into the
+        run.light()                       # 3. asset's own file (glTF): a process of its own, from when the
+        run.adapt()                       # 4. texture is final (after 2, or after 4); adapt only with SD2
         run.compose()                     # 5. the texture in the photo under the estimated light
     return run.finish()                   # 7. report.json
 
@@ -336,18 +227,47 @@ def guidance_found(config: RunConfig) -> tuple[bool, str]:
 class PipelineRun:
     """One run's shared state: the checked inputs, each stage's key, the runner that reuses stages."""
 
-    def __init__(self, mesh: Mesh, maps: PBRMaps, photo_path: str | Path, placement, out_dir: str | Path,
-                 config: RunConfig, progress: ProgressCallback | None, cancel: threading.Event | None,
-                 models: ModelCache | None, reuse_from: str | Path | None = None) -> None:
-        from ..stages.light import load_photo
+    def __init__(self, mesh: Mesh | AssetMaterials, maps: PBRMaps | None, photo_path: str | Path | None, placement,
+                 out_dir: str | Path, config: RunConfig, progress: ProgressCallback | None,
+                 cancel: threading.Event | None, models: ModelCache | None, reuse_from: str | Path | None = None,
+                 stages: tuple[str, ...] = STAGES) -> None:
         from ..data.mesh import normalize_to_unit_sphere
-        from ..scene.placement import Placement
 
         self.started = time.perf_counter()
+        self.stages = stages
+        self.asset = mesh   # what convert fits: a mesh with its maps, or every material of an asset
+        if isinstance(mesh, AssetMaterials):
+            mesh, maps = mesh.fitting_view()   # (the one mesh and maps the other stages see)
+        assert maps is not None
         self.mesh, self.maps, self.config, self.progress, self.cancel = mesh, maps, config, progress, cancel
         self.out = Path(out_dir).resolve()   # stage.json lists absolute outputs, whatever the working folder
-        self.photo_path = Path(photo_path)
         # Everything that can be wrong with the inputs is found before any work.
+        reads_photo = any(stage in stages for stage in PHOTO_STAGES)
+        if reads_photo and photo_path is None:
+            raise InputError(f"The stages {', '.join(stages)} read a photo, and none was given.")
+        self.photo_path = Path(photo_path) if reads_photo and photo_path is not None else None
+        if self.photo_path is not None:
+            self.read_photo(placement)
+        # Guidance is adapt's, and the light critic's beside it; light alone chooses its critic as `scenefit light`.
+        self.found, self.where = guidance_found(config) if "compose" in stages else (False, "light alone")
+        self.cache = models if models is not None else ModelCache()
+        self.asset_key = asset_digest(mesh, maps)
+        self.normalized, _ = normalize_to_unit_sphere(mesh)
+        self.runner = StageRunner(self.out, progress, cancel, Path(reuse_from).resolve() if reuse_from else None,
+                                  before_work=self.check_the_view)
+        self.texture_path = self.light_path = self.camera_path = None
+        self.camera: tuple[PhotoCamera, dict] | None = None   # the photo's camera, once estimated
+        self.keys: dict[str, str] = {}
+        self.texture_final: Callable[[], None] = lambda: None   # what waits for the final texture (the bake)
+
+    def read_photo(self, placement) -> None:
+        """The photo (the light stage's working copy), where the asset stands in it, the shadow's points and the
+        fSpy project, each one sentence when wrong."""
+        from ..data.photo import load_photo
+        from ..scene.placement import Placement
+
+        config = self.config
+        assert self.photo_path is not None
         self.photo, self.photo_info = load_photo(self.photo_path)
         h, w = self.photo.shape[:2]
         self.placement = Placement.parse(placement, tuple(self.photo_info["size"]))   # pixels of the photo as stored
@@ -360,23 +280,7 @@ class PipelineRun:
             from ..stages.camera import read_fspy
 
             read_fspy(config.fspy)   # a broken fSpy file is one sentence before any work
-        self.found, self.where = guidance_found(config)
-        self.cache = models if models is not None else ModelCache()
-        self.asset_key = asset_digest(mesh, maps)
         self.photo_key = _digest(self.photo_path.read_bytes())
-        self.normalized, _ = normalize_to_unit_sphere(mesh)
-        self.runner = StageRunner(self.out, progress, cancel, Path(reuse_from).resolve() if reuse_from else None,
-                                  before_work=self.check_the_view)
-        self.texture_path = self.light_path = self.camera_path = None
-        self.camera: tuple[PhotoCamera, dict] | None = None   # the photo's camera, once estimated
-        self.keys: dict[str, str] = {}
-        self.texture_final: Callable[[], None] = lambda: None   # what waits for the final texture (the bake)
-
-    def stage_config(self, stage: str, **values):
-        """The preset's config for `stage` with `values`, then the run's own overrides for it."""
-        from .presets import stage_config, with_overrides
-
-        return stage_config(stage, self.config.preset, **with_overrides(values, self.config.overrides(stage)))
 
     def camera_stage(self) -> None:
         """The photo's camera, written as camera/camera.json: keyed by the photo and what was given about its
@@ -406,52 +310,60 @@ class PipelineRun:
     def convert(self) -> None:
         from ..stages.convert import convert_and_bake
         from ..texture.bake import WEIGHTS_FILE
+        from .stage_configs import convert_config
 
         # Only what the scene needs: no more texels than the composite shows of the asset (the photo's
         # stored height, not the light stage's working copy, is what the composite is made at).
-        screen_px = max(1, round(self.config.size * self.photo_info["size"][1]))
-        config = self.stage_config("convert", screen_px=screen_px, seed=self.config.seed)
-        self.keys["convert"] = _digest("convert", asdict(config), self.asset_key)
+        screen_px = None if self.photo_path is None else max(1, round(self.config.size * self.photo_info["size"][1]))
+        config = convert_config(self.config, screen_px)
+        per_material = isinstance(self.asset, AssetMaterials)
+        self.keys["convert"] = _digest("convert", asdict(config), self.asset_key,
+                                       *(["per material"] if per_material else []))
 
         def convert(folder: Path) -> dict:
-            return convert_and_bake(self.mesh, self.maps, folder / "maps", config, progress=self.progress,
-                                    cancel=self.cancel)[1]
+            return convert_and_bake(self.asset, None if per_material else self.maps, folder / "maps", config,
+                                    progress=self.progress, cancel=self.cancel)[1]
 
         self.runner.run("convert", self.keys["convert"], convert)
         self.texture_path = self.out / "convert" / "maps" / WEIGHTS_FILE
         self.upstream = self.keys["convert"]
 
     def light_config(self):
-        """The light stage's config: the map as sharp as the asset's glossiest reflections, capped by the preset."""
-        from dataclasses import replace
-
+        """The light stage's config (core/pipeline/stage_configs.light_config), with what this run decides: the
+        critic (the run's guidance; light alone as `scenefit light`), and, for a run that converts the asset,
+        the map as sharp as its glossiest reflections, capped by the preset. Returns the config, the critic's
+        decision and the height's (None: the preset's)."""
         from .presets import stage_config
-        from ..data.scene_needs import envmap_height_for
-        from ..data.uv_raster import rasterize_uv
+        from .stage_configs import light_config, light_critic
 
-        # (the coverage mask only picks which roughness texels count: 1024² is plenty, never the
-        # texture's long side squared, which for a 16384x16 map is 16384²)
-        raster = rasterize_uv(self.normalized, min(max(self.maps.resolution), 1024))
-        height = envmap_height_for(self.maps, raster.mask)
-        preset_height = stage_config("light", self.config.preset).map_height
-        if height.choice > preset_height:
-            height = replace(height, choice=preset_height,
-                             reason=f"{height.reason}; capped at the {self.config.preset} preset's {preset_height} rows")
-        config = self.stage_config("light", critic_type="diffusion" if self.found else "none",
-                                   map_height=height.choice, **light_settings(self.config))
-        if self.config.guidance_type == "none":  # no diffusion model at all: the sky/ground prior completes outdoors
-            config = replace(config, outpaint=replace(config.outpaint, completion_type="prior"))
-        return config, height
+        critic = light_critic(self.config, (self.found, self.where) if "compose" in self.stages else None)
+        height = None
+        if "convert" in self.stages:
+            from ..data.scene_needs import envmap_height_for
+            from ..data.uv_raster import rasterize_uv
+
+            # (the coverage mask only picks which roughness texels count: 1024² is plenty, never the
+            # texture's long side squared, which for a 16384x16 map is 16384²)
+            raster = rasterize_uv(self.normalized, min(max(self.maps.resolution), 1024))
+            height = envmap_height_for(self.maps, raster.mask)
+            preset_height = stage_config("light", self.config.preset).map_height
+            if height.choice > preset_height:
+                height = replace(height, choice=preset_height, reason=f"{height.reason}; capped at the "
+                                 f"{self.config.preset} preset's {preset_height} rows")
+        config = light_config(self.config, critic.choice, None if height is None else height.choice,
+                              without_diffusion="compose" in self.stages and self.config.guidance_type == "none")
+        return config, critic, height
 
     def light(self) -> None:
         from ..stages.light.stage import LightInputs, run_light, write_light
         from ..data.scene_needs import report as needs_report
         from ..texture.surface_layout import texture_view
         from ..texture.bake import load_neural_texture
+        from .stage_configs import with_shadow_sun
 
-        config, envmap_height = self.light_config()
+        config, critic, envmap_height = self.light_config()
         # The diffusion critic scores renders of the asset itself (as converted), not a stand-in sphere.
-        critic_sees_asset = config.critic_type == "diffusion"
+        critic_sees_asset = config.critic_type == "diffusion" and "convert" in self.keys
         self.keys["light"] = _digest("light", asdict(config), self.photo_key, self.placement_px,
                                      self.keys[CAMERA_STAGE],
                                      self.keys["convert"] if critic_sees_asset else None,
@@ -459,13 +371,9 @@ class PipelineRun:
 
         def light(folder: Path) -> dict:
             camera, estimate = self.stage_camera(self.photo.shape[1], self.photo.shape[0])
-            with_sun = config
-            if self.config.sun_shadow is not None:   # the shadow's points need the camera
-                from ..stages.light.shadow_hint import sun_from_shadow_points
-
-                sun, spread = sun_from_shadow_points(self.config.sun_shadow, camera, tuple(self.photo_info["size"]),
-                                                     self.photo.shape[:2])
-                with_sun = replace(config, sun_deg=sun, sun_uncertainty_deg=spread)
+            # (the shadow's points need the camera)
+            with_sun = with_shadow_sun(config, self.config, camera, tuple(self.photo_info["size"]),
+                                       self.photo.shape[:2])
             asset = {}
             if critic_sees_asset:
                 texture = load_neural_texture(self.texture_path)
@@ -474,7 +382,9 @@ class PipelineRun:
             inputs = LightInputs(self.photo, self.photo_info, self.placement_px, camera, estimate)
             result = run_light(inputs, with_sun, self.progress, self.cancel,
                                models=_WithInpaint(self.cache) if self.found else self.cache, asset=asset)
-            result.decisions["envmap_height"] = needs_report(envmap_height)
+            if envmap_height is not None:
+                result.decisions["envmap_height"] = needs_report(envmap_height)
+            result.decisions.setdefault("critic", {})["choice"] = {"chosen": critic.choice, "why": critic.reason}
             if self.config.sun_shadow is not None:
                 result.decisions["sun"]["from"] = "the shadow's foot, top and tip given (" + \
                     ", ".join(self.config.sun_shadow) + ")"
@@ -509,12 +419,16 @@ class PipelineRun:
         found them after convert (and light) had run; they find the same, with the same camera."""
         from ..scene.asset_pose import place_asset
 
+        if self.photo_path is None:   # (convert alone)
+            return
         h, w = self.photo.shape[:2]
         camera = self.photo_camera()[0]   # (the camera stage's, once it ran: estimated once a run)
         if self.config.sun_shadow is not None:
             from ..stages.light.shadow_hint import sun_from_shadow_points
 
             sun_from_shadow_points(self.config.sun_shadow, camera, tuple(self.photo_info["size"]), (h, w))
+        if "compose" not in self.stages:   # (light alone places no asset)
+            return
         place_asset(self.normalized, camera, self.placement_px, self.compose_config().size, self.config.turn_deg)
         if self.found:   # adapt's global views place it at each of its azimuths' turns
             from ..stages.adapt.global_views import placement_turns
@@ -525,13 +439,9 @@ class PipelineRun:
                 place_asset(self.normalized, camera, self.placement_px, size, turn)
 
     def adapt_config(self):
-        """The adapt stage's config: the run's mode, prompts and seed (a scene run without a prompt gets one
-        from the asset's name; an edit's prompt may be made of its object prompt and instruction)."""
-        run = self.config
-        prompt = run.prompt or (f"a {self.mesh.name} in this scene, photo" if run.mode == "scene" else "")
-        return self.stage_config("adapt", mode_type=run.mode, prompt=prompt, negative_prompt=run.negative_prompt,
-                                 object_prompt=run.object_prompt, instruction=run.instruction, seed=run.seed,
-                                 models=run.models)
+        from .stage_configs import adapt_config
+
+        return adapt_config(self.config, self.mesh.name)
 
     def adapt_placement(self):
         """Where adapt's global views place the asset: compose's point, at most the photo's height."""
@@ -541,14 +451,17 @@ class PipelineRun:
         return Placement((self.placement_px[0] / w, self.placement_px[1] / h), min(1.0, self.config.size))
 
     def compose_config(self):
-        """The compose stage's config: the run's size, shadow and samples over the preset's."""
-        return self.stage_config("compose", size=self.config.size, shadow_type=self.config.shadow_type,
-                                 spp=self.config.compose_spp)
+        from .stage_configs import compose_config
+
+        return compose_config(self.config)
 
     def adapt(self) -> None:
         from ..stages.adapt import adapt_and_bake
         from ..texture.bake import WEIGHTS_FILE, load_neural_texture
 
+        if "adapt" not in self.stages:
+            self.runner.skip("adapt", "skipped", "the run's stages do not list adapt")
+            return
         if not self.found:
             self.runner.skip("adapt", "skipped", f"Stable Diffusion 2 weights are not on this machine, so the "
                              f"converted texture is composed as it is ({self.where})"
@@ -574,7 +487,7 @@ class PipelineRun:
 
     def compose(self) -> None:
         from ..stages.compose import ComposeInputs, compose_to_folder
-        from ..stages.light import load_photo
+        from ..data.photo import load_photo
         from ..render.environment import load_environment
         from ..texture.surface_layout import texture_view
         from ..texture.bake import load_neural_texture
@@ -643,10 +556,11 @@ class PipelineRun:
         from ..render.backend import environment_info
 
         recorded = self.runner.stages
+        inputs: dict = {"asset": self.mesh.name, "asset_digest": self.asset_key}
+        if self.photo_path is not None:
+            inputs.update(photo=self.photo_info, photo_digest=self.photo_key, placement_px=list(self.placement_px))
         result = RunResult(
-            folder=self.out, config=_plain(replace(self.config, models=self.config.models)),
-            inputs={"asset": self.mesh.name, "asset_digest": self.asset_key, "photo": self.photo_info,
-                    "photo_digest": self.photo_key, "placement_px": list(self.placement_px)},
+            folder=self.out, config=_plain(replace(self.config, models=self.config.models)), inputs=inputs,
             stages={name: StageRecord.from_runner(name, recorded[name]) for name in STAGES if name in recorded},
             camera=StageRecord.from_runner(CAMERA_STAGE, recorded[CAMERA_STAGE]) if CAMERA_STAGE in recorded else None,
             seconds=round(time.perf_counter() - self.started, 3), environment=environment_info())

@@ -20,7 +20,7 @@ from typing import Any, Callable
 from ..base.errors import InputError
 from ..base.names import CONFIG_STAGES
 from ..stages.camera import CAMERA_VALUES
-from .run import RunConfig
+from .run_config import RunConfig
 
 # Fields a table does not carry: photo_camera is a PhotoCamera object a Python caller already holds (a table
 # gives camera values instead); models come from the jobs file's [models] table, shared by its jobs.

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..base.errors import InputError
 from ..data.imageio import linear_to_srgb
+from ..data.photo import camera_exposure
 from ..scene.camera import PhotoCamera
 from ..scene.frame import blender_direction_to_equirect_uv
 
@@ -45,13 +46,6 @@ def perspective_view(envmap: np.ndarray, camera: PhotoCamera) -> np.ndarray:
     map_y = np.clip(uv[..., 1] * h - 0.5, 0, h - 1).astype(np.float32)
     padded = np.concatenate([envmap[:, -1:], envmap, envmap[:, :1]], axis=1).astype(np.float32)
     return cv2.remap(padded, map_x + 1.0, map_y, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-
-
-def camera_exposure(radiance: np.ndarray, key: float = 0.18) -> float:
-    """Auto-exposure as a camera meters: the scene's log-average luminance maps to middle grey."""
-    lum = radiance[..., :3] @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
-    log_average = float(np.exp(np.mean(np.log(np.maximum(lum, 1e-6)))))
-    return key / max(log_average, 1e-6)
 
 
 def develop_photo(radiance: np.ndarray, exposure: float | None = None) -> np.ndarray:

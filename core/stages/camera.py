@@ -6,7 +6,7 @@ Each field comes from the best source that has it, best first:
   user       given by the user (CameraEstimate.overridden: a stage's --fov / --pitch / --roll);
   blender    the Blender scene's camera that shows the photo (matched by the fSpy importer or by eye);
   fspy       an fSpy project (the artist drew the vanishing lines by hand);
-  exif_35mm  the 35 mm equivalent focal length (field of view only; core/stages/light's load_photo);
+  exif_35mm  the 35 mm equivalent focal length (field of view only; core/data/photo.load_photo);
   exif_sensor  the focal length with the sensor width of a known camera model (field of view only);
   lines      the photo's own straight lines: segments from OpenCV's line segment detector, grouped by
              the three orthogonal (Manhattan) directions of a built scene on the Gauss sphere;
@@ -120,7 +120,7 @@ def photo_camera_estimate(photo_path: str | Path, fspy_path: str | Path | None =
     from `source`) over the estimate. With all three given the photo's lines are not looked at."""
     overrides = check_camera_values(overrides or {})
     if {"fov_deg", "pitch_deg", "roll_deg"} <= set(overrides) and fspy_path is None:
-        from .light.estimate import load_photo
+        from ..data.photo import load_photo
 
         width, height = (int(v) for v in load_photo(photo_path)[1]["size"])
         base = _estimate(overrides["fov_deg"], overrides["pitch_deg"], overrides["roll_deg"], (source,) * 3,
@@ -162,7 +162,7 @@ def check_camera_values(values: dict) -> dict:
 def estimate_photo_camera(photo_path: str | Path, fspy_path: str | Path | None = None) -> CameraEstimate:
     """The photo's camera from the best source there is (module docstring); raises InputError with one
     sentence for a photo or fSpy file that cannot be read."""
-    from .light.estimate import load_photo
+    from ..data.photo import load_photo
 
     srgb, info = load_photo(photo_path)
     width, height = (int(v) for v in info["size"])

@@ -1,10 +1,12 @@
 """What a photo's EXIF says about its lens: the focal length with the sensor of a known camera model gives
-the field of view (the 35 mm equivalent is read with the photo, core/stages/light/estimate.load_photo). A
+the field of view (the 35 mm equivalent is read with the photo, core/data/photo.load_photo). A
 focal length that is not one (text, zero, negative, huge) is left aside."""
 from __future__ import annotations
 
 import math
 from pathlib import Path
+
+from ..data.photo import plausible_focal_mm
 
 # Sensor width (long side, mm) of common cameras whose JPEGs may lack the 35 mm equivalent, from the
 # makers' specification sheets; matched on the start of the EXIF Model, longest key first, where no
@@ -56,11 +58,3 @@ def exif_focal_and_model(path: Path) -> tuple[float | None, str]:
 
 # A focal length a photo's EXIF may give, in mm (35 mm equivalent or real): a fisheye's few mm to a
 # super-telephoto's few thousand. A value outside (zero, negative, text, 1e30) is data from elsewhere gone wrong.
-FOCAL_RANGE_MM = (1.0, 5000.0)
-
-
-def plausible_focal_mm(value) -> float | None:
-    """`value` as a focal length in mm when it is a finite number in FOCAL_RANGE_MM, else None."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        return None
-    return float(value) if FOCAL_RANGE_MM[0] <= value <= FOCAL_RANGE_MM[1] else None

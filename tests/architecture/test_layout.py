@@ -52,7 +52,7 @@ def test_the_import_graph_finds_known_edges():
     """So the tests above and below can fail: the graph sees a module-level and a function-level import."""
     known = modules()
     assert "core.base.output_folder" in imports("workers.batch", known["workers.batch"], known)
-    assert "blender_io.asset_file" in imports("workers.batch", known["workers.batch"], known)   # in a function
+    assert "blender_io.asset_file" in imports("workers.job_worker", known["workers.job_worker"], known)   # in a function
 
 
 def test_no_import_circle_anywhere():

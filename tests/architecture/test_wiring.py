@@ -54,7 +54,7 @@ class Recorder:
         self.calls: list[dict] = []
 
     def __call__(self, mesh, maps, photo_path, placement, out_dir, config, progress=None, cancel=None, bake=None,
-                 bake_skipped_why="", models=None, reuse_from=None):
+                 bake_skipped_why="", models=None, reuse_from=None, stages=None):
         from scenefit.core.pipeline.result import RunResult
 
         self.calls.append({"config": config, "placement": tuple(placement), "bake": bake is not None,
@@ -64,7 +64,7 @@ class Recorder:
 
 def test_the_command_line_and_a_batch_job_give_the_pipeline_the_same_settings(inputs, monkeypatch, capsys):
     """Batch jobs once never baked (only the command line passed a bake) and differed in defaults."""
-    from scenefit.workers.batch import run_pipeline_for_job
+    from scenefit.workers.job_worker import run_pipeline_for_job
 
     recorder = Recorder()
     monkeypatch.setattr(run_module, "run_pipeline", recorder)
@@ -81,7 +81,7 @@ def test_the_command_line_and_a_batch_job_give_the_pipeline_the_same_settings(in
 def test_a_jobs_file_says_how_the_photo_is_seen_as_the_command_line_does(inputs, monkeypatch):
     """object_size, camera and sun in a [[job]] reach the pipeline as --object-size, --fov/--pitch/--roll and --sun
     do (jobs could not say them: every batch job had the default size and an estimated camera)."""
-    from scenefit.workers.batch import run_pipeline_for_job
+    from scenefit.workers.job_worker import run_pipeline_for_job
 
     recorder = Recorder()
     monkeypatch.setattr(run_module, "run_pipeline", recorder)
@@ -113,7 +113,7 @@ def test_a_remote_run_all_sees_the_photo_as_a_local_one(inputs, monkeypatch):
     from scenefit.core.pipeline.run_table import run_table
     from scenefit.operators.work import view_config
     from scenefit.workers import remote
-    from scenefit.workers.batch import run_pipeline_for_job
+    from scenefit.workers.job_worker import run_pipeline_for_job
 
     jobs = []
     def run_remote(job, *args, **kwargs):   # the worker's job, its asset kept past the packing's temporary folder
@@ -146,7 +146,7 @@ def test_a_remote_run_all_sees_the_photo_as_a_local_one(inputs, monkeypatch):
 def test_a_light_only_job_looks_for_the_depth_model_where_a_whole_run_does(inputs):
     """A job of light alone once took the default depth settings, ignoring the file's [models] cache and
     offline switch that the same job with compose (the pipeline) follows; a depth override keeps them."""
-    from scenefit.workers.batch import run_job_stages
+    from scenefit.workers.job_worker import run_job_stages
 
     path = _jobs(inputs["root"], inputs["folder"], inputs["photo"], ["light"])
     cache = inputs["root"] / "hub"
@@ -156,7 +156,7 @@ def test_a_light_only_job_looks_for_the_depth_model_where_a_whole_run_does(input
                       '"geometric" } } }\n')
     out = inputs["root"] / "out"
     out.mkdir()
-    light = run_job_stages(load_jobs(path).jobs[0], out)["light"]
+    light = run_job_stages(load_jobs(path).jobs[0], out)["run"]["stages"]["light"]["report"]
     depth = light["config"]["depth"]
     assert (depth["cache_dir"], depth["local_files_only"], depth["model"]) == (str(cache), True, "my/depth")
     assert depth["depth_type"] == "geometric" and light["decisions"]["scene_type"]["chosen"] == "indoor"
@@ -176,13 +176,12 @@ def test_an_override_table_changes_only_what_it_names():
 
 
 def test_a_batch_convert_job_keeps_constant_channels_as_numbers(inputs):
-    from scenefit.workers.batch import run_job_stages
+    from scenefit.workers.job_worker import run_job_stages
 
     job = load_jobs(_jobs(inputs["root"], inputs["folder"], inputs["photo"], ["convert"])).jobs[0]
     out = inputs["root"] / "out"
     out.mkdir()
-    stages = run_job_stages(job, out)
-    convert = stages["convert"]
+    convert = run_job_stages(job, out)["run"]["stages"]["convert"]["report"]
     assert convert["decisions"]["channels"]["roughness"]["value"] == 0.5
     assert convert["outputs"]["roughness"] == 0.5 and not (out / "convert" / "maps" / "roughness.png").exists()
 
@@ -217,7 +216,7 @@ def test_a_batch_light_job_lights_the_photo_as_scenefit_light_does(inputs, monke
     while `scenefit light` estimated the photo's own (here EXIF's 90 deg). Both now read the photo, the
     placement and the camera through core/stages/light/stage.py and write the same report."""
     import scenefit.core.stages.light.stage as lighting
-    from scenefit.workers.batch import run_job_stages
+    from scenefit.workers.job_worker import run_job_stages
 
     from camera_scenes import jpeg_with_exif as _jpeg_with_exif
 
@@ -250,7 +249,7 @@ def test_a_batch_light_job_chooses_the_critic_as_scenefit_light_does(inputs, mon
     a batch light job always took none. Both now decide 'auto' in core/stages/light/stage.critic_choice."""
     import scenefit.core.guidance.models as models
     import scenefit.core.stages.light.stage as lighting
-    from scenefit.workers.batch import run_job_stages
+    from scenefit.workers.job_worker import run_job_stages
 
     class Stop(Exception):
         pass
@@ -371,7 +370,7 @@ def test_a_remote_job_from_blender_runs_the_pipeline_as_a_batch_job_does(inputs,
     """workers/remote.work_remotely packs the add-on's data into a Job; its worker runs the batch's path."""
     from scenefit.core.data.asset_io import load_asset_folder
     from scenefit.workers import remote
-    from scenefit.workers.batch import run_pipeline_for_job
+    from scenefit.workers.job_worker import run_pipeline_for_job
 
     jobs = []
 

@@ -305,7 +305,9 @@ job.cancel()
 out["cancelled"] = job.wait(30).status
 jobs.release_job(job)
 out["cancel_left"] = sorted(p.name for p in tmp.iterdir() if "job_cancel" in p.name)  # written beside: nothing
-job = jobs.start_job(jobs.Job("light", work.estimate_light, {"photo": str(tmp / "missing.png")}))
+RunConfig = import_module(MODULE + ".core.pipeline.run_config").RunConfig
+job = jobs.start_job(jobs.Job("light", work.estimate_light, {"photo": str(tmp / "missing.png"), "placement": (0.5, 0.6),
+                                                            "config": RunConfig(), "out": str(tmp / "light")}))
 state = job.wait(30)
 jobs.release_job(job)
 out["error"] = [state.status, state.error]

@@ -192,7 +192,7 @@ def test_blender_shows_a_sideways_stored_photo_upright_like_the_pipeline(tmp_pat
         import bpy, numpy as np
         from scenefit.blender_io.compose import ensure_photo_camera, load_photo_image
         from scenefit.core.scene.camera import PhotoCamera
-        from scenefit.core.stages.light import load_photo
+        from scenefit.core.data.photo import load_photo
 
         bpy.ops.wm.read_factory_settings(use_empty=True)
         image = load_photo_image({str(photo)!r})

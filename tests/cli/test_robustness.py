@@ -331,7 +331,7 @@ def test_a_phone_photo_stored_sideways_is_read_upright(tmp_path):
     is the upright photo's horizontal one."""
     import OpenImageIO as oiio
 
-    from scenefit.core.stages.light import load_photo
+    from scenefit.core.data.photo import load_photo
 
     stored = np.full((40, 60, 3), 0.2, np.float32)
     stored[:8, :8] = 1.0                                # a white block in the stored top-left corner

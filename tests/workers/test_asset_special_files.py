@@ -12,7 +12,7 @@ import pytest
 from scenefit.core.base.errors import InputError
 from scenefit.core.data.asset_files import asset_files
 from scenefit.core.data.imageio import write_image
-from scenefit.workers.batch import make_payload
+from scenefit.workers.payload import make_payload
 from scenefit.workers.jobs import Job
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="FIFOs are POSIX")

@@ -10,7 +10,8 @@ import pytest
 
 from scenefit.cli import main
 from scenefit.core.data.asset_io import save_asset_folder
-from scenefit.workers.batch import InProcessDispatcher, JobWorker, run_batch
+from scenefit.workers.batch import InProcessDispatcher, run_batch
+from scenefit.workers.job_worker import JOB_FOLDER_PREFIX, JobWorker
 from scenefit.core.base.errors import InputError
 from scenefit.core.data.imageio import read_image, write_image
 from scenefit.workers.jobs import load_jobs
@@ -68,10 +69,10 @@ class AlwaysFailingWorker(JobWorker):
 
 
 def outputs(folder: Path) -> dict[str, bytes]:
-    """Every file a job wrote, except its report (timings, worker) -> bytes; EXR files by their
-    pixels (OpenImageIO stamps the write time into the header)."""
+    """Every file a job wrote, except its reports and each stage's record of its report (timings, worker)
+    -> bytes; EXR files by their pixels (OpenImageIO stamps the write time into the header)."""
     return {str(p.relative_to(folder)): read_image(p).tobytes() if p.suffix == ".exr" else p.read_bytes()
-            for p in sorted(folder.rglob("*")) if p.is_file() and p.name != "report.json"}
+            for p in sorted(folder.rglob("*")) if p.is_file() and p.name not in ("report.json", "stage.json")}
 
 
 @pytest.fixture(scope="module")
@@ -151,7 +152,7 @@ def test_in_process_batch_writes_folders_summary_and_resumes(in_process, capsys)
         assert report["status"] == "done" and report["job"]["name"] == name
         assert (out / name / "light" / "light.exr").is_file()
         # Paths in the report are inside the job's folder, relative to it.
-        assert (out / name / report["stages"]["light"]["outputs"]["hdr_exr"]).is_file()
+        assert (out / name / report["stages"]["run"]["stages"]["light"]["report"]["outputs"]["hdr_exr"]).is_file()
     assert (out / "a" / "convert" / "maps" / "base_color.png").is_file() and not (out / "c" / "convert").exists()
     assert outcomes[0].quality["convert_psnr_db"] > 30.0
     summary = json.loads((out / "summary.json").read_text())
@@ -160,6 +161,8 @@ def test_in_process_batch_writes_folders_summary_and_resumes(in_process, capsys)
     sheet = read_image(out / "contact_sheet.png")
     assert sheet.shape[0] > 0 and sheet.shape[1] == 3 * 192      # three cells in one row
     assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [".scenefit-run"]  # no staging folders left
+    # No record or report names the worker's temporary copies of the inputs, gone once the job ended.
+    assert not [p for p in out.rglob("*.json") if JOB_FOLDER_PREFIX in p.read_text()]
 
     # A second run does nothing: every job is skipped and no job folder is touched.
     before = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file() and p.parent != out}
@@ -426,7 +429,7 @@ def test_a_killed_workers_job_folder_is_removed_by_the_next_worker_and_nothing_e
     import os
     import subprocess
 
-    from scenefit.workers.batch import JOB_FOLDER_PREFIX, remove_orphaned_job_folders
+    from scenefit.workers.job_worker import JOB_FOLDER_PREFIX, remove_orphaned_job_folders
 
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait()
@@ -606,7 +609,7 @@ def test_blend_tiles_and_frames_and_an_unreadable_blend(tmp_path):
 def test_an_earlier_stage_holding_a_link_is_not_sent(tmp_path):
     """Earlier stages travel as files: one holding a link (to anything) would send what it points at, so
     it runs again instead."""
-    from scenefit.workers.batch import finished_stage_folders
+    from scenefit.workers.payload import finished_stage_folders
 
     for stage in ("convert", "light"):
         (tmp_path / "run" / stage).mkdir(parents=True)

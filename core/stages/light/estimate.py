@@ -10,10 +10,7 @@ light_preview.png (tone-mapped) and returns the report's fields.
 from __future__ import annotations
 
 from ...base.names import SCENE_TYPES as NAMED_SCENE_TYPES
-from ..camera_exif import FOCAL_RANGE_MM, plausible_focal_mm
 
-import copy
-import functools
 import math
 import threading
 import time
@@ -27,9 +24,8 @@ from ...base.decision import Decision
 from ...base.errors import InputError, ModelMissingError, check_choice
 from ...guidance import models as model_loading   # called through the module, where tests stand in for them
 from ...guidance.models import ModelConfig
-from ...data.imageio import linear_to_srgb, read_image, srgb_to_linear, write_image
+from ...data.imageio import srgb_to_linear, write_image
 from ...data.mesh import Mesh, normalize_to_unit_sphere
-from ...render.photo import camera_exposure
 from ...data.primitives import uv_sphere
 from ...base.progress import ProgressCallback, check_cancel, emit
 from ...scene.camera import PhotoCamera, photo_camera_for
@@ -116,102 +112,6 @@ class LightResult:
     seconds: float = 0.0
     config: LightConfig | None = None     # set by the stage (lighting/stage.run_light), for its report
     photo_info: dict | None = None        # what load_photo found, for the report
-
-
-# -- photos ----------------------------------------------------------------------------------------
-# Nothing in the light stage looks at a photo more closely than this: the panorama splats at most
-# 768 px on the long side, the depth model sees 518, the critics 512. Larger photos are reduced while
-# they are read (an 8000x6000 photo peaked at 5.1 GB to make a 64x128 map).
-PHOTO_WORKING_SIDE = 1024
-
-
-def load_photo(path: str | Path, max_side: int | None = PHOTO_WORKING_SIDE) -> tuple[np.ndarray, dict]:
-    """A photo as sRGB-encoded float32 RGB in [0, 1], and what was decided reading it.
-
-    Photos longer than `max_side` are area-reduced by a whole factor while read (linear radiance
-    for EXR/HDR, so a small bright light keeps its energy); the report gives both sizes.
-
-    8/16-bit files are taken as stored (sRGB). Float files (EXR/HDR) hold linear radiance: they are
-    exposed as a camera meters (log-average luminance -> 0.18), clipped and sRGB-encoded, so every
-    photo reaches the panorama as the LDR image a camera would have stored. Photos are turned
-    upright as their EXIF Orientation says (a phone's portrait photo is stored sideways), so `--at`
-    and the composite refer to the photo as every viewer shows it.
-    """
-    path = Path(path)
-    try:
-        stat = path.stat()
-        key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
-    except OSError:
-        key = None   # read_image says what is wrong with it
-    if key is None or max_side is None or max_side > PHOTO_WORKING_SIDE:   # (a full-size copy is read once a run)
-        return _decoded_photo(path, max_side)
-    rgb, info = _decoded_photo_once(key, path, max_side)
-    return rgb.copy(), copy.deepcopy(info)
-
-
-@functools.lru_cache(maxsize=2)
-def _decoded_photo_once(key: tuple, path: Path, max_side: int | None) -> tuple[np.ndarray, dict]:
-    """A run reads its photo at the light stage's size several times (inputs, camera, light): once
-    decoded here while the file stays the same (`key`: its path, time and size). Two such copies at
-    most (about 9 MB each) stay in a long-lived process such as Blender."""
-    return _decoded_photo(path, max_side)
-
-
-def _decoded_photo(path: Path, max_side: int | None) -> tuple[np.ndarray, dict]:
-    pixels = read_image(path, max_side=max_side, upright=True)
-    if pixels.shape[2] == 1:
-        pixels = np.repeat(pixels, 3, axis=2)
-    elif pixels.shape[2] == 2:
-        pixels = np.repeat(pixels[..., :1], 3, axis=2)
-    rgb = np.ascontiguousarray(pixels[..., :3], np.float32)
-    h, w = rgb.shape[:2]
-    info: dict = {"path": str(path), "size": _metadata(path).get("size", [w, h])}
-    # Messages give the size as stored (a 1x10000 photo is read as 1x1000; the user never saw that).
-    stored_w, stored_h = info["size"]
-    if min(stored_w, stored_h) < 2:
-        raise InputError(f"The photo '{path}' is {stored_w}x{stored_h}; it needs at least 2x2 pixels.")
-    if min(h, w) < 2:
-        raise InputError(f"The photo '{path}' is {stored_w}x{stored_h}, too thin for the light stage (it reduces "
-                         f"photos to at most {max_side} px on the long side, which leaves {w}x{h}); crop it to a "
-                         f"less extreme shape.")
-    if info["size"] != [w, h]:
-        info["working_size"] = {"size": [w, h], "why": f"reduced while read: the light stage needs at most "
-                                                      f"{max_side} px on the long side"}
-    if path.suffix.lower() in (".exr", ".hdr"):
-        rgb = np.nan_to_num(np.maximum(rgb, 0.0), nan=0.0, posinf=0.0)
-        exposure = camera_exposure(rgb)
-        info["decoded"] = f"linear HDR exposed by x{exposure:.4g} (log-average luminance -> 0.18), clipped, sRGB-encoded"
-        rgb = linear_to_srgb(np.clip(rgb * exposure, 0.0, 1.0))
-    else:
-        info["decoded"] = "sRGB as stored"
-        rgb = np.clip(rgb, 0.0, 1.0)
-    focal35 = _metadata(path).get("focal35")
-    if focal35 is not None and plausible_focal_mm(focal35) is None:
-        info["metadata_ignored"] = f"EXIF FocalLengthIn35mmFilm {str(focal35)[:40]!r} is not a focal length " \
-                                   f"({FOCAL_RANGE_MM[0]:g} to {FOCAL_RANGE_MM[1]:g} mm)"
-    elif focal35:
-        # The 35 mm equivalent is defined on the diagonal (43.27 mm); the width's share of it gives the
-        # horizontal view of any aspect ratio, upright portrait photos included.
-        film_width = 43.27 * w / np.hypot(w, h)
-        info["fov_from_metadata_deg"] = round(float(np.degrees(2 * np.arctan(film_width / (2 * float(focal35))))), 3)
-    return rgb, info
-
-
-def _metadata(path: Path) -> dict:
-    """The photo's upright size (EXIF Orientation 5-8 swap width and height) and 35 mm focal length."""
-    import OpenImageIO as oiio  # lazy: Blender may lack it (missing_modules)
-
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        return {}
-    try:
-        spec = inp.spec()
-        size = [spec.width, spec.height]
-        if spec.get_int_attribute("Orientation", 1) >= 5:
-            size.reverse()
-        return {"size": size, "focal35": spec.getattribute("Exif:FocalLengthIn35mmFilm")}
-    finally:
-        inp.close()
 
 
 def default_photo_camera(photo_info: dict, width: int, height: int) -> tuple[PhotoCamera, dict]:

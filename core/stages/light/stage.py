@@ -21,7 +21,8 @@ from ...base.decision import Decision
 from ...scene.camera import PhotoCamera
 from ...scene.placement import Placement
 from ...base.progress import ProgressCallback
-from .estimate import LightConfig, LightResult, estimate_light, light_report, load_photo, write_light_outputs
+from ...data.photo import load_photo
+from .estimate import LightConfig, LightResult, estimate_light, light_report, write_light_outputs
 
 
 @dataclass(frozen=True)

@@ -14,8 +14,8 @@ from scenefit.core.base.errors import InputError
 from scenefit.core.data.imageio import write_image
 from scenefit.core.stages import camera_exif
 from scenefit.core.stages.camera import check_camera_values, estimate_photo_camera, read_fspy
-from scenefit.core.stages.light import estimate as light_estimate
-from scenefit.core.stages.light import load_photo
+from scenefit.core.data import photo as photo_reading
+from scenefit.core.data.photo import load_photo
 
 PARAMS = {"principalPoint": {"x": 0.0, "y": 0.0}, "horizontalFieldOfView": 1.0,
           "cameraTransform": {"rows": np.eye(4).tolist()}, "imageWidth": 96, "imageHeight": 64}
@@ -59,7 +59,7 @@ def test_an_exif_focal_length_that_is_not_one_is_left_aside(tmp_path, monkeypatc
     taken from it, and the camera's notes say why when it was a value at all."""
     photo = tmp_path / "photo.png"
     write_image(photo, np.full((80, 120, 3), 0.5, np.float32))
-    monkeypatch.setattr(light_estimate, "_metadata", lambda path: {"size": [120, 80], "focal35": focal35})
+    monkeypatch.setattr(photo_reading, "_metadata", lambda path: {"size": [120, 80], "focal35": focal35})
     _, info = load_photo(photo)
     assert "fov_from_metadata_deg" not in info
     estimate = estimate_photo_camera(photo)
@@ -71,7 +71,7 @@ def test_an_exif_focal_length_that_is_not_one_is_left_aside(tmp_path, monkeypatc
 def test_a_real_focal_length_still_gives_the_field_of_view(tmp_path, monkeypatch):
     photo = tmp_path / "photo.png"
     write_image(photo, np.full((80, 120, 3), 0.5, np.float32))
-    monkeypatch.setattr(light_estimate, "_metadata", lambda path: {"size": [120, 80], "focal35": 26})
+    monkeypatch.setattr(photo_reading, "_metadata", lambda path: {"size": [120, 80], "focal35": 26})
     width_mm = 43.27 * 120 / math.hypot(120, 80)
     assert load_photo(photo)[1]["fov_from_metadata_deg"] == pytest.approx(
         math.degrees(2 * math.atan(width_mm / 52.0)), abs=1e-3)

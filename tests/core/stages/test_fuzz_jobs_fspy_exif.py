@@ -1,6 +1,6 @@
 """Fuzz tests of the readers the `joins` helper restructures, through their public entry points only:
 a jobs file (workers.jobs.load_jobs), an fSpy project (core.stages.camera.read_fspy), a photo's EXIF
-(core.stages.light.estimate.load_photo). Random and mutated inputs give a result or one InputError
+(core.data.photo.load_photo). Random and mutated inputs give a result or one InputError
 sentence, never another exception. Seeded and bounded: the same examples each run, seconds per reader."""
 from __future__ import annotations
 
@@ -108,7 +108,7 @@ def test_fuzz_fspy_projects_give_a_camera_or_one_sentence(tmp_path, data):
 def test_fuzz_exif_fields_give_a_photo_or_one_sentence(tmp_path, name, value):
     import OpenImageIO as oiio
 
-    from scenefit.core.stages.light.estimate import load_photo
+    from scenefit.core.data.photo import load_photo
 
     path = tmp_path / "photo.jpg"
     spec = oiio.ImageSpec(32, 24, 3, oiio.UINT8)

@@ -22,7 +22,8 @@ from scenefit.core.render.orbit_camera import Camera
 from scenefit.core.stages.convert import convert_asset
 from scenefit.core.base.errors import InputError
 from scenefit.core.data.imageio import write_image
-from scenefit.core.stages.light import estimate_light, load_photo
+from scenefit.core.data.photo import load_photo
+from scenefit.core.stages.light import estimate_light
 from scenefit.core.stages.light.depth import DepthConfig
 from scenefit.core.data.maps import PBRMaps
 from scenefit.core.data.mesh import Mesh
@@ -141,7 +142,8 @@ def test_a_1x1_photo_is_a_clear_error(tmp_path):
 
 LIGHT_PEAK = textwrap.dedent("""
     import json, sys
-    from scenefit.core.stages.light import estimate_light, load_photo
+    from scenefit.core.data.photo import load_photo
+    from scenefit.core.stages.light import estimate_light
     from scenefit.core.stages.light.depth import DepthConfig
     from scenefit.core.pipeline.presets import stage_config
     config = stage_config("light", "draft", depth=DepthConfig(depth_type="geometric"))
@@ -179,7 +181,7 @@ def test_an_8000x6000_photo_costs_the_light_stage_what_its_working_size_costs(tm
     reduces at a time: not one full-size copy (8000x6000x3 float32 = 576 MB; it used to peak at 5.1 GB)."""
     import cv2
 
-    from scenefit.core.stages.light.estimate import PHOTO_WORKING_SIDE
+    from scenefit.core.data.photo import PHOTO_WORKING_SIDE
 
     big = np.full((6000, 8000, 3), 90, np.uint8)
     big[:400] = 250

@@ -9,7 +9,7 @@ from scenefit.core.stages.compose import (COMPOSE_MAX_SIDE, PILOT_MAX_SIDE, Comp
                                    pilot_view)
 from scenefit.core.base.errors import InputError
 from scenefit.core.data.imageio import write_image
-from scenefit.core.stages.light import load_photo
+from scenefit.core.data.photo import load_photo
 from scenefit.core.render.environment import sun_environment
 from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.data.primitives import uv_sphere

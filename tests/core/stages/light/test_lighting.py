@@ -12,7 +12,8 @@ import torch
 
 from scenefit.core.base.errors import InputError, ModelMissingError
 from scenefit.core.data.imageio import read_image, write_image
-from scenefit.core.stages.light import estimate_light, load_photo
+from scenefit.core.data.photo import load_photo
+from scenefit.core.stages.light import estimate_light
 from scenefit.core.stages.light.depth import DepthConfig, estimate_ray_distance
 from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.stages.light.hdr import (ApparatusConfig, ApparatusScene, CriticRequest, OptimiseConfig, compose_hdr,

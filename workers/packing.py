@@ -1,0 +1,23 @@
+"""Files and folders as bytes (a gzip tar), so a job's inputs and outputs travel to and from a worker on
+another node without a shared disk."""
+from __future__ import annotations
+
+import io
+import tarfile
+from pathlib import Path
+
+
+def pack(paths: dict[str, Path]) -> bytes:
+    """A tar (gzip) of files and folders, each stored under its given name; a link as the file it points at."""
+    buffer = io.BytesIO()
+    with tarfile.open(fileobj=buffer, mode="w:gz", dereference=True) as tar:
+        for name, path in paths.items():
+            tar.add(str(path), arcname=name)
+    return buffer.getvalue()
+
+
+def unpack(data: bytes, folder: Path) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    with tarfile.open(fileobj=io.BytesIO(data), mode="r:gz") as tar:
+        tar.extractall(folder, filter="data")   # refuses absolute paths and '..'
+    return folder
