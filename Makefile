@@ -25,8 +25,9 @@ help:
 	@echo "make extension PLATFORM=linux-x64|linux-arm64|windows-x64|macos-arm64|macos-x64"
 	@echo "                download runtime wheels, list them in the manifest, build dist/*.zip"
 	@echo "make extension-nowheels   pure-Python zip without wheels (what the install test uses)"
-	@echo "make check-extension PLATFORM=...  build the zip, install it into a bare bpy venv, run the"
-	@echo "                stages there (slow; not part of make test)"
+	@echo "make check-extension PLATFORM=... [BPY=4.2.0]  build the zip, install it into a bare bpy venv"
+	@echo "                (this checkout's Blender, or BPY's), run the stages there in an artist's scene"
+	@echo "                (slow; not part of make test)"
 
 setup: $(STAMP)
 
@@ -40,7 +41,7 @@ $(STAMP): requirements.txt requirements-ray.txt pyproject.toml tools/setup.sh to
 # 420 s against 454 s; one worker: 534 s).
 TEST_WORKERS ?= 2
 test: setup
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile tests
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=25 tests
 
 test-quick: setup
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile -m "not slow" tests
@@ -71,7 +72,7 @@ extension: setup
 	$(PY) tools/build_extension.py build --platform $(PLATFORM)
 
 check-extension: setup
-	$(PY) tools/check_extension.py --platform $(PLATFORM)
+	$(PY) tools/check_extension.py --platform $(PLATFORM) $(if $(BPY),--bpy $(BPY))
 
 extension-nowheels: setup
 	$(PY) tools/build_extension.py nowheels
