@@ -42,12 +42,11 @@ MODES = (
 
 
 def _path_options() -> set[str]:
-    """'//' (relative to the .blend) is accepted in path settings; Blender 4.5+ asks for it explicitly."""
-    try:
-        StringProperty(options={"PATH_SUPPORTS_BLEND_RELATIVE"})
-    except (TypeError, ValueError):
-        return set()
-    return {"PATH_SUPPORTS_BLEND_RELATIVE"}
+    """'//' (relative to the .blend) is accepted in path settings; Blender 4.5+ asks for it explicitly, and
+    older ones refuse the flag when the class registers (StringProperty() itself only defers it)."""
+    if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties.keys():
+        return {"PATH_SUPPORTS_BLEND_RELATIVE"}
+    return set()
 
 
 PATH = _path_options()

@@ -55,6 +55,8 @@ pixels = np.ones((64, 64, 4), np.float32)
 pixels[..., :3] = np.random.default_rng(0).uniform(0.1, 0.9, (64, 64, 3))
 image.pixels.foreach_set(pixels.ravel())
 mat = bpy.data.materials.new("Asset")
+if mat.node_tree is None:   # Blender 4.x makes a material without nodes
+    mat.use_nodes = True
 tex = mat.node_tree.nodes.new("ShaderNodeTexImage"); tex.image = image
 mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
 obj.data.materials.append(mat)
