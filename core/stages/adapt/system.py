@@ -382,9 +382,9 @@ class AdaptSystem:
             choice["global"] = "loop" if isinstance(glob, LoopRenderer) else "path"
         if loops:
             choice.update(traced=sum(r.traced for r in loops), reused=sum(r.reused for r in loops))
-        why = {"auto": "the loop renderer where it agrees with path tracing to >= 35 dB on the corpus (global views, "
-                       "HDR light), path tracing where it was not shown to (local views, ambient light): "
-                       "benchmarks/results/loop_render.md",
+        why = {"auto": "the loop renderer where it agrees with path tracing to >= 35 dB on the corpus (local views "
+                       "under ambient light, global views under the HDR map), path tracing where it was not shown "
+                       "to: benchmarks/results/loop_render.md",
                "loop": "the loop renderer, as asked", "path": "Mitsuba's differentiable path tracing (prb), as asked"}
         reason = why[self.config.renderer]
         if loops:
