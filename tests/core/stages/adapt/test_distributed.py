@@ -13,7 +13,8 @@ With two views, a + b = b + a holds exactly in IEEE arithmetic, so two ranks of 
 the bits of one process doing both, step after step. With four views the groupings differ, and
 each ordering is within (V - 1) u sum|g_j| of the exact sum (u = 2^-24), so they differ by at most
 2 (V - 1) u sum|g_j| per element: the test checks that bound, and that the distributed gradient is
-exactly the rank-grouped sum.
+exactly the rank-grouped sum. So the views here go through the models one at a time (batch_views
+False): a rank's views in one batch would round differently from each alone (test_batched_views.py).
 """
 from __future__ import annotations
 
@@ -63,10 +64,10 @@ def rank_work(models: tuple[str, str]) -> dict:
     torch.set_num_threads(1)
     drjit.set_thread_count(1)
     inputs, four, two = setup(models)
-    system = AdaptSystem.build(inputs, four)          # joins the launcher's group (gloo on CPU)
+    system = AdaptSystem.build(inputs, four, batch_views=False)   # joins the launcher's group (gloo on CPU)
     system.step(0)
     grads = [p.grad.clone() for p in system.texture.parameters()]
-    texture = adapt_texture(inputs, two).texture.state_dict()
+    texture = adapt_texture(inputs, two, batch_views=False).texture.state_dict()
     return {"rank": dist.get_rank(), "world": system.decisions()["world_size"].choice, "views": system.my_views,
             "grads": grads, "texture": texture}
 
@@ -101,13 +102,13 @@ def one_process(tiny_models):
     drjit.set_thread_count(1)
     try:
         inputs, four, two = setup(tiny_models)
-        system = AdaptSystem.build(inputs, four)
+        system = AdaptSystem.build(inputs, four, batch_views=False)
         per_view = []
         for j in range(4):
             system.optimizer.zero_grad(set_to_none=True)
             system.train_view(system.sample(0, j))
             per_view.append([p.grad.clone() for p in system.texture.parameters()])
-        alone = adapt_texture(inputs, two)
+        alone = adapt_texture(inputs, two, batch_views=False)
     finally:
         torch.set_num_threads(threads[0])
         drjit.set_thread_count(threads[1])
