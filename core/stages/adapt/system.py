@@ -293,6 +293,7 @@ class AdaptSystem:
         rendered, then one VAE pass, one UNet pass per critic and one ε_ψ update over all their images;
         the gradients are the sum of each view's alone (to float rounding)."""
         maps = split_channels(self.texture.texture_from_plan(self.plan, self.base_logit))
+        self.timer.lap("render")   # (the texture, as one view's render is charged with it)
         items = []
         for view in views:
             check_cancel(self.cancel)
@@ -300,7 +301,8 @@ class AdaptSystem:
         check_cancel(self.cancel)
         return self._score(items)
 
-    def render_view(self, view: ViewSample, maps: tuple[torch.Tensor, ...] | None = None) -> "_Rendered":
+    def render_view(self, view: ViewSample, maps: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None
+                    ) -> "_Rendered":
         """The view's constant work and its renders (local, and the asset in the photo when it has crops),
         from `maps` (the step's texture) or the texture made afresh."""
         env = self.base_env if view.envmap is None else torch.from_numpy(view.envmap)
@@ -497,9 +499,12 @@ class AdaptSystem:
                 "the fixed bank" if self.constants.cache and self.bank else "recomputed every step"),
             "views_per_step": Decision(config.views_per_step,
                                        f"{mine} view(s) rendered in turn on this rank, gradients averaged"
-                                       + (f" over {world} ranks" if world > 1 else "")
-                                       + f"; {self.batched_steps} step(s) scored with each model once for all "
-                                       "the step's images (the loop renderer's renders wait for one backward)"),
+                                       + (f" over {world} ranks" if world > 1 else "")),
+            "batched_views": Decision(
+                {"asked": self.batch_views, "steps": self.batched_steps},
+                "the steps whose views went through the VAE, each UNet and ε_ψ's update in one pass per model "
+                "(their renders, the loop renderer's, wait for one backward); the others' views one at a time"
+                if self.batch_views else "one image at a time through each model, as asked (least memory)"),
             "models": Decision({k: str(v) for k, v in self.models.paths.items()}, "where the weights were found"),
             "device": Decision(str(self.device), f"{str(self.models.dtype).replace('torch.', '')} UNet"),
         }

@@ -56,6 +56,7 @@ def _one_step(inputs, config, batch: bool) -> tuple[torch.Tensor, dict, dict]:
         model.register_forward_hook(lambda *_, name=name: passes.__setitem__(name, passes[name] + 1))
     metrics = system.step(0)
     grad = torch.cat([p.grad.flatten() for p in system.texture.parameters() if p.grad is not None])
+    passes["batched steps"] = system.decisions()["batched_views"].choice["steps"]
     return grad, metrics, passes
 
 
@@ -65,8 +66,8 @@ def test_a_batched_step_gives_the_one_at_a_time_gradient(setup):
     alone, m_alone, p_alone = _one_step(inputs, config, batch=False)
     # Both: 6 encodes of constant work (a reference per view, a masked photo per crop; once per bank view).
     # One at a time: 2 local and 4 global encodes; ε_φ and ε_ψ per view, ε_ψ's update per view; a pass per crop.
-    assert p_alone == {"vae": 6 + 6, "unet": 6, "inpaint": 4}
-    assert p_batched == {"vae": 6 + 2, "unet": 3, "inpaint": 1}
+    assert p_alone == {"vae": 6 + 6, "unet": 6, "inpaint": 4, "batched steps": 0}
+    assert p_batched == {"vae": 6 + 2, "unet": 3, "inpaint": 1, "batched steps": 1}
     scale = alone.abs().max()
     assert scale > 0 and (batched - alone).abs().max() <= RELATIVE * scale, float((batched - alone).abs().max() / scale)
     assert m_batched["t"] == m_alone["t"] and len(set(m_alone["t"])) == 2   # two views with their own t
