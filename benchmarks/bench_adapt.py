@@ -4,8 +4,10 @@ CPU: tiny random-weight models (devtools/tiny_models.py), 32-64 px renders, so t
 the stage's own overhead, not Stable Diffusion. Where CUDA is available, also an SD2-sized
 random-weight UNet in fp16 at setup (m)'s 512 px, 128 spp and 4 views per step.
 
-`bench_adapt(quick)` returns {"rows": [...], "markdown": str}; `python benchmarks/bench_adapt.py`
-prints the table. benchmarks/run.py can import and call it.
+`bench_adapt(quick)` returns {"rows": [...], "markdown": str, "batched": [...]}; `python
+benchmarks/bench_adapt.py` prints the table. benchmarks/run.py can import and call it. `--batched`
+writes results/adapt_batched.md (a step's views through each model in one pass against one image at
+a time), `--render-phases` results/render_phases.md, `--renderers` results/adapt_renderers.md.
 """
 from __future__ import annotations
 
@@ -108,7 +110,7 @@ def bench_adapt(quick: bool = False) -> dict:
             + f" | {r['iteration_s']:.3f} | {r['peak_memory_mb']:.0f} |" for r in rows]
     note = ("Peak memory: process resident set on CPU (includes Mitsuba and torch), "
             "torch.cuda.max_memory_allocated on GPU.")
-    batched = batched_views(iterations=2 if quick else 8)
+    batched = batched_views(iterations=2 if quick else 4)   # results/adapt_batched.md: 8, --batched
     markdown = "\n".join(["Adapt stage, seconds per iteration by phase (after a warm-up run):", "", head, rule,
                           *body, "", note, "", batched["markdown"]])
     return {"rows": rows, "markdown": markdown, "batched": batched["rows"]}
