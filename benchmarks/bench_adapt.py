@@ -34,7 +34,7 @@ from scenefit.devtools.tiny_models import SD2_UNET, build_tiny_pair, build_tiny_
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from results_files import machine_load  # noqa: E402
 
-PHASES = (("constant work", "constants"), ("render", "render"), ("VAE encode", "vae"), ("UNet passes", "unet"), ("VAE backward", "vae_backward"),
+PHASES = (("constant work", "constants"), ("G-buffer trace", "trace"), ("render", "render"), ("VAE encode", "vae"), ("UNet passes", "unet"), ("VAE backward", "vae_backward"),
           ("render backward", "render_backward"), ("LoRA loss + backward", "lora"), ("Adam steps", "step"))
 
 

@@ -57,6 +57,7 @@ class LoopRenderer:
         self._moved: dict[tuple, GBuffer] = {}   # copies on the maps' device (CUDA): moved once, not per step
         self._tables: dict[tuple, torch.Tensor] = {}
         self.traced = self.reused = 0
+        self.trace_seconds = 0.0   # spent tracing G-buffers, so a caller can tell it from the shading
 
     def gbuffer(self, camera, envmap) -> tuple[GBuffer, torch.Tensor]:
         """The view's G-buffer and the light's colour (the constant environment's, else ones); traced on
@@ -82,9 +83,11 @@ class LoopRenderer:
             self.reused += 1
             return key
         constant = bool(np.all(env == env.reshape(-1, 3)[0]))
+        t0 = time.perf_counter()
         self.tracer.params[ENVMAP_KEY] = pad_envmap(torch.from_numpy(env)).numpy()
         self.tracer.params.update()
         traced = trace_gbuffer(self.tracer, camera, self.gbuffer_options, self.normal_map, env, constant)
+        self.trace_seconds += time.perf_counter() - t0
         colour = torch.from_numpy(env.reshape(-1, 3)[0].copy()) if constant else torch.ones(3)
         if len(self._cache) >= MAX_CACHED_VIEWS:   # views that never come back (a random light) must not pile up
             oldest = next(iter(self._cache))

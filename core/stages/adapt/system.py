@@ -49,7 +49,8 @@ from .distributed import join_process_group, rank_world, sum_gradients, views_of
 from .global_views import GlobalRender, GlobalScene
 from .sampling import ViewSample, draw_view_bank, sample_view, uses_view_bank, view_azimuths
 
-PHASES = ("constants", "render", "vae", "unet", "vae_backward", "render_backward", "lora", "step")
+# "trace": the loop renderer's G-buffers, traced the first time a view comes up (once per view and run).
+PHASES = ("constants", "trace", "render", "vae", "unet", "vae_backward", "render_backward", "lora", "step")
 
 
 @dataclass
@@ -136,6 +137,12 @@ class _Timer:
 
     def restart(self) -> None:
         self.last = time.perf_counter()
+
+    def move(self, seconds: float, source: str, target: str) -> None:
+        """Charge `seconds` of the phase `source` (just lapped) to `target` instead."""
+        if seconds > 0:
+            self.totals[source] = self.totals.get(source, 0.0) - seconds
+            self.totals[target] = self.totals.get(target, 0.0) + seconds
 
 
 @dataclass
@@ -306,8 +313,10 @@ class AdaptSystem:
         """The view's constant work and its renders (local, and the asset in the photo when it has crops),
         from `maps` (the step's texture) or the texture made afresh."""
         env = self.base_env if view.envmap is None else torch.from_numpy(view.envmap)
+        traced = self._trace_seconds()
         constants = self.constants.get(view, env)
         self.timer.lap("constants")
+        traced = self._charge_trace("constants", traced)   # the reference render may trace the view first
         if maps is None:
             maps = split_channels(self.texture.texture_from_plan(self.plan, self.base_logit))
         out = self.renderer_for(view).render(view.camera, *maps, env, spp=view.stage.spp, seed=view.render_seed)
@@ -318,11 +327,22 @@ class AdaptSystem:
                                               view.stage.spp, view.render_seed + 1)
             rendered.append(torch.cat([placed.rgb, placed.alpha], dim=-1))
         self.timer.lap("render")
+        self._charge_trace("render", traced)
         # Gradients stop at the leaves, so the two halves of backward can be timed.
         leaves = [r.detach().to(self.device).requires_grad_(True) for r in rendered]
         weight = 1.0 / self.config.views_per_step
         share = 0.5 * weight if view.crops else weight   # local and global weighed equally
         return _Rendered(view, constants, rendered, leaves, placed, share)
+
+    def _trace_seconds(self) -> float:
+        glob = self.global_scene.renderer if self.global_scene is not None else None
+        return sum(r.trace_seconds for r in (self.renderer, glob) if isinstance(r, LoopRenderer))
+
+    def _charge_trace(self, phase: str, since: float) -> float:
+        """Move the G-buffer tracing done since `since` out of `phase` (just lapped) into "trace"."""
+        now = self._trace_seconds()
+        self.timer.move(now - since, phase, "trace")
+        return now
 
     def _score(self, items: list["_Rendered"]) -> list[dict]:
         """The rendered views scored (local, then global), back-propagated into the texture, and ε_ψ's

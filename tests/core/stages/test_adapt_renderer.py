@@ -64,6 +64,12 @@ def test_the_loop_renderer_traces_each_view_once(setup):
     # Three steps over a bank of two views: at most two local and two global G-buffers, the rest reused.
     assert decision.choice["local"] == decision.choice["global"] == "loop" and decision.choice["traced"] <= 4
     assert decision.choice["reused"] >= 2 and "traced once" in decision.reason
+    # The tracing is its own phase (once per view), not the render's nor the constant work's.
+    traced = system.renderer.trace_seconds + system.global_scene.renderer.trace_seconds
+    assert traced > 0 and system.timer.totals["trace"] == pytest.approx(traced)
+    before = dict(system.timer.totals)
+    system.step(cfg.iterations)   # every view of the bank met: nothing more to trace
+    assert system.timer.totals["trace"] == before["trace"] and system.timer.totals["render"] > before["render"]
     assert any((a - b).abs().max() > 0 for a, b in zip(start, system.texture.parameters()))
     assert all(torch.isfinite(p).all() for p in system.texture.parameters())
 
@@ -74,7 +80,7 @@ def test_path_tracing_when_asked_and_a_bad_name_refused(setup):
     system.step(0)
     choice = system.decisions()["renderer"].choice
     assert choice["local"] == choice["global"] == "path" and "traced" not in choice
-    assert not isinstance(system.renderer, LoopRenderer)
+    assert not isinstance(system.renderer, LoopRenderer) and system.timer.totals.get("trace", 0.0) == 0.0
     with pytest.raises(InputError, match="renderer"):
         config(models, renderer="raster")
 
