@@ -118,10 +118,12 @@ def bench_adapt(quick: bool = False) -> dict:
 
 def batched_views(iterations: int = 8, views_per_step: int = 4, size: int = 64, dtype_type: str = "auto") -> dict:
     """A step's views through each model in one pass (`AdaptSystem.train_views`) against one image at a
-    time (batch_views=False), tiny models, the loop renderer, local + global views with 2 crops: seconds
+    time (AdaptConfig.batch_views False), tiny models, the loop renderer, local + global views with 2 crops: seconds
     per step by phase once the views' G-buffers and constant work are made (step 0, not timed). Two
     systems side by side in one process take their steps in turn (which goes first alternates), so both
     see the same load; each phase is the median over the steps."""
+    from dataclasses import replace
+
     from scenefit.core.stages.adapt import AdaptSystem
 
     timed: dict[bool, list[dict]] = {True: [], False: []}
@@ -136,7 +138,7 @@ def batched_views(iterations: int = 8, views_per_step: int = 4, size: int = 64, 
                              models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint), dtype_type=dtype_type))
         inputs = AdaptInputs(mesh=mesh, raster=rasterize_uv(mesh, 128), photo=photo, placement=Placement((0.5, 0.6), 0.5),
                              texture=NeuralTexture(stage_config("texture", "draft", resolution=128), seed=0))
-        systems = {batch: AdaptSystem.build(inputs, config, batch_views=batch) for batch in (True, False)}
+        systems = {batch: AdaptSystem.build(inputs, replace(config, batch_views=batch)) for batch in (True, False)}
         for system in systems.values():
             system.step(0)                                      # G-buffers and constant work, not timed
         for i in range(iterations):

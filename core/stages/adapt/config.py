@@ -77,6 +77,10 @@ class AdaptConfig:
     "path" (the paper's differentiable path tracing, Mitsuba `prb`, every step), or "auto": the loop
     renderer for the views whose light it was measured to agree with path tracing on to >= 35 dB on the
     corpus (LOOP_AGREES), path tracing for the others.
+    batch_views: a step's views through the VAE, each critic's UNet and ε_ψ's update in one pass per
+    model where their renders can wait for one backward (the loop renderer's): the same gradients to
+    float rounding, fewer passes, more memory (every image's encoder graph at once). False: one image
+    at a time, the least memory (a run may resume with either).
     """
 
     mode_type: str = "scene"                      # scene (setup m) | generate (a) | edit (c)
@@ -111,6 +115,7 @@ class AdaptConfig:
     timestep_anneal_type: str = "linear"          # how the timestep window slides from high to low
     max_depth: int = 3                            # light bounces per path in the renders
     renderer: str = "auto"                        # "auto" | "loop" | "path" (ADAPT_RENDERERS)
+    batch_views: bool = True                      # a step's images through each model in one pass (False: one at a time)
     texture: NeuralTextureConfig = BALANCED_TEXTURE   # "generate": the fresh texture (resolution: the raster's)
     seed: int = 0                                 # the views, timesteps and noise (the same on one device or four)
     preview_every: int = 50                       # iterations between previews
@@ -134,6 +139,7 @@ class AdaptConfig:
         need(self.mode_type == "scene" or self.views_type == "local",
              f"mode '{self.mode_type}' has no photo; use views_type 'local'.")
         need(self.iterations >= 1, f"iterations must be at least 1, got {self.iterations}.")
+        need(isinstance(self.batch_views, bool), f"batch_views must be true or false, got {self.batch_views!r}.")
         stages = tuple(s if isinstance(s, StageSpec) else StageSpec(*s) for s in self.stages)
         object.__setattr__(self, "stages", stages)
         need(len(stages) >= 1 and abs(sum(s.fraction for s in stages) - 1.0) < 1e-6,

@@ -13,7 +13,7 @@ The step's views go through each model together (`train_views`: one VAE pass for
 for the crops, one UNet pass per critic, one ε_ψ update) where their renders can all wait for one
 backward (the loop renderer's); with path tracing each view is rendered, scored and back-propagated
 in turn (Mitsuba replays a render from the scene's current state), its crops still in one pass.
-`batch_views=False` passes one image at a time (one encoder graph held at a time: least memory).
+`AdaptConfig.batch_views` False passes one image at a time (one encoder graph held at a time: least memory).
 After the step's views (and the ranks' shares, summed by torch.distributed): one Adam step on the
 texture and one on ε_ψ.
 """
@@ -158,7 +158,7 @@ class AdaptSystem:
 
     def __init__(self, inputs: AdaptInputs, config: AdaptConfig, models: GuidanceModels, texture: NeuralTexture,
                  renderer: AssetRenderer, critics: _Critics, rank: int, world: Decision,
-                 checkpoint_path: Path | None, cache_constants: bool = True, batch_views: bool = True) -> None:
+                 checkpoint_path: Path | None, cache_constants: bool = True) -> None:
         self.inputs, self.config, self.models = inputs, config, models
         self.texture, self.renderer, self.critics = texture, renderer, critics
         self._path_renderer: AssetRenderer | None = None
@@ -179,7 +179,7 @@ class AdaptSystem:
         self.bank = draw_view_bank(config, *bank_box(self)) if uses_view_bank(config) else None
         self.constants = ConstantWork(self, cache_constants)
         # The step's images through each model in one pass (else one image at a time: less memory).
-        self.batch_views = batch_views
+        self.batch_views = config.batch_views
         self.batched_steps = 0
         self.uncond = models.embed(config.negative_prompt)
         self.optimizer = torch.optim.Adam(texture.parameters(), lr=config.lr_texture)
@@ -197,8 +197,7 @@ class AdaptSystem:
 
     @classmethod
     def build(cls, inputs: AdaptInputs, config: AdaptConfig, models: GuidanceModels | None = None,
-              checkpoint_dir: str | Path | None = None, cache_constants: bool = True,
-              batch_views: bool = True) -> "AdaptSystem":
+              checkpoint_dir: str | Path | None = None, cache_constants: bool = True) -> "AdaptSystem":
         """Validate, find and load the models (a missing one fails here, before any work), copy the
         texture, set up the renderer and critics, and resume from `checkpoint_dir` when it holds one.
         cache_constants False recomputes each view's constant work every step (for comparison)."""
@@ -219,7 +218,7 @@ class AdaptSystem:
                                   SceneOptions(max_depth=config.max_depth, hide_emitters=True))
         checkpoint_path = Path(checkpoint_dir) / CHECKPOINT_FILE if checkpoint_dir is not None else None
         system = cls(inputs, config, models, texture, renderer, _build_critics(models, config), rank,
-                     world, checkpoint_path, cache_constants, batch_views)
+                     world, checkpoint_path, cache_constants)
         system.resume()
         if models.device.type == "cuda":
             torch.cuda.reset_peak_memory_stats()
@@ -634,15 +633,14 @@ def _peak_memory_mb(device) -> float | None:
 
 def adapt_texture(inputs: AdaptInputs, config: AdaptConfig, progress: ProgressCallback | None = None,
                   cancel: threading.Event | None = None, checkpoint_dir: str | Path | None = None,
-                  models: GuidanceModels | None = None, cache_constants: bool = True,
-                  batch_views: bool = True) -> AdaptResult:
+                  models: GuidanceModels | None = None, cache_constants: bool = True) -> AdaptResult:
     """Run the adapt stage; returns a new NeuralTexture (the input texture is left as it was).
 
     Models are located (and a missing one reported) before any work. With `checkpoint_dir`, a
     checkpoint is written every `checkpoint_every` iterations and a run with the same settings
     resumes from it.
     """
-    system = AdaptSystem.build(inputs, config, models, checkpoint_dir, cache_constants, batch_views)
+    system = AdaptSystem.build(inputs, config, models, checkpoint_dir, cache_constants)
     done = saved = system.start
     try:
         for iteration in range(system.start, config.iterations):

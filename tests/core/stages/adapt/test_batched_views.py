@@ -10,6 +10,8 @@ view would change (one view alone differs from the step's gradient by 0.9 of tha
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -43,7 +45,7 @@ def setup(tmp_path_factory):
 
 
 def _one_step(inputs, config, batch: bool) -> tuple[torch.Tensor, dict, dict]:
-    system = AdaptSystem.build(inputs, config, batch_views=batch)
+    system = AdaptSystem.build(inputs, replace(config, batch_views=batch))
     passes = {"vae": 0, "unet": 0, "inpaint": 0}
     encode = system.models.encode
 
@@ -73,3 +75,16 @@ def test_a_batched_step_gives_the_one_at_a_time_gradient(setup):
     assert m_batched["t"] == m_alone["t"] and len(set(m_alone["t"])) == 2   # two views with their own t
     for key in ("local_grad_norm", "global_grad_norm", "lora_loss"):
         assert m_batched[key] == pytest.approx(m_alone[key], rel=RELATIVE), key
+
+
+def test_a_run_resumes_with_either_and_the_setting_is_a_boolean(setup):
+    """A run that ran out of memory batched goes on from its checkpoint one image at a time: batch_views
+    is not part of what a checkpoint must match (the gradients are the same to rounding)."""
+    from scenefit.core.base.errors import InputError
+    from scenefit.core.stages.adapt.checkpoint import settings_key
+
+    _, config = setup
+    assert settings_key(replace(config, batch_views=False)) == settings_key(config)
+    assert settings_key(replace(config, iterations=2)) != settings_key(config)
+    with pytest.raises(InputError, match="batch_views"):
+        replace(config, batch_views="no")

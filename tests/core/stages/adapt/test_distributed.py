@@ -14,7 +14,7 @@ the bits of one process doing both, step after step. With four views the groupin
 each ordering is within (V - 1) u sum|g_j| of the exact sum (u = 2^-24), so they differ by at most
 2 (V - 1) u sum|g_j| per element: the test checks that bound, and that the distributed gradient is
 exactly the rank-grouped sum. So the views here go through the models one at a time (batch_views
-False): a rank's views in one batch would round differently from each alone (test_batched_views.py).
+false): a rank's views in one batch would round differently from each alone (test_batched_views.py).
 """
 from __future__ import annotations
 
@@ -64,10 +64,10 @@ def rank_work(models: tuple[str, str]) -> dict:
     torch.set_num_threads(1)
     drjit.set_thread_count(1)
     inputs, four, two = setup(models)
-    system = AdaptSystem.build(inputs, four, batch_views=False)   # joins the launcher's group (gloo on CPU)
+    system = AdaptSystem.build(inputs, four)          # joins the launcher's group (gloo on CPU)
     system.step(0)
     grads = [p.grad.clone() for p in system.texture.parameters()]
-    texture = adapt_texture(inputs, two, batch_views=False).texture.state_dict()
+    texture = adapt_texture(inputs, two).texture.state_dict()
     return {"rank": dist.get_rank(), "world": system.decisions()["world_size"].choice, "views": system.my_views,
             "grads": grads, "texture": texture}
 
@@ -80,7 +80,7 @@ def setup(models: tuple[str, str]):
     texture = NeuralTexture(stage_config("texture", "draft", resolution=32, log2_table=12), seed=0)
     photo = np.random.default_rng(0).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32)
     inputs = AdaptInputs(mesh=mesh, raster=raster, texture=texture, photo=photo, placement=Placement((0.5, 0.6), 0.5))
-    common = dict(prompt="a mossy sphere in a swamp", stages=STAGES, model_resolution=32, views=8,
+    common = dict(prompt="a mossy sphere in a swamp", stages=STAGES, model_resolution=32, views=8, batch_views=False,
                   checkpoint_every=0, preview_every=0, lr_texture=1e-2,
                   models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint)))
     return inputs, AdaptConfig(iterations=1, views_per_step=4, **common), AdaptConfig(iterations=3, views_per_step=2,
@@ -102,13 +102,13 @@ def one_process(tiny_models):
     drjit.set_thread_count(1)
     try:
         inputs, four, two = setup(tiny_models)
-        system = AdaptSystem.build(inputs, four, batch_views=False)
+        system = AdaptSystem.build(inputs, four)
         per_view = []
         for j in range(4):
             system.optimizer.zero_grad(set_to_none=True)
             system.train_view(system.sample(0, j))
             per_view.append([p.grad.clone() for p in system.texture.parameters()])
-        alone = adapt_texture(inputs, two, batch_views=False)
+        alone = adapt_texture(inputs, two)
     finally:
         torch.set_num_threads(threads[0])
         drjit.set_thread_count(threads[1])
