@@ -4,8 +4,10 @@ CPU: tiny random-weight models (devtools/tiny_models.py), 32-64 px renders, so t
 the stage's own overhead, not Stable Diffusion. Where CUDA is available, also an SD2-sized
 random-weight UNet in fp16 at setup (m)'s 512 px, 128 spp and 4 views per step.
 
-`bench_adapt(quick)` returns {"rows": [...], "markdown": str}; `python benchmarks/bench_adapt.py`
-prints the table. benchmarks/run.py can import and call it.
+`bench_adapt(quick)` returns {"rows": [...], "markdown": str, "batched": [...]}; `python
+benchmarks/bench_adapt.py` prints the table. benchmarks/run.py can import and call it. `--batched`
+writes results/adapt_batched.md (a step's views through each model in one pass against one image at
+a time), `--render-phases` results/render_phases.md, `--renderers` results/adapt_renderers.md.
 """
 from __future__ import annotations
 
@@ -32,7 +34,7 @@ from scenefit.devtools.tiny_models import SD2_UNET, build_tiny_pair, build_tiny_
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from results_files import machine_load  # noqa: E402
 
-PHASES = (("constant work", "constants"), ("render", "render"), ("VAE encode", "vae"), ("UNet passes", "unet"), ("VAE backward", "vae_backward"),
+PHASES = (("constant work", "constants"), ("G-buffer trace", "trace"), ("render", "render"), ("VAE encode", "vae"), ("UNet passes", "unet"), ("VAE backward", "vae_backward"),
           ("render backward", "render_backward"), ("LoRA loss + backward", "lora"), ("Adam steps", "step"))
 
 
@@ -57,7 +59,8 @@ def _run(base: Path, inpaint: Path, model_resolution: int, stages, iterations: i
     per = result.seconds_per_iteration()
     return {"phases": {k: per.get(k, 0.0) for _, k in PHASES}, "iteration_s": sum(per.values()), "wall_s": wall,
             "peak_memory_mb": result.peak_memory_mb, "device": result.decisions["device"].choice,
-            "views_per_step": result.decisions["views_per_step"].choice}
+            "views_per_step": result.decisions["views_per_step"].choice,
+            "batched_steps": result.decisions["batched_views"].choice["steps"]}
 
 
 def preset_row(preset: str, iterations: int, spp_cut: int = 8) -> dict:
@@ -107,9 +110,66 @@ def bench_adapt(quick: bool = False) -> dict:
             + f" | {r['iteration_s']:.3f} | {r['peak_memory_mb']:.0f} |" for r in rows]
     note = ("Peak memory: process resident set on CPU (includes Mitsuba and torch), "
             "torch.cuda.max_memory_allocated on GPU.")
+    batched = batched_views(iterations=2 if quick else 4)   # results/adapt_batched.md: 8, --batched
     markdown = "\n".join(["Adapt stage, seconds per iteration by phase (after a warm-up run):", "", head, rule,
-                          *body, "", note])
-    return {"rows": rows, "markdown": markdown}
+                          *body, "", note, "", batched["markdown"]])
+    return {"rows": rows, "markdown": markdown, "batched": batched["rows"]}
+
+
+def batched_views(iterations: int = 8, views_per_step: int = 4, size: int = 64, dtype_type: str = "auto") -> dict:
+    """A step's views through each model in one pass (`AdaptSystem.train_views`) against one image at a
+    time (AdaptConfig.batch_views False), tiny models, the loop renderer, local + global views with 2 crops: seconds
+    per step by phase once the views' G-buffers and constant work are made (step 0, not timed). Two
+    systems side by side in one process take their steps in turn (which goes first alternates), so both
+    see the same load; each phase is the median over the steps."""
+    from dataclasses import replace
+
+    from scenefit.core.stages.adapt import AdaptSystem
+
+    timed: dict[bool, list[dict]] = {True: [], False: []}
+    with tempfile.TemporaryDirectory() as tmp:
+        base, inpaint = build_tiny_pair(tmp)
+        mesh = uv_sphere(segments=32, rings=16)
+        photo = np.random.default_rng(0).uniform(0.2, 0.8, (96, 128, 3)).astype(np.float32)
+        config = AdaptConfig(prompt="a mossy sphere in a swamp", iterations=iterations + 1,
+                             stages=(StageSpec(1.0, size, 8, (500, 990)),), model_resolution=size, views=views_per_step,
+                             view_variants=1, views_per_step=views_per_step, global_crops=2, checkpoint_every=0,
+                             preview_every=0, renderer="loop",
+                             models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint), dtype_type=dtype_type))
+        inputs = AdaptInputs(mesh=mesh, raster=rasterize_uv(mesh, 128), photo=photo, placement=Placement((0.5, 0.6), 0.5),
+                             texture=NeuralTexture(stage_config("texture", "draft", resolution=128), seed=0))
+        systems = {batch: AdaptSystem.build(inputs, replace(config, batch_views=batch)) for batch in (True, False)}
+        for system in systems.values():
+            system.step(0)                                      # G-buffers and constant work, not timed
+        for i in range(iterations):
+            for batch in ((True, False) if i % 2 == 0 else (False, True)):
+                system = systems[batch]
+                before = dict(system.timer.totals)
+                system.step(i + 1)
+                timed[batch].append({k: v - before.get(k, 0.0) for k, v in system.timer.totals.items()})
+        assert systems[True].batched_steps == iterations + 1 and systems[False].batched_steps == 0
+    load = machine_load()
+    rows = []
+    for batch in (True, False):
+        phases = {k: float(np.median([step.get(k, 0.0) for step in timed[batch]])) for _, k in PHASES}
+        rows.append({"batched": batch, "phases": phases, "step_s": float(np.median([sum(st.values()) for st in timed[batch]])),
+                     "steps": len(timed[batch]), "views_per_step": views_per_step, "size": size,
+                     "dtype": str(systems[batch].models.dtype).replace("torch.", ""), "load": load})
+    together, alone = rows
+    models = ("vae", "unet", "vae_backward", "lora")
+    lines = [f"A step's {views_per_step} views (local + global, 2 crops each, {size} px, loop renderer, tiny models in "
+             f"{together['dtype']}) through each model in one pass, against one image at a time; median seconds per "
+             f"step by phase over {together['steps']} steps each, two systems taking their steps in turn in one "
+             f"process ({load}).", "",
+             "| views through the models | " + " | ".join(title for title, _ in PHASES) + " | s / step |",
+             "|" + "---|" * (len(PHASES) + 2)]
+    for r in rows:
+        lines.append(f"| {'one pass per model' if r['batched'] else 'one image at a time'} | "
+                     + " | ".join(f"{r['phases'][k]:.3f}" for _, k in PHASES) + f" | {r['step_s']:.3f} |")
+    lines += ["", f"The models' phases (VAE, UNet, VAE backward, LoRA): {sum(alone['phases'][k] for k in models):.3f} s "
+              f"one at a time, {sum(together['phases'][k] for k in models):.3f} s in one pass per model; the step "
+              f"{alone['step_s'] / together['step_s']:.2f}x faster batched."]
+    return {"rows": rows, "markdown": "\n".join(lines) + "\n"}
 
 
 def final_step_renderers(iterations: int = 2, spp_cut: int = 8) -> dict:
@@ -180,6 +240,7 @@ def render_phases(size: int = 512, views: int = 4, spp: int = 128, spp_cut: int 
     texture, by the loop renderer (G-buffers traced once, before timing) and by path tracing (Mitsuba
     prb at spp / `spp_cut`, projected to `spp`: rendering is linear in samples), in one process.
     `measured` of the renders are timed and the step projected from them (each render costs the same)."""
+    from scenefit.core.render.gbuffer import GBufferOptions
     from scenefit.core.render.loop_renderer import LoopRenderer
     from scenefit.core.render.orbit_camera import Camera
     from scenefit.core.render.renderer import AssetRenderer, SceneOptions
@@ -191,11 +252,14 @@ def render_phases(size: int = 512, views: int = 4, spp: int = 128, spp_cut: int 
     options = SceneOptions(max_depth=3, hide_emitters=True)
     maps = torch.rand(512, 512, 5, generator=torch.Generator().manual_seed(0)).requires_grad_(True)
     rows = []
-    for name in ("loop", "path"):
-        renderer = (LoopRenderer(mesh, (512, 512), env, options) if name == "loop"
+    # The loop renderer as it is, as it was before each sample shaded its own texture values (4 samples
+    # per pixel, 16 diffuse rays each), and path tracing.
+    gbuffers = {"loop": GBufferOptions(), "loop, 4 samples (before)": GBufferOptions(samples=4, diffuse_rays=16)}
+    for name in (*gbuffers, "path"):
+        renderer = (LoopRenderer(mesh, (512, 512), env, options, gbuffer=gbuffers[name]) if name in gbuffers
                     else AssetRenderer(mesh, (512, 512), env, options))
         t = time.perf_counter()
-        if name == "loop":
+        if name in gbuffers:
             for camera in cameras:
                 renderer.gbuffer(camera, torch.from_numpy(env))
         trace = time.perf_counter() - t
@@ -212,7 +276,7 @@ def render_phases(size: int = 512, views: int = 4, spp: int = 128, spp_cut: int 
         rows.append({"renderer": name, "renders_per_step": 2 * views, "measured_renders": measured, "size": size,
                      "spp": spp, "measured_spp": spp // spp_cut if name == "path" else None, "render_s": forward / repeats * cut,
                      "render_backward_s": backward / repeats * cut, "trace_s": trace, "load": machine_load()})
-    loop, path = rows
+    loop, before, path = rows
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                             cwd=Path(__file__).resolve().parent).stdout.strip()
     lines = ["# The final preset's render phases: loop renderer vs path tracing (this CPU)", "",
@@ -230,8 +294,10 @@ def render_phases(size: int = 512, views: int = 4, spp: int = 128, spp_cut: int 
                      f"{r['render_s'] + r['render_backward_s']:.2f} | {r['trace_s']:.1f} | "
                      f"{r['load'].split('load average:')[-1].strip()} |")
     ratio = (path["render_s"] + path["render_backward_s"]) / (loop["render_s"] + loop["render_backward_s"])
+    cost = (loop["render_s"] + loop["render_backward_s"]) / (before["render_s"] + before["render_backward_s"])
     lines += ["", f"The loop renderer's render + backward per step is {ratio:.0f}x less than path tracing's under the "
-              "same load."]
+              f"same load; 16 samples per pixel cost {cost:.1f}x the 4 it took before (the price of agreeing with "
+              "path tracing under ambient light, benchmarks/results/loop_render.md)."]
     return {"rows": rows, "markdown": "\n".join(lines) + "\n"}
 
 
@@ -344,6 +410,14 @@ if __name__ == "__main__":
 
         out = render_phases()
         print(write_results(Path(__file__).resolve().parent / "results", "render_phases", out["markdown"],
+                            {"rows": out["rows"]}))
+        print(out["markdown"])
+    elif "--batched" in sys.argv:   # python benchmarks/bench_adapt.py --batched (-> results/adapt_batched)
+        from results_files import write_results
+
+        out = batched_views()
+        print(write_results(Path(__file__).resolve().parent / "results", "adapt_batched",
+                            "# A step's views through each model in one pass (tiny models, this CPU)\n\n" + out["markdown"],
                             {"rows": out["rows"]}))
         print(out["markdown"])
     elif "--renderers" in sys.argv:   # python benchmarks/bench_adapt.py --renderers (-> results/adapt_renderers)

@@ -8,8 +8,12 @@ writes seconds per iteration by phase and peak VRAM to benchmarks/results/gpu.md
 the light stage's diffusion critic per preset (`scenefit light --critic diffusion`). On one H200 the
 adapt part took about 3 minutes (models built in 50 s); the light part has not run on a GPU yet.
 
-`--dry-run` is the same code path with the tiny models on the CPU, one iteration, one view, small
-renders: the test suite runs it, so the check works the first time a GPU is there.
+Both renderers per preset, each step by phase: the loop renderer (adapt's default; a step's views
+through each model in one pass) and the paper's path tracing (each view rendered, scored and
+back-propagated in turn). `--dry-run` is the same code path with the tiny models on the CPU, one
+iteration, at most two views per step (so a batched step runs), small renders: the test suite runs it,
+so the check works the first time a GPU is there. It writes into --out (a dry run never into
+benchmarks/results unless told: its numbers are not a GPU's).
 """
 from __future__ import annotations
 
@@ -47,9 +51,9 @@ def measure(base: Path, inpaint: Path, preset: str, dry_run: bool, renderer: str
     config = stage_config("adapt", preset, prompt="x")
     stages, resolution, iterations, warmup = config.stages, config.model_resolution, ITERATIONS, 1
     views = config.views_per_step
-    if dry_run:   # the tiny models' 32-px latents, 8 samples, one view: seconds on two cores
+    if dry_run:   # the tiny models' 32-px latents, 8 samples, up to two views: seconds on two cores
         stages = tuple(replace(s, render_size=min(s.render_size, 32), spp=min(s.spp, 8)) for s in stages)
-        resolution, iterations, warmup, views = 32, 1, 0, 1
+        resolution, iterations, warmup, views = 32, 1, 0, min(views, 2)
     started = time.perf_counter()
     row = _run(base, inpaint, resolution, stages, iterations, config.views_type, views_per_step=views, warmup=warmup,
                renderer=renderer)
@@ -99,24 +103,29 @@ def measure_light(base: Path, inpaint: Path, preset: str, dry_run: bool, folder:
 
 def markdown(rows: list[dict], machine: dict, light_rows: list[dict] | None = None,
              loop_rows: list[dict] | None = None) -> str:
-    head = "| preset | render px / spp | views / step | " + " | ".join(t for t, _ in PHASES) + \
-           " | s / iteration | peak memory MB |"
+    head = "| preset | render px / spp | views / step | views through the models | " + \
+           " | ".join(t for t, _ in PHASES) + " | s / iteration | peak memory MB |"
     lines = ["# `make gpu-check` (benchmarks/gpu_check.py)", "", " ".join(__doc__.split("\n\n")[1].split()), "",
              f"Machine: {machine['device']}; torch {machine['torch']}, CUDA {machine['cuda']}; Mitsuba "
              f"{machine['variant']}; models: {machine['models']} (built in {machine.get('model_build_s', '?')} s); "
              f"{'DRY RUN (tiny models, CPU)' if machine['dry_run'] else ''}",
-             "", head, "|" + "---|" * (len(PHASES) + 5)]
+             "", "Path tracing (the paper's renderer):", "", head, "|" + "---|" * (len(PHASES) + 6)]
     for r in rows:
-        lines.append(f"| {r['preset']} | {r['render_size']} / {r['spp']} | {r['views_per_step']} | "
+        lines.append(f"| {r['preset']} | {r['render_size']} / {r['spp']} | {r['views_per_step']} | {_through(r)} | "
                      + " | ".join(f"{r['phases'][k]:.3f}" for _, k in PHASES)
                      + f" | {r['iteration_s']:.3f} | {r['peak_memory_mb'] or 0:.0f} |")
     if loop_rows:
         lines += ["", "The same with the loop renderer (the adapt stage's default: each view's G-buffers traced "
-                  "once, then shaded in torch; its one-off tracing is in the first iterations' constant work):", "",
-                  head.replace("render px / spp", "render px"), "|" + "---|" * (len(PHASES) + 5)]
-        lines += [f"| {r['preset']} | {r['render_size']} | {r['views_per_step']} | "
+                  "once, then shaded in torch). Its tracing is the G-buffer trace column, paid the first time each "
+                  "view comes up (a few iterations meet many new views; a run's thousands meet them once), so the "
+                  "step is also given without it:", "",
+                  head.replace("render px / spp", "render px").replace(" | peak memory MB |",
+                                                                       " | s / iteration without tracing | peak memory MB |"),
+                  "|" + "---|" * (len(PHASES) + 7)]
+        lines += [f"| {r['preset']} | {r['render_size']} | {r['views_per_step']} | {_through(r)} | "
                   + " | ".join(f"{r['phases'][k]:.3f}" for _, k in PHASES)
-                  + f" | {r['iteration_s']:.3f} | {r['peak_memory_mb'] or 0:.0f} |" for r in loop_rows]
+                  + f" | {r['iteration_s']:.3f} | {r['iteration_s'] - r['phases'].get('trace', 0.0):.3f}"
+                  f" | {r['peak_memory_mb'] or 0:.0f} |" for r in loop_rows]
     if light_rows:
         lines += ["", "The light stage's diffusion critic with the same models (`scenefit light --critic diffusion`, "
                   "a made-up outdoor photo, after a one-iteration warm-up run):", "",
@@ -131,6 +140,13 @@ def markdown(rows: list[dict], machine: dict, light_rows: list[dict] | None = No
     return "\n".join(lines) + "\n"
 
 
+def _through(row: dict) -> str:
+    """How the row's step took its views through the models: in one pass each, or one at a time."""
+    if row["views_per_step"] == 1:
+        return "one view"
+    return "one pass per model" if row.get("batched_steps") == row["iterations"] else "one at a time"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dry-run", action="store_true", help="tiny models on the CPU, one iteration")
@@ -138,7 +154,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--light-presets", default="draft,balanced,final",
                         help="the light critic's presets, after adapt's ('' for none)")
     parser.add_argument("--models", help="a folder to build the models in and keep (default: a temporary one)")
-    parser.add_argument("--out", default=str(RESULTS))
+    parser.add_argument("--out", help="where gpu.md and gpu.json go (default: benchmarks/results; a dry run's: "
+                                      "benchmarks/results/quick, so it never stands in for a GPU's table)")
     args = parser.parse_args(argv)
     if not args.dry_run and not torch.cuda.is_available():
         print("gpu-check: torch sees no CUDA GPU on this machine; run it where one is lent, or --dry-run here.",
@@ -149,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     machine = {"device": torch.cuda.get_device_name() if torch.cuda.is_available() and not args.dry_run else "CPU",
                "torch": torch.__version__, "cuda": torch.version.cuda, "variant": init_mitsuba().variant,
                "models": "tiny" if args.dry_run else "SD2-sized, random weights", "dry_run": args.dry_run}
-    out = Path(args.out)
+    out = Path(args.out) if args.out else RESULTS / "quick" if args.dry_run else RESULTS
     out.mkdir(parents=True, exist_ok=True)
     rows: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="scenefit-gpu-check-") as tmp:

@@ -119,26 +119,42 @@ class LoraCritic:
         ε_ψ learns the distribution of the current renderings (ProlificDreamer's LoRA update).
         Gradients accumulate over calls (one per view) until `step` applies and clears them.
         """
+        b = latents.shape[0]   # one image's loss: the mean over its rows
+        losses = self.train_rows(latents, text_embedding, condition[None].expand(b, -1), [t] * b, noise,
+                                 [alpha_bar_t] * b, [drop_condition] * b, prediction_type, [weight / b] * b)
+        return float(sum(losses) / b)
+
+    def train_rows(self, latents: torch.Tensor, text_embedding: torch.Tensor, conditions: torch.Tensor,
+                   timesteps: list[int], noise: torch.Tensor, alpha_bars: list[float], drops: list[bool],
+                   prediction_type: str = "epsilon", weights: list[float] | None = None) -> list[float]:
+        """`train_step` for B images in one UNet pass: row i with its own text (or one for all), condition
+        (B, D), timestep, noise, ᾱ, dropped condition and weight; the gradient is the sum of each row's
+        `weight` x its mean squared error. Returns each row's loss."""
         from .weighting import add_noise
 
         latents = latents.detach()
-        cond = torch.zeros_like(condition) if drop_condition else condition
-        x_t = add_noise(latents, noise, alpha_bar_t)
-        timesteps = torch.full((latents.shape[0],), t, device=latents.device, dtype=torch.long)
+        b = latents.shape[0]
+        weights = [1.0] * b if weights is None else weights
+        keep = torch.tensor([0.0 if d else 1.0 for d in drops], dtype=conditions.dtype, device=conditions.device)
+        cond = conditions * keep[:, None]
+        x_t = torch.cat([add_noise(latents[i:i + 1], noise[i:i + 1], alpha_bars[i]) for i in range(b)])
+        steps = torch.tensor(timesteps, device=latents.device, dtype=torch.long)
         # The UNet may run in fp16 (the CUDA default) while renders and latents stay float32.
         dtype = self.unet.dtype
         with self.active(), torch.enable_grad():
-            pred = self.unet(x_t.to(dtype), timesteps,
-                             encoder_hidden_states=text_embedding.to(dtype).expand(latents.shape[0], -1, -1),
-                             class_labels=cond.to(latents.device, dtype)[None].expand(latents.shape[0], -1)).sample
+            text = text_embedding.to(dtype)
+            pred = self.unet(x_t.to(dtype), steps, encoder_hidden_states=text.expand(b, -1, -1) if text.shape[0] == 1
+                             else text, class_labels=cond.to(latents.device, dtype)).sample
+            a = torch.tensor(alpha_bars, dtype=torch.float64).view(-1, 1, 1, 1)
             if prediction_type == "v_prediction":
-                target = (alpha_bar_t ** 0.5) * noise.float() - ((1 - alpha_bar_t) ** 0.5) * latents.float()
+                target = a.sqrt().float().to(latents.device) * noise.float() \
+                    - (1 - a).sqrt().float().to(latents.device) * latents.float()
             else:
                 target = noise.float()
-            loss = torch.nn.functional.mse_loss(pred.float(), target)
+            per_row = (pred.float() - target).pow(2).flatten(1).mean(dim=1)
             # Inside `active()`: leaving it turns requires_grad off, and autograd skips such leaves.
-            (loss * weight).backward()
-        return float(loss.detach())
+            (per_row * torch.tensor(weights, dtype=per_row.dtype, device=per_row.device)).sum().backward()
+        return [float(v) for v in per_row.detach()]
 
     def learn(self, latents: torch.Tensor, text_embedding: torch.Tensor, condition: torch.Tensor,
               rng: np.random.Generator, generator: torch.Generator, alpha_bar: torch.Tensor,
@@ -146,11 +162,21 @@ class LoraCritic:
         """One view's share of ε_ψ's update: t ~ U[0, T), fresh noise, the condition dropped with
         probability `condition_dropout`, all drawn from the caller's generators (so a resumed run
         repeats them); then `train_step`. Call `step` once the views (and ranks) are in."""
-        t = int(rng.integers(0, len(alpha_bar)))
-        noise = torch.randn(latents.shape, generator=generator).to(latents.device)
-        drop = bool(rng.uniform() < self.condition_dropout)
-        return self.train_step(latents, text_embedding, condition, t, noise, float(alpha_bar[t]), drop,
-                               prediction_type, weight)
+        return self.learn_rows(latents, text_embedding, condition[None], [rng], [generator], alpha_bar,
+                               prediction_type, [weight])[0]
+
+    def learn_rows(self, latents: torch.Tensor, text_embedding: torch.Tensor, conditions: torch.Tensor,
+                   rngs: list[np.random.Generator], generators: list[torch.Generator], alpha_bar: torch.Tensor,
+                   prediction_type: str = "epsilon", weights: list[float] | None = None) -> list[float]:
+        """`learn` for B views in one UNet pass: row i's t, noise and dropout drawn from its own view's
+        generators, exactly as `learn` draws them for that view alone."""
+        ts, noise, drops = [], [], []
+        for i, (rng, generator) in enumerate(zip(rngs, generators)):
+            ts.append(int(rng.integers(0, len(alpha_bar))))
+            noise.append(torch.randn(latents[i:i + 1].shape, generator=generator).to(latents.device))
+            drops.append(bool(rng.uniform() < self.condition_dropout))
+        return self.train_rows(latents, text_embedding, conditions, ts, torch.cat(noise), [float(alpha_bar[t]) for t in ts],
+                               drops, prediction_type, weights)
 
     def step(self) -> None:
         """Apply the accumulated gradients (after an all-reduce across ranks, if any), then clear them."""

@@ -28,8 +28,12 @@ LEVELS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)   # roughness nodes of the specular ligh
 
 @dataclass(frozen=True)
 class GBufferOptions:
-    samples: int = 4             # sub-pixel samples per pixel, stratified (a square number)
-    diffuse_rays: int = 16       # visibility rays per sample for the diffuse light term
+    # Sub-pixel samples per pixel, stratified (a square number). Each reads the texture and is shaded on
+    # its own: a pixel's textured detail (roughness and metallic shade non-linearly) needs 16; 4 cost
+    # 7 dB against path tracing under ambient light, and averaging 4 texture lookups per sample won
+    # back only 1.3 of them (benchmarks/FINDINGS.md, "The loop renderer under ambient light").
+    samples: int = 16
+    diffuse_rays: int = 4        # visibility rays per sample for the diffuse light term (64 per pixel)
     specular_rays: int = 4       # per sample and roughness level (the mirror level takes one)
     edge_samples: int = 16       # samples per pixel along the asset's edges (a square number)
     seed: int = 0

@@ -54,29 +54,48 @@ class LoopRenderer:
         self.maps_shape, self.envmap_shape = self.tracer.maps_shape, self.tracer.envmap_shape
         self.normal_map, self.gbuffer_options = normal_map, gbuffer
         self._cache: dict[tuple, tuple[GBuffer, torch.Tensor]] = {}
+        self._moved: dict[tuple, GBuffer] = {}   # copies on the maps' device (CUDA): moved once, not per step
         self._tables: dict[tuple, torch.Tensor] = {}
         self.traced = self.reused = 0
+        self.trace_seconds = 0.0   # spent tracing G-buffers, so a caller can tell it from the shading
 
     def gbuffer(self, camera, envmap) -> tuple[GBuffer, torch.Tensor]:
         """The view's G-buffer and the light's colour (the constant environment's, else ones); traced on
         first use, then kept."""
+        return self._cache[self._traced(camera, envmap)]
+
+    def _on(self, key: tuple, device: torch.device) -> GBuffer:
+        """The G-buffer `key` on `device` (the one traced, where it is already there)."""
+        gb = self._cache[key][0]
+        if gb.slots.device == device:
+            return gb
+        if (key, str(device)) not in self._moved:
+            self._moved[(key, str(device))] = gb.to(device)
+        return self._moved[(key, str(device))]
+
+    def _traced(self, camera, envmap) -> tuple:
+        """The cache's key of the view's G-buffer, traced first if it is not there."""
         env = np.ascontiguousarray(torch.as_tensor(envmap).detach().cpu().float().numpy())
         if tuple(env.shape) != tuple(self.envmap_shape):
             raise InputError(f"Environment map shape {env.shape} differs from the scene's {self.envmap_shape}.")
         key = (camera, hashlib.blake2b(env.tobytes(), digest_size=16).hexdigest())
         if key in self._cache:
             self.reused += 1
-            return self._cache[key]
+            return key
         constant = bool(np.all(env == env.reshape(-1, 3)[0]))
+        t0 = time.perf_counter()
         self.tracer.params[ENVMAP_KEY] = pad_envmap(torch.from_numpy(env)).numpy()
         self.tracer.params.update()
         traced = trace_gbuffer(self.tracer, camera, self.gbuffer_options, self.normal_map, env, constant)
+        self.trace_seconds += time.perf_counter() - t0
         colour = torch.from_numpy(env.reshape(-1, 3)[0].copy()) if constant else torch.ones(3)
         if len(self._cache) >= MAX_CACHED_VIEWS:   # views that never come back (a random light) must not pile up
-            self._cache.pop(next(iter(self._cache)))
+            oldest = next(iter(self._cache))
+            self._cache.pop(oldest)
+            self._moved = {k: v for k, v in self._moved.items() if k[0] != oldest}
         self._cache[key] = (traced, colour)
         self.traced += 1
-        return self._cache[key]
+        return key
 
     def render_aovs(self, camera) -> dict[str, np.ndarray]:
         return self.tracer.render_aovs(camera)
@@ -89,11 +108,11 @@ class LoopRenderer:
         """RGBA of the maps (torch (H, W, 3|1), linear) seen by `camera` under `envmap`; differentiable in
         the maps. spp and seed are accepted for AssetRenderer's signature: the G-buffer's samples are fixed."""
         t0 = time.perf_counter()
-        gb, colour = self.gbuffer(camera, envmap)
+        key = self._traced(camera, envmap)
         stack = torch.cat([_channels(base_color, 3), _channels(roughness, 1), _channels(metallic, 1)], dim=-1)
         if tuple(stack.shape[:2]) != tuple(self.maps_shape):
             raise InputError(f"The maps are {tuple(stack.shape[:2])}, expected {self.maps_shape}.")
-        rgb, alpha = shade(gb, stack, colour, self._tables_on(stack))
+        rgb, alpha = shade(self._on(key, stack.device), stack, self._cache[key][1], self._tables_on(stack))
         return RenderOutput(rgb=rgb, alpha=alpha, seconds=time.perf_counter() - t0)
 
     def _tables_on(self, like: torch.Tensor) -> torch.Tensor:

@@ -40,8 +40,18 @@ def test_the_dry_run_measures_every_preset_with_tiny_models(tmp_path):
     assert [row["preset"] for row in data["loop_rows"]] == ["final", "draft", "balanced"]
     assert {row["renderer"] for row in data["loop_rows"]} == {"loop"} and {row["renderer"] for row in data["rows"]} == {"path"}
     assert all(row["phases"]["render"] > 0 for row in data["loop_rows"])
+    # Final and balanced step through 2 views in the dry run: the loop renderer's in one pass per model,
+    # path tracing's one at a time (Mitsuba replays a render from the scene's state at backward).
+    views = {row["preset"]: row["views_per_step"] for row in data["loop_rows"]}
+    assert views == {"final": 2, "draft": 1, "balanced": 2}
+    assert [row["batched_steps"] for row in data["loop_rows"]] == [1, 0, 1]
+    assert all(row["batched_steps"] == 0 for row in data["rows"])
+    # The loop renderer's one-off tracing is its own phase; path tracing has none.
+    assert all(row["phases"]["trace"] > 0 for row in data["loop_rows"])
+    assert all(row["phases"]["trace"] == 0 for row in data["rows"])
     table = (tmp_path / "gpu.md").read_text()
     assert "| final |" in table and "| balanced |" in table and "DRY RUN" in table and "loop renderer" in table
+    assert "| one pass per model |" in table and "| one at a time |" in table and "without tracing" in table
     assert "s per critic iteration" in table
 
 

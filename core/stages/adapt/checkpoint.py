@@ -15,8 +15,8 @@ from .config import AdaptConfig
 
 CHECKPOINT_FILE = "adapt_checkpoint.pt"
 CHECKPOINT_FORMAT = "scenefit.adapt_checkpoint"
-# Settings that may change between a run and its resumption.
-RESUMABLE_FIELDS = ("checkpoint_every", "preview_every")
+# Settings that may change between a run and its resumption (batch_views: the same gradients, less memory).
+RESUMABLE_FIELDS = ("checkpoint_every", "preview_every", "batch_views")
 
 
 def settings_key(config: AdaptConfig) -> dict:

@@ -5,10 +5,15 @@ One view of a step (core/stages/adapt/sampling.py draws its camera, light, backg
 and edit modes pick it from a fixed bank whose constant work, core/stages/adapt/constants.py, is done once):
   render the texture (Mitsuba, differentiable) -> local view (object on a solid colour) and global
   views (the asset rendered through the photo camera where compose places it, with compose's shadow
-  matte and compositing rule, crops at several scales; core/stages/adapt/global_views.py) -> per image:
-  VAE encode -> critic (UNet passes; local and global weighed equally) -> backward through the VAE
-  (one image's encoder graph held at a time) -> then backward through the renderer into the texture,
-  scaled by 1 / views_per_step -> ε_ψ's LoRA loss on the local latents (same weight).
+  matte and compositing rule, crops at several scales; core/stages/adapt/global_views.py) -> VAE
+  encode -> critic (UNet passes; local and global weighed equally) -> backward through the VAE -> then
+  backward through the renderer into the texture, scaled by 1 / views_per_step -> ε_ψ's LoRA loss on
+  the local latents (same weight).
+The step's views go through each model together (`train_views`: one VAE pass for the local images, one
+for the crops, one UNet pass per critic, one ε_ψ update) where their renders can all wait for one
+backward (the loop renderer's); with path tracing each view is rendered, scored and back-propagated
+in turn (Mitsuba replays a render from the scene's current state), its crops still in one pass.
+`AdaptConfig.batch_views` False passes one image at a time (one encoder graph held at a time: least memory).
 After the step's views (and the ranks' shares, summed by torch.distributed): one Adam step on the
 texture and one on ε_ψ.
 """
@@ -24,7 +29,7 @@ import torch
 
 from ...base.decision import Decision, decisions_to_dict
 from ...base.errors import Cancelled, InputError
-from ...guidance.critics import ScoreCritic
+from ...guidance.critics import ScoreCritic, gradient_loss
 from ...guidance.injection import ReferenceInjector
 from ...guidance.lora import LoraCritic, camera_condition
 from ...guidance.models import GuidanceModels, load_guidance_models, locate_models
@@ -44,7 +49,8 @@ from .distributed import join_process_group, rank_world, sum_gradients, views_of
 from .global_views import GlobalRender, GlobalScene
 from .sampling import ViewSample, draw_view_bank, sample_view, uses_view_bank, view_azimuths
 
-PHASES = ("constants", "render", "vae", "unet", "vae_backward", "render_backward", "lora", "step")
+# "trace": the loop renderer's G-buffers, traced the first time a view comes up (once per view and run).
+PHASES = ("constants", "trace", "render", "vae", "unet", "vae_backward", "render_backward", "lora", "step")
 
 
 @dataclass
@@ -132,6 +138,12 @@ class _Timer:
     def restart(self) -> None:
         self.last = time.perf_counter()
 
+    def move(self, seconds: float, source: str, target: str) -> None:
+        """Charge `seconds` of the phase `source` (just lapped) to `target` instead."""
+        if seconds > 0:
+            self.totals[source] = self.totals.get(source, 0.0) - seconds
+            self.totals[target] = self.totals.get(target, 0.0) + seconds
+
 
 @dataclass
 class _Critics:
@@ -166,6 +178,9 @@ class AdaptSystem:
         self.latent_res = config.model_resolution // models.vae_scale_factor
         self.bank = draw_view_bank(config, *bank_box(self)) if uses_view_bank(config) else None
         self.constants = ConstantWork(self, cache_constants)
+        # The step's images through each model in one pass (else one image at a time: less memory).
+        self.batch_views = config.batch_views
+        self.batched_steps = 0
         self.uncond = models.embed(config.negative_prompt)
         self.optimizer = torch.optim.Adam(texture.parameters(), lr=config.lr_texture)
         self.my_views = views_of_rank(config.views_per_step, rank, world.choice)
@@ -228,10 +243,15 @@ class AdaptSystem:
         self.timer.restart()
         self.optimizer.zero_grad(set_to_none=True)
         self.cancel = cancel if self.world.choice == 1 else None   # (ranks must finish a step together)
-        per_view = []
-        for j in self.my_views:
-            check_cancel(self.cancel)
-            per_view.append(self.train_view(self.sample(iteration, j)))
+        views = [self.sample(iteration, j) for j in self.my_views]
+        if self.batch_views and self.holds_renders(views):
+            per_view = self.train_views(views)
+            self.batched_steps += 1
+        else:
+            per_view = []
+            for view in views:
+                check_cancel(self.cancel)
+                per_view.append(self.train_view(view))
         params = list(self.texture.parameters())
         for p in params:
             if p.grad is not None:
@@ -250,43 +270,13 @@ class AdaptSystem:
         return sample_view(self.config, iteration, index, self.latent_res, self.inputs.envmap, *bank_box(self),
                            self.bank)
 
-    def train_view(self, view: ViewSample) -> dict:
-        """Render, score and back-propagate one view (its loss weighted 1 / views_per_step); returns its metrics."""
-        weight = 1.0 / self.config.views_per_step
-        env = self.base_env if view.envmap is None else torch.from_numpy(view.envmap)
-        constants = self.constants.get(view, env)
-        self.timer.lap("constants")
-        maps = split_channels(self.texture.texture_from_plan(self.plan, self.base_logit))
-        out = self.renderer_for(view).render(view.camera, *maps, env, spp=view.stage.spp, seed=view.render_seed)
-        rendered = [torch.cat([out.rgb, out.alpha], dim=-1)]
-        placed = None
-        if view.crops:
-            placed = self.global_scene.render(*maps, env, view.camera.azimuth_deg, view.stage.render_size,
-                                              view.stage.spp, view.render_seed + 1)
-            rendered.append(torch.cat([placed.rgb, placed.alpha], dim=-1))
-        self.timer.lap("render")
-        check_cancel(self.cancel)   # between the render and the critics (the view's heaviest half)
-        # Gradients stop at the leaves, so the two halves of backward can be timed.
-        leaves = [r.detach().to(self.device).requires_grad_(True) for r in rendered]
-        share = 0.5 * weight if view.crops else weight   # local and global weighed equally
-        image, latents, metrics = self._local(view, leaves[0], constants, share)
-        if view.crops:
-            check_cancel(self.cancel)   # between the local and the global half of a view
-            self._global(view, leaves[1], placed, constants, share, metrics)
-        grads = [torch.nan_to_num(leaf.grad if leaf.grad is not None else torch.zeros_like(leaf),
-                                  nan=0.0, posinf=0.0, neginf=0.0).to(r.device) for leaf, r in zip(leaves, rendered)]
-        torch.autograd.backward(rendered, grads)  # one pass through the texture for both renders
-        self.timer.lap("render_backward")
-        if self.critics.lora is not None:
-            # ε_ψ learns the current renderings (its LoRA loss on the detached local latents).
-            metrics["lora_loss"] = self.critics.lora.learn(
-                latents, self.models.embed(view.prompt), self._condition(view), view.rng, view.generator,
-                self.critics.local.alpha_bar, self.critics.local.prediction_type, weight)
-            self.timer.lap("lora")
-        if view.index == self.my_views[0]:
-            self.last_image = image.detach()
-        metrics.update({"t": view.t, "lambda": round(view.lam, 4), "stage_size": view.stage.render_size})
-        return metrics
+    def holds_renders(self, views: list[ViewSample]) -> bool:
+        """Whether the views' renders can all wait for one backward: the loop renderer's can (a torch
+        graph each); Mitsuba's path tracing replays a render from the scene's current state, so its
+        render must be back-propagated before the scene renders the next view."""
+        glob = self.global_scene.renderer if self.global_scene is not None else None
+        return len(views) > 1 and all(isinstance(self.renderer_for(v), LoopRenderer) for v in views) and (
+            not any(v.crops for v in views) or isinstance(glob, LoopRenderer))
 
     def renderer_for(self, view: ViewSample):
         """The configured renderer; path tracing for a view with its own random light under the loop
@@ -298,42 +288,153 @@ class AdaptSystem:
                                                 np.asarray(self.base_env), self.renderer.tracer.options)
         return self._path_renderer
 
+    def train_view(self, view: ViewSample) -> dict:
+        """Render, score and back-propagate one view (its loss weighted 1 / views_per_step); returns its metrics."""
+        item = self.render_view(view)
+        check_cancel(self.cancel)   # between the render and the critics (the view's heaviest half)
+        return self._score([item])[0]
+
+    def train_views(self, views: list[ViewSample]) -> list[dict]:
+        """`train_view` for several views, each model run once on all of them: the texture once, each view
+        rendered, then one VAE pass, one UNet pass per critic and one ε_ψ update over all their images;
+        the gradients are the sum of each view's alone (to float rounding)."""
+        maps = split_channels(self.texture.texture_from_plan(self.plan, self.base_logit))
+        self.timer.lap("render")   # (the texture, as one view's render is charged with it)
+        items = []
+        for view in views:
+            check_cancel(self.cancel)
+            items.append(self.render_view(view, maps))
+        check_cancel(self.cancel)
+        return self._score(items)
+
+    def render_view(self, view: ViewSample, maps: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None
+                    ) -> "_Rendered":
+        """The view's constant work and its renders (local, and the asset in the photo when it has crops),
+        from `maps` (the step's texture) or the texture made afresh."""
+        env = self.base_env if view.envmap is None else torch.from_numpy(view.envmap)
+        traced = self._trace_seconds()
+        constants = self.constants.get(view, env)
+        self.timer.lap("constants")
+        traced = self._charge_trace("constants", traced)   # the reference render may trace the view first
+        if maps is None:
+            maps = split_channels(self.texture.texture_from_plan(self.plan, self.base_logit))
+        out = self.renderer_for(view).render(view.camera, *maps, env, spp=view.stage.spp, seed=view.render_seed)
+        rendered = [torch.cat([out.rgb, out.alpha], dim=-1)]
+        placed = None
+        if view.crops:
+            placed = self.global_scene.render(*maps, env, view.camera.azimuth_deg, view.stage.render_size,
+                                              view.stage.spp, view.render_seed + 1)
+            rendered.append(torch.cat([placed.rgb, placed.alpha], dim=-1))
+        self.timer.lap("render")
+        self._charge_trace("render", traced)
+        # Gradients stop at the leaves, so the two halves of backward can be timed.
+        leaves = [r.detach().to(self.device).requires_grad_(True) for r in rendered]
+        weight = 1.0 / self.config.views_per_step
+        share = 0.5 * weight if view.crops else weight   # local and global weighed equally
+        return _Rendered(view, constants, rendered, leaves, placed, share)
+
+    def _trace_seconds(self) -> float:
+        glob = self.global_scene.renderer if self.global_scene is not None else None
+        return sum(r.trace_seconds for r in (self.renderer, glob) if isinstance(r, LoopRenderer))
+
+    def _charge_trace(self, phase: str, since: float) -> float:
+        """Move the G-buffer tracing done since `since` out of `phase` (just lapped) into "trace"."""
+        now = self._trace_seconds()
+        self.timer.move(now - since, phase, "trace")
+        return now
+
+    def _score(self, items: list["_Rendered"]) -> list[dict]:
+        """The rendered views scored (local, then global), back-propagated into the texture, and ε_ψ's
+        update on their local latents; each model takes `rows_per_pass` images at a time."""
+        images, latents, per_view = self._local(items)
+        if any(item.view.crops for item in items):
+            check_cancel(self.cancel)   # between the local and the global half
+            self._global(items, per_view)
+        rendered = [r for item in items for r in item.rendered]
+        grads = [torch.nan_to_num(leaf.grad if leaf.grad is not None else torch.zeros_like(leaf),
+                                  nan=0.0, posinf=0.0, neginf=0.0).to(r.device)
+                 for item in items for leaf, r in zip(item.leaves, item.rendered)]
+        torch.autograd.backward(rendered, grads)  # one pass through the texture for all the renders
+        self.timer.lap("render_backward")
+        views = [item.view for item in items]
+        if self.critics.lora is not None:
+            # ε_ψ learns the current renderings (its LoRA loss on the detached local latents).
+            losses: list[float] = []
+            for rows in self._passes(len(views)):
+                losses += self.critics.lora.learn_rows(
+                    latents[rows], torch.cat([self.models.embed(views[i].prompt) for i in rows]),
+                    torch.stack([self._condition(views[i]) for i in rows]), [views[i].rng for i in rows],
+                    [views[i].generator for i in rows], self.critics.local.alpha_bar,
+                    self.critics.local.prediction_type, [1.0 / self.config.views_per_step] * len(rows))
+            for metrics, loss in zip(per_view, losses):
+                metrics["lora_loss"] = loss
+            self.timer.lap("lora")
+        for k, (view, metrics) in enumerate(zip(views, per_view)):
+            if view.index == self.my_views[0]:
+                self.last_image = images[k:k + 1].detach()
+            metrics.update({"t": view.t, "lambda": round(view.lam, 4), "stage_size": view.stage.render_size})
+        return per_view
+
+    def _passes(self, count: int) -> list[list[int]]:
+        """The rows of `count` images, grouped into the models' passes (all at once when batching)."""
+        size = count if self.batch_views else 1
+        return [list(range(i, min(i + size, count))) for i in range(0, count, size)]
+
     def _condition(self, view: ViewSample) -> torch.Tensor:
         return camera_condition(view.camera.origin, view.camera.forward, view.light)
 
-    def _local(self, view: ViewSample, leaf: torch.Tensor, constants: ViewConstants, share: float):
-        """The local view encoded, scored (ε_φ with the reference injected, ε_ψ) and back-propagated to
-        its leaf at `share` of the step; its encoder graph is freed before the next image's is built."""
-        image = local_view(leaf[..., 0:3], leaf[..., 3:4], view.background, self.config.model_resolution)
-        latents = self.models.encode(image)
-        self.timer.lap("vae")
-        local = self.critics.local(latents, view.t, view.noise.to(self.device), self.models.embed(view.prompt),
-                                   self.uncond, lam=view.lam, condition=self._condition(view),
-                                   reference_latents=constants.reference_latents, weight_map=constants.weight_map)
-        self.timer.lap("unet")
-        (local.loss * share).backward()
-        self.timer.lap("vae_backward")
-        metrics = {"local_grad_norm": local.metrics["grad_norm"], "nonfinite": local.metrics["nonfinite"]}
-        return image, latents.detach(), metrics
-
-    def _global(self, view: ViewSample, leaf: torch.Tensor, placed: GlobalRender, constants: ViewConstants,
-                share: float, metrics: dict) -> None:
-        """Each crop of the asset in the photo encoded, scored by the inpainting critic (its mask and
-        masked-photo latents from the constants) and back-propagated at `share` / crops."""
-        norms = []
-        for crop, (mask, masked_latents) in zip(view.crops, constants.crops):
-            g_image, _ = global_view(leaf[..., 0:3], leaf[..., 3:4], placed.rect, self.photo, placed.matte, crop,
-                                     self.config.model_resolution)
-            g_latents = self.models.encode(g_image)
+    def _local(self, items: list["_Rendered"]) -> tuple[torch.Tensor, torch.Tensor, list[dict]]:
+        """The local views encoded, scored (ε_φ with the reference injected, ε_ψ) and back-propagated to
+        their leaves at each view's share of the step. A pass's encoder graph is freed before the next
+        pass builds its own (one image at a time unless batching)."""
+        images, latents, per_view = [], [], []
+        for rows in self._passes(len(items)):
+            part = [items[i] for i in rows]
+            image = torch.cat([local_view(it.leaves[0][..., 0:3], it.leaves[0][..., 3:4], it.view.background,
+                                          self.config.model_resolution) for it in part])
+            z = self.models.encode(image)
             self.timer.lap("vae")
-            g = self.critics.glob(g_latents, view.t, view.noise.to(self.device), self.models.embed(view.prompt),
-                                  self.uncond, extra=(mask, masked_latents))
+            views, constants = [it.view for it in part], [it.constants for it in part]
+            local = self.critics.local(
+                z, [v.t for v in views], torch.cat([v.noise for v in views]).to(self.device),
+                torch.cat([self.models.embed(v.prompt) for v in views]), self.uncond, lam=[v.lam for v in views],
+                condition=torch.stack([self._condition(v) for v in views]),
+                reference_latents=_stacked([c.reference_latents for c in constants]),
+                weight_map=_stacked([c.weight_map for c in constants]))
             self.timer.lap("unet")
-            (g.loss * (share / len(view.crops))).backward()
+            gradient_loss(z, local.grad * _per_row([it.share for it in part], local.grad)).backward()
             self.timer.lap("vae_backward")
-            norms.append(g.metrics["grad_norm"])
-            metrics["nonfinite"] += g.metrics["nonfinite"]
-        metrics["global_grad_norm"] = float(np.mean(norms))
+            per_view += [{"local_grad_norm": row["grad_norm"], "nonfinite": row["nonfinite"]} for row in local.row_metrics]
+            images.append(image)
+            latents.append(z.detach())
+        return torch.cat(images), torch.cat(latents), per_view
+
+    def _global(self, items: list["_Rendered"], per_view: list[dict]) -> None:
+        """Each crop of the asset in the photo encoded, scored by the inpainting critic (its mask and
+        masked-photo latents from the constants) and back-propagated at its view's share / crops."""
+        crops = [(k, crop, consts) for k, it in enumerate(items)
+                 for crop, consts in zip(it.view.crops, it.constants.crops)]
+        norms: dict[int, list[float]] = {}
+        for rows in self._passes(len(crops)):
+            part = [crops[i] for i in rows]
+            image = torch.cat([global_view(items[k].leaves[1][..., 0:3], items[k].leaves[1][..., 3:4],
+                                           items[k].placed.rect, self.photo, items[k].placed.matte, crop,
+                                           self.config.model_resolution)[0] for k, crop, _ in part])
+            z = self.models.encode(image)
+            self.timer.lap("vae")
+            views = [items[k].view for k, _, _ in part]
+            g = self.critics.glob(z, [v.t for v in views], torch.cat([v.noise for v in views]).to(self.device),
+                                  torch.cat([self.models.embed(v.prompt) for v in views]), self.uncond,
+                                  extra=(torch.cat([c[0] for _, _, c in part]), torch.cat([c[1] for _, _, c in part])))
+            self.timer.lap("unet")
+            shares = [items[k].share / len(items[k].view.crops) for k, _, _ in part]
+            gradient_loss(z, g.grad * _per_row(shares, g.grad)).backward()
+            self.timer.lap("vae_backward")
+            for (k, _, _), row in zip(part, g.row_metrics):
+                norms.setdefault(k, []).append(row["grad_norm"])
+                per_view[k]["nonfinite"] += row["nonfinite"]
+        for k, values in norms.items():
+            per_view[k]["global_grad_norm"] = float(np.mean(values))
 
     # -- reporting and finish ------------------------------------------------------------------------
 
@@ -382,9 +483,9 @@ class AdaptSystem:
             choice["global"] = "loop" if isinstance(glob, LoopRenderer) else "path"
         if loops:
             choice.update(traced=sum(r.traced for r in loops), reused=sum(r.reused for r in loops))
-        why = {"auto": "the loop renderer where it agrees with path tracing to >= 35 dB on the corpus (global views, "
-                       "HDR light), path tracing where it was not shown to (local views, ambient light): "
-                       "benchmarks/results/loop_render.md",
+        why = {"auto": "the loop renderer where it agrees with path tracing to >= 35 dB on the corpus (local views "
+                       "under ambient light, global views under the HDR map), path tracing where it was not shown "
+                       "to: benchmarks/results/loop_render.md",
                "loop": "the loop renderer, as asked", "path": "Mitsuba's differentiable path tracing (prb), as asked"}
         reason = why[self.config.renderer]
         if loops:
@@ -418,9 +519,36 @@ class AdaptSystem:
             "views_per_step": Decision(config.views_per_step,
                                        f"{mine} view(s) rendered in turn on this rank, gradients averaged"
                                        + (f" over {world} ranks" if world > 1 else "")),
+            "batched_views": Decision(
+                {"asked": self.batch_views, "steps": self.batched_steps},
+                "the steps whose views went through the VAE, each UNet and ε_ψ's update in one pass per model "
+                "(their renders, the loop renderer's, wait for one backward); the others' views one at a time"
+                if self.batch_views else "one image at a time through each model, as asked (least memory)"),
             "models": Decision({k: str(v) for k, v in self.models.paths.items()}, "where the weights were found"),
             "device": Decision(str(self.device), f"{str(self.models.dtype).replace('torch.', '')} UNet"),
         }
+
+
+@dataclass
+class _Rendered:
+    """One view of a step, rendered: what its scoring needs."""
+
+    view: ViewSample
+    constants: ViewConstants
+    rendered: list[torch.Tensor]     # the renders (local; the asset in the photo), in the texture's graph
+    leaves: list[torch.Tensor]       # the same, detached on the models' device: where the critics' gradients stop
+    placed: GlobalRender | None
+    share: float                     # the weight of each half (local, global) in the step
+
+
+def _stacked(rows: list[torch.Tensor | None]) -> torch.Tensor | None:
+    """The views' tensors of one kind as one batch (None where the views have none)."""
+    return None if rows[0] is None else torch.cat(rows)
+
+
+def _per_row(values: list[float], like: torch.Tensor) -> torch.Tensor:
+    """(B, 1, 1, 1): one number per row of `like`."""
+    return torch.tensor(values, dtype=like.dtype, device=like.device).view(-1, *([1] * (like.ndim - 1)))
 
 
 def _global_scene(inputs: AdaptInputs, config: AdaptConfig, photo: np.ndarray, envmap: np.ndarray) -> GlobalScene:

@@ -58,17 +58,17 @@ def test_a_cancel_mid_step_stops_between_views_and_resume_continues_the_count(ti
         expected = whole.texture.texture(raster.position, raster.border, raster.fill_index)
 
     cancel, views, asked = threading.Event(), [], []
-    train_view = AdaptSystem.train_view
+    render_view = AdaptSystem.render_view   # every view of a step, batched or one at a time, is rendered here
 
-    def counted(self, view):
+    def counted(self, view, *args):
         views.append(len(views))
-        metrics = train_view(self, view)
+        rendered = render_view(self, view, *args)
         if len(views) == 3:   # the first view of the second step: cancel before its second view
             cancel.set()
             asked.append(time.perf_counter())
-        return metrics
+        return rendered
 
-    monkeypatch.setattr(AdaptSystem, "train_view", counted)
+    monkeypatch.setattr(AdaptSystem, "render_view", counted)
     with pytest.raises(Cancelled):
         adapt_texture(inputs, config, cancel=cancel, checkpoint_dir=tmp_path)
     stopped = time.perf_counter() - asked[0]
@@ -77,7 +77,7 @@ def test_a_cancel_mid_step_stops_between_views_and_resume_continues_the_count(ti
     checkpoint = torch.load(tmp_path / CHECKPOINT_FILE, map_location="cpu", weights_only=True)
     assert checkpoint["iteration"] == 1 and len(checkpoint["history"]) == 1   # the finished step, not the half one
 
-    monkeypatch.setattr(AdaptSystem, "train_view", train_view)
+    monkeypatch.setattr(AdaptSystem, "render_view", render_view)
     resumed = adapt_texture(inputs, config, checkpoint_dir=tmp_path)
     assert resumed.resumed_from == 1 and len(resumed.history) == config.iterations
     with torch.no_grad():

@@ -1,5 +1,5 @@
 """The adapt stage's renderer choice: by default ("auto") the loop renderer where it was measured to agree
-with path tracing (the global views), path tracing elsewhere; "loop" (each bank view's G-buffer traced
+with path tracing (local and global views, benchmarks/results/loop_render.md), path tracing elsewhere; "loop" (each bank view's G-buffer traced
 once, then shaded every step) or "path" everywhere when asked; the report says which ran and why."""
 from __future__ import annotations
 
@@ -43,12 +43,12 @@ def config(models, **overrides) -> AdaptConfig:
 def test_auto_uses_the_loop_renderer_where_it_agrees(setup):
     inputs, models = setup
     cfg = config(models, iterations=1)
-    assert cfg.renderer == "auto" and (cfg.renderer_of("local"), cfg.renderer_of("global")) == ("path", "loop")
+    assert cfg.renderer == "auto" and (cfg.renderer_of("local"), cfg.renderer_of("global")) == ("loop", "loop")
     system = AdaptSystem.build(inputs, cfg)
     system.step(0)
-    assert not isinstance(system.renderer, LoopRenderer) and isinstance(system.global_scene.renderer, LoopRenderer)
+    assert isinstance(system.renderer, LoopRenderer) and isinstance(system.global_scene.renderer, LoopRenderer)
     decision = system.decisions()["renderer"]
-    assert decision.choice["local"] == "path" and decision.choice["global"] == "loop"
+    assert decision.choice["local"] == "loop" and decision.choice["global"] == "loop"
     assert "35 dB" in decision.reason and "loop_render.md" in decision.reason
 
 
@@ -64,6 +64,12 @@ def test_the_loop_renderer_traces_each_view_once(setup):
     # Three steps over a bank of two views: at most two local and two global G-buffers, the rest reused.
     assert decision.choice["local"] == decision.choice["global"] == "loop" and decision.choice["traced"] <= 4
     assert decision.choice["reused"] >= 2 and "traced once" in decision.reason
+    # The tracing is its own phase (once per view), not the render's nor the constant work's.
+    traced = system.renderer.trace_seconds + system.global_scene.renderer.trace_seconds
+    assert traced > 0 and system.timer.totals["trace"] == pytest.approx(traced)
+    before = dict(system.timer.totals)
+    system.step(cfg.iterations)   # every view of the bank met: nothing more to trace
+    assert system.timer.totals["trace"] == before["trace"] and system.timer.totals["render"] > before["render"]
     assert any((a - b).abs().max() > 0 for a, b in zip(start, system.texture.parameters()))
     assert all(torch.isfinite(p).all() for p in system.texture.parameters())
 
@@ -74,7 +80,7 @@ def test_path_tracing_when_asked_and_a_bad_name_refused(setup):
     system.step(0)
     choice = system.decisions()["renderer"].choice
     assert choice["local"] == choice["global"] == "path" and "traced" not in choice
-    assert not isinstance(system.renderer, LoopRenderer)
+    assert not isinstance(system.renderer, LoopRenderer) and system.timer.totals.get("trace", 0.0) == 0.0
     with pytest.raises(InputError, match="renderer"):
         config(models, renderer="raster")
 
@@ -85,7 +91,7 @@ def test_loop_and_path_steps_point_the_same_way(setup):
     own noise does not hide the direction)."""
     inputs, models = setup
     grads = {}
-    for renderer in ("loop", "path"):   # local views only: "auto" would path-trace both
+    for renderer in ("loop", "path"):   # local views only: one renderer each
         system = AdaptSystem.build(inputs, config(models, renderer=renderer, views_type="local",
                                                   stages=(StageSpec(1.0, 32, 256, (500, 990)),)))
         system.optimizer.zero_grad(set_to_none=True)

@@ -88,7 +88,9 @@ def test_short_scene_run_changes_the_texture_and_resumes_exactly(tiny_models, as
     assert events[1].preview is not None and events[1].preview.shape == (32, 32, 3) and events[0].preview is None
     assert full.decisions["reference_injection"].choice == 4   # the tiny UNet's 4 self-attention layers
     # Every phase is timed, and the phases are parts of the run (they cannot add up to more than it).
-    assert set(full.timings) == {"constants", "render", "vae", "unet", "vae_backward", "render_backward", "lora", "step"}
+    # ("trace": the loop renderer's G-buffers, the default renderer's, traced once per view.)
+    assert set(full.timings) == {"constants", "trace", "render", "vae", "unet", "vae_backward", "render_backward", "lora",
+                                 "step"}
     assert sum(full.timings.values()) <= full.seconds
     # The coarse stage renders 16 px, the fine one 32 px.
     assert [h["stage_size"] for h in full.history] == [16, 16, 32, 32]

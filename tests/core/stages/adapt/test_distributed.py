@@ -13,7 +13,8 @@ With two views, a + b = b + a holds exactly in IEEE arithmetic, so two ranks of 
 the bits of one process doing both, step after step. With four views the groupings differ, and
 each ordering is within (V - 1) u sum|g_j| of the exact sum (u = 2^-24), so they differ by at most
 2 (V - 1) u sum|g_j| per element: the test checks that bound, and that the distributed gradient is
-exactly the rank-grouped sum.
+exactly the rank-grouped sum. So the views here go through the models one at a time (batch_views
+false): a rank's views in one batch would round differently from each alone (test_batched_views.py).
 """
 from __future__ import annotations
 
@@ -79,7 +80,7 @@ def setup(models: tuple[str, str]):
     texture = NeuralTexture(stage_config("texture", "draft", resolution=32, log2_table=12), seed=0)
     photo = np.random.default_rng(0).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32)
     inputs = AdaptInputs(mesh=mesh, raster=raster, texture=texture, photo=photo, placement=Placement((0.5, 0.6), 0.5))
-    common = dict(prompt="a mossy sphere in a swamp", stages=STAGES, model_resolution=32, views=8,
+    common = dict(prompt="a mossy sphere in a swamp", stages=STAGES, model_resolution=32, views=8, batch_views=False,
                   checkpoint_every=0, preview_every=0, lr_texture=1e-2,
                   models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint)))
     return inputs, AdaptConfig(iterations=1, views_per_step=4, **common), AdaptConfig(iterations=3, views_per_step=2,
