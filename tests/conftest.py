@@ -144,17 +144,35 @@ def validator():
     return validate
 
 
+_TINY_PAIR: tuple[Path, Path] | None = None
+
+
+def shared_tiny_pair() -> tuple[Path, Path]:
+    """The tiny random-weight (base, inpaint) model folders, built once per test process (4 s each time) and
+    only ever read by the tests that share them."""
+    global _TINY_PAIR
+    if _TINY_PAIR is None:
+        import atexit
+        import shutil
+        import tempfile
+
+        from scenefit.devtools.tiny_models import build_tiny_pair
+
+        folder = Path(tempfile.mkdtemp(prefix="scenefit-tiny-pair-"))
+        atexit.register(shutil.rmtree, folder, True)
+        _TINY_PAIR = build_tiny_pair(folder)
+    return _TINY_PAIR
+
+
 def extension_and_models(tmp: Path) -> tuple[Path, Path, Path]:
-    """The extension zip (no wheels), the tiny model pair and an empty Blender user folder, in `tmp`."""
+    """The extension zip (no wheels) and an empty Blender user folder in `tmp`, and the tiny models' folder."""
     sys.path.insert(0, str(ROOT / "tools"))
     import build_extension
-    from scenefit.devtools.tiny_models import build_tiny_pair
 
     zip_path = build_extension.build_without_wheels(tmp / "scenefit.zip")
-    build_tiny_pair(tmp / "tiny")
     user = tmp / "blender_user"
     user.mkdir()
-    return zip_path, tmp / "tiny", user
+    return zip_path, shared_tiny_pair()[0].parent, user
 
 
 def fill_in(script: str, tmp: Path, zip_path: Path, tiny: Path) -> str:

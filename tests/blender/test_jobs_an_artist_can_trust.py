@@ -397,10 +397,10 @@ def session(tmp_path_factory):
     missing = [p for p in ASSETS if not p.is_file()]
     if missing:
         pytest.skip(f"the corpus asset {missing[0]} is not here")
-    from scenefit.devtools.tiny_models import build_tiny_pair
+    from conftest import shared_tiny_pair
 
     tmp = tmp_path_factory.mktemp("trust_jobs")
-    tiny = build_tiny_pair(tmp / "tiny")
+    tiny = shared_tiny_pair()
     python = PythonSession()
     try:
         setup = python.run(SETUP.replace("TMP", repr(str(tmp))).replace("ASSETS", repr([str(p) for p in ASSETS]))

@@ -11,7 +11,7 @@ from scenefit.core.base.errors import InputError, ModelMissingError
 from scenefit.core.guidance import (CriticConfig, LoraCritic, ModelConfig, ReferenceInjector, ScoreCritic,
                                     camera_condition, load_guidance_models, locate_models, models_available)
 from scenefit.core.scene.placement import Placement
-from scenefit.devtools.tiny_models import build_tiny_pair
+from conftest import shared_tiny_pair
 from scenefit.core.guidance.views import (global_view, inpainting_input, latent_mask, local_view,
                                           masked_image, sample_crops)
 from scenefit.core.guidance.weighting import (add_noise, guard_gradient, interpolation_lambda, predicted_x0,
@@ -20,7 +20,7 @@ from scenefit.core.guidance.weighting import (add_noise, guard_gradient, interpo
 
 @pytest.fixture(scope="module")
 def tiny_folders(tmp_path_factory):
-    return build_tiny_pair(tmp_path_factory.mktemp("tiny_sd"))
+    return shared_tiny_pair()
 
 
 @pytest.fixture(scope="module", autouse=True)

@@ -18,12 +18,12 @@ from scenefit.core.scene.placement import Placement
 from scenefit.core.stages.adapt import AdaptConfig, AdaptInputs, AdaptSystem, StageSpec, adapt_texture
 from scenefit.core.stages.adapt.checkpoint import CHECKPOINT_FILE
 from scenefit.core.texture import NeuralTexture
-from scenefit.devtools.tiny_models import build_tiny_pair
+from conftest import shared_tiny_pair
 
 
 @pytest.fixture(scope="module")
 def tiny_models(tmp_path_factory):
-    return build_tiny_pair(tmp_path_factory.mktemp("tiny_sd_cancel"))
+    return shared_tiny_pair()
 
 
 @pytest.fixture

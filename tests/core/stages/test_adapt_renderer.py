@@ -17,12 +17,12 @@ from scenefit.core.scene.placement import Placement
 from scenefit.core.stages.adapt import AdaptConfig, AdaptInputs, StageSpec
 from scenefit.core.stages.adapt.system import AdaptSystem
 from scenefit.core.texture import NeuralTexture
-from scenefit.devtools.tiny_models import build_tiny_pair
+from conftest import shared_tiny_pair
 
 
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory):
-    base, inpaint = build_tiny_pair(tmp_path_factory.mktemp("tiny_sd_loop"))
+    base, inpaint = shared_tiny_pair()
     mesh = uv_sphere(segments=16, rings=8)
     raster = rasterize_uv(mesh, 32)
     texture = NeuralTexture(stage_config("texture", "draft", resolution=32, log2_table=12), seed=0)

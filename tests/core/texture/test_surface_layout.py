@@ -133,9 +133,9 @@ def test_the_layout_is_saved_with_the_texture_and_read_for_the_same_asset_only(t
 
 @pytest.fixture(scope="module")
 def tiny_models(tmp_path_factory):
-    from scenefit.devtools.tiny_models import build_tiny_pair
+    from conftest import shared_tiny_pair
 
-    return build_tiny_pair(tmp_path_factory.mktemp("tiny_sd_layout"))
+    return shared_tiny_pair()
 
 
 def test_adaptation_works_in_the_new_layout_and_saves_it(tiny_models, tmp_path):

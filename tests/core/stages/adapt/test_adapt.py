@@ -17,14 +17,14 @@ from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.scene.placement import Placement
 from scenefit.core.data.uv_raster import rasterize_uv
 from scenefit.core.texture import NeuralTexture
-from scenefit.devtools.tiny_models import build_tiny_pair
+from conftest import shared_tiny_pair
 
 TINY_STAGES = (StageSpec(0.5, 16, 2, (30, 990)), StageSpec(0.5, 32, 2, (500, 990)))
 
 
 @pytest.fixture(scope="module")
 def tiny_models(tmp_path_factory):
-    return build_tiny_pair(tmp_path_factory.mktemp("tiny_sd_adapt"))
+    return shared_tiny_pair()
 
 
 @pytest.fixture(scope="module")
