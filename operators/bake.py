@@ -170,7 +170,7 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         self._beside = [o.name for o in imported_beside(objects, context.scene.objects, source)] \
             if self.cameras_and_lights else []
         remap, remapped, self._new_uvs = new_uv_map(context, layout, texture)
-        return work.bake_game_maps, dict(layout.bake_data(), **layout.own_maps(),
+        return work.bake_game_maps, dict(layout.bake_data(), **layout.own_maps(context),
                                          texture=str(texture),
                                          size=self.texture_size, max_size=self.max_texture, remap=remap,
                                          remapped=remapped)

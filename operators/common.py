@@ -13,6 +13,7 @@ import bpy
 
 from ..blender_io.tag import TAG   # what every datablock SceneFit makes carries (operators/results.py)
 from ..core.base.errors import InputError
+from ..core.data.map_plan import PendingAsset
 from ..core.data.materials import AssetMaterials
 
 ADDON_PACKAGE = __package__.rpartition(".")[0]
@@ -83,16 +84,22 @@ class AssetLayout:
     slots: list[list[tuple[str, int]]]
     artists: list
 
-    def read(self, context, shown: bool = False) -> AssetMaterials:
-        """Every material's maps as the artist made it, and what was read (procedural chains are baked over
-        their own faces): Run All and Convert again restyle the asset, not SceneFit's last result.
-        shown: as the slots show it instead (SceneFit's result where there is one: Export to Mitsuba)."""
-        from ..blender_io.material import read_material
+    def plan(self, context, shown: bool = False, files_in_job: bool = True) -> PendingAsset:
+        """Every material's maps as the artist made it, planned here and computed in the job
+        (core/data/map_plan.py): its image files decoded there, its procedural chains baked over their own
+        faces by the main thread first (`bakes`, one per tick). Run All and Convert again restyle the asset,
+        not SceneFit's last result. shown: as the slots show it instead (SceneFit's result where there is one)."""
+        from ..blender_io.material import plan_asset
 
-        users = [bpy.data.objects[pairs[0][0]] for pairs in self.slots]
-        materials = self.materials if shown else self.artists
-        return AssetMaterials(mesh=self.mesh, materials=tuple(
-            read_material(m, obj, pairs[0][1]) for m, obj, pairs in zip(materials, users, self.slots)))
+        users = [(bpy.data.objects[pairs[0][0]], pairs[0][1]) for pairs in self.slots]
+        return plan_asset(self.mesh, self.materials if shown else self.artists, users, files_in_job)
+
+    def read(self, context, shown: bool = False) -> AssetMaterials:
+        """The plan's maps read now, on this thread (Export to Mitsuba, a worker's hand-off)."""
+        plan = self.plan(context, shown)
+        for bake in plan.bakes:
+            bake.run()
+        return plan.resolved()
 
     def fitting_mesh(self):
         """The mesh of `fitting`, read without any pixels (Adapt needs only the mesh: reading the maps
@@ -117,13 +124,11 @@ class AssetLayout:
                 "constants": [constant_channels(m) for m in self.artists],
                 "wraps": [material_wrap(m) for m in self.artists]}
 
-    def own_maps(self) -> dict:
+    def own_maps(self, context) -> dict:
         """Each artist's material's own maps, which the game bake takes its shape and base from and compares
-        its maps with (plain data): a result's images are the texture's working copy, not the asset's."""
-        from ..blender_io.material import read_material
-
-        return {"own_maps": [read_material(artist, bpy.data.objects[pairs[0][0]], pairs[0][1]).maps
-                             for artist, pairs in zip(self.artists, self.slots)]}
+        its maps with, planned (decoded in the job): a result's images are the texture's working copy, not
+        the asset's."""
+        return {"own_maps": self.plan(context)}
 
 
 def artists_materials(context, materials: list, slots: list[list[tuple[str, int]]]) -> list:

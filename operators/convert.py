@@ -24,15 +24,15 @@ class SCENEFIT_OT_convert(OnMesh, JobOperator):
 
     def prepare(self, context):
         layout = asset_layout(context)   # the selected objects, or the active one with all its materials
-        asset = layout.read(context)
         self._object_name, self._layout = layout.name, result_targets(layout)
         out = run_folder(context, "convert", layout.name)
-        data = {"preset": context.scene.scenefit.preset, "iterations": self.iterations, "out": str(out)}
+        # the maps are decoded in the job; procedural chains are baked between redraws before it starts
+        data = {"preset": context.scene.scenefit.preset, "iterations": self.iterations, "out": str(out),
+                "asset": layout.plan(context)}
         if len(layout.materials) == 1:
-            mesh, maps = asset.fitting_view()
-            return work.convert, dict(data, mesh=mesh, maps=maps)
+            return work.convert, data
         # several materials: fitted as their atlas, then each baked in its own UVs for its slots
-        return work.convert, dict(data, asset=asset, materials=layout.bake_data())
+        return work.convert, dict(data, materials=layout.bake_data())
 
     def apply(self, context, result) -> str:
         mats = apply_layout_results(context, self._layout, result, "convert")

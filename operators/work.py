@@ -38,6 +38,7 @@ def _moved(value, old: str, new: str):
 def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
     """Fit the neural texture to the asset's maps; bake base colour, roughness, metallic into data['out']."""
     from ..core.base.report import write_report
+    from ..core.data.map_plan import resolved_asset
     from ..core.stages.convert import convert_and_bake
     from ..core.pipeline.presets import stage_config
 
@@ -47,8 +48,12 @@ def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> 
     def write(out: Path) -> dict:
         # A roughness or metallic that holds one value stays that value (a factor on the socket), as
         # on the command line, instead of a baked 16-bit map.
-        asset = data.get("asset")   # several materials (core.materials.AssetMaterials), else mesh and maps
-        _, report = convert_and_bake(asset or data["mesh"], None if asset else data["maps"], out,
+        mesh, maps = data.get("mesh"), data.get("maps")   # (a script's own mesh and maps)
+        if data.get("asset") is not None:
+            asset = resolved_asset(data["asset"])   # the maps decoded here, off Blender's main thread
+            several = len(asset.materials) > 1   # fitted as their atlas; one material: its mesh and maps
+            mesh, maps = (asset, None) if several else asset.fitting_view()
+        _, report = convert_and_bake(mesh, maps, out,
                                      stage_config("convert", data["preset"], **overrides), progress=progress,
                                      cancel=cancel, keep_constants=True)
         per_material = material_results(data, report["outputs"]["weights"], out / "materials") \
@@ -235,10 +240,13 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
     game bake is Bake Asset's, on the main thread) into data['out'] with data['config'], the RunConfig
     Run All built (view_config); returns what Blender applies."""
     from ..core.base.report import write_report
+    from ..core.data.map_plan import resolved_asset
     from ..core.pipeline.run import run_pipeline
 
+    mesh, maps = resolved_asset(data["asset"]).fitting_view()   # the maps decoded here, off the main thread
+
     def write(folder: Path) -> dict:
-        result = run_pipeline(data["mesh"], data["maps"], data["photo"], data["placement"], folder,
+        result = run_pipeline(mesh, maps, data["photo"], data["placement"], folder,
                               data["config"], progress=progress, cancel=cancel,
                               bake_skipped_why="in Blender the game file is written by Bake Asset",
                               reuse_from=data.get("reuse_from"))
@@ -273,10 +281,11 @@ def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Eve
     from ..blender_io.uv_unwrap import NEW_UV_MAP
     from ..core.stages.bake.game_bake import bake_game_maps as bake, bake_shapes
     from ..core.base.progress import emit
+    from ..core.data.map_plan import resolved_asset
     from ..core.texture.bake import load_neural_texture
 
     texture = load_neural_texture(data["texture"])
-    own = list(data["own_maps"])
+    own = [m.maps for m in resolved_asset(data["own_maps"]).materials]   # decoded here, off the main thread
     shapes = bake_shapes(own, data["size"], data.get("max_size", 8192))
     shown = ", ".join(sorted({f"{s}²" if isinstance(s, int) else f"{s[1]}x{s[0]}" for s in shapes}))
     emit(progress, "bake", 0, 1, f"{len(data['names'])} material(s) at {shown}")

@@ -218,7 +218,7 @@ texture = import_module(MODULE + ".core.texture.bake").load_neural_texture(bpy.p
 mesh_b, _ = import_module(MODULE + ".blender_io.material").object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())
 # (each material at its own images' shape, from the artist's maps behind the result in the slot)
 layout = import_module(MODULE + ".operators.common").asset_layout(bpy.context)
-own = layout.own_maps()["own_maps"]
+own = [m.maps for m in layout.read(bpy.context).materials]
 out["bake_shape"] = list(game_bake.own_texture_shape(own[0], import_module(MODULE + ".core.stages.bake.gltf_output").DEFAULT_MAX_TEXTURE))
 # The file holds the artist's material (the slot holds SceneFit's preview of the texture) with the baked maps.
 (artist,) = layout.artists
