@@ -1,6 +1,6 @@
 """Imports in core/ sit at the top of their module; one inside a function is kept only where it puts
 off a heavy or optional library (one that takes seconds to load, or that Blender may lack: the extension
-registers without it and `operators.common.missing_modules` names it), and says so in a comment."""
+registers without it and `operators.dependencies.missing_modules` names it), and says so in a comment."""
 from __future__ import annotations
 
 import ast
@@ -19,9 +19,7 @@ BOUNDARIES = frozenset({
 
 # TODO: modules being rewritten now (the run schema, the camera stage, the stage splits): their imports
 # inside functions are swept when they settle.
-REWRITTEN = ("core/pipeline/", "core/stages/camera.py", "core/stages/camera/", "core/stages/light/stage.py",
-             "core/render/", "core/stages/adapt/", "core/guidance/", "core/stages/bake/", "core/data/asset_files.py",
-             "core/data/asset_read_cache.py", "core/data/gltf_meshopt.py", "core/base/report.py")
+REWRITTEN = ("core/pipeline/", "core/render/", "core/stages/adapt/", "core/guidance/", "core/stages/bake/")
 
 
 def _target(module: str, node: ast.Import | ast.ImportFrom, alias: ast.alias) -> str:

@@ -1,0 +1,285 @@
+"""What each Blender operator's job runs in its worker thread: plain data in, plain data (paths, numbers) out.
+
+These functions run in a job's worker thread (or inline under `blender -b`), so they never import
+bpy: the operators gather Blender data into the `data` dicts on the main thread, and write the
+results back on the main thread once the job ends. Each writes only into its own run folder.
+"""
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+from ..core.base.progress import ProgressCallback
+
+
+def written_whole(out: str, write, resume: bool = False) -> dict:
+    """Run `write(folder)` into the hidden sibling of `out` and swap it in whole when it returns
+    (core.output_folder: a cancelled or failed run leaves nothing, except with `resume`: a stage that
+    checkpoints keeps its sibling, which the same `out` continues from); the paths it returns are moved
+    along to `out`."""
+    from ..core.base.output_folder import output_folder
+
+    with output_folder(out, resume=resume) as staging:
+        result = write(staging)
+    target = str(Path(out).absolute())
+    return _moved(_moved(result, str(staging.resolve()), target), str(staging), target)
+
+
+def _moved(value, old: str, new: str):
+    if isinstance(value, dict):
+        return {k: _moved(v, old, new) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(_moved(v, old, new) for v in value)
+    if isinstance(value, str) and (value == old or value.startswith(old + "/") or value.startswith(old + "\\")):
+        return new + value[len(old):]
+    return value
+
+
+def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+    """Fit the neural texture to the asset's maps; bake base colour, roughness, metallic into data['out']."""
+    from ..core.base.report import write_report
+    from ..core.data.map_plan import resolved_asset
+    from ..core.pipeline.stage_configs import convert_config
+    from ..core.stages.convert import convert_and_bake
+
+    # data['config']: the RunConfig Convert's prepare() built; an iteration count in its overrides asks for the
+    # fit (core/pipeline/presets.py), else the asset's maps are the exact start.
+    config = convert_config(data["config"])
+
+    def write(out: Path) -> dict:
+        # A roughness or metallic that holds one value stays that value (a factor on the socket), as
+        # on the command line, instead of a baked 16-bit map.
+        mesh, maps = data.get("mesh"), data.get("maps")   # (a script's own mesh and maps)
+        if data.get("asset") is not None:
+            asset = resolved_asset(data["asset"])   # the maps decoded here, off Blender's main thread
+            several = len(asset.materials) > 1   # fitted as their atlas; one material: its mesh and maps
+            mesh, maps = (asset, None) if several else asset.fitting_view()
+        _, report = convert_and_bake(mesh, maps, out,
+                                     config, progress=progress,
+                                     cancel=cancel, keep_constants=True)
+        per_material = material_results(data, report["outputs"]["weights"], out / "materials") \
+            if data.get("materials") else []
+        if per_material:
+            report["materials_in_blender"] = per_material
+        write_report(out / "report.json", report)
+        return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
+                "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
+                "psnr_db": report["psnr_covered_texels_db"], "material_maps": per_material}
+
+    return written_whole(data["out"], write)
+
+
+def camera_source(view: dict) -> tuple[str, str]:
+    """(source, why) of a view's camera values for the camera's record (core/stages/camera.py)."""
+    if view["camera_source"] == "blender":
+        return "blender", "; ".join(view["notes"])
+    return "user", "given by the user"   # the panel's values, as the command line's --fov/--pitch/--roll
+
+
+def camera_values(camera) -> dict:
+    """What the Cycles set-up takes from the camera a job used."""
+    return {"fov_deg": camera.fov_deg, "pitch_deg": camera.pitch_deg, "roll_deg": camera.roll_deg,
+            "shift_x": camera.shift_x, "shift_y": camera.shift_y}
+
+
+def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+    """Photo + placement -> light.exr (Blender's equirectangular convention) in data['out'], with
+    data['config'], the RunConfig Estimate Light's prepare() built (view_config): its light config is
+    resolved where every entry point's is (core/pipeline/stage_configs.py)."""
+    from ..core.pipeline.stage_configs import light_config, light_critic, with_shadow_sun
+    from ..core.stages.light.scene_type import is_blended, scene_type_words
+    from ..core.stages.light.stage import light_inputs, run_light, sun_words, write_light
+
+    run = data["config"]
+    # the photo's camera: the artist's, the panel's values, or the photo's own (operators/photo.photo_view)
+    inputs = light_inputs(data["photo"], tuple(data["placement"]), run.fspy, run.camera_overrides, run.camera_source,
+                          run.camera_why)
+    config = with_shadow_sun(light_config(run, light_critic(run).choice), run, inputs.camera,
+                             tuple(inputs.info["size"]), inputs.photo.shape[:2])
+    result = run_light(inputs, config, progress, cancel)
+
+    def write(out: Path) -> dict:
+        report = write_light(result, out)
+        scene = result.decisions.get("scene_type", {})
+        return {"hdr": str(report["outputs"]["hdr_exr"]), "preview": str(report["outputs"]["preview_png"]),
+                "report": str(out / "report.json"),
+                "scene_type": scene_type_words(scene, "Scene type"), "scene_type_blended": is_blended(scene),
+                "sun": sun_words(result.decisions, "Pick Sun or Sun from Light"),
+                "camera": camera_values(result.photo_camera)}
+
+    return written_whole(data["out"], write)
+
+
+def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+    """Restyle the converted texture (or make one, mode 'generate') and bake the maps into data['out']/maps,
+    with data['config'], the RunConfig Adapt's prepare() built (view_config): its adapt config is resolved
+    where every entry point's is (core/pipeline/stage_configs.py), with what the photo and light map decide."""
+    import numpy as np
+
+    from ..core.stages.adapt import adapt_and_bake
+    from ..core.stages.camera import photo_camera_estimate
+    from ..core.stages.compose import light_camera
+    from ..core.data.imageio import linear_to_srgb, read_color_image
+    from ..core.base.report import write_report
+    from ..core.render.environment import load_environment
+    from ..core.pipeline.stage_configs import adapt_config
+    from ..core.scene.placement import Placement
+    from ..core.texture.bake import load_neural_texture
+
+    run = data["config"]
+    photo = placement = camera = None
+    if run.mode == "scene" and data.get("photo"):
+        photo = linear_to_srgb(np.clip(read_color_image(data["photo"], upright=True), 0.0, 1.0))
+        placement = Placement(tuple(data["placement"]), run.size)
+        h, w = photo.shape[:2]
+        if data.get("envmap"):   # the camera the light stage estimated this map with
+            camera = light_camera(data["envmap"], {}, w, h)[0]
+        else:   # the artist's camera, the panel's values, or the estimate (operators/photo.photo_view)
+            camera = photo_camera_estimate(data["photo"], None, run.camera_overrides, run.camera_source,
+                                           run.camera_why).photo_camera(width=w, height=h)
+    envmap = load_environment(data["envmap"]) if data.get("envmap") else None
+    config = adapt_config(run, data["asset_name"], has_photo=photo is not None, has_envmap=envmap is not None)
+    texture = load_neural_texture(data["texture"]) if data.get("texture") else None
+
+    def write(out: Path) -> dict:
+        result, report = adapt_and_bake(data["mesh"], texture, config, out, photo=photo, placement=placement,
+                                        envmap=envmap, photo_camera=camera, progress=progress, cancel=cancel)
+        write_report(out / "report.json", report)
+        # several materials: each one's maps from the adapted texture, in its own UVs, for its slots
+        per_material = material_results(data, report["outputs"]["weights"], out / "materials") \
+            if data.get("materials") else []
+        return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
+                "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
+                "iterations": result.iterations, "material_maps": per_material}
+
+    return written_whole(data["out"], write, resume=True)   # a cancelled adaptation keeps its checkpoint
+
+
+def view_config(view: dict, **settings):
+    """A RunConfig of `settings` seeing the photo as `view` (operators/photo.photo_view) says: the artist's
+    camera or the panel's values, the asset's size and turn, the artist's sun. Run All's prepare() here and
+    on a worker (its job is this config's table, core/pipeline/run_table.py) build it here."""
+    from ..core.pipeline.run_config import RunConfig
+
+    source, why = camera_source(view)
+    return RunConfig(size=view["size"], camera_overrides=dict(view["camera"] or {}), camera_source=source,
+                     camera_why=why, turn_deg=view["turn_deg"],
+                     sun_deg=tuple(view["sun_deg"]) if view.get("sun_deg") else None,
+                     sun_uncertainty_deg=float(view.get("sun_uncertainty_deg", 0.0)), **settings)
+
+
+def plain_config(**settings):
+    """A RunConfig of `settings` that sees no photo (Convert; Adapt before a photo is chosen)."""
+    from ..core.pipeline.run_config import RunConfig
+
+    return RunConfig(**settings)
+
+
+def quick_overrides(op) -> dict:
+    """The operator's iterations / model_resolution / render_size (0: the preset's) as stage overrides:
+    a quick look. render_size also caps the light's apparatus renders and the composite's samples."""
+    overrides: dict = {}
+    iterations = getattr(op, "iterations", 0)
+    if iterations:
+        overrides = {"convert": {"iterations": iterations}, "light": {"optimise": {"iterations": iterations}},
+                     "adapt": {"iterations": iterations}}
+    size = getattr(op, "model_resolution", 0)
+    if size:
+        overrides.setdefault("adapt", {})["model_resolution"] = size
+        overrides.setdefault("light", {}).update(diffusion={"model_resolution": size},
+                                                 outpaint={"resolution": size})
+    render = getattr(op, "render_size", 0)
+    if render:
+        overrides.setdefault("adapt", {})["stages"] = [[1.0, render, 2, [500, 990]]]
+        overrides.setdefault("light", {}).update(map_height=render, apparatus={"render_size": render, "spp": 2})
+        overrides["compose"] = {"pilot_spp": 1, "min_spp": 1, "max_spp": 2}
+    return overrides
+
+
+def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:
+    """Each material's maps baked from the neural texture in that material's own UVs (core.game_bake, as
+    Bake Asset and the command line's bake do), written into folder/<n>/: what the new material in its
+    slots shows. The run's own maps are the atlas of every material (core.materials), which no slot reads.
+    data['materials']: operators.asset.AssetLayout.bake_data()."""
+    import numpy as np
+
+    from ..core.stages.bake.game_bake import bake_game_maps as bake, default_texture_size
+    from ..core.data.imageio import write_image
+    from ..core.texture.bake import load_neural_texture
+
+    info = data["materials"]
+    texture = load_neural_texture(texture_path)
+    size = default_texture_size(texture, len(info["names"]))
+    baked = bake(texture, info["mesh"], list(info["names"]), size, [dict(c) for c in info["constants"]],
+                 [tuple(w) for w in info["wraps"]])
+    maps = []
+    for index, material in enumerate(baked, start=1):
+        where = folder / str(index)
+        paths = {"base_color": str(write_image(where / "base_color.png", material.base_color / 255.0, "uint8"))}
+        for key in ("roughness", "metallic"):
+            value = getattr(material, key)
+            paths[key] = str(write_image(where / f"{key}.png", value / 255.0, "uint8")) \
+                if isinstance(value, np.ndarray) else float(value)
+        maps.append(dict(paths, name=material.name, size=size))
+    return maps
+
+
+def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+    """The command line's pipeline (core.run.run_pipeline: convert -> light -> adapt -> compose; the
+    game bake is Bake Asset's, on the main thread) into data['out'] with data['config'], the RunConfig
+    Run All built (view_config); returns what Blender applies."""
+    from ..core.base.report import write_report
+    from ..core.data.map_plan import resolved_asset
+    from ..core.pipeline.run import run_pipeline
+
+    mesh, maps = resolved_asset(data["asset"]).fitting_view()   # the maps decoded here, off the main thread
+
+    def write(folder: Path) -> dict:
+        result = run_pipeline(mesh, maps, data["photo"], data["placement"], folder,
+                              data["config"], progress=progress, cancel=cancel,
+                              bake_skipped_why="in Blender the game file is written by Bake Asset",
+                              reuse_from=data.get("reuse_from"))
+        report = result.to_report()
+        stages = report["stages"]
+        if result.stages["adapt"].status == "skipped" and data.get("why_no_adapt"):
+            stages["adapt"]["why"] = data["why_no_adapt"]
+        last = result.texture_stage
+        outputs = result.outputs(last)
+        per_material = material_results(data, outputs["weights"], folder / "materials") \
+            if data.get("materials") else []
+        if per_material:
+            report["materials_in_blender"] = per_material
+        write_report(folder / "report.json", report)  # paths relative to the run folder, which moves
+        return {"stage": last, "report": str(folder / "report.json"), "texture": outputs["weights"],
+                "maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
+                "hdr": str(folder / "light" / "light.exr"), "composite": str(result.composite),
+                # the camera stage's (which light and compose used), for the Cycles set-up
+                "camera": {k: result.camera.report["photo_camera"][k] for k in ("fov_deg", "pitch_deg", "roll_deg")},
+                "stages": {name: stage.status for name, stage in result.stages.items()},
+                "adapt_skipped": stages["adapt"].get("why", ""), "material_maps": per_material}
+
+    return written_whole(data["out"], write)
+
+
+def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+    """The neural texture baked per material for glTF: at data['size']² for all, or (0) each at its own
+    images' shape from its own maps (data['own_maps']), within data['max_size'], as `scenefit bake` does.
+    A channel whose baked map is what the artist's material already gives keeps that material's nodes
+    (BakedMaterial.unchanged), also where the slot holds a SceneFit result: the file is written from the
+    artist's material (operators/asset.AssetLayout.artists)."""
+    from ..blender_io.uv_unwrap import NEW_UV_MAP
+    from ..core.stages.bake.game_bake import bake_game_maps as bake, bake_shapes
+    from ..core.base.progress import emit
+    from ..core.data.map_plan import resolved_asset
+    from ..core.texture.bake import load_neural_texture
+
+    texture = load_neural_texture(data["texture"])
+    own = [m.maps for m in resolved_asset(data["own_maps"]).materials]   # decoded here, off the main thread
+    shapes = bake_shapes(own, data["size"], data.get("max_size", 8192))
+    shown = ", ".join(sorted({f"{s}²" if isinstance(s, int) else f"{s[1]}x{s[0]}" for s in shapes}))
+    emit(progress, "bake", 0, 1, f"{len(data['names'])} material(s) at {shown}")
+    baked = bake(texture, data["mesh"], list(data["names"]), shapes, [dict(c) for c in data["constants"]],
+                 [tuple(w) for w in data.get("wraps", ())] or None, own, data.get("remapped"),
+                 data.get("remap", frozenset()), NEW_UV_MAP)
+    emit(progress, "bake", 1, 1, "maps ready")
+    return {"baked": baked, "size": max(max(b.base_color.shape[:2]) for b in baked)}
