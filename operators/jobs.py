@@ -24,7 +24,7 @@ from ..core.base.errors import SceneFitError
 from ..core.base.names import RUN_ORDER
 from ..core.base.progress import TerminalProgress
 from ..core.data.map_plan import PendingAsset
-from .common import check_dependencies
+from .dependencies import check_dependencies
 
 if TYPE_CHECKING:
     from ..panels.quality import LocalWork
@@ -628,7 +628,7 @@ def _end_job_before_load(*_args) -> None:
 @persistent
 def _reset_after_load(*_args) -> None:
     from ..panels.thumbnail import load_thumbnail
-    from .common import remember_photo_size
+    from .photo import remember_photo_size
 
     wm = bpy.context.window_manager
     if wm is not None and hasattr(wm, "scenefit_runtime"):

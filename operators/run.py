@@ -10,10 +10,13 @@ from bpy.props import EnumProperty
 from ..blender_io.compose import setup_composite
 from ..core.base.errors import SceneFitError
 from ..core.scene.camera import PhotoCamera
-from . import work
+from ..workers import blender_jobs as work
 from .adapt import adapt_seconds_here
-from .common import (OnMesh, depth_model_preference, last_finished_run, model_settings, photo_path, photo_view,
-                     run_folder, scene_layout)
+from .asset import scene_layout
+from .folders import last_finished_run, run_folder
+from .photo import photo_path, photo_view
+from .polls import OnMesh
+from .prefs import depth_model_preference, model_settings
 from .jobs import CHOICES, CostFirst, JobOperator
 from .properties import GUIDANCE
 from .results import (apply_composite_image, apply_layout_results, apply_result_world, materials_words,

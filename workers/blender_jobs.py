@@ -49,11 +49,12 @@ def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> 
     def write(out: Path) -> dict:
         # A roughness or metallic that holds one value stays that value (a factor on the socket), as
         # on the command line, instead of a baked 16-bit map.
-        mesh, maps = data.get("mesh"), data.get("maps")   # (a script's own mesh and maps)
         if data.get("asset") is not None:
             asset = resolved_asset(data["asset"])   # the maps decoded here, off Blender's main thread
             several = len(asset.materials) > 1   # fitted as their atlas; one material: its mesh and maps
             mesh, maps = (asset, None) if several else asset.fitting_view()
+        else:
+            mesh, maps = data["mesh"], data["maps"]   # (a script's own mesh and maps)
         _, report = convert_and_bake(mesh, maps, out,
                                      config, progress=progress,
                                      cancel=cancel, keep_constants=True)
@@ -95,7 +96,8 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
     inputs = light_inputs(data["photo"], tuple(data["placement"]), run.fspy, run.camera_overrides, run.camera_source,
                           run.camera_why)
     config = with_shadow_sun(light_config(run, light_critic(run).choice), run, inputs.camera,
-                             tuple(inputs.info["size"]), inputs.photo.shape[:2])
+                             (int(inputs.info["size"][0]), int(inputs.info["size"][1])),
+                             (inputs.photo.shape[0], inputs.photo.shape[1]))
     result = run_light(inputs, config, progress, cancel)
 
     def write(out: Path) -> dict:
@@ -215,7 +217,7 @@ def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:
     maps = []
     for index, material in enumerate(baked, start=1):
         where = folder / str(index)
-        paths = {"base_color": str(write_image(where / "base_color.png", material.base_color / 255.0, "uint8"))}
+        paths: dict[str, str | float] = {"base_color": str(write_image(where / "base_color.png", material.base_color / 255.0, "uint8"))}
         for key in ("roughness", "metallic"):
             value = getattr(material, key)
             paths[key] = str(write_image(where / f"{key}.png", value / 255.0, "uint8")) \
@@ -244,6 +246,9 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
         if result.stages["adapt"].status == "skipped" and data.get("why_no_adapt"):
             stages["adapt"]["why"] = data["why_no_adapt"]
         last = result.texture_stage
+        camera = result.camera
+        if camera is None:   # (Run All runs the camera stage always)
+            raise RuntimeError("the run returned no camera stage")
         outputs = result.outputs(last)
         per_material = material_results(data, outputs["weights"], folder / "materials") \
             if data.get("materials") else []
@@ -254,7 +259,7 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
                 "maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
                 "hdr": str(folder / "light" / "light.exr"), "composite": str(result.composite),
                 # the camera stage's (which light and compose used), for the Cycles set-up
-                "camera": {k: result.camera.report["photo_camera"][k] for k in ("fov_deg", "pitch_deg", "roll_deg")},
+                "camera": {k: camera.report["photo_camera"][k] for k in ("fov_deg", "pitch_deg", "roll_deg")},
                 "stages": {name: stage.status for name, stage in result.stages.items()},
                 "adapt_skipped": stages["adapt"].get("why", ""), "material_maps": per_material}
 

@@ -397,7 +397,7 @@ out["deleted"] = [folder.exists(), material in bpy.data.materials, len(runs),
 # own words on the bar, and Esc between bakes ends it before the worker starts.
 MAIN_THREAD = r"""
 from scenefit.operators import convert as convert_ops
-from scenefit.operators.common import asset_layout
+from scenefit.operators.asset import asset_layout
 from scenefit.core.data import map_plan
 DECODERS = {"read_image", "read_texture_bytes", "check_decodes", "_read_reduced"}
 main = threading.main_thread()
