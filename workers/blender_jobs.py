@@ -36,36 +36,33 @@ def _moved(value, old: str, new: str):
 
 
 def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
-    """Fit the neural texture to the asset's maps; bake base colour, roughness, metallic into data['out']."""
+    """Fit the neural texture to the asset's maps and bake base colour, roughness, metallic: the pipeline's
+    convert stage alone (run_pipeline, stages ("convert",)) into data['out'], with data['config'], the
+    RunConfig Convert's prepare() built (an iteration count in its overrides asks for the fit; else the
+    asset's maps are the exact start). A roughness or metallic that holds one value stays that value."""
     from ..core.base.report import write_report
     from ..core.data.map_plan import resolved_asset
-    from ..core.pipeline.stage_configs import convert_config
-    from ..core.stages.convert import convert_and_bake
+    from ..core.pipeline.run import run_pipeline
 
-    # data['config']: the RunConfig Convert's prepare() built; an iteration count in its overrides asks for the
-    # fit (core/pipeline/presets.py), else the asset's maps are the exact start.
-    config = convert_config(data["config"])
+    if data.get("asset") is not None:
+        asset = resolved_asset(data["asset"])   # the maps decoded here, off Blender's main thread
+        several = len(asset.materials) > 1   # fitted as their atlas; one material: its mesh and maps
+        mesh, maps = (asset, None) if several else asset.fitting_view()
+    else:
+        mesh, maps = data["mesh"], data["maps"]   # (a script's own mesh and maps)
 
-    def write(out: Path) -> dict:
-        # A roughness or metallic that holds one value stays that value (a factor on the socket), as
-        # on the command line, instead of a baked 16-bit map.
-        if data.get("asset") is not None:
-            asset = resolved_asset(data["asset"])   # the maps decoded here, off Blender's main thread
-            several = len(asset.materials) > 1   # fitted as their atlas; one material: its mesh and maps
-            mesh, maps = (asset, None) if several else asset.fitting_view()
-        else:
-            mesh, maps = data["mesh"], data["maps"]   # (a script's own mesh and maps)
-        _, report = convert_and_bake(mesh, maps, out,
-                                     config, progress=progress,
-                                     cancel=cancel, keep_constants=True)
-        per_material = material_results(data, report["outputs"]["weights"], out / "materials") \
+    def write(folder: Path) -> dict:
+        result = run_pipeline(mesh, maps, None, None, folder, data["config"], progress=progress, cancel=cancel,
+                              stages=("convert",))
+        report, outputs = result.to_report(), result.outputs("convert")
+        per_material = material_results(data, outputs["weights"], folder / "materials") \
             if data.get("materials") else []
         if per_material:
             report["materials_in_blender"] = per_material
-        write_report(out / "report.json", report)
-        return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
-                "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
-                "psnr_db": report["psnr_covered_texels_db"], "material_maps": per_material}
+        write_report(folder / "report.json", report)  # paths relative to the run folder, which moves
+        return {"maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
+                "texture": outputs["weights"], "report": str(folder / "report.json"),
+                "psnr_db": result.stages["convert"].report["psnr_covered_texels_db"], "material_maps": per_material}
 
     return written_whole(data["out"], write)
 
