@@ -73,12 +73,6 @@ class AssetLayout:
 
         return fitting_mesh(self.mesh, [material_wrap(m) for m in self.artists], len(self.materials))
 
-    def fitting(self, context) -> tuple:
-        """(mesh, maps, per-material bake data or None) a run fits: several materials as their atlas
-        (core/data/materials.py), each then baked in its own UVs for its slots (`bake_data`)."""
-        mesh, maps = self.read(context).fitting_view()
-        return mesh, maps, self.bake_data() if len(self.materials) > 1 else None
-
     def bake_data(self) -> dict:
         """What core.game_bake needs to bake each (artist's) material in its own UVs (plain data, for a job)."""
         from ..blender_io.gltf_export import constant_channels

@@ -72,7 +72,8 @@ def remote_work(op, context, address: str) -> tuple:
     settings = context.scene.scenefit
     photo, layout = scene_layout(op, context, "A worker environment runs the pipeline that fits the asset into a "
                                               "photo; other modes run in this Blender")
-    mesh, maps, materials = layout.fitting(context)   # as a local Run All hands them over
+    # as a local Run All hands them over: planned here, decoded in the job, procedural chains baked between ticks
+    materials = layout.bake_data() if len(layout.materials) > 1 else None
     op._layout = result_targets(layout)   # where the results go: every slot of the asset
     objects, name = [bpy.data.objects[n] for n in layout.objects], layout.name
     models, _ = model_settings(context)
@@ -95,7 +96,7 @@ def remote_work(op, context, address: str) -> tuple:
     config = view_config(view, preset=settings.preset, prompt=settings.prompt, stage_overrides=quick_overrides(op),
                          scene_type=settings.scene_type, depth_model=depth_model_preference(context))
     return (work_remotely if materials is None else work_remotely_per_material), {
-        "mesh": mesh, "maps": maps, "photo": str(photo), "worker": address, "at": tuple(view["placement"]),
+        "asset": layout.plan(context), "photo": str(photo), "worker": address, "at": tuple(view["placement"]),
         "out": str(folder.parent), "name": folder.name, "stages": REMOTE_STAGES, "models": models,
         "materials": materials, "earlier": str(earlier) if earlier else None,
         **{k: v for k, v in run_table(config).items() if v is not None}}

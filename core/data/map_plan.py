@@ -188,6 +188,14 @@ def _baked_in(value: Any) -> Any:
     return value
 
 
+def fitting_inputs(data: dict) -> tuple[Mesh, PBRMaps]:
+    """(mesh, maps) a job fits: data['asset'] (planned, or read) as its fitting view (one material as it is,
+    several as their atlas), else a script's own data['mesh'] and data['maps']."""
+    if data.get("asset") is not None:
+        return resolved_asset(data["asset"]).fitting_view()
+    return data["mesh"], data["maps"]
+
+
 def resolved_asset(value: PendingAsset | PlannedAsset | AssetMaterials) -> AssetMaterials:
     """The asset's materials, whichever side read them."""
     return value if isinstance(value, AssetMaterials) else value.resolved()
