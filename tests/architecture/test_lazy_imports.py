@@ -126,3 +126,16 @@ def test_the_check_sees_each_kind_of_unjustified_import(tmp_path):
     assert [line.split(" (")[0] for line in found] == [
         "core/base/torch_user.py:5 core.base.heavy", "core/base/user.py:5 json", "core/base/user.py:9 core.base.light",
         "core/base/user.py:13 torch"], found
+
+
+def test_what_an_operators_prepare_builds_loads_no_torch():
+    """A job's inputs are gathered on Blender's main thread: the RunConfig, the planned maps and the job
+    functions they are handed to import no torch (a second or more the first time)."""
+    import subprocess
+    import sys
+
+    code = ("import sys\nimport scenefit.core.pipeline.run_config, scenefit.core.data.map_plan, "
+            "scenefit.workers.blender_jobs\nprint(sorted(m for m in ('torch', 'mitsuba', 'diffusers') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "[]", done.stdout
