@@ -8,17 +8,16 @@ import numpy as np
 
 from ..core.base.errors import InputError
 from ..core.data.imageio import check_decodes, srgb_to_linear
+from ..core.data.map_plan import FILE_MAGIC, CheckedPixels, PendingAsset, PendingMaterial, TextureFile, later
 from ..core.data.maps import PBRMaps
 from ..core.data.materials import AssetMaterials, Material
 from ..core.data.mesh import Mesh
 from ..core.base.quiet import native_output_captured
 from .mesh import mesh_from_object
 from .node_values import NotAnImageChain, socket_value, source
-from .procedural_bake import bake_socket
+from .procedural_bake import SocketBake
 from .unlit import unlit_surface
 
-# Size of the base-colour image made when Base Color is a constant but another channel is not.
-CONSTANT_SIZE = 256
 # Colour spaces whose 8-bit pixels are stored as-is (no transfer function to undo).
 _LINEAR_SPACES = {"Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear CIE-XYZ E", "Linear FilmLight E-Gamut",
                   "Linear Rec.2020", "ACEScg", "ACES2065-1"}
@@ -47,16 +46,67 @@ def principled_bsdf(material):
 
 
 def image_pixels_linear(image, decode_srgb: bool = True) -> np.ndarray:
-    """(H, W, 4) float32, rows top to bottom, colour channels decoded to linear.
+    """(H, W, 4) float32, rows top to bottom, colour channels decoded to linear, read through Blender
+    here (its stored file checked first).
 
     Blender keeps float images linear; 8-bit images are exposed as stored, so their transfer
     function is undone here from the image's colour space (sRGB, or none for Non-Color).
     """
+    check_stored_image(image)
+    return _held_pixels(image, decode_srgb)
+
+
+# Colour spaces whose 8-bit files Blender keeps as stored bytes (a file the job decodes gives the same pixels).
+_JOB_SPACES = {"sRGB", "Non-Color"}
+
+
+def pixels_source(image, decode_srgb: bool = True):
+    """What a job decodes for `image`: its 8-bit PNG or JPEG file (or packed bytes) when Blender's reader
+    would give the stored values, else a copy of the pixels Blender holds (edited, generated, float, other
+    formats; a copy is fast once loaded), its stored file checked in the job."""
+    space = image.colorspace_settings.name
+    stored = _stored_bytes(image)
+    if stored is not None and space in _JOB_SPACES and _eight_bit(stored[1]) \
+            and getattr(image, "alpha_mode", "STRAIGHT") in ("STRAIGHT", "CHANNEL_PACKED"):
+        where, _ = stored
+        decode = decode_srgb and space not in _LINEAR_SPACES
+        if isinstance(where, bytes):
+            return TextureFile(image.name, packed=where, decode_srgb=decode)
+        return TextureFile(where, path=where, decode_srgb=decode)
+    return CheckedPixels(_held_pixels(image, decode_srgb), None if stored is None else stored[0],
+                         image.name if stored is None or isinstance(stored[0], bytes) else stored[0])
+
+
+def _stored_bytes(image) -> tuple[str | bytes, bytes] | None:
+    """(the file's path or the packed bytes, their first bytes) of an unedited file image, else None."""
+    import bpy
+
+    if image.source != "FILE" or image.is_dirty or len(image.packed_files) > 1:
+        return None
+    if image.packed_file is not None:
+        data = bytes(image.packed_file.data)
+        return data, data[:32]
+    path = bpy.path.abspath(image.filepath, library=image.library) if image.filepath else ""
+    if not path or not os.path.isfile(path):
+        return None
+    with open(path, "rb") as f:
+        return path, f.read(32)
+
+
+def _eight_bit(head: bytes) -> bool:
+    """A JPEG, or a PNG of 8 bits per sample (a palette's too): what the job decodes as Blender does."""
+    kind = next((s for m, s in FILE_MAGIC.items() if head.startswith(m)), None)
+    if kind == ".png":
+        return len(head) > 24 and head[12:16] == b"IHDR" and head[24] == 8
+    return kind == ".jpg"
+
+
+def _held_pixels(image, decode_srgb: bool = True) -> np.ndarray:
+    """The pixels Blender holds for `image` (loading its file first if it has not yet)."""
     with native_output_captured():   # libjpeg's and libpng's warnings would go straight to the terminal
         w, h = image.size  # reading the size loads the file
     if w == 0 or h == 0:
         raise InputError(f"Image '{image.name}' cannot be loaded (is '{image.filepath}' missing?).")
-    check_stored_image(image)
     c = image.channels
     pixels = np.empty(w * h * c, dtype=np.float32)
     image.pixels.foreach_get(pixels)
@@ -96,25 +146,41 @@ _GLTF_SETTINGS_GROUPS = ("glTF Material Output", "glTF Settings")
 PROCEDURAL_BAKE_SIZE = 512
 
 
-def _read_input(bsdf, name: str, kind: str, material, obj, slot: int, read: list[str], bake_size: int,
+class _Reading:
+    """How one material's pixels are reached: `pixels_of` (decoded in the job, or read here) and the
+    procedural chains' bakes, owed by the main thread (`bakes`), with the material's bake size."""
+
+    def __init__(self, material, obj, slot: int, pixels_of, bakes: list) -> None:
+        self.material, self.obj, self.slot, self.pixels_of, self.bakes = material, obj, slot, pixels_of, bakes
+        self._size: int | None = None
+
+    @property
+    def bake_size(self) -> int:
+        if self._size is None:
+            self._size = _image_size(self.material)   # (loads the images: only where a chain is baked)
+        return self._size
+
+
+def _read_input(bsdf, name: str, kind: str, reading: _Reading, read: list[str],
                 wrap: tuple[str, str] = ("repeat", "repeat")):
     """The input's value through its node chain; a procedural chain is baked with Cycles (over UVs
-    outside [0, 1] too, wrapped as `wrap` says)."""
+    outside [0, 1] too, wrapped as `wrap` says) by the main thread before the job resolves it."""
     trail: list[str] = []
     try:
-        value = socket_value(bsdf.inputs[name], kind, trail, image_pixels_linear)
+        value = socket_value(bsdf.inputs[name], kind, trail, reading.pixels_of)
     except NotAnImageChain as why:
-        pixels = bake_socket(obj, slot, bsdf.inputs[name], bake_size, image_pixels_linear, wrap, material)
-        read.append(f"{name} <- procedural setup ({why}) baked by Cycles to {bake_size}² "
+        size = reading.bake_size
+        bake = SocketBake(reading.obj, reading.slot, bsdf.inputs[name], size, wrap, reading.material, _held_pixels)
+        reading.bakes.append(bake)
+        read.append(f"{name} <- procedural setup ({why}) baked by Cycles to {size}² "
                     f"(Blender's bake, emission pass)")
-        value = pixels if kind == "color" else pixels[..., 0].copy()
-        return np.clip(value, 0.0, 1.0)
+        return later("baked", bake, kind)
     if trail:
         read.append(f"{name} <- " + ", ".join(reversed(trail)))
     else:
         shown = ", ".join(f"{x:.4g}" for x in np.ravel(value))
         read.append(f"{name} <- constant {shown}")
-    return np.clip(value, 0.0, 1.0) if isinstance(value, np.ndarray) else float(np.clip(value, 0.0, 1.0))
+    return later("clipped", value)
 
 
 # Blender's Image Texture extension -> how glTF's exporter writes the sampler (core.data.uv_raster.WRAP_MODES).
@@ -207,7 +273,7 @@ def _image_size(material) -> int:
     return max(sizes) if sizes else PROCEDURAL_BAKE_SIZE
 
 
-def _normal_map(bsdf, material, kept: list[str], dropped: list[str]) -> np.ndarray | None:
+def _normal_map(bsdf, material, kept: list[str], dropped: list[str], pixels_of):
     """The tangent-space normal map behind Normal, with the node's strength applied, or None."""
     linked = source(bsdf.inputs["Normal"])
     if linked is None:
@@ -225,18 +291,15 @@ def _normal_map(bsdf, material, kept: list[str], dropped: list[str]) -> np.ndarr
                        "not used in renders; it stays in the material for export")
         return None
     image = color[0].image
-    encoded = image_pixels_linear(image, decode_srgb=False)[..., :3]
-    if image.colorspace_settings.name not in _LINEAR_SPACES and not image.is_float:
+    stored = pixels_of(image, decode_srgb=False)
+    is_float = False if isinstance(stored, TextureFile) else image.is_float   # (an 8-bit file: never float)
+    if image.colorspace_settings.name not in _LINEAR_SPACES and not is_float:
         dropped.append(f"normal map image '{image.name}' is tagged {image.colorspace_settings.name}; its bytes are "
                        "read as Non-Color data, as Blender's glTF importer tags normal maps")
     strength = float(node.inputs["Strength"].default_value)
-    if strength != 1.0:  # Blender blends the perturbed normal with the surface normal by strength
-        n = (encoded * 2.0 - 1.0) * strength + np.array([0.0, 0.0, 1.0 - strength], np.float32)
-        n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-8)
-        encoded = (n * 0.5 + 0.5).astype(np.float32)
     kept.append(f"normal map <- image '{image.name}' via Normal Map '{node.name}' (tangent space, strength "
                 f"{strength:.3g}): used in renders, kept for export")
-    return np.ascontiguousarray(encoded, dtype=np.float32)
+    return later("normal_at_strength", stored, strength)
 
 
 def alpha_mode(material, bsdf) -> str:
@@ -283,42 +346,57 @@ def _carried(material, bsdf, kept: list[str], dropped: list[str]) -> str:
     return mode
 
 
-def read_material(material, obj=None, slot: int = 0) -> Material:
-    """Everything SceneFit reads from one material, with an account of what it read and dropped.
+def plan_material(material, obj=None, slot: int = 0, bakes: list | None = None,
+                  files_in_job: bool = True) -> PendingMaterial:
+    """Everything SceneFit reads from one material, with an account of what it read and dropped, its
+    maps still to compute (core/data/map_plan.py): its image files decoded wherever `resolved()` runs, its
+    procedural chains' Cycles bakes appended to `bakes` for the main thread to run first.
 
     Base Color, Roughness and Metallic come from images, constants, one channel of an image
     (Separate Color, as glTF's packed metallic-roughness image) or factors; any other node chain is
     baked with Cycles over the faces of `obj`'s slot `slot`. The material is only read.
+    files_in_job=False reads every image through Blender here instead.
     """
     bsdf = principled_bsdf(material)
     read: list[str] = []
     kept: list[str] = []
     dropped: list[str] = []
-    size = _image_size(material)
+    pixels_of = pixels_source if files_in_job else image_pixels_linear
+    reading = _Reading(material, obj, slot, pixels_of, bakes if bakes is not None else [])
     wrap = material_wrap(material, dropped)
-    roughness = _read_input(bsdf, "Roughness", "float", material, obj, slot, read, size, wrap)
-    metallic = _read_input(bsdf, "Metallic", "float", material, obj, slot, read, size, wrap)
-    base_color = _read_input(bsdf, "Base Color", "color", material, obj, slot, read, size, wrap)
-    if not (isinstance(base_color, np.ndarray) and base_color.ndim == 3):
-        sizes = [m.shape for m in (roughness, metallic) if isinstance(m, np.ndarray)]
-        h, w = sizes[0] if sizes else (CONSTANT_SIZE, CONSTANT_SIZE)
-        base_color = np.broadcast_to(np.asarray(base_color, np.float32), (h, w, 3)).copy()
-    normal = _normal_map(bsdf, material, kept, dropped)
+    roughness = _read_input(bsdf, "Roughness", "float", reading, read, wrap)
+    metallic = _read_input(bsdf, "Metallic", "float", reading, read, wrap)
+    base_color = _read_input(bsdf, "Base Color", "color", reading, read, wrap)
+    normal = _normal_map(bsdf, material, kept, dropped, pixels_of)
     mode = _carried(material, bsdf, kept, dropped)
     if getattr(bsdf, "unlit", False):
         kept.append(f"unlit (KHR_materials_unlit) <- '{bsdf.name}': its colour is read as base colour, renders "
                     "shade it as a rough dielectric (unlit is not modelled); exported unlit again")
-    maps = PBRMaps(base_color=np.ascontiguousarray(base_color, dtype=np.float32), roughness=roughness,
-                   metallic=metallic, normal=normal)
-    return Material(name=material.name, maps=maps, read=tuple(read), kept=tuple(kept), dropped=tuple(dropped),
-                    alpha_mode=mode, wrap=wrap)
+    return PendingMaterial(name=material.name, maps=later("pbr_maps", base_color, roughness, metallic, normal),
+                           read=tuple(read), kept=tuple(kept), dropped=tuple(dropped), alpha_mode=mode, wrap=wrap)
+
+
+def read_material(material, obj=None, slot: int = 0) -> Material:
+    """The material's maps read now (its bakes run, its files decoded here): see plan_material."""
+    bakes: list = []
+    plan = plan_material(material, obj, slot, bakes)
+    for bake in bakes:
+        bake.run()
+    return plan.resolved()
+
+
+def plan_asset(mesh, materials: list, users: list[tuple], files_in_job: bool = True) -> PendingAsset:
+    """An asset's materials planned (plan_material), each read over its (object, slot) in `users`."""
+    bakes: list = []
+    planned = tuple(plan_material(m, obj, slot, bakes, files_in_job) for m, (obj, slot) in zip(materials, users))
+    return PendingAsset(mesh=mesh, materials=planned, bakes=bakes)
 
 
 def maps_from_material(material, obj=None, slot: int = 0) -> PBRMaps:
     """Base colour, roughness, metallic (and the normal map) of the material's Principled BSDF.
 
     Linear float pixels, rows top to bottom; an unlinked input gives its value. A constant base
-    colour becomes an image the size of the other maps (or CONSTANT_SIZE square). See read_material.
+    colour becomes an image the size of the other maps (or core.data.map_steps.CONSTANT_SIZE square). See read_material.
     """
     return read_material(material, obj, slot).maps
 

@@ -4,20 +4,18 @@ Handles what real assets carry, in particular what Blender's glTF importer build
 Image Texture (Color or Alpha, default UVs or the mesh's UV map), Separate Color / Separate RGB
 (one channel, e.g. glTF's packed G = roughness, B = metallic), factors as Math Multiply or Mix
 Multiply nodes, and Reroutes. Anything else raises `NotAnImageChain`, and the caller bakes the
-chain with Cycles instead. Every step is written down in `trail` for the report.
+chain with Cycles instead. Every step is written down in `trail` for the report. Steps on pixels are `later` steps
+(core/data/map_plan.py): where `pixels_of` gives a file still to decode, they run in the job.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..core.base.errors import InputError
-from ..core.data.maps import resize_channels
+from ..core.data.map_plan import is_pending, later
+from ..core.data.map_steps import Value
 
-# Blender's colour -> float conversion for the default (Rec.709) OCIO configuration.
-REC709_LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
 _CHANNELS = {"Red": 0, "Green": 1, "Blue": 2, "R": 0, "G": 1, "B": 2}
-
-Value = float | np.ndarray  # float, (3,) colour, (H, W) map or (H, W, 3) colour map
 
 
 class NotAnImageChain(Exception):
@@ -43,7 +41,7 @@ def source(socket):
 def socket_value(socket, kind: str, trail: list[str], pixels_of) -> Value:
     """The value of an input socket as `kind` ("float" or "color"), evaluated through its chain.
 
-    pixels_of(image) -> (H, W, 4) linear float pixels, rows top to bottom.
+    pixels_of(image) -> (H, W, 4) linear float pixels, rows top to bottom, or a Source giving them later.
     """
     linked = source(socket)
     if linked is None:
@@ -54,26 +52,7 @@ def socket_value(socket, kind: str, trail: list[str], pixels_of) -> Value:
             return np.array(value[:3], dtype=np.float32)
         return float(value)
     node, output = linked
-    return _convert(_node_value(node, output, trail, pixels_of), kind)
-
-
-def _is_color(value: Value) -> bool:
-    return isinstance(value, np.ndarray) and (value.shape == (3,) or (value.ndim == 3 and value.shape[2] == 3))
-
-
-def _convert(value: Value, kind: str) -> Value:
-    """Blender's implicit conversions between colour and float sockets."""
-    is_color = _is_color(value)
-    if kind == "color" and not is_color:
-        return np.repeat(np.asarray(value, np.float32)[..., None], 3, axis=-1) if isinstance(value, np.ndarray) \
-            else np.full(3, float(value), np.float32)
-    if kind == "float" and is_color:
-        gray = (value @ REC709_LUMA).astype(np.float32)
-        if value.ndim == 3 and np.array_equal(value[..., 0], value[..., 1]) \
-                and np.array_equal(value[..., 0], value[..., 2]):
-            gray = value[..., 0].copy()  # a grey image is its own value, bit for bit
-        return gray if value.ndim == 3 else float(gray)
-    return value
+    return later("convert", _node_value(node, output, trail, pixels_of), kind)
 
 
 def _uses_default_uvs(node) -> bool:
@@ -108,20 +87,19 @@ def _node_value(node, output, trail: list[str], pixels_of) -> Value:
         pixels = pixels_of(node.image)
         trail.append(f"image '{node.image.name}' {output.name} (node '{node.name}', "
                      f"{node.image.colorspace_settings.name})")
-        return pixels[..., 3].copy() if output.name == "Alpha" else pixels[..., :3].copy()
+        return later("alpha" if output.name == "Alpha" else "colour", pixels)
     if kind in ("SEPARATE_COLOR", "SEPRGB"):
         if kind == "SEPARATE_COLOR" and node.mode != "RGB":
             raise NotAnImageChain(node)
         color = socket_value(node.inputs[0], "color", trail, pixels_of)
         channel = _CHANNELS[output.name]
         trail.append(f"channel {'RGB'[channel]} via {node.bl_label} '{node.name}'")
-        return color[..., channel].copy() if isinstance(color, np.ndarray) and color.ndim == 3 \
-            else float(np.asarray(color)[channel])
+        return later("channel", color, channel)
     if kind == "MATH" and node.operation == "MULTIPLY":
         a = socket_value(node.inputs[0], "float", trail, pixels_of)
         b = socket_value(node.inputs[1], "float", trail, pixels_of)
         _note_factor(trail, node, a, b)
-        return _clamp(node.use_clamp, _product(a, b))
+        return later("clamp", node.use_clamp, later("product", a, b))
     if kind == "MIX" and node.blend_type == "MULTIPLY" and node.data_type in ("RGBA", "FLOAT"):
         return _mix_multiply(node, node.data_type, trail, pixels_of)
     if kind == "MIX_RGB" and node.blend_type == "MULTIPLY":
@@ -143,33 +121,12 @@ def _mix_multiply(node, data_type: str, trail: list[str], pixels_of) -> Value:
     a = socket_value(a_socket, kind, trail, pixels_of)
     b = socket_value(b_socket, kind, trail, pixels_of)
     _note_factor(trail, node, a, b)
-    product = _product(a, b)
-    mixed = _product(a, 1.0 - factor) + _product(product, factor) if factor != 1.0 else product
-    return _clamp(getattr(node, "clamp_result", False) or getattr(node, "use_clamp", False), mixed)
+    clamp = getattr(node, "clamp_result", False) or getattr(node, "use_clamp", False)
+    return later("clamp", clamp, later("mixed", a, b, factor))
 
 
 def _note_factor(trail: list[str], node, a: Value, b: Value) -> None:
-    constants = [v for v in (a, b) if not (isinstance(v, np.ndarray) and v.ndim >= 2)]
+    constants = [v for v in (a, b) if not is_pending(v) and not (isinstance(v, np.ndarray) and v.ndim >= 2)]
     if constants:
         shown = ", ".join(f"{x:.4g}" for x in np.ravel(constants[0])[:3])
         trail.append(f"times factor ({shown}) from '{node.label or node.name}'")
-
-
-def _product(a: Value, b: Value) -> Value:
-    """a * b, broadcasting maps of different sizes to the larger one."""
-    if isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.ndim >= 2 and b.ndim >= 2 \
-            and a.shape[:2] != b.shape[:2]:
-        h, w = max(a.shape[:2], b.shape[:2], key=lambda s: s[0] * s[1])
-        a, b = resize_channels(a, h, w), resize_channels(b, h, w)
-    if isinstance(a, np.ndarray) and a.ndim == 2 and _is_color(b):
-        a = a[..., None]  # a grey map times a colour
-    if isinstance(b, np.ndarray) and b.ndim == 2 and _is_color(a):
-        b = b[..., None]
-    result = np.asarray(a, np.float32) * np.asarray(b, np.float32)
-    return result if result.ndim else float(result)
-
-
-def _clamp(clamp: bool, value: Value) -> Value:
-    if not clamp:
-        return value
-    return np.clip(value, 0.0, 1.0) if isinstance(value, np.ndarray) else min(max(value, 0.0), 1.0)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.base.errors import InputError
+from ..core.data.map_plan import Source
 from ..core.base.quiet import native_output_captured
 from .interrupts import interrupt_held
 
@@ -17,6 +18,42 @@ from .interrupts import interrupt_held
 BAKE_SAMPLES = 4
 # Copies of the image (UV tiles) a chain is baked over at most: each is a bake of its own.
 MAX_COPIES = 64
+
+
+class SocketBake(Source):
+    """One procedural input's bake, owed by the main thread (one per timer tick of a job's gathering):
+    its object, material and socket are found again by name when it runs, as the artist may have
+    changed the file between ticks; `pixels()` then gives what bake_socket baked."""
+
+    def __init__(self, obj, slot: int, socket, size: int, wrap: tuple[str, str], material, pixels_of) -> None:
+        if obj is None:   # the sentence bake_socket says, at once
+            bake_socket(None, slot, socket, size, pixels_of, wrap, material)
+        self.object_name, self.slot, self.size, self.wrap = obj.name, slot, size, wrap
+        self.material_name, self.node_name = material.name, socket.node.name
+        self.socket_name, self.socket_id = socket.name, socket.identifier
+        self.pixels_of = pixels_of
+        self.words = f"'{material.name}' {socket.name}"
+        self.baked: np.ndarray | None = None
+
+    @property
+    def done(self) -> bool:
+        return self.baked is not None
+
+    def run(self) -> None:
+        import bpy
+
+        obj, material = bpy.data.objects.get(self.object_name), bpy.data.materials.get(self.material_name)
+        node = material.node_tree.nodes.get(self.node_name) if material is not None else None
+        if obj is None or node is None:
+            raise InputError(f"{self.words} changed while SceneFit read it (its object, material or node is gone); "
+                             "run it again.")
+        socket = next((s for s in node.inputs if s.identifier == self.socket_id), None) or node.inputs[self.socket_name]
+        self.baked = bake_socket(obj, self.slot, socket, self.size, self.pixels_of, self.wrap, material)
+
+    def pixels(self) -> np.ndarray:
+        if self.baked is None:
+            raise RuntimeError(f"the bake of {self.words} was not run")
+        return self.baked
 
 
 def bake_socket(obj, slot: int, socket, size: int, pixels_of,

@@ -9,8 +9,12 @@ from bpy.props import EnumProperty, IntProperty, StringProperty
 
 from ..blender_io import mesh_from_object
 from ..core.base.errors import InputError
-from . import work
-from .common import OnMesh, asset_layout, asset_texture, model_settings, photo_path, photo_view, run_folder
+from ..workers import blender_jobs as work
+from .asset import asset_layout, asset_texture
+from .folders import run_folder
+from .photo import photo_path, photo_view
+from .polls import OnMesh
+from .prefs import model_settings
 from .jobs import CHOICES, CostFirst, JobOperator
 from .results import apply_layout_results, apply_result_material, materials_words, result_targets
 
@@ -38,21 +42,22 @@ def gather_adapt(op, context, texture: str) -> dict:
     op._layout = result_targets(layout) if layout is not None else None
     photo = str(photo_path(context)) if settings.mode == "scene" and settings.photo_path else ""
     light = bpy.path.abspath(settings.light_path) if settings.light_path else ""
-    x, y = settings.placement
     view = photo_view(context, Path(photo), objects) if photo else None
-    models, _ = model_settings(context)
     op._object_name = layout.name if layout is not None else obj.name
+    # The run's settings as one frozen RunConfig, as Run All builds it: how the photo is seen (the artist's
+    # camera, the panel's values or the estimate; where the asset stands and its height), the prompts, and
+    # the operator's quick-look properties as stage overrides.
+    settings_of_run = {"preset": op.run_preset(context), "mode": settings.mode, "prompt": settings.prompt,
+                       "object_prompt": settings.object_prompt, "instruction": settings.instruction,
+                       "models": model_settings(context)[0], "stage_overrides": work.quick_overrides(op)}
+    config = work.view_config(view, **settings_of_run) if view else work.plain_config(
+        size=settings.size, **settings_of_run)
     return {
         "materials": layout.bake_data() if layout is not None and len(layout.materials) > 1 else None,
-        "mesh": mesh, "texture": texture, "mode": settings.mode, "prompt": settings.prompt,
-        "object_prompt": settings.object_prompt, "instruction": settings.instruction, "photo": photo,
-        # Where the asset stands and its height, as the light and compose stages read them; the photo's
-        # camera is the light stage's (beside light.exr), else the scene's, the panel's or the estimate.
-        "placement": view["placement"] if view else (x, y), "size": view["size"] if view else settings.size,
-        "view": view,
-        "envmap": light if light and Path(light).is_file() else "", "preset": op.run_preset(context),
-        "models": models, "iterations": op.iterations, "model_resolution": op.model_resolution,
-        "render_size": op.render_size,
+        "mesh": mesh, "asset_name": mesh.name, "texture": texture, "photo": photo, "config": config,
+        "placement": view["placement"] if view else tuple(settings.placement),
+        # the light stage's map: its camera is the one the local views' light was estimated with
+        "envmap": light if light and Path(light).is_file() else "",
         # Resume: the cancelled run's folder, whose hidden sibling holds its checkpoint (else a new folder)
         "out": op.resume or str(run_folder(context, "adapt", op._object_name))}
 
@@ -64,7 +69,7 @@ def adapt_seconds_here(context, iterations: int | None = None) -> LocalWork | No
     Main thread, at a click: no model lookup (the job looks the models up, and downloads them, itself),
     no network, and torch is not imported for it (`device_here`)."""
     from ..panels.quality import LocalWork, adapt_projection
-    from .common import preferences
+    from .prefs import preferences
 
     prefs = preferences(context)   # (not model_settings: its ModelConfig imports torch)
     device = device_here(prefs.device if prefs is not None else "auto")

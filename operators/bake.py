@@ -20,8 +20,10 @@ from ..core.stages.bake.gltf_ktx2 import basisu_path
 from ..core.stages.bake.engine_targets import TARGETS
 from ..core.stages.bake.gltf_output import COMPRESSIONS, DEFAULT_MAX_TEXTURE, TEXTURE_FORMATS, GltfOutput
 from ..core.base.report import write_report
-from . import work
-from .common import OnMesh, asset_layout, asset_texture, run_folder
+from ..workers import blender_jobs as work
+from .asset import asset_layout, asset_texture
+from .folders import run_folder
+from .polls import OnMesh
 from .jobs import JobOperator, has_ui
 from .properties import PATH
 
@@ -124,7 +126,8 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         if not has_ui(context):
             return self.execute(context)
         if not self.filepath:
-            from .common import output_root, asset_objects
+            from .asset import asset_objects
+            from .folders import output_root
 
             objects = asset_objects(context)
             name = bpy.path.clean_name(objects[0].name if objects else "asset")
@@ -170,7 +173,7 @@ class SCENEFIT_OT_bake_asset(OnMesh, JobOperator):
         self._beside = [o.name for o in imported_beside(objects, context.scene.objects, source)] \
             if self.cameras_and_lights else []
         remap, remapped, self._new_uvs = new_uv_map(context, layout, texture)
-        return work.bake_game_maps, dict(layout.bake_data(), **layout.own_maps(),
+        return work.bake_game_maps, dict(layout.bake_data(), **layout.own_maps(context),
                                          texture=str(texture),
                                          size=self.texture_size, max_size=self.max_texture, remap=remap,
                                          remapped=remapped)

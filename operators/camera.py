@@ -11,8 +11,9 @@ from ..blender_io.compose import composite_scene, ensure_photo_camera, load_phot
 from ..blender_io.tag import TAG
 from ..core.base.errors import InputError, SceneFitError
 from ..core.scene.asset_pose import camera_for_placement
-from .common import artist_camera, keep_image, photo_path, relative_if_saved, run_folder
-from .work import written_whole
+from .folders import keep_image, relative_if_saved, run_folder
+from .photo import artist_camera, photo_path
+from ..workers.blender_jobs import written_whole
 
 OVERLAY_NAME = "SceneFit Camera Lines"
 

@@ -8,9 +8,12 @@ from bpy.props import BoolProperty, IntProperty
 
 from ..blender_io.compose import setup_composite
 from ..core.base.errors import SceneFitError
-from .common import OnMesh, asset_objects, composite_camera, photo_path, photo_view, run_folder
+from .asset import asset_objects
+from .folders import run_folder
+from .photo import composite_camera, photo_path, photo_view
+from .polls import OnMesh
 from .results import apply_composite_image
-from .work import written_whole
+from ..workers.blender_jobs import written_whole
 
 
 class SCENEFIT_OT_compose(OnMesh, bpy.types.Operator):

@@ -5,8 +5,10 @@ from __future__ import annotations
 import bpy
 from bpy.props import IntProperty
 
-from . import work
-from .common import OnMesh, asset_layout, run_folder
+from ..workers import blender_jobs as work
+from .asset import asset_layout
+from .folders import run_folder
+from .polls import OnMesh
 from .jobs import JobOperator
 from .results import apply_layout_results, materials_words, result_targets
 
@@ -24,15 +26,16 @@ class SCENEFIT_OT_convert(OnMesh, JobOperator):
 
     def prepare(self, context):
         layout = asset_layout(context)   # the selected objects, or the active one with all its materials
-        asset = layout.read(context)
         self._object_name, self._layout = layout.name, result_targets(layout)
         out = run_folder(context, "convert", layout.name)
-        data = {"preset": context.scene.scenefit.preset, "iterations": self.iterations, "out": str(out)}
+        # the maps are decoded in the job; procedural chains are baked between redraws before it starts
+        # the run's settings as one frozen RunConfig; an iteration count is a quick look's stage override
+        config = work.plain_config(preset=context.scene.scenefit.preset, stage_overrides=work.quick_overrides(self))
+        data = {"config": config, "out": str(out), "asset": layout.plan(context)}
         if len(layout.materials) == 1:
-            mesh, maps = asset.fitting_view()
-            return work.convert, dict(data, mesh=mesh, maps=maps)
+            return work.convert, data
         # several materials: fitted as their atlas, then each baked in its own UVs for its slots
-        return work.convert, dict(data, asset=asset, materials=layout.bake_data())
+        return work.convert, dict(data, materials=layout.bake_data())
 
     def apply(self, context, result) -> str:
         mats = apply_layout_results(context, self._layout, result, "convert")

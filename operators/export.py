@@ -12,8 +12,13 @@ import bpy
 from ..blender_io.material import object_mesh_and_slots
 from ..blender_io.compose import CAMERA_NAME
 from ..core.base.errors import SceneFitError
-from .common import TAG, OnMesh, artist_camera, asset_layout, check_dependencies, photo_path, run_folder
-from .work import written_whole
+from ..blender_io.tag import TAG
+from .asset import asset_layout
+from .dependencies import check_dependencies
+from .folders import run_folder
+from .photo import artist_camera, photo_path
+from .polls import OnMesh
+from ..workers.blender_jobs import written_whole
 
 
 def photo_look_at(context):

@@ -13,8 +13,9 @@ from bpy.props import BoolProperty, IntProperty
 
 from ..blender_io.world import assign_world
 from ..core.base.errors import InputError, SceneFitError
-from .common import TAG, relative_if_saved
-from .common import asset_owner, asset_state
+from ..blender_io.tag import TAG
+from .folders import relative_if_saved
+from .asset import asset_owner, asset_state
 from .results import put_in_slots
 
 

@@ -23,7 +23,8 @@ from ..workers import background
 from ..core.base.errors import SceneFitError
 from ..core.base.names import RUN_ORDER
 from ..core.base.progress import TerminalProgress
-from .common import check_dependencies
+from ..core.data.map_plan import PendingAsset
+from .dependencies import check_dependencies
 
 if TYPE_CHECKING:
     from ..panels.quality import LocalWork
@@ -31,6 +32,7 @@ if TYPE_CHECKING:
 TIMER_SECONDS = 0.25
 _previews = None  # bpy.utils.previews collection, made on register
 _preview_serial = (None, 0)  # (job, serial) of the preview shown
+_gathering = None  # the operator whose inputs are still being gathered (its bakes between redraws), or None
 
 
 class SceneFitRuntime(bpy.types.PropertyGroup):
@@ -225,6 +227,20 @@ def has_ui(context) -> bool:
     return context.window is not None and not bpy.app.background
 
 
+def owed_bakes(data) -> list:
+    """The Cycles bakes a job's inputs still owe the main thread (core/data/map_plan.PendingAsset.bakes)."""
+    if not isinstance(data, dict):
+        return []
+    return [b for v in data.values() if isinstance(v, PendingAsset) for b in v.bakes if not b.done]
+
+
+def for_the_worker(data):
+    """A job's data as its worker takes it: each planned asset as plain data, its bakes' pixels in place."""
+    if not isinstance(data, dict):
+        return data
+    return {k: v.for_job() if isinstance(v, PendingAsset) else v for k, v in data.items()}
+
+
 def job_seconds(job: background.Job) -> float:
     """How long `job` has run so far."""
     return time.perf_counter() - job.state.started
@@ -292,7 +308,9 @@ class JobSteps:
                 self.report({"WARNING"}, warning)
             work, data = self.job_work(context)
             self._out = data.get("out", "") if isinstance(data, dict) else ""
-            result = background.run_inline(work, data, TerminalProgress())
+            for bake in owed_bakes(data):
+                bake.run()
+            result = background.run_inline(work, for_the_worker(data), TerminalProgress())
             message = self.apply_result(context, result)
             self.keep_run(context, "finished", result)
         except SceneFitError as error:
@@ -322,13 +340,18 @@ class JobSteps:
         return self._begin(context)
 
     def _begin(self, context):
-        """The bar at once; the inputs are gathered on the first timer tick (`_start_job`)."""
+        """The bar at once; the inputs are gathered on the first timer tick (`_gather`), a procedural chain's
+        bake on each tick after (`_bake_one`), and the worker started once they are (`_start_job`)."""
         active = background.active_job()
+        if _gathering is not None and _gathering is not self:
+            self.report({"ERROR"}, f"SceneFit's {_gathering.bl_label} is reading its asset; wait for it or cancel it "
+                                   "first.")
+            return {"CANCELLED"}
         if active is not None and not active.state.finished:
             self.report({"ERROR"}, f"A SceneFit job ('{active.name}') is already running; wait for it or cancel it "
                                    "first.")
             return {"CANCELLED"}
-        self._job = None
+        self._job, self._gathered, self._owed, self._cancel_gathering = None, None, [], False
         rt = runtime(context)
         rt.running, rt.job, rt.stage, rt.progress = True, self.job_name, "prepare", 0.0
         try:   # the bench's projection (no model lookup): the time left shows from the first moment
@@ -343,26 +366,71 @@ class JobSteps:
         wm.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
-    def _start_job(self, context) -> bool:
-        """Gather the inputs and start the worker; False (said) when the inputs are refused."""
+    def _gather_tick(self, context) -> set:
+        """One tick before the worker runs: gather the inputs (the first), else run one owed bake; then the
+        worker starts once nothing is owed. Each tick holds the main thread for one step only."""
+        global _gathering
         try:
-            check_dependencies()
-            work, data = self.job_work(context)
-            self._out = data.get("out", "") if isinstance(data, dict) else ""
-            self._job = background.start_job(background.Job(self.job_name, work, data))
+            if getattr(self, "_cancel_gathering", False):
+                return self._end_gathering(context, None)
+            if getattr(self, "_gathered", None) is None:
+                check_dependencies()
+                work, data = self.job_work(context)
+                self._out = data.get("out", "") if isinstance(data, dict) else ""
+                self._gathered, self._owed, self._baked = (work, data), owed_bakes(data), 0
+            elif self._owed:
+                self._owed.pop(0).run()
+                self._baked += 1
+            if self._owed:
+                _gathering = self
+                self._show_baking(context)
+                redraw(context)
+                return {"RUNNING_MODAL"}
+            _gathering = None
+            return {"RUNNING_MODAL"} if self._start_job(context) else {"CANCELLED"}
+        except SceneFitError as error:
+            return self._end_gathering(context, error)
+
+    def _show_baking(self, context) -> None:
+        rt = runtime(context)
+        n = self._baked + len(self._owed)
+        rt.stage, rt.progress = "prepare", self._baked / n
+        rt.status = f"{self.bl_label}: baking material {self._baked + 1} of {n} ({self._owed[0].words})…"
+
+    def _end_gathering(self, context, error: SceneFitError | None) -> set:
+        """Stop before the worker started: refused (`error`, said) or cancelled between bakes."""
+        global _gathering
+        _gathering = None
+        self._remove_timer(context)
+        rt = runtime(context)
+        rt.running = False
+        rt.status = rt.details = str(error) if error is not None else f"{self.bl_label}: cancelled"
+        if error is None:
+            rt.details = ""
+        self.report({"ERROR"} if error is not None else {"WARNING"}, rt.status)
+        return {"CANCELLED"}
+
+    def _start_job(self, context) -> bool:
+        """Start the worker on the gathered inputs; False (said) when they are refused."""
+        work, data = self._gathered
+        try:
+            self._job = background.start_job(background.Job(self.job_name, work, for_the_worker(data)))
             if getattr(self, "_remote", False):   # the projection is this machine's, not the worker's
                 runtime(context).expected_seconds = 0.0
         except SceneFitError as error:
-            self._remove_timer(context)
-            rt = runtime(context)
-            rt.running, rt.status, rt.details = False, str(error), str(error)
-            self.report({"ERROR"}, str(error))
+            self._end_gathering(context, error)
             return False
         update_runtime(context, self._job.state)
         return True
 
     def modal(self, context, event):
         job = getattr(self, "_job", None)
+        if event.type == "ESC" and event.value == "PRESS" and job is None and getattr(self, "_owed", None):
+            if not pointer_over_progress(context, event):
+                return {"PASS_THROUGH"}
+            self._cancel_gathering = True   # between bakes: the next tick ends it
+            runtime(context).status = f"{self.bl_label}: cancelling…"
+            return {"RUNNING_MODAL"}
         if event.type == "ESC" and event.value == "PRESS" and job is not None:
             action = esc_action(pointer_over_progress(context, event), job_seconds(job))
             if action == "pass":
@@ -375,8 +443,8 @@ class JobSteps:
             return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
-        if job is None:   # the first tick: gather the inputs, start the worker
-            return {"RUNNING_MODAL"} if self._start_job(context) else {"CANCELLED"}
+        if job is None:   # gather the inputs, bake what needs Blender's bake, start the worker
+            return self._gather_tick(context)
         state = job.poll()
         update_runtime(context, state, job.cancel_requested)
         redraw(context)
@@ -386,6 +454,9 @@ class JobSteps:
 
     def cancel(self, context):
         """Blender ends the modal (file load, window closed): stop the worker, keep Blender's data as is."""
+        global _gathering
+        if _gathering is self:
+            _gathering = None
         job = getattr(self, "_job", None)
         if job is not None:
             job.cancel()
@@ -512,14 +583,14 @@ class SCENEFIT_OT_cancel_job(bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         job = background.active_job()
-        if job is not None and not job.state.finished:
+        if (job is not None and not job.state.finished) or _gathering is not None:
             return True
         cls.poll_message_set("No SceneFit job is running")
         return False
 
     def invoke(self, context, event):
         job = background.active_job()
-        if job is not None and job_seconds(job) > CONFIRM_CANCEL_AFTER:
+        if job is not None and not job.state.finished and job_seconds(job) > CONFIRM_CANCEL_AFTER:
             return context.window_manager.invoke_confirm(self, event, title=f"Cancel {job.name}?",
                                                          message="It has run for a while; an adaptation can be "
                                                                  "resumed later.", confirm_text="Cancel it")
@@ -527,6 +598,10 @@ class SCENEFIT_OT_cancel_job(bpy.types.Operator):
 
     def execute(self, context):
         job = background.active_job()
+        if _gathering is not None and (job is None or job.state.finished):   # between bakes, before the worker
+            _gathering._cancel_gathering = True
+            runtime(context).status = f"{_gathering.bl_label}: cancelling…"
+            return {"FINISHED"}
         job.cancel()
         runtime(context).status = f"{job.name}: cancelling…"
         return {"FINISHED"}
@@ -553,7 +628,7 @@ def _end_job_before_load(*_args) -> None:
 @persistent
 def _reset_after_load(*_args) -> None:
     from ..panels.thumbnail import load_thumbnail
-    from .common import remember_photo_size
+    from .photo import remember_photo_size
 
     wm = bpy.context.window_manager
     if wm is not None and hasattr(wm, "scenefit_runtime"):

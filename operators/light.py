@@ -5,8 +5,10 @@ from __future__ import annotations
 import bpy
 from bpy.props import EnumProperty, IntProperty
 
-from . import work
-from .common import depth_model_preference, model_settings, photo_path, photo_view, run_folder
+from ..workers import blender_jobs as work
+from .folders import run_folder
+from .photo import photo_path, photo_view
+from .prefs import depth_model_preference, model_settings
 from .jobs import JobOperator
 from .results import apply_result_world
 

@@ -7,7 +7,7 @@ import bpy
 from bpy.props import EnumProperty
 
 from ..workers import background
-from .common import ADDON_PACKAGE, model_settings, offline, preferences
+from .prefs import ADDON_PACKAGE, model_settings, offline, preferences
 from .jobs import JobOperator
 
 MODEL_ITEMS = (

@@ -13,7 +13,7 @@ from ..blender_io.compose import CAMERA_NAME, ensure_photo_camera, load_photo_im
 from ..blender_io.placement import CANCEL, CLICK, classify_event, frame_rect, placement_from_click, \
     region_from_placement
 from ..core.base.errors import InputError, SceneFitError
-from .common import artist_camera, composite_camera, photo_path, photo_view
+from .photo import artist_camera, composite_camera, photo_path, photo_view
 
 _draw_handle = None
 

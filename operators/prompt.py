@@ -13,7 +13,8 @@ import threading
 import bpy
 
 from ..core.base.errors import SceneFitError
-from .common import needs_setting, preferences
+from .polls import needs_setting
+from .prefs import preferences
 
 # Adapt's edit mode wants an instruction; the other modes a description.
 PROMPT_MODE = {"edit": "instruct"}

@@ -10,7 +10,8 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
                        PointerProperty, StringProperty)
 
 from ..core.pipeline.presets import PRESET_DESCRIPTIONS, PRESET_NAMES
-from .common import asset_owner, remember_photo_size, texture_mesh_digest
+from .asset import asset_owner, texture_mesh_digest
+from .photo import remember_photo_size
 from ..core.scene.camera import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG
 from ..core.scene.placement import DEFAULT_AT, DEFAULT_OBJECT_SIZE
 

@@ -16,8 +16,10 @@ import bpy
 
 from ..core.base.errors import InputError
 from ..core.base.names import STAGES
-from .common import (depth_model_preference, last_finished_run, model_settings, photo_view, preferences, run_folder,
-                     scene_layout)
+from .asset import scene_layout
+from .folders import last_finished_run, run_folder
+from .photo import photo_view
+from .prefs import depth_model_preference, model_settings, preferences
 from .results import apply_layout_results, materials_words, result_targets
 
 # What the worker runs for each operator: the whole pipeline but the bake (Bake Asset writes the file here).
@@ -70,7 +72,8 @@ def remote_work(op, context, address: str) -> tuple:
     settings = context.scene.scenefit
     photo, layout = scene_layout(op, context, "A worker environment runs the pipeline that fits the asset into a "
                                               "photo; other modes run in this Blender")
-    mesh, maps, materials = layout.fitting(context)   # as a local Run All hands them over
+    # as a local Run All hands them over: planned here, decoded in the job, procedural chains baked between ticks
+    materials = layout.bake_data() if len(layout.materials) > 1 else None
     op._layout = result_targets(layout)   # where the results go: every slot of the asset
     objects, name = [bpy.data.objects[n] for n in layout.objects], layout.name
     models, _ = model_settings(context)
@@ -83,17 +86,17 @@ def remote_work(op, context, address: str) -> tuple:
     # The job's folder comes back whole as this run's new folder (nothing of it while it runs or if cancelled).
     folder = run_folder(context, op.job_name, name)
     earlier = last_finished_run(folder)   # its stages with this run's settings and inputs are reused, as here
-    # How the photo is seen, as Run All here sees it (operators/common.photo_view): the artist's camera or the
+    # How the photo is seen, as Run All here sees it (operators/photo.photo_view): the artist's camera or the
     # panel's values, where the asset stands, and the artist's sun.
     from ..core.pipeline.run_table import run_table
-    from .work import quick_overrides, view_config
+    from ..workers.blender_jobs import quick_overrides, view_config
 
     view = photo_view(context, photo, objects)
-    # The run as a local Run All builds it (operators/work.view_config), sent as a job's table.
+    # The run as a local Run All builds it (workers/blender_jobs.view_config), sent as a job's table.
     config = view_config(view, preset=settings.preset, prompt=settings.prompt, stage_overrides=quick_overrides(op),
                          scene_type=settings.scene_type, depth_model=depth_model_preference(context))
     return (work_remotely if materials is None else work_remotely_per_material), {
-        "mesh": mesh, "maps": maps, "photo": str(photo), "worker": address, "at": tuple(view["placement"]),
+        "asset": layout.plan(context), "photo": str(photo), "worker": address, "at": tuple(view["placement"]),
         "out": str(folder.parent), "name": folder.name, "stages": REMOTE_STAGES, "models": models,
         "materials": materials, "earlier": str(earlier) if earlier else None,
         **{k: v for k, v in run_table(config).items() if v is not None}}
@@ -114,10 +117,10 @@ def check_models_reach_the_worker(address: str, models: dict[str, str | None]) -
 
 def work_remotely_per_material(data: dict, progress=None, cancel=None) -> dict:
     """work_remotely for an asset of several materials: the worker fits their atlas; each material's maps
-    are then baked here from the texture that came back, in its own UVs (operators.work.material_results,
+    are then baked here from the texture that came back, in its own UVs (workers.blender_jobs.material_results,
     as after a local Run All), into the run folder's materials/."""
     from ..workers.remote import work_remotely
-    from .work import material_results
+    from ..workers.blender_jobs import material_results
 
     result = work_remotely(data, progress, cancel)
     texture = run_result(result["folder"], result["report"])["texture"]

@@ -14,8 +14,10 @@ from bpy.props import EnumProperty
 from ..blender_io import write_result_material
 from ..blender_io.world import assign_world, world_from_hdr
 from ..core.base.errors import InputError
-from .common import (ORIGINAL_PROPERTY, TAG, artists_material_behind, asset_state, keep_image, needs_setting,
-                     recorded_originals, relative_if_saved)
+from ..blender_io.tag import TAG
+from .asset import ORIGINAL_PROPERTY, artists_material_behind, asset_state, recorded_originals
+from .folders import keep_image, relative_if_saved
+from .polls import needs_setting
 
 
 
@@ -108,12 +110,12 @@ def materials_words(materials: list) -> str:
 
 def result_targets(layout) -> dict:
     """Where a job's result goes, as plain data kept on the operator while the job runs (the datablocks
-    are found again by name when it ends): an operators.common.AssetLayout's objects and slots, the
+    are found again by name when it ends): an operators.asset.AssetLayout's objects and slots, the
     wrap of each material's maps, and the result's name where the asset is one object with one material
     (as ever: '<object> SceneFit <stage>'; else each is named after the artist's material it replaces)."""
     from ..blender_io.material import material_wrap
 
-    from .common import asset_digest
+    from .asset import asset_digest
 
     one = len(layout.objects) == 1 and len(layout.materials) == 1
     return {"objects": list(layout.objects), "slots": [list(pairs) for pairs in layout.slots],

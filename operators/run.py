@@ -10,10 +10,13 @@ from bpy.props import EnumProperty
 from ..blender_io.compose import setup_composite
 from ..core.base.errors import SceneFitError
 from ..core.scene.camera import PhotoCamera
-from . import work
+from ..workers import blender_jobs as work
 from .adapt import adapt_seconds_here
-from .common import (OnMesh, depth_model_preference, last_finished_run, model_settings, photo_path, photo_view,
-                     run_folder, scene_layout)
+from .asset import scene_layout
+from .folders import last_finished_run, run_folder
+from .photo import photo_path, photo_view
+from .polls import OnMesh
+from .prefs import depth_model_preference, model_settings
 from .jobs import CHOICES, CostFirst, JobOperator
 from .properties import GUIDANCE
 from .results import (apply_composite_image, apply_layout_results, apply_result_world, materials_words,
@@ -51,7 +54,6 @@ class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
         settings = context.scene.scenefit
         photo, layout = scene_layout(self, context, "Run All fits the asset into the photo; use Convert and "
                                                     "Adapt for the other modes")
-        mesh, maps, materials = layout.fitting(context)
         guidance, why_no_adapt = self.chosen_guidance(context), ""
         if not settings.prompt.strip() and guidance == "auto":
             guidance, why_no_adapt = "none", "the Style section has no prompt"
@@ -68,8 +70,10 @@ class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
         config = work.view_config(view, preset=self.run_preset(context), prompt=settings.prompt, guidance_type=guidance,
                                   models=model_settings(context)[0], scene_type=settings.scene_type,
                                   depth_model=depth_model_preference(context))
-        return work.run, {"mesh": mesh, "maps": maps, "photo": str(photo), "placement": tuple(view["placement"]),
-                          "config": config, "why_no_adapt": why_no_adapt, "materials": materials,
+        # the maps are decoded in the job; procedural chains are baked between redraws before it starts
+        return work.run, {"asset": layout.plan(context), "photo": str(photo), "placement": tuple(view["placement"]),
+                          "config": config, "why_no_adapt": why_no_adapt,
+                          "materials": layout.bake_data() if len(layout.materials) > 1 else None,
                           "out": str(out), "reuse_from": str(earlier) if earlier else None}
 
     def long_local_work(self, context) -> LocalWork | None:

@@ -14,7 +14,8 @@ import bpy
 from bpy.props import FloatVectorProperty
 
 from ..core.base.errors import InputError, SceneFitError
-from .common import TAG, artist_camera, composite_camera, photo_path, photo_view
+from ..blender_io.tag import TAG
+from .photo import artist_camera, composite_camera, photo_path, photo_view
 from .placement import PhotoClicks
 
 STEPS = ("foot", "top", "tip")

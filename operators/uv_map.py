@@ -5,7 +5,8 @@ from __future__ import annotations
 import bpy
 
 from ..core.base.errors import SceneFitError
-from .common import OnMesh, asset_objects
+from .asset import asset_objects
+from .polls import OnMesh
 
 
 def objects_without_uvs(context) -> list:

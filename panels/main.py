@@ -13,7 +13,9 @@ import bpy
 from bpy.app.translations import pgettext_iface as iface_
 
 from ..core.base.errors import SceneFitError
-from ..operators.common import artist_camera, asset_objects, dependency_sentence, flat_parts, missing_modules
+from ..operators.asset import asset_objects, flat_parts
+from ..operators.dependencies import dependency_sentence, missing_modules
+from ..operators.photo import artist_camera
 from .quality import BENCH_MACHINE, EXPECTED_SECONDS, adapt_projection, duration_text, expected_line
 from .thumbnail import thumbnail
 
@@ -266,7 +268,7 @@ class SCENEFIT_UL_runs(bpy.types.UIList):
 
 def draw_runs(layout, context) -> None:
     """The active asset's run history and what can be done with the chosen run."""
-    from ..operators.common import asset_owner
+    from ..operators.asset import asset_owner
 
     owner = asset_owner(context.scene)
     if owner is None or not owner.scenefit_asset.runs:

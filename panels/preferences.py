@@ -122,7 +122,7 @@ def draw_models(box, context) -> None:
     import textwrap
 
     from ..core.guidance import model_store as store
-    from ..operators.common import offline
+    from ..operators.prefs import offline
     from ..operators.models import downloading, model_states
 
     from ..core.base.errors import SceneFitError

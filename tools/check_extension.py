@@ -45,7 +45,7 @@ t = time.perf_counter()
 bpy.ops.extensions.package_install_files(repo="user_default", filepath=zip_path, enable_on_install=True)
 report["enabled"] = module in bpy.context.preferences.addons
 report["install_s"] = round(time.perf_counter() - t, 1)
-common = __import__(module + ".operators.common", fromlist=["missing_modules"])
+common = __import__(module + ".operators.dependencies", fromlist=["missing_modules"])
 report["missing_modules"] = common.missing_modules()
 report["oidn"] = __import__(module + ".core.render.denoise", fromlist=["oidn_available"]).oidn_available()
 bpy.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16)

@@ -324,7 +324,7 @@ def _read_preview(path: str):
 def work_remotely(data: dict, progress=None, cancel=None) -> dict:
     """A background-job work function for the add-on: plain data in (the asset as arrays, the photo,
     the placement), the job run in the worker environment `data["worker"]`, its folder back in
-    `data["out"]`. Keys: mesh, maps, photo, at, worker, out; optional name, stages, models (a ModelConfig),
+    `data["out"]`. Keys: asset (planned in Blender, decoded here; or mesh and maps), photo, at, worker, out; optional name, stages, models (a ModelConfig),
     num_cpus, num_gpus, earlier (an earlier run's folder: its stages with the same inputs and settings are
     reused), and the run's settings as a jobs file's job gives them (core/pipeline/run_table.py: preset,
     mode, prompt, overrides, object_size, camera, sun, scene, ...), read by the same code.
@@ -333,6 +333,7 @@ def work_remotely(data: dict, progress=None, cancel=None) -> dict:
 
     from ..core.base.names import STAGES
     from ..core.data.asset_io import save_asset_folder
+    from ..core.data.map_plan import fitting_inputs
     from ..core.guidance.models import ModelConfig
     from ..core.pipeline.run_table import KEYS, run_config
 
@@ -341,7 +342,7 @@ def work_remotely(data: dict, progress=None, cancel=None) -> dict:
     run = run_config({k: data[k] for k in KEYS if data.get(k) is not None}, f"The remote job '{name}'", stages,
                      models=data.get("models") or ModelConfig())
     with tempfile.TemporaryDirectory(prefix="scenefit-asset-") as tmp:
-        asset = save_asset_folder(data["mesh"], data["maps"], Path(tmp) / "asset")
+        asset = save_asset_folder(*fitting_inputs(data), Path(tmp) / "asset")
         job = Job(name=name, asset=asset, stages=stages, photo=Path(data["photo"]) if data.get("photo") else None,
                   at=tuple(data["at"]) if data.get("at") is not None else None, run=run)
         settings = BatchSettings(retries=0, num_cpus=float(data.get("num_cpus", 1.0)),

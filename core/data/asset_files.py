@@ -8,6 +8,7 @@ from pathlib import Path
 from urllib.parse import unquote
 
 from ..base.errors import InputError
+from ..base.output_folder import LOCK_TEXT, MARKER
 from .glb import gltf_json
 
 
@@ -41,8 +42,6 @@ def folder_files(folder: Path) -> list[Path]:
     for a job's payload and its digest alike, so a batch whose --out lies inside the folder does not
     change the asset it reads (the folder itself may be one of SceneFit's: a convert's texture folder is read
     whole). One sentence for a FIFO, socket, device or link to nothing in it."""
-    from ..base.output_folder import LOCK_TEXT, MARKER
-
     refuse_special_files(folder)
     runs = [marker.parent for marker in folder.rglob(MARKER) if marker.is_file() and marker.parent != folder]
     return sorted(p for p in folder.rglob("*") if p.is_file() and not any(run in p.parents for run in runs)

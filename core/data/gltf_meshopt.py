@@ -121,7 +121,7 @@ def _checked_packing(view: dict, index: int, source: bytes | None, room: int) ->
 
 def _decoded_view(view: dict, index: int, buffers: list[bytes | None], room: int) -> bytes:
     """The bufferView's plain bytes, decoded where it is compressed."""
-    import meshopt
+    import meshopt  # lazy: its wheel is not on every platform
 
     if EXTENSION not in view.get("extensions", {}):
         source = buffers[view["buffer"]]
@@ -221,7 +221,7 @@ def _element_sizes(document: dict) -> dict[int, int]:
 def _packed(data: bytes, view: dict, size: int) -> tuple[bytes, dict] | None:
     """The view's bytes as EXT_meshopt_compression stores them and the extension's fields, or None
     where the codec cannot take it (a stride not a multiple of 4, a partial row)."""
-    import meshopt
+    import meshopt  # lazy: its wheel is not on every platform
 
     stride = view.get("byteStride", size)
     if view.get("target") == _ELEMENT_ARRAY_BUFFER and stride in (2, 4) and len(data) % (3 * stride) == 0:

@@ -72,6 +72,35 @@ def read_image(path: str | os.PathLike, max_side: int | None = None, upright: bo
     return pixels
 
 
+def read_texture_bytes(path: str | os.PathLike) -> np.ndarray:
+    """An 8-bit texture's stored values, (H, W, C) uint8, colour as stored (never multiplied by alpha);
+    one sentence when the file does not decode whole (a truncated JPEG's rows would come back grey)."""
+    import OpenImageIO as oiio  # lazy: Blender may lack it (missing_modules)
+
+    path = Path(path)
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    with native_output_captured() as chatter:
+        inp = oiio.ImageInput.open(str(path), config)
+        pixels = None
+        if inp is not None:
+            try:
+                spec = inp.spec()
+                pixels = inp.read_image(0, 0, 0, spec.nchannels, "uint8")
+                reason = inp.geterror()
+            finally:
+                inp.close()
+        else:
+            reason = oiio.geterror()
+    if pixels is None or reason:
+        reason = _first_line(reason).replace(f' ("{path}")', "") or chatter.last_line() or \
+            "the file is empty, truncated or not an image"
+        raise InputError(f"Image '{path}' cannot be {'read' if inp is None else 'decoded'} ({reason}); re-export it "
+                         "as PNG, JPEG or EXR.")
+    pixels = np.asarray(pixels, np.uint8)
+    return pixels.reshape(spec.height, spec.width, spec.nchannels) if pixels.ndim != 3 else pixels
+
+
 # Formats OpenImageIO and Blender both decode fully, so a file one refuses is damaged, not exotic.
 CHECKED_FORMATS = {".png": b"\x89PNG", ".jpg": b"\xff\xd8", ".jpeg": b"\xff\xd8"}
 # The long side an image is decoded at when only whether it decodes matters.

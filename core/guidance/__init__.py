@@ -8,11 +8,28 @@ injection.py  ReferenceInjector: attention processors concatenating the referenc
 views.py      local view on solid colours, global view crops in the photo, the 9-channel inpainting input
 weighting.py  timesteps, w_t, λ schedule, ⟨camera, normal⟩ map, guard rails
 """
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
 from ..scene.placement import Placement
-from .critics import CRITIC_TYPES, CriticConfig, CriticOutput, ScoreCritic
-from .injection import ReferenceInjector
-from .lora import LoraCritic, camera_condition
 from .models import GuidanceModels, ModelConfig, load_guidance_models, locate_models, models_available
+
+if TYPE_CHECKING:
+    from .critics import CRITIC_TYPES, CriticConfig, CriticOutput, ScoreCritic
+    from .injection import ReferenceInjector
+    from .lora import LoraCritic, camera_condition
+
+# The critics, LoRA and injection load torch (a second or more): imported when first named, so a RunConfig's
+# ModelConfig (built on Blender's main thread) or the model store does not load it.
+_TORCH_NAMES = {"CRITIC_TYPES": "critics", "CriticConfig": "critics", "CriticOutput": "critics",
+                "ScoreCritic": "critics", "ReferenceInjector": "injection", "LoraCritic": "lora",
+                "camera_condition": "lora"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _TORCH_NAMES:
+        return getattr(import_module(f"{__name__}.{_TORCH_NAMES[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = [
     "CRITIC_TYPES", "CriticConfig", "CriticOutput", "GuidanceModels", "LoraCritic", "ModelConfig", "Placement",

@@ -85,13 +85,20 @@ def with_shadow_sun(config: LightConfig, run: RunConfig, camera: PhotoCamera, st
     return replace(config, sun_deg=sun, sun_uncertainty_deg=spread)
 
 
-def adapt_config(run: RunConfig, asset_name: str) -> AdaptConfig:
+def adapt_config(run: RunConfig, asset_name: str, has_photo: bool = True, has_envmap: bool = False) -> AdaptConfig:
     """The run's mode, prompts and seed (a scene run without a prompt gets one from the asset's name; an
-    edit's prompt may be made of its object prompt and instruction)."""
+    edit's prompt may be made of its object prompt and instruction). has_photo: a scene run without its
+    photo (Blender's Adapt before a photo is chosen) adapts local views only; has_envmap: the local views
+    are lit by the light stage's map."""
     prompt = run.prompt or (f"a {asset_name} in this scene, photo" if run.mode == "scene" else "")
-    return _resolved("adapt", run, {"mode_type": run.mode, "prompt": prompt, "negative_prompt": run.negative_prompt,
-                                    "object_prompt": run.object_prompt, "instruction": run.instruction,
-                                    "seed": run.seed, "models": run.models})
+    values = {"mode_type": run.mode, "prompt": prompt, "negative_prompt": run.negative_prompt,
+              "object_prompt": run.object_prompt, "instruction": run.instruction, "seed": run.seed,
+              "models": run.models}
+    if run.mode == "scene" and not has_photo:
+        values["views_type"] = "local"
+    if has_envmap:
+        values["light_type"] = "envmap"
+    return _resolved("adapt", run, values)
 
 
 def compose_config(run: RunConfig) -> ComposeConfig:

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ..base.errors import InputError
+from ..data.photo import load_photo
 from ..scene.camera import DEFAULT_FOV_DEG, DEFAULT_PITCH_DEG, PHOTO_YAW_DEG, PhotoCamera
 # The fSpy and EXIF readers live in their own modules; their names are this module's too (what callers import).
 from .camera_exif import SENSOR_WIDTH_MM, exif_focal_and_model, fov_from_sensor, sensor_width_mm  # noqa: F401
@@ -120,8 +121,6 @@ def photo_camera_estimate(photo_path: str | Path, fspy_path: str | Path | None =
     from `source`) over the estimate. With all three given the photo's lines are not looked at."""
     overrides = check_camera_values(overrides or {})
     if {"fov_deg", "pitch_deg", "roll_deg"} <= set(overrides) and fspy_path is None:
-        from ..data.photo import load_photo
-
         width, height = (int(v) for v in load_photo(photo_path)[1]["size"])
         base = _estimate(overrides["fov_deg"], overrides["pitch_deg"], overrides["roll_deg"], (source,) * 3,
                          (1.0, 1.0, 1.0), width, height, None, ())
@@ -162,8 +161,6 @@ def check_camera_values(values: dict) -> dict:
 def estimate_photo_camera(photo_path: str | Path, fspy_path: str | Path | None = None) -> CameraEstimate:
     """The photo's camera from the best source there is (module docstring); raises InputError with one
     sentence for a photo or fSpy file that cannot be read."""
-    from ..data.photo import load_photo
-
     srgb, info = load_photo(photo_path)
     width, height = (int(v) for v in info["size"])
     if fspy_path is not None:
@@ -489,7 +486,7 @@ def photo_segments(srgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _line_detector():
     """OpenCV's LSD (back in 4.5.1+, present in the pinned 4.11); the contrib fast line detector where a
     build lacks it (4.1-4.5.0 shipped LSD as a stub that raises)."""
-    import cv2
+    import cv2  # lazy: Blender may lack it (missing_modules)
 
     try:
         return cv2.createLineSegmentDetector(cv2.LSD_REFINE_STD)

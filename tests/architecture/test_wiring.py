@@ -105,13 +105,13 @@ def test_a_jobs_file_says_how_the_photo_is_seen_as_the_command_line_does(inputs,
 
 
 def test_a_remote_run_all_sees_the_photo_as_a_local_one(inputs, monkeypatch):
-    """Run All on a worker: the RunConfig a local Run All builds (operators/work.view_config), sent as a job's
+    """Run All on a worker: the RunConfig a local Run All builds (workers/blender_jobs.view_config), sent as a job's
     table (as operators/remote.remote_work sends it) and read back on the worker, is the same config: the scene
     camera, the panel's camera values, the asset's size and turn and Pick Sun's sun all arrive."""
     from scenefit.core.data.asset_io import load_asset_folder
     from scenefit.core.guidance import ModelConfig
     from scenefit.core.pipeline.run_table import run_table
-    from scenefit.operators.work import view_config
+    from scenefit.workers.blender_jobs import view_config
     from scenefit.workers import remote
     from scenefit.workers.job_worker import run_pipeline_for_job
 
@@ -341,7 +341,7 @@ def test_elevation_is_the_orbit_angle_and_pitch_the_photo_cameras():
 
 
 def _panel_view(camera: dict | None = None) -> dict:
-    """operators/common.photo_view's answer for a panel at its defaults (the camera estimated in the job)."""
+    """operators/photo.photo_view's answer for a panel at its defaults (the camera estimated in the job)."""
     return {"camera": camera, "camera_source": "user" if camera else "estimate", "scene_camera": "",
             "placement": DEFAULT_AT, "size": DEFAULT_OBJECT_SIZE, "turn_deg": 0.0, "notes": []}
 
@@ -349,7 +349,7 @@ def _panel_view(camera: dict | None = None) -> dict:
 def test_run_all_in_blender_and_the_command_line_give_the_pipeline_the_same_settings(inputs, monkeypatch):
     """Run All once sent a placeholder camera (60 deg, 1x1 pixels) where the command line estimated it."""
     from scenefit.core.guidance import ModelConfig
-    from scenefit.operators.work import view_config
+    from scenefit.workers.blender_jobs import view_config
 
     recorder = Recorder()
     monkeypatch.setattr(run_module, "run_pipeline", recorder)

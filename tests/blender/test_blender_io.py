@@ -172,7 +172,7 @@ def test_operators_take_the_materials_the_faces_use(run_py):
     proc = run_py("""
         import json
         import bpy
-        from scenefit.operators.common import asset_layout
+        from scenefit.operators.asset import asset_layout
 
         bpy.ops.wm.read_factory_settings(use_empty=True)
         bpy.ops.mesh.primitive_cube_add()

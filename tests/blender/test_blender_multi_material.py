@@ -201,11 +201,11 @@ box.select_set(True)
 ball.select_set(True)
 bpy.context.view_layer.objects.active = ball
 import torch
-common = import_module(MODULE + ".operators.common")
+asset_ops = import_module(MODULE + ".operators.asset")
 convert = import_module(MODULE + ".core.stages.convert")
 layouts = import_module(MODULE + ".core.texture.surface_layout")
 saving = import_module(MODULE + ".core.texture.bake")
-asset = common.asset_layout(bpy.context).read(bpy.context)
+asset = asset_ops.asset_layout(bpy.context).read(bpy.context)
 texture = convert.convert_materials(asset, convert.ConvertConfig(texture=import_module(MODULE + ".core.pipeline.presets").stage_config("texture", "draft"), resolution=32)).texture
 view, layout, why = layouts.adapting_view(texture, asset.fitting_view()[0])
 out["layout"] = why
@@ -295,7 +295,7 @@ image = a.material_slots[0].material.node_tree.nodes["SceneFit Base Color"].imag
 image.pixels.foreach_set(np.tile(np.array([1.0, 0.0, 1.0, 1.0], np.float32), len(image.pixels) // 4))
 out["converts"].append(convert(a))
 out["a"] = results(["A"])["A/0"]
-out["a_behind"] = import_module(MODULE + ".operators.common").asset_layout(bpy.context).artists[0].name
+out["a_behind"] = import_module(MODULE + ".operators.asset").asset_layout(bpy.context).artists[0].name
 # The Results switch on B alone, though A's result came last: B's original back, A's result stays
 bpy.ops.object.select_all(action="DESELECT")
 b.select_set(True)

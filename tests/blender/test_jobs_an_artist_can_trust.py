@@ -392,6 +392,96 @@ out["deleted"] = [folder.exists(), material in bpy.data.materials, len(runs),
 """
 
 
+# Nothing heavy on the main thread: the maps the job decodes are the ones Blender's own read gives, bit for bit;
+# no tick of Convert decodes an image file (the worker does); a procedural chain bakes one per tick with its
+# own words on the bar, and Esc between bakes ends it before the worker starts.
+MAIN_THREAD = r"""
+from scenefit.operators import convert as convert_ops
+from scenefit.operators.asset import asset_layout
+from scenefit.core.data import map_plan
+DECODERS = {"read_image", "read_texture_bytes", "check_decodes", "_read_reduced"}
+main = threading.main_thread()
+decoded = {"main": [], "worker": []}
+def decode_guard(frame, kind, arg):
+    if kind == "call" and frame.f_code.co_name in DECODERS and frame.f_globals.get("__name__", "").endswith(
+            "core.data.imageio"):
+        decoded["main" if threading.current_thread() is main else "worker"].append(frame.f_code.co_name)
+def leaves(value):
+    if isinstance(value, map_plan.Deferred):
+        return [leaf for a in value.args for leaf in leaves(a)]
+    return [type(value).__name__] if isinstance(value, map_plan.Source) else []
+same, kinds = {}, {}
+for name in roots:
+    select(name)
+    layout = asset_layout(bpy.context)
+    job, here = layout.plan(bpy.context), layout.plan(bpy.context, files_in_job=False)
+    kinds[name] = sorted({leaf for m in job.materials for leaf in leaves(m.maps)})
+    new, old = job.resolved(), here.resolved()
+    same[name] = [[m.read == o.read and m.kept == o.kept and m.dropped == o.dropped] + [
+        (np.array_equal(a, b) and a.dtype == b.dtype) if isinstance(a, np.ndarray) else a == b
+        for a, b in ((getattr(m.maps, k), getattr(o.maps, k)) for k in ("base_color", "roughness", "metallic", "normal"))]
+        for m, o in zip(new.materials, old.materials)]
+
+def ticks(op, ctx, until_job=True):
+    # each tick's seconds and bar until the worker starts (or the operator ends)
+    seen = []
+    while getattr(op, "_job", None) is None:
+        t = time.perf_counter()
+        result = sorted(op.modal(ctx, event("TIMER")))
+        seen.append([round(time.perf_counter() - t, 4), rt.status, result])
+        if result != ["RUNNING_MODAL"]:
+            break
+    return seen
+
+def stop(op):
+    if getattr(op, "_job", None) is not None:
+        op._job.cancel(); op._job.wait(60); background.release_job(op._job)
+
+rt = bpy.context.window_manager.scenefit_runtime
+select(roots[0])
+op, ctx = probe(convert_ops.SCENEFIT_OT_convert, iterations=3), Ctx()
+sys.setprofile(decode_guard); threading.setprofile(decode_guard)
+try:
+    ui_invoke(op, ctx, event("LEFTMOUSE"))
+    convert_ticks = ticks(op, ctx)
+    sys.setprofile(None)
+    op._job.wait(120)
+finally:
+    sys.setprofile(None); threading.setprofile(None)
+convert_status = op._job.state.status
+background.release_job(op._job)
+
+# An artist's procedural material (two noise chains) on a plane of their own: two bakes, one per tick.
+bpy.ops.mesh.primitive_plane_add(size=1.0, location=(5.0, 0.0, 0.0))
+plane = bpy.context.active_object
+material = bpy.data.materials.new("Artist Noise")
+material.use_nodes = True
+nodes, links = material.node_tree.nodes, material.node_tree.links
+bsdf = next(n for n in nodes if n.type == "BSDF_PRINCIPLED")
+for socket in ("Base Color", "Roughness"):
+    links.new(nodes.new("ShaderNodeTexNoise").outputs["Color" if socket == "Base Color" else "Fac"], bsdf.inputs[socket])
+plane.data.materials.append(material)
+select(plane.name)
+op, ctx = probe(convert_ops.SCENEFIT_OT_convert, iterations=3), Ctx()
+ui_invoke(op, ctx, event("LEFTMOUSE"))
+first = sorted(op.modal(ctx, event("TIMER")))
+before_esc = [rt.status, getattr(op, "_job", None) is None, bpy.ops.scenefit.cancel_job.poll()]
+esc = sorted(op.modal(ctx, event("ESC", 500, 10)))
+cancelled = ticks(op, ctx)
+cancelled_state = [rt.running, rt.status, getattr(op, "_job", None) is None]
+op, ctx = probe(convert_ops.SCENEFIT_OT_convert, iterations=3), Ctx()
+ui_invoke(op, ctx, event("LEFTMOUSE"))
+baked = ticks(op, ctx)
+stop(op)
+for datablock, where in ((plane, bpy.data.objects), (plane.data, bpy.data.meshes), (material, bpy.data.materials)):
+    where.remove(datablock)
+out["main_thread"] = {"same": same, "kinds": kinds, "convert_ticks": convert_ticks, "convert_status": convert_status,
+                      "decoded": {k: sorted(set(v)) for k, v in decoded.items()}, "first": first,
+                      "before_esc": before_esc, "esc": esc, "cancelled": cancelled, "cancelled_state": cancelled_state,
+                      "baked": baked}
+"""
+
+
 @pytest.fixture(scope="module")
 def session(tmp_path_factory):
     missing = [p for p in ASSETS if not p.is_file()]
@@ -510,3 +600,24 @@ def test_each_asset_keeps_its_own_state_and_runs(session):
     folder_left, material_left, runs_left, slot_material = out["deleted"]
     assert not folder_left and not material_left and runs_left == len(out["runs"]) - 1
     assert "SceneFit" not in slot_material
+
+
+def test_maps_are_decoded_in_the_job_and_bakes_run_one_per_tick(session):
+    out = _step(session, MAIN_THREAD, "main_thread")["main_thread"]
+    # The job's maps are Blender's own read, bit for bit (8-bit PNG/JPEG: the stored bytes x 1/255), and the
+    # job really decodes files (a packed .glb image, an .obj's PNG), not Blender's copies.
+    for name, materials in out["same"].items():
+        assert materials and all(all(flags) for flags in materials), (name, materials)
+        assert "TextureFile" in out["kinds"][name], out["kinds"]
+    # No tick of Convert decodes an image file; its worker does.
+    assert out["decoded"]["main"] == [] and "read_texture_bytes" in out["decoded"]["worker"], out["decoded"]
+    assert out["convert_status"] == "done" and len(out["convert_ticks"]) == 1, out["convert_ticks"]
+    # Two procedural chains: one bake per tick, each said on the bar before the worker starts.
+    assert out["first"] == ["RUNNING_MODAL"]
+    status, no_job, can_cancel = out["before_esc"]
+    assert "baking material 1 of 2" in status and "Artist Noise" in status and no_job and can_cancel
+    assert out["esc"] == ["RUNNING_MODAL"]
+    assert out["cancelled"][-1][2] == ["CANCELLED"] and out["cancelled_state"] == [False, "Convert: cancelled", True]
+    bars = [status for _, status, _ in out["baked"]]
+    assert "baking material 1 of 2" in bars[0] and "baking material 2 of 2" in bars[1], bars
+    assert out["baked"][-1][2] == ["RUNNING_MODAL"] and len(out["baked"]) == 3, out["baked"]

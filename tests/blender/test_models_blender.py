@@ -32,7 +32,7 @@ def test_download_cancel_resume_remove_in_blender(run_py, tmp_path):
         bpy.ops.wm.read_factory_settings(use_empty=True)
         addon_utils.enable("scenefit", default_set=True)
         from scenefit.operators import models as ops
-        from scenefit.operators.common import model_settings
+        from scenefit.operators.prefs import model_settings
         from scenefit.workers import background
         out = {{}}
         prefs = bpy.context.preferences.addons["scenefit"].preferences

@@ -38,8 +38,9 @@ prefs = bpy.context.preferences.addons[MODULE].preferences
 prefs.base_model, prefs.inpaint_model = str(Path(tiny) / "sd2-base"), str(Path(tiny) / "sd2-inpaint")
 prefs.offline = True
 jobs = import_module(MODULE + ".workers.background")
-work = import_module(MODULE + ".operators.work")
-common = import_module(MODULE + ".operators.common")
+work = import_module(MODULE + ".workers.blender_jobs")
+asset_ops = import_module(MODULE + ".operators.asset")
+dependencies = import_module(MODULE + ".operators.dependencies")
 results = import_module(MODULE + ".operators.results")
 imageio = import_module(MODULE + ".core.data.imageio")
 
@@ -217,8 +218,8 @@ game_bake = import_module(MODULE + ".core.stages.bake.game_bake")
 texture = import_module(MODULE + ".core.texture.bake").load_neural_texture(bpy.path.abspath(bpy.context.scene.scenefit.texture_path))
 mesh_b, _ = import_module(MODULE + ".blender_io.material").object_mesh_and_slots(obj, bpy.context.evaluated_depsgraph_get())
 # (each material at its own images' shape, from the artist's maps behind the result in the slot)
-layout = import_module(MODULE + ".operators.common").asset_layout(bpy.context)
-own = layout.own_maps()["own_maps"]
+layout = import_module(MODULE + ".operators.asset").asset_layout(bpy.context)
+own = [m.maps for m in layout.read(bpy.context).materials]
 out["bake_shape"] = list(game_bake.own_texture_shape(own[0], import_module(MODULE + ".core.stages.bake.gltf_output").DEFAULT_MAX_TEXTURE))
 # The file holds the artist's material (the slot holds SceneFit's preview of the texture) with the baked maps.
 (artist,) = layout.artists
@@ -247,7 +248,7 @@ out["snapshot"] = [snapshot(), before]
 # The job path without a window: progress, preview, cancel, error; no bpy in the worker.
 JOBS = r"""
 obj, mat, image, world = make_scene()
-mesh, maps = common.asset_layout(bpy.context).read(bpy.context).fitting_view()
+mesh, maps = asset_ops.asset_layout(bpy.context).read(bpy.context).fitting_view()
 touched = []
 
 def profile(frame, event, arg):  # every Python call and C call in threads started from here on
@@ -266,7 +267,9 @@ def profile(frame, event, arg):  # every Python call and C call in threads start
 t_job = time.perf_counter()
 threading.setprofile(profile)
 try:
-    data = {"mesh": mesh, "maps": maps, "preset": "draft", "iterations": 12, "out": str(tmp / "job_convert")}
+    RunConfig = import_module(MODULE + ".core.pipeline.run_config").RunConfig
+    quick = lambda n: RunConfig(preset="draft", stage_overrides={"convert": {"iterations": n}})
+    data = {"mesh": mesh, "maps": maps, "config": quick(12), "out": str(tmp / "job_convert")}
     job = jobs.start_job(jobs.Job("convert", work.convert, data))
     seen = []
     while not job.poll().finished:
@@ -297,7 +300,7 @@ try:
 finally:
     threading.setprofile(None)
 
-data = dict(data, iterations=100000, out=str(tmp / "job_cancel"))
+data = dict(data, config=quick(100000), out=str(tmp / "job_cancel"))
 job = jobs.start_job(jobs.Job("convert", work.convert, data))
 while job.poll().step < 2:
     time.sleep(0.02)
@@ -305,7 +308,6 @@ job.cancel()
 out["cancelled"] = job.wait(30).status
 jobs.release_job(job)
 out["cancel_left"] = sorted(p.name for p in tmp.iterdir() if "job_cancel" in p.name)  # written beside: nothing
-RunConfig = import_module(MODULE + ".core.pipeline.run_config").RunConfig
 job = jobs.start_job(jobs.Job("light", work.estimate_light, {"photo": str(tmp / "missing.png"), "placement": (0.5, 0.6),
                                                             "config": RunConfig(), "out": str(tmp / "light")}))
 state = job.wait(30)
@@ -359,12 +361,12 @@ out["timings"] = dict(timings)
 
 # A zip without its wheels: one sentence, no traceback, nothing run (last: it disables the add-on).
 MISSING = r"""
-common.REQUIRED_MODULES["scenefit_no_such_module"] = "NoSuchModule"
-common._missing = None
+dependencies.REQUIRED_MODULES["scenefit_no_such_module"] = "NoSuchModule"
+dependencies._missing = None
 try:
-    out["missing"] = [sorted(bpy.ops.scenefit.convert()), common.dependency_sentence()]
+    out["missing"] = [sorted(bpy.ops.scenefit.convert()), dependencies.dependency_sentence()]
 except RuntimeError as error:  # bpy.ops raises what the operator reported as an error
-    out["missing"] = [str(error), common.dependency_sentence()]
+    out["missing"] = [str(error), dependencies.dependency_sentence()]
 addon_utils.disable(MODULE, default_set=True)
 """
 
@@ -678,7 +680,7 @@ def drawn(names):
     return [t for t in panel_lines(bpy.types.SCENEFIT_PT_asset) if "ground plane" in t]
 out["with_ground"] = drawn(["Trunk", "Crown", "Ground", "ShadowDecal"])
 out["tree_alone"] = drawn(["Trunk", "Crown"])
-out["flat_parts"] = common.flat_parts([bpy.data.objects[n] for n in ("Trunk", "Crown", "Ground", "ShadowDecal")])
+out["flat_parts"] = asset_ops.flat_parts([bpy.data.objects[n] for n in ("Trunk", "Crown", "Ground", "ShadowDecal")])
 """
 
 

@@ -64,13 +64,20 @@ s = bpy.context.scene.scenefit
 s.preset, s.photo_path, s.prompt, s.placement = "draft", str(tmp / "photo.png"), "a mossy ball", (0.5, 0.8)
 bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "scene.blend"))
 
-# 1. The Run operator's job, made by its own job_work and driven as its modal timer drives it (no window).
+# 1. The Run operator's job, made by its own job_work and driven as its modal timer drives it (no window):
+# the bakes its inputs owe run first, and the worker gets the planned asset as plain data.
+def handed(data):
+    for bake in jobs_ui.owed_bakes(data):
+        bake.run()
+    return jobs_ui.for_the_worker(data)
+
 Run = bpy.types.SCENEFIT_OT_run
 op = SimpleNamespace(job_name=Run.job_name, runs_remotely=Run.runs_remotely, iterations=2, model_resolution=32,
                      render_size=16)
 op.apply = lambda context, result: Run.apply(op, context, result)
 t0 = time.perf_counter()
 work, data = Run.job_work(op, bpy.context)
+data = handed(data)
 out["handed_off"] = [work.__module__, work.__name__, op._remote]
 data["overrides"]["adapt"].update(preview_every=1)   # a preview at every step
 job = jobs.start_job(jobs.Job("run", work, data))
@@ -100,6 +107,7 @@ if state.status == "done":
 # 1b. Run All again, nothing changed: the earlier run's stages travel with the job and the worker reuses
 # them (a Run All on a worker reused nothing, while one here reuses the last run's).
 work, data = Run.job_work(op, bpy.context)
+data = handed(data)
 data["overrides"]["adapt"].update(preview_every=1)   # as the first run had it
 out["rerun_earlier"] = data.get("earlier")
 t0 = time.perf_counter()
@@ -115,6 +123,7 @@ if state.status == "done":
 materials_before = sorted(m.name for m in bpy.data.materials)
 op_long = SimpleNamespace(job_name="run", iterations=100000, model_resolution=0, render_size=0)
 work, data = remote.remote_work(op_long, bpy.context, out["address"])
+data = handed(data)
 job = jobs.start_job(jobs.Job("run", work, data))
 t0 = time.perf_counter()
 while job.poll().step < 1 and time.perf_counter() - t0 < 120:

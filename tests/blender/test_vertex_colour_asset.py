@@ -115,8 +115,8 @@ def test_an_artists_vertex_coloured_mesh_gets_a_uv_map_at_their_word_and_then_co
         out["again"] = bpy.ops.scenefit.add_uv_map.poll()
         out["convert"] = sorted(bpy.ops.scenefit.convert())
         run = obj.scenefit_asset.runs[len(obj.scenefit_asset.runs) - 1]
-        report = json.loads((Path(bpy.path.abspath(run.folder)) / "report.json").read_text())
-        out["psnr"] = report["psnr_covered_texels_db"]
+        report = json.loads((Path(bpy.path.abspath(run.folder)) / "report.json").read_text())   # a run's report
+        out["psnr"] = report["stages"]["convert"]["report"]["psnr_covered_texels_db"]
         print("JSON" + json.dumps(out))
     """)
     from conftest import printed_json

@@ -10,7 +10,7 @@ from conftest import ROOT
 ARCHITECTURE = ROOT / "docs" / "architecture.md"
 PACKAGES = ("core", "workers", "blender_io", "operators", "panels", "cli")
 # A cited path or dotted module: core/stages/light/stage.py, core/base/errors, core.pipeline.run.guidance_found,
-# operators/common.AssetLayout.artists, core/render/renderer.py:material_shapes; not a test's folder
+# operators/asset.AssetLayout.artists, core/render/renderer.py:material_shapes; not a test's folder
 # (tests/core/base/...), which is no module.
 CITED = re.compile(r"(?<![\w/])((?:%s)(?:[/.][A-Za-z_][A-Za-z0-9_]*)+(?:\.py)?(?::[A-Za-z_][A-Za-z0-9_]*)?/?)"
                    % "|".join(PACKAGES))

@@ -11,13 +11,12 @@ from __future__ import annotations
 import os
 
 import torch
+import torch.distributed as dist
 
 from ...base.decision import Decision
 
 
 def rank_world() -> tuple[int, int]:
-    import torch.distributed as dist
-
     if dist.is_available() and dist.is_initialized():
         return dist.get_rank(), dist.get_world_size()
     return 0, 1
@@ -28,8 +27,6 @@ def init_distributed(backend: str | None = None) -> tuple[int, int]:
 
     nccl on CUDA, gloo otherwise; each rank uses GPU `LOCAL_RANK`. Returns (rank, world size).
     """
-    import torch.distributed as dist
-
     if not dist.is_initialized():
         backend = backend or ("nccl" if torch.cuda.is_available() else "gloo")
         if torch.cuda.is_available():
@@ -40,8 +37,6 @@ def init_distributed(backend: str | None = None) -> tuple[int, int]:
 
 def join_process_group() -> tuple[int, int, Decision]:
     """(rank, world size, why): joins torchrun's group when launched by it, else runs alone."""
-    import torch.distributed as dist
-
     if dist.is_available() and dist.is_initialized():
         rank, world = rank_world()
         return rank, world, Decision(world, "a process group was already initialised by the caller")
@@ -53,8 +48,6 @@ def join_process_group() -> tuple[int, int, Decision]:
 
 def sum_gradients(params) -> None:
     """Sum each parameter's gradient over the ranks (no-op alone)."""
-    import torch.distributed as dist
-
     if not (dist.is_available() and dist.is_initialized()):
         return
     for p in params:

@@ -34,13 +34,16 @@ from ...guidance.injection import ReferenceInjector
 from ...guidance.lora import LoraCritic, camera_condition
 from ...guidance.models import GuidanceModels, load_guidance_models, locate_models
 from ...guidance.views import global_view, local_view
-from ...data.mesh import Mesh
+from ...data.materials import mesh_raster
+from ...data.mesh import Mesh, normalize_to_unit_sphere
 from ...base.progress import ProgressCallback, check_cancel, emit
 from ...render.loop_renderer import LoopRenderer, asset_renderer
 from ...render.renderer import AssetRenderer, SceneOptions
 from ...scene.camera import PhotoCamera, photo_camera_for
 from ...scene.placement import Placement
+from ...texture.bake import bake_maps
 from ...texture.neural_texture import NeuralTexture, split_channels
+from ...texture.surface_layout import adapting_view
 from ...data.uv_raster import UVRaster
 from .checkpoint import CHECKPOINT_FILE, load_checkpoint, save_checkpoint
 from .config import AdaptConfig
@@ -624,7 +627,7 @@ def _peak_memory_mb(device) -> float | None:
     if device.type == "cuda":
         return torch.cuda.max_memory_allocated() / 2**20
     try:
-        import resource
+        import resource  # Unix only
 
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     except (ImportError, OSError):
@@ -667,10 +670,6 @@ def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfi
     running the same command again resumes. Returns the result and a report dict (on ranks other
     than 0 of a distributed run nothing is written and the report's outputs are empty).
     """
-    from ...data.mesh import normalize_to_unit_sphere
-    from ...data.materials import mesh_raster
-    from ...texture.surface_layout import adapting_view
-
     out_dir = Path(out_dir)
     join_process_group()  # under torchrun: this rank's GPU is chosen before the models load
     if models is None:  # missing weights stop the run here, before any work
@@ -694,8 +693,6 @@ def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfi
 def write_adapt(result: AdaptResult, folder: str | Path) -> dict:
     """The adapted texture baked into folder/maps in the asset's own UVs (on rank 0 only of a distributed
     run: one writer); returns the stage's report (its outputs empty on the other ranks)."""
-    from ...texture.bake import bake_maps
-
     raster, paths = result.bake_raster, {}
     if rank_world()[0] == 0:
         paths = bake_maps(result.texture, raster.position, raster.border, raster.fill_index, Path(folder) / "maps")

@@ -25,6 +25,7 @@ import numpy as np
 
 from ...base.errors import InputError
 from ...data.glb import read_gltf, write_glb
+from ...data.imageio import read_image, write_image
 
 EXTENSION = "KHR_texture_basisu"
 MIME = "image/ktx2"
@@ -110,9 +111,7 @@ def _encoder_arguments(role: str) -> list[str]:
 
 def _multiple_of_4(path: Path) -> Path:
     """`path` as a PNG whose sides are multiples of 4 (resized up where they are not)."""
-    import cv2
-
-    from ...data.imageio import read_image, write_image
+    import cv2  # lazy: Blender may lack it (missing_modules)
 
     pixels = read_image(path)
     h, w = pixels.shape[:2]

@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ...base.errors import InputError
-from .engine_targets import AS_IMPORTED, check_given, engine_target, kept_extensions
+from ...data.glb import gltf_json, read_gltf, write_glb
+from .engine_targets import AS_IMPORTED, check_given, engine_target, keep_only_extensions, kept_extensions
 
 COMPRESSIONS = ("none", "draco", "meshopt")
 TEXTURE_FORMATS = ("png", "jpeg", "webp", "ktx2")
@@ -94,8 +95,6 @@ def output_like_input(asset: str | Path | None, compress: str | None = None, tex
     the compression, texture format and extensions that engine reads (engine_targets). Tangents where the
     input has them (and, for inputs that are not glTF, where a loaded material has a normal map:
     blender_io.gltf_export)."""
-    from ...data.glb import gltf_json
-
     engine = engine_target(target)
     check_given(engine, compress, textures)
     is_gltf = asset is not None and Path(asset).suffix.lower() in (".gltf", ".glb")
@@ -144,9 +143,6 @@ def _input_texture_format(document: dict) -> str:
 def extensions_kept(path: Path, keep: frozenset[str]) -> list[str]:
     """engine_targets.keep_only_extensions on the .glb or .gltf file at `path`, rewritten in place if any
     went. Returns the extensions taken out."""
-    from ...data.glb import read_gltf, write_glb
-    from .engine_targets import keep_only_extensions
-
     document, chunk = read_gltf(path)
     removed = keep_only_extensions(document, keep)
     if removed and path.suffix.lower() == ".gltf":
@@ -188,8 +184,6 @@ def move_skinned_meshes_to_root(document: dict) -> int:
 
 def skinned_meshes_moved_to_root(path: Path) -> int:
     """move_skinned_meshes_to_root on the .glb or .gltf file at `path`, rewritten in place if any moved."""
-    from ...data.glb import read_gltf, write_glb
-
     document, chunk = read_gltf(path)
     moved = move_skinned_meshes_to_root(document)
     if moved and chunk is None:

@@ -12,6 +12,9 @@ from urllib.parse import unquote
 
 import numpy as np
 
+from ...data.glb import read_gltf, write_glb
+from ...data.gltf_meshopt import importable
+
 _DTYPES = {5126: np.float32, 5121: np.uint8, 5123: np.uint16, 5120: np.int8, 5122: np.int16}
 _NORMALIZED = {5121: 255.0, 5123: 65535.0, 5120: 127.0, 5122: 32767.0}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
@@ -20,10 +23,7 @@ _PLACES = (4, 4)   # decimals a vertex is matched at: place (in its mesh's size)
 
 class GltfBuffers:
     """A glTF file's JSON and its buffers as writable bytes (a .glb's BIN chunk, a .gltf's .bin files)."""
-
     def __init__(self, path: Path) -> None:
-        from ...data.glb import read_gltf
-
         self.path = Path(path)
         self.document, chunk = read_gltf(self.path)
         self.data: list[bytearray | None] = []
@@ -72,8 +72,6 @@ class GltfBuffers:
         out[...] = values
 
     def save(self) -> None:
-        from ...data.glb import write_glb
-
         for buffer, data in zip(self.document.get("buffers", []), self.data):
             uri = buffer.get("uri")
             if uri and not uri.startswith("data:") and data is not None:
@@ -113,8 +111,6 @@ def _keys(size: float, positions: np.ndarray, uvs: np.ndarray) -> list[tuple]:
 
 def input_tangents(path: Path) -> dict[tuple, list[tuple[np.ndarray, np.ndarray]]]:
     """The input glTF's (normal, tangent) pairs by vertex key (place relative to its mesh's size, UV)."""
-    from ...data.gltf_meshopt import importable
-
     found: dict[tuple, list] = {}
     with importable(Path(path)) as plain:
         for size, positions, normals, uvs, _, tangents in _primitives(GltfBuffers(plain)):

@@ -18,10 +18,14 @@ from pathlib import Path
 import numpy as np
 
 from ...base.decision import Decision
+from ...base.report import write_report
+from ...guidance import models as guidance_models
 from ...scene.camera import PhotoCamera
 from ...scene.placement import Placement
 from ...base.progress import ProgressCallback
 from ...data.photo import load_photo
+from ..camera import photo_camera_estimate
+from .cues import SUN_UNSURE_ADVICE, sun_is_unsure
 from .estimate import LightConfig, LightResult, estimate_light, light_report, write_light_outputs
 
 
@@ -39,11 +43,9 @@ def critic_choice(asked: str, models) -> Decision:
     SD2 base weights are on this machine (never a download), else none. `scenefit light`, Blender's
     Estimate Light and a batch light job decide it here; the whole pipeline follows its run's guidance
     (core.run.guidance_found), which also needs the inpainting weights."""
-    from ...guidance.models import models_available
-
     if asked != "auto":
         return Decision(asked, "the user's choice")
-    found, where = models_available(models, need_inpaint=False)
+    found, where = guidance_models.models_available(models, need_inpaint=False)
     if found:
         return Decision("diffusion", f"Stable Diffusion 2 found ({where})")
     return Decision("none", "Stable Diffusion 2 weights are not on this machine, so the prior sets the scales")
@@ -55,8 +57,6 @@ def light_inputs(photo_path: str | Path, at, fspy: str | Path | None = None,
     """The photo read once, the placement `at` ("X,Y" or a pair: fractions, or pixels of the photo as
     stored) and the photo's camera as `scenefit camera` finds it, with `camera_overrides` (from
     `camera_source`, said as `camera_why`) over it."""
-    from ..camera import photo_camera_estimate
-
     photo, info = load_photo(photo_path)
     h, w = photo.shape[:2]
     pixel = Placement.parse(at, tuple(info["size"])).pixel((h, w))
@@ -78,8 +78,6 @@ def run_light(inputs: LightInputs, config: LightConfig, progress: ProgressCallba
 
 def write_light(result: LightResult, folder: str | Path, extra: dict | None = None) -> dict:
     """light.exr and its previews in `folder`, and report.json (the photo's facts, `extra` over it)."""
-    from ...base.report import write_report
-
     report = light_report(result, result.config, write_light_outputs(result, folder))
     report["photo"] = result.photo_info
     report.update(extra or {})
@@ -93,8 +91,6 @@ def sun_words(decisions: dict, setter: str) -> str:
     sun = decisions.get("sun")
     if not sun:
         return f"light direction guessed ({setter} sets it)"
-    from .cues import SUN_UNSURE_ADVICE, sun_is_unsure
-
     spread = sun.get("uncertainty_deg") or 0.0
     sure = "" if spread < 0.5 else f" (±{spread:.0f}°: {SUN_UNSURE_ADVICE})" if sun_is_unsure(spread) else \
         f" (±{spread:.0f}°)"

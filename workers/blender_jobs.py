@@ -1,4 +1,4 @@
-"""What each operator's job runs: plain data in, plain data (paths, numbers) out.
+"""What each Blender operator's job runs in its worker thread: plain data in, plain data (paths, numbers) out.
 
 These functions run in a job's worker thread (or inline under `blender -b`), so they never import
 bpy: the operators gather Blender data into the `data` dicts on the main thread, and write the
@@ -36,40 +36,35 @@ def _moved(value, old: str, new: str):
 
 
 def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
-    """Fit the neural texture to the asset's maps; bake base colour, roughness, metallic into data['out']."""
+    """Fit the neural texture to the asset's maps and bake base colour, roughness, metallic: the pipeline's
+    convert stage alone (run_pipeline, stages ("convert",)) into data['out'], with data['config'], the
+    RunConfig Convert's prepare() built (an iteration count in its overrides asks for the fit; else the
+    asset's maps are the exact start). A roughness or metallic that holds one value stays that value."""
     from ..core.base.report import write_report
-    from ..core.stages.convert import convert_and_bake
-    from ..core.pipeline.presets import stage_config
+    from ..core.data.map_plan import resolved_asset
+    from ..core.pipeline.run import run_pipeline
 
-    # An iteration count asks for the fit (core/pipeline/presets.py); else the asset's maps are the exact start.
-    overrides = {"iterations": int(data["iterations"])} if data.get("iterations") else {}
+    if data.get("asset") is not None:
+        asset = resolved_asset(data["asset"])   # the maps decoded here, off Blender's main thread
+        several = len(asset.materials) > 1   # fitted as their atlas; one material: its mesh and maps
+        mesh, maps = (asset, None) if several else asset.fitting_view()
+    else:
+        mesh, maps = data["mesh"], data["maps"]   # (a script's own mesh and maps)
 
-    def write(out: Path) -> dict:
-        # A roughness or metallic that holds one value stays that value (a factor on the socket), as
-        # on the command line, instead of a baked 16-bit map.
-        asset = data.get("asset")   # several materials (core.materials.AssetMaterials), else mesh and maps
-        _, report = convert_and_bake(asset or data["mesh"], None if asset else data["maps"], out,
-                                     stage_config("convert", data["preset"], **overrides), progress=progress,
-                                     cancel=cancel, keep_constants=True)
-        per_material = material_results(data, report["outputs"]["weights"], out / "materials") \
+    def write(folder: Path) -> dict:
+        result = run_pipeline(mesh, maps, None, None, folder, data["config"], progress=progress, cancel=cancel,
+                              stages=("convert",))
+        report, outputs = result.to_report(), result.outputs("convert")
+        per_material = material_results(data, outputs["weights"], folder / "materials") \
             if data.get("materials") else []
         if per_material:
             report["materials_in_blender"] = per_material
-        write_report(out / "report.json", report)
-        return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
-                "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
-                "psnr_db": report["psnr_covered_texels_db"], "material_maps": per_material}
+        write_report(folder / "report.json", report)  # paths relative to the run folder, which moves
+        return {"maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
+                "texture": outputs["weights"], "report": str(folder / "report.json"),
+                "psnr_db": result.stages["convert"].report["psnr_covered_texels_db"], "material_maps": per_material}
 
     return written_whole(data["out"], write)
-
-
-def view_camera(photo: str, view: dict, width: int, height: int):
-    """(PhotoCamera, its record) for the photo as operators/common.photo_view decided: the artist's
-    camera or the panel's values, else the estimate from the photo (core/stages/camera.py)."""
-    from ..core.stages.camera import photo_camera_estimate
-
-    estimate = photo_camera_estimate(photo, None, view["camera"], *camera_source(view))
-    return estimate.photo_camera(width=width, height=height), estimate.to_dict()
 
 
 def camera_source(view: dict) -> tuple[str, str]:
@@ -94,11 +89,12 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
     from ..core.stages.light.stage import light_inputs, run_light, sun_words, write_light
 
     run = data["config"]
-    # the photo's camera: the artist's, the panel's values, or the photo's own (operators/common.photo_view)
+    # the photo's camera: the artist's, the panel's values, or the photo's own (operators/photo.photo_view)
     inputs = light_inputs(data["photo"], tuple(data["placement"]), run.fspy, run.camera_overrides, run.camera_source,
                           run.camera_why)
     config = with_shadow_sun(light_config(run, light_critic(run).choice), run, inputs.camera,
-                             tuple(inputs.info["size"]), inputs.photo.shape[:2])
+                             (int(inputs.info["size"][0]), int(inputs.info["size"][1])),
+                             (inputs.photo.shape[0], inputs.photo.shape[1]))
     result = run_light(inputs, config, progress, cancel)
 
     def write(out: Path) -> dict:
@@ -114,44 +110,34 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
 
 
 def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
-    """Restyle the converted texture (or make one, mode 'generate') and bake the maps into data['out']/maps."""
+    """Restyle the converted texture (or make one, mode 'generate') and bake the maps into data['out']/maps,
+    with data['config'], the RunConfig Adapt's prepare() built (view_config): its adapt config is resolved
+    where every entry point's is (core/pipeline/stage_configs.py), with what the photo and light map decide."""
     import numpy as np
 
-    from dataclasses import replace
-
-    from ..core.stages.adapt import StageSpec, adapt_and_bake
+    from ..core.stages.adapt import adapt_and_bake
+    from ..core.stages.camera import photo_camera_estimate
     from ..core.stages.compose import light_camera
     from ..core.data.imageio import linear_to_srgb, read_color_image
     from ..core.base.report import write_report
     from ..core.render.environment import load_environment
-    from ..core.pipeline.presets import stage_config
+    from ..core.pipeline.stage_configs import adapt_config
     from ..core.scene.placement import Placement
     from ..core.texture.bake import load_neural_texture
 
-    mode = data["mode"]
+    run = data["config"]
     photo = placement = camera = None
-    if mode == "scene" and data.get("photo"):
+    if run.mode == "scene" and data.get("photo"):
         photo = linear_to_srgb(np.clip(read_color_image(data["photo"], upright=True), 0.0, 1.0))
-        placement = Placement(tuple(data["placement"]), data["size"])
+        placement = Placement(tuple(data["placement"]), run.size)
         h, w = photo.shape[:2]
         if data.get("envmap"):   # the camera the light stage estimated this map with
             camera = light_camera(data["envmap"], {}, w, h)[0]
-        else:
-            camera = view_camera(data["photo"], data["view"], w, h)[0]
-    overrides = {"views_type": "local"} if mode == "scene" and photo is None else {}
+        else:   # the artist's camera, the panel's values, or the estimate (operators/photo.photo_view)
+            camera = photo_camera_estimate(data["photo"], None, run.camera_overrides, run.camera_source,
+                                           run.camera_why).photo_camera(width=w, height=h)
     envmap = load_environment(data["envmap"]) if data.get("envmap") else None
-    if envmap is not None:
-        overrides["light_type"] = "envmap"
-    if data.get("iterations"):
-        overrides["iterations"] = int(data["iterations"])
-    config = stage_config("adapt", data["preset"], mode_type=mode, prompt=data["prompt"],
-                          object_prompt=data["object_prompt"], instruction=data["instruction"], models=data["models"],
-                          **overrides)
-    if data.get("model_resolution") or data.get("render_size"):  # quick looks and tests
-        size = data.get("render_size") or None
-        stages = tuple(StageSpec(st.fraction, min(st.render_size, size or st.render_size), st.spp, st.t_range)
-                       for st in config.stages)
-        config = replace(config, stages=stages, model_resolution=data.get("model_resolution") or config.model_resolution)
+    config = adapt_config(run, data["asset_name"], has_photo=photo is not None, has_envmap=envmap is not None)
     texture = load_neural_texture(data["texture"]) if data.get("texture") else None
 
     def write(out: Path) -> dict:
@@ -169,7 +155,7 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
 
 
 def view_config(view: dict, **settings):
-    """A RunConfig of `settings` seeing the photo as `view` (operators/common.photo_view) says: the artist's
+    """A RunConfig of `settings` seeing the photo as `view` (operators/photo.photo_view) says: the artist's
     camera or the panel's values, the asset's size and turn, the artist's sun. Run All's prepare() here and
     on a worker (its job is this config's table, core/pipeline/run_table.py) build it here."""
     from ..core.pipeline.run_config import RunConfig
@@ -179,6 +165,13 @@ def view_config(view: dict, **settings):
                      camera_why=why, turn_deg=view["turn_deg"],
                      sun_deg=tuple(view["sun_deg"]) if view.get("sun_deg") else None,
                      sun_uncertainty_deg=float(view.get("sun_uncertainty_deg", 0.0)), **settings)
+
+
+def plain_config(**settings):
+    """A RunConfig of `settings` that sees no photo (Convert; Adapt before a photo is chosen)."""
+    from ..core.pipeline.run_config import RunConfig
+
+    return RunConfig(**settings)
 
 
 def quick_overrides(op) -> dict:
@@ -206,7 +199,7 @@ def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:
     """Each material's maps baked from the neural texture in that material's own UVs (core.game_bake, as
     Bake Asset and the command line's bake do), written into folder/<n>/: what the new material in its
     slots shows. The run's own maps are the atlas of every material (core.materials), which no slot reads.
-    data['materials']: operators.common.AssetLayout.bake_data()."""
+    data['materials']: operators.asset.AssetLayout.bake_data()."""
     import numpy as np
 
     from ..core.stages.bake.game_bake import bake_game_maps as bake, default_texture_size
@@ -221,7 +214,7 @@ def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:
     maps = []
     for index, material in enumerate(baked, start=1):
         where = folder / str(index)
-        paths = {"base_color": str(write_image(where / "base_color.png", material.base_color / 255.0, "uint8"))}
+        paths: dict[str, str | float] = {"base_color": str(write_image(where / "base_color.png", material.base_color / 255.0, "uint8"))}
         for key in ("roughness", "metallic"):
             value = getattr(material, key)
             paths[key] = str(write_image(where / f"{key}.png", value / 255.0, "uint8")) \
@@ -235,10 +228,13 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
     game bake is Bake Asset's, on the main thread) into data['out'] with data['config'], the RunConfig
     Run All built (view_config); returns what Blender applies."""
     from ..core.base.report import write_report
+    from ..core.data.map_plan import resolved_asset
     from ..core.pipeline.run import run_pipeline
 
+    mesh, maps = resolved_asset(data["asset"]).fitting_view()   # the maps decoded here, off the main thread
+
     def write(folder: Path) -> dict:
-        result = run_pipeline(data["mesh"], data["maps"], data["photo"], data["placement"], folder,
+        result = run_pipeline(mesh, maps, data["photo"], data["placement"], folder,
                               data["config"], progress=progress, cancel=cancel,
                               bake_skipped_why="in Blender the game file is written by Bake Asset",
                               reuse_from=data.get("reuse_from"))
@@ -247,6 +243,9 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
         if result.stages["adapt"].status == "skipped" and data.get("why_no_adapt"):
             stages["adapt"]["why"] = data["why_no_adapt"]
         last = result.texture_stage
+        camera = result.camera
+        if camera is None:   # (Run All runs the camera stage always)
+            raise RuntimeError("the run returned no camera stage")
         outputs = result.outputs(last)
         per_material = material_results(data, outputs["weights"], folder / "materials") \
             if data.get("materials") else []
@@ -257,7 +256,7 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
                 "maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
                 "hdr": str(folder / "light" / "light.exr"), "composite": str(result.composite),
                 # the camera stage's (which light and compose used), for the Cycles set-up
-                "camera": {k: result.camera.report["photo_camera"][k] for k in ("fov_deg", "pitch_deg", "roll_deg")},
+                "camera": {k: camera.report["photo_camera"][k] for k in ("fov_deg", "pitch_deg", "roll_deg")},
                 "stages": {name: stage.status for name, stage in result.stages.items()},
                 "adapt_skipped": stages["adapt"].get("why", ""), "material_maps": per_material}
 
@@ -269,14 +268,15 @@ def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Eve
     images' shape from its own maps (data['own_maps']), within data['max_size'], as `scenefit bake` does.
     A channel whose baked map is what the artist's material already gives keeps that material's nodes
     (BakedMaterial.unchanged), also where the slot holds a SceneFit result: the file is written from the
-    artist's material (operators/common.AssetLayout.artists)."""
+    artist's material (operators/asset.AssetLayout.artists)."""
     from ..blender_io.uv_unwrap import NEW_UV_MAP
     from ..core.stages.bake.game_bake import bake_game_maps as bake, bake_shapes
     from ..core.base.progress import emit
+    from ..core.data.map_plan import resolved_asset
     from ..core.texture.bake import load_neural_texture
 
     texture = load_neural_texture(data["texture"])
-    own = list(data["own_maps"])
+    own = [m.maps for m in resolved_asset(data["own_maps"]).materials]   # decoded here, off the main thread
     shapes = bake_shapes(own, data["size"], data.get("max_size", 8192))
     shown = ", ".join(sorted({f"{s}²" if isinstance(s, int) else f"{s[1]}x{s[0]}" for s in shapes}))
     emit(progress, "bake", 0, 1, f"{len(data['names'])} material(s) at {shown}")
