@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 
+from scenefit.core.base.errors import InputError
 from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.render.brdf_tables import brdf_tables, compute_tables
 from scenefit.core.render.gbuffer import GBufferOptions, bilinear_taps
@@ -119,3 +120,19 @@ def test_each_sample_reads_the_texture_a_pixel_covers():
         psnr[samples] = image_psnr(tonemap_srgb(loop.render(camera, *split, torch.from_numpy(env)).rgb.numpy()), ref)
     assert GBufferOptions().samples == 16
     assert psnr[16] > psnr[4] + 1.0 and psnr[16] > 33.0, psnr
+
+
+def test_a_view_under_a_light_map_is_traced_with_the_map_settings_and_ambient_views_with_their_own():
+    mesh = uv_sphere(segments=16, rings=8)
+    ambient = np.ones((8, 16, 3), np.float32)
+    light_map = np.full((8, 16, 3), 0.5, np.float32)
+    light_map[2, 5] = 40.0
+    options = GBufferOptions(samples=9, diffuse_rays=2, map_samples=4, map_diffuse_rays=3, specular_rays=1)
+    loop = LoopRenderer(mesh, (8, 8), ambient, SceneOptions(max_depth=2, hide_emitters=True), gbuffer=options)
+    camera = Camera(30, 15, 1.1, width=8, height=8)
+    assert loop.gbuffer(camera, torch.from_numpy(ambient))[0].samples == 9
+    assert loop.gbuffer(camera, torch.from_numpy(light_map))[0].samples == 4
+    assert options.for_light(False) == GBufferOptions(samples=4, diffuse_rays=3, map_samples=4, map_diffuse_rays=3,
+                                                      specular_rays=1)
+    with pytest.raises(InputError, match="square"):
+        GBufferOptions(map_samples=5)
