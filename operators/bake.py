@@ -243,8 +243,6 @@ def new_uv_map(context, layout, texture) -> tuple[frozenset, object, dict]:
     return remap, remapped, loops
 
 
-
-
 class SCENEFIT_OT_open_bake_folder(bpy.types.Operator):
     """Open the folder of the last file Bake Asset wrote in the system's file browser"""
 

@@ -24,7 +24,7 @@ class SCENEFIT_OT_add_uv_map(OnMesh, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if not OnMesh.poll.__func__(cls, context):
+        if not super().poll(context):
             return False
         obj = context.active_object
         if obj.data.uv_layers:

@@ -36,22 +36,35 @@ def read_image(path: str | os.PathLike, max_side: int | None = None, upright: bo
     factor k = ceil(long side / max_side) (each output pixel the mean of k x k stored ones, which keeps
     an HDR image's energy), so an 8000x6000 photo never sits in memory at full size.
     """
-    import OpenImageIO as oiio  # lazy: Blender may lack it (missing_modules)
-
     path = Path(path)
     if path.is_dir():
         raise InputError(f"'{path}' is a folder, not an image; give the image file's path.")
     if not path.is_file():
         raise InputError(f"Image '{path}' does not exist.")
+    pixels, orientation = _decoded(path, lambda inp: (*_read_reduced(inp, max_side),
+                                                      inp.spec().get_int_attribute("Orientation", 1)))
+    pixels = np.asarray(pixels, dtype=np.float32)
+    if pixels.ndim == 2:
+        pixels = pixels[..., None]
+    if upright and orientation in TURNED_ORIENTATIONS:
+        pixels = _reoriented(pixels, orientation)
+    return pixels
+
+
+def _decoded(path: Path, read) -> tuple:
+    """(pixels, extra) of `read(inp)` -> (pixels, the reader's error, extra) on `path` opened with its colour as
+    stored (never multiplied by alpha); one sentence (InputError) when it does not open or decode whole."""
+    import OpenImageIO as oiio  # lazy: Blender may lack it (missing_modules)
+
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
+    extra = None
     with native_output_captured() as chatter:
         inp = oiio.ImageInput.open(str(path), config)
         pixels = None
         if inp is not None:
             try:
-                pixels, reason = _read_reduced(inp, max_side)
-                orientation = inp.spec().get_int_attribute("Orientation", 1)
+                pixels, reason, extra = read(inp)
             finally:
                 inp.close()
         else:
@@ -62,41 +75,19 @@ def read_image(path: str | os.PathLike, max_side: int | None = None, upright: bo
         # libjpeg's errors repeat the path the message already names.
         reason = _first_line(reason).replace(f' ("{path}")', "") or chatter.last_line() or \
             "the file is empty, truncated or not an image"
-        what = "read" if inp is None else "decoded"
-        raise InputError(f"Image '{path}' cannot be {what} ({reason}); re-export it as PNG, JPEG or EXR.")
-    pixels = np.asarray(pixels, dtype=np.float32)
-    if pixels.ndim == 2:
-        pixels = pixels[..., None]
-    if upright and orientation in TURNED_ORIENTATIONS:
-        pixels = _reoriented(pixels, orientation)
-    return pixels
+        raise InputError(f"Image '{path}' cannot be {'read' if inp is None else 'decoded'} ({reason}); re-export it "
+                         "as PNG, JPEG or EXR.")
+    return pixels, extra
 
 
 def read_texture_bytes(path: str | os.PathLike) -> np.ndarray:
     """An 8-bit texture's stored values, (H, W, C) uint8, colour as stored (never multiplied by alpha);
     one sentence when the file does not decode whole (a truncated JPEG's rows would come back grey)."""
-    import OpenImageIO as oiio  # lazy: Blender may lack it (missing_modules)
+    def stored(inp):
+        spec = inp.spec()
+        return inp.read_image(0, 0, 0, spec.nchannels, "uint8"), inp.geterror(), spec
 
-    path = Path(path)
-    config = oiio.ImageSpec()
-    config.attribute("oiio:UnassociatedAlpha", 1)
-    with native_output_captured() as chatter:
-        inp = oiio.ImageInput.open(str(path), config)
-        pixels = None
-        if inp is not None:
-            try:
-                spec = inp.spec()
-                pixels = inp.read_image(0, 0, 0, spec.nchannels, "uint8")
-                reason = inp.geterror()
-            finally:
-                inp.close()
-        else:
-            reason = oiio.geterror()
-    if pixels is None or reason:
-        reason = _first_line(reason).replace(f' ("{path}")', "") or chatter.last_line() or \
-            "the file is empty, truncated or not an image"
-        raise InputError(f"Image '{path}' cannot be {'read' if inp is None else 'decoded'} ({reason}); re-export it "
-                         "as PNG, JPEG or EXR.")
+    pixels, spec = _decoded(Path(path), stored)
     pixels = np.asarray(pixels, np.uint8)
     return pixels.reshape(spec.height, spec.width, spec.nchannels) if pixels.ndim != 3 else pixels
 

@@ -3,31 +3,22 @@ with path tracing (local and global views, benchmarks/results/loop_render.md), p
 once, then shaded every step) or "path" everywhere when asked; the report says which ran and why."""
 from __future__ import annotations
 
-import numpy as np
 import pytest
 import torch
 
 from scenefit.core.base.errors import InputError
-from scenefit.core.data.primitives import uv_sphere
-from scenefit.core.data.uv_raster import rasterize_uv
 from scenefit.core.guidance import ModelConfig
-from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.render.loop_renderer import LoopRenderer
-from scenefit.core.scene.placement import Placement
-from scenefit.core.stages.adapt import AdaptConfig, AdaptInputs, StageSpec
+from scenefit.core.stages.adapt import AdaptConfig, StageSpec
 from scenefit.core.stages.adapt.system import AdaptSystem
-from scenefit.core.texture import NeuralTexture
+from adapt_scenes import sphere_in_a_photo
 from conftest import shared_tiny_pair
 
 
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory):
     base, inpaint = shared_tiny_pair()
-    mesh = uv_sphere(segments=16, rings=8)
-    raster = rasterize_uv(mesh, 32)
-    texture = NeuralTexture(stage_config("texture", "draft", resolution=32, log2_table=12), seed=0)
-    photo = np.random.default_rng(0).uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32)
-    inputs = AdaptInputs(mesh=mesh, raster=raster, texture=texture, photo=photo, placement=Placement((0.5, 0.6), 0.5))
+    inputs = sphere_in_a_photo()
     models = ModelConfig(base_model=str(base), inpaint_model=str(inpaint))
     return inputs, models
 
