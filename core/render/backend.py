@@ -41,6 +41,16 @@ class Backend:
 _active: Backend | None = None
 
 
+def render_whole(mi, scene, integrator, **kwargs):
+    """mi.render(scene, integrator=integrator, ...), or KeyboardInterrupt for a Ctrl-C during it: Mitsuba takes
+    that Ctrl-C for itself, winds the render down and returns the partial image without an error, which
+    must never pass for a finished one."""
+    image = mi.render(scene, integrator=integrator, **kwargs)
+    if integrator.should_stop():
+        raise KeyboardInterrupt
+    return image
+
+
 def _llvm_major(path: str) -> int:
     numbers = [int(n) for n in re.findall(r"(?:LLVM[-.]?|llvm-)(\d+)", os.path.basename(path) + path)]
     return max(numbers) if numbers else 0

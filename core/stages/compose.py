@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..render.backend import init_mitsuba
+from ..render.backend import init_mitsuba, render_whole
 from ..render.denoise import DENOISER_TYPES, denoise, oidn_available
 from ..base.atomic import write_json_atomic
 from ..base.errors import InputError, check_choice
@@ -238,7 +238,7 @@ class ComposeJob:
 
     def _render(self, scene, integrator, window, spp: int, seed: int, camera: PhotoCamera | None = None) -> np.ndarray:
         sensor = _sensor(self.mi, camera or self.camera, window, self.config.sampler_type, spp)
-        image = self.mi.render(scene, sensor=sensor, integrator=integrator, spp=spp, seed=seed)
+        image = render_whole(self.mi, scene, integrator, sensor=sensor, spp=spp, seed=seed)
         return np.array(image, dtype=np.float32)
 
     def _sampler_spp(self, spp: int) -> int:

@@ -246,3 +246,37 @@ def test_render_albedo_is_the_base_colour_where_the_asset_is_hit_and_nothing_els
     hit = out[..., 3] > 0
     assert 0.2 < hit.mean() < 0.9
     assert np.allclose(out[hit][:, :3], (0.2, 0.5, 0.7), atol=1e-4) and not out[~hit][:, :3].any()
+
+
+def test_a_ctrl_c_during_a_render_is_a_keyboard_interrupt_not_a_partial_image(run_py):
+    """Mitsuba catches a Ctrl-C while it renders and winds down. In a process that ignores SIGINT (a shell's
+    background job, nohup) Python raises nothing, and the partial image came back as if finished;
+    render_whole ends such a render with KeyboardInterrupt, as Python does where it takes SIGINT."""
+    proc = run_py("""
+        import json, os, signal, threading, time
+        signal.signal(signal.SIGINT, signal.SIG_IGN)   # as a shell starts a background job
+        from scenefit.core.render.backend import init_mitsuba, render_whole
+        init_mitsuba()
+        import mitsuba as mi
+        scene = mi.load_dict({"type": "scene", "ball": {"type": "sphere"}, "light": {"type": "constant"},
+                              "sensor": {"type": "perspective", "to_world": mi.ScalarTransform4f().look_at(
+                                  origin=[0, -4, 0], target=[0, 0, 0], up=[0, 0, 1]),
+                                  "film": {"type": "hdrfilm", "width": 160, "height": 160}}})
+        integrator = mi.load_dict({"type": "path", "max_depth": 8})
+        render_whole(mi, scene, integrator, spp=4)                   # compiled: the next one only renders
+        t = time.perf_counter()
+        whole = render_whole(mi, scene, integrator, spp=64)
+        one = time.perf_counter() - t
+        threading.Timer(one * 2, os.kill, (os.getpid(), signal.SIGINT)).start()
+        t = time.perf_counter()
+        try:
+            render_whole(mi, scene, integrator, spp=64 * 40)        # about 40 times as long as `one`
+            said = "finished"
+        except KeyboardInterrupt:
+            said = "interrupted"
+        print("\\nJSON" + json.dumps({"said": said, "after": time.perf_counter() - t, "one": one}))
+    """)
+    from conftest import printed_json
+
+    out = printed_json(proc)
+    assert out["said"] == "interrupted" and out["after"] < 20 * out["one"] + 5, out
