@@ -112,9 +112,11 @@ def _wrap(index: np.ndarray, size: int, mode: str) -> np.ndarray:
 
 
 def trace_gbuffer(renderer, camera, options: GBufferOptions, normal_map: np.ndarray | None,
-                  envmap: np.ndarray, constant_light: bool) -> GBuffer:
+                  envmap: np.ndarray, constant_light: bool,
+                  prefiltered: "PrefilteredEnvironment | None" = None) -> GBuffer:
     """The G-buffer of `camera` in `renderer`'s scene (an AssetRenderer whose environment is already set
-    to `envmap`, (He, We, 3) in the scene's latitude-longitude convention)."""
+    to `envmap`, (He, We, 3) in the scene's latitude-longitude convention). `prefiltered`: that map's
+    tables, where the caller keeps them across views (built here otherwise)."""
     import drjit as dr
     import mitsuba as mi
 
@@ -137,8 +139,10 @@ def trace_gbuffer(renderer, camera, options: GBufferOptions, normal_map: np.ndar
     frame["wi"] = frame["wi"][hits]
     normal = _shading_normal(renderer, part_of, uv, frame, normal_map)
     cosine = np.sum(normal * frame["wi"], axis=1)
-    diffuse, specular = _light_terms(scene, si, normal, frame["n"], frame["wi"], options, rng, envmap,
-                                     constant_light)
+    if not constant_light and prefiltered is None:
+        prefiltered = PrefilteredEnvironment(scene, envmap)
+    diffuse, specular = _light_terms(scene, si, normal, frame["n"], frame["wi"], options, rng,
+                                     None if constant_light else prefiltered)
     taken = np.bincount(pixel, minlength=height * width)
     alpha = np.bincount(pixel, weights=valid, minlength=height * width) / np.maximum(taken, 1)
     pixel = pixel[hits]
@@ -253,13 +257,15 @@ def _shading_normal(renderer, part_of, uv, frame, normal_map) -> np.ndarray:
     return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
 
 
-def _light_terms(scene, si, normal, shading, wi, options: GBufferOptions, rng, envmap: np.ndarray,
-                 constant_light: bool):
+def _light_terms(scene, si, normal, shading, wi, options: GBufferOptions, rng,
+                 prefiltered: "PrefilteredEnvironment | None"):
     """(n, C) diffuse and (n, levels, C) specular light at each hit (C = 1 for a constant environment:
     the fraction of the lobe that sees it). Under a map, each is the pre-filtered environment
     (core/render/gbuffer.py `PrefilteredEnvironment`, noise-free) times the fraction of the lobe's light
     the point sees, estimated from the traced rays (exactly 1 where nothing blocks the lobe).
-    Directions below the interpolated normal are dark, as Mitsuba's `normalmap` BSDF makes them."""
+    Directions below the interpolated normal are dark, as Mitsuba's `normalmap` BSDF makes them.
+    `prefiltered` is None for a constant environment."""
+    constant_light = prefiltered is None
     b1, b2 = _basis(normal)
     wi_local = np.stack([np.sum(wi * b1, 1), np.sum(wi * b2, 1), np.sum(wi * normal, 1)], 1)
     channels = 1 if constant_light else 3
@@ -271,7 +277,6 @@ def _light_terms(scene, si, normal, shading, wi, options: GBufferOptions, rng, e
                                   shading, constant_light)
         seen += visible * radiance
         total += radiance
-    prefiltered = None if constant_light else PrefilteredEnvironment(scene, envmap)
     diffuse = _visible_share(seen, total, options.diffuse_rays)
     if prefiltered is not None:
         diffuse = diffuse * prefiltered.diffuse(normal)
@@ -316,10 +321,11 @@ class PrefilteredEnvironment:
     """The scene's environment convolved once with the cosine lobe and with GGX lobes about a mirror
     direction (split-sum's assumption: normal = view = mirror direction), on a latitude-longitude grid of
     directions; read bilinearly. The radiance comes from Mitsuba's own emitter (its orientation and
-    filtering), sampled at a Fibonacci sphere of directions."""
+    filtering), sampled at a Fibonacci sphere of directions. Every view under the same map reads the same
+    tables, so a renderer builds them once per map (LoopRenderer keeps them)."""
 
     def __init__(self, scene, envmap: np.ndarray, texels: tuple[int, int] = (64, 128),
-                 grid: tuple[int, int] = (32, 64)) -> None:
+                 grid: tuple[int, int] = (32, 64), levels: tuple[float, ...] = LEVELS) -> None:
         import cv2
 
         from ..scene.frame import equirect_directions
@@ -329,19 +335,33 @@ class PrefilteredEnvironment:
         if env.shape[0] > texels[0]:   # area average: each coarse texel keeps its fine texels' light
             env = cv2.resize(env, (texels[1], texels[0]), interpolation=cv2.INTER_AREA)
         h, w = env.shape[:2]
-        dirs = equirect_directions(h, w).reshape(-1, 3)
+        dirs = torch.from_numpy(equirect_directions(h, w).reshape(-1, 3).astype(np.float32))
         elevation = (0.5 - (np.arange(h) + 0.5) / h) * np.pi
-        solid = np.repeat(np.cos(elevation) * (np.pi / h) * (2 * np.pi / w), w)
-        self.radiance = torch.from_numpy(env.reshape(-1, 3).astype(np.float64) * solid[:, None])
-        self.dirs = torch.from_numpy(dirs)
+        solid = torch.from_numpy(np.repeat(np.cos(elevation) * (np.pi / h) * (2 * np.pi / w), w).astype(np.float32))
+        radiance = torch.from_numpy(env.reshape(-1, 3)) * solid[:, None]
         theta = (np.arange(grid[0]) + 0.5) / grid[0] * np.pi
         az = (np.arange(grid[1]) + 0.5) / grid[1] * 2 * np.pi
         t, a = np.meshgrid(theta, az, indexing="ij")
-        self.nodes = torch.from_numpy(np.stack([np.sin(t) * np.cos(a), np.sin(t) * np.sin(a), np.cos(t)], -1).reshape(-1, 3))
-        cosine = (self.nodes @ self.dirs.T).clamp(min=0)
-        self.solid = torch.from_numpy(solid)[:, None]
-        self._diffuse = (cosine @ self.radiance / np.pi).numpy().reshape(*grid, 3)
-        self._specular: dict[float, np.ndarray] = {}
+        nodes = torch.from_numpy(np.stack([np.sin(t) * np.cos(a), np.sin(t) * np.sin(a), np.cos(t)], -1)
+                                 .reshape(-1, 3).astype(np.float32))
+        rough = [r for r in levels if r > 0]
+        diffuse, specular = torch.zeros(len(nodes), 3), torch.zeros(len(rough), len(nodes), 3)
+        # float32 in blocks of nodes: the (nodes x texels) cosines of a 64 x 128 map at 32 x 64 nodes are
+        # 16M numbers, shared by the cosine lobe and every GGX level.
+        for start in range(0, len(nodes), 512):
+            block = slice(start, start + 512)
+            cos = nodes[block] @ dirs.T
+            lit = cos.clamp(min=0)
+            diffuse[block] = lit @ radiance / np.pi
+            cos_h2 = ((1 + cos) / 2).clamp(min=0)
+            lit_over_cos_h = lit / cos_h2.sqrt().clamp(min=1e-6)
+            for k, roughness in enumerate(rough):
+                a2 = max(1e-3, roughness ** 2) ** 2
+                # D(h) (n.l) / (4 v.h) with n = v = the mirror direction: the lobe over directions l.
+                weight = lit_over_cos_h / (cos_h2 * (a2 - 1) + 1) ** 2
+                specular[k, block] = (weight @ radiance) / (weight @ solid).clamp(min=1e-30)[:, None]
+        self._diffuse = diffuse.double().numpy().reshape(*grid, 3)
+        self._specular = {r: specular[k].double().numpy().reshape(*grid, 3) for k, r in enumerate(rough)}
 
     def diffuse(self, normal: np.ndarray) -> np.ndarray:
         return self._read(self._diffuse, normal)
@@ -349,18 +369,9 @@ class PrefilteredEnvironment:
     def specular(self, mirror: np.ndarray, roughness: float) -> np.ndarray:
         if roughness == 0:   # a mirror: the radiance itself, as Mitsuba's emitter gives it
             return self._exact(mirror)
-        return self._read(self._level(roughness), mirror)
-
-    def _level(self, roughness: float) -> np.ndarray:
         if roughness not in self._specular:
-            a2 = max(1e-3, roughness ** 2) ** 2
-            cos = (self.nodes @ self.dirs.T)
-            cos_h2 = ((1 + cos) / 2).clamp(min=0)
-            # D(h) (n.l) / (4 v.h) with n = v = the mirror direction: the lobe over directions l.
-            weight = cos.clamp(min=0) / (cos_h2 * (a2 - 1) + 1) ** 2 / cos_h2.sqrt().clamp(min=1e-6)
-            self._specular[roughness] = ((weight @ self.radiance) / (weight @ self.solid).clamp(min=1e-30)
-                                         ).numpy().reshape(*self.grid, 3)
-        return self._specular[roughness]
+            raise ValueError(f"No pre-filtered level for roughness {roughness}; built for {sorted(self._specular)}.")
+        return self._read(self._specular[roughness], mirror)
 
     def _exact(self, d: np.ndarray) -> np.ndarray:
         return environment_radiance(self.scene, d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12))

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from .brdf_tables import brdf_tables
-from .gbuffer import LEVELS, GBuffer, GBufferOptions, trace_gbuffer
+from .gbuffer import LEVELS, GBuffer, GBufferOptions, PrefilteredEnvironment, trace_gbuffer
 from .renderer import ENVMAP_KEY, RENDERER_TYPES, AssetRenderer, RenderOutput, SceneOptions, pad_envmap
 from ..base.errors import InputError
 from ..data.mesh import Mesh
@@ -56,6 +56,7 @@ class LoopRenderer:
         self._cache: dict[tuple, tuple[GBuffer, torch.Tensor]] = {}
         self._moved: dict[tuple, GBuffer] = {}   # copies on the maps' device (CUDA): moved once, not per step
         self._tables: dict[tuple, torch.Tensor] = {}
+        self._prefiltered: dict[str, PrefilteredEnvironment] = {}   # per light map: every view under it reads them
         self.traced = self.reused = 0
         self.trace_seconds = 0.0   # spent tracing G-buffers, so a caller can tell it from the shading
 
@@ -78,7 +79,8 @@ class LoopRenderer:
         env = np.ascontiguousarray(torch.as_tensor(envmap).detach().cpu().float().numpy())
         if tuple(env.shape) != tuple(self.envmap_shape):
             raise InputError(f"Environment map shape {env.shape} differs from the scene's {self.envmap_shape}.")
-        key = (camera, hashlib.blake2b(env.tobytes(), digest_size=16).hexdigest())
+        light = hashlib.blake2b(env.tobytes(), digest_size=16).hexdigest()
+        key = (camera, light)
         if key in self._cache:
             self.reused += 1
             return key
@@ -86,7 +88,8 @@ class LoopRenderer:
         t0 = time.perf_counter()
         self.tracer.params[ENVMAP_KEY] = pad_envmap(torch.from_numpy(env)).numpy()
         self.tracer.params.update()
-        traced = trace_gbuffer(self.tracer, camera, self.gbuffer_options, self.normal_map, env, constant)
+        prefiltered = None if constant else self._prefiltered_for(light, env)
+        traced = trace_gbuffer(self.tracer, camera, self.gbuffer_options, self.normal_map, env, constant, prefiltered)
         self.trace_seconds += time.perf_counter() - t0
         colour = torch.from_numpy(env.reshape(-1, 3)[0].copy()) if constant else torch.ones(3)
         if len(self._cache) >= MAX_CACHED_VIEWS:   # views that never come back (a random light) must not pile up
@@ -96,6 +99,14 @@ class LoopRenderer:
         self._cache[key] = (traced, colour)
         self.traced += 1
         return key
+
+    def _prefiltered_for(self, light: str, env: np.ndarray) -> PrefilteredEnvironment:
+        """The light map's pre-filtered tables (the scene's environment is set to it), built on first use."""
+        if light not in self._prefiltered:
+            if len(self._prefiltered) >= 4:   # a random light per view must not keep every map's tables
+                self._prefiltered.pop(next(iter(self._prefiltered)))
+            self._prefiltered[light] = PrefilteredEnvironment(self.tracer.scene, env)
+        return self._prefiltered[light]
 
     def render_aovs(self, camera) -> dict[str, np.ndarray]:
         return self.tracer.render_aovs(camera)

@@ -2,7 +2,8 @@
 
 Checked against known answers (Mitsuba's bilinear taps and wrap modes), against autograd's own
 numerical Jacobian (gradients exact to the texture), against a fresh computation of the stored BRDF
-tables, and against Mitsuba's `path` integrator on a textured sphere (agreement in dB).
+tables, the pre-filtered light map against its lobes' integrals summed texel by texel, and against
+Mitsuba's `path` integrator on a textured sphere (agreement in dB).
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import torch
 from scenefit.core.base.errors import InputError
 from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.render.brdf_tables import brdf_tables, compute_tables
-from scenefit.core.render.gbuffer import GBufferOptions, bilinear_taps
+from scenefit.core.render.gbuffer import GBufferOptions, PrefilteredEnvironment, bilinear_taps
 from scenefit.core.render.loop_renderer import LoopRenderer, shade
 from scenefit.core.render.orbit_camera import Camera
 from scenefit.core.render.renderer import AssetRenderer, SceneOptions
@@ -136,3 +137,74 @@ def test_a_view_under_a_light_map_is_traced_with_the_map_settings_and_ambient_vi
                                                       specular_rays=1)
     with pytest.raises(InputError, match="square"):
         GBufferOptions(map_samples=5)
+
+
+def _brute_force_tables(env: np.ndarray, node: np.ndarray, roughness: float) -> tuple[np.ndarray, np.ndarray]:
+    """The cosine lobe's and a GGX lobe's light about unit `node`, summed texel by texel in float64."""
+    from scenefit.core.scene.frame import equirect_directions
+
+    h, w = env.shape[:2]
+    dirs = equirect_directions(h, w).reshape(-1, 3).astype(np.float64)
+    elevation = (0.5 - (np.arange(h) + 0.5) / h) * np.pi
+    solid = np.repeat(np.cos(elevation) * (np.pi / h) * (2 * np.pi / w), w)
+    light = env.reshape(-1, 3).astype(np.float64) * solid[:, None]
+    cos = dirs @ node
+    diffuse = np.clip(cos, 0, None) @ light / np.pi
+    a2 = max(1e-3, roughness ** 2) ** 2
+    cos_h2 = np.clip((1 + cos) / 2, 0, None)
+    weight = np.clip(cos, 0, None) / (cos_h2 * (a2 - 1) + 1) ** 2 / np.maximum(np.sqrt(cos_h2), 1e-6)
+    return diffuse, weight @ light / (weight @ solid)
+
+
+def test_prefiltered_tables_are_the_lobes_integrals_of_the_map():
+    rng = np.random.default_rng(4)
+    env = rng.uniform(0.05, 1.0, (16, 32, 3)).astype(np.float32)
+    env[3, 7] = 60.0                                          # a sun: the lobes must weigh it right
+    tables = PrefilteredEnvironment(None, env, grid=(8, 16))
+    t, a = (np.arange(8) + 0.5) / 8 * np.pi, (np.arange(16) + 0.5) / 16 * 2 * np.pi
+    for i, j in ((0, 0), (2, 5), (4, 11), (7, 15)):
+        node = np.array([np.sin(t[i]) * np.cos(a[j]), np.sin(t[i]) * np.sin(a[j]), np.cos(t[i])])
+        for roughness in (0.2, 0.6, 1.0):
+            diffuse, specular = _brute_force_tables(env, node, roughness)
+            np.testing.assert_allclose(tables.diffuse(node[None])[0], diffuse, rtol=1e-4)   # a node reads its own value
+            np.testing.assert_allclose(tables.specular(node[None], roughness)[0], specular, rtol=1e-4)
+    # Under a constant sky every lobe sees the sky's radiance.
+    sky = PrefilteredEnvironment(None, np.full((16, 32, 3), [0.5, 1.0, 2.0], np.float32), grid=(8, 16))
+    up = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, -0.8]])
+    np.testing.assert_allclose(sky.specular(up, 0.4), [[0.5, 1.0, 2.0]] * 2, rtol=1e-4)
+    np.testing.assert_allclose(sky.diffuse(up), [[0.5, 1.0, 2.0]] * 2, rtol=0.02)   # the grid's quadrature
+    with pytest.raises(ValueError, match="roughness 0.3"):
+        sky.specular(up, 0.3)
+
+
+def test_views_under_one_light_map_share_its_prefiltered_tables(monkeypatch):
+    import scenefit.core.render.loop_renderer as loop_module
+    from scenefit.core.render.gbuffer import trace_gbuffer
+    from scenefit.core.render.renderer import ENVMAP_KEY, pad_envmap
+
+    built = []
+
+    class Counted(PrefilteredEnvironment):
+        def __init__(self, *args, **kwargs):
+            built.append(1)
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(loop_module, "PrefilteredEnvironment", Counted)
+    mesh = uv_sphere(segments=16, rings=8)
+    light_map = np.full((8, 16, 3), 0.5, np.float32)
+    light_map[2, 5] = 40.0
+    options = GBufferOptions(samples=4, diffuse_rays=2, map_samples=4, map_diffuse_rays=2, specular_rays=1)
+    loop = LoopRenderer(mesh, (8, 8), light_map, SceneOptions(max_depth=2, hide_emitters=True), gbuffer=options)
+    views = [Camera(azimuth, 15, 1.1, width=8, height=8) for azimuth in (0, 90, 180)]
+    shared = [loop.gbuffer(camera, torch.from_numpy(light_map))[0] for camera in views]
+    assert len(built) == 1 and loop.traced == 3
+    other = light_map.copy()
+    other[5, 12] = 20.0
+    loop.gbuffer(views[0], torch.from_numpy(other))
+    assert len(built) == 2                                   # a new map: its own tables
+    # Kept tables change nothing: the last view traced afresh, its tables built for it alone, is the same.
+    loop.tracer.params[ENVMAP_KEY] = pad_envmap(torch.from_numpy(light_map)).numpy()   # the scene lit by the first map again
+    loop.tracer.params.update()
+    fresh = trace_gbuffer(loop.tracer, views[2], options, None, light_map, False)
+    for kept, new in zip(shared[2].tensors(), fresh.tensors()):
+        assert torch.equal(kept, new)
