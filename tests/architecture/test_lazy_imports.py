@@ -32,6 +32,13 @@ def _target(module: str, node: ast.Import | ast.ImportFrom, alias: ast.alias) ->
     return (node.module or "").removeprefix("scenefit.")
 
 
+def _for_type_checkers(node: ast.AST) -> bool:
+    """An `if TYPE_CHECKING:` block: what it imports is never loaded."""
+    test = node.test if isinstance(node, ast.If) else None
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+
+
 def _imports(module: str, path: Path) -> tuple[set[str], list[tuple[int, str]]]:
     """(what `module` imports at module level, [(line, target)] of the imports inside its functions)."""
     top: set[str] = set()
@@ -41,6 +48,8 @@ def _imports(module: str, path: Path) -> tuple[set[str], list[tuple[int, str]]]:
 
     def visit(node: ast.AST, in_function: bool) -> None:
         for child in ast.iter_child_nodes(node):
+            if _for_type_checkers(child):
+                continue
             if isinstance(child, (ast.Import, ast.ImportFrom)):
                 for alias in child.names:
                     target = _target(module, child, alias)
@@ -116,6 +125,9 @@ def test_the_check_sees_each_kind_of_unjustified_import(tmp_path):
             "def d():\n    from .heavy import y  # torch: seconds to load\n\n\n"   # fine
             "def e():\n    # cv2: Blender may lack it\n    import cv2\n"),         # fine
         "core/base/torch_user.py": "import torch\n\n\ndef f():\n    from .heavy import y  # already loaded\n",
+        # What only a type checker reads is not loaded: torch is still put off, and needs its comment.
+        "core/base/typed.py": ("from typing import TYPE_CHECKING\n\nif TYPE_CHECKING:\n    import torch\n\n\n"
+                               "def g():\n    import torch\n"),
     }
     for name, text in files.items():
         (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
@@ -124,8 +136,9 @@ def test_the_check_sees_each_kind_of_unjustified_import(tmp_path):
         (tmp_path / package).mkdir()
     found = unjustified_imports(tmp_path)
     assert [line.split(" (")[0] for line in found] == [
-        "core/base/torch_user.py:5 core.base.heavy", "core/base/user.py:5 json", "core/base/user.py:9 core.base.light",
-        "core/base/user.py:13 torch"], found
+        "core/base/torch_user.py:5 core.base.heavy", "core/base/typed.py:8 torch", "core/base/user.py:5 json",
+        "core/base/user.py:9 core.base.light", "core/base/user.py:13 torch"], found
+    assert "(puts off torch: say so in a comment)" in found[1], found[1]
 
 
 def test_what_an_operators_prepare_builds_loads_no_torch():
