@@ -84,7 +84,13 @@ def _boundaries_reached(start: str, graph: dict) -> set[str]:
 
 
 def _has_reason(lines: list[str], lineno: int) -> bool:
-    return "#" in lines[lineno - 1] or lines[lineno - 2].strip().startswith("#")
+    """A comment on the import's line, or a comment line heading the block of imports it is in."""
+    if "#" in lines[lineno - 1]:
+        return True
+    above = lineno - 2
+    while above >= 0 and lines[above].strip().startswith(("import ", "from ")):
+        above -= 1
+    return above >= 0 and lines[above].strip().startswith("#")
 
 
 def unjustified_imports(root: Path = ROOT) -> list[str]:
@@ -125,6 +131,7 @@ def test_the_check_sees_each_kind_of_unjustified_import(tmp_path):
             "def d():\n    from .heavy import y  # torch: seconds to load\n\n\n"   # fine
             "def e():\n    # cv2: Blender may lack it\n    import cv2\n"),         # fine
         "core/base/torch_user.py": "import torch\n\n\ndef f():\n    from .heavy import y  # already loaded\n",
+        "core/base/block.py": "def h():\n    # mitsuba: seconds to load\n    import drjit\n    import mitsuba\n",   # fine
         # What only a type checker reads is not loaded: torch is still put off, and needs its comment.
         "core/base/typed.py": ("from typing import TYPE_CHECKING\n\nif TYPE_CHECKING:\n    import torch\n\n\n"
                                "def g():\n    import torch\n"),
