@@ -316,7 +316,7 @@ def sd2_row(models: Path, preset: str, dtype_type: str, cache: bool) -> dict:
     computed (cold), the second reusing it when `cache` (warm); seconds by phase per step and the
     process's peak resident memory. Meant for a process of its own (peak memory is the process's)."""
     from scenefit.core.stages.adapt import AdaptSystem
-    from scenefit.core.stages.adapt.system import _peak_memory_mb
+    from scenefit.core.stages.adapt.metrics import peak_memory_mb
 
     config = stage_config("adapt", preset, prompt="a mossy sphere in a swamp", checkpoint_every=0, preview_every=0,
                           models=ModelConfig(base_model=str(models / "sd2-base"),
@@ -340,7 +340,7 @@ def sd2_row(models: Path, preset: str, dtype_type: str, cache: bool) -> dict:
                      f"constants {'cached' if cache else 'recomputed'}",
             "preset": preset, "iterations": config.iterations, "dtype": str(system.models.dtype), "cache": cache, "build_s": build_s,
             "cold": steps[0], "warm": steps[1], "cold_s": sum(steps[0].values()), "warm_s": sum(steps[1].values()),
-            "peak_memory_mb": _peak_memory_mb(system.device), "load": machine_load()}
+            "peak_memory_mb": peak_memory_mb(system.device), "load": machine_load()}
 
 
 def sd2_markdown(rows: list[dict], light: list[dict] = ()) -> str:

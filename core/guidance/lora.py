@@ -15,6 +15,7 @@ import numpy as np
 import torch
 
 from ..scene.frame import look_frame
+from .weighting import add_noise
 
 ADAPTER = "scenefit_vsd"
 LIGHT_DIM = 5
@@ -36,6 +37,7 @@ class LoraCritic:
     """Owns the adapter, the camera embedding and their optimiser."""
 
     def __init__(self, unet, rank: int = 4, lr: float = 1e-4, condition_dropout: float = 0.1, seed: int = 0) -> None:
+        # lazy: diffusers and peft take seconds to load
         from diffusers.models.embeddings import TimestepEmbedding
         from peft import LoraConfig
 
@@ -130,8 +132,6 @@ class LoraCritic:
         """`train_step` for B images in one UNet pass: row i with its own text (or one for all), condition
         (B, D), timestep, noise, ᾱ, dropped condition and weight; the gradient is the sum of each row's
         `weight` x its mean squared error. Returns each row's loss."""
-        from .weighting import add_noise
-
         latents = latents.detach()
         b = latents.shape[0]
         weights = [1.0] * b if weights is None else weights

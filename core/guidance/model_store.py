@@ -248,7 +248,7 @@ def in_megabytes(progress: ProgressCallback) -> ProgressCallback:
 
 def _quiet_bar():
     """The hub's own bar class, never drawn: the final linking step fetches nothing worth a bar on stderr."""
-    from huggingface_hub.utils import tqdm
+    from huggingface_hub.utils import tqdm  # lazy: huggingface_hub is needed only to find or fetch models
 
     class Quiet(tqdm):
         def __init__(self, *args, **kwargs) -> None:
@@ -268,6 +268,7 @@ def format_bytes(count: float) -> str:
 
 def _repo_files(api, spec: ModelSpec, revision: str) -> tuple[str, dict[str, int]]:
     """(commit, {file: size}) of the files `spec` needs at `revision`, from the hub's listing."""
+    # lazy: huggingface_hub is needed only to find or fetch models
     from huggingface_hub.hf_api import RepoFile
     from huggingface_hub.utils import filter_repo_objects
 
@@ -281,6 +282,7 @@ def _repo_files(api, spec: ModelSpec, revision: str) -> tuple[str, dict[str, int
 def _fetch_blob(spec: ModelSpec, storage: Path, commit: str, name: str, endpoint: str | None,
                 transfer: _Transfer) -> None:
     """One file's bytes into blobs/<etag>, resumed from blobs/<etag>.incomplete when an earlier try left one."""
+    # lazy: huggingface_hub is needed only to find or fetch models
     from huggingface_hub import get_hf_file_metadata, hf_hub_url
     from huggingface_hub.file_download import http_get
     from huggingface_hub.utils import WeakFileLock, build_hf_headers
@@ -317,7 +319,7 @@ def download_model(spec: ModelSpec, cache: Path, progress: ProgressCallback | No
                    revision: str = "main") -> ModelState:
     """Fetch the files of `spec` a run reads into the hub cache at `cache`: progress as bytes with speed,
     `cancel` honoured between chunks (the partial file is kept and the next call resumes it)."""
-    from huggingface_hub import HfApi, snapshot_download
+    from huggingface_hub import HfApi, snapshot_download  # lazy: huggingface_hub is needed only to find or fetch models
 
     if spec.is_folder:
         raise InputError(f"The {spec.label} is the folder '{spec.model}'; there is nothing to download.")

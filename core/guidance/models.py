@@ -10,10 +10,13 @@ inpainting was fine-tuned from SD2 with both frozen), so only its UNet is loaded
 """
 from __future__ import annotations
 
+import gc
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 from pathlib import Path
+
+import numpy as np
 
 from ..base.errors import InputError, ModelMissingError
 
@@ -54,7 +57,7 @@ def hub_cache(cache_dir: str | None = None) -> Path:
         return Path(os.environ["HF_HUB_CACHE"]).expanduser()
     if os.environ.get("HF_HOME"):
         return Path(os.environ["HF_HOME"]).expanduser() / "hub"
-    from huggingface_hub import constants
+    from huggingface_hub import constants  # lazy: huggingface_hub is needed only to find or fetch models
 
     return Path(constants.HF_HUB_CACHE)
 
@@ -101,7 +104,7 @@ class ModelConfig:
         return hub_offline(self.local_files_only)
 
     def device(self):
-        import torch
+        import torch  # lazy: torch takes seconds to load
 
         if self.device_type == "auto":
             return torch.device(found_device())
@@ -112,7 +115,7 @@ class ModelConfig:
         return torch.device(self.device_type)
 
     def dtype(self):
-        import torch
+        import torch  # lazy: torch takes seconds to load
 
         if self.dtype_type == "auto":
             if self.device().type in ("cuda", "mps"):
@@ -122,7 +125,7 @@ class ModelConfig:
 
 
 def _mps_available() -> bool:
-    import torch
+    import torch  # lazy: torch takes seconds to load
 
     backend = getattr(torch.backends, "mps", None)
     return backend is not None and bool(backend.is_available())
@@ -130,7 +133,7 @@ def _mps_available() -> bool:
 
 def found_device() -> str:
     """The device "auto" means here: an NVIDIA GPU (CUDA), else an Apple GPU (MPS), else the CPU."""
-    import torch
+    import torch  # lazy: torch takes seconds to load
 
     if torch.cuda.is_available():
         return "cuda"
@@ -146,7 +149,7 @@ def memory_options_for(device: str) -> tuple[str, ...]:
 
 def cpu_computes_bf16() -> bool:
     """Whether this CPU has bf16 arithmetic (AVX512-BF16 or AMX); elsewhere torch emulates it, slower than fp32."""
-    import torch
+    import torch  # lazy: torch takes seconds to load
 
     probes = [getattr(torch.cpu, name, None) for name in ("_is_avx512_bf16_supported", "_is_amx_tile_supported")]
     return any(probe is not None and bool(probe()) for probe in probes)
@@ -189,7 +192,7 @@ def locate_model(model: str, role: str, parts: dict, config: ModelConfig) -> Pat
             raise ModelMissingError(f"The {role} model folder '{local}' lacks {', '.join(missing)}. {how}")
         return local
 
-    from huggingface_hub import snapshot_download
+    from huggingface_hub import snapshot_download  # lazy: huggingface_hub is needed only to find or fetch models
 
     cache = _cache_dir(config)
     patterns = hub_patterns(parts)
@@ -226,8 +229,6 @@ def locate_models(config: ModelConfig, need_inpaint: bool) -> dict[str, Path]:
 
 def models_available(config: ModelConfig, need_inpaint: bool = True) -> tuple[bool, str]:
     """(True, where) when the models are already on this machine (never downloads), else (False, why)."""
-    from dataclasses import replace
-
     try:
         found = locate_models(replace(config, local_files_only=True), need_inpaint)
     except ModelMissingError as error:
@@ -262,7 +263,7 @@ class GuidanceModels:
 
     def embed(self, prompt: str):
         """(1, 77, D) text embedding of `prompt`, cached."""
-        import torch
+        import torch  # lazy: torch takes seconds to load
 
         if prompt not in self._embeddings:
             if self.text_encoder is None:
@@ -278,7 +279,7 @@ class GuidanceModels:
     def encode(self, images):
         """SD latents (float32) of sRGB images (N, 3, H, W) in [0, 1]: the VAE posterior mean, scaled.
         Differentiable with respect to `images` (gradients flow back through the encoder)."""
-        import torch
+        import torch  # lazy: torch takes seconds to load
 
         x = (images * 2.0 - 1.0).to(self.device, self.vae.dtype)
         if self.vae.encoder.conv_in.weight.is_contiguous(memory_format=torch.channels_last):
@@ -291,9 +292,7 @@ class GuidanceModels:
 
 
 def _empty_cache(device) -> None:
-    import gc
-
-    import torch
+    import torch  # lazy: torch takes seconds to load
 
     gc.collect()
     if getattr(device, "type", "") == "cuda":
@@ -304,6 +303,7 @@ def _empty_cache(device) -> None:
 
 def load_guidance_models(config: ModelConfig, need_inpaint: bool, paths: dict[str, Path] | None = None) -> GuidanceModels:
     """Locate (unless `paths` is given) and load the models onto the configured device and dtype."""
+    # lazy: torch, diffusers and transformers take seconds to load
     import torch
     from diffusers import AutoencoderKL, DDPMScheduler, UNet2DConditionModel
     from transformers import CLIPTextModel, CLIPTokenizer
@@ -374,8 +374,6 @@ class ModelCache:
         self.loads = 0
 
     def get(self, config: ModelConfig, need_inpaint: bool) -> GuidanceModels:
-        from dataclasses import replace
-
         key = (config, need_inpaint)
         if key not in self._loaded:
             # A model set with the inpainting UNet also serves jobs that do not need it.
@@ -398,6 +396,7 @@ class DepthEstimator:
 
     def __init__(self, model: str, cache_dir: str | None = None, local_files_only: bool | None = None,
                  device: str = "cpu") -> None:
+        # lazy: transformers takes seconds to load
         from transformers import AutoImageProcessor, AutoModelForDepthEstimation
 
         only_local = hub_offline(local_files_only)
@@ -406,6 +405,7 @@ class DepthEstimator:
             if local.exists() or model.startswith((".", "/", "~")):
                 source = str(local)
             else:
+                # lazy: huggingface_hub is needed only to find or fetch models
                 from huggingface_hub import snapshot_download
 
                 # One snapshot call fails at once without a network; transformers' own loading retries
@@ -430,7 +430,7 @@ class DepthEstimator:
 
     def predict(self, photo_srgb):
         """Raw prediction resized to the photo: disparity (relative models) or depth (metric ones)."""
-        import numpy as np
+        # lazy: torch takes seconds to load
         import torch
         import torch.nn.functional as F
 

@@ -28,11 +28,13 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Annotated, Callable
 
+import numpy as np
 from pydantic import Field
 
 from ..base.atomic import write_json_atomic
 from ..base.errors import InputError, PromptServiceError
 from ..base.untrusted import Record, checked, parse_json, read_bytes, read_json
+from ..data.imageio import linear_to_srgb, read_color_image
 
 MODE_TYPES = ("describe", "instruct")
 VISION_TYPES = ("auto", "yes", "no")
@@ -370,10 +372,7 @@ def repair(text: str, request: PromptRequest) -> tuple[str, list[str]]:
 
 def encode_photo(path: str, max_side: int = 1024) -> bytes:
     """The photo as JPEG bytes (sRGB, longest side at most max_side) for a data URL."""
-    import cv2
-    import numpy as np
-
-    from ..data.imageio import linear_to_srgb, read_color_image
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     rgb = linear_to_srgb(read_color_image(path, upright=True))
     scale = max_side / max(rgb.shape[:2])
@@ -453,7 +452,7 @@ class ChatClient:
 
     def __init__(self, service: ServiceConfig, on_text: Callable[[str], None] | None = None):
         try:
-            from openai import OpenAI
+            from openai import OpenAI  # lazy: openai may be missing; only asking a language model needs it
         except ImportError as error:
             raise PromptServiceError("The 'openai' Python package is missing, so no language model can be asked; "
                                      "install SceneFit's build for your platform (it bundles it) or use --offline.") from error
@@ -466,7 +465,7 @@ class ChatClient:
         self.requests = 0
 
     def ask(self, messages: list[dict]) -> str:
-        import openai
+        import openai  # lazy: openai may be missing; only asking a language model needs it
 
         where = f"The language model '{self.service.model}' at {self.service.base_url}"
         self.requests += 1

@@ -78,7 +78,7 @@ def sample_crops(photo_hw: tuple[int, int], box: tuple[float, float, float], cou
 
 def photo_crop(photo: np.ndarray, crop: tuple[float, float, float], size: int) -> np.ndarray:
     """The photo inside `crop` resampled to size x size (edge pixels repeat outside the photo)."""
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     x0, y0, side = crop
     scale = side / size

@@ -63,6 +63,6 @@ TABLES: dict[str, dict[str, dict]] = {
 
 def texture_preset(name: str, **overrides):
     """The neural texture's config at preset `name` (the one place a texture preset is resolved)."""
-    from ..texture.neural_texture import NeuralTextureConfig
+    from ..texture.neural_texture import NeuralTextureConfig  # lazy: torch takes seconds to load
 
     return NeuralTextureConfig(**{**TABLES["texture"][name], **overrides})

@@ -7,18 +7,16 @@ overrides. The docs' presets table (docs/technical/presets.md) and `scenefit ada
 """
 from __future__ import annotations
 
-from dataclasses import fields, replace
+from dataclasses import fields, is_dataclass, replace
 
 from ..base.errors import InputError
-
+from ..stages.compose import ComposeConfig
 from .preset_tables import PRESET_DESCRIPTIONS, PRESET_NAMES, STAGES, TABLES, texture_preset  # noqa: F401
 
 
 def with_overrides(values: dict, overrides: dict) -> dict:
     """`values` (a stage config's settings) with `overrides` over them; an override table over a settings
     object changes only what it names ({"depth": {"model": ...}} keeps the given DepthConfig's cache)."""
-    from dataclasses import is_dataclass, replace
-
     merged = dict(values)
     for name, override in overrides.items():
         ours = merged.get(name)
@@ -41,7 +39,7 @@ def stage_config(stage: str, name: str, **overrides):
     if stage == "texture":
         return texture_preset(name, **overrides)
     if stage == "convert":
-        from ..stages.convert import ConvertConfig
+        from ..stages.convert import ConvertConfig  # lazy: torch takes seconds to load
 
         # Fitting settings ask for the fit: without them the asset's own maps are the exact start.
         if "init_type" not in overrides and {"iterations", "method_type"} & set(overrides):
@@ -51,12 +49,10 @@ def stage_config(stage: str, name: str, **overrides):
             values["texture"] = stage_config("texture", values["texture"])
         return ConvertConfig(**values)
     if stage == "light":
-        from ..stages.light.estimate import LightConfig
+        from ..stages.light.estimate import LightConfig  # lazy: torch takes seconds to load
 
         return _nested(LightConfig(), {**table, **overrides})
     if stage == "compose":
-        from ..stages.compose import ComposeConfig
-
         return ComposeConfig(**{**table, **overrides})
     return _adapt_config(table, overrides)
 
@@ -72,6 +68,7 @@ def _nested(config, values: dict):
 
 
 def _adapt_config(table: dict, overrides: dict):
+    # lazy: torch takes seconds to load
     from ..stages.adapt.config import MODE_SETTINGS, MODE_TYPES, SCENE_STAGES, AdaptConfig, StageSpec
 
     mode = overrides.pop("mode_type", "scene")

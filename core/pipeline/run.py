@@ -26,21 +26,44 @@ import numpy as np
 import torch
 
 from ..base.atomic import write_json_atomic
+from ..base.errors import InputError
+from ..base.names import CAMERA_STAGE, PHOTO_STAGES, RUN_ORDER, STAGES
+from ..base.progress import ProgressCallback, check_cancel, emit
+from ..base.report import relative_paths, write_report
+from ..base.untrusted import read_stage_record
+from ..data.finite_maps import finite_outputs
+from ..data.maps import PBRMaps
+from ..data.materials import AssetMaterials
+from ..data.mesh import Mesh, normalize_to_unit_sphere
+from ..data.photo import load_photo
+from ..data.scene_needs import envmap_height_for, report as needs_report
+from ..data.uv_raster import rasterize_uv
+from ..guidance.models import GuidanceModels, ModelCache, ModelConfig, locate_models, models_available
+from ..render.backend import environment_info
+from ..render.environment import load_environment
+from ..scene.asset_pose import place_asset
+from ..scene.camera import PhotoCamera
+from ..scene.placement import Placement
+from ..stages.adapt import adapt_and_bake
+from ..stages.adapt.global_views import placement_turns
+from ..stages.adapt.sampling import view_azimuths
 # GameBake: bake(texture.pt, stage folder, cancel) -> the started bake of the asset's own file; its wait()
 # gives the report with "outputs". It needs Blender, which core/ never imports: bake_process runs it as a
 # child process, so it runs while the run composes.
 from ..stages.bake.process import GameBake
-from ..base.errors import InputError
-from ..guidance.models import GuidanceModels, ModelCache, ModelConfig
-from ..data.maps import PBRMaps
-from ..data.materials import AssetMaterials
-from ..data.mesh import Mesh
-from ..base.progress import ProgressCallback, check_cancel, emit
-from ..scene.camera import PhotoCamera
+from ..stages.camera import photo_camera_estimate, read_fspy
+from ..stages.camera_stage import CAMERA_FILE, read_camera, write_camera
+from ..stages.compose import ComposeInputs, compose_to_folder
+from ..stages.convert import convert_and_bake
+from ..stages.light.shadow_hint import shadow_pixels, sun_from_shadow_points
+from ..stages.light.stage import LightInputs, run_light, write_light
+from ..texture.bake import WEIGHTS_FILE, load_neural_texture
+from ..texture.surface_layout import texture_view
+from . import stage_configs
+from .presets import stage_config
 from .result import RunResult, StageRecord
 from .run_config import RunConfig, stage_subset
 
-from ..base.names import (CAMERA_STAGE, PHOTO_STAGES, RUN_ORDER, STAGES)
 STAGE_FILE = "stage.json"
 
 def _digest(*parts) -> str:
@@ -120,8 +143,6 @@ class StageRunner:
             seconds = time.perf_counter() - t0
             # Outputs are kept relative to the stage's folder: the run's folder may be moved (Blender swaps
             # it into place, a batch worker sends it home) and a later run must still find them.
-            from ..base.report import relative_paths
-
             write_json_atomic(record, {"key": key, "report": dict(report, outputs=relative_paths(
                 report.get("outputs", {}), folder))})
             self.stages[name] = {"status": "ran", "key": key, "seconds": round(seconds, 3), "report": report}
@@ -141,9 +162,6 @@ def _finished_stage(folder: Path, key: str) -> dict | None:
     folder): one that does not read as a stage record, an output that leads out of the stage's folder
     ('..', an absolute path, a link), or a float map that is not finite is not this stage's, so the
     stage is not taken as finished and runs again."""
-    from ..base.untrusted import read_stage_record
-    from ..data.finite_maps import finite_outputs
-
     record = folder / STAGE_FILE
     if not record.is_file():
         return None
@@ -214,8 +232,6 @@ def run_pipeline(mesh: Mesh | AssetMaterials, maps: PBRMaps | None, photo_path: 
 
 def guidance_found(config: RunConfig) -> tuple[bool, str]:
     """Whether adapt (and the diffusion light critic) run, and why: the one place `--guidance` is decided."""
-    from ..guidance.models import locate_models, models_available
-
     if config.guidance_type == "sd2":
         locate_models(config.models, need_inpaint=True)   # missing weights: a clear error before any work
         return True, "asked for (--guidance sd2)"
@@ -231,8 +247,6 @@ class PipelineRun:
                  out_dir: str | Path, config: RunConfig, progress: ProgressCallback | None,
                  cancel: threading.Event | None, models: ModelCache | None, reuse_from: str | Path | None = None,
                  stages: tuple[str, ...] = STAGES) -> None:
-        from ..data.mesh import normalize_to_unit_sphere
-
         self.started = time.perf_counter()
         self.stages = stages
         self.asset = mesh   # what convert fits: a mesh with its maps, or every material of an asset
@@ -263,9 +277,6 @@ class PipelineRun:
     def read_photo(self, placement) -> None:
         """The photo (the light stage's working copy), where the asset stands in it, the shadow's points and the
         fSpy project, each one sentence when wrong."""
-        from ..data.photo import load_photo
-        from ..scene.placement import Placement
-
         config = self.config
         assert self.photo_path is not None
         self.photo, self.photo_info = load_photo(self.photo_path)
@@ -273,12 +284,8 @@ class PipelineRun:
         self.placement = Placement.parse(placement, tuple(self.photo_info["size"]))   # pixels of the photo as stored
         self.placement_px = self.placement.pixel((h, w))                              # ... in the light stage's copy
         if config.sun_shadow is not None:   # a malformed point is one sentence before any work
-            from ..stages.light.shadow_hint import shadow_pixels
-
             shadow_pixels(config.sun_shadow, tuple(self.photo_info["size"]), (h, w))
         if config.fspy is not None and config.photo_camera is None:
-            from ..stages.camera import read_fspy
-
             read_fspy(config.fspy)   # a broken fSpy file is one sentence before any work
         self.photo_key = _digest(self.photo_path.read_bytes())
 
@@ -286,8 +293,6 @@ class PipelineRun:
         """The photo's camera, written as camera/camera.json: keyed by the photo and what was given about its
         camera, and never making the stages after it run by itself (the keys of light, adapt (through light's)
         and compose hold its key)."""
-        from ..stages.camera_stage import CAMERA_FILE, write_camera
-
         given = self.config.photo_camera
         camera_key = asdict(given) if given else ["estimated", _digest(Path(self.config.fspy).read_bytes())
                                                   if self.config.fspy else None, self.config.camera_overrides,
@@ -303,19 +308,13 @@ class PipelineRun:
 
     def stage_camera(self, width: int, height: int) -> tuple[PhotoCamera, dict]:
         """The camera stage's camera at an image of `width` x `height`, and its estimate's record."""
-        from ..stages.camera_stage import read_camera
-
         return read_camera(self.camera_path, width, height)
 
     def convert(self) -> None:
-        from ..stages.convert import convert_and_bake
-        from ..texture.bake import WEIGHTS_FILE
-        from .stage_configs import convert_config
-
         # Only what the scene needs: no more texels than the composite shows of the asset (the photo's
         # stored height, not the light stage's working copy, is what the composite is made at).
         screen_px = None if self.photo_path is None else max(1, round(self.config.size * self.photo_info["size"][1]))
-        config = convert_config(self.config, screen_px)
+        config = stage_configs.convert_config(self.config, screen_px)
         per_material = isinstance(self.asset, AssetMaterials)
         self.keys["convert"] = _digest("convert", asdict(config), self.asset_key,
                                        *(["per material"] if per_material else []))
@@ -333,15 +332,10 @@ class PipelineRun:
         critic (the run's guidance; light alone as `scenefit light`), and, for a run that converts the asset,
         the map as sharp as its glossiest reflections, capped by the preset. Returns the config, the critic's
         decision and the height's (None: the preset's)."""
-        from .presets import stage_config
-        from .stage_configs import light_config, light_critic
-
-        critic = light_critic(self.config, (self.found, self.where) if "compose" in self.stages else None)
+        guidance = (self.found, self.where) if "compose" in self.stages else None
+        critic = stage_configs.light_critic(self.config, guidance)
         height = None
         if "convert" in self.stages:
-            from ..data.scene_needs import envmap_height_for
-            from ..data.uv_raster import rasterize_uv
-
             # (the coverage mask only picks which roughness texels count: 1024² is plenty, never the
             # texture's long side squared, which for a 16384x16 map is 16384²)
             raster = rasterize_uv(self.normalized, min(max(self.maps.resolution), 1024))
@@ -350,17 +344,12 @@ class PipelineRun:
             if height.choice > preset_height:
                 height = replace(height, choice=preset_height, reason=f"{height.reason}; capped at the "
                                  f"{self.config.preset} preset's {preset_height} rows")
-        config = light_config(self.config, critic.choice, None if height is None else height.choice,
-                              without_diffusion="compose" in self.stages and self.config.guidance_type == "none")
+        without_diffusion = "compose" in self.stages and self.config.guidance_type == "none"
+        config = stage_configs.light_config(self.config, critic.choice, None if height is None else height.choice,
+                                            without_diffusion=without_diffusion)
         return config, critic, height
 
     def light(self) -> None:
-        from ..stages.light.stage import LightInputs, run_light, write_light
-        from ..data.scene_needs import report as needs_report
-        from ..texture.surface_layout import texture_view
-        from ..texture.bake import load_neural_texture
-        from .stage_configs import with_shadow_sun
-
         config, critic, envmap_height = self.light_config()
         # The diffusion critic scores renders of the asset itself (as converted), not a stand-in sphere.
         critic_sees_asset = config.critic_type == "diffusion" and "convert" in self.keys
@@ -372,8 +361,8 @@ class PipelineRun:
         def light(folder: Path) -> dict:
             camera, estimate = self.stage_camera(self.photo.shape[1], self.photo.shape[0])
             # (the shadow's points need the camera)
-            with_sun = with_shadow_sun(config, self.config, camera, tuple(self.photo_info["size"]),
-                                       self.photo.shape[:2])
+            with_sun = stage_configs.with_shadow_sun(config, self.config, camera, tuple(self.photo_info["size"]),
+                                                     self.photo.shape[:2])
             asset = {}
             if critic_sees_asset:
                 texture = load_neural_texture(self.texture_path)
@@ -404,8 +393,6 @@ class PipelineRun:
             elif self.config.photo_camera is not None:
                 self.camera = replace(self.config.photo_camera, width=w, height=h), {"source": "given by the caller"}
             else:
-                from ..stages.camera import photo_camera_estimate
-
                 estimate = photo_camera_estimate(self.photo_path, self.config.fspy, self.config.camera_overrides,
                                                  self.config.camera_source, self.config.camera_why)
                 self.camera = estimate.photo_camera(width=w, height=h), estimate.to_dict()
@@ -417,48 +404,32 @@ class PipelineRun:
         before): a shadow point in the sky, an asset that cannot stand where it was put (a ground plane
         reaching behind the camera) at compose's turn or at adapt's. The light stage, adapt and compose
         found them after convert (and light) had run; they find the same, with the same camera."""
-        from ..scene.asset_pose import place_asset
-
         if self.photo_path is None:   # (convert alone)
             return
         h, w = self.photo.shape[:2]
         camera = self.photo_camera()[0]   # (the camera stage's, once it ran: estimated once a run)
         if self.config.sun_shadow is not None:
-            from ..stages.light.shadow_hint import sun_from_shadow_points
-
             sun_from_shadow_points(self.config.sun_shadow, camera, tuple(self.photo_info["size"]), (h, w))
         if "compose" not in self.stages:   # (light alone places no asset)
             return
         place_asset(self.normalized, camera, self.placement_px, self.compose_config().size, self.config.turn_deg)
         if self.found:   # adapt's global views place it at each of its azimuths' turns
-            from ..stages.adapt.global_views import placement_turns
-            from ..stages.adapt.sampling import view_azimuths
-
             size = self.adapt_placement().size
             for turn in placement_turns(view_azimuths(self.adapt_config().views)):
                 place_asset(self.normalized, camera, self.placement_px, size, turn)
 
     def adapt_config(self):
-        from .stage_configs import adapt_config
-
-        return adapt_config(self.config, self.mesh.name)
+        return stage_configs.adapt_config(self.config, self.mesh.name)
 
     def adapt_placement(self):
         """Where adapt's global views place the asset: compose's point, at most the photo's height."""
-        from ..scene.placement import Placement
-
         h, w = self.photo.shape[:2]
         return Placement((self.placement_px[0] / w, self.placement_px[1] / h), min(1.0, self.config.size))
 
     def compose_config(self):
-        from .stage_configs import compose_config
-
-        return compose_config(self.config)
+        return stage_configs.compose_config(self.config)
 
     def adapt(self) -> None:
-        from ..stages.adapt import adapt_and_bake
-        from ..texture.bake import WEIGHTS_FILE, load_neural_texture
-
         if "adapt" not in self.stages:
             self.runner.skip("adapt", "skipped", "the run's stages do not list adapt")
             return
@@ -486,12 +457,6 @@ class PipelineRun:
         self.texture_final()
 
     def compose(self) -> None:
-        from ..stages.compose import ComposeInputs, compose_to_folder
-        from ..data.photo import load_photo
-        from ..render.environment import load_environment
-        from ..texture.surface_layout import texture_view
-        from ..texture.bake import load_neural_texture
-
         config = self.compose_config()
         self.keys["compose"] = _digest("compose", asdict(config), self.upstream, self.keys["light"], self.photo_key,
                                        self.placement_px, self.config.turn_deg, self.keys[CAMERA_STAGE])
@@ -550,11 +515,6 @@ class PipelineRun:
         finishes[0]()
 
     def finish(self) -> RunResult:
-        from dataclasses import replace
-
-        from ..base.report import write_report
-        from ..render.backend import environment_info
-
         recorded = self.runner.stages
         inputs: dict = {"asset": self.mesh.name, "asset_digest": self.asset_key}
         if self.photo_path is not None:

@@ -12,6 +12,7 @@ from ..base.names import (ALONE_STAGES, CAMERA_SOURCES, CONFIG_STAGES, GUIDANCE_
 from ..guidance.models import ModelConfig
 from ..scene.camera import PhotoCamera
 from ..scene.placement import DEFAULT_OBJECT_SIZE
+from ..stages.camera import check_camera_values
 
 # (The camera stage's report is the run report's "camera", beside the "stages" a job lists.)
 
@@ -64,6 +65,7 @@ class RunConfig:
             raise _refused("sun_shadow", "Give the sun as an azimuth and elevation or as a shadow's three points, "
                                          "not both.")
         if self.sun_shadow is not None:
+            # lazy: core.stages.light loads torch (seconds); a RunConfig is built on Blender's main thread
             from ..stages.light.shadow_hint import check_point_count
 
             check_point_count(self.sun_shadow)
@@ -109,8 +111,6 @@ def _check_view(config: RunConfig) -> None:
     if config.compose_spp is not None and not (_whole(config.compose_spp) and 1 <= config.compose_spp <= 65536):
         raise _refused("compose_spp", f"compose_spp must be a whole number from 1 to 65536, got "
                                       f"{config.compose_spp!r}.")
-    from ..stages.camera import check_camera_values
-
     try:
         check_camera_values(config.camera_overrides)
     except InputError as error:

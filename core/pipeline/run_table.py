@@ -20,6 +20,7 @@ from typing import Any, Callable
 from ..base.errors import InputError
 from ..base.names import CONFIG_STAGES
 from ..stages.camera import CAMERA_VALUES
+from .presets import stage_config, with_overrides
 from .run_config import RunConfig
 
 # Fields a table does not carry: photo_camera is a PhotoCamera object a Python caller already holds (a table
@@ -159,8 +160,6 @@ def run_table(config: RunConfig) -> dict:
 def check_stage_settings(config: RunConfig, where: str, stages: tuple[str, ...] = CONFIG_STAGES) -> None:
     """The config of each of `stages` as the run resolves it, built now: an override the stage config does not
     have, or of the wrong type, and a mode without its prompts, are one sentence naming `where` and the key."""
-    from .presets import stage_config, with_overrides
-
     for stage in (s for s in CONFIG_STAGES if s in stages or s in config.stage_overrides):
         overrides = config.overrides(stage)
         # (a scene run without a prompt is given one from the asset's name: any text stands for it here)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import glob
 import os
+import platform
 import re
 from dataclasses import dataclass
 
@@ -65,7 +66,7 @@ def find_llvm_library() -> str | None:
 
 def _cuda_usable() -> bool:
     try:
-        import torch
+        import torch  # lazy: torch takes seconds to load; the CPU backend does without it
 
         return bool(torch.cuda.is_available())
     except Exception:  # torch missing or broken CUDA runtime: the CPU path still works
@@ -88,7 +89,7 @@ def init_mitsuba(prefer: str | None = None) -> Backend:
         if llvm:
             os.environ["DRJIT_LIBLLVM_PATH"] = llvm
 
-    import mitsuba as mi
+    import mitsuba as mi  # lazy: Mitsuba is heavy, and must load after DRJIT_LIBLLVM_PATH is set above
 
     requested = prefer or os.environ.get("SCENEFIT_MITSUBA_VARIANT")
     if requested:
@@ -121,9 +122,7 @@ def init_mitsuba(prefer: str | None = None) -> Backend:
 
 def environment_info() -> dict:
     """The renderer, torch and the machine a report was made with."""
-    import platform
-
-    import torch   # here, not at the top: starting Mitsuba should not wait for torch
+    import torch  # lazy: torch takes seconds to load; starting Mitsuba should not wait for it
 
     backend = init_mitsuba()
     return {

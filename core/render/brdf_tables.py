@@ -42,6 +42,7 @@ def brdf_tables(size: int = TABLE_SIZE, samples: int = TABLE_SAMPLES) -> np.ndar
 
 def compute_tables(size: int, samples: int) -> np.ndarray:
     init_mitsuba()
+    # lazy: Mitsuba is heavy and Blender may lack it
     import drjit as dr
     import mitsuba as mi
 

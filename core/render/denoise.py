@@ -28,7 +28,7 @@ def denoise(color: np.ndarray, albedo: np.ndarray | None = None, normal: np.ndar
     ok, why = oidn_available()
     if not ok:
         raise RendererUnavailableError(f"Denoising needs Intel Open Image Denoise: {why}.")
-    import pyoidn
+    import pyoidn  # lazy: pyoidn is optional (no wheel for linux-arm64)
 
     def prep(image):
         return None if image is None else np.ascontiguousarray(image[..., :3], dtype=np.float32)

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..base.errors import InputError
 from ..data.imageio import read_color_image
+from ..scene.frame import equirect_directions
 
 
 def constant_environment(color, height: int = 32) -> np.ndarray:
@@ -19,8 +20,6 @@ def sun_environment(direction, sun_radiance: float = 2000.0, sky_radiance: float
                     height: int = 64) -> np.ndarray:
     """A grey sky with one small disc sun towards world `direction` (Blender's lat-long convention):
     hard-edged shadows with a known direction, for tests and benchmarks."""
-    from ..scene.frame import equirect_directions
-
     d = np.asarray(direction, np.float64)
     d = d / np.linalg.norm(d)
     env = np.full((height, 2 * height, 3), sky_radiance, np.float32)
@@ -30,7 +29,7 @@ def sun_environment(direction, sun_radiance: float = 2000.0, sky_radiance: float
 
 def load_environment(path: str | Path, max_height: int = 256) -> np.ndarray:
     """An equirectangular HDR map (EXR/HDR linear, or an 8-bit image decoded from sRGB), downsized for rendering."""
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     env = read_color_image(path)
     h, w = env.shape[:2]

@@ -50,7 +50,7 @@ def _exported_parts(mi, mesh: Mesh, maps: PBRMaps, out_dir: Path) -> list[dict]:
     """Each material part as the live renderer draws it (core.render.drawn_part: its own UVs, its own
     texels, its wrap mode), written as a PLY and its images; one material keeps the plain names
     (mesh.ply, base_color.png, ...), several are numbered (mesh_0.ply, base_color_0.png, ...)."""
-    import torch
+    import torch  # lazy: torch takes seconds to load
 
     stack = torch.from_numpy(np.ascontiguousarray(maps.stacked(), np.float32))
     drawn = [drawn_part(part) for part in material_parts(mesh, maps.resolution)]
@@ -104,7 +104,7 @@ def export_mitsuba_scene(mesh: Mesh, maps: PBRMaps, out_dir: str | Path, camera:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     init_mitsuba()
-    import mitsuba as mi
+    import mitsuba as mi  # lazy: Mitsuba is heavy and Blender may lack it
 
     camera = camera or Camera(width=512, height=512)
     if isinstance(camera, LookAt):

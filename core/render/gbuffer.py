@@ -22,6 +22,9 @@ import numpy as np
 import torch
 
 from ..base.errors import InputError
+from ..data.maps import FLAT_NORMAL
+from ..data.materials import material_parts
+from ..scene.frame import equirect_directions
 
 LEVELS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)   # roughness nodes of the specular light term
 
@@ -117,6 +120,7 @@ def trace_gbuffer(renderer, camera, options: GBufferOptions, normal_map: np.ndar
     """The G-buffer of `camera` in `renderer`'s scene (an AssetRenderer whose environment is already set
     to `envmap`, (He, We, 3) in the scene's latitude-longitude convention). `prefiltered`: that map's
     tables, where the caller keeps them across views (built here otherwise)."""
+    # lazy: Mitsuba is heavy and Blender may lack it
     import drjit as dr
     import mitsuba as mi
 
@@ -160,7 +164,7 @@ def _sample_positions(scene, sensor, width: int, height: int, options: GBufferOp
     """Each sample's pixel and film position: `samples` stratified ones per pixel, and
     `edge_samples` in the pixels along the asset's edges (found by a first probe: pixels whose
     samples disagree, and their neighbours), so edges are anti-aliased as a path tracer's are."""
-    import mitsuba as mi
+    import mitsuba as mi  # lazy: Mitsuba is heavy and Blender may lack it
 
     def stratified(xs: np.ndarray, ys: np.ndarray, count: int):
         side = round(count ** 0.5)
@@ -191,6 +195,7 @@ def _sample_positions(scene, sensor, width: int, height: int, options: GBufferOp
 
 def _part_ids(scene, si, shape_ids: list[str]) -> np.ndarray:
     """Each hit's material part (its index in `shape_ids`)."""
+    # lazy: Mitsuba is heavy and Blender may lack it
     import drjit as dr
     import mitsuba as mi
 
@@ -233,11 +238,6 @@ def _shading_normal(renderer, part_of, uv, frame, normal_map) -> np.ndarray:
     n = frame["n"]
     if normal_map is None:
         return n
-    from dataclasses import replace
-
-    from ..data.maps import FLAT_NORMAL
-    from ..data.materials import material_parts
-
     out = n.copy()
     nm = torch.from_numpy(np.ascontiguousarray(normal_map, np.float32))
     normal_parts = {p.index: p for p in material_parts(renderer.mesh, tuple(nm.shape[:2]))}
@@ -326,9 +326,7 @@ class PrefilteredEnvironment:
 
     def __init__(self, scene, envmap: np.ndarray, texels: tuple[int, int] = (64, 128),
                  grid: tuple[int, int] = (32, 64), levels: tuple[float, ...] = LEVELS) -> None:
-        import cv2
-
-        from ..scene.frame import equirect_directions
+        import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
         self.scene, self.grid = scene, grid
         env = np.asarray(envmap, np.float32)
@@ -393,7 +391,7 @@ def _seen(scene, si, direction: np.ndarray, shading: np.ndarray, constant_light:
     """Whether each hit sees the environment along `direction` ((n, 1): not blocked by the asset and
     above the interpolated normal), and the environment's radiance there ((n, 3); ones for a constant
     environment, (n, 1))."""
-    import mitsuba as mi
+    import mitsuba as mi  # lazy: Mitsuba is heavy and Blender may lack it
 
     d = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
     d32 = mi.Vector3f(*np.ascontiguousarray(d.T, np.float32))
@@ -407,6 +405,7 @@ def _seen(scene, si, direction: np.ndarray, shading: np.ndarray, constant_light:
 def environment_radiance(scene, directions: np.ndarray) -> np.ndarray:
     """(n, 3) the scene's environment's radiance arriving from unit `directions` (n, 3), as Mitsuba's
     emitter gives it."""
+    # lazy: Mitsuba is heavy and Blender may lack it
     import drjit as dr
     import mitsuba as mi
 

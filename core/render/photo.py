@@ -38,7 +38,7 @@ def studiolight_path(name: str) -> Path:
 
 def perspective_view(envmap: np.ndarray, camera: PhotoCamera) -> np.ndarray:
     """Linear radiance seen by `camera` in an equirectangular map (bilinear, wrapping in u)."""
-    import cv2
+    import cv2  # lazy: Blender may lack OpenCV (missing_modules)
 
     h, w = envmap.shape[:2]
     uv = blender_direction_to_equirect_uv(camera.ray_directions())

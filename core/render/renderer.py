@@ -16,6 +16,8 @@ Conventions:
 """
 from __future__ import annotations
 
+import time
+import weakref
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -135,7 +137,7 @@ class DrawnPart:
 
     def texels(self, maps):
         """This part's texels of torch maps (H, W, C), as its bitmaps hold them (gradients flow through)."""
-        import torch
+        import torch  # lazy: torch takes seconds to load
 
         cell = maps[self.part.rows, self.part.cols]
         if self.doubled is not None:
@@ -207,7 +209,7 @@ def material_shapes(mi, mesh: Mesh, maps: np.ndarray, normal_map: np.ndarray | N
     inside a `normalmap` BSDF where `normal_map` (H, W, 3) has a map for it (a cell that is all flat
     is a material without one). Returns the shapes, the drawn parts and each part's map parameters,
     all by shape id."""
-    import torch
+    import torch  # lazy: torch takes seconds to load
 
     maps = torch.from_numpy(np.ascontiguousarray(maps, dtype=np.float32))
     parts = material_parts(mesh, tuple(maps.shape[:2]))
@@ -235,7 +237,7 @@ def material_shapes(mi, mesh: Mesh, maps: np.ndarray, normal_map: np.ndarray | N
 
 def pad_envmap(envmap):
     """Mitsuba stores the map with one wrapped column on each side (so bilinear lookups wrap)."""
-    import torch
+    import torch  # lazy: torch takes seconds to load
 
     return torch.cat([envmap[:, -1:], envmap, envmap[:, :1]], dim=1)
 
@@ -250,7 +252,7 @@ class AssetRenderer:
         Blender store it), fixed for the renderer's life. Mitsuba's `normalmap` BSDF perturbs the
         shading normal in the frame of the UV derivative dp/du, so the mesh's UVs give the tangents."""
         self.backend: Backend = init_mitsuba(variant)
-        import mitsuba as mi
+        import mitsuba as mi  # lazy: Mitsuba is heavy and Blender may lack it
 
         envmap = np.asarray(envmap, dtype=np.float32)
         if envmap.ndim != 3 or envmap.shape[2] != 3 or envmap.shape[1] != 2 * envmap.shape[0]:
@@ -302,7 +304,7 @@ class AssetRenderer:
 
     # -- cameras -------------------------------------------------------------------------------
     def _sensor(self, camera: Camera):
-        import mitsuba as mi
+        import mitsuba as mi  # lazy: Mitsuba is heavy and Blender may lack it
 
         if isinstance(camera, WindowCamera):
             return self._window_sensor(camera)
@@ -328,7 +330,7 @@ class AssetRenderer:
 
     def _window_sensor(self, camera: WindowCamera):
         """One sensor per film and crop; its pose and field of view are updated in place (no recompile)."""
-        import mitsuba as mi
+        import mitsuba as mi  # lazy: Mitsuba is heavy and Blender may lack it
 
         key = ("window", camera.film, camera.crop, camera.film_offset)
         if key not in self._sensors:
@@ -353,6 +355,7 @@ class AssetRenderer:
     # -- rendering -----------------------------------------------------------------------------
     def _render_fn(self):
         if self._wrapped is None:
+            # lazy: Mitsuba is heavy and Blender may lack it
             import drjit as dr
             import mitsuba as mi
 
@@ -377,9 +380,7 @@ class AssetRenderer:
 
         Tensors that require grad receive gradients through `dr.wrap` on backward().
         """
-        import time
-
-        import torch
+        import torch  # lazy: torch takes seconds to load
 
         t0 = time.perf_counter()
         self._refuse_while_backward_pending()
@@ -404,8 +405,6 @@ class AssetRenderer:
     # second render through this scene before the first one's backward would silently give the first
     # one wrong gradients. Refuse instead; a render dropped without backward stops counting.
     def _track_pending(self, image) -> None:
-        import weakref
-
         self._pending = weakref.ref(image)
 
         def done(grad):
@@ -432,6 +431,7 @@ class AssetRenderer:
     def render_albedo(self, camera: Camera, maps: np.ndarray) -> np.ndarray:
         """(H, W, 4): the base colour of `maps` (H, W, 5) seen at each pixel centre, and 1 where the asset
         is hit (0 elsewhere): what the texture shows, without light or noise."""
+        # lazy: Mitsuba and torch are heavy, and Blender may lack Mitsuba
         import mitsuba as mi
         import torch
 
@@ -444,7 +444,7 @@ class AssetRenderer:
 
     def render_aovs(self, camera: Camera) -> dict[str, np.ndarray]:
         """Shading normals (world space), depth and coverage, one sample at pixel centres, no gradients."""
-        import mitsuba as mi
+        import mitsuba as mi  # lazy: Mitsuba is heavy and Blender may lack it
 
         self._refuse_while_backward_pending()
         if self._aov_integrator is None:

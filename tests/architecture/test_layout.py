@@ -139,7 +139,7 @@ def test_the_scenes_concepts_are_defined_once_in_core_scene():
 # game bake is a child `scenefit bake` process, core/stages/bake/process.py, and keeps that process's shape).
 STAGE_SHAPES = {"convert": ("core/stages/convert.py", "run_convert", "write_convert"),
                 "light": ("core/stages/light/stage.py", "run_light", "write_light"),
-                "adapt": ("core/stages/adapt/system.py", "adapt_texture", "write_adapt"),
+                "adapt": ("core/stages/adapt/stage.py", "adapt_texture", "write_adapt"),
                 "compose": ("core/stages/compose.py", "compose", "write_compose")}
 
 

@@ -188,7 +188,6 @@ def test_a_batch_convert_job_keeps_constant_channels_as_numbers(inputs):
 
 def test_the_light_critic_scores_the_asset_itself(inputs, monkeypatch):
     """run_pipeline once gave the light stage no asset: its critic scored the default grey sphere."""
-    import scenefit.core.guidance.models as models
     import scenefit.core.stages.light.stage as lighting
 
     seen = {}
@@ -200,7 +199,7 @@ def test_the_light_critic_scores_the_asset_itself(inputs, monkeypatch):
         seen.update(kwargs, critic_type=config.critic_type)
         raise Stop
 
-    monkeypatch.setattr(models, "models_available", lambda *a, **k: (True, "pretended for the test"))
+    monkeypatch.setattr(run_module, "models_available", lambda *a, **k: (True, "pretended for the test"))
     monkeypatch.setattr(lighting, "estimate_light", estimate)
     mesh = uv_sphere(0.5, 12, 6)
     maps = PBRMaps(np.full((16, 16, 3), 0.5, np.float32), 0.5, 0.0)

@@ -14,8 +14,12 @@ Modes (`mode_type`):
 config.py       AdaptConfig and StageSpec (paper defaults), the modes' settings, the stage schedule
 sampling.py     every random choice of one view of one step
 global_views.py the asset rendered through the photo camera where compose places it, and its shadow
-system.py       AdaptSystem: build / step / finish; adapt_texture (the stage's run), write_adapt, and
-                adapt_and_bake (both, the asset's UVs checked first)
+stage_data.py   AdaptInputs, AdaptResult: what the stage works on and gives back
+assembly.py     what AdaptSystem.build puts together: the working texture, the critics, the photo's scene
+system.py       AdaptSystem: build / step / finish
+metrics.py      seconds per phase, the history's entries, peak memory, when a preview goes out
+stage.py        adapt_texture (the stage's run), write_adapt, and adapt_and_bake (both, the asset's UVs
+                checked first)
 checkpoint.py   save and resume
 distributed.py  torch.distributed: views spread over ranks, gradients summed
 """
@@ -24,7 +28,9 @@ from .config import (GENERATE_STAGES, MODE_SETTINGS, MODE_TYPES, SCENE_STAGES, A
                      stage_at)
 from .distributed import init_distributed
 from .sampling import sample_camera, sample_view, spherical_gaussian_environment, view_suffix
-from .system import AdaptInputs, AdaptResult, AdaptSystem, adapt_and_bake, adapt_texture, write_adapt
+from .stage import adapt_and_bake, adapt_texture, write_adapt
+from .stage_data import AdaptInputs, AdaptResult
+from .system import AdaptSystem
 
 __all__ = [
     "CHECKPOINT_FILE", "GENERATE_STAGES", "MODE_SETTINGS", "MODE_TYPES", "SCENE_STAGES", "AdaptConfig", "AdaptInputs",

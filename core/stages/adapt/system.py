@@ -21,146 +21,38 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from ...base.decision import Decision, decisions_to_dict
-from ...base.errors import Cancelled, InputError
-from ...guidance.critics import ScoreCritic, gradient_loss
-from ...guidance.injection import ReferenceInjector
-from ...guidance.lora import LoraCritic, camera_condition
+from ...base.decision import Decision
+from ...base.errors import InputError
+from ...base.progress import ProgressCallback, check_cancel, emit
+from ...guidance.critics import gradient_loss
+from ...guidance.lora import camera_condition
 from ...guidance.models import GuidanceModels, load_guidance_models, locate_models
 from ...guidance.views import global_view, local_view
-from ...data.materials import mesh_raster
-from ...data.mesh import Mesh, normalize_to_unit_sphere
-from ...base.progress import ProgressCallback, check_cancel, emit
 from ...render.loop_renderer import LoopRenderer, asset_renderer
 from ...render.renderer import AssetRenderer, SceneOptions
-from ...scene.camera import PhotoCamera, photo_camera_for
-from ...scene.placement import Placement
-from ...texture.bake import bake_maps
 from ...texture.neural_texture import NeuralTexture, split_channels
-from ...texture.surface_layout import adapting_view
-from ...data.uv_raster import UVRaster
+from .assembly import Critics, build_critics, embed_prompts, global_scene_for, renderer_environment, working_texture
 from .checkpoint import CHECKPOINT_FILE, load_checkpoint, save_checkpoint
 from .config import AdaptConfig
 from .constants import ConstantWork, ViewConstants, bank_box
-from .distributed import join_process_group, rank_world, sum_gradients, views_of_rank
-from .global_views import GlobalRender, GlobalScene
-from .sampling import ViewSample, draw_view_bank, sample_view, uses_view_bank, view_azimuths
-
-# "trace": the loop renderer's G-buffers, traced the first time a view comes up (once per view and run).
-PHASES = ("constants", "trace", "render", "vae", "unet", "vae_backward", "render_backward", "lora", "step")
-
-
-@dataclass
-class AdaptInputs:
-    """What the stage works on. mesh: normalised (radius 0.5); raster: its UV raster at the texture's
-    resolution; texture: the converted neural texture (None only for "generate"); photo: sRGB float
-    (H, W, 3) in [0, 1] and placement ("scene"); envmap: (He, 2He, 3) linear ("envmap" light);
-    photo_camera: the light stage's camera for the photo (None: the light stage's default for it);
-    base_logit: the texture's base for `raster` when it is not the texture's own layout, and `layout`
-    that layout (core.surface_layout: the asset's UVs share texels, so adaptation works in new ones)."""
-
-    mesh: Mesh
-    raster: UVRaster
-    texture: NeuralTexture | None = None
-    photo: np.ndarray | None = None
-    placement: Placement | None = None
-    envmap: np.ndarray | None = None
-    photo_camera: PhotoCamera | None = None
-    base_logit: torch.Tensor | None = None
-    layout: object | None = None
-
-    def validate(self, config: AdaptConfig) -> None:
-        if config.mode_type != "generate" and self.texture is None:
-            raise InputError(f"Mode '{config.mode_type}' adapts an existing texture; convert the asset first.")
-        if config.views_type == "local+global":
-            if self.photo is None or self.placement is None:
-                raise InputError("Scene-conditional adaptation needs the photo and where the object goes in it.")
-            photo = np.asarray(self.photo)
-            if photo.ndim != 3 or photo.shape[2] != 3 or min(photo.shape[:2]) < 8:
-                raise InputError(f"The photo must be an RGB image of at least 8x8 pixels, got {photo.shape}.")
-        if config.light_type == "envmap" and self.envmap is None:
-            raise InputError("light_type 'envmap' needs an environment map (e.g. the estimated HDR map).")
-        if self.texture is not None and self.texture.config.resolution != self.raster.resolution[0]:
-            raise InputError(f"The texture is {self.texture.config.resolution}² but the UV raster is "
-                             f"{self.raster.resolution[0]}²; rasterise at the texture's resolution.")
-
-
-@dataclass
-class AdaptResult:
-    texture: NeuralTexture
-    iterations: int
-    seconds: float
-    history: list[dict]
-    timings: dict[str, float]           # seconds summed over the iterations run here, per phase
-    resumed_from: int = 0
-    decisions: dict[str, Decision] = field(default_factory=dict)
-    peak_memory_mb: float | None = None
-    # for write_adapt, set by adapt_and_bake: the config, the asset's own UV raster the maps are baked
-    # in, and what the UV check decided
-    config: AdaptConfig | None = None
-    bake_raster: UVRaster | None = None
-    uv_report: dict = field(default_factory=dict)
-
-    def seconds_per_iteration(self) -> dict[str, float]:
-        n = max(1, self.iterations - self.resumed_from)
-        return {k: v / n for k, v in self.timings.items()}
-
-
-# A preview also goes out when this long has passed since the last one (one a step at most), so a slow
-# machine shows the texture changing about this often, not only every preview_every steps.
-PREVIEW_SECONDS = 30.0
-
-
-def preview_due(done: int, every: int, iterations: int, since_last: float) -> bool:
-    """Whether step `done` sends a preview: every `every` steps, the last step, or PREVIEW_SECONDS after the
-    last one; never with previews off (every = 0)."""
-    return bool(every) and (done % every == 0 or done == iterations or since_last >= PREVIEW_SECONDS)
-
-
-class _Timer:
-    """Seconds per phase, summed; waits for the GPU so a phase is charged its own kernels."""
-
-    def __init__(self, device) -> None:
-        self.totals: dict[str, float] = {}
-        self.cuda = getattr(device, "type", "") == "cuda"
-        self.last = time.perf_counter()
-
-    def lap(self, name: str) -> None:
-        if self.cuda:
-            torch.cuda.synchronize()
-        now = time.perf_counter()
-        self.totals[name] = self.totals.get(name, 0.0) + now - self.last
-        self.last = now
-
-    def restart(self) -> None:
-        self.last = time.perf_counter()
-
-    def move(self, seconds: float, source: str, target: str) -> None:
-        """Charge `seconds` of the phase `source` (just lapped) to `target` instead."""
-        if seconds > 0:
-            self.totals[source] = self.totals.get(source, 0.0) - seconds
-            self.totals[target] = self.totals.get(target, 0.0) + seconds
-
-
-@dataclass
-class _Critics:
-    local: ScoreCritic
-    glob: ScoreCritic | None
-    lora: LoraCritic | None
-    injector: ReferenceInjector | None
+from .distributed import join_process_group, sum_gradients, views_of_rank
+from .global_views import GlobalRender
+from .metrics import PhaseTimer, mean_metrics, peak_memory_mb, preview_due
+from .sampling import ViewSample, draw_view_bank, sample_view, uses_view_bank
+from .stage_data import AdaptInputs, AdaptResult
 
 
 class AdaptSystem:
     """Holds everything a step needs; built once by `build`, stepped, then `finish`ed."""
 
     def __init__(self, inputs: AdaptInputs, config: AdaptConfig, models: GuidanceModels, texture: NeuralTexture,
-                 renderer: AssetRenderer, critics: _Critics, rank: int, world: Decision,
+                 renderer: AssetRenderer, critics: Critics, rank: int, world: Decision,
                  checkpoint_path: Path | None, cache_constants: bool = True) -> None:
         self.inputs, self.config, self.models = inputs, config, models
         self.texture, self.renderer, self.critics = texture, renderer, critics
@@ -177,7 +69,7 @@ class AdaptSystem:
         self.photo = None if inputs.photo is None else np.clip(np.asarray(inputs.photo, np.float32), 0.0, 1.0)
         self.global_scene = None
         if config.views_type == "local+global":
-            self.global_scene = _global_scene(inputs, config, self.photo, np.asarray(self.base_env))
+            self.global_scene = global_scene_for(inputs, config, self.photo, np.asarray(self.base_env))
         self.latent_res = config.model_resolution // models.vae_scale_factor
         self.bank = draw_view_bank(config, *bank_box(self)) if uses_view_bank(config) else None
         self.constants = ConstantWork(self, cache_constants)
@@ -193,7 +85,7 @@ class AdaptSystem:
         self.start = 0
         self.last_image: torch.Tensor | None = None
         self.last_preview = time.monotonic()
-        self.timer = _Timer(self.device)
+        self.timer = PhaseTimer(self.device)
         self.started = time.perf_counter()
 
     # -- build -------------------------------------------------------------------------------------
@@ -213,14 +105,14 @@ class AdaptSystem:
             models = load_guidance_models(config.models, need_inpaint, paths)
         elif need_inpaint and models.inpaint_unet is None:
             raise InputError("Global views need the inpainting model; load the models with need_inpaint=True.")
-        _embed_prompts(models, config)
-        texture = _working_texture(inputs, config).to(models.device)
+        embed_prompts(models, config)
+        texture = working_texture(inputs, config).to(models.device)
         resolution = inputs.raster.resolution[0]
         renderer = asset_renderer(config.renderer_of("local"), inputs.mesh, (resolution, resolution),
                                   renderer_environment(inputs, config),
                                   SceneOptions(max_depth=config.max_depth, hide_emitters=True))
         checkpoint_path = Path(checkpoint_dir) / CHECKPOINT_FILE if checkpoint_dir is not None else None
-        system = cls(inputs, config, models, texture, renderer, _build_critics(models, config), rank,
+        system = cls(inputs, config, models, texture, renderer, build_critics(models, config), rank,
                      world, checkpoint_path, cache_constants)
         system.resume()
         if models.device.type == "cuda":
@@ -265,7 +157,7 @@ class AdaptSystem:
             sum_gradients(self.critics.lora.parameters())
             self.critics.lora.step()
         self.timer.lap("step")
-        metrics = _mean_metrics(per_view)
+        metrics = mean_metrics(per_view)
         self.history.append(metrics)
         return metrics
 
@@ -475,7 +367,7 @@ class AdaptSystem:
         return AdaptResult(texture=self.texture, iterations=self.config.iterations,
                            seconds=time.perf_counter() - self.started, history=self.history,
                            timings=dict(self.timer.totals), resumed_from=self.start, decisions=self.decisions(),
-                           peak_memory_mb=_peak_memory_mb(self.device))
+                           peak_memory_mb=peak_memory_mb(self.device))
 
     def _renderer_decision(self) -> Decision:
         glob = self.global_scene.renderer if self.global_scene is not None else None
@@ -552,157 +444,3 @@ def _stacked(rows: list[torch.Tensor | None]) -> torch.Tensor | None:
 def _per_row(values: list[float], like: torch.Tensor) -> torch.Tensor:
     """(B, 1, 1, 1): one number per row of `like`."""
     return torch.tensor(values, dtype=like.dtype, device=like.device).view(-1, *([1] * (like.ndim - 1)))
-
-
-def _global_scene(inputs: AdaptInputs, config: AdaptConfig, photo: np.ndarray, envmap: np.ndarray) -> GlobalScene:
-    """The photo, its camera (the light stage's) and the asset placed in it, for the global views."""
-    h, w = photo.shape[:2]
-    camera = inputs.photo_camera or photo_camera_for({}, w, h)[0]
-    azimuths = view_azimuths(config.views)  # sample_camera's choices
-    return GlobalScene(inputs.mesh, inputs.raster.resolution, photo, inputs.placement, camera, envmap, azimuths,
-                       config.max_depth, config.shadow_type, config.shadow_spp, config.seed, config.renderer_of("global"))
-
-
-def renderer_environment(inputs: AdaptInputs, config: AdaptConfig) -> np.ndarray:
-    """The map the renderer starts with: the user's (light_type "envmap") or the constant ambient one."""
-    if config.light_type == "envmap":
-        return np.asarray(inputs.envmap, np.float32)
-    return np.full((16, 32, 3), config.ambient, np.float32)
-
-
-def _embed_prompts(models: GuidanceModels, config: AdaptConfig) -> None:
-    """Every prompt the run will use, embedded once; the text encoder is released afterwards."""
-    prompt = config.effective_prompt
-    prompts = ([f"{prompt}, {v}" for v in ("front view", "side view", "back view")]
-               if config.mode_type == "generate" else [prompt])
-    for p in prompts + [config.negative_prompt]:
-        models.embed(p)
-    models.release_text_encoder()
-
-
-def _working_texture(inputs: AdaptInputs, config: AdaptConfig) -> NeuralTexture:
-    """A copy of the input texture (left as it was), or a fresh one for "generate"."""
-    if inputs.texture is None:
-        return NeuralTexture(replace(config.texture, resolution=inputs.raster.resolution[0]),
-                             seed=config.seed)
-    texture = NeuralTexture(inputs.texture.config, seed=None)
-    texture.load_state_dict(inputs.texture.state_dict())
-    texture.layout = inputs.layout if inputs.layout is not None else inputs.texture.layout
-    return texture
-
-
-def _build_critics(models: GuidanceModels, config: AdaptConfig) -> _Critics:
-    lora = None
-    if config.critic.critic_type == "vsd":
-        lora = LoraCritic(models.unet, rank=config.lora_rank, lr=config.lr_lora,
-                          condition_dropout=config.condition_dropout, seed=config.seed)
-    injector = ReferenceInjector(models.unet, config.critic.injection_fraction) if config.uses_reference else None
-    local = ScoreCritic(models.unet, models.scheduler, config.critic, lora=lora, injector=injector)
-    glob = None
-    if config.views_type == "local+global":
-        glob = ScoreCritic(models.inpaint_unet, models.scheduler,
-                           replace(config.critic, critic_type="sds", reference_type="none"))
-    return _Critics(local, glob, lora, injector)
-
-
-def _mean_metrics(per_view: list[dict]) -> dict:
-    """One history entry: numbers averaged over the views (t listed per view, nonfinite summed)."""
-    out: dict = {"t": [m["t"] for m in per_view]}
-    for key in per_view[0]:
-        if key == "t":
-            continue
-        values = [m[key] for m in per_view if key in m]
-        if key == "nonfinite":
-            out[key] = int(sum(values))
-        elif key in ("lambda", "stage_size"):
-            out[key] = values[0]
-        else:
-            out[key] = round(float(np.mean(values)), 6)
-    if len(out["t"]) == 1:
-        out["t"] = out["t"][0]
-    return out
-
-
-def _peak_memory_mb(device) -> float | None:
-    if device.type == "cuda":
-        return torch.cuda.max_memory_allocated() / 2**20
-    try:
-        import resource  # Unix only
-
-        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    except (ImportError, OSError):
-        return None
-
-
-def adapt_texture(inputs: AdaptInputs, config: AdaptConfig, progress: ProgressCallback | None = None,
-                  cancel: threading.Event | None = None, checkpoint_dir: str | Path | None = None,
-                  models: GuidanceModels | None = None, cache_constants: bool = True) -> AdaptResult:
-    """Run the adapt stage; returns a new NeuralTexture (the input texture is left as it was).
-
-    Models are located (and a missing one reported) before any work. With `checkpoint_dir`, a
-    checkpoint is written every `checkpoint_every` iterations and a run with the same settings
-    resumes from it.
-    """
-    system = AdaptSystem.build(inputs, config, models, checkpoint_dir, cache_constants)
-    done = saved = system.start
-    try:
-        for iteration in range(system.start, config.iterations):
-            check_cancel(cancel)
-            metrics = system.step(iteration, cancel)
-            done = iteration + 1
-            system.after_step(iteration, metrics, progress)
-            saved = done if system.checkpointed(done) else saved
-    except Cancelled:
-        system.keep(done, saved)   # the steps made so far, for a resume
-        raise
-    return system.finish()
-
-
-def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfig, out_dir: str | Path,
-                   photo: np.ndarray | None = None, placement: Placement | None = None,
-                   envmap: np.ndarray | None = None, resolution: int | None = None,
-                   photo_camera: PhotoCamera | None = None, progress: ProgressCallback | None = None, cancel: threading.Event | None = None,
-                   models: GuidanceModels | None = None) -> tuple[AdaptResult, dict]:
-    """Adapt (or, for "generate", make) the asset's texture and bake it into out_dir/maps.
-
-    mesh is the asset as given (normalised here); photo_camera: the light stage's camera for the photo
-    (None: its default for the photo); checkpoints go to out_dir/checkpoint so that
-    running the same command again resumes. Returns the result and a report dict (on ranks other
-    than 0 of a distributed run nothing is written and the report's outputs are empty).
-    """
-    out_dir = Path(out_dir)
-    join_process_group()  # under torchrun: this rank's GPU is chosen before the models load
-    if models is None:  # missing weights stop the run here, before any work
-        models = load_guidance_models(config.models, config.views_type == "local+global")
-    normalized, _ = normalize_to_unit_sphere(mesh)
-    res = texture.config.resolution if texture is not None else int(resolution or config.texture.resolution)
-    raster = mesh_raster(normalized, res)   # each material's own cell and wrap mode, as the renderer reads them
-    # Where the asset's UVs share texels the result could not differ per surface: a new layout.
-    emit(progress, "adapt", 0, config.iterations, "checking whether the UVs give every surface its own texels")
-    view, layout, uv_report = adapting_view(texture, normalized)
-    inputs = AdaptInputs(mesh=view.mesh if view else normalized, raster=view.raster if view else raster,
-                         texture=texture, photo=photo, placement=placement, envmap=envmap,
-                         photo_camera=photo_camera, base_logit=view.base_logit if view else None, layout=layout)
-    result = adapt_texture(inputs, config, progress=progress, cancel=cancel, checkpoint_dir=out_dir / "checkpoint",
-                           models=models)
-    check_cancel(cancel)
-    result.config, result.bake_raster, result.uv_report = config, raster, uv_report
-    return result, write_adapt(result, out_dir)
-
-
-def write_adapt(result: AdaptResult, folder: str | Path) -> dict:
-    """The adapted texture baked into folder/maps in the asset's own UVs (on rank 0 only of a distributed
-    run: one writer); returns the stage's report (its outputs empty on the other ranks)."""
-    raster, paths = result.bake_raster, {}
-    if rank_world()[0] == 0:
-        paths = bake_maps(result.texture, raster.position, raster.border, raster.fill_index, Path(folder) / "maps")
-    per_it = result.seconds_per_iteration()
-    return {
-        "stage": "adapt", "config": result.config.to_dict(), "schedule": result.config.schedule(),
-        "decisions": decisions_to_dict(result.decisions), "uv_layout": result.uv_report,
-        "iterations": result.iterations, "resumed_from": result.resumed_from, "seconds": round(result.seconds, 3),
-        "seconds_per_iteration": {k: round(v, 4) for k, v in per_it.items()},
-        "peak_memory_mb": None if result.peak_memory_mb is None else round(result.peak_memory_mb, 1),
-        "last_metrics": result.history[-1] if result.history else {},
-        "outputs": {k: str(v) for k, v in paths.items()},
-    }

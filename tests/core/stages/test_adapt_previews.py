@@ -1,6 +1,6 @@
 """Adapt's previews go out by time as well as by step count, so a slow machine shows the texture change
 about every PREVIEW_SECONDS (one a step at most) rather than every preview_every steps (hours on a CPU)."""
-from scenefit.core.stages.adapt.system import PREVIEW_SECONDS, preview_due
+from scenefit.core.stages.adapt.metrics import PREVIEW_SECONDS, preview_due
 
 
 def test_a_preview_every_so_many_steps_at_the_end_and_after_half_a_minute():
