@@ -13,7 +13,7 @@ import hashlib
 
 import shutil
 import tempfile
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -84,31 +84,42 @@ def constant_channels(material) -> dict[str, float]:
             if source(bsdf.inputs[name]) is None}
 
 
-def _load_png(bpy, folder: Path, name: str, pixels: np.ndarray, colorspace: str, shared: dict | None = None):
-    """An 8-bit image holding exactly `pixels` (uint8, rows top to bottom), saved as PNG by Blender
-    (straight alpha, as glTF wants) and packed, so the exporter writes these bytes. `shared` maps the
-    pixels already written to their image: materials that bake to the same pixels (a palette texture
-    many materials sample) share one image, as the input did, instead of each writing a copy."""
-    key = (colorspace, pixels.shape, hashlib.sha256(np.ascontiguousarray(pixels).tobytes()).hexdigest())
-    if shared is not None and key in shared:
-        return shared[key]
-    # Written at zlib's highest level and packed as written: the exporter passes a packed PNG's bytes
-    # through unchanged (Blender's own PNG writer makes files about 1.8x larger).
-    path = write_image(folder / f"{bpy.path.clean_name(name)}.png", pixels.astype(np.float32) / 255.0, "uint8",
-                       smallest=True)
-    image = bpy.data.images.load(str(path))
-    image.name = name
-    image.colorspace_settings.name = colorspace
-    image.alpha_mode = "STRAIGHT"
-    image.pack()  # the temporary folder can go
-    if shared is not None:
-        shared[key] = image
-    return image
+@dataclass
+class BakeImages:
+    """Where one export's baked images are written, and those written so far: materials that bake to the
+    same pixels (a palette texture many materials sample) share one image, as the input did, instead of
+    each writing a copy. `ships_png`: the exporter passes these PNGs' bytes into the file (png textures),
+    so they are worth zlib's highest level; for jpeg, webp and ktx2 it re-encodes them, and level 9 on a
+    2048² map cost seconds for nothing."""
+
+    folder: Path
+    ships_png: bool = True
+    written: dict = field(default_factory=dict)
+
+    def load(self, name: str, pixels: np.ndarray, colorspace: str):
+        """An 8-bit image holding exactly `pixels` (uint8, rows top to bottom), saved as PNG (straight
+        alpha, as glTF wants) and packed, so the exporter reads these bytes."""
+        import bpy
+
+        key = (colorspace, pixels.shape, hashlib.sha256(np.ascontiguousarray(pixels).tobytes()).hexdigest())
+        if key in self.written:
+            return self.written[key]
+        # Packed as written: the exporter passes a packed PNG's bytes through unchanged (Blender's own PNG
+        # writer makes files about 1.8x larger).
+        path = write_image(self.folder / f"{bpy.path.clean_name(name)}.png", pixels.astype(np.float32) / 255.0,
+                           "uint8", smallest=self.ships_png)
+        image = bpy.data.images.load(str(path))
+        image.name = name
+        image.colorspace_settings.name = colorspace
+        image.alpha_mode = "STRAIGHT"
+        image.pack()  # the temporary folder can go
+        self.written[key] = image
+        return image
 
 
-def apply_baked_material(material, baked: BakedMaterial, folder: Path, shared: dict | None = None) -> list[str]:
-    """Rewire `material` (a fresh import, or a copy) to the baked maps; returns what was done. `shared`:
-    the images written so far in this export (see _load_png)."""
+def apply_baked_material(material, baked: BakedMaterial, images: BakeImages) -> list[str]:
+    """Rewire `material` (a fresh import, or a copy) to the baked maps, its images written by `images`;
+    returns what was done."""
     bsdf = principled_bsdf(material)
     notes = []
     if baked.uv_map:
@@ -120,14 +131,14 @@ def apply_baked_material(material, baked: BakedMaterial, folder: Path, shared: d
         # written as they came, shared images, texture transforms, alpha and all.
         notes.append("base colour: unchanged, the material's own nodes and images kept")
     else:
-        notes += _write_base_color(material, bsdf, baked, folder, shared)
+        notes += _write_base_color(material, bsdf, baked, images)
     if getattr(bsdf, "unlit", False):
         notes.append("unlit: only the base colour is written (an unlit material has no roughness or metallic)")
         return notes
     if {"roughness", "metallic"} <= baked.unchanged:
         notes.append("roughness and metallic: unchanged, the material's own nodes and images kept")
         return notes
-    return notes + _write_roughness_metallic(material, bsdf, baked, folder, shared)
+    return notes + _write_roughness_metallic(material, bsdf, baked, images)
 
 
 def _extension(baked: BakedMaterial) -> str:
@@ -145,11 +156,9 @@ def _read_through(material, image_node, baked: BakedMaterial) -> None:
     material.node_tree.links.new(uv.outputs["UV"], image_node.inputs["Vector"])
 
 
-def _write_base_color(material, bsdf, baked: BakedMaterial, folder: Path, shared: dict | None) -> list[str]:
+def _write_base_color(material, bsdf, baked: BakedMaterial, images: BakeImages) -> list[str]:
     """The baked base colour into the material: a factor when it is one colour, else a new image (with
     the alpha the material had, resized into it)."""
-    import bpy
-
     nodes, links = material.node_tree.nodes, material.node_tree.links
     notes = []
     height, width = baked.base_color.shape[:2]
@@ -177,7 +186,7 @@ def _write_base_color(material, bsdf, baked: BakedMaterial, folder: Path, shared
         base = nodes.new("ShaderNodeTexImage")
         base.name = base.label = "SceneFit Base Color"
         base.extension = _extension(baked)
-        base.image = _load_png(bpy, folder, f"{material.name}_base_color", rgba, "sRGB", shared)
+        base.image = images.load(f"{material.name}_base_color", rgba, "sRGB")
         base.location = (bsdf.location.x - 700, bsdf.location.y)
         _read_through(material, base, baked)
         links.new(base.outputs["Color"], bsdf.inputs["Base Color"])
@@ -186,11 +195,9 @@ def _write_base_color(material, bsdf, baked: BakedMaterial, folder: Path, shared
     return notes
 
 
-def _write_roughness_metallic(material, bsdf, baked: BakedMaterial, folder: Path, shared: dict | None) -> list[str]:
+def _write_roughness_metallic(material, bsdf, baked: BakedMaterial, images: BakeImages) -> list[str]:
     """The baked roughness and metallic into the material: factors where constant, else one packed image
     (G roughness, B metallic, as glTF packs them) through Separate Color."""
-    import bpy
-
     nodes, links = material.node_tree.nodes, material.node_tree.links
     notes = []
     height, width = baked.base_color.shape[:2]
@@ -208,7 +215,7 @@ def _write_roughness_metallic(material, bsdf, baked: BakedMaterial, folder: Path
         mr = nodes.new("ShaderNodeTexImage")
         mr.name = mr.label = "SceneFit Metallic Roughness"
         mr.extension = _extension(baked)
-        mr.image = _load_png(bpy, folder, f"{material.name}_metallic_roughness", packed, "Non-Color", shared)
+        mr.image = images.load(f"{material.name}_metallic_roughness", packed, "Non-Color")
         mr.location = (bsdf.location.x - 700, bsdf.location.y - 300)
         _read_through(material, mr, baked)
         separate = nodes.new("ShaderNodeSeparateColor")
@@ -322,13 +329,14 @@ def bake_materials_to_gltf(materials: list, baked: list[BakedMaterial], out_file
                            output: GltfOutput = GltfOutput(), replace: bool = False) -> dict:
     """Put `baked[i]` into `materials[i]` (each material once) and export the scene (or `selection_only`)."""
     report = {"materials": []}
-    done, shared = set(), {}
+    done = set()
     with tempfile.TemporaryDirectory(prefix="scenefit-bake-") as folder:
+        images = BakeImages(Path(folder), ships_png=output.textures == "png")
         for maps, material in zip(baked, materials):
             if material.name in done:
                 continue
             done.add(material.name)
-            notes = apply_baked_material(material, maps, Path(folder), shared)
+            notes = apply_baked_material(material, maps, images)
             report["materials"].append(dict(maps.report(), done=notes))
         notes: list[str] = []
         written = export_gltf(out_file, file_format, selection_only, protect, output, replace, notes)

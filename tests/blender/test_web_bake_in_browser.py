@@ -202,7 +202,7 @@ def test_a_web_bake_in_three_js_looks_as_it_does_in_blender(tmp_path, validator)
     assert proc.returncode == 0, proc.stderr[-2000:]
     glb = tmp_path / "web" / "truck.glb"
     proc = scenefit_process("bake", TRUCK, "--texture", tmp_path / "convert" / "maps" / "texture.pt", "--out", glb,
-                            "--target", "web", "--quiet")
+                            "--target", "web", "--max-texture", "512", "--quiet")   # for a 192 px picture
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert validator(str(glb))["issues"]["numErrors"] == 0
     assert "EXT_meshopt_compression" in gltf_json(glb)["extensionsRequired"]   # the decoder is exercised

@@ -23,8 +23,9 @@ def toy_car_bakes(tmp_path_factory) -> dict[str, Path]:
     if not TOY_CAR.is_file():
         pytest.skip(f"the development corpus is not at {CORPUS.parent} (set SCENEFIT_CORPUS)")
     folder = tmp_path_factory.mktemp("targets")
+    # What each engine's file holds does not depend on how well the texture fits: a short fit.
     proc = scenefit_process("convert", TOY_CAR, "--out", folder / "convert", "--preset", "draft",
-                            "--resolution", "64", "--quiet")
+                            "--resolution", "64", "--iterations", "20", "--quiet")
     assert proc.returncode == 0, proc.stderr[-2000:]
     texture = folder / "convert" / "maps" / "texture.pt"
     outs = {engine: folder / f"car_{engine}.glb" for engine in ENGINES}
