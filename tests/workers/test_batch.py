@@ -17,6 +17,7 @@ from scenefit.core.data.imageio import read_image, write_image
 from scenefit.workers.jobs import load_jobs
 from scenefit.core.data.maps import PBRMaps
 from scenefit.core.data.primitives import uv_sphere
+from conftest import shared_tiny_pair
 
 JOBS = """
 [batch]
@@ -384,13 +385,11 @@ def test_a_worker_loads_the_models_once_and_reuses_them_with_the_same_outputs(tm
     prompt made of its words, as `scenefit adapt --mode edit` does."""
     from scenefit.core.stages.adapt.config import edit_prompt
     from scenefit.core.guidance import models as model_module
-    from scenefit.devtools.tiny_models import build_tiny_pair
-
     make_inputs(tmp_path)
-    build_tiny_pair(tmp_path / "tiny")
+    (tmp_path / "tiny").symlink_to(shared_tiny_pair()[0].parent)   # the jobs file's ./tiny
     (tmp_path / "jobs.toml").write_text(TINY_JOBS)
     jobs = load_jobs(tmp_path / "jobs.toml")
-    assert jobs.jobs[0].models.base_model == str(tmp_path / "tiny" / "sd2-base")
+    assert jobs.jobs[0].models.base_model == str((tmp_path / "tiny" / "sd2-base").resolve())   # beside the file
     real_load, loads = model_module.load_guidance_models, []
 
     def counted_load(config, need_inpaint, paths=None):

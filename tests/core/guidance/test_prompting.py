@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 from chat_server import ChatServer, Reply
+from conftest import shared_tiny_pair
 
 from scenefit.core.base.errors import InputError, PromptServiceError
 from scenefit.core.guidance.prompting import (ANALYSIS_STEP, DESCRIBE_STEP, INSTRUCT_STEP, PromptRequest, ServiceConfig,
@@ -292,7 +293,6 @@ def test_adapt_writes_its_prompt_from_object_and_scene(server, tmp_path, capsys)
     from scenefit.cli import build_parser, main
     from scenefit.cli.options import scene_conditional_prompt
     from scenefit.core.data.asset_io import save_asset_folder
-    from scenefit.devtools.tiny_models import build_tiny_pair
     from scenefit.core.data.maps import PBRMaps
     from scenefit.core.data.primitives import uv_sphere
     from scenefit.core.pipeline.presets import stage_config
@@ -316,7 +316,7 @@ def test_adapt_writes_its_prompt_from_object_and_scene(server, tmp_path, capsys)
     save_asset_folder(mesh, PBRMaps(base_color=np.full((16, 16, 3), 0.5, np.float32), roughness=0.5, metallic=0.0),
                       tmp_path / "asset")
     save_neural_texture(NeuralTexture(stage_config("texture", "draft", resolution=16, log2_table=10), seed=0), tmp_path / "texture.pt")
-    base, inpaint = build_tiny_pair(tmp_path / "tiny")
+    base, inpaint = shared_tiny_pair()
     server.replies = [Reply(answer(GOOD_INSTRUCTION, "Instructions"))]
     out = tmp_path / "out"
     assert main(["adapt", str(tmp_path / "asset"), "--mode", "edit", "--texture", str(tmp_path / "texture.pt"),

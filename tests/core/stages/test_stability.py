@@ -31,7 +31,7 @@ from scenefit.core.pipeline.presets import stage_config
 from scenefit.core.data.primitives import uv_sphere
 from scenefit.core.render.renderer import AssetRenderer
 
-from conftest import printed_json
+from conftest import printed_json, shared_tiny_pair
 
 TEX = (16, 16)
 GEOMETRIC = DepthConfig(depth_type="geometric")
@@ -265,9 +265,7 @@ def test_fp16_unet_gives_the_lora_the_same_gradients_as_fp32(tmp_path):
     drift, so no loss scaling is needed (GradScaler would only matter for fp16 parameters)."""
     from scenefit.core.guidance import LoraCritic, ModelConfig, load_guidance_models
     from scenefit.core.guidance.lora import camera_condition
-    from scenefit.devtools.tiny_models import build_tiny_pair
-
-    base, _ = build_tiny_pair(tmp_path)
+    base, _ = shared_tiny_pair()
     grads = {}
     generator = torch.Generator().manual_seed(0)
     latents, noise = torch.randn(1, 4, 16, 16, generator=generator), torch.randn(1, 4, 16, 16, generator=generator)

@@ -15,7 +15,7 @@ from scenefit.core.data.imageio import write_image
 from scenefit.core.stages.light import estimate as estimate_module
 from scenefit.core.stages.light.diffusion_critic import DiffusionCriticConfig, DiffusionLightCritic
 from scenefit.core.stages.light.estimate import LightConfig, estimate_light
-from scenefit.devtools.tiny_models import build_tiny_sd
+from conftest import shared_tiny_pair
 from scenefit.core.stages.light.hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, CriticRequest, OptimiseConfig,
                                         optimise_scales)
 from scenefit.core.data.primitives import uv_sphere
@@ -33,8 +33,8 @@ def one_torch_thread():
 
 
 @pytest.fixture(scope="module")
-def tiny_base(tmp_path_factory):
-    return build_tiny_sd(tmp_path_factory.mktemp("tiny_light_sd") / "sd2-base", 4, seed=0)
+def tiny_base():
+    return shared_tiny_pair()[0]
 
 
 def _scene():
@@ -256,8 +256,8 @@ def test_scenefit_light_critic_auto_and_missing_weights(tmp_path):
 
 # -- outdoor outpainting ----------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def tiny_inpaint(tmp_path_factory):
-    return build_tiny_sd(tmp_path_factory.mktemp("tiny_light_inpaint") / "sd2-inpaint", 9, seed=1)
+def tiny_inpaint():
+    return shared_tiny_pair()[1]
 
 
 def _outdoor_photo():
