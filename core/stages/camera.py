@@ -525,10 +525,12 @@ def _kernel(residual_deg: np.ndarray, tolerance: float) -> np.ndarray:
     return np.maximum(0.0, 1.0 - (residual_deg / tolerance) ** 2)
 
 
-def _score(ends: np.ndarray, weights: np.ndarray, params, tolerance: float = TOLERANCE_DEG) -> float:
-    """Share of the segments' weight the three directions explain (each segment by its best one)."""
+def _score(ends: np.ndarray, weights: np.ndarray, params, tolerance: float = TOLERANCE_DEG,
+           circles: tuple[np.ndarray, np.ndarray] | None = None) -> float:
+    """Share of the segments' weight the three directions explain (each segment by its best one).
+    `circles`: _great_circles(ends) at params' field of view, where the caller holds it fixed."""
     fov, pitch, roll, theta = params
-    n, m = _great_circles(ends, focal_from_fov(fov))
+    n, m = circles if circles is not None else _great_circles(ends, focal_from_fov(fov))
     frame = camera_frame(pitch, roll, theta)
     res = _signed_residual_deg(n[:, None], m[:, None], frame[None])
     return float(np.sum(weights * _kernel(res, tolerance).max(axis=1)) / np.sum(weights))
@@ -602,7 +604,8 @@ def _refine(ends: np.ndarray, weights: np.ndarray, start) -> tuple:
     score is piecewise)."""
     x = list(start)
     steps = list(REFINE_STEPS)
-    best = _score(ends, weights, x)
+    circles = _great_circles(ends, focal_from_fov(x[0]))   # the field of view (x[0]) never moves here
+    best = _score(ends, weights, x, circles=circles)
     for _ in range(500):   # a bound, never reached in practice
         if steps[1] <= REFINE_STEPS[1] / 64:
             break
@@ -613,7 +616,7 @@ def _refine(ends: np.ndarray, weights: np.ndarray, start) -> tuple:
                 y[i] += sign * steps[i]
                 if not _in_range(y):
                     continue
-                score = _score(ends, weights, y)
+                score = _score(ends, weights, y, circles=circles)
                 if score > best:
                     x, best, improved = y, score, True
         if not improved:
