@@ -31,27 +31,6 @@ if _WORKERS > 1:
     os.environ.setdefault("OMP_NUM_THREADS", str(threads_per_worker(os.cpu_count() or 1, _WORKERS)))
 
 
-def start_first(listing: Path = Path(__file__).with_name("start_first.txt")) -> list[str]:
-    """The test files `start_first.txt` lists, in its order (paths from the project root)."""
-    lines = listing.read_text(encoding="utf-8").splitlines()
-    return [line.strip() for line in lines if line.strip() and not line.startswith("#")]
-
-
-def pytest_collection_modifyitems(config, items) -> None:
-    """The files of start_first.txt first, each file's tests kept together and in order: with two workers
-    taking files in turn, a long file started last would run alone at the end."""
-    rank = {path: i for i, path in enumerate(start_first())}
-    first_seen = {}
-    for item in items:
-        first_seen.setdefault(item.nodeid.split("::")[0], len(first_seen))
-
-    def key(item) -> tuple[int, int]:
-        path = item.nodeid.split("::")[0]
-        return (rank.get(path, len(rank)), first_seen[path])
-
-    items.sort(key=key)   # stable: a file's own tests keep their order
-
-
 def run_python(code: str, env: dict | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
     """Run `code` in a fresh interpreter of this environment; fails the test with its output."""
     full_env = dict(os.environ, **(env or {}))

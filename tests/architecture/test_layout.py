@@ -169,15 +169,3 @@ def test_the_pipeline_runs_each_stage_through_its_shape():
     for old in ("estimate_light(", "write_light_stage(", "write_compose_outputs("):
         assert old not in text
 
-
-def test_the_files_started_first_are_test_files_listed_once():
-    """tests/start_first.txt orders the suite (tests/conftest.py): a renamed or deleted file there would
-    silently lose its early start."""
-    import sys
-
-    sys.path.insert(0, str(ROOT / "tests"))
-    from conftest import start_first
-
-    listed = start_first()
-    assert listed and len(set(listed)) == len(listed)
-    assert [p for p in listed if not (ROOT / p).is_file() or not Path(p).name.startswith("test_")] == []
