@@ -320,9 +320,10 @@ def _visible_share(seen: np.ndarray, total: np.ndarray, count) -> np.ndarray:
 class PrefilteredEnvironment:
     """The scene's environment convolved once with the cosine lobe and with GGX lobes about a mirror
     direction (split-sum's assumption: normal = view = mirror direction), on a latitude-longitude grid of
-    directions; read bilinearly. The radiance comes from Mitsuba's own emitter (its orientation and
-    filtering), sampled at a Fibonacci sphere of directions. Every view under the same map reads the same
-    tables, so a renderer builds them once per map (LoopRenderer keeps them)."""
+    directions; read bilinearly. The tables sum the map's texels (area-averaged to at most `texels`) by
+    solid angle; the mirror level reads Mitsuba's own emitter (its orientation and filtering). Every view
+    under the same map reads the same tables, so a renderer builds them once per map (LoopRenderer keeps
+    them)."""
 
     def __init__(self, scene, envmap: np.ndarray, texels: tuple[int, int] = (64, 128),
                  grid: tuple[int, int] = (32, 64), levels: tuple[float, ...] = LEVELS) -> None:
