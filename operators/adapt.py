@@ -54,7 +54,7 @@ def gather_adapt(op, context, texture: str) -> dict:
         size=settings.size, **settings_of_run)
     return {
         "materials": layout.bake_data() if layout is not None and len(layout.materials) > 1 else None,
-        "mesh": mesh, "asset_name": mesh.name, "texture": texture, "photo": photo, "config": config,
+        "mesh": mesh, "texture": texture, "photo": photo, "config": config,
         "placement": view["placement"] if view else tuple(settings.placement),
         # the light stage's map: its camera is the one the local views' light was estimated with
         "envmap": light if light and Path(light).is_file() else "",

@@ -6,7 +6,7 @@ import bpy
 from bpy.props import EnumProperty, IntProperty
 
 from ..workers import blender_jobs as work
-from .folders import run_folder
+from .folders import last_finished_run, run_folder
 from .photo import photo_path, photo_view
 from .prefs import depth_model_preference, model_settings
 from .jobs import JobOperator
@@ -47,13 +47,15 @@ class SCENEFIT_OT_estimate_light(JobOperator):
         config = work.view_config(photo_view(context, photo), preset=settings.preset, scene_type=settings.scene_type,
                                   models=model_settings(context)[0], depth_model=depth_model_preference(context),
                                   stage_overrides={"light": light})
+        earlier = last_finished_run(out)   # the last estimate of this photo: its stages with these keys are reused
         return work.estimate_light, {"photo": str(photo), "placement": tuple(settings.placement), "config": config,
-                                     "out": str(out)}
+                                     "out": str(out), "reuse_from": str(earlier) if earlier else None}
 
     def apply(self, context, result) -> str:
         world = apply_result_world(context, result["hdr"])
         said = result["scene_type"] if result.get("scene_type_blended") else f"{result['scene_type']} scene"
-        return f"Light estimated, {said}, {result['sun']}: World '{world.name}'"
+        how = "Light as estimated before (same photo and settings)" if result.get("reused") else "Light estimated"
+        return f"{how}, {said}, {result['sun']}: World '{world.name}'"
 
 
 classes = (SCENEFIT_OT_estimate_light,)

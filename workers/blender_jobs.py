@@ -75,81 +75,57 @@ def camera_source(view: dict) -> tuple[str, str]:
 
 
 def camera_values(camera) -> dict:
-    """What the Cycles set-up takes from the camera a job used."""
-    return {"fov_deg": camera.fov_deg, "pitch_deg": camera.pitch_deg, "roll_deg": camera.roll_deg,
-            "shift_x": camera.shift_x, "shift_y": camera.shift_y}
+    """What the Cycles set-up takes from a run's camera stage (a StageRecord): the camera light and compose used."""
+    if camera is None:   # (a run that reads the photo runs the camera stage always)
+        raise RuntimeError("the run returned no camera stage")
+    return {k: camera.report["photo_camera"][k] for k in ("fov_deg", "pitch_deg", "roll_deg")}
 
 
 def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
-    """Photo + placement -> light.exr (Blender's equirectangular convention) in data['out'], with
-    data['config'], the RunConfig Estimate Light's prepare() built (view_config): its light config is
-    resolved where every entry point's is (core/pipeline/stage_configs.py)."""
-    from ..core.pipeline.stage_configs import light_config, light_critic, with_shadow_sun
+    """Photo + placement -> the pipeline's camera and light stages alone (run_pipeline, stages ("light",), no
+    asset) into data['out']: light/light.exr in Blender's equirectangular convention, with data['config'],
+    the RunConfig Estimate Light's prepare() built (view_config). A stage of data['reuse_from'] (the last
+    Estimate Light of this photo) with the same settings and inputs is copied in, not redone."""
+    from ..core.pipeline.run import run_pipeline
     from ..core.stages.light.scene_type import is_blended, scene_type_words
-    from ..core.stages.light.stage import light_inputs, run_light, sun_words, write_light
+    from ..core.stages.light.stage import sun_words
 
-    run = data["config"]
-    # the photo's camera: the artist's, the panel's values, or the photo's own (operators/photo.photo_view)
-    inputs = light_inputs(data["photo"], tuple(data["placement"]), run.fspy, run.camera_overrides, run.camera_source,
-                          run.camera_why)
-    config = with_shadow_sun(light_config(run, light_critic(run).choice), run, inputs.camera,
-                             (int(inputs.info["size"][0]), int(inputs.info["size"][1])),
-                             (inputs.photo.shape[0], inputs.photo.shape[1]))
-    result = run_light(inputs, config, progress, cancel)
-
-    def write(out: Path) -> dict:
-        report = write_light(result, out)
-        scene = result.decisions.get("scene_type", {})
-        return {"hdr": str(report["outputs"]["hdr_exr"]), "preview": str(report["outputs"]["preview_png"]),
-                "report": str(out / "report.json"),
+    def write(folder: Path) -> dict:
+        result = run_pipeline(None, None, data["photo"], tuple(data["placement"]), folder, data["config"],
+                              progress=progress, cancel=cancel, reuse_from=data.get("reuse_from"), stages=("light",))
+        light = result.stages["light"]
+        decisions = light.report["decisions"]
+        scene = decisions.get("scene_type", {})
+        outputs = result.outputs("light")
+        return {"hdr": outputs["hdr_exr"], "preview": outputs["preview_png"], "report": str(folder / "report.json"),
                 "scene_type": scene_type_words(scene, "Scene type"), "scene_type_blended": is_blended(scene),
-                "sun": sun_words(result.decisions, "Pick Sun or Sun from Light"),
-                "camera": camera_values(result.photo_camera)}
+                "sun": sun_words(decisions, "Pick Sun or Sun from Light"), "reused": light.status == "reused",
+                "camera": camera_values(result.camera)}
 
     return written_whole(data["out"], write)
 
 
 def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
-    """Restyle the converted texture (or make one, mode 'generate') and bake the maps into data['out']/maps,
-    with data['config'], the RunConfig Adapt's prepare() built (view_config): its adapt config is resolved
-    where every entry point's is (core/pipeline/stage_configs.py), with what the photo and light map decide."""
-    import numpy as np
+    """Restyle the converted texture (or make one, mode 'generate') and bake the maps: the pipeline's adapt
+    stage from the texture Convert made and the light Estimate Light made (run_pipeline, `given`), of the
+    photo in scene mode, into data['out'] with data['config'], the RunConfig Adapt's prepare() built
+    (view_config). A cancelled adaptation keeps its checkpoint, which the same folder resumes from."""
+    from ..core.pipeline.run import GivenOutputs, run_pipeline
 
-    from ..core.stages.adapt import adapt_and_bake
-    from ..core.stages.camera import photo_camera_estimate
-    from ..core.stages.compose import light_camera
-    from ..core.data.imageio import linear_to_srgb, read_color_image
-    from ..core.base.report import write_report
-    from ..core.render.environment import load_environment
-    from ..core.pipeline.stage_configs import adapt_config
-    from ..core.scene.placement import Placement
-    from ..core.texture.bake import load_neural_texture
+    given = GivenOutputs(texture=Path(data["texture"]) if data.get("texture") else None,
+                         light=Path(data["envmap"]) if data.get("envmap") else None)
 
-    run = data["config"]
-    photo = placement = camera = None
-    if run.mode == "scene" and data.get("photo"):
-        photo = linear_to_srgb(np.clip(read_color_image(data["photo"], upright=True), 0.0, 1.0))
-        placement = Placement(tuple(data["placement"]), run.size)
-        h, w = photo.shape[:2]
-        if data.get("envmap"):   # the camera the light stage estimated this map with
-            camera = light_camera(data["envmap"], {}, w, h)[0]
-        else:   # the artist's camera, the panel's values, or the estimate (operators/photo.photo_view)
-            camera = photo_camera_estimate(data["photo"], None, run.camera_overrides, run.camera_source,
-                                           run.camera_why).photo_camera(width=w, height=h)
-    envmap = load_environment(data["envmap"]) if data.get("envmap") else None
-    config = adapt_config(run, data["asset_name"], has_photo=photo is not None, has_envmap=envmap is not None)
-    texture = load_neural_texture(data["texture"]) if data.get("texture") else None
-
-    def write(out: Path) -> dict:
-        result, report = adapt_and_bake(data["mesh"], texture, config, out, photo=photo, placement=placement,
-                                        envmap=envmap, photo_camera=camera, progress=progress, cancel=cancel)
-        write_report(out / "report.json", report)
+    def write(folder: Path) -> dict:
+        result = run_pipeline(data["mesh"], None, data.get("photo") or None, tuple(data["placement"]), folder,
+                              data["config"], progress=progress, cancel=cancel, stages=("adapt",), given=given)
+        adapted = result.stages["adapt"]
+        outputs = result.outputs("adapt")
         # several materials: each one's maps from the adapted texture, in its own UVs, for its slots
-        per_material = material_results(data, report["outputs"]["weights"], out / "materials") \
+        per_material = material_results(data, outputs["weights"], folder / "materials") \
             if data.get("materials") else []
-        return {"maps": {k: report["outputs"][k] for k in ("base_color", "roughness", "metallic")},
-                "texture": report["outputs"]["weights"], "report": str(out / "report.json"),
-                "iterations": result.iterations, "material_maps": per_material}
+        return {"maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
+                "texture": outputs["weights"], "report": str(folder / "report.json"),
+                "iterations": adapted.report["iterations"], "material_maps": per_material}
 
     return written_whole(data["out"], write, resume=True)   # a cancelled adaptation keeps its checkpoint
 
@@ -243,9 +219,6 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
         if result.stages["adapt"].status == "skipped" and data.get("why_no_adapt"):
             stages["adapt"]["why"] = data["why_no_adapt"]
         last = result.texture_stage
-        camera = result.camera
-        if camera is None:   # (Run All runs the camera stage always)
-            raise RuntimeError("the run returned no camera stage")
         outputs = result.outputs(last)
         per_material = material_results(data, outputs["weights"], folder / "materials") \
             if data.get("materials") else []
@@ -256,7 +229,7 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
                 "maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
                 "hdr": str(folder / "light" / "light.exr"), "composite": str(result.composite),
                 # the camera stage's (which light and compose used), for the Cycles set-up
-                "camera": {k: camera.report["photo_camera"][k] for k in ("fov_deg", "pitch_deg", "roll_deg")},
+                "camera": camera_values(result.camera),
                 "stages": {name: stage.status for name, stage in result.stages.items()},
                 "adapt_skipped": stages["adapt"].get("why", ""), "material_maps": per_material}
 

@@ -22,6 +22,11 @@ PHOTO_STAGES = ("light", "compose")
 ALONE_STAGES = ("convert", "light")
 OPTIONAL_STAGES = ("adapt", "bake")
 PIPELINE_STAGES = tuple(stage for stage in STAGES if stage not in OPTIONAL_STAGES)
+# What runs on a photo alone, without an asset (Blender's Estimate Light before any asset is chosen).
+PHOTO_ONLY_STAGES = ("light",)
+# What runs from outputs made before (Blender's Adapt after its Convert and Estimate Light): adapt alone,
+# given the texture it starts from and, optionally, the light map its local views are lit by.
+FROM_GIVEN_STAGES = ("adapt",)
 
 PRESETS = ("draft", "balanced", "final")
 # scene: restyle the asset to fit the photo; generate: a new appearance from the prompt; edit: change it as told.

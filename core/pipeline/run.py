@@ -18,7 +18,7 @@ import shutil
 import threading
 import time
 from contextlib import contextmanager
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -27,7 +27,7 @@ import torch
 
 from ..base.atomic import write_json_atomic
 from ..base.errors import InputError
-from ..base.names import CAMERA_STAGE, PHOTO_STAGES, RUN_ORDER, STAGES
+from ..base.names import CAMERA_STAGE, FROM_GIVEN_STAGES, PHOTO_ONLY_STAGES, PHOTO_STAGES, RUN_ORDER, STAGES
 from ..base.progress import ProgressCallback, check_cancel, emit
 from ..base.report import relative_paths, write_report
 from ..base.untrusted import read_stage_record
@@ -79,9 +79,21 @@ def _digest(*parts) -> str:
     return h.hexdigest()[:16]
 
 
-def asset_digest(mesh: Mesh, maps: PBRMaps) -> str:
-    stack = maps.stacked()
+def asset_digest(mesh: Mesh, maps: PBRMaps | None) -> str:
+    """The asset's mesh and maps (maps None: a run given its texture reads the mesh alone)."""
+    stack = maps.stacked() if maps is not None else b""
     return _digest(mesh.positions, mesh.faces, mesh.uvs, mesh.normals if mesh.normals is not None else b"", stack)
+
+
+@dataclass(frozen=True)
+class GivenOutputs:
+    """What a run of FROM_GIVEN_STAGES starts from, made before and elsewhere (Blender's Convert and Estimate
+    Light): the neural texture (convert's weights; None: mode "generate" makes one) and the light map the
+    local views are lit by (None: the adapt preset's light). Their bytes key the stage, as a stage's key
+    holds the keys of the stages it reads."""
+
+    texture: Path | None = None
+    light: Path | None = None
 
 
 class StageRunner:
@@ -191,30 +203,38 @@ def _paths(outputs) -> list[str]:
     return [outputs] if isinstance(outputs, str) else []
 
 
-def run_pipeline(mesh: Mesh | AssetMaterials, maps: PBRMaps | None, photo_path: str | Path | None, placement,
+def run_pipeline(mesh: Mesh | AssetMaterials | None, maps: PBRMaps | None, photo_path: str | Path | None, placement,
                  out_dir: str | Path, config: RunConfig = RunConfig(), progress: ProgressCallback | None = None,
                  cancel: threading.Event | None = None, bake: GameBake | None = None,
                  bake_skipped_why: str = "no game bake was asked for", models: ModelCache | None = None,
-                 reuse_from: str | Path | None = None, stages: tuple[str, ...] = STAGES) -> RunResult:
+                 reuse_from: str | Path | None = None, stages: tuple[str, ...] = STAGES,
+                 given: GivenOutputs | None = None) -> RunResult:
     """Convert the asset, estimate the photo's light, adapt the texture (when the SD2 weights exist),
     compose the asset into the photo, and bake (when `bake` is given); returns the run's RunResult (its
     to_report() is out_dir/report.json).
 
     mesh, maps: the asset, or (maps None) every material of it (core/data/materials.AssetMaterials), which
-    convert fits each at its own cell's size, as `scenefit convert` does.
+    convert fits each at its own cell's size, as `scenefit convert` does; both None for the light alone
+    (PHOTO_ONLY_STAGES), which reads the photo only.
     placement: (x, y) as fractions of the photo's width and height (both <= 1) or pixels, or "X,Y".
     models: the loaded diffusion models to use (a ModelCache: a batch worker keeps one for its life,
     so its jobs load them once); default a cache for this run, so light and adapt share one load.
     reuse_from: a finished run's folder (Blender's Run All makes a new folder per run): each of its stages
     whose key this run shares is copied into out_dir and reused, as a stage already in out_dir is.
     stages: the subset to run (stage_subset: convert and/or light alone, or the pipeline, adapt and bake
-    optional); a run without light or compose reads no photo.
+    optional); a run without light or compose reads no photo. With `given` (the texture and light map made
+    before), FROM_GIVEN_STAGES alone: adapt, of the photo when a scene-mode run gives one.
     This is the one place the stages are strung together: the command line, batch jobs, remote
     workers, the Blender operators and the demo all call it.
     """
-    stages = stage_subset(stages)
+    stages = stage_subset(stages) if given is None else from_given(stages)
     run = PipelineRun(mesh, maps, photo_path, placement, out_dir, config, progress, cancel, models,  # 1. inputs
-                      reuse_from, stages)
+                      reuse_from, stages, given)
+    if given is not None:                 # adapt alone, from the texture and light made before
+        if run.photo_path is not None:
+            run.camera_stage()
+        run.adapt()
+        return run.finish()
     if "convert" in stages:
         run.convert()                     # 2. the asset's maps -> neural texture
     if run.photo_path is not None:
@@ -230,6 +250,14 @@ def run_pipeline(mesh: Mesh | AssetMaterials, maps: PBRMaps | None, photo_path: 
     return run.finish()                   # 7. report.json
 
 
+def from_given(stages) -> tuple[str, ...]:
+    """`stages` when they are FROM_GIVEN_STAGES, else one sentence: the rest of a run makes its own inputs."""
+    if tuple(stages) != FROM_GIVEN_STAGES:
+        raise InputError(f"A run from a given texture runs {', '.join(FROM_GIVEN_STAGES)} alone, not "
+                         f"{', '.join(stages) or 'nothing'}.")
+    return FROM_GIVEN_STAGES
+
+
 def guidance_found(config: RunConfig) -> tuple[bool, str]:
     """Whether adapt (and the diffusion light critic) run, and why: the one place `--guidance` is decided."""
     if config.guidance_type == "sd2":
@@ -243,36 +271,61 @@ def guidance_found(config: RunConfig) -> tuple[bool, str]:
 class PipelineRun:
     """One run's shared state: the checked inputs, each stage's key, the runner that reuses stages."""
 
-    def __init__(self, mesh: Mesh | AssetMaterials, maps: PBRMaps | None, photo_path: str | Path | None, placement,
-                 out_dir: str | Path, config: RunConfig, progress: ProgressCallback | None,
+    def __init__(self, mesh: Mesh | AssetMaterials | None, maps: PBRMaps | None, photo_path: str | Path | None,
+                 placement, out_dir: str | Path, config: RunConfig, progress: ProgressCallback | None,
                  cancel: threading.Event | None, models: ModelCache | None, reuse_from: str | Path | None = None,
-                 stages: tuple[str, ...] = STAGES) -> None:
+                 stages: tuple[str, ...] = STAGES, given: GivenOutputs | None = None) -> None:
         self.started = time.perf_counter()
-        self.stages = stages
+        self.stages, self.given = stages, given
+        if mesh is None and not set(stages) <= set(PHOTO_ONLY_STAGES):
+            raise InputError(f"The stages {', '.join(stages)} need an asset; only {', '.join(PHOTO_ONLY_STAGES)} "
+                             "runs on a photo alone.")
         self.asset = mesh   # what convert fits: a mesh with its maps, or every material of an asset
         if isinstance(mesh, AssetMaterials):
             mesh, maps = mesh.fitting_view()   # (the one mesh and maps the other stages see)
-        assert maps is not None
-        self.mesh, self.maps, self.config, self.progress, self.cancel = mesh, maps, config, progress, cancel
+        assert mesh is None or maps is not None or given is not None
+        self._mesh, self._maps, self.config, self.progress, self.cancel = mesh, maps, config, progress, cancel
         self.out = Path(out_dir).resolve()   # stage.json lists absolute outputs, whatever the working folder
         # Everything that can be wrong with the inputs is found before any work.
-        reads_photo = any(stage in stages for stage in PHOTO_STAGES)
+        # (adapt from a given texture reads the photo a scene-mode run gives; without one it sees local views)
+        reads_photo = any(stage in stages for stage in PHOTO_STAGES) or \
+            (given is not None and photo_path is not None and config.mode == "scene")
         if reads_photo and photo_path is None:
             raise InputError(f"The stages {', '.join(stages)} read a photo, and none was given.")
         self.photo_path = Path(photo_path) if reads_photo and photo_path is not None else None
         if self.photo_path is not None:
             self.read_photo(placement)
         # Guidance is adapt's, and the light critic's beside it; light alone chooses its critic as `scenefit light`.
-        self.found, self.where = guidance_found(config) if "compose" in stages else (False, "light alone")
+        self.found, self.where = guidance_found(config) if "compose" in stages else \
+            (True, "asked for (adapt from a given texture)") if given is not None else (False, "light alone")
         self.cache = models if models is not None else ModelCache()
-        self.asset_key = asset_digest(mesh, maps)
-        self.normalized, _ = normalize_to_unit_sphere(mesh)
+        self.asset_key = None if mesh is None else asset_digest(mesh, maps)
+        self._normalized = None if mesh is None else normalize_to_unit_sphere(mesh)[0]
         self.runner = StageRunner(self.out, progress, cancel, Path(reuse_from).resolve() if reuse_from else None,
                                   before_work=self.check_the_view)
         self.texture_path = self.light_path = self.camera_path = None
         self.camera: tuple[PhotoCamera, dict] | None = None   # the photo's camera, once estimated
         self.keys: dict[str, str] = {}
+        if given is not None:   # what the given files hold stands for the stages that made them
+            self.texture_path = given.texture
+            self.keys["convert"] = self.upstream = _digest("given texture", _file_bytes(given.texture))
         self.texture_final: Callable[[], None] = lambda: None   # what waits for the final texture (the bake)
+
+    # The asset as the stages that need one see it (the constructor refused a run without one that needs one).
+    @property
+    def mesh(self) -> Mesh:
+        assert self._mesh is not None
+        return self._mesh
+
+    @property
+    def maps(self) -> PBRMaps:
+        assert self._maps is not None
+        return self._maps
+
+    @property
+    def normalized(self) -> Mesh:
+        assert self._normalized is not None
+        return self._normalized
 
     def read_photo(self, placement) -> None:
         """The photo (the light stage's working copy), where the asset stands in it, the shadow's points and the
@@ -305,6 +358,9 @@ class PipelineRun:
 
         self.runner.start(CAMERA_STAGE, self.keys[CAMERA_STAGE], begin, later_stages_follow=False)()
         self.camera_path = self.out / CAMERA_STAGE / CAMERA_FILE
+        if self.given is not None:   # (adapt's key holds light's, which holds the camera's)
+            self.light_path = self.given.light
+            self.keys["light"] = _digest("given light", _file_bytes(self.given.light), self.keys[CAMERA_STAGE])
 
     def stage_camera(self, width: int, height: int) -> tuple[PhotoCamera, dict]:
         """The camera stage's camera at an image of `width` x `height`, and its estimate's record."""
@@ -410,16 +466,18 @@ class PipelineRun:
         camera = self.photo_camera()[0]   # (the camera stage's, once it ran: estimated once a run)
         if self.config.sun_shadow is not None:
             sun_from_shadow_points(self.config.sun_shadow, camera, tuple(self.photo_info["size"]), (h, w))
-        if "compose" not in self.stages:   # (light alone places no asset)
-            return
-        place_asset(self.normalized, camera, self.placement_px, self.compose_config().size, self.config.turn_deg)
-        if self.found:   # adapt's global views place it at each of its azimuths' turns
+        if "compose" in self.stages:
+            place_asset(self.normalized, camera, self.placement_px, self.compose_config().size, self.config.turn_deg)
+        if self.found and "adapt" in self.stages:   # adapt's global views place it at each of its azimuths' turns
             size = self.adapt_placement().size
             for turn in placement_turns(view_azimuths(self.adapt_config().views)):
                 place_asset(self.normalized, camera, self.placement_px, size, turn)
 
     def adapt_config(self):
-        return stage_configs.adapt_config(self.config, self.mesh.name)
+        """Adapt's config: of the photo when the run reads one; its local views lit by the given light map."""
+        has_envmap = self.given is not None and self.given.light is not None
+        return stage_configs.adapt_config(self.config, self.mesh.name, has_photo=self.photo_path is not None,
+                                          has_envmap=has_envmap)
 
     def adapt_placement(self):
         """Where adapt's global views place the asset: compose's point, at most the photo's height."""
@@ -440,17 +498,21 @@ class PipelineRun:
             return
         config = self.adapt_config()
         # The global views are the compose stage's composite: same point, size and camera as compose below.
-        h, w = self.photo.shape[:2]
-        placement = self.adapt_placement()
-        self.keys["adapt"] = _digest("adapt", config.to_dict(), self.keys["convert"], self.photo_key,
-                                     asdict(placement), self.keys["light"])
-        texture_path = self.texture_path
+        placement = self.adapt_placement() if self.photo_path is not None else None
+        self.keys["adapt"] = _digest("adapt", config.to_dict(), self.keys["convert"],
+                                     self.photo_key if placement is not None else None,
+                                     asdict(placement) if placement is not None else None, self.keys.get("light"))
+        texture_path, light_path = self.texture_path, self.light_path
+        # (the light stage shares the loaded models when it ran beside; alone, adapt loads what its views need)
+        need_inpaint = self.given is None or config.views_type == "local+global"
 
         def adapt(folder: Path) -> dict:
-            camera, _ = self.stage_camera(w, h)
-            return adapt_and_bake(self.mesh, load_neural_texture(texture_path), config, folder, photo=self.photo,
-                                  placement=placement, photo_camera=camera, progress=self.progress,
-                                  cancel=self.cancel, models=self.cache.get(config.models, True))[1]
+            camera = None if placement is None else self.stage_camera(self.photo.shape[1], self.photo.shape[0])[0]
+            envmap = load_environment(light_path) if config.light_type == "envmap" and light_path else None
+            return adapt_and_bake(self.mesh, load_neural_texture(texture_path) if texture_path else None, config,
+                                  folder, photo=self.photo if placement is not None else None,
+                                  placement=placement, envmap=envmap, photo_camera=camera, progress=self.progress,
+                                  cancel=self.cancel, models=self.cache.get(config.models, need_inpaint))[1]
 
         self.runner.run("adapt", self.keys["adapt"], adapt)
         self.texture_path, self.upstream = self.out / "adapt" / "maps" / WEIGHTS_FILE, self.keys["adapt"]
@@ -516,7 +578,7 @@ class PipelineRun:
 
     def finish(self) -> RunResult:
         recorded = self.runner.stages
-        inputs: dict = {"asset": self.mesh.name, "asset_digest": self.asset_key}
+        inputs: dict = {"asset": None if self._mesh is None else self._mesh.name, "asset_digest": self.asset_key}
         if self.photo_path is not None:
             inputs.update(photo=self.photo_info, photo_digest=self.photo_key, placement_px=list(self.placement_px))
         result = RunResult(
@@ -537,6 +599,17 @@ class _WithInpaint:
 
     def get(self, config: ModelConfig, need_inpaint: bool) -> GuidanceModels:
         return self.cache.get(config, True)
+
+
+def _file_bytes(path: Path | None) -> bytes:
+    """A given file's bytes for its key (b"": none given); a missing one is one sentence."""
+    if path is None:
+        return b""
+    try:
+        return Path(path).read_bytes()
+    except OSError as error:
+        raise InputError(f"Cannot read '{path}' ({error.strerror or error}); run the stage that makes it again.") \
+            from None
 
 
 def _plain(config: RunConfig) -> dict:

@@ -230,7 +230,7 @@ def started(props):
 
 op, ctx, first, invoke_s, tick, tick_s = started(ADAPT)
 steps = []
-while op._job.poll().step < 2 and not op._job.state.finished:
+while not (op._job.poll().stage == "adapt" and op._job.state.step >= 2) and not op._job.state.finished:
     op.modal(ctx, event("TIMER")); time.sleep(0.05)
 steps.append(op._job.state.step)
 elsewhere = sorted(op.modal(ctx, event("ESC", 300, 300)))       # over the viewport: the artist's Esc
@@ -249,7 +249,7 @@ runs = fox.scenefit_asset.runs
 run = runs[len(runs) - 1]
 folder = Path(bpy.path.abspath(run.folder))
 partial = folder.parent / f".{folder.name}.partial"
-checkpoint = partial / "checkpoint" / "adapt_checkpoint.pt"
+checkpoint = partial / "adapt" / "checkpoint" / "adapt_checkpoint.pt"   # the pipeline's adapt stage folder
 import torch
 done = int(torch.load(checkpoint, map_location="cpu", weights_only=True)["iteration"]) if checkpoint.is_file() else -1
 out["modal"] = {"first": first, "invoke_s": round(invoke_s, 4), "tick": tick, "tick_s": round(tick_s, 2),
@@ -260,9 +260,9 @@ out["modal"] = {"first": first, "invoke_s": round(invoke_s, 4), "tick": tick, "t
 # Resume (inline here: no window) continues the count from the checkpoint and finishes the same entry.
 index = len(runs) - 1
 out["resume"] = sorted(bpy.ops.scenefit.resume_run(index=index))
-report = json.loads((folder / "report.json").read_text())
-out["resumed"] = {"resumed_from": report.get("resumed_from", report.get("stages", {}).get("adapt", {}).get("resumed_from")),
-                  "iterations": report.get("iterations"), "run": [runs[index].state, len(runs)],
+adapted = json.loads((folder / "report.json").read_text())["stages"]["adapt"]["report"]   # the run's report
+out["resumed"] = {"resumed_from": adapted["resumed_from"], "iterations": adapted["iterations"],
+                  "run": [runs[index].state, len(runs)],
                   "partial_left": partial.exists()}
 """
 

@@ -158,6 +158,7 @@ out["convert_constants"] = {k: [bsdf.inputs[k].is_linked, round(bsdf.inputs[k].d
 ops["convert_again"] = bpy.ops.scenefit.convert(iterations=30)
 with timed("light"):
     ops["light"] = bpy.ops.scenefit.estimate_light(critic="none", outpaint="prior")
+ops["light_again"] = bpy.ops.scenefit.estimate_light(critic="none", outpaint="prior")   # reuses the first's stages
 with timed("adapt"):
     ops["adapt"] = bpy.ops.scenefit.adapt(iterations=2, model_resolution=32, render_size=16)
 # The warning before hours of local work: the draft preset's 300 iterations here, not the 2 just run.
@@ -418,14 +419,29 @@ def test_every_operator_finishes_with_exec_default(blender, operated):
     first, last, active = out["materials"]
     assert first != last and active == last and "adapt" in last
     assert out["after_revert"] == "AssetMaterial" and out["world_after_revert"] == "User World"
-    assert out["world"] == "SceneFit Light" and out["camera"] == [None, "SceneFit Camera"] and out["shadow_catcher"]
+    assert out["world"] == "SceneFit Light.001" and out["camera"]   # (a World per Estimate Light: the second's) == [None, "SceneFit Camera"] and out["shadow_catcher"]
     kinds = sorted(Path(f).name.split("-")[0] for f in out["run_folders"])
-    assert kinds == ["adapt", "compose", "convert", "convert", "light", "mitsuba"], out["run_folders"]
+    assert kinds == ["adapt", "compose", "convert", "convert", "light", "light", "mitsuba"], out["run_folders"]
     # Constant channels stay constants: the sphere's roughness 0.5 and metallic 0 are socket values, not images.
     assert out["convert_constants"] == {"Roughness": [False, 0.5], "Metallic": [False, 0.0]}
     assert out["open_composite_options"] == ["REGISTER"]
     assert all(p.startswith("//scenefit/") for p in out["paths"].values()), out["paths"]
     assert all(path.startswith("//scenefit/") for _, path in out["images"]), out["images"]
+
+
+def test_estimate_light_is_the_pipelines_light_stage_and_a_second_click_reuses_it(operated):
+    """Estimate Light runs run_pipeline's camera and light stages on the photo alone; the same click again
+    copies the first run's stages in (same photo and settings) and the World reads the new folder's map."""
+    tmp, out, _ = operated
+    first, second = sorted(tmp / f for f in out["run_folders"] if Path(f).name.startswith("light"))
+    reports = [json.loads((folder / "report.json").read_text()) for folder in (first, second)]
+    assert [list(r["stages"]) for r in reports] == [["light"], ["light"]]
+    assert [r["stages"]["light"]["status"] for r in reports] == ["ran", "reused"]
+    assert Path(reports[1]["stages"]["light"]["from"]).resolve() == first.resolve()
+    assert reports[0]["inputs"]["asset"] is None
+    assert reports[0]["camera"]["status"] == "ran" and (first / "camera" / "camera.json").is_file()
+    assert (tmp / out["paths"]["light"][2:]).resolve() == (second / "light" / "light.exr").resolve()
+    assert (first / "light" / "light.exr").read_bytes() == (second / "light" / "light.exr").read_bytes()
 
 
 def test_hours_of_local_adaptation_are_said_before_they_start(operated):

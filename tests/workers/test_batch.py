@@ -374,7 +374,7 @@ object_prompt = "a rubber ball"
 instruction = "add moss"
 negative_prompt = "blurry"
 seed = 5
-overrides = { convert = { iterations = 4 }, light = { critic_type = "none", map_height = 16, apparatus = { render_size = 16, spp = 1 }, outpaint = { completion_type = "prior" } }, compose = { pilot_spp = 1, min_spp = 1, max_spp = 1 }, adapt = { iterations = 1, model_resolution = 32, views_per_step = 1, preview_every = 1, checkpoint_every = 100, stages = [[1.0, 16, 1, [500, 990]]] } }
+overrides = { convert = { iterations = 4 }, light = { critic_type = "none", map_height = 16, apparatus = { render_size = 16, spp = 1 }, outpaint = { completion_type = "prior" } }, compose = { pilot_spp = 1, min_spp = 1, max_spp = 1 }, adapt = { light_type = "envmap", iterations = 1, model_resolution = 32, views_per_step = 1, preview_every = 1, checkpoint_every = 100, stages = [[1.0, 16, 1, [500, 990]]] } }
 """
 
 
@@ -382,7 +382,8 @@ def test_a_worker_loads_the_models_once_and_reuses_them_with_the_same_outputs(tm
     """Two jobs with diffusion guidance in one worker: the tiny models load once (counted in the real
     loader), the second job (reused models) writes the same bytes as the first (fresh models). A third job's
     mode, object prompt, instruction, negative prompt and seed reach adapt: it adapts in mode edit with the
-    prompt made of its words, as `scenefit adapt --mode edit` does."""
+    prompt made of its words, as `scenefit adapt --mode edit` does, its local views lit by the run's own
+    light map as its overrides ask."""
     from scenefit.core.stages.adapt.config import edit_prompt
     from scenefit.core.guidance import models as model_module
     make_inputs(tmp_path)
@@ -410,8 +411,8 @@ def test_a_worker_loads_the_models_once_and_reuses_them_with_the_same_outputs(tm
     edit = json.loads((tmp_path / "out" / "edit" / "report.json").read_text())["stages"]["run"]
     adapt = edit["stages"]["adapt"]["report"]
     assert (adapt["config"]["mode_type"], adapt["config"]["object_prompt"], adapt["config"]["instruction"],
-            adapt["config"]["negative_prompt"], adapt["config"]["seed"], adapt["config"]["views_type"]) == (
-        "edit", "a rubber ball", "add moss", "blurry", 5, "local")
+            adapt["config"]["negative_prompt"], adapt["config"]["seed"], adapt["config"]["views_type"],
+            adapt["config"]["light_type"]) == ("edit", "a rubber ball", "add moss", "blurry", 5, "local", "envmap")
     assert edit_prompt("a rubber ball", "add moss") == "a rubber ball, with moss"
     assert "a rubber ball, with moss" in json.dumps(adapt["decisions"]["prompt"])
     assert edit["config"]["mode"] == "edit" and edit["stages"]["convert"]["report"]["config"]["seed"] == 5

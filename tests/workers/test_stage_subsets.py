@@ -102,3 +102,16 @@ def test_run_pipeline_refuses_a_subset_that_does_not_run_before_any_work(tmp_pat
     with pytest.raises(InputError, match="read a photo, and none was given"):
         run_module.run_pipeline(mesh, maps, None, None, tmp_path / "run", stages=("light",))
     assert steps == [] and not (tmp_path / "run").exists()
+
+
+def test_the_light_alone_runs_without_an_asset_and_nothing_else_does(tmp_path, steps):
+    make_inputs(tmp_path)
+    run_module.run_pipeline(None, None, tmp_path / "room.png", (0.5, 0.7), tmp_path / "run",
+                            RunConfig(guidance_type="none"), stages=("light",))
+    assert steps == ["camera_stage", "light"]
+    for stages in [s for s in sorted(RUNS) if s != ("light",)]:
+        with pytest.raises(InputError, match="need an asset; only light runs on a photo alone") as error:
+            run_module.run_pipeline(None, None, tmp_path / "room.png", (0.5, 0.7), tmp_path / "other",
+                                    RunConfig(guidance_type="none"), stages=stages)
+        assert "\n" not in str(error.value)
+    assert not (tmp_path / "other").exists()
