@@ -15,11 +15,11 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..core.base.errors import InputError
-from ..core.stages.bake.game_bake import BakedMaterial
 from ..core.stages.bake.gltf_ktx2 import basisu_path, ktx2_glb
 from ..core.stages.bake.engine_targets import engine_target
 from ..core.stages.bake.gltf_tangents import tangents_repaired
@@ -32,6 +32,9 @@ from ..core.base.quiet import native_output_captured
 from ..core.data.uv_raster import sample_image
 from .material import EXTENSION_OF_WRAP, image_pixels_linear, material_wrap, principled_bsdf
 from .node_values import source
+
+if TYPE_CHECKING:   # (game_bake evaluates the network: torch, which Blender need not load to register the add-on)
+    from ..core.stages.bake.game_bake import BakedMaterial
 
 FORMATS = {"glb": "GLB", "gltf": "GLTF_SEPARATE"}
 # --textures -> the exporter's image format (AUTO keeps the PNGs SceneFit bakes, and each other image's own format).

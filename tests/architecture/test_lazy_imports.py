@@ -155,3 +155,16 @@ def test_what_an_operators_prepare_builds_loads_no_torch():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip() == "[]", done.stdout
+
+
+def test_registering_the_add_on_loads_no_torch():
+    """Blender registers the add-on at every start: its operators, panels and their modules load no torch,
+    Mitsuba, OpenCV or diffusers (a second or more each start); a job imports them when it runs."""
+    import subprocess
+    import sys
+
+    code = ("import sys, bpy, scenefit\nscenefit.register()\n"
+            "print(sorted(m for m in ('torch', 'mitsuba', 'cv2', 'diffusers') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout
