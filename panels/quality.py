@@ -57,10 +57,11 @@ def adapt_projection(preset: str, iterations: int | None = None, gpu: bool = Fal
 
 
 def preset_iterations(preset: str) -> int:
-    """The adapt preset's iterations, as the pipeline resolves them (core/pipeline/presets.py)."""
-    from ..core.pipeline.presets import stage_config
+    """The adapt preset's iterations, from the table the pipeline resolves them from (read at each draw:
+    resolving the whole AdaptConfig would load torch into Blender the first time the panel is drawn)."""
+    from ..core.pipeline.preset_tables import TABLES
 
-    return stage_config("adapt", preset, prompt="-").iterations
+    return int(TABLES["adapt"][preset]["iterations"])
 
 
 def duration_text(seconds: float) -> str:

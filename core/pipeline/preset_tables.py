@@ -47,7 +47,7 @@ TABLES: dict[str, dict[str, dict]] = {
         "draft": {"iterations": 300, "size_scale": 0.5, "spp_scale": 0.25, "views_per_step": 1,
                   "preview_every": 25, "checkpoint_every": 100},
         "balanced": {"iterations": 1500, "size_scale": 0.75, "spp_scale": 0.5, "views_per_step": 2},
-        "final": {},
+        "final": {"iterations": 4000},
     },
     # Compose: the final render's noise target and sample cap (the paper renders evaluation at 1024 spp;
     # here a denoised render aims at a noise level, see benchmarks/FINDINGS.md). A draft is a quick look:

@@ -157,6 +157,7 @@ def test_adapts_projected_time_is_the_sd2_bench_measurement():
     for preset, seconds in quality.ADAPT_SECONDS_PER_ITERATION.items():
         assert (seconds is None and preset not in measured) or seconds == pytest.approx(measured[preset], abs=0.1)
         iterations = stage_config("adapt", preset, prompt="a test").iterations
+        assert quality.preset_iterations(preset) == iterations   # (the table, read without loading torch)
         if seconds is not None:   # the projection takes the preset's iterations from the presets themselves
             assert quality.adapt_projection(preset) == pytest.approx(seconds * iterations)
     assert quality.adapt_projection("draft", 10) == pytest.approx(10 * quality.ADAPT_SECONDS_PER_ITERATION["draft"])

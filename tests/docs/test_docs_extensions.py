@@ -107,5 +107,6 @@ def test_the_presets_rows_are_the_tables_and_the_resolved_defaults():
     assert rows["noise_target"] == [str(TABLES["compose"][p]["noise_target"]) for p in ("draft", "balanced", "final")]
     assert rows["max_side"][1] == f"{stage_config('compose', 'balanced').max_side} (default)"
     adapt = {row[0]: row[1:] for row in stage_rows("adapt")}
-    assert adapt["iterations"][2] == f"{stage_config('adapt', 'final', prompt='x').iterations} (default)"
+    assert adapt["iterations"][2] == f"{stage_config('adapt', 'final', prompt='x').iterations}"   # (in the table)
+    assert adapt["views_per_step"][2] == f"{stage_config('adapt', 'final', prompt='x').views_per_step} (default)"
     assert adapt["size_scale"][2] == "1.0 (default)"
