@@ -84,6 +84,8 @@ out["untranslated_buttons"] = sorted({c.bl_label for c in operators.classes if i
 
 THUMBNAIL = r"""
 from importlib import import_module
+import sys
+torch_before = "torch" in sys.modules
 imageio = import_module("scenefit.core.data.imageio")
 bpy.ops.wm.read_homefile(use_empty=True)
 photo = np.zeros((60, 80, 3), np.float32); photo[:, :40] = (1.0, 0.0, 0.0)   # left half red
@@ -116,6 +118,7 @@ preview = panels.thumbnail._previews[str(path)]
 pixels = np.array(preview.image_pixels_float[:]).reshape(preview.image_size[1], preview.image_size[0], 4)
 out["sections"] = {name: len(lines) for name, lines in sections.items()}
 out["quality"] = [d for d in sections["SCENEFIT_PT_quality"] if d[0] in ("label", "operator")]
+out["torch"] = [torch_before, "torch" in sys.modules]
 out.update(reads=reads, opened=opened, icons=icons, icon_id=preview.icon_id, size=list(preview.image_size),
            top_left=pixels[-1, 0].tolist(), top_right=pixels[-1, -1].tolist(),
            pickers=[d for d in frames[0] if d[0] == "operator" and d[1] in ("scenefit.pick_placement", "scenefit.pick_sun")])
@@ -281,6 +284,7 @@ def test_the_photos_thumbnail_is_read_once_and_drawing_opens_no_file(blender):
     out = session.run(THUMBNAIL.replace("TMP", repr(str(tmp))))
     assert len(out["reads"]) == 1 and out["reads"][0].endswith("photo.png")
     assert out["opened"] == []
+    assert out["torch"] == [False, False]   # nor does drawing load torch (seconds, the first time)
     assert out["icons"] == [[out["icon_id"]]] * 3   # (0 without a window: Blender makes icons for the UI)
     assert out["size"] == [80, 60]
     # the preview is the photo the right way up: red on the left, black on the right
