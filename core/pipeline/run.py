@@ -307,8 +307,9 @@ class PipelineRun:
         self.camera: tuple[PhotoCamera, dict] | None = None   # the photo's camera, once estimated
         self.keys: dict[str, str] = {}
         if given is not None:   # what the given files hold stands for the stages that made them
-            self.texture_path = given.texture
+            self.texture_path, self.light_path = given.texture, given.light
             self.keys["convert"] = self.upstream = _digest("given texture", _file_bytes(given.texture))
+            self.given_light_key = _digest("given light", _file_bytes(given.light))
         self.texture_final: Callable[[], None] = lambda: None   # what waits for the final texture (the bake)
 
     # The asset as the stages that need one see it (the constructor refused a run without one that needs one).
@@ -358,9 +359,6 @@ class PipelineRun:
 
         self.runner.start(CAMERA_STAGE, self.keys[CAMERA_STAGE], begin, later_stages_follow=False)()
         self.camera_path = self.out / CAMERA_STAGE / CAMERA_FILE
-        if self.given is not None:   # (adapt's key holds light's, which holds the camera's)
-            self.light_path = self.given.light
-            self.keys["light"] = _digest("given light", _file_bytes(self.given.light), self.keys[CAMERA_STAGE])
 
     def stage_camera(self, width: int, height: int) -> tuple[PhotoCamera, dict]:
         """The camera stage's camera at an image of `width` x `height`, and its estimate's record."""
@@ -497,6 +495,8 @@ class PipelineRun:
                              if self.config.guidance_type == "auto" else self.where)
             return
         config = self.adapt_config()
+        if self.given is not None:   # the given map stands for the light stage, whose key holds the camera's
+            self.keys["light"] = _digest(self.given_light_key, self.keys.get(CAMERA_STAGE))
         # The global views are the compose stage's composite: same point, size and camera as compose below.
         placement = self.adapt_placement() if self.photo_path is not None else None
         self.keys["adapt"] = _digest("adapt", config.to_dict(), self.keys["convert"],

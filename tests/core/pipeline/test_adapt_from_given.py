@@ -74,8 +74,8 @@ def test_adapt_of_the_photo_under_the_given_light_runs_once_and_is_reused(tmp_pa
     assert adapted_again.stages["adapt"].status == "ran"
 
 
-def test_an_edit_without_a_photo_adapts_local_views_under_the_presets_light(tmp_path, made_before):
-    mesh, texture, _, photo = made_before
+def test_an_edit_without_a_photo_adapts_local_views_under_the_presets_light_or_the_given_one(tmp_path, made_before):
+    mesh, texture, light, photo = made_before
     result = run_pipeline(mesh, None, photo, (0.5, 0.8), tmp_path / "edit",
                           config(mode="edit", object_prompt="a ball", instruction="make it rusty"),
                           stages=("adapt",), given=GivenOutputs(texture=texture))
@@ -83,6 +83,10 @@ def test_an_edit_without_a_photo_adapts_local_views_under_the_presets_light(tmp_
     assert result.camera is None and not (tmp_path / "edit" / "camera").exists()   # an edit reads no photo
     assert adapted["views_type"] == "local" and adapted["light_type"] == "ambient"
     assert adapted["instruction"] == "make it rusty" and adapted["mode_type"] == "edit"
+    lit = run_pipeline(mesh, None, photo, (0.5, 0.8), tmp_path / "edit_lit",
+                       config(mode="edit", object_prompt="a ball", instruction="make it rusty"),
+                       stages=("adapt",), given=GivenOutputs(texture=texture, light=light))
+    assert lit.stages["adapt"].report["config"]["light_type"] == "envmap" and lit.camera is None
 
 
 def test_a_run_from_given_outputs_is_adapt_alone_and_its_files_must_exist(tmp_path, made_before):
@@ -95,4 +99,7 @@ def test_a_run_from_given_outputs_is_adapt_alone_and_its_files_must_exist(tmp_pa
     with pytest.raises(InputError, match="Cannot read .*missing.pt.*run the stage that makes it again"):
         run_pipeline(mesh, None, photo, (0.5, 0.8), tmp_path / "run", config(), stages=("adapt",),
                      given=GivenOutputs(texture=tmp_path / "missing.pt"))
+    with pytest.raises(InputError, match="Cannot read .*missing.exr"):
+        run_pipeline(mesh, None, photo, (0.5, 0.8), tmp_path / "run", config(), stages=("adapt",),
+                     given=GivenOutputs(texture=texture, light=tmp_path / "missing.exr"))
     assert not (tmp_path / "run").exists()
