@@ -53,6 +53,15 @@ def printed_json(proc: subprocess.CompletedProcess) -> dict:
         pytest.fail(f"the script's JSON line does not parse ({error}):\n{proc.stdout[-4000:]}\n{proc.stderr[-4000:]}")
 
 
+def takes_ctrl_c() -> None:
+    """preexec_fn of a child a test sends Ctrl-C (SIGINT): SIGINT as a terminal gives it. A suite started in
+    the background (`nohup`, `&` in a script) hands its children SIGINT ignored, and Python then installs
+    no KeyboardInterrupt, so the child would run on as a background job should."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def scenefit_process(*args, env: dict | None = None) -> subprocess.CompletedProcess:
     """`scenefit ARGS` as a user runs it: a process of its own (a fresh bpy), its output captured."""
     return subprocess.run([sys.executable, "-m", "scenefit.cli", *map(str, args)], capture_output=True, text=True,

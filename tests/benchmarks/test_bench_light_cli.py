@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from conftest import ROOT  # noqa: E402
+from conftest import ROOT, takes_ctrl_c  # noqa: E402
 
 
 def test_a_folder_without_the_maps_gets_one_sentence_and_exit_2(tmp_path):
@@ -43,7 +43,8 @@ def test_ctrl_c_half_way_gets_one_sentence_and_leaves_no_results(tmp_path):
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, str(ROOT / "benchmarks" / "bench_light.py"), "--real", "--no-draft",
                              "--corpus", str(corpus), "--out", str(out)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=ROOT, env=dict(os.environ, PYTHONWARNINGS="ignore"))
+                            stderr=subprocess.PIPE, text=True, cwd=ROOT, env=dict(os.environ, PYTHONWARNINGS="ignore"),
+                            preexec_fn=takes_ctrl_c)
     first = proc.stdout.readline()                         # the first view is done: the run is under way
     assert "wins" in first, proc.stderr.read()[-2000:] if proc.poll() is not None else first
     proc.send_signal(signal.SIGINT)

@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from conftest import ROOT
+from conftest import ROOT, takes_ctrl_c
 from scenefit.core.data.asset_io import save_asset_folder
 from scenefit.core.data.imageio import write_image
 from scenefit.core.data.maps import PBRMaps
@@ -49,7 +49,7 @@ def test_ctrl_c_stops_the_batch_within_seconds_with_finished_jobs_whole(tmp_path
     (tmp_path / "jobs.toml").write_text(JOBS)
     batch = subprocess.Popen([sys.executable, "-m", "scenefit.cli", "batch", tmp_path / "jobs.toml", "--out",
                               tmp_path / "out", "--events"], stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                             cwd=ROOT)
+                             cwd=ROOT, preexec_fn=takes_ctrl_c)
     for line in batch.stdout:   # Ctrl-C half a second into job b's first compose render (1.5 s long here)
         event = json.loads(line) if line.startswith("{") else {}
         if event.get("job") == "b" and event.get("stage") == "compose":
