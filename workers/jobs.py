@@ -245,7 +245,8 @@ def _parse_models(table: dict, path: Path) -> ModelConfig:
         kind = bool if key not in ("base_model", "inpaint_model", "cache_dir", "device_type", "dtype_type") else str
         if not isinstance(value, kind):
             raise InputError(f"{where}: {key} must be a {'true/false' if kind is bool else 'string'}, got {value!r}.")
-        if key in ("base_model", "inpaint_model", "cache_dir") and value.startswith((".", "/", "~")):
+        if key in ("base_model", "inpaint_model", "cache_dir") and isinstance(value, str) and \
+                value.startswith((".", "/", "~")):
             value = str(_resolve(value, path))
         values[key] = value
     try:

@@ -4,6 +4,7 @@ folder) is data, and a light.exr or texture.pt of NaN reused as it is would carr
 render."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ FLOAT_IMAGE_SUFFIXES = (".exr", ".hdr")
 TENSOR_SUFFIXES = (".pt",)
 
 
-def finite_outputs(paths: list[str | Path]) -> bool:
+def finite_outputs(paths: Sequence[str | Path]) -> bool:
     """True when every float image and tensor file among `paths` reads and holds only finite values."""
     for path in paths:
         suffix = Path(path).suffix.lower()

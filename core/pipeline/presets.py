@@ -20,7 +20,10 @@ def with_overrides(values: dict, overrides: dict) -> dict:
     merged = dict(values)
     for name, override in overrides.items():
         ours = merged.get(name)
-        merged[name] = replace(ours, **override) if isinstance(override, dict) and is_dataclass(ours) else override
+        if isinstance(override, dict) and is_dataclass(ours) and not isinstance(ours, type):
+            merged[name] = replace(ours, **override)
+        else:
+            merged[name] = override
     return merged
 
 

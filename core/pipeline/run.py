@@ -303,7 +303,10 @@ class PipelineRun:
         self._normalized = None if mesh is None else normalize_to_unit_sphere(mesh)[0]
         self.runner = StageRunner(self.out, progress, cancel, Path(reuse_from).resolve() if reuse_from else None,
                                   before_work=self.check_the_view)
-        self.texture_path = self.light_path = self.camera_path = None
+        # (each set once the stage that writes it ran, or from `given`)
+        self.texture_path: Path | None = None
+        self.light_path: Path | None = None
+        self.camera_path: Path | None = None
         self.camera: tuple[PhotoCamera, dict] | None = None   # the photo's camera, once estimated
         self.keys: dict[str, str] = {}
         if given is not None:   # what the given files hold stands for the stages that made them
@@ -362,6 +365,7 @@ class PipelineRun:
 
     def stage_camera(self, width: int, height: int) -> tuple[PhotoCamera, dict]:
         """The camera stage's camera at an image of `width` x `height`, and its estimate's record."""
+        assert self.camera_path is not None   # (camera_stage ran)
         return read_camera(self.camera_path, width, height)
 
     def convert(self) -> None:
@@ -373,8 +377,11 @@ class PipelineRun:
         self.keys["convert"] = _digest("convert", asdict(config), self.asset_key,
                                        *(["per material"] if per_material else []))
 
+        asset = self.asset
+        assert asset is not None   # (the constructor refused convert without an asset)
+
         def convert(folder: Path) -> dict:
-            return convert_and_bake(self.asset, None if per_material else self.maps, folder / "maps", config,
+            return convert_and_bake(asset, None if per_material else self.maps, folder / "maps", config,
                                     progress=self.progress, cancel=self.cancel)[1]
 
         self.runner.run("convert", self.keys["convert"], convert)
@@ -416,9 +423,10 @@ class PipelineRun:
             camera, estimate = self.stage_camera(self.photo.shape[1], self.photo.shape[0])
             # (the shadow's points need the camera)
             with_sun = stage_configs.with_shadow_sun(config, self.config, camera, tuple(self.photo_info["size"]),
-                                                     self.photo.shape[:2])
+                                                     (self.photo.shape[0], self.photo.shape[1]))
             asset = {}
             if critic_sees_asset:
+                assert self.texture_path is not None   # (convert ran)
                 texture = load_neural_texture(self.texture_path)
                 stack = texture_view(texture, self.normalized).stack(texture)   # convert's: the own UVs
                 asset = {"mesh": self.mesh, "maps": torch.as_tensor(stack)}
@@ -447,6 +455,7 @@ class PipelineRun:
             elif self.config.photo_camera is not None:
                 self.camera = replace(self.config.photo_camera, width=w, height=h), {"source": "given by the caller"}
             else:
+                assert self.photo_path is not None   # (only a run that reads the photo asks for its camera)
                 estimate = photo_camera_estimate(self.photo_path, self.config.fspy, self.config.camera_overrides,
                                                  self.config.camera_source, self.config.camera_why)
                 self.camera = estimate.photo_camera(width=w, height=h), estimate.to_dict()
@@ -522,12 +531,13 @@ class PipelineRun:
         config = self.compose_config()
         self.keys["compose"] = _digest("compose", asdict(config), self.upstream, self.keys["light"], self.photo_key,
                                        self.placement_px, self.config.turn_deg, self.keys[CAMERA_STAGE])
-        texture_path, light_path = self.texture_path, self.light_path
+        texture_path, light_path, photo_path = self.texture_path, self.light_path, self.photo_path
+        assert texture_path is not None and light_path is not None and photo_path is not None   # (compose is last)
 
         def compose(folder: Path) -> dict:
             texture = load_neural_texture(texture_path)
             view = texture_view(texture, self.mesh)   # adaptation's new UV layout, when it made one
-            full, _ = load_photo(self.photo_path, max_side=config.max_side)   # at the photo's size, up to max_side
+            full, _ = load_photo(photo_path, max_side=config.max_side)   # at the photo's size, up to max_side
             fh, fw = full.shape[:2]
             camera, camera_from = self.stage_camera(fw, fh)[0], "the camera stage (camera/camera.json)"
             inputs = ComposeInputs(view.mesh, view.stack(texture), full, self.placement.pixel((fh, fw)),
@@ -554,6 +564,7 @@ class PipelineRun:
             if finishes:
                 return
             texture = self.texture_path
+            assert texture is not None   # (started once the texture is final)
 
             def begin(folder: Path) -> Callable[[], dict]:
                 started.append(bake(texture, folder, self.cancel))

@@ -163,10 +163,12 @@ def check_stage_settings(config: RunConfig, where: str, stages: tuple[str, ...] 
     for stage in (s for s in CONFIG_STAGES if s in stages or s in config.stage_overrides):
         overrides = config.overrides(stage)
         # (a scene run without a prompt is given one from the asset's name: any text stands for it here)
-        own = {"adapt": {"mode_type": config.mode, "prompt": config.prompt or ("x" if config.mode == "scene" else ""),
-                         "object_prompt": config.object_prompt, "instruction": config.instruction},
-               "compose": {"size": config.size, "shadow_type": config.shadow_type, "spp": config.compose_spp},
-               }.get(stage, {})
+        prompt = config.prompt or ("x" if config.mode == "scene" else "")
+        owns: dict[str, dict] = {
+            "adapt": {"mode_type": config.mode, "prompt": prompt, "object_prompt": config.object_prompt,
+                      "instruction": config.instruction},
+            "compose": {"size": config.size, "shadow_type": config.shadow_type, "spp": config.compose_spp}}
+        own = owns.get(stage, {})
         try:
             _check_types(overrides, stage_config(stage, config.preset, **own), f"{where}: overrides.{stage}")
             stage_config(stage, config.preset, **with_overrides(own, overrides))

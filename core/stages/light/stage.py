@@ -78,6 +78,7 @@ def run_light(inputs: LightInputs, config: LightConfig, progress: ProgressCallba
 
 def write_light(result: LightResult, folder: str | Path, extra: dict | None = None) -> dict:
     """light.exr and its previews in `folder`, and report.json (the photo's facts, `extra` over it)."""
+    assert result.config is not None   # (run_light sets it)
     report = light_report(result, result.config, write_light_outputs(result, folder))
     report["photo"] = result.photo_info
     report.update(extra or {})
