@@ -28,10 +28,10 @@ def asset_files(path: str | os.PathLike, resolve: bool = True) -> list[Path]:
         for library in dict.fromkeys(named + [same_name]):
             found.append(library)
             found += _mtl_maps(library)
-    for named in found:   # a FIFO named as a map would hang Blender's importer, and any reader of it
-        kind = _special_kind(named)
+    for listed in found:   # a FIFO named as a map would hang Blender's importer, and any reader of it
+        kind = _special_kind(listed)
         if kind and not kind.startswith("a link"):
-            raise InputError(f"'{path.name}' names '{named}', which is {kind}, not a file; SceneFit reads only "
+            raise InputError(f"'{path.name}' names '{listed}', which is {kind}, not a file; SceneFit reads only "
                              "regular files, so put the file itself there.")
     return sorted({p.resolve() if resolve else as_named(p) for p in found if p.is_file()})
 

@@ -95,10 +95,12 @@ def load_read(folder: str | Path, key: str | None) -> tuple[Mesh, PBRMaps] | Non
             return None
         mesh = Mesh(positions=arrays["positions"], faces=arrays["faces"], uvs=arrays["uvs"],
                     normals=arrays.get("normals"), name=meta.name, material_index=arrays.get("material_index"),
-                    wraps=tuple(tuple(w) for w in meta.wraps), atlas=meta.atlas)
-        maps = PBRMaps(base_color=arrays["base_color"], normal=arrays.get("normal"),
-                       roughness=arrays.get("roughness", meta.roughness),
-                       metallic=arrays.get("metallic", meta.metallic))
+                    wraps=tuple((w[0], w[1]) for w in meta.wraps), atlas=meta.atlas)
+        roughness, metallic = arrays.get("roughness", meta.roughness), arrays.get("metallic", meta.metallic)
+        if roughness is None or metallic is None:   # (a copy without a channel is no copy)
+            return None
+        maps = PBRMaps(base_color=arrays["base_color"], normal=arrays.get("normal"), roughness=roughness,
+                       metallic=metallic)
     # A copy that does not read whole is no copy: the asset is read again (JSONDecodeError is a ValueError).
     except (OSError, ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile, zlib.error, InputError):
         return None

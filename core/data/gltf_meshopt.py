@@ -69,7 +69,7 @@ def _uri_bytes(uri: str, folder: Path) -> bytes:
 
 def _buffers(document: dict, chunk: bytes | None, folder: Path) -> list[bytes | None]:
     """Each buffer's bytes; None for a meshopt fallback buffer that holds nothing."""
-    found = []
+    found: list[bytes | None] = []
     for index, buffer in enumerate(document.get("buffers", [])):
         if "uri" in buffer:
             found.append(_uri_bytes(buffer["uri"], folder))
@@ -134,6 +134,7 @@ def _decoded_view(view: dict, index: int, buffers: list[bytes | None], room: int
     source = buffers[packed["buffer"]] if isinstance(packed, dict) and isinstance(packed.get("buffer"), int) \
         and 0 <= packed["buffer"] < len(buffers) else None
     packed = _checked_packing(view, index, source, room)
+    assert source is not None   # (_checked_packing refuses a view outside its buffer)
     start = packed.byteOffset
     rows = meshopt.decode_gltf_buffer(bytes(source[start:start + packed.byteLength]), packed.count,
                                       packed.byteStride, packed.mode, packed.filter)
@@ -224,6 +225,7 @@ def _packed(data: bytes, view: dict, size: int) -> tuple[bytes, dict] | None:
     import meshopt  # lazy: its wheel is not on every platform
 
     stride = view.get("byteStride", size)
+    rows: np.ndarray
     if view.get("target") == _ELEMENT_ARRAY_BUFFER and stride in (2, 4) and len(data) % (3 * stride) == 0:
         mode, rows = "TRIANGLES", np.frombuffer(data, f"<u{stride}").astype(np.uint32)
     elif stride % 4 == 0 and stride <= 256 and len(data) % stride == 0 and view.get("target") != _ELEMENT_ARRAY_BUFFER:
@@ -238,6 +240,8 @@ def encoded_glb(source: Path, out: Path) -> Path:
     compressed, in gltfpack's layout: the compressed bytes in the BIN chunk, and a fallback buffer
     holding nothing (so the extension is required). Images stay as they are."""
     document, chunk = read_gltf(source)
+    if chunk is None:   # (the exporter's GLB holds its buffer in the BIN chunk)
+        raise InputError(f"'{source}' has no BIN chunk; only a self-contained GLB is meshopt-compressed.")
     sizes = _element_sizes(document)
     blob, fallback = bytearray(), 0
     for index, view in enumerate(document.get("bufferViews", [])):

@@ -196,6 +196,7 @@ class ScoreCritic:
         ts = row_timesteps(t, b)
         alpha = self._alpha_rows(ts, x_t)
         cond_labels = rows_of(condition.to(x_t.device).reshape(-1, condition.shape[-1]), b)
+        assert self.lora is not None   # (the caller refused λ > 0 without ε_ψ)
         with self.lora.active():
             if self.config.lora_guidance_scale == 1.0:  # the unconditional branch has weight 0
                 out = self._unet(x_t, torch.tensor(ts), rows_of(text_cond, b), ref_t, (), cond_labels, None)

@@ -35,7 +35,8 @@ def to_nchw(image_hwc: torch.Tensor) -> torch.Tensor:
 def background_color(rng: np.random.Generator, random_p: float = 0.5) -> tuple[float, float, float]:
     """Grey 0.5, or with probability `random_p` a random solid colour (sRGB), as in the appendix."""
     if rng.uniform() < random_p:
-        return tuple(float(c) for c in rng.uniform(0.0, 1.0, 3))
+        r, g, b = (float(c) for c in rng.uniform(0.0, 1.0, 3))
+        return r, g, b
     return GREY
 
 

@@ -31,7 +31,8 @@ def sample_timestep(rng: np.random.Generator, t_range: tuple[int, int], progress
     anneal "linear": a window of `window` x the range slides from the top (progress 0) to the bottom
     (progress 1), so noise levels go from high to low (the paper's appendix); "none": uniform.
     """
-    lo, hi = int(t_range[0]), int(t_range[1])
+    lo: float = int(t_range[0])
+    hi: float = int(t_range[1])
     if anneal_type == "linear":
         width = window * (hi - lo)
         centre = hi - (hi - lo) * min(max(progress, 0.0), 1.0)

@@ -99,7 +99,7 @@ def init_mitsuba(prefer: str | None = None) -> Backend:
     else:
         order, reason = ["llvm_ad_rgb"], "no usable CUDA device, using the CPU (LLVM) backend"
 
-    errors = []
+    errors: list[str] = []
     for variant in order:
         try:
             mi.set_variant(variant)

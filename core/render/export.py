@@ -63,7 +63,8 @@ def _exported_parts(mi, mesh: Mesh, maps: PBRMaps, out_dir: Path) -> list[dict]:
         _mitsuba_mesh(mi, part.mesh).write_ply(str(tmp_ply))
         tmp_ply.replace(out_dir / f"mesh{tag}.ply")
         write_image(out_dir / f"base_color{tag}.png", linear_to_srgb(texels[..., 0:3]))
-        files = {"mesh": f"mesh{tag}.ply", "base_color": f"base_color{tag}.png", "wrap": part.mode}
+        files: dict[str, str | float] = {"mesh": f"mesh{tag}.ply", "base_color": f"base_color{tag}.png",
+                                         "wrap": part.mode}
         for channel, name in ((3, "roughness"), (4, "metallic")):
             if isinstance(getattr(maps, name), np.ndarray):
                 write_image(out_dir / f"{name}{tag}.png", texels[..., channel], dtype="uint16")

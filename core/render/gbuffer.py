@@ -218,7 +218,7 @@ def _texel_taps(renderer, part_of: np.ndarray, uv: np.ndarray) -> tuple[np.ndarr
     for i, piece in enumerate(renderer.parts.values()):
         mine = part_of == i
         drawn = _drawn_indices(piece, index_image)
-        taps, wts = bilinear_taps(uv[mine], drawn.shape[:2], piece.mode)
+        taps, wts = bilinear_taps(uv[mine], (int(drawn.shape[0]), int(drawn.shape[1])), piece.mode)
         texels[mine] = drawn[taps[..., 1], taps[..., 0]]
         weights[mine] = wts
     return texels, weights

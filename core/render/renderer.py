@@ -19,7 +19,7 @@ from __future__ import annotations
 import time
 import weakref
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -212,7 +212,7 @@ def material_shapes(mi, mesh: Mesh, maps: np.ndarray, normal_map: np.ndarray | N
     import torch  # lazy: torch takes seconds to load
 
     maps = torch.from_numpy(np.ascontiguousarray(maps, dtype=np.float32))
-    parts = material_parts(mesh, tuple(maps.shape[:2]))
+    parts = material_parts(mesh, (int(maps.shape[0]), int(maps.shape[1])))
     if normal_map is not None:   # its own size: each part reads its own cell of it
         normal_map = torch.from_numpy(np.ascontiguousarray(normal_map, dtype=np.float32))
         normal_parts = {p.index: p for p in material_parts(mesh, tuple(normal_map.shape[:2]))}
@@ -297,13 +297,14 @@ class AssetRenderer:
             if key not in self.params:
                 raise RuntimeError(f"Mitsuba scene lacks parameter {key}; got {list(self.params.keys())[:20]}")
         self.params.keep(wanted)
-        self._sensors: dict[tuple[int, int], object] = {}
+        self._sensors: dict[tuple, object] = {}   # by film size; a window's by film, crop and offset
         self._aov_integrator = None
-        self._wrapped = None
-        self._pending = None  # weak reference to a differentiable render whose backward has not run
+        self._wrapped: Callable | None = None
+        # weak reference to a differentiable render whose backward has not run
+        self._pending: weakref.ReferenceType | None = None
 
     # -- cameras -------------------------------------------------------------------------------
-    def _sensor(self, camera: Camera):
+    def _sensor(self, camera: "Camera | WindowCamera"):
         import mitsuba as mi  # lazy: Mitsuba is heavy and Blender may lack it
 
         if isinstance(camera, WindowCamera):
