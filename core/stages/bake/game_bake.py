@@ -191,7 +191,7 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
     normalized, _ = normalize_to_unit_sphere(mesh)
     baked = []
     for index, name in enumerate(names):
-        wrap = tuple(wraps[index]) if wraps else ("repeat", "repeat")
+        wrap = (wraps[index][0], wraps[index][1]) if wraps else ("repeat", "repeat")
         height, width = shapes[index]
         if index in remap:
             baked.append(_remapped_material(texture, normalized, remapped, index, name, max(height, width), wrap,
@@ -200,7 +200,7 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
             continue
         raster = rasterize_uv(material_submesh(normalized, index), height, width, wrap=wrap)
         own_stack = own_maps[index].stacked_at(height, width) if own_maps else None   # resized once, used twice
-        if own_maps:
+        if own_stack is not None:
             base = own_base_logit(texture, own_stack)
         else:   # (the texture's own copy is square: a square bake)
             if height != width:
@@ -208,7 +208,7 @@ def bake_game_maps(texture: NeuralTexture, mesh: Mesh, names: list[str], size: i
             base = material_base(texture, index, len(names), height)
         maps = bake_texture(texture, raster.position, raster.border, raster.fill_index, base)
         material = _baked_material(name, maps, raster, constants[index] if constants else {}, wrap)
-        if own_maps:
+        if own_maps and own_stack is not None:
             material = replace(material, unchanged=unchanged_channels(material, own_maps[index], own_stack,
                                                                       raster.mask, texture.config))
         baked.append(material)
@@ -221,7 +221,7 @@ def materials_to_remap(texture: NeuralTexture, mesh: Mesh, wraps: list[tuple[str
     if getattr(texture, "layout", None) is None:
         return frozenset()
     return frozenset(index for index in range(mesh.material_count)
-                     if uv_sharing(replace(material_submesh(mesh, index), wraps=(tuple(wraps[index]),)))
+                     if uv_sharing(replace(material_submesh(mesh, index), wraps=((wraps[index][0], wraps[index][1]),)))
                      .needs_new_layout())
 
 

@@ -97,7 +97,7 @@ def image_roles(document: dict) -> dict[int, str]:
             if source is None:
                 continue
             role = "colour" if slot in _COLOUR_SLOTS else "normal" if slot == "normalTexture" else "data"
-            if _RANK[role] > _RANK.get(roles.get(source), -1):
+            if _RANK[role] > _RANK.get(roles.get(source, ""), -1):
                 roles[source] = role
     return roles
 

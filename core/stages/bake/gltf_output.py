@@ -98,7 +98,7 @@ def output_like_input(asset: str | Path | None, compress: str | None = None, tex
     engine = engine_target(target)
     check_given(engine, compress, textures)
     is_gltf = asset is not None and Path(asset).suffix.lower() in (".gltf", ".glb")
-    document = gltf_json(Path(asset)) if is_gltf else {}
+    document = gltf_json(Path(asset)) if asset is not None and is_gltf else {}
     unlike = []
     if compress is None:
         compress = _input_compression(document)
@@ -136,8 +136,8 @@ def _input_compression(document: dict) -> str:
 
 
 def _input_texture_format(document: dict) -> str:
-    formats = [_image_format(image) for image in document.get("images", [])]
-    return max(set(formats) - {None}, key=formats.count, default="png")
+    formats = [f for f in (_image_format(image) for image in document.get("images", [])) if f is not None]
+    return max(set(formats), key=formats.count, default="png")
 
 
 def extensions_kept(path: Path, keep: frozenset[str]) -> list[str]:
@@ -148,7 +148,7 @@ def extensions_kept(path: Path, keep: frozenset[str]) -> list[str]:
     if removed and path.suffix.lower() == ".gltf":
         path.write_text(json.dumps(document, indent=2))
     elif removed:
-        write_glb(path, document, chunk)
+        write_glb(path, document, chunk or b"")   # (a GLB without a BIN chunk is written back without one)
     return removed
 
 
@@ -189,5 +189,5 @@ def skinned_meshes_moved_to_root(path: Path) -> int:
     if moved and chunk is None:
         path.write_text(json.dumps(document, indent=2))
     elif moved:
-        write_glb(path, document, chunk)
+        write_glb(path, document, chunk or b"")   # (a GLB without a BIN chunk is written back without one)
     return moved

@@ -67,8 +67,11 @@ class GltfBuffers:
 
     def write(self, index: int, values: np.ndarray) -> None:
         """Write float values over a float accessor's own bytes."""
-        data, offset, stride, width, _ = self._place(index)
-        out = np.ndarray((len(values), width), np.dtype("<f4"), buffer=data, offset=offset, strides=(stride, 4))
+        place = self._place(index)
+        assert place is not None   # (written only where the same accessor was read)
+        data, offset, stride, width, _ = place
+        out: np.ndarray = np.ndarray((len(values), width), np.dtype("<f4"), buffer=data, offset=offset,
+                                     strides=(stride, 4))
         out[...] = values
 
     def save(self) -> None:
@@ -92,12 +95,12 @@ def _primitives(gltf: GltfBuffers):
             if not {"TANGENT", "NORMAL", "POSITION"} <= set(names) or "KHR_draco_mesh_compression" in \
                     primitive.get("extensions", {}):
                 continue
-            data = [gltf.read(names[key]) if key in names else None
-                    for key in ("POSITION", "NORMAL", "TEXCOORD_0", "TANGENT")]
-            if any(d is None for d in (data[0], data[1], data[3])) or data[3].shape[1] != 4:
+            position, normal, texcoord, tangent = (gltf.read(names[key]) if key in names else None
+                                                   for key in ("POSITION", "NORMAL", "TEXCOORD_0", "TANGENT"))
+            if position is None or normal is None or tangent is None or tangent.shape[1] != 4:
                 continue
-            uv = data[2] if data[2] is not None else np.zeros((len(data[0]), 2))
-            found.append((data[0], data[1], uv, names["TANGENT"], data[3]))
+            uv = texcoord if texcoord is not None else np.zeros((len(position), 2))
+            found.append((position, normal, uv, names["TANGENT"], tangent))
         if found:
             everything = np.concatenate([f[0] for f in found])
             size = float(np.ptp(everything, axis=0).max()) or 1.0
