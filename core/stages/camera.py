@@ -188,7 +188,7 @@ def _pick_fov(fit: "LinesFit", exif_fov: float | None, exif_source: str | None) 
     """EXIF's lens where the photo has one; else the lines' posterior median whatever its confidence (where
     the lines hardly fix the lens it sits near the default, and was measured closer to the truth than the
     default on the bench's built scenes); else the default."""
-    if exif_fov is not None:
+    if exif_fov is not None and exif_source is not None:
         return exif_fov, exif_source, EXIF_CONFIDENCE[exif_source]
     if fit.fov_deg is not None:
         return fit.fov_deg, "lines", fit.fov_confidence
@@ -290,16 +290,16 @@ def camera_frame(pitch_deg, roll_deg, theta_deg) -> np.ndarray:
     return np.stack([up, ct * across + st * ahead, ct * ahead - st * across], axis=-2)
 
 
-def horizon_points(camera: PhotoCamera) -> tuple[tuple[float, float], ...]:
+def horizon_points(camera: PhotoCamera) -> tuple[tuple[float, float], tuple[float, float]]:
     """Where the horizon (level rays) meets the photo's left and right edges, in pixels (y down)."""
     forward, right, up, half_w, half_h = camera.basis()
     off_y = camera.plane_offset()[1]
-    points = []
-    for x in (0.0, float(camera.width)):
+    def at(x: float) -> tuple[float, float]:
         plane_x = float(camera.plane_xy(x, 0.0)[0])
         plane_y = -(forward[2] + plane_x * right[2]) / up[2]   # the ray forward + x right + y up is level
-        points.append((round(x, 2), round((1.0 - (plane_y - off_y) / half_h) / 2.0 * camera.height, 2)))
-    return tuple(points)
+        return round(x, 2), round((1.0 - (plane_y - off_y) / half_h) / 2.0 * camera.height, 2)
+
+    return at(0.0), at(float(camera.width))
 
 
 # -- the photo's own lines -------------------------------------------------------------------------
@@ -676,7 +676,7 @@ def _judge(ends: np.ndarray, weights: np.ndarray, params, families: np.ndarray, 
     share = float(np.sum(weights[families >= 0]) / np.sum(weights))
     per = [int(np.sum(families == k)) for k in range(3)]
     counts.update(vertical=per[0], horizontal_1=per[1], horizontal_2=per[2], inlier_share=round(share, 3))
-    seen = dict(counts=counts, segments=ends, weights=weights, families=families)
+    seen: dict = dict(counts=counts, segments=ends, weights=weights, families=families)
     if (share < MIN_INLIER_SHARE or per[0] < MIN_VERTICAL or per[1] + per[2] < MIN_HORIZONTAL
                        or max(per[1:]) < MIN_MAIN_HORIZONTAL):
         return LinesFit(**seen, notes=(
@@ -686,17 +686,18 @@ def _judge(ends: np.ndarray, weights: np.ndarray, params, families: np.ndarray, 
     errors = _standard_errors(ends, weights, params, families, (1, 2, 3))
     support = 1.0 - math.exp(-sum(per) / 8.0)
     conf = [support / (1.0 + (INFLATION * float(errors[i]) / TOLERABLE_DEG[i]) ** 2) for i in (1, 2)]
-    _, pitch, roll, _ = params
+    fov, pitch, roll, theta = (float(v) for v in params)
     note = (f"lines: {len(ends)} segments, {sum(per)} pointing at the vanishing points (vertical {per[0]}, "
             f"horizontal {per[1]} and {per[2]})")
     return LinesFit(pitch_deg=float(pitch), roll_deg=float((roll + 180.0) % 360.0 - 180.0),
-                    pitch_confidence=conf[0], roll_confidence=conf[1], params=tuple(float(v) for v in params),
+                    pitch_confidence=conf[0], roll_confidence=conf[1], params=(fov, pitch, roll, theta),
                     notes=(note,), **seen)
 
 
 def _with_lens_spread(fit: LinesFit, fov_range: tuple[float, float]) -> LinesFit:
     """The fit with pitch's and roll's confidence also counting how far they move over `fov_range`, the
     lenses the lines leave possible (pitch trades against the focal length when the verticals converge)."""
+    assert fit.segments is not None and fit.weights is not None and fit.params is not None   # (a fit that found lines)
     first, last = (_refine(fit.segments, fit.weights, (f,) + tuple(fit.params[1:])) for f in fov_range)
     spread = [abs(first[i] - last[i]) / 2.0 for i in (1, 2)]
     pitch_conf, roll_conf = (min(c, 1.0 / (1.0 + (u / TOLERABLE_DEG[i + 1]) ** 2))
