@@ -59,8 +59,8 @@ def save_neural_texture(texture: NeuralTexture, path: str | os.PathLike) -> Path
     state = {k: v.detach().cpu() for k, v in texture.state_dict().items()}
     payload = {"format": WEIGHTS_FORMAT, "version": WEIGHTS_VERSION,
                "config": texture.config.to_dict(), "state_dict": state}
-    if getattr(texture, "layout", None) is not None:   # adaptation's new UV layout (core.surface_layout)
-        payload["layout"] = texture.layout.to_payload()  # type: ignore[attr-defined]
+    if texture.layout is not None:   # adaptation's new UV layout (core.surface_layout)
+        payload["layout"] = texture.layout.to_payload()
     buffer = io.BytesIO()
     torch.save(payload, buffer)
     return write_bytes_atomic(path, buffer.getvalue())
@@ -99,7 +99,7 @@ def load_neural_texture(path: str | os.PathLike, device: str | torch.device = "c
         raise InputError(f"The weights in '{path}' do not match their config: {error}") from error
     if payload.get("layout") is not None:
         try:
-            texture.layout = SurfaceLayout.from_payload(payload["layout"])  # type: ignore[assignment]
+            texture.layout = SurfaceLayout.from_payload(payload["layout"])
         except (KeyError, TypeError, ValueError, AttributeError):
             raise InputError(f"'{path}' has an unreadable UV layout; adapt the asset again.") from None
     return texture.to(device)

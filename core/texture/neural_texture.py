@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import asdict, dataclass
-from typing import TypeVar
+from typing import Protocol, TypeVar
 
 import numpy as np
 import torch
@@ -21,6 +21,13 @@ import torch
 from ..base.errors import InputError
 from ..data.mesh import NORMALIZED_RADIUS
 from .hashgrid import EncodingPlan, HashGrid3D
+
+
+class SavedLayout(Protocol):
+    """What a texture keeps of adaptation's new UV layout (core.surface_layout.SurfaceLayout, which imports
+    this module): it is saved with the weights."""
+
+    def to_payload(self) -> dict: ...
 
 _Stack = TypeVar("_Stack", torch.Tensor, np.ndarray)
 
@@ -152,7 +159,7 @@ class NeuralTexture(torch.nn.Module):
             self.register_buffer("base_logit", torch.zeros(config.resolution, config.resolution, len(CHANNELS)))
         self._plan_cache: tuple | None = None
         # Where adaptation re-mapped the surface (core.surface_layout.SurfaceLayout), saved with the weights.
-        self.layout = None
+        self.layout: SavedLayout | None = None
 
     # -- the exact start ---------------------------------------------------------------------------
 

@@ -197,7 +197,7 @@ def adapting_view(texture: NeuralTexture | None, mesh: Mesh) -> tuple[TextureVie
     layout keeps it; a fresh one ("generate") has no base to carry and keeps the own UVs."""
     if texture is None:
         return None, None, {"uv_layout": "own", "why": "a generated texture is made in the asset's own UVs"}
-    if getattr(texture, "layout", None) is not None:
+    if isinstance(texture.layout, SurfaceLayout):   # (the one layout a texture is saved with)
         view = texture_view(texture, mesh)
         return view, texture.layout, dict(view.report, why="the texture was adapted in this layout before")
     sharing = uv_sharing(mesh)

@@ -35,6 +35,7 @@ def global_scene_for(inputs: AdaptInputs, config: AdaptConfig, photo: np.ndarray
     h, w = photo.shape[:2]
     camera = inputs.photo_camera or photo_camera_for({}, w, h)[0]
     azimuths = view_azimuths(config.views)  # sample_camera's choices
+    assert inputs.placement is not None   # (AdaptInputs refuses global views without the placement)
     return GlobalScene(inputs.mesh, inputs.raster.resolution, photo, inputs.placement, camera, envmap, azimuths,
                        config.max_depth, config.shadow_type, config.shadow_spp, config.seed, config.renderer_of("global"))
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 import torch
 
 from ...guidance.views import global_view, latent_mask, local_view, masked_image
@@ -60,9 +59,9 @@ class ConstantWork:
             reference_latents = models.encode(local_view(ref.rgb, ref.alpha, view.background, size))
         if config.normal_weight_type != "none":
             aov = s.renderer.render_aovs(view.camera)
-            weight_map = normal_weight_map(aov["normal"], aov["coverage"], view.camera.forward,
-                                           (s.latent_res, s.latent_res),
-                                           weight_type=config.normal_weight_type).to(s.device)
+            weights = normal_weight_map(aov["normal"], aov["coverage"], view.camera.forward,
+                                        (s.latent_res, s.latent_res), weight_type=config.normal_weight_type)
+            weight_map = None if weights is None else weights.to(s.device)
         crops = []
         if view.crops:
             fixed = maps if maps is not None else split_channels(s.start_stack)
@@ -78,6 +77,6 @@ class ConstantWork:
 
 def bank_box(system) -> tuple[tuple[int, int] | None, tuple[float, float, float] | None]:
     """The photo's size and the object's square, what the bank's crops are drawn in."""
-    hw = None if system.photo is None else tuple(np.asarray(system.photo).shape[:2])
+    hw = None if system.photo is None else (int(system.photo.shape[0]), int(system.photo.shape[1]))
     box = None if system.global_scene is None else system.global_scene.box
     return hw, box

@@ -88,7 +88,9 @@ class GlobalScene:
         spherical-Gaussian light, if any, changes the asset's shading but not this matte).
         """
         if turn not in self._mattes:
-            inputs = ComposeInputs(self.mesh, None, self.photo, self.pixel, self.envmap, self.camera, turn)
+            # (no texture: the floor passes render the asset black)
+            inputs = ComposeInputs(self.mesh, None, self.photo, self.pixel, self.envmap, self.camera,  # type: ignore[arg-type]
+                                   turn)
             self._mattes[turn], _ = shadow_matte(inputs, self.compose_config)
         return self._mattes[turn]
 

@@ -80,7 +80,7 @@ def draw_view_bank(config: AdaptConfig, photo_hw: tuple[int, int] | None,
         for _ in range(config.view_variants):
             camera = _camera(config, rng, k, 8)
             background = background_color(rng, config.background_random_p)
-            crops = ()
+            crops: tuple = ()
             if config.views_type == "local+global" and photo_hw is not None and object_box is not None:
                 crops = tuple(sample_crops(photo_hw, object_box, config.global_crops, rng))
             bank.append(BankView(camera.azimuth_deg, camera.elevation_deg, camera.fov_multiplier, background,
@@ -117,12 +117,12 @@ def sample_view(config: AdaptConfig, iteration: int, index: int, latent_res: int
     if config.mode_type == "generate":
         prompt = f"{prompt}, {view_suffix(camera.azimuth_deg)}"
     render_seed = int(rng.integers(2**31 - 2**16))
-    crops = []
+    crops, reference_seed = [], render_seed
     if bank:
-        crops = list(bank[entry].crops)
+        assert entry is not None   # (a view of the bank has its entry)
+        crops, reference_seed = list(bank[entry].crops), bank[entry].reference_seed
     elif config.views_type == "local+global" and photo_hw is not None and object_box is not None:
         crops = sample_crops(photo_hw, object_box, config.global_crops, rng)
-    reference_seed = bank[entry].reference_seed if bank else render_seed
     return ViewSample(index, stage, camera, env, light, background, t, lam, noise, render_seed, prompt, crops,
                       rng, generator, entry, reference_seed)
 
@@ -175,6 +175,7 @@ def sample_light(config: AdaptConfig, rng: np.random.Generator, envmap: np.ndarr
                  height: int = 16) -> tuple[np.ndarray | None, Light]:
     """(environment map for this view, or None for the base map; its light vector for ε_ψ)."""
     if config.light_type == "envmap":
+        assert envmap is not None   # (AdaptInputs refuses light_type envmap without a map)
         mean = float(np.mean(envmap))
         return None, (AMBIENT_LIGHT[0], AMBIENT_LIGHT[1], 0.0, mean, mean)
     if config.light_type == "random" and rng.uniform() < config.light_random_p:

@@ -84,12 +84,13 @@ def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfi
 def write_adapt(result: AdaptResult, folder: str | Path) -> dict:
     """The adapted texture baked into folder/maps in the asset's own UVs (on rank 0 only of a distributed
     run: one writer); returns the stage's report (its outputs empty on the other ranks)."""
-    raster, paths = result.bake_raster, {}
+    raster, config, paths = result.bake_raster, result.config, {}
+    assert raster is not None and config is not None   # (adapt_and_bake sets both)
     if rank_world()[0] == 0:
         paths = bake_maps(result.texture, raster.position, raster.border, raster.fill_index, Path(folder) / "maps")
     per_it = result.seconds_per_iteration()
     return {
-        "stage": "adapt", "config": result.config.to_dict(), "schedule": result.config.schedule(),
+        "stage": "adapt", "config": config.to_dict(), "schedule": config.schedule(),
         "decisions": decisions_to_dict(result.decisions), "uv_layout": result.uv_report,
         "iterations": result.iterations, "resumed_from": result.resumed_from, "seconds": round(result.seconds, 3),
         "seconds_per_iteration": {k: round(v, 4) for k, v in per_it.items()},

@@ -14,6 +14,7 @@ from ...data.uv_raster import UVRaster
 from ...scene.camera import PhotoCamera
 from ...scene.placement import Placement
 from ...texture.neural_texture import NeuralTexture
+from ...texture.surface_layout import SurfaceLayout
 from .config import AdaptConfig
 
 
@@ -34,7 +35,7 @@ class AdaptInputs:
     envmap: np.ndarray | None = None
     photo_camera: PhotoCamera | None = None
     base_logit: torch.Tensor | None = None
-    layout: object | None = None
+    layout: SurfaceLayout | None = None
 
     def validate(self, config: AdaptConfig) -> None:
         if config.mode_type != "generate" and self.texture is None:

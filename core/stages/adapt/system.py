@@ -69,6 +69,7 @@ class AdaptSystem:
         self.photo = None if inputs.photo is None else np.clip(np.asarray(inputs.photo, np.float32), 0.0, 1.0)
         self.global_scene = None
         if config.views_type == "local+global":
+            assert self.photo is not None   # (AdaptInputs refuses global views without the photo)
             self.global_scene = global_scene_for(inputs, config, self.photo, np.asarray(self.base_env))
         self.latent_res = config.model_resolution // models.vae_scale_factor
         self.bank = draw_view_bank(config, *bank_box(self)) if uses_view_bank(config) else None
@@ -217,6 +218,7 @@ class AdaptSystem:
         rendered = [torch.cat([out.rgb, out.alpha], dim=-1)]
         placed = None
         if view.crops:
+            assert self.global_scene is not None   # (crops are drawn only for global views)
             placed = self.global_scene.render(*maps, env, view.camera.azimuth_deg, view.stage.render_size,
                                               view.stage.spp, view.render_seed + 1)
             rendered.append(torch.cat([placed.rgb, placed.alpha], dim=-1))
@@ -309,16 +311,20 @@ class AdaptSystem:
         masked-photo latents from the constants) and back-propagated at its view's share / crops."""
         crops = [(k, crop, consts) for k, it in enumerate(items)
                  for crop, consts in zip(it.view.crops, it.constants.crops)]
+        glob = self.critics.glob
+        assert glob is not None and self.photo is not None   # (crops are drawn only for global views)
         norms: dict[int, list[float]] = {}
         for rows in self._passes(len(crops)):
             part = [crops[i] for i in rows]
+            placed = [items[k].placed for k, _, _ in part]
+            assert all(p is not None for p in placed)   # (a view with crops was placed in the photo)
             image = torch.cat([global_view(items[k].leaves[1][..., 0:3], items[k].leaves[1][..., 3:4],
-                                           items[k].placed.rect, self.photo, items[k].placed.matte, crop,
-                                           self.config.model_resolution)[0] for k, crop, _ in part])
+                                           p.rect, self.photo, p.matte, crop, self.config.model_resolution)[0]
+                               for (k, crop, _), p in zip(part, placed) if p is not None])
             z = self.models.encode(image)
             self.timer.lap("vae")
             views = [items[k].view for k, _, _ in part]
-            g = self.critics.glob(z, [v.t for v in views], torch.cat([v.noise for v in views]).to(self.device),
+            g = glob(z, [v.t for v in views], torch.cat([v.noise for v in views]).to(self.device),
                                   torch.cat([self.models.embed(v.prompt) for v in views]), self.uncond,
                                   extra=(torch.cat([c[0] for _, _, c in part]), torch.cat([c[1] for _, _, c in part])))
             self.timer.lap("unet")
@@ -339,7 +345,8 @@ class AdaptSystem:
             return
         config, done = self.config, iteration + 1
         preview = None
-        if preview_due(done, config.preview_every, config.iterations, time.monotonic() - self.last_preview):
+        if preview_due(done, config.preview_every, config.iterations, time.monotonic() - self.last_preview) \
+                and self.last_image is not None:
             image = self.last_image[0].permute(1, 2, 0).clamp(0, 1).cpu().numpy()
             preview = (image * 255).round().astype(np.uint8)
             self.last_preview = time.monotonic()
