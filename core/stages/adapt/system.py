@@ -312,21 +312,17 @@ class AdaptSystem:
         crops = [(k, crop, consts) for k, it in enumerate(items)
                  for crop, consts in zip(it.view.crops, it.constants.crops)]
         glob = self.critics.glob
-        assert glob is not None and self.photo is not None   # (crops are drawn only for global views)
+        assert glob is not None   # (crops are drawn only for global views)
         norms: dict[int, list[float]] = {}
         for rows in self._passes(len(crops)):
             part = [crops[i] for i in rows]
-            placed = [items[k].placed for k, _, _ in part]
-            assert all(p is not None for p in placed)   # (a view with crops was placed in the photo)
-            image = torch.cat([global_view(items[k].leaves[1][..., 0:3], items[k].leaves[1][..., 3:4],
-                                           p.rect, self.photo, p.matte, crop, self.config.model_resolution)[0]
-                               for (k, crop, _), p in zip(part, placed) if p is not None])
+            image = torch.cat([self._crop_of(items[k], crop) for k, crop, _ in part])
             z = self.models.encode(image)
             self.timer.lap("vae")
             views = [items[k].view for k, _, _ in part]
             g = glob(z, [v.t for v in views], torch.cat([v.noise for v in views]).to(self.device),
-                                  torch.cat([self.models.embed(v.prompt) for v in views]), self.uncond,
-                                  extra=(torch.cat([c[0] for _, _, c in part]), torch.cat([c[1] for _, _, c in part])))
+                     torch.cat([self.models.embed(v.prompt) for v in views]), self.uncond,
+                     extra=(torch.cat([c[0] for _, _, c in part]), torch.cat([c[1] for _, _, c in part])))
             self.timer.lap("unet")
             shares = [items[k].share / len(items[k].view.crops) for k, _, _ in part]
             gradient_loss(z, g.grad * _per_row(shares, g.grad)).backward()
@@ -336,6 +332,13 @@ class AdaptSystem:
                 per_view[k]["nonfinite"] += row["nonfinite"]
         for k, values in norms.items():
             per_view[k]["global_grad_norm"] = float(np.mean(values))
+
+    def _crop_of(self, item: "_Rendered", crop):
+        """The crop of the photo with this view's asset layer and shadow in it, at the model's size."""
+        placed = item.placed
+        assert placed is not None and self.photo is not None   # (a view with crops was placed in the photo)
+        return global_view(item.leaves[1][..., 0:3], item.leaves[1][..., 3:4], placed.rect, self.photo, placed.matte,
+                           crop, self.config.model_resolution)[0]
 
     # -- reporting and finish ------------------------------------------------------------------------
 
