@@ -348,6 +348,11 @@ def bake_materials_to_gltf(materials: list, baked: list[BakedMaterial], out_file
     return report
 
 
+def _never_unchanged(baked: BakedMaterial, channels: frozenset[str]) -> BakedMaterial:
+    """`baked` with `channels` written as new images even where their bytes are the material's own."""
+    return replace(baked, unchanged=baked.unchanged - channels)
+
+
 def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_format: str = "glb",
                     texture_size: int | None = None, object_name: str | None = None, protect: tuple = (),
                     output: GltfOutput | None = None, replace: bool = False) -> dict:
@@ -367,7 +372,7 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
     import bpy
 
     from .asset_file import loaded_asset
-    from .material import object_mesh_and_slots, read_material, unwrap_vertex_coloured
+    from .material import object_mesh_and_slots, read_material_within, unwrap_vertex_coloured
     from .scene_asset import scene_mesh
     from .uv_unwrap import NEW_UV_MAP, new_uv_map_active
 
@@ -385,9 +390,12 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
             return mesh, [obj.material_slots[s].material for s in slots], [obj.name], [(obj, s) for s in slots]
 
         mesh, materials, taken, users = read()
-        own = [read_material(m, o, slot).maps for m, (o, slot) in zip(materials, users)]
-        wraps = [material_wrap(m) for m in materials]
         output = _with_tangents(output or output_like_input(asset_path), asset_path)
+        # No bake is larger than this (bake_shapes): procedural chains are baked by Cycles at no more.
+        limit = min(texture_size or output.max_texture, output.max_texture)
+        read_own = [read_material_within(m, o, slot, limit) for m, (o, slot) in zip(materials, users)]
+        own, shrunk = [r[0].maps for r in read_own], [r[1] for r in read_own]
+        wraps = [material_wrap(m) for m in materials]
         # Adapted per surface on UVs that share texels: those materials' maps go into a new UV map.
         remap, remapped, unmapped = materials_to_remap(texture, mesh, wraps), None, None
         if remap:
@@ -406,6 +414,7 @@ def bake_asset_file(asset_path: str | Path, texture, out_file: str | Path, file_
         baked = bake_game_maps(texture, mesh, [m.name for m in materials], bake_shapes(own, texture_size,
                                                                                        output.max_texture),
                                [constant_channels(m) for m in materials], wraps, own, remapped, remap, NEW_UV_MAP)
+        baked = [_never_unchanged(b, s) for b, s in zip(baked, shrunk)]
         report = bake_materials_to_gltf(materials, baked, out_file, file_format, protect=protect, output=output,
                                         replace=replace)
         report.update({"asset": str(asset_path), "object": taken[0] if len(taken) == 1 else None, "objects": taken,

@@ -150,15 +150,16 @@ class _Reading:
     """How one material's pixels are reached: `pixels_of` (decoded in the job, or read here) and the
     procedural chains' bakes, owed by the main thread (`bakes`), with the material's bake size."""
 
-    def __init__(self, material, obj, slot: int, pixels_of, bakes: list) -> None:
+    def __init__(self, material, obj, slot: int, pixels_of, bakes: list, bake_limit: int | None = None) -> None:
         self.material, self.obj, self.slot, self.pixels_of, self.bakes = material, obj, slot, pixels_of, bakes
+        self.bake_limit = bake_limit
         self._size: int | None = None
 
     @property
     def bake_size(self) -> int:
         if self._size is None:
             self._size = _image_size(self.material)   # (loads the images: only where a chain is baked)
-        return self._size
+        return self._size if self.bake_limit is None else min(self._size, self.bake_limit)
 
 
 def _read_input(bsdf, name: str, kind: str, reading: _Reading, read: list[str],
@@ -347,7 +348,7 @@ def _carried(material, bsdf, kept: list[str], dropped: list[str]) -> str:
 
 
 def plan_material(material, obj=None, slot: int = 0, bakes: list | None = None,
-                  files_in_job: bool = True) -> PendingMaterial:
+                  files_in_job: bool = True, bake_limit: int | None = None) -> PendingMaterial:
     """Everything SceneFit reads from one material, with an account of what it read and dropped, its
     maps still to compute (core/data/map_plan.py): its image files decoded wherever `resolved()` runs, its
     procedural chains' Cycles bakes appended to `bakes` for the main thread to run first.
@@ -355,14 +356,15 @@ def plan_material(material, obj=None, slot: int = 0, bakes: list | None = None,
     Base Color, Roughness and Metallic come from images, constants, one channel of an image
     (Separate Color, as glTF's packed metallic-roughness image) or factors; any other node chain is
     baked with Cycles over the faces of `obj`'s slot `slot`. The material is only read.
-    files_in_job=False reads every image through Blender here instead.
+    files_in_job=False reads every image through Blender here instead. bake_limit: the largest side a
+    chain is baked at (else the material's largest image's).
     """
     bsdf = principled_bsdf(material)
     read: list[str] = []
     kept: list[str] = []
     dropped: list[str] = []
     pixels_of = pixels_source if files_in_job else image_pixels_linear
-    reading = _Reading(material, obj, slot, pixels_of, bakes if bakes is not None else [])
+    reading = _Reading(material, obj, slot, pixels_of, bakes if bakes is not None else [], bake_limit)
     wrap = material_wrap(material, dropped)
     roughness = _read_input(bsdf, "Roughness", "float", reading, read, wrap)
     metallic = _read_input(bsdf, "Metallic", "float", reading, read, wrap)
@@ -383,6 +385,20 @@ def read_material(material, obj=None, slot: int = 0) -> Material:
     for bake in bakes:
         bake.run()
     return plan.resolved()
+
+
+def read_material_within(material, obj, slot: int, limit: int) -> tuple[Material, frozenset[str]]:
+    """read_material for a bake that writes at most limit² texels: a procedural chain is baked by Cycles at
+    no more than that, not at the material's image size to be averaged down after (ToyCar's fabric: 1024²,
+    2 s, for a 256² bake). Also returns the channels ("base_color", "roughness", "metallic") so shrunk:
+    the material's own nodes give them larger than the bake, so they are never its unchanged maps."""
+    bakes: list = []
+    plan = plan_material(material, obj, slot, bakes, bake_limit=limit)
+    for bake in bakes:
+        bake.run()
+    full = _image_size(material) if bakes else 0
+    shrunk = frozenset(b.socket_name.lower().replace(" ", "_") for b in bakes if b.size < full)
+    return plan.resolved(), shrunk
 
 
 def plan_asset(mesh, materials: list, users: list[tuple], files_in_job: bool = True) -> PendingAsset:
