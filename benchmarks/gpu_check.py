@@ -63,15 +63,19 @@ def measure(base: Path, inpaint: Path, preset: str, dry_run: bool, renderer: str
 
 
 def measure_light(base: Path, inpaint: Path, preset: str, dry_run: bool, folder: Path) -> dict:
-    """`scenefit light --critic diffusion` at `preset` on a made-up outdoor photo (the corpus does not
-    travel to a lent machine): seconds per critic iteration from its report, after a one-iteration run
-    that compiles the kernels, and peak memory."""
+    """The light stage with the diffusion critic at `preset` on a made-up outdoor photo (the corpus does not
+    travel to a lent machine), run as `scenefit light` and Estimate Light run it (run_pipeline, stages
+    ("light",)): seconds per critic iteration from its report, after a one-iteration run that compiles the
+    kernels, and peak memory. A dry run renders the critic's apparatus as small as adapt's dry run does."""
     import resource
 
     import numpy as np
 
-    from scenefit.cli import main as scenefit
     from scenefit.core.data.imageio import write_image
+    from scenefit.core.guidance.models import ModelConfig
+    from scenefit.core.pipeline.presets import stage_config
+    from scenefit.core.pipeline.run import run_pipeline
+    from scenefit.core.pipeline.run_config import RunConfig
 
     photo = folder / "photo.png"
     if not photo.is_file():   # a sky brightening upwards over a darker, textured ground
@@ -80,20 +84,25 @@ def measure_light(base: Path, inpaint: Path, preset: str, dry_run: bool, folder:
         ground = np.random.default_rng(0).uniform(0.15, 0.35, (240, 320, 1)) * np.array([0.8, 0.9, 0.6])
         write_image(photo, np.where(y < 0.45, sky, ground).astype(np.float32))
     iterations = 1 if dry_run else ITERATIONS
+    light: dict = {"critic_type": "diffusion", "outpaint": {"completion_type": "prior"}}
+    if dry_run:   # the tiny models' 32 px, at most 8 samples, as adapt's dry run
+        apparatus = stage_config("light", preset).apparatus
+        light.update(diffusion={"model_resolution": 32},
+                     apparatus={"render_size": min(apparatus.render_size, 32), "spp": min(apparatus.spp, 8)})
+    models = ModelConfig(base_model=str(base), inpaint_model=str(inpaint), local_files_only=True)
 
-    def light(n: int, out: Path) -> dict:
-        args = ["light", "--photo", str(photo), "--at", "0.5,0.75", "--out", str(out), "--replace", "--preset", preset,
-                "--scene", "outdoor", "--critic", "diffusion", "--iterations", str(n), "--outpaint", "prior",
-                "--base-model", str(base), "--inpaint-model", str(inpaint), "--offline", "--quiet"]
-        if scenefit(args + (["--model-resolution", "32"] if dry_run else [])) != 0:
-            raise RuntimeError(f"scenefit light failed at {preset}")
-        return json.loads((out / "report.json").read_text())
+    def estimate(n: int, out: Path) -> dict:
+        overrides = {**light, "optimise": {"iterations": n}}
+        result = run_pipeline(None, None, photo, (0.5, 0.75), out, RunConfig(
+            preset=preset, scene_type="outdoor", models=models, stage_overrides={"light": overrides}),
+            stages=("light",))
+        return result.stages["light"].report
 
     if not dry_run:
-        light(1, folder / "light-warmup")
+        estimate(1, folder / "light-warmup")
     if torch.cuda.is_available():
         torch.cuda.reset_peak_memory_stats()
-    report = light(iterations, folder / f"light-{preset}")
+    report = estimate(iterations, folder / f"light-{preset}")
     peak = (torch.cuda.max_memory_allocated() if torch.cuda.is_available() and not dry_run
             else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024) / 2 ** 20
     optimisation = report["decisions"]["optimisation"]
