@@ -10,7 +10,9 @@ from pathlib import Path
 def pack(paths: dict[str, Path]) -> bytes:
     """A tar (gzip) of files and folders, each stored under its given name; a link as the file it points at."""
     buffer = io.BytesIO()
-    with tarfile.open(fileobj=buffer, mode="w:gz", dereference=True) as tar:
+    # Level 1: a job's files are mostly compressed already (PNG, EXR, torch's zip), so gzip's default 9 took
+    # 1.6x the time for 0.6% less.
+    with tarfile.open(fileobj=buffer, mode="w:gz", compresslevel=1, dereference=True) as tar:
         for name, path in paths.items():
             tar.add(str(path), arcname=name)
     return buffer.getvalue()
