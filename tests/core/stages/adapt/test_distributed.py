@@ -29,11 +29,6 @@ import torch
 
 pytestmark = pytest.mark.slow   # several processes (torchrun): what make test-quick leaves out
 
-# The adapt stage's views-per-step system (core/stages/adapt/ package, devtools/) is landing in parallel;
-# until it is on main this module is skipped.
-pytest.importorskip("scenefit.devtools.tiny_models")
-pytest.importorskip("scenefit.core.pipeline.presets")
-
 from scenefit.core.stages.adapt import AdaptConfig, AdaptInputs, AdaptSystem, StageSpec, adapt_texture  # noqa: E402
 from scenefit.core.guidance import ModelConfig  # noqa: E402
 from scenefit.core.scene.placement import Placement  # noqa: E402
@@ -41,7 +36,6 @@ from scenefit.core.pipeline.presets import stage_config  # noqa: E402
 from scenefit.core.data.primitives import uv_sphere  # noqa: E402
 from scenefit.core.data.uv_raster import rasterize_uv
 from scenefit.core.texture import NeuralTexture  # noqa: E402
-from scenefit.devtools.tiny_models import build_tiny_pair  # noqa: E402
 
 STAGES = (StageSpec(1.0, 16, 2, (30, 990)),)
 
@@ -88,8 +82,10 @@ def setup(models: tuple[str, str]):
 
 
 @pytest.fixture(scope="module")
-def tiny_models(tmp_path_factory):
-    return tuple(str(p) for p in build_tiny_pair(tmp_path_factory.mktemp("tiny_sd_dist")))
+def tiny_models():
+    from conftest import shared_tiny_pair   # (here: the ranks import this module without the tests' path)
+
+    return tuple(str(p) for p in shared_tiny_pair())
 
 
 @pytest.fixture(scope="module")
