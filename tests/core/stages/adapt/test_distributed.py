@@ -1,6 +1,6 @@
 """Views of the adapt stage spread over two processes with torch.distributed (gloo, CPU) by torchrun. Ray
 launches the ranks with torchrun's environment (workers.batch_ray.run_on_ranks); that the adapt stage's
-join and gradient sum work under it is test_batch's test_ray_launches_a_torch_distributed_group_on_one_node.
+join and gradient sum work under it is test_batch_ray's test_ray_launches_a_torch_distributed_group_on_one_node.
 
 Why the comparisons can be exact. Each view's loss is weighted 1/V and back-propagated on its own;
 a rank accumulates its views' gradients in its own order and gloo sums the ranks' buffers. On one
