@@ -1,5 +1,4 @@
 """core/ never imports bpy: import every core module with bpy made unimportable."""
-from pathlib import Path
 
 from conftest import printed_json
 

@@ -19,7 +19,6 @@ from conftest import printed_json, scenefit_here
 
 pytestmark = pytest.mark.blender
 
-from conftest import ROOT  # noqa: E402
 ITERATIONS = 80          # draft preset, fewer steps: the smooth test maps pass 30 dB well before 150
 # The 2048² asset takes the command's default start (its own maps, nothing fitted): fitting 512² texels
 # costs most of a minute and checks nothing the small assets' fits do not; its checks are the preset's

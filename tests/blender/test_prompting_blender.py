@@ -1,7 +1,6 @@
 """The Write Prompt operator in a real bpy session, against the 127.0.0.1 chat server: the model's
 prompt lands in the Style section (the instruction in edit mode), Blender's online-access switch
 and the add-on's Offline switch give the template with no connection."""
-from pathlib import Path
 
 import pytest
 

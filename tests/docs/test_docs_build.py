@@ -119,7 +119,7 @@ def minimal_site(tmp: Path, page: str) -> Path:
     shutil.copytree(DOCS / "_ext", source / "_ext")
     shutil.copy(DOCS / "conf.py", source / "conf.py")
     (source / "_static").mkdir()
-    (source / "index.md").write_text(f"# Index\n\n```{{toctree}}\npage\n```\n")
+    (source / "index.md").write_text("# Index\n\n```{toctree}\npage\n```\n")
     (source / "page.md").write_text(page)
     return source
 

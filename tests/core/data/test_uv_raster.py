@@ -2,7 +2,6 @@
 and every triangle spanning the whole UV square (memory bounded by the texture and mesh size)."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,7 +13,6 @@ from scenefit.core.data.uv_raster import _barycentric, _nearest_covered, rasteri
 
 from conftest import printed_json
 
-from conftest import ROOT  # noqa: E402
 WRAPS = (("clamp", "clamp"), ("repeat", "repeat"), ("mirror", "mirror"), ("repeat", "mirror"), ("clamp", "repeat"))
 
 

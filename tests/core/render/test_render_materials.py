@@ -7,12 +7,9 @@ import pytest
 import torch
 
 from scenefit.core.render.backend import init_mitsuba
-from scenefit.core.data.maps import PBRMaps
-from scenefit.core.data.materials import AssetMaterials, Material
-from scenefit.core.data.mesh import Mesh
-from scenefit.core.data.primitives import grid_plane
+from scenefit.core.data.materials import AssetMaterials
 from scenefit.core.render.renderer import AssetRenderer
-from material_scenes import BANDS, TEXELS, albedo_and_position, banded_plane, expected_albedo, sample
+from material_scenes import TEXELS, albedo_and_position, banded_plane, expected_albedo
 
 
 

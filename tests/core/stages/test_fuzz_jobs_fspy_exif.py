@@ -9,7 +9,6 @@ import math
 import struct
 
 import numpy as np
-import pytest
 from hypothesis import HealthCheck, Phase, given, settings, strategies as st
 
 from scenefit.core.base.errors import InputError
