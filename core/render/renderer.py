@@ -100,6 +100,17 @@ class RenderOutput:
     seconds: float = 0.0
 
 
+def _owned(array_type, values: np.ndarray):
+    """`values` as a Dr.Jit array in memory of its own. Built straight from NumPy it would share NumPy's
+    memory, whose alignment varies from run to run, and Dr.Jit reads an unaligned buffer with other
+    instructions: the same scene would compile a kernel that differs from the cached one."""
+    import drjit as dr  # lazy: Mitsuba is heavy and Blender may lack it
+
+    owned = array_type(values) + dr.opaque(array_type, 0)
+    dr.eval(owned)
+    return owned
+
+
 def _mitsuba_mesh(mi, mesh: Mesh):
     """A mi.Mesh from our arrays (v flipped to Mitsuba's top-row-first texture lookup)."""
     normals = mesh.normals if mesh.normals is not None else vertex_normals(mesh.positions, mesh.faces)
@@ -108,10 +119,10 @@ def _mitsuba_mesh(mi, mesh: Mesh):
     params = mi.traverse(m)
     uv = mesh.uvs.astype(np.float32).copy()
     uv[:, 1] = 1.0 - uv[:, 1]
-    params["vertex_positions"] = mi.Float(mesh.positions.astype(np.float32).ravel())
-    params["faces"] = mi.UInt32(mesh.faces.astype(np.uint32).ravel())
-    params["vertex_normals"] = mi.Float(normals.astype(np.float32).ravel())
-    params["vertex_texcoords"] = mi.Float(uv.ravel())
+    params["vertex_positions"] = _owned(mi.Float, mesh.positions.astype(np.float32).ravel())
+    params["faces"] = _owned(mi.UInt32, mesh.faces.astype(np.uint32).ravel())
+    params["vertex_normals"] = _owned(mi.Float, normals.astype(np.float32).ravel())
+    params["vertex_texcoords"] = _owned(mi.Float, uv.ravel())
     params.update()
     return m
 
