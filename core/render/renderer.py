@@ -100,6 +100,17 @@ class RenderOutput:
     seconds: float = 0.0
 
 
+def _owned(array_type, values: np.ndarray):
+    """`values` as a Dr.Jit array in memory of its own. Built straight from NumPy it would share NumPy's
+    memory, whose alignment varies from run to run, and Dr.Jit reads an unaligned buffer with other
+    instructions: the same scene would compile a kernel that differs from the cached one."""
+    import drjit as dr  # lazy: Mitsuba is heavy and Blender may lack it
+
+    owned = array_type(values) + dr.opaque(array_type, 0)
+    dr.eval(owned)
+    return owned
+
+
 def _mitsuba_mesh(mi, mesh: Mesh):
     """A mi.Mesh from our arrays (v flipped to Mitsuba's top-row-first texture lookup)."""
     normals = mesh.normals if mesh.normals is not None else vertex_normals(mesh.positions, mesh.faces)
@@ -108,10 +119,10 @@ def _mitsuba_mesh(mi, mesh: Mesh):
     params = mi.traverse(m)
     uv = mesh.uvs.astype(np.float32).copy()
     uv[:, 1] = 1.0 - uv[:, 1]
-    params["vertex_positions"] = mi.Float(mesh.positions.astype(np.float32).ravel())
-    params["faces"] = mi.UInt32(mesh.faces.astype(np.uint32).ravel())
-    params["vertex_normals"] = mi.Float(normals.astype(np.float32).ravel())
-    params["vertex_texcoords"] = mi.Float(uv.ravel())
+    params["vertex_positions"] = _owned(mi.Float, mesh.positions.astype(np.float32).ravel())
+    params["faces"] = _owned(mi.UInt32, mesh.faces.astype(np.uint32).ravel())
+    params["vertex_normals"] = _owned(mi.Float, normals.astype(np.float32).ravel())
+    params["vertex_texcoords"] = _owned(mi.Float, uv.ravel())
     params.update()
     return m
 
@@ -299,6 +310,7 @@ class AssetRenderer:
         self.params.keep(wanted)
         self._sensors: dict[tuple, object] = {}   # by film size; a window's by film, crop and offset
         self._aov_integrator = None
+        self._sensor_by_index: dict[int, object] = {}
         self._wrapped: Callable | None = None
         # weak reference to a differentiable render whose backward has not run
         self._pending: weakref.ReferenceType | None = None
@@ -360,16 +372,21 @@ class AssetRenderer:
             import drjit as dr
             import mitsuba as mi
 
+            # The function holds the scene's parts, not the renderer: a renderer in a reference cycle lives
+            # until Python's cycle collector runs, and while its Mitsuba objects live every new scene's
+            # kernels also dispatch to them, so they differ from the cached ones and compile again.
+            params, keys, scene, sensors = self.params, self.keys, self.scene, self._sensor_by_index
+
             @dr.wrap(source="torch", target="drjit")
             def render(texels: dict, envmap, sensor_index: int, spp: int, seed: int):
                 for shape_id, maps in texels.items():
                     for name, values in zip(MAP_NAMES, maps):
-                        self.params[self.keys[shape_id][name]] = values
-                self.params[ENVMAP_KEY] = envmap
-                self.params.update()
-                sensor = self._sensor_by_index[sensor_index]
+                        params[keys[shape_id][name]] = values
+                params[ENVMAP_KEY] = envmap
+                params.update()
+                sensor = sensors[sensor_index]
                 # Seeds are opaque so a new seed does not recompile the kernel.
-                return mi.render(self.scene, self.params, sensor=sensor, spp=spp,
+                return mi.render(scene, params, sensor=sensor, spp=spp,
                                  seed=dr.opaque(mi.UInt32, seed), seed_grad=dr.opaque(mi.UInt32, seed + 0x9E37))
 
             self._wrapped = render
@@ -390,7 +407,7 @@ class AssetRenderer:
         if tuple(envmap.shape) != tuple(self.envmap_shape):
             raise InputError(f"Environment map shape {tuple(envmap.shape)} differs from the scene's {self.envmap_shape}.")
         sensor = self._sensor(camera)
-        self._sensor_by_index = {0: sensor}
+        self._sensor_by_index[0] = sensor
         # Each part's own texels (torch slices, so gradients reach the maps given).
         # Moved to the renderer's backend (an environment map on the CPU beside a texture on the GPU must
         # not reach a CUDA scene as an LLVM array), and the image back to where the maps are.

@@ -104,6 +104,28 @@ def test_a_second_render_before_backward_is_refused_not_silently_wrong():
         renderer.render(Camera(width=16, height=16), base, *constant_maps()[1:], env, spp=2, seed=2)
 
 
+def test_a_dropped_renderer_is_freed_at_once_not_by_the_cycle_collector():
+    """A renderer no longer referenced (after a differentiable render and its backward) is freed by
+    reference counting: while its Mitsuba objects live, every later scene's kernels dispatch to them too,
+    so they differ from the cached ones and compile again."""
+    import gc
+    import weakref
+
+    gc.collect()
+    gc.disable()
+    try:
+        renderer = AssetRenderer(uv_sphere(), TEX, constant_env(1.0))
+        base = constant_maps()[0].clone().requires_grad_(True)
+        out = renderer.render(Camera(width=8, height=8), base, *constant_maps()[1:],
+                              torch.tensor(constant_env(1.0)), spp=1)
+        out.rgb.sum().backward()
+        gone = weakref.ref(renderer)
+        del renderer, out
+        assert gone() is None
+    finally:
+        gc.enable()
+
+
 def test_uv_convention_top_of_texture_lands_on_top_of_plane():
     # OpenGL UVs (v = 0 at the bottom) with an image whose top rows are red: the plane's top is red.
     renderer = AssetRenderer(grid_plane(size=0.9), TEX, constant_env(1.0))
