@@ -2,12 +2,10 @@
 model options. Declared once so an option means the same thing in every command."""
 from __future__ import annotations
 
-from ..core.base.names import SCENE_TYPES
-
 import argparse
 import math
 
-from ..core.pipeline.presets import PRESET_NAMES as PRESETS
+from ..core.base.names import PRESETS, SCENE_TYPES
 
 
 # -- option types: a bad value is refused by argparse (one line, exit 2) before any work ---------------
