@@ -192,3 +192,38 @@ def test_operators_take_the_materials_the_faces_use(run_py):
     out = printed_json(proc)
     assert out["one"] == ["Painted"] and out["slots"] == [[["Cube", 1]]]
     assert out["two"] == ["Unused", "Painted"]
+
+
+def test_a_bake_limit_shrinks_only_the_procedural_chains_it_caps(run_py):
+    """A bake reads a material's procedural chains at no more than its size, and says which channels it
+    shrank (those are never written as the material's own nodes): a 64² image material whose roughness is
+    a noise chain, read for a 16² bake, then for a 128² one."""
+    proc = run_py("""
+        import json
+        import bpy
+        import numpy as np
+        from scenefit.blender_io.material import read_material_within
+
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        bpy.ops.mesh.primitive_plane_add()
+        obj = bpy.context.active_object
+        material = bpy.data.materials.new("Painted Noise")
+        material.use_nodes = True
+        nodes, links = material.node_tree.nodes, material.node_tree.links
+        bsdf = next(n for n in nodes if n.type == "BSDF_PRINCIPLED")
+        image = bpy.data.images.new("paint", 64, 64)
+        image.pixels.foreach_set(np.random.default_rng(0).uniform(0.2, 0.8, 64 * 64 * 4).astype(np.float32))
+        texture = nodes.new("ShaderNodeTexImage")
+        texture.image = image
+        links.new(texture.outputs["Color"], bsdf.inputs["Base Color"])
+        links.new(nodes.new("ShaderNodeTexNoise").outputs["Fac"], bsdf.inputs["Roughness"])
+        obj.data.materials.append(material)
+        out = {}
+        for limit in (16, 128):
+            read, shrunk = read_material_within(material, obj, 0, limit)
+            out[limit] = [sorted(shrunk), list(np.shape(read.maps.roughness)), list(np.shape(read.maps.base_color))]
+        print("JSON" + json.dumps(out))
+    """)
+    out = printed_json(proc)
+    assert out["16"] == [["roughness"], [16, 16], [64, 64, 3]]   # the chain at the bake's size, the image as it is
+    assert out["128"] == [[], [64, 64], [64, 64, 3]]             # no cap below the image: nothing shrunk
