@@ -27,9 +27,12 @@ class HubServer:
     requests: list[dict] = field(default_factory=list)   # {"method", "path", "range"}
     bytes_sent: int = 0
     seconds_per_mib: float = 0.0   # a slow link, so a test can stop a download half-way from another thread
+    # a hostile or broken hub: the ETag answered for a file ({path: etag}), the commit answered for a repository
+    etags: dict[str, str] = field(default_factory=dict)
+    commits: dict[str, str] = field(default_factory=dict)
 
     def commit(self, repo: str) -> str:
-        return hashlib.sha1(repo.encode()).hexdigest()
+        return self.commits.get(repo, hashlib.sha1(repo.encode()).hexdigest())
 
     @staticmethod
     def etag(data: bytes) -> str:
@@ -63,7 +66,7 @@ class HubServer:
                 if api and api["repo"] in hub.repos:
                     return self._json(hub._api(api["repo"], api["kind"]), body)
                 if resolve and resolve["repo"] in hub.repos and resolve["path"] in hub.repos[resolve["repo"]]:
-                    return self._file(resolve["repo"], hub.repos[resolve["repo"]][resolve["path"]], body)
+                    return self._file(resolve["repo"], resolve["path"], body)
                 self._json({"error": "Repository Not Found"}, body, status=404)
 
             def _json(self, payload, body: bool, status: int = 200) -> None:
@@ -77,13 +80,13 @@ class HubServer:
                 if body:
                     self.wfile.write(data)
 
-            def _file(self, repo: str, data: bytes, body: bool) -> None:
-                start = 0
+            def _file(self, repo: str, name: str, body: bool) -> None:
+                data, start = hub.repos[repo][name], 0
                 asked = _RANGE.match(self.headers.get("Range") or "")
                 if asked and body:
                     start = int(asked[1])
                 self.send_response(206 if start else 200)
-                self.send_header("ETag", f'"{hub.etag(data)}"')
+                self.send_header("ETag", f'"{hub.etags.get(name, hub.etag(data))}"')
                 self.send_header("X-Repo-Commit", hub.commit(repo))
                 self.send_header("Accept-Ranges", "bytes")
                 self.send_header("Content-Length", str(len(data) - start))

@@ -47,8 +47,15 @@ def check_texture_size(height: int, width: int, what: str) -> None:
                   "reduce the texture (4096 px is plenty for SceneFit) and try again")
 
 
-def _check_memory(needed: int, doing: str, fix: str) -> None:
+def memory_needed_sentence(needed: int, doing: str) -> str | None:
+    """"{doing} needs about N GB of memory, more than half of this machine's M GB" when it does, else None."""
     total = physical_memory()
     if total is not None and needed > MEMORY_SHARE * total:
-        raise InputError(f"{doing} needs about {_gb(needed)} of memory, more than half of this "
-                         f"machine's {_gb(total)}; {fix}.")
+        return f"{doing} needs about {_gb(needed)} of memory, more than half of this machine's {_gb(total)}"
+    return None
+
+
+def _check_memory(needed: int, doing: str, fix: str) -> None:
+    too_much = memory_needed_sentence(needed, doing)
+    if too_much:
+        raise InputError(f"{too_much}; {fix}.")

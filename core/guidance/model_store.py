@@ -8,14 +8,18 @@ never copied. A model given as a local folder is the artist's: it is reported, n
 
 huggingface_hub (2.x) deletes a file's partial download when the download fails, so a cancelled
 multi-gigabyte file would start over. The bytes are therefore fetched here with the hub's own `http_get`
-(its Range resume) into `blobs/<etag>.incomplete`, kept across cancels, and the hub's `snapshot_download`
-then links the finished blobs into the snapshot and records the revision, as its own downloads do.
+(its Range resume) into `blobs/<etag>.incomplete`, kept across cancels, then linked into the snapshot
+and the revision recorded with the hub's own helpers, as its downloads do. Everything the server names
+is checked before it names a file (the commit and each ETag a hash, each file a relative path inside the
+snapshot), and a blob is kept only when its bytes hash to its ETag: the hub's answers are data.
 """
 from __future__ import annotations
 
 import fnmatch
+import hashlib
 import math
 import os
+import re
 import shutil
 import threading
 import time
@@ -29,6 +33,8 @@ from .models import (BASE_PARTS, DEFAULT_BASE_MODEL, DEFAULT_DEPTH_MODEL, DEFAUL
 
 FOUND, PARTIAL, MISSING, FOLDER, FOLDER_INCOMPLETE = "found", "partial", "missing", "folder", "folder incomplete"
 PARTIAL_SUFFIX = ".incomplete"
+_COMMIT = re.compile(r"[0-9a-f]{40}")
+_ETAG = re.compile(r"[0-9a-f]{40}|[0-9a-f]{64}")   # a git blob's sha1 or an LFS file's sha256
 DOWNLOAD_STAGE = "download"
 
 # The download size of the default repositories' files that `allow` selects (the hub's listing), for the
@@ -178,6 +184,9 @@ def remove_model(spec: ModelSpec, cache: Path) -> int:
     if spec.is_folder:
         raise InputError(f"The {spec.label} is your folder '{spec.model}'; SceneFit does not delete it.")
     storage = storage_folder(cache, spec.model)
+    if storage.is_symlink():   # the cache's folder is a link (to the user's folder): never deleted through
+        raise InputError(f"'{storage}' is a link to '{os.path.realpath(storage)}', not a folder of the cache; "
+                         "SceneFit deletes nothing through it (remove the link yourself).")
     if not storage.is_dir():
         return 0
     freed = _size(storage)
@@ -246,24 +255,25 @@ def in_megabytes(progress: ProgressCallback) -> ProgressCallback:
     return forward
 
 
-def _quiet_bar():
-    """The hub's own bar class, never drawn: the final linking step fetches nothing worth a bar on stderr."""
-    from huggingface_hub.utils import tqdm  # lazy: huggingface_hub is needed only to find or fetch models
-
-    class Quiet(tqdm):
-        def __init__(self, *args, **kwargs) -> None:
-            kwargs["disable"] = True
-            super().__init__(*args, **kwargs)
-
-    return Quiet
-
-
 def format_bytes(count: float) -> str:
     for unit in ("B", "KB", "MB", "GB"):
         if abs(count) < 1000 or unit == "GB":
             return f"{count:.0f} {unit}" if unit == "B" else f"{count:.1f} {unit}"
         count /= 1000.0
     return f"{count:.1f} GB"
+
+
+def _hub_refused(spec: ModelSpec, what: str) -> ModelMissingError:
+    return ModelMissingError(f"The hub's answer for {spec.model} is not usable: {what}; nothing was written "
+                             "outside the cache.")
+
+
+def _checked_name(spec: ModelSpec, name: object) -> str:
+    """A file name from the hub's listing: a relative path of plain parts, as a repository holds."""
+    if not isinstance(name, str) or not name or len(name) > 500 or "\\" in name or "\x00" in name or \
+            any(part in ("", ".", "..") for part in name.split("/")):
+        raise _hub_refused(spec, f"it lists a file named {str(name)[:80]!r}")
+    return name
 
 
 def _repo_files(api, spec: ModelSpec, revision: str) -> tuple[str, dict[str, int]]:
@@ -273,41 +283,95 @@ def _repo_files(api, spec: ModelSpec, revision: str) -> tuple[str, dict[str, int
     from huggingface_hub.utils import filter_repo_objects
 
     commit = api.repo_info(spec.model, revision=revision).sha
+    if not isinstance(commit, str) or not _COMMIT.fullmatch(commit):
+        raise _hub_refused(spec, f"its commit {str(commit)[:80]!r} is not a commit hash")
     tree = [f for f in api.list_repo_tree(spec.model, recursive=True, revision=commit) if isinstance(f, RepoFile)]
     wanted = set(filter_repo_objects([f.path for f in tree], allow_patterns=list(spec.allow),
                                      ignore_patterns=IGNORE_PATTERNS))
-    return commit, {f.path: (f.lfs.size if f.lfs is not None else f.size) for f in tree if f.path in wanted}
+    sizes = {_checked_name(spec, f.path): (f.lfs.size if f.lfs is not None else f.size) for f in tree
+             if f.path in wanted}
+    if not all(isinstance(n, int) and 0 <= n < 2**45 for n in sizes.values()):
+        raise _hub_refused(spec, "it lists a file size that is not a byte count")
+    return commit, sizes
+
+
+def _hashes_to(path: Path, etag: str) -> bool:
+    """Whether the file's bytes are those `etag` names: an LFS file's sha256, or a git blob's sha1."""
+    digest = hashlib.sha256() if len(etag) == 64 else hashlib.sha1(b"blob %d\0" % path.stat().st_size)
+    with path.open("rb") as handle:
+        for chunk in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest() == etag
 
 
 def _fetch_blob(spec: ModelSpec, storage: Path, commit: str, name: str, endpoint: str | None,
-                transfer: _Transfer) -> None:
-    """One file's bytes into blobs/<etag>, resumed from blobs/<etag>.incomplete when an earlier try left one."""
+                transfer: _Transfer) -> str:
+    """One file's bytes into blobs/<etag>, resumed from blobs/<etag>.incomplete when an earlier try left one;
+    the file's ETag."""
     # lazy: huggingface_hub is needed only to find or fetch models
     from huggingface_hub import get_hf_file_metadata, hf_hub_url
-    from huggingface_hub.file_download import http_get
-    from huggingface_hub.utils import WeakFileLock, build_hf_headers
+    from huggingface_hub.utils import WeakFileLock
 
     meta = get_hf_file_metadata(hf_hub_url(spec.model, name, revision=commit, endpoint=endpoint))
+    if not isinstance(meta.etag, str) or not _ETAG.fullmatch(meta.etag):
+        raise _hub_refused(spec, f"'{name}' comes with the ETag {str(meta.etag)[:80]!r}, which is not a file hash")
     blob = storage / "blobs" / meta.etag
     # The hub's own lock for this blob: another download of it (SceneFit's or the hub's) waits, never appends.
     lock = storage.parent / ".locks" / storage.name / f"{meta.etag}.lock"
     lock.parent.mkdir(parents=True, exist_ok=True)
     with WeakFileLock(lock):
-        if blob.is_file():   # fetched by an earlier, stopped download: only its link is missing
+        if blob.is_file() and not blob.is_symlink():   # fetched by an earlier, stopped download: only its link is missing
             transfer.done += blob.stat().st_size
-            return
+            return meta.etag
         blob.parent.mkdir(parents=True, exist_ok=True)
         partial = blob.with_name(blob.name + PARTIAL_SUFFIX)
-        with partial.open("ab") as out:
-            transfer.done += out.tell()
-            http_get(meta.location, out, resume_size=out.tell(), headers=build_hf_headers(),
-                     expected_size=meta.size, tqdm_class=transfer.bar_class())
-        arrived = partial.stat().st_size
-        if meta.size is not None and arrived != meta.size:
+        resumed = _fetch_into(partial, meta, transfer)
+        if not _hashes_to(partial, meta.etag) and resumed:
+            # the kept part was not the start of this file (damaged or planted): fetched once more, whole
             partial.unlink()
-            raise ModelMissingError(f"'{name}' of {spec.model} arrived with {arrived} bytes, not {meta.size}; "
-                                    "the next download fetches it again.")
+            _fetch_into(partial, meta, transfer)
+        if not _hashes_to(partial, meta.etag):
+            partial.unlink()
+            raise ModelMissingError(f"'{name}' of {spec.model} arrived with bytes that do not match its hash "
+                                    f"{meta.etag}; nothing was kept, the next download fetches it again.")
         os.replace(partial, blob)
+    return meta.etag
+
+
+def _fetch_into(partial: Path, meta, transfer: _Transfer) -> bool:
+    """The rest of the file into `partial` (the hub's Range resume); whether a kept part was resumed."""
+    from huggingface_hub.file_download import http_get   # lazy: needed only to fetch models
+    from huggingface_hub.utils import build_hf_headers
+
+    if partial.is_symlink() or (partial.exists() and not partial.is_file()):
+        partial.unlink()   # a partial is SceneFit's own plain file; anything else is not appended to
+    with partial.open("ab") as out:
+        kept = out.tell()
+        if meta.size is not None and kept > meta.size:   # longer than the file: not a part of it
+            out.truncate(0)
+            kept = 0
+        transfer.done += kept
+        http_get(meta.location, out, resume_size=kept, headers=build_hf_headers(),
+                 expected_size=meta.size, tqdm_class=transfer.bar_class())
+    arrived = partial.stat().st_size
+    if meta.size is not None and arrived != meta.size:
+        partial.unlink()
+        raise ModelMissingError(f"'{partial.name}' arrived with {arrived} bytes, not {meta.size}; "
+                                "the next download fetches it again.")
+    return kept > 0
+
+
+def _link_snapshot(storage: Path, commit: str, revision: str, blobs: dict[str, str]) -> None:
+    """Each fetched file linked into snapshots/<commit>/ from its checked blob, and the revision recorded, by the
+    hub's own helpers (relative links, or copies where the file system has none)."""
+    from huggingface_hub.file_download import _cache_commit_hash_for_specific_revision, _create_symlink
+
+    snapshot = storage / "snapshots" / commit
+    for name, etag in blobs.items():
+        pointer = snapshot / name
+        pointer.parent.mkdir(parents=True, exist_ok=True)
+        _create_symlink(str(storage / "blobs" / etag), str(pointer), new_blob=False)
+    _cache_commit_hash_for_specific_revision(str(storage), revision, commit)
 
 
 def _already_there(storage: Path, commit: str, name: str) -> bool:
@@ -319,7 +383,7 @@ def download_model(spec: ModelSpec, cache: Path, progress: ProgressCallback | No
                    revision: str = "main") -> ModelState:
     """Fetch the files of `spec` a run reads into the hub cache at `cache`: progress as bytes with speed,
     `cancel` honoured between chunks (the partial file is kept and the next call resumes it)."""
-    from huggingface_hub import HfApi, snapshot_download  # lazy: huggingface_hub is needed only to find or fetch models
+    from huggingface_hub import HfApi  # lazy: huggingface_hub is needed only to find or fetch models
 
     if spec.is_folder:
         raise InputError(f"The {spec.label} is the folder '{spec.model}'; there is nothing to download.")
@@ -330,15 +394,14 @@ def download_model(spec: ModelSpec, cache: Path, progress: ProgressCallback | No
         commit, sizes = _repo_files(HfApi(endpoint=endpoint), spec, revision)
         todo = [n for n in sorted(sizes) if not _already_there(storage, commit, n)]
         transfer = _Transfer(spec, sum(sizes.values()), sum(sizes[n] for n in sizes if n not in todo), progress, cancel)
+        blobs = {}
         for name in todo:
             check_cancel(cancel)
             transfer.file = name
             transfer.report()
-            _fetch_blob(spec, storage, commit, name, endpoint, transfer)
+            blobs[name] = _fetch_blob(spec, storage, commit, name, endpoint, transfer)
         check_cancel(cancel)
-        # Every blob is here: the hub links them into the snapshot and records the revision and its file list.
-        snapshot_download(spec.model, revision=revision, cache_dir=cache, allow_patterns=list(spec.allow),
-                          ignore_patterns=IGNORE_PATTERNS, endpoint=endpoint, tqdm_class=_quiet_bar())
+        _link_snapshot(storage, commit, revision, blobs)
     except SceneFitError:   # a cancel
         raise
     except Exception as error:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import gc
 import os
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 from pathlib import Path
 
@@ -311,6 +312,7 @@ def load_guidance_models(config: ModelConfig, need_inpaint: bool, paths: dict[st
     paths = paths or locate_models(config, need_inpaint)
     device, dtype = config.device(), config.dtype()
     base = paths["base"]
+    _check_guidance_folders(paths, dtype)
     tokenizer = CLIPTokenizer.from_pretrained(base, subfolder="tokenizer")
     text_encoder = CLIPTextModel.from_pretrained(base, subfolder="text_encoder", torch_dtype=dtype,
                                                  use_safetensors=True)
@@ -359,6 +361,27 @@ def load_guidance_models(config: ModelConfig, need_inpaint: bool, paths: dict[st
             module.to(device)
     return GuidanceModels(tokenizer=tokenizer, text_encoder=text_encoder, vae=vae, unet=unet, scheduler=scheduler,
                           inpaint_unet=inpaint_unet, device=device, dtype=dtype, paths=paths, config=config)
+
+
+def _check_guidance_folders(paths: dict[str, Path], dtype) -> None:
+    """The folders' files and configs checked, and each network's size against memory, before any is loaded."""
+    from diffusers import AutoencoderKL, UNet2DConditionModel   # lazy: seconds to load
+    from transformers import CLIPTextConfig, CLIPTextModel
+
+    from .model_folder import check_model_files, check_model_memory, read_config
+
+    size = dtype.itemsize
+    for role, folder in paths.items():
+        check_model_files(folder, f"{role} model")
+        unet = read_config(folder / "unet" / "config.json", f"{role} model's UNet")
+        check_model_memory(partial(UNet2DConditionModel.from_config, unet), folder / "unet", f"{role} model's UNet",
+                           size)
+    base = paths["base"]
+    vae = read_config(base / "vae" / "config.json", "base model's VAE")
+    check_model_memory(lambda: AutoencoderKL.from_config(vae), base / "vae", "base model's VAE", size)
+    text = read_config(base / "text_encoder" / "config.json", "base model's text encoder")
+    check_model_memory(lambda: CLIPTextModel(CLIPTextConfig.from_dict(text)), base / "text_encoder",
+                       "base model's text encoder", size)
 
 
 class ModelCache:
@@ -412,6 +435,7 @@ class DepthEstimator:
                 # each file's request and took 100 s to give up.
                 source = snapshot_download(model, cache_dir=hub_cache(cache_dir), local_files_only=only_local,
                                            allow_patterns=DEPTH_PATTERNS, ignore_patterns=IGNORE_PATTERNS)
+            _check_depth_folder(Path(source))
             self.processor = AutoImageProcessor.from_pretrained(source, local_files_only=True)
             self.model = AutoModelForDepthEstimation.from_pretrained(source, local_files_only=True,
                                                                      use_safetensors=True)
@@ -440,6 +464,21 @@ class DepthEstimator:
             pred = self.model(**{k: v.to(self.device) for k, v in inputs.items()}).predicted_depth
         pred = F.interpolate(pred[:, None].float(), size=image.shape[:2], mode="bilinear", align_corners=False)
         return pred[0, 0].cpu().numpy().astype(np.float32)
+
+
+def _check_depth_folder(folder: Path) -> None:
+    """The depth model's files and config checked, and its size against memory, before transformers reads it."""
+    if not folder.is_dir():
+        return   # transformers' own error says what is missing
+    from transformers import AutoConfig, AutoModelForDepthEstimation   # lazy: seconds to load
+
+    from .model_folder import check_model_files, check_model_memory, read_config
+
+    check_model_files(folder, "depth model")
+    if (folder / "config.json").is_file():
+        read_config(folder / "config.json", "depth model")
+        check_model_memory(lambda: AutoModelForDepthEstimation.from_config(AutoConfig.from_pretrained(folder)),
+                           folder, "depth model", 4)
 
 
 def _first_sentence(error: Exception) -> str:

@@ -64,3 +64,15 @@ def test_a_hub_that_cannot_be_reached_is_one_sentence(tmp_path):
                                                                  "HF_HUB_CACHE": str(tmp_path / "hub")})
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr[-2000:]
     assert "could not be downloaded" in proc.stderr and "hf download depth-anything/Depth-Anything-V2-Small-hf" in proc.stderr
+
+
+def test_removing_a_model_whose_folder_is_a_link_names_the_link(tmp_path):
+    """The cache's model folder is a link to the user's folder: nothing is deleted, and the sentence names both."""
+    cache, mine = tmp_path / "hub", tmp_path / "mine"
+    (mine / "keep").mkdir(parents=True)
+    cache.mkdir()
+    (cache / "models--tiny--sd2-base").symlink_to(mine)
+    proc = scenefit_process("models", "remove", "base", "--base-model", BASE, env={"HF_HUB_CACHE": str(cache)})
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert str(cache / "models--tiny--sd2-base") in proc.stderr and str(mine) in proc.stderr
+    assert (mine / "keep").is_dir()

@@ -148,3 +148,64 @@ def test_the_cache_is_the_hubs_own(tmp_path, monkeypatch):
     assert hub_cache(str(tmp_path / "asked")) == tmp_path / "asked"
     states = store.model_states(ModelConfig())
     assert [s.cache for s in states] == [str(tmp_path / "elsewhere")] * 3
+
+
+# -- a hub's answers are data -------------------------------------------------------------------------
+DEPTH = {"config.json": b'{"model_type": "dpt"}', "preprocessor_config.json": b'{"p": 1}',
+         "model.safetensors": os.urandom(5000)}
+
+
+def _depth_spec():
+    return store.depth_spec("tiny/depth")
+
+
+def _outside(tmp_path, cache) -> list[str]:
+    """Files under tmp_path that are not in the cache: what a download wrote where it must not."""
+    return sorted(str(p) for p in tmp_path.rglob("*") if p.is_file() and cache not in p.parents)
+
+
+def test_an_etag_that_is_a_path_writes_nothing_outside_the_cache(tmp_path, monkeypatch):
+    """A hub (or anyone between it and the user) answering an ETag of `../../../home/.bash_profile`: the
+    downloader used to write the served bytes there; it refuses in one sentence and writes nothing outside."""
+    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
+    server = HubServer({"tiny/depth": dict(DEPTH)}, etags={"model.safetensors": "../../../home/.bash_profile"}).start()
+    cache = tmp_path / "hub"
+    try:
+        with pytest.raises(ModelMissingError, match="not a file hash") as refused:
+            store.download_model(_depth_spec(), cache, endpoint=server.url)
+    finally:
+        server.stop()
+    assert "\n" not in str(refused.value)
+    assert not (tmp_path / "home").exists() and _outside(tmp_path, cache) == []
+
+
+def test_a_partial_with_a_zero_tail_is_fetched_again(tmp_path, monkeypatch):
+    """A `.incomplete` as long as its file but with a zero-filled tail was taken as finished ("found", weights
+    that do not match the ETag): its hash is checked, and the file fetched again whole."""
+    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
+    server = HubServer({"tiny/depth": dict(DEPTH)}).start()
+    cache = tmp_path / "hub"
+    weights = DEPTH["model.safetensors"]
+    blobs = store.storage_folder(cache, "tiny/depth") / "blobs"
+    blobs.mkdir(parents=True)
+    (blobs / (HubServer.etag(weights) + store.PARTIAL_SUFFIX)).write_bytes(weights[:1000] + bytes(len(weights) - 1000))
+    try:
+        state = store.download_model(_depth_spec(), cache, endpoint=server.url)
+    finally:
+        server.stop()
+    assert state.state == store.FOUND
+    assert open(os.path.join(state.where, "model.safetensors"), "rb").read() == weights
+
+
+def test_a_hub_serving_other_bytes_than_its_etag_says_keeps_nothing(tmp_path, monkeypatch):
+    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
+    server = HubServer({"tiny/depth": dict(DEPTH)}, etags={"model.safetensors": "a" * 64}).start()
+    cache = tmp_path / "hub"
+    try:
+        with pytest.raises(ModelMissingError, match="do not match its hash"):
+            store.download_model(_depth_spec(), cache, endpoint=server.url)
+    finally:
+        server.stop()
+    blobs = store.storage_folder(cache, "tiny/depth") / "blobs"
+    assert not (blobs / ("a" * 64)).exists() and not list(blobs.glob("*" + store.PARTIAL_SUFFIX))
+    assert store.model_state(_depth_spec(), cache).state != store.FOUND
