@@ -282,6 +282,20 @@ def _prepare_staging(out: Path, staging: Path, resume: bool, reuse: bool) -> Non
             staging.mkdir(parents=True)
     write_marker(staging)
     remove_stale_temps(staging)
+    drop_links(staging)
+
+
+def drop_links(folder: Path) -> list[Path]:
+    """Delete every symbolic link under `folder` (the link itself, never what it points at): SceneFit makes
+    none in its folders, so one there was planted, and a stage writing through it would write elsewhere."""
+    dropped = []
+    for root, dirs, names in os.walk(folder):   # (os.walk does not descend into linked folders)
+        for name in dirs + names:
+            path = Path(root) / name
+            if path.is_symlink():
+                path.unlink()
+                dropped.append(path)
+    return dropped
 
 
 def _link_or_copy(src: str, dst: str) -> None:
