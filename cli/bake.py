@@ -30,7 +30,9 @@ def run(args) -> int:
     if args.format is None:   # the file name says which: a.gltf is the separate layout, anything else a .glb
         args.format = "gltf" if out.suffix.lower() == ".gltf" else "glb"
     targets = [out] + ([out.with_suffix(".bin")] if args.format == "gltf" else [])
-    targets += [Path(args.report)] if args.report else []
+    if args.report:
+        _check_report_path(Path(args.report), targets)
+        targets.append(Path(args.report))
     refuse_overwriting(targets, list(protect))
     if not args.replace:   # before any work; the images of a .gltf are checked once their names are known
         refuse_replacing(targets)
@@ -55,6 +57,24 @@ def run(args) -> int:
         print(f"  {why}")
     print(f"wrote {', '.join(report['files'])} (glTF 2.0 by Blender's exporter)")
     return 0
+
+
+def _check_report_path(report: Path, outputs: list[Path]) -> None:
+    """--report refused before any work when it names a file the bake writes (the .glb, the .gltf's .bin),
+    or a folder that does not exist."""
+    import os
+
+    from ..core.base.errors import InputError
+
+    for output in outputs:
+        if os.path.abspath(report) == os.path.abspath(output) or (
+                report.exists() and output.exists() and os.path.samefile(report, output)):
+            raise InputError(f"--report '{report}' is a file the bake itself writes ('{output}'); give the report "
+                             "another path.")
+    folder = report.absolute().parent
+    if not folder.is_dir():
+        raise InputError(f"The folder of --report '{report}' ('{folder}') does not exist; make it or give "
+                         "another path.")
 
 
 def add_parser(sub) -> None:

@@ -246,7 +246,7 @@ def _parse_models(table: dict, path: Path) -> ModelConfig:
         if not isinstance(value, kind):
             raise InputError(f"{where}: {key} must be a {'true/false' if kind is bool else 'string'}, got {value!r}.")
         if key in ("base_model", "inpaint_model", "cache_dir") and isinstance(value, str) and \
-                value.startswith((".", "/", "~")):
+                _names_a_path(value, path):
             value = str(_resolve(value, path))
         values[key] = value
     try:
@@ -274,6 +274,8 @@ def _parse_job(entry: dict, index: int, path: Path, models: ModelConfig) -> Job:
     table = {k: v for k, v in entry.items() if k in RUN_KEYS}
     if isinstance(table.get("fspy"), str):
         table["fspy"] = str(_existing(table["fspy"], path, where, "fspy", "fSpy project"))
+    if isinstance(table.get("depth_model"), str) and _names_a_path(table["depth_model"], path):
+        table["depth_model"] = str(_resolve(table["depth_model"], path))   # a folder, from the jobs file's
     run = run_config(table, where, stages, models=models)
     asset, obj = _parse_asset(entry, path, where)
     photo_text = entry.get("photo", "")
@@ -355,6 +357,12 @@ def _parse_asset(entry: dict, path: Path, where: str) -> tuple[Path, str | None]
     if obj is not None and asset.is_dir():
         raise InputError(f"{where}: object is for a Blender/glTF file; '{asset.name}' is an asset folder.")
     return asset, obj
+
+
+def _names_a_path(text: str, jobs_path: Path) -> bool:
+    """Whether a model key's text is a folder (as the model manager tells them from hub ids: './', '/', '~',
+    or a folder beside the jobs file), to be taken from the jobs file's folder."""
+    return text.startswith((".", "/", "~")) or (jobs_path.parent / text).is_dir()
 
 
 def _resolve(text: str, jobs_path: Path) -> Path:

@@ -34,5 +34,7 @@ MODES = ("scene", "generate", "edit")
 # Whether adapt (and the light stage's diffusion critic) use Stable Diffusion 2: auto is sd2 when its weights are found.
 GUIDANCE_TYPES = ("auto", "sd2", "none")
 SCENE_TYPES = ("auto", "indoor", "outdoor")
+# The composite's shadow: the floor passes' ratio, the paper's matte, or none (compose, and adapt's global views).
+SHADOW_TYPES = ("ratio", "paper", "none")
 # Where a run's camera values come from: the user (options, the panel), or the artist's Blender camera.
 CAMERA_SOURCES = ("user", "blender")

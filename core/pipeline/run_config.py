@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 from ..base.errors import InputError
 from ..base.names import (ALONE_STAGES, CAMERA_SOURCES, CONFIG_STAGES, GUIDANCE_TYPES, MODES, OPTIONAL_STAGES,
-                          PIPELINE_STAGES, PRESETS, SCENE_TYPES, STAGES)
+                          PIPELINE_STAGES, PRESETS, SCENE_TYPES, SHADOW_TYPES, STAGES)
 from ..guidance.models import ModelConfig
 from ..scene.camera import PhotoCamera
 from ..scene.placement import DEFAULT_OBJECT_SIZE
@@ -58,6 +58,7 @@ class RunConfig:
         _choice("guidance_type", self.guidance_type, GUIDANCE_TYPES)
         _choice("scene_type", self.scene_type, SCENE_TYPES)
         _choice("camera_source", self.camera_source, CAMERA_SOURCES)
+        _choice("shadow_type", self.shadow_type, SHADOW_TYPES)
         if self.seed is not None and not (_whole(self.seed) and self.seed >= 0):
             raise _refused("seed", f"seed must be a whole number >= 0, got {self.seed!r}.")
         _check_view(self)

@@ -42,6 +42,7 @@ from ..render.backend import init_mitsuba, render_whole
 from ..render.denoise import DENOISER_TYPES, denoise, oidn_available
 from ..base.atomic import write_json_atomic
 from ..base.errors import InputError, check_choice
+from ..base.names import SHADOW_TYPES
 from ..base.untrusted import parse_json, read_bytes
 from ..data.imageio import linear_to_srgb, srgb_to_linear, write_image
 from ..data.mesh import Mesh, normalize_to_unit_sphere
@@ -53,7 +54,6 @@ from ..scene.frame import ENVMAP_TO_WORLD
 from ..scene.mattes import composite_linear, paper_shadow_matte
 from ..scene.placement import DEFAULT_OBJECT_SIZE
 
-SHADOW_TYPES = ("ratio", "paper", "none")
 SAMPLER_TYPES = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
 # The composite is made at the photo's own size up to this long side (a 24 MP photo is halved), which
 # keeps the stage's memory near 1.5 GB; the light stage works on a smaller copy.
@@ -86,8 +86,8 @@ class ComposeConfig:
 
     def __post_init__(self) -> None:
         if not 64 <= self.max_side <= COMPOSE_MAX_SIDE:
-            raise InputError(f"The composite's long side must be between 64 and {COMPOSE_MAX_SIDE} pixels, got "
-                             f"{self.max_side}.")
+            raise InputError(f"max_side (the composite's long side) must be between 64 and {COMPOSE_MAX_SIDE} "
+                             f"pixels, got {self.max_side}.")
         if not 0.0 < self.size <= 2.0:
             raise InputError(f"--object-size is the fraction of the photo's height the asset spans, in (0, 2]; "
                              f"got {self.size}.")

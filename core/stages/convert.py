@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from ..base.errors import InputError
-from ..base.limits import check_texture_size
+from ..base.limits import check_render_size, check_texture_size
 from ..data.maps import PBRMaps
 from ..data.materials import AssetMaterials, atlas_grid, atlas_maps, atlas_mesh, atlas_raster, atlas_slices, mesh_raster
 from ..data.mesh import Mesh, NormalizeTransform, normalize_to_unit_sphere
@@ -71,6 +71,17 @@ class ConvertConfig:
             raise InputError(f"screen_px must be at least 1 pixel, got {self.screen_px}.")
         if self.resolution is not None and not 8 <= self.resolution <= 8192:
             raise InputError(f"resolution must be between 8 and 8192 texels, got {self.resolution}.")
+        if not 8 <= self.max_resolution <= 8192:
+            raise InputError(f"max_resolution must be between 8 and 8192 texels, got {self.max_resolution}.")
+        if self.batch_texels is not None and self.batch_texels < 1:
+            raise InputError(f"batch_texels must be at least 1 (or left out for all), got {self.batch_texels}.")
+        if not 1 <= self.spp <= 65536:
+            raise InputError(f"spp must be between 1 and 65536, got {self.spp}.")
+        if not (0 < self.lr_end and 0 < self.lr_start):
+            raise InputError(f"lr_start and lr_end must be positive, got {self.lr_start}, {self.lr_end}.")
+        if not 8 <= self.render_size:
+            raise InputError(f"render_size must be at least 8 pixels, got {self.render_size}.")
+        check_render_size(self.render_size, self.render_size, "render_size")
         if not isinstance(self.texture, NeuralTextureConfig):
             raise InputError(f"texture must be a NeuralTextureConfig, got {type(self.texture).__name__}.")
 

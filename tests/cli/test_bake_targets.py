@@ -58,3 +58,21 @@ def test_each_engines_bake_validates_and_uses_only_what_that_engine_reads(toy_ca
     assert seen["godot"] & source == {"KHR_texture_transform"}
     assert "KHR_materials_sheen" not in seen["unity"] and "KHR_materials_clearcoat" in seen["unity"]
     assert source <= seen["unreal"]
+
+
+@pytest.mark.parametrize("layout", ["glb", "gltf"])
+def test_a_report_naming_the_bakes_own_output_is_refused_before_work(tmp_path, layout):
+    """`--report x.glb --out x.glb` left the report in the GLB, `--report y.bin` with `--format gltf` replaced the
+    buffer, both exit 0; and `--report missing/r.json` exited 2 only after the GLB was written."""
+    asset = tmp_path / "a.gltf"
+    asset.write_text('{"asset": {"version": "2.0"}}')
+    texture = tmp_path / "texture.pt"
+    texture.write_bytes(b"not read")
+    out = tmp_path / f"baked.{layout}"
+    reports = [out] + ([out.with_suffix(".bin")] if layout == "gltf" else []) + [tmp_path / "missing" / "r.json"]
+    for report in reports:
+        proc = scenefit_process("bake", asset, "--texture", texture, "--out", out, "--report", report, "--quiet")
+        assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr[-2000:]
+        assert str(report) in proc.stderr and ("the bake itself writes" in proc.stderr or
+                                              "does not exist" in proc.stderr), proc.stderr
+        assert not out.exists() and not report.exists()

@@ -97,6 +97,16 @@ def test_a_jobs_file_job_is_the_run_and_travels_whole(tmp_path):
     ("sun_shadow = [\"0.5,0.5\", \"0.5,0.4\"]", "sun_shadow must be the shadow's foot, top and tip"),
     ("sun_shadow = [\"500,40\", \"30,20\", \"40,45\"]", "sun_shadow: The shadow's foot (500, 40) lies outside the 64x48"),
     ("sun_shadow = [\"0.5,0.8\", \"nan,0.5\", \"0.6,0.85\"]", "sun_shadow: The shadow's top takes two finite"),
+    # sizes against memory, ranges and choices of keys the stages used to take and fail on later
+    ("overrides = { convert = { render_size = 200000 } }", "render_size 200000 is larger than"),
+    ("overrides = { convert = { batch_texels = -5 } }", "batch_texels must be at least 1"),
+    ("overrides = { convert = { max_resolution = 0 } }", "max_resolution must be between 8 and 8192"),
+    ("stages = [\"light\"]\nshadow_type = \"soft\"", "shadow_type must be one of ratio, paper, none"),
+    ("overrides = { adapt = { stages = [[1.0, 16.5, 2, [500, 990]]] } }", "a whole render_size"),
+    ("overrides = { adapt = { stages = [[1.0, 1e9, 2, [500, 990]]] } }", "a whole render_size"),
+    ("overrides = { adapt = { stages = [[1.0, 1000000000, 2, [500, 990]]] } }", "is larger than"),
+    ("overrides = { adapt = { model_resolution = 1048576 } }", "model_resolution must be a multiple of 8 from 8"),
+    ("overrides = { compose = { max_side = 10 } }", "compose: max_side"),
 ])
 def test_what_the_run_cannot_take_is_one_sentence_naming_file_job_and_key(tmp_path, line, says):
     make_inputs(tmp_path)
@@ -104,6 +114,21 @@ def test_what_the_run_cannot_take_is_one_sentence_naming_file_job_and_key(tmp_pa
         load_jobs(jobs_file(tmp_path, line + "\n"))
     text = str(error.value)
     assert text.startswith("jobs.toml job 'a': ") and says in text and "\n" not in text.strip(), text
+
+
+def test_a_depth_model_folder_is_taken_from_the_jobs_files_folder(tmp_path, monkeypatch):
+    """`depth_model = "./depth"` resolved against the working folder: run from elsewhere, the job silently used
+    the geometric room."""
+    make_inputs(tmp_path)
+    (tmp_path / "depth").mkdir()
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    for given in ("./depth", "depth"):
+        job = load_jobs(jobs_file(tmp_path, f'depth_model = "{given}"\n')).jobs[0]
+        assert job.run.depth_model == str(tmp_path / "depth"), given
+    hub = load_jobs(jobs_file(tmp_path, 'depth_model = "depth-anything/Depth-Anything-V2-Small-hf"\n')).jobs[0]
+    assert hub.run.depth_model == "depth-anything/Depth-Anything-V2-Small-hf"
 
 
 @pytest.mark.parametrize("head, says", [

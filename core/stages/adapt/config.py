@@ -10,11 +10,12 @@ The paper does not say how many global-view crops it scores per view; we take 2 
 """
 from __future__ import annotations
 
-from ...base.names import MODES
+import math
 
 from dataclasses import asdict, dataclass, field
 
-from ..compose import SHADOW_TYPES
+from ...base.limits import check_render_size
+from ...base.names import MODES, SHADOW_TYPES
 from ...base.errors import InputError
 from ...guidance.critics import CriticConfig
 from ...guidance.models import ModelConfig
@@ -31,6 +32,17 @@ ADAPT_RENDERERS = ("auto", *RENDERER_TYPES)
 # the local views' constant ambient light 38.3-42.0 dB, the global views' HDR map 42.3-45.8 dB (8 views each).
 # Before each sample read the texture on its own (16 per pixel, not 4) ambient was 34.2-38.6: path traced.
 LOOP_AGREES = {"local": True, "global": True}
+# The diffusion model's image side at most: SD2 works at 512 (768 for its v-model); twice that is already
+# four times the memory per image.
+MAX_MODEL_RESOLUTION = 2048
+
+
+def _whole(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 @dataclass(frozen=True)
@@ -43,10 +55,15 @@ class StageSpec:
     t_range: tuple[int, int]
 
     def __post_init__(self) -> None:
-        if not 0.0 < self.fraction <= 1.0:
-            raise InputError(f"A stage's fraction must be in (0, 1], got {self.fraction}.")
-        if self.render_size < 8 or self.spp < 1:
-            raise InputError(f"A stage needs render_size >= 8 and spp >= 1, got {self.render_size}, {self.spp}.")
+        if not _number(self.fraction) or not 0.0 < self.fraction <= 1.0:
+            raise InputError(f"A stage's fraction must be in (0, 1], got {self.fraction!r}.")
+        if not _whole(self.render_size) or not _whole(self.spp) or self.render_size < 8 or not 1 <= self.spp <= 65536:
+            raise InputError(f"A stage needs a whole render_size >= 8 and a whole spp from 1 to 65536, got "
+                             f"{self.render_size!r}, {self.spp!r}.")
+        check_render_size(self.render_size, self.render_size, "a stage's render_size")
+        if not isinstance(self.t_range, (tuple, list)) or len(self.t_range) != 2 or \
+                not all(_whole(t) for t in self.t_range):
+            raise InputError(f"A stage's timestep range must be two whole numbers, got {self.t_range!r}.")
         lo, hi = self.t_range
         if not 0 <= lo <= hi <= 999:
             raise InputError(f"A stage's timestep range must satisfy 0 <= lo <= hi <= 999, got {self.t_range}.")
@@ -144,8 +161,9 @@ class AdaptConfig:
         object.__setattr__(self, "stages", stages)
         need(len(stages) >= 1 and abs(sum(s.fraction for s in stages) - 1.0) < 1e-6,
              f"stage fractions must add up to 1, got {[s.fraction for s in stages]}.")
-        need(self.model_resolution >= 8 and self.model_resolution % 8 == 0,
-             f"model_resolution must be a multiple of 8, got {self.model_resolution}.")
+        need(8 <= self.model_resolution <= MAX_MODEL_RESOLUTION and self.model_resolution % 8 == 0,
+             f"model_resolution must be a multiple of 8 from 8 to {MAX_MODEL_RESOLUTION}, got "
+             f"{self.model_resolution}.")
         need(self.lr_texture > 0 and self.lr_lora > 0, "learning rates must be positive.")
         need(self.lora_rank >= 1, f"lora_rank must be at least 1, got {self.lora_rank}.")
         need(0.0 <= self.condition_dropout <= 1.0, "condition_dropout must be in [0, 1].")
