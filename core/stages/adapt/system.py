@@ -38,7 +38,7 @@ from ...render.loop_renderer import LoopRenderer, asset_renderer
 from ...render.renderer import AssetRenderer, SceneOptions
 from ...texture.neural_texture import NeuralTexture, split_channels
 from .assembly import Critics, build_critics, embed_prompts, global_scene_for, renderer_environment, working_texture
-from .checkpoint import CHECKPOINT_FILE, load_checkpoint, save_checkpoint
+from .checkpoint import CHECKPOINT_FILE, inputs_digest, load_checkpoint, save_checkpoint
 from .config import AdaptConfig
 from .constants import ConstantWork, ViewConstants, bank_box
 from .distributed import join_process_group, sum_gradients, views_of_rank
@@ -81,6 +81,7 @@ class AdaptSystem:
         self.optimizer = torch.optim.Adam(texture.parameters(), lr=config.lr_texture)
         self.my_views = views_of_rank(config.views_per_step, rank, world.choice)
         self.checkpoint_path = checkpoint_path
+        self._inputs_digest: str | None = None
         self.cancel: threading.Event | None = None   # seen between views (one rank), set by step
         self.history: list[dict] = []
         self.start = 0
@@ -120,14 +121,33 @@ class AdaptSystem:
             torch.cuda.reset_peak_memory_stats()
         return system
 
+    @property
+    def inputs_digest(self) -> str:
+        """What this run adapts (the checkpoint is tied to it): the mesh, the starting texture, the photo and
+        where the asset stands in it, the light."""
+        if self._inputs_digest is None:
+            inputs = self.inputs
+            mesh = inputs.mesh
+            self._inputs_digest = inputs_digest(
+                mesh.positions, mesh.faces, mesh.uvs, mesh.material_index, mesh.wraps,
+                None if inputs.texture is None else inputs.texture.state_dict(), inputs.photo, inputs.placement,
+                inputs.envmap, inputs.photo_camera, inputs.base_logit)
+        return self._inputs_digest
+
     def resume(self) -> None:
-        payload = load_checkpoint(self.checkpoint_path, self.config) if self.checkpoint_path is not None else None
+        payload = load_checkpoint(self.checkpoint_path, self.config, self.inputs_digest) \
+            if self.checkpoint_path is not None else None
         if payload is None:
             return
-        self.texture.load_state_dict(payload["texture"])
-        self.optimizer.load_state_dict(payload["optimizer"])
-        if self.critics.lora is not None and payload["lora"] is not None:
-            self.critics.lora.load_state_dict(payload["lora"])
+        try:
+            self.texture.load_state_dict(payload["texture"])
+            self.optimizer.load_state_dict(payload["optimizer"])
+            if self.critics.lora is not None and payload["lora"] is not None:
+                self.critics.lora.load_state_dict(payload["lora"])
+        except (RuntimeError, ValueError, KeyError, TypeError) as error:   # shapes or keys not this run's
+            reason = str(error).strip().splitlines()[0][:160] if str(error).strip() else type(error).__name__
+            raise InputError(f"The checkpoint '{self.checkpoint_path}' does not fit this run's texture or "
+                             f"optimiser ({reason}); delete it to start over.") from None
         self.history, self.start = list(payload["history"]), int(payload["iteration"])
 
     # -- step --------------------------------------------------------------------------------------
@@ -358,7 +378,7 @@ class AdaptSystem:
         if self.checkpoint_path is not None and config.checkpoint_every and (
                 done % config.checkpoint_every == 0 or done == config.iterations):
             save_checkpoint(self.checkpoint_path, done, config, self.texture, self.optimizer, self.critics.lora,
-                            self.history)
+                            self.history, self.inputs_digest)
 
     def checkpointed(self, done: int) -> bool:
         """Whether after_step wrote a checkpoint after `done` iterations."""
@@ -371,7 +391,7 @@ class AdaptSystem:
         if self.rank != 0 or self.world.choice != 1 or self.checkpoint_path is None or done <= saved:
             return
         save_checkpoint(self.checkpoint_path, done, self.config, self.texture, self.optimizer, self.critics.lora,
-                        self.history)
+                        self.history, self.inputs_digest)
 
     def finish(self) -> AdaptResult:
         return AdaptResult(texture=self.texture, iterations=self.config.iterations,
