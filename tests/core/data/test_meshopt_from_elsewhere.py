@@ -54,7 +54,7 @@ def sentence_of(path) -> str:
         with importable(path):
             pass
     text = str(caught.value)
-    assert "\n" not in text and text.endswith(".") and "'asset.glb'" in text, text
+    assert "\n" not in text and text.endswith(".") and ("'asset.glb'" in text or f"'{path}'" in text), text
     return text
 
 
