@@ -55,6 +55,9 @@ def test_a_job_may_name_the_folder_a_gltf_came_in(tmp_path):
     (lambda t: t + "[[job\n", "not valid TOML"),
     (lambda t: t + "[models]\nbase = 'x'\n", r"\[models\]: unknown key 'base'"),
     (lambda t: t + "[models]\ndevice_type = 'tpu'\n", "device_type must be one of"),
+    (lambda t: t + "[models]\nbase_model = './models/sd2-base'\n", r"base_model './models/sd2-base' names the "
+                                                                  r"folder .* which does not exist"),
+    (lambda t: t + "[models]\ncache_dir = 'hub-cache'\n", r"cache_dir 'hub-cache' names the folder"),
     (lambda t: t.replace("seed = 1", "overrides = { paint = { iterations = 2 } }"), "unknown stage 'paint'"),
 ])
 def test_jobs_file_errors_are_one_sentence(tmp_path, change, message):
@@ -63,6 +66,19 @@ def test_jobs_file_errors_are_one_sentence(tmp_path, change, message):
     with pytest.raises(InputError, match=message) as error:
         load_jobs(path)
     assert "\n" not in str(error.value).strip()
+
+
+def test_models_given_as_folders_are_folders_and_hub_ids_stay_ids(tmp_path):
+    """The docs' example `base_model = "models/sd2-base"`: with models/ beside the jobs file it is that folder,
+    refused while it is missing; without models/ it is a hub id (owner/name), as the run looks it up."""
+    path = make_inputs(tmp_path)
+    path.write_text(path.read_text() + '[models]\nbase_model = "models/sd2-base"\n')
+    assert load_jobs(path).jobs[0].models.base_model == "models/sd2-base"          # a hub id
+    (tmp_path / "models").mkdir()
+    with pytest.raises(InputError, match="names the folder .*sd2-base', which does not exist"):
+        load_jobs(path)
+    (tmp_path / "models" / "sd2-base").mkdir()
+    assert load_jobs(path).jobs[0].models.base_model == str((tmp_path / "models" / "sd2-base").resolve())
 
 
 def test_in_process_batch_writes_folders_summary_and_resumes(in_process, capsys):
