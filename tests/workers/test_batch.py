@@ -397,3 +397,28 @@ def test_a_batch_stopped_half_way_says_which_jobs_it_finished_and_its_summary_ma
         (out / "summary.md").read_text()
     assert (out / "c" / "report.json").read_text() == before   # a job not reached is as it was
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]   # nothing half-written beside it
+
+
+def test_a_job_whose_adapt_was_skipped_says_so_everywhere(tmp_path, capsys):
+    """A job that lists adapt on a machine without the weights is done, and its skip is said: the command's
+    line for the job, report.json's stage_status (the place a run's report has it), summary.md and .json."""
+    make_inputs(tmp_path)
+    (tmp_path / "empty-cache").mkdir()   # no weights, whatever this machine holds
+    (tmp_path / "jobs.toml").write_text(
+        '[models]\ncache_dir = "empty-cache"\n[defaults]\npreset = "draft"\nphoto = "room.png"\nat = [0.5, 0.7]\n'
+        'stages = ["convert", "light", "adapt", "compose"]\n[[job]]\nname = "a"\nasset = "ball"\n'
+        'overrides = { convert = { iterations = 20 } }\n')
+    out = tmp_path / "out"
+    assert main(["batch", str(tmp_path / "jobs.toml"), "--out", str(out)]) == 0
+    said = capsys.readouterr()
+    assert "[a] done in" in said.err and "; adapt skipped: no weights" in said.err
+    assert "a skipped stages (summary.md says which and why)" in said.out
+    report = json.loads((out / "a" / "report.json").read_text())
+    assert report["status"] == "done" and report["stage_status"]["adapt"]["status"] == "skipped"
+    assert report["stage_status"] == report["stages"]["run"]["stage_status"]   # one shape, as `scenefit run` writes it
+    assert "scenefit models download" in report["stage_status"]["adapt"]["why"]
+    assert "| a | done, adapt skipped: no weights | 1 |" in (out / "summary.md").read_text()
+    assert json.loads((out / "summary.json").read_text())["jobs"][0]["skipped_stages"] == {"adapt": "no weights"}
+    # Run again: the job is skipped as done before, and what it skipped is still said.
+    assert main(["batch", str(tmp_path / "jobs.toml"), "--out", str(out)]) == 0
+    assert "| a | skipped, adapt skipped: no weights |" in (out / "summary.md").read_text()
