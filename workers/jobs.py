@@ -245,7 +245,7 @@ def _parse_models(table: dict, path: Path) -> ModelConfig:
         kind = bool if key not in ("base_model", "inpaint_model", "cache_dir", "device_type", "dtype_type") else str
         if not isinstance(value, kind):
             raise InputError(f"{where}: {key} must be a {'true/false' if kind is bool else 'string'}, got {value!r}.")
-        if key in MODEL_PATH_KEYS:
+        if key in MODEL_PATH_KEYS and isinstance(value, str):
             value = _model_path(key, value, path, where)
         values[key] = value
     try:

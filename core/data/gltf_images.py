@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import base64
 import io
+import json
 from pathlib import Path
 from urllib.parse import unquote
 
 from ..base.errors import InputError
-from .glb import read_gltf, write_glb
+from .glb import gltf_json, read_gltf, write_glb
 
 # Each image extension and the MIME type of the images it points at.
 IMAGE_EXTENSIONS = {"EXT_texture_webp": "image/webp", "EXT_texture_avif": "image/avif",
@@ -35,11 +36,14 @@ def image_mime(image: dict) -> str | None:
 
 def png_bytes(data: bytes, mime: str, name: str) -> bytes:
     """One image's bytes as PNG (its alpha kept); one sentence when they cannot be decoded."""
-    from PIL import Image, UnidentifiedImageError  # lazy: only files with such images need it
-
     if mime not in DECODED:
         raise InputError(f"The {mime} image '{name}' cannot be re-encoded here (only {', '.join(DECODED)} "
                          "images are); give the file with PNG or JPEG images.")
+    try:
+        from PIL import Image, UnidentifiedImageError  # lazy: Pillow comes with diffusers, not in every install
+    except ImportError:
+        raise InputError(f"The {mime} image '{name}' needs Pillow to be re-encoded, which is not installed; run "
+                         "`pip install -r requirements.txt`, or give the file with PNG or JPEG images.") from None
     try:
         with Image.open(io.BytesIO(data)) as image:
             image.load()
@@ -129,8 +133,6 @@ def reencode_images(document: dict, chunk: bytes | None, folder: Path, keep: set
 def images_reencoded(path: Path, keep: set[str]) -> list[str]:
     """reencode_images on the .glb or .gltf at `path` (a file this process wrote: a .gltf's replaced image
     files beside it are deleted), rewritten in place when any image changed."""
-    import json
-
     document, chunk = read_gltf(path)
     before = {str(image.get("uri")) for image in document.get("images", []) if "uri" in image}
     chunk, names = reencode_images(document, chunk, path.parent, keep)
@@ -147,8 +149,6 @@ def images_reencoded(path: Path, keep: set[str]) -> list[str]:
 
 def needs_decoding(path: Path) -> bool:
     """Whether a glTF's images include a format Blender's importer does not read (AVIF, KTX2)."""
-    from .glb import gltf_json
-
     if path.suffix.lower() not in (".gltf", ".glb"):
         return False
     document = gltf_json(path)

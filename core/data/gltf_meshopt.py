@@ -18,6 +18,7 @@ from pydantic import Field
 from ..base.errors import InputError
 from ..base.untrusted import Record, checked
 from .glb import read_gltf, write_glb
+from .gltf_images import BLENDER_READS, images_reencoded, needs_decoding
 
 EXTENSION = "EXT_meshopt_compression"
 _MIME = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".webp": "image/webp",
@@ -182,8 +183,6 @@ def decoded_glb(path: Path, out: Path) -> Path:
 def importable(path: Path):
     """`path`, or while the block runs a copy of it Blender's importer reads: its EXT_meshopt_compression
     data decoded, and images of a type the importer does not read (AVIF) as PNG (core/data/gltf_images.py)."""
-    from .gltf_images import BLENDER_READS, images_reencoded, needs_decoding
-
     meshopt_used, images = uses_meshopt(path), needs_decoding(path)
     if not meshopt_used and not images:
         yield path
