@@ -9,6 +9,7 @@ from bpy.props import BoolProperty, IntProperty
 
 from ..blender_io.compose import setup_composite
 from ..core.base.errors import SceneFitError
+from ..core.base.limits import COMPOSE_MAX_SIDE
 from ..core.pipeline.preset_tables import TABLES
 from .asset import asset_objects
 from .folders import run_folder
@@ -53,11 +54,11 @@ class SCENEFIT_OT_compose(OnMesh, bpy.types.Operator):
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        samples, how = self.render_cost(settings.preset)
+        cost, how = self.render_cost(own, settings.preset)
         if context.window is not None and not bpy.app.background:
             # In the UI Blender's own render job runs it (progress, Esc); the artist saves it from there. The
             # scene's own settings come back when the job ends, so F12 there stays the artist's.
-            restore_after_render(own, at_cost(own, samples))
+            restore_after_render(own, at_cost(own, cost))
             bpy.ops.render.render("INVOKE_DEFAULT", scene=own.name)
             self.report({"INFO"}, f"Rendering the composite {how}; F12 in '{own.name}' renders with its own "
                                   "settings")
@@ -65,7 +66,7 @@ class SCENEFIT_OT_compose(OnMesh, bpy.types.Operator):
         try:
             active = context.active_object
             folder = run_folder(context, "compose", (active if active in objects else objects[0]).name)
-            out = written_whole(str(folder), lambda staging: {"composite": self._render(own, staging, samples)})
+            out = written_whole(str(folder), lambda staging: {"composite": self._render(own, staging, cost)})
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
@@ -73,19 +74,25 @@ class SCENEFIT_OT_compose(OnMesh, bpy.types.Operator):
         self.report({"INFO"}, f"Composite rendered {how}: {out['composite']}")
         return {"FINISHED"}
 
-    def render_cost(self, preset: str) -> tuple[int, str]:
-        """(Cycles samples, the words for them): the ones asked for, else the preset's compose sample cap,
-        denoised, as Run All's compose renders (the composite scene's own samples are for the artist's F12)."""
-        if self.samples:
-            return self.samples, f"at {self.samples} samples, denoised"
-        samples = TABLES["compose"][preset]["max_spp"]
-        return samples, f"at the {preset.capitalize()} preset's {samples} samples, denoised"
+    def render_cost(self, scene, preset: str) -> tuple[dict, str]:
+        """(the render settings, the words for them): as Run All's compose renders at `preset`, its sample cap
+        (or the samples asked for) with the denoiser, its long side at most the preset's; the composite
+        scene's own settings are for the artist's F12."""
+        table = TABLES["compose"][preset]
+        samples = self.samples or table["max_spp"]
+        longest = max(scene.render.resolution_x, scene.render.resolution_y, 1)
+        percent = max(1, min(100, 100 * table.get("max_side", COMPOSE_MAX_SIDE) // longest))
+        cost = {"samples": samples, "use_denoising": True, "denoiser": "OPENIMAGEDENOISE",
+                "resolution_percentage": percent}
+        whose = f"{samples} samples" if self.samples else f"the {preset.capitalize()} preset's {samples} samples"
+        size = f", {percent}% of the photo's size" if percent < 100 else ""
+        return cost, f"at {whose}, denoised{size}"
 
-    def _render(self, scene, folder: Path, samples: int) -> str:
+    def _render(self, scene, folder: Path, cost: dict) -> str:
         """F12 of the composite scene with write_still into `folder`; its settings put back after."""
         out = folder / "composite.png"
         settings = scene.render.image_settings
-        before = at_cost(scene, samples), scene.render.filepath, settings.file_format
+        before = at_cost(scene, cost), scene.render.filepath, settings.file_format
         try:
             scene.render.filepath = str(out)
             settings.file_format = "PNG"
@@ -96,22 +103,25 @@ class SCENEFIT_OT_compose(OnMesh, bpy.types.Operator):
         return str(out)
 
 
-_COST = ("samples", "use_denoising", "denoiser")
+def _owner(scene, name: str):
+    """The settings block a render setting lives in: the resolution in scene.render, the rest in Cycles'."""
+    return scene.render if name == "resolution_percentage" else scene.cycles
 
 
-def at_cost(scene, samples: int) -> tuple:
-    """Set the scene's Cycles samples and the denoiser (Open Image Denoise) for one render; what they were."""
-    before = tuple(getattr(scene.cycles, name) for name in _COST)
-    scene.cycles.samples, scene.cycles.use_denoising, scene.cycles.denoiser = samples, True, "OPENIMAGEDENOISE"
+def at_cost(scene, cost: dict) -> dict:
+    """Set the scene's render settings for one render; what they were."""
+    before = {name: getattr(_owner(scene, name), name) for name in cost}
+    for name, value in cost.items():
+        setattr(_owner(scene, name), name, value)
     return before
 
 
-def put_back(scene, before: tuple) -> None:
-    for name, value in zip(_COST, before):
-        setattr(scene.cycles, name, value)
+def put_back(scene, before: dict) -> None:
+    for name, value in before.items():
+        setattr(_owner(scene, name), name, value)
 
 
-def restore_after_render(scene, before: tuple) -> None:
+def restore_after_render(scene, before: dict) -> None:
     """Put the scene's render settings back once Blender's render job for it completes or is cancelled."""
     name = scene.name
 
