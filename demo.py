@@ -120,8 +120,7 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
         "stage": "demo",
         "preset": preset,
         "inputs": {"asset": example_origin, "photo": photo_info, "placement": DEMO_PLACEMENT},
-        "run": {name: {k: v for k, v in stage.to_report().items() if k != "report"}
-                for name, stage in run.stages.items()},
+        "stage_status": run.stage_status(),
         "convert": run.stages["convert"].report,
         "lighting": run.stages["light"].report,
         "adapt": run.stages["adapt"].to_report(),

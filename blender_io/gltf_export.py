@@ -23,9 +23,10 @@ from ..core.base.errors import InputError
 from ..core.stages.bake.gltf_ktx2 import basisu_path, ktx2_glb
 from ..core.stages.bake.engine_targets import engine_target
 from ..core.stages.bake.gltf_tangents import tangents_repaired
+from ..core.data.gltf_images import images_reencoded
 from ..core.data.gltf_meshopt import encoded_glb
-from ..core.stages.bake.gltf_output import (GltfOutput, check_output_format, extensions_kept, output_like_input,
-                                               skinned_meshes_moved_to_root)
+from ..core.stages.bake.gltf_output import (MIME_OF_FORMAT, GltfOutput, check_output_format, extensions_kept,
+                                            output_like_input, skinned_meshes_moved_to_root)
 from ..core.data.imageio import srgb_to_linear, write_image
 from ..core.data.maps import resize_channels
 from ..core.base.quiet import native_output_captured
@@ -282,6 +283,11 @@ def export_gltf(out_file: str | Path, file_format: str, selection_only: list | N
             skinned_meshes_moved_to_root(staged)
         said = [] if notes is None else notes   # (what the caller's report says of the file)
         if output.extensions is not None:   # an engine's bake: only what its importer reads
+            # (the exporter keeps a WebP input's images WebP: re-encoded where the engine reads none)
+            reencoded = images_reencoded(staged, {MIME_OF_FORMAT[f] for f in engine_target(output.target).textures})
+            if reencoded:
+                said.append(f"re-encoded as PNG for {engine_target(output.target).label}, whose importer does not "
+                            f"read their format: {', '.join(reencoded)}")
             removed = extensions_kept(staged, output.extensions)
             if removed:
                 said.append(f"left out for {engine_target(output.target).label}, whose importer does not read "

@@ -42,7 +42,9 @@ def run(args) -> int:
     failed = [o.name for o in outcomes if o.status == "failed"]
     done = sum(o.status == "done" for o in outcomes)
     skipped = sum(o.status == "skipped" for o in outcomes)
-    print(f"batch: {done} done, {skipped} skipped (done before), {len(failed)} failed -> {args.out}/summary.md")
+    partial = [o.name for o in outcomes if o.skipped]
+    print(f"batch: {done} done, {skipped} skipped (done before), {len(failed)} failed -> {args.out}/summary.md"
+          + (f"; {', '.join(partial)} skipped stages (summary.md says which and why)" if partial else ""))
     if failed:
         print(f"scenefit: {len(failed)} job(s) failed ({', '.join(failed)}); their report.json says why; "
               f"run the same command again to retry them.", file=sys.stderr)

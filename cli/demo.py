@@ -21,6 +21,7 @@ def _previous_demo(out: Path) -> bool:
 
 
 def run(args) -> int:
+    from ..core.pipeline.result import skipped_lines, stage_words
     from ..demo import run_demo
 
     previous = Path(args.out)
@@ -37,8 +38,11 @@ def run(args) -> int:
             shutil.copytree(previous / "input", out / "input", dirs_exist_ok=True)
         report = run_demo(out, preset=args.preset, progress=progress(args), refresh=args.refresh,
                           guidance=args.guidance)
-    print(f"demo done in {report['seconds_total']:.1f} s: conversion {report['convert']['psnr_covered_texels_db']:.2f} dB, "
-          f"composite {args.out}/compose/composite.png, sheet {args.out}/sheet.png")
+    print(f"demo done in {report['seconds_total']:.1f} s ({stage_words(report['stage_status'])}): conversion "
+          f"{report['convert']['psnr_covered_texels_db']:.2f} dB, composite {args.out}/compose/composite.png, "
+          f"sheet {args.out}/sheet.png")
+    for line in skipped_lines(report["stage_status"]):
+        print(line)
     return 0
 
 

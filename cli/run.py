@@ -59,6 +59,7 @@ def read_asset(args) -> tuple:
 def run(args) -> int:
     from ..core.data.asset_read_cache import save_read
     from ..core.base.report import write_report
+    from ..core.pipeline.result import skipped_lines, stage_words
     from ..core.pipeline.run import run_pipeline
     from ..core.stages.light.stage import sun_words
 
@@ -76,11 +77,13 @@ def run(args) -> int:
         if written is not None:
             report["prompt_writing"] = written.to_report()
         write_report(staging / "report.json", report)
-    summary = ", ".join(f"{name} {stage.status}" for name, stage in result.stages.items())
+    summary = stage_words(result.stage_status())
     decisions = result.stages["light"].report.get("decisions") if "light" in result.stages else None
     light = f"; {sun_words(decisions, '--sun AZ,EL or --sun-from-shadow')}" if decisions else ""
     print(f"run done in {result.seconds:.1f} s ({summary}{light}) -> "
           f"{Path(args.out) / 'compose' / 'composite.png'}")
+    for line in skipped_lines(result.stage_status()):
+        print(line)
     return 0
 
 

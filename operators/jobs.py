@@ -251,7 +251,7 @@ class JobSteps:
 
     invoke returns to Blender at once: the long-work question (from the bench's tables, no model lookup,
     no network) or the job's bar; gathering the inputs (`prepare`) happens on the first tick after, and
-    the model lookup and download inside the job. execute with a window starts the same background job
+    the model lookup inside the job. execute with a window starts the same background job
     (Repeat Last never freezes Blender); only without one (scripts under `blender -b`) is it inline."""
 
     job_name = "job"

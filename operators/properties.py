@@ -31,8 +31,8 @@ SUN_SOURCES = (
     ("set", "As set here", "The azimuth and elevation below (Pick Sun sets them from a shadow in the photo, "
                            "Sun from Light from a Sun light turned until its shadows match the photo's)"),
 )
-GUIDANCE = (("auto", "Auto", "Adapt with Stable Diffusion 2 when its weights are on this machine (or downloaded, "
-                               "with online access) and there is a prompt"),
+GUIDANCE = (("auto", "Auto", "Adapt with Stable Diffusion 2 when its weights are on this machine (Preferences: Models, "
+                               "Download) and there is a prompt"),
             ("sd2", "Stable Diffusion 2", "Adapt; fail when the weights cannot be found"),
             ("none", "None", "No adaptation: compose the converted texture (seconds instead of hours)"))
 MODES = (

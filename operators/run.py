@@ -80,7 +80,7 @@ class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
         guidance = self.chosen_guidance(context)
         if guidance == "none" or (guidance == "auto" and not context.scene.scenefit.prompt.strip()):
             return None   # no adaptation: the rest takes seconds
-        # "auto" adapts only when the job finds the weights (on disk, or downloaded with online access): the
+        # "auto" adapts only when the job finds the weights on disk (only Download fetches them): the
         # question is asked without looking (a look imports torch and may touch the network).
         return adapt_seconds_here(context)
 

@@ -14,6 +14,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 VALIDATOR_VERSION = "2.0.0-dev.3.10"
+GLTF_TRANSFORM_VERSION = "4.5.1"
 
 
 def threads_per_worker(cores: int, workers: int) -> int:
@@ -121,20 +122,41 @@ def example_asset(tmp_path_factory) -> Path:
     return out
 
 
-def _validator_module() -> Path | None:
-    """The gltf-validator npm package, installed once into a cache folder (needs node and npm)."""
+def _npm_module(package: str, version: str, folder: str) -> Path | None:
+    """An npm package at `version`, installed once into a cache folder (needs node and npm)."""
     if shutil.which("node") is None or shutil.which("npm") is None:
         return None
-    cache = Path(os.environ.get("SCENEFIT_CACHE", Path.home() / ".cache" / "scenefit")) / "gltf-validator"
-    module = cache / "node_modules" / "gltf-validator"
+    cache = Path(os.environ.get("SCENEFIT_CACHE", Path.home() / ".cache" / "scenefit")) / folder
+    module = cache / "node_modules" / package
     if not (module / "package.json").is_file() or \
-            json.loads((module / "package.json").read_text()).get("version") != VALIDATOR_VERSION:
+            json.loads((module / "package.json").read_text()).get("version") != version:
         cache.mkdir(parents=True, exist_ok=True)
         proc = subprocess.run(["npm", "install", "--no-audit", "--no-fund", "--prefix", str(cache),
-                               f"gltf-validator@{VALIDATOR_VERSION}"], capture_output=True, text=True, timeout=300)
+                               f"{package}@{version}"], capture_output=True, text=True, timeout=300)
         if proc.returncode != 0:
             return None
     return module
+
+
+def _validator_module() -> Path | None:
+    """The gltf-validator npm package, installed once into a cache folder (needs node and npm)."""
+    return _npm_module("gltf-validator", VALIDATOR_VERSION, "gltf-validator")
+
+
+@pytest.fixture(scope="session")
+def gltf_transform():
+    """run(*args) of glTF-Transform's command line (npm @gltf-transform/cli), e.g. run("webp", a, b): the
+    tool that writes test inputs in other texture formats (skips without node and npm)."""
+    module = _npm_module("@gltf-transform/cli", GLTF_TRANSFORM_VERSION, "gltf-transform")
+    if module is None:
+        pytest.skip("glTF-Transform needs node and npm (npm install @gltf-transform/cli failed or no npm)")
+
+    def run(*args) -> None:
+        proc = subprocess.run(["node", str(module / "bin" / "cli.js"), *map(str, args)], capture_output=True,
+                              text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+
+    return run
 
 
 @pytest.fixture(scope="session")

@@ -26,6 +26,7 @@ from typing import Callable, Protocol
 
 from ..core.base.atomic import write_json_atomic
 from ..core.base.errors import Cancelled, InputError
+from ..core.pipeline.result import skipped_reasons
 from ..core.base.output_folder import (FINISHED_JOBS_ATTRIBUTE, check_output_folder, check_subfolder,
                                       folder_in_place, install_folder)
 from .interrupt import CtrlCStops
@@ -39,6 +40,12 @@ from .summary import RESERVED_NAMES, JobOutcome, write_summary
 
 def job_report(out_dir: Path, name: str) -> dict | None:
     return read_job_report(Path(out_dir) / name / REPORT)   # (data: a planted report reads as none)
+
+
+def skipped_stages(report: dict) -> dict[str, str]:
+    """{stage: why in a few words} of the stages a job's report says were skipped."""
+    status = report.get("stage_status")
+    return skipped_reasons(status) if isinstance(status, dict) else {}
 
 
 def reused_stages(report: dict) -> tuple[str, ...]:
@@ -135,7 +142,7 @@ def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: E
             if not redo and done_before and report.get("digest") == digest:
                 outcomes[job.name] = JobOutcome(job.name, "skipped", report.get("attempts", 0),
                                                 report.get("seconds", 0.0), report.get("quality", {}),
-                                                reused=reused_stages(report))
+                                                reused=reused_stages(report), skipped=skipped_stages(report))
                 say(job.name, "done by an earlier run; skipped")
                 continue
             # Changed since an earlier run, or failed after one (not --replace): its finished stages go
@@ -153,11 +160,12 @@ def _run_jobs(jobs: JobsFile, out_dir: Path, dispatcher: Dispatcher, on_event: E
             job = payload.job
             if isinstance(result, JobResult):
                 install_folder(out_dir, job.name, lambda folder: unpack(result.outputs, folder))
-                reused = reused_stages(result.report)
+                reused, skipped = reused_stages(result.report), skipped_stages(result.report)
                 outcomes[job.name] = JobOutcome(job.name, "done", payload.attempt, result.report["seconds"],
-                                                result.report.get("quality", {}), reused=reused)
+                                                result.report.get("quality", {}), reused=reused, skipped=skipped)
                 say(job.name, f"done in {result.report['seconds']:.1f} s (attempt {payload.attempt})"
-                              + (f"; {', '.join(reused)} reused" if reused else ""))
+                              + (f"; {', '.join(reused)} reused" if reused else "")
+                              + "".join(f"; {name} skipped: {why}" for name, why in skipped.items()))
                 continue
             error = error_text(result)
             if payload.attempt < tries:

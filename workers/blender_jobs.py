@@ -217,7 +217,7 @@ def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict
         report = result.to_report()
         stages = report["stages"]
         if result.stages["adapt"].status == "skipped" and data.get("why_no_adapt"):
-            stages["adapt"]["why"] = data["why_no_adapt"]
+            stages["adapt"]["why"] = report["stage_status"]["adapt"]["why"] = data["why_no_adapt"]
         last = result.texture_stage
         outputs = result.outputs(last)
         per_material = material_results(data, outputs["weights"], folder / "materials") \

@@ -94,6 +94,7 @@ class JobWorker:
             name_user_files(out, job, payload.job, Path(tmp))
             report = {"status": "done", "job": payload.job.to_dict(), "digest": payload.digest, "attempts": payload.attempt,
                       "seconds": round(time.perf_counter() - started, 3), "quality": quality_figures(stages),
+                      "stage_status": stages.get("run", {}).get("stage_status", {}),
                       "stages": stages, "worker": worker_info(self.jobs_run, self.models.loads)}
             report = relative_paths(user_report(report, job, payload.job, Path(tmp)), out)   # no temporary paths
             write_json_atomic(out / REPORT, report)

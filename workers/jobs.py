@@ -8,7 +8,7 @@
     workers = 2                   # Ray workers (actors, each loads its models once); default: what fits
 
     [models]                      # optional: the diffusion models (hub ids or folders), as ModelConfig
-    base_model = "models/sd2-base"
+    base_model = "models/sd2-base"         # a folder beside this file (refused when missing), or a hub id
     inpaint_model = "models/sd2-inpainting"
     local_files_only = true
 
@@ -19,10 +19,10 @@
     name = "sofa-swamp"           # the output folder DIR/<name>/ (letters, digits, '.', '_', '-')
     asset = "assets/sofa"         # asset folder, or a file Blender reads (.blend with `object`)
     object = "Sofa"               # optional: the object inside a .blend / .glb
-    photo = "photos/swamp.jpg"
+    photo = "photos/swamp.jpg"    # the scene photo (a job of the convert stage alone needs none)
     at = [0.5, 0.7]               # where the asset stands: fractions of the photo's width and height
     preset = "balanced"           # draft | balanced | final
-    stages = ["convert", "light", "adapt", "compose", "bake"]
+    stages = ["convert", "light", "adapt", "compose", "bake"]   # which stages run, as `scenefit run` orders them
     mode = "scene"                # scene | generate | edit (adapt)
     prompt = "a leather sofa, soggy and stained with mud"   # optional prompts: also negative_prompt, and for
     # mode "edit" object_prompt and instruction (the prompt is made of them when it is left out)
@@ -35,7 +35,7 @@
     scene = "indoor"              # optional: the light stage's scene type, as --scene (default: "auto")
     depth_model = "depth-anything/Depth-Anything-V2-Small-hf"   # optional: the light stage's depth model
     turn = 0                      # optional: degrees the asset turns about its up axis after facing the camera
-    # also guidance_type, shadow_type, compose_spp, fspy, sun_shadow: as `scenefit run`'s options
+    # also guidance_type, shadow_type, compose_spp, fspy, sun_shadow: the table in docs/technical/jobs-file.md
 
 A job's keys other than name, asset, object, photo, at and stages are `scenefit run`'s settings, its
 RunConfig (core/pipeline/run_table.py holds the one table of them); a key the run does not take is
@@ -234,8 +234,8 @@ def _parse_settings(table: dict, path: Path) -> BatchSettings:
 
 
 def _parse_models(table: dict, path: Path) -> ModelConfig:
-    """The [models] table: ModelConfig's fields; a model or cache given as a path ('.', '/', '~') is
-    taken relative to the jobs file, a hub id as it is."""
+    """The [models] table: ModelConfig's fields; a model or cache given as a path is taken relative to the
+    jobs file and must be a folder there, a hub id is taken as it is (_model_path)."""
     if not isinstance(table, dict):
         raise InputError(f"{path.name}: [models] must be a table.")
     where = f"{path.name} [models]"
@@ -245,14 +245,33 @@ def _parse_models(table: dict, path: Path) -> ModelConfig:
         kind = bool if key not in ("base_model", "inpaint_model", "cache_dir", "device_type", "dtype_type") else str
         if not isinstance(value, kind):
             raise InputError(f"{where}: {key} must be a {'true/false' if kind is bool else 'string'}, got {value!r}.")
-        if key in ("base_model", "inpaint_model", "cache_dir") and isinstance(value, str) and \
-                _names_a_path(value, path):
-            value = str(_resolve(value, path))
+        if key in MODEL_PATH_KEYS and isinstance(value, str):
+            value = _model_path(key, value, path, where)
         values[key] = value
     try:
         return ModelConfig(**values)
     except InputError as error:
         raise InputError(f"{where}: {error}") from None
+
+
+MODEL_PATH_KEYS = ("base_model", "inpaint_model", "cache_dir")
+
+
+def _model_path(key: str, value: str, path: Path, where: str) -> str:
+    """A [models] value as the run reads it: a folder (absolute) when it is given as a path ('.', '/', '~'), is
+    a folder beside the jobs file, starts with one (`models/sd2-base` where `models/` is there), or is the
+    cache; else a hub id. A folder that does not exist is refused now: a run would take it for a hub id,
+    find no such model and go on without adaptation."""
+    folder = _resolve(value, path)
+    first = _resolve(Path(value).parts[0], path) if Path(value).parts else folder
+    if key == "cache_dir" or value.startswith((".", "/", "~")) or folder.exists() or \
+            (len(Path(value).parts) > 1 and first.is_dir()):
+        if not folder.is_dir():
+            hub = " or a hub id such as 'stabilityai/stable-diffusion-2-base'" if key != "cache_dir" else ""
+            raise InputError(f"{where}: {key} '{value}' names the folder '{folder}', which does not exist; give "
+                             f"an existing folder (relative to the jobs file){hub}.")
+        return str(folder)
+    return value
 
 
 def _is_number(value) -> bool:

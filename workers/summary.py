@@ -25,6 +25,12 @@ class JobOutcome:
     quality: dict = field(default_factory=dict)
     error: str | None = None
     reused: tuple[str, ...] = ()   # the stages taken from an earlier run, not run again
+    skipped: dict = field(default_factory=dict)   # {stage: why, in a few words} of the stages the job skipped
+
+    @property
+    def status_words(self) -> str:
+        """The status and what it hides: "done, adapt skipped: no weights"."""
+        return ", ".join([self.status, *(f"{name} skipped: {why}" for name, why in self.skipped.items())])
 
 
 def summary_table(outcomes: list[JobOutcome]) -> str:
@@ -33,7 +39,7 @@ def summary_table(outcomes: list[JobOutcome]) -> str:
     rule = "|" + "---|" * (6 + len(keys))
     rows = []
     for o in outcomes:
-        cells = [o.name, o.status, str(o.attempts), f"{o.seconds:.1f}", ", ".join(o.reused)]
+        cells = [o.name, o.status_words.replace("|", "/"), str(o.attempts), f"{o.seconds:.1f}", ", ".join(o.reused)]
         cells += ["" if o.quality.get(k) is None else _cell(o.quality[k]) for k in keys]
         cells.append((o.error or "").replace("|", "/"))
         rows.append("| " + " | ".join(cells) + " |")
@@ -53,7 +59,8 @@ def write_summary(out_dir: Path, outcomes: list[JobOutcome], jobs: JobsFile) -> 
     write_json_atomic(out_dir / SUMMARY_JSON, {
         "jobs_file": str(jobs.path), "counts": counts,
         "jobs": [{"name": o.name, "status": o.status, "attempts": o.attempts, "seconds": o.seconds,
-                  "reused": list(o.reused), "quality": o.quality, "error": o.error} for o in outcomes]})
+                  "reused": list(o.reused), "skipped_stages": o.skipped, "quality": o.quality, "error": o.error}
+                 for o in outcomes]})
     stopped = f", {counts['interrupted']} not run (the batch was interrupted)" if "interrupted" in counts else ""
     text = (f"# Batch {jobs.path.name}\n\n{counts['done']} done, {counts['skipped']} skipped (done before), "
             f"{counts['failed']} failed{stopped}.\n\n{summary_table(outcomes)}\n")

@@ -10,6 +10,10 @@ from .errors import InputError
 # render's memory is its film and the copies made of it (measured: about 80 bytes per pixel for
 # `scenefit render`), and 8192² is 5 GB already; nothing SceneFit makes needs more.
 MAX_RENDER_SIDE = 8192
+# The composite is made at the photo's own size up to this long side (a 24 MP photo is halved), which keeps
+# the compose stage's memory near 1.5 GB; the Compose button's Cycles render at a preset is capped alike (a
+# preset may ask for less: core/pipeline/preset_tables.py).
+COMPOSE_MAX_SIDE = 4096
 RENDER_BYTES_PER_PIXEL = 80
 # A (H, W, 5) float32 map stack, with the copies alive while it is resampled, clipped and handed to
 # Mitsuba as three bitmaps.

@@ -18,6 +18,7 @@ from pydantic import Field
 from ..base.errors import InputError
 from ..base.untrusted import Record, checked
 from .glb import read_gltf, write_glb
+from .gltf_images import BLENDER_READS, images_reencoded, needs_decoding
 
 EXTENSION = "EXT_meshopt_compression"
 _MIME = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".webp": "image/webp",
@@ -180,15 +181,18 @@ def decoded_glb(path: Path, out: Path) -> Path:
 
 @contextmanager
 def importable(path: Path):
-    """`path`, or while the block runs a decoded copy of it when it uses EXT_meshopt_compression."""
-    if not uses_meshopt(path):
+    """`path`, or while the block runs a copy of it Blender's importer reads: its EXT_meshopt_compression
+    data decoded, and images of a type the importer does not read (AVIF) as PNG (core/data/gltf_images.py)."""
+    meshopt_used, images = uses_meshopt(path), needs_decoding(path)
+    if not meshopt_used and not images:
         yield path
         return
-    try:
-        import meshopt  # noqa: F401  (meshoptimizer's decoder)
-    except ImportError:
-        raise InputError(f"'{path.name}' uses {EXTENSION}, whose decoder (PyPI 'meshopt') is not installed; "
-                         "run `make setup` or `pip install -r requirements.txt`.") from None
+    if meshopt_used:
+        try:
+            import meshopt  # noqa: F401  (meshoptimizer's decoder)
+        except ImportError:
+            raise InputError(f"'{path.name}' uses {EXTENSION}, whose decoder (PyPI 'meshopt') is not installed; "
+                             "run `make setup` or `pip install -r requirements.txt`.") from None
     with tempfile.TemporaryDirectory(prefix="scenefit-meshopt-") as folder:
         try:
             copy = decoded_glb(path, Path(folder) / f"{path.stem}.glb")
@@ -196,6 +200,8 @@ def importable(path: Path):
             why = _lower_first(str(error).rstrip("."))
             raise InputError(f"The {EXTENSION} data of '{path.name}' does not decode ({why}); check the file "
                              "with the Khronos glTF validator.") from None
+        if images:
+            images_reencoded(copy, BLENDER_READS)
         yield copy
 
 

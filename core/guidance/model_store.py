@@ -28,7 +28,7 @@ from pathlib import Path
 
 from ..base.errors import InputError, ModelMissingError, SceneFitError
 from ..base.progress import ProgressCallback, ProgressEvent, check_cancel, emit
-from .models import (BASE_PARTS, DEFAULT_BASE_MODEL, DEFAULT_DEPTH_MODEL, DEFAULT_INPAINT_MODEL, IGNORE_PATTERNS,
+from .models import (ABOUT_DOWNLOAD, BASE_PARTS, DEFAULT_DEPTH_MODEL, IGNORE_PATTERNS,
                      DEPTH_PATTERNS, INPAINT_PARTS, ModelConfig, hub_cache, hub_offline, hub_patterns)
 
 FOUND, PARTIAL, MISSING, FOLDER, FOLDER_INCOMPLETE = "found", "partial", "missing", "folder", "folder incomplete"
@@ -37,10 +37,6 @@ _COMMIT = re.compile(r"[0-9a-f]{40}")
 _ETAG = re.compile(r"[0-9a-f]{40}|[0-9a-f]{64}")   # a git blob's sha1 or an LFS file's sha256
 DOWNLOAD_STAGE = "download"
 
-# The download size of the default repositories' files that `allow` selects (the hub's listing), for the
-# cost before the first download: unet 3.46 GB + text encoder 1.36 GB + VAE 0.33 GB; a UNet; one small ViT.
-_ABOUT_BYTES = {DEFAULT_BASE_MODEL: 5_160_000_000, DEFAULT_INPAINT_MODEL: 3_460_000_000,
-                DEFAULT_DEPTH_MODEL: 99_000_000}
 
 
 @dataclass(frozen=True)
@@ -60,7 +56,7 @@ class ModelSpec:
 
     @property
     def about_bytes(self) -> int | None:
-        return _ABOUT_BYTES.get(self.model)
+        return ABOUT_DOWNLOAD.get(self.model)
 
 
 @dataclass(frozen=True)

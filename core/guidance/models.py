@@ -41,6 +41,10 @@ _PART_FILES = {"unet": ("*.json", "*.safetensors"), "vae": ("*.json", "*.safeten
                "text_encoder": ("*.json", "*.safetensors"), "tokenizer": ("*.json", "*.txt", "*.model"),
                "scheduler": ("*.json",)}
 DEPTH_PATTERNS = ["*.json", "*.safetensors"]
+# The download size of each default repository's files a run reads (the hub's listing), said before a download:
+# unet 3.46 GB + text encoder 1.36 GB + VAE 0.33 GB; a UNet; one small ViT.
+ABOUT_DOWNLOAD = {DEFAULT_BASE_MODEL: 5_160_000_000, DEFAULT_INPAINT_MODEL: 3_460_000_000,
+                   DEFAULT_DEPTH_MODEL: 99_000_000}
 
 
 def hub_patterns(parts: dict) -> list[str]:
@@ -169,8 +173,15 @@ def _missing_parts(folder: Path, parts: dict) -> list[str]:
     return missing
 
 
+# How a run goes on without the diffusion models, in each place a run is started (each a command or
+# setting that exists: tests/core/guidance/test_model_hints.py parses them).
+WITHOUT_GUIDANCE = ("or run without adaptation (`scenefit run --guidance none`, `scenefit demo --guidance none`; "
+                    "in Blender, Run All with Adaptation: None)")
+
+
 def locate_model(model: str, role: str, parts: dict, config: ModelConfig) -> Path:
-    """The folder holding `model` (a local folder, or the cached/downloaded hub snapshot).
+    """The folder holding `model` (a local folder, or the hub snapshot already in the cache). Never downloads:
+    only `scenefit models download` and the Preferences' Download do, when asked (core/guidance/model_store.py).
 
     Raises ModelMissingError naming the model, where it looked and how to provide it.
     """
@@ -178,14 +189,8 @@ def locate_model(model: str, role: str, parts: dict, config: ModelConfig) -> Pat
     local = Path(model).expanduser()
     is_folder = local.is_dir() or model.startswith((".", "/", "~")) or model.count("/") > 1
     if is_folder:
-        how = (f"Give a folder laid out like the hub repository ({layout}), a hub id such as "
-               f"'{DEFAULT_BASE_MODEL}', or run without diffusion guidance (`--guidance none`).")
-    else:
-        how = (f"Provide it by (a) downloading it (`scenefit models download`, or Download in SceneFit's "
-               f"Preferences), or running `hf download {model}` on a machine with internet and copying its cache here (or pointing the cache folder setting / HF_HUB_CACHE at it), or (b) giving "
-               f"a local folder with {layout} as the {role} model; or run without diffusion guidance "
-               f"(`--guidance none`).")
-    if is_folder:
+        how = (f"Give a folder laid out like the hub repository ({layout}), or a hub id such as "
+               f"'{DEFAULT_BASE_MODEL}'; {WITHOUT_GUIDANCE}.")
         if not local.is_dir():
             raise ModelMissingError(f"The {role} model folder '{local}' does not exist. {how}")
         missing = _missing_parts(local, parts)
@@ -204,19 +209,13 @@ def locate_model(model: str, role: str, parts: dict, config: ModelConfig) -> Pat
         folder = None
     if folder is not None and not _missing_parts(folder, parts):
         return folder
-    if config.offline:
-        why = "HF_HUB_OFFLINE is set" if not config.local_files_only else "local files only was asked for"
-        raise ModelMissingError(f"The {role} model '{model}' is not in the Hugging Face cache at '{cache}' "
-                                f"and downloading is off ({why}). {how}")
-    try:
-        folder = Path(snapshot_download(model, cache_dir=cache, allow_patterns=patterns, ignore_patterns=IGNORE_PATTERNS))
-    except Exception as error:
-        raise ModelMissingError(f"The {role} model '{model}' is not in the Hugging Face cache at '{cache}' and "
-                                f"could not be downloaded ({type(error).__name__}: {_first_sentence(error)}). {how}") from None
-    missing = _missing_parts(folder, parts)
-    if missing:
-        raise ModelMissingError(f"The {role} model '{model}' in '{folder}' lacks {', '.join(missing)}. {how}")
-    return folder
+    about = ABOUT_DOWNLOAD.get(model)
+    size = f", about {about / 1e9:.1f} GB" if about else ""
+    how = (f"Download it first (`scenefit models download`{size}, or Download in SceneFit's Preferences); "
+           f"without a network, run `hf download {model}` on a machine with one and copy its cache here (or "
+           f"point the cache folder setting / HF_HUB_CACHE at it); or give a local folder with {layout} as the "
+           f"{role} model; {WITHOUT_GUIDANCE}.")
+    raise ModelMissingError(f"The {role} model '{model}' is not in the Hugging Face cache at '{cache}'. {how}")
 
 
 def locate_models(config: ModelConfig, need_inpaint: bool) -> dict[str, Path]:
@@ -422,7 +421,6 @@ class DepthEstimator:
         # lazy: transformers takes seconds to load
         from transformers import AutoImageProcessor, AutoModelForDepthEstimation
 
-        only_local = hub_offline(local_files_only)
         local = Path(model).expanduser()
         try:
             if local.exists() or model.startswith((".", "/", "~")):
@@ -431,9 +429,9 @@ class DepthEstimator:
                 # lazy: huggingface_hub is needed only to find or fetch models
                 from huggingface_hub import snapshot_download
 
-                # One snapshot call fails at once without a network; transformers' own loading retries
-                # each file's request and took 100 s to give up.
-                source = snapshot_download(model, cache_dir=hub_cache(cache_dir), local_files_only=only_local,
+                # The cache alone (a download is asked for: `scenefit models download depth`, Preferences'
+                # Download); transformers' own loading retries each file's request and took 100 s to give up.
+                source = snapshot_download(model, cache_dir=hub_cache(cache_dir), local_files_only=True,
                                            allow_patterns=DEPTH_PATTERNS, ignore_patterns=IGNORE_PATTERNS)
             _check_depth_folder(Path(source))
             self.processor = AutoImageProcessor.from_pretrained(source, local_files_only=True)
@@ -441,9 +439,9 @@ class DepthEstimator:
                                                                      use_safetensors=True)
         except (OSError, ValueError) as error:
             raise ModelMissingError(
-                f"The depth model '{model}' was not found in {_where_looked(model, cache_dir)}"
-                f"{' (offline: downloads are off)' if only_local else ''}. Provide it by downloading it on a "
-                f"connected machine (`scenefit models download depth`, or `hf download {model}`) into that cache, or pass a local folder "
+                f"The depth model '{model}' was not found in {_where_looked(model, cache_dir)}. Download it first "
+                f"(`scenefit models download depth`, or Download in SceneFit's Preferences; without a network, "
+                f"`hf download {model}` on a machine with one, into that cache), or pass a local folder "
                 f"holding config.json, the weights and preprocessor_config.json (--depth-model PATH); or use "
                 f"the geometric fallback (--depth geometric). Cause: {_first_sentence(error)}") from error
         self.model.eval().to(device)

@@ -1,20 +1,26 @@
 """What run_pipeline returns: a RunResult of StageRecords, typed, and its report.json as `to_report()`.
 
     result = run_pipeline(...)
-    result.stages["light"].status          # "ran" | "reused" | "skipped"
+    result.stages["light"].status          # "ran" | "reused" | "skipped" | "not listed"
     result.reused                           # ("convert", "light")
     result.texture_stage                    # "adapt" when adapt made the texture, else "convert"
     result.outputs("compose")["composite"]  # a stage's own outputs
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 
+# A stage's status when the run was not asked for it (a job's stages leave it out): not a skip to be said.
+NOT_LISTED = "not listed"
+
+
 @dataclass(frozen=True)
 class StageRecord:
-    """One stage of a run: ran, reused (from this folder or, `source`, an earlier run's) or skipped (`why`)."""
+    """One stage of a run: ran, reused (from this folder or, `source`, an earlier run's), skipped (`why`), or
+    not listed (the run was not asked for it)."""
 
     name: str
     status: str
@@ -29,8 +35,12 @@ class StageRecord:
         """Whether the stage's outputs are there (it ran or was reused)."""
         return self.status in ("ran", "reused")
 
+    def status_words(self) -> dict:
+        """{"status", "why"}: report.json's `stage_status` entry, the same shape in demo, run and batch."""
+        return {"status": self.status, "why": self.why}
+
     def to_report(self) -> dict:
-        if self.status == "skipped" or not self.done:
+        if not self.done:
             return {"status": self.status, "why": self.why}
         out = {"status": self.status, "key": self.key, "seconds": self.seconds, "report": self.report}
         return out if self.source is None else dict(out, **{"from": self.source})
@@ -70,10 +80,40 @@ class RunResult:
     def outputs(self, name: str) -> dict:
         return dict(self.stages[name].report.get("outputs", {}))
 
+    def stage_status(self) -> dict:
+        """Each stage's status and why: report.json's `stage_status`, one place and shape in demo, run and batch."""
+        return {name: stage.status_words() for name, stage in self.stages.items()}
+
     def to_report(self) -> dict:
         """report.json's content (paths as they are here; write_report makes them relative to the folder)."""
-        return {"stage": "run", "config": self.config, "inputs": self.inputs,
+        return {"stage": "run", "config": self.config, "inputs": self.inputs, "stage_status": self.stage_status(),
                 "stages": {name: stage.to_report() for name, stage in self.stages.items()},
                 "camera": None if self.camera is None else self.camera.to_report(),
                 "composite": str(self.composite) if "compose" in self.stages else None, "reused": list(self.reused),
                 "environment": self.environment, "seconds_total": self.seconds}
+
+
+# -- what a run's stage_status ({stage: {"status", "why"}}) says in a line: the terminal, summary.md --------
+
+def reason(why: str) -> str:
+    """Why a stage was skipped, in a few words: `why`'s first clause ("no weights", "--no-bake was given")."""
+    return re.split(r": | \(|; |, so ", why, maxsplit=1)[0].strip()
+
+
+def skipped_reasons(stage_status: dict) -> dict[str, str]:
+    """{stage: its reason in a few words} of the stages a run skipped."""
+    return {name: reason(stage.get("why", "")) for name, stage in stage_status.items()
+            if isinstance(stage, dict) and stage.get("status") == "skipped"}
+
+
+def stage_words(stage_status: dict) -> str:
+    """Each stage and what became of it, a skipped one with its reason: "convert ran, adapt skipped: no weights"."""
+    skipped = skipped_reasons(stage_status)
+    return ", ".join(f"{name} {stage.get('status')}" + (f": {skipped[name]}" if name in skipped else "")
+                     for name, stage in stage_status.items() if isinstance(stage, dict))
+
+
+def skipped_lines(stage_status: dict) -> list[str]:
+    """One line per skipped stage whose why says more than its reason (what to do to have it run)."""
+    return [f"  {name} skipped: {stage_status[name]['why']}" for name, short in skipped_reasons(stage_status).items()
+            if stage_status[name].get("why", "") != short]

@@ -61,7 +61,7 @@ from ..texture.bake import WEIGHTS_FILE, load_neural_texture
 from ..texture.surface_layout import texture_view
 from . import stage_configs
 from .presets import stage_config
-from .result import RunResult, StageRecord
+from .result import NOT_LISTED, RunResult, StageRecord
 from .run_config import RunConfig, stage_subset
 
 STAGE_FILE = "stage.json"
@@ -496,11 +496,11 @@ class PipelineRun:
 
     def adapt(self) -> None:
         if "adapt" not in self.stages:
-            self.runner.skip("adapt", "skipped", "the run's stages do not list adapt")
+            self.runner.skip("adapt", NOT_LISTED, "the run's stages do not list adapt")
             return
         if not self.found:
-            self.runner.skip("adapt", "skipped", f"Stable Diffusion 2 weights are not on this machine, so the "
-                             f"converted texture is composed as it is ({self.where})"
+            self.runner.skip("adapt", "skipped", f"no weights: Stable Diffusion 2's weights are not on this machine, "
+                             f"so the converted texture is composed as it is ({self.where})"
                              if self.config.guidance_type == "auto" else self.where)
             return
         config = self.adapt_config()
@@ -554,7 +554,7 @@ class PipelineRun:
         without adaptation, else when adapt calls texture_final), waited for after the block, and
         stopped if the block fails (a cancel, a refusal), so no bake outlives its run."""
         if bake is None:
-            self.runner.skip("bake", "skipped", skipped_why)
+            self.runner.skip("bake", "skipped" if "bake" in self.stages else NOT_LISTED, skipped_why)
             yield
             return
         started: list = []   # the bake's process, once begun

@@ -23,7 +23,7 @@ class RunConfig:
     view), Blender's Run All and a remote worker all build this, and run_pipeline takes nothing else."""
 
     preset: str = "balanced"                  # draft | balanced | final, for every stage
-    mode: str = "scene"                       # adapt: scene (fit the photo) | generate | edit (names.MODES)
+    mode: str = "scene"                       # adapt: scene (fit the photo) | generate | edit
     prompt: str = ""                          # adapt: what the asset should become in this scene
     negative_prompt: str = ""                 # adapt: what it should not look like
     object_prompt: str = ""                   # adapt, mode edit: what the asset is ...
@@ -31,22 +31,24 @@ class RunConfig:
     seed: int | None = None                   # convert's fit and adapt's noise (None: each stage's default)
     guidance_type: str = "auto"               # adapt (and the light critic): sd2 | none | auto (sd2 when found)
     size: float = DEFAULT_OBJECT_SIZE         # compose: fraction of the photo's height the asset spans (--object-size)
-    shadow_type: str = "ratio"
-    compose_spp: int | None = None
+    shadow_type: str = "ratio"                # compose: ratio (a shadow catcher) | paper (the thresholded matte) | none
+    compose_spp: int | None = None            # compose: samples per pixel (None: from the preset's noise target)
     photo_camera: PhotoCamera | None = None   # None: the photo's camera as estimated (core/stages/camera.py)
     fspy: str | None = None                   # an fSpy project of the photo: its solved camera is used
-    camera_overrides: dict = field(default_factory=dict)   # {stages.camera.CAMERA_VALUES key: value} over the estimate
-    camera_source: str = "user"               # where camera_overrides come from: "user", or "blender" (the scene camera)
+    camera_overrides: dict = field(default_factory=dict)   # the photo's camera over the estimate: field of view,
+                                                           # pitch and roll (degrees), lens shift x and y
+    camera_source: str = "user"               # where those camera values come from: "user", or "blender" (the scene camera)
     camera_why: str = "given by the user"     # ... said in the report's camera notes
     turn_deg: float = 0.0                     # compose: the asset turned about Z after facing the camera
-    # The artist's dominant light (light stage): (azimuth, elevation) in degrees as --sun takes it, or a shadow's
-    # FOOT, TOP, TIP (each as --at takes a point) that gives it through the photo's camera; None: guessed.
-    sun_deg: tuple[float, float] | None = None
-    sun_shadow: tuple[str, str, str] | None = None
-    sun_uncertainty_deg: float = 0.0          # how far off sun_deg may be (Pick Sun's clicks); a shadow gives its own
+    # The artist's dominant light for the light stage (neither given: guessed), as the sun's angles or a shadow's points.
+    sun_deg: tuple[float, float] | None = None   # light: the sun's (azimuth, elevation) in degrees, as --sun takes it
+    sun_shadow: tuple[str, str, str] | None = None   # light: a shadow's foot, top and tip (each as --at takes a
+                                                     # point), which give the sun through the photo's camera
+    sun_uncertainty_deg: float = 0.0          # how far off the sun's angles may be, degrees (Pick Sun's clicks); a
+                                              # shadow gives its own
     scene_type: str = "auto"                  # light: indoor | outdoor | auto (decided from the photo, or unsure)
     depth_model: str | None = None            # light: hub id or folder of the depth model (None: the default),
-                                              # looked for where `models` are (their cache and offline switch)
+                                              # looked for where the diffusion models are ([models]' cache)
     models: ModelConfig = field(default_factory=ModelConfig)
     # Settings over the preset's, per stage ("convert", "light", "adapt", "compose"), as the stage's config takes them:
     # quick looks, tests and benchmarks (e.g. {"adapt": {"iterations": 4}}). Part of each stage's key.

@@ -43,6 +43,7 @@ from ..render.denoise import DENOISER_TYPES, denoise, oidn_available
 from ..base.atomic import write_json_atomic
 from ..base.errors import InputError, check_choice
 from ..base.names import SHADOW_TYPES
+from ..base.limits import COMPOSE_MAX_SIDE
 from ..base.untrusted import parse_json, read_bytes
 from ..data.imageio import linear_to_srgb, srgb_to_linear, write_image
 from ..data.mesh import Mesh, normalize_to_unit_sphere
@@ -55,9 +56,6 @@ from ..scene.mattes import composite_linear, paper_shadow_matte
 from ..scene.placement import DEFAULT_OBJECT_SIZE
 
 SAMPLER_TYPES = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
-# The composite is made at the photo's own size up to this long side (a 24 MP photo is halved), which
-# keeps the stage's memory near 1.5 GB; the light stage works on a smaller copy.
-COMPOSE_MAX_SIDE = 4096
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
 
 

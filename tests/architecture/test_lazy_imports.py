@@ -14,6 +14,7 @@ BOUNDARIES = frozenset({
     "mitsuba", "drjit", "bpy", "ray", "pyoidn", "openai",
     "cv2", "OpenImageIO",   # the extension registers without them (missing_modules)
     "xatlas", "meshopt",    # wheels not on every platform
+    "PIL",                  # Pillow: diffusers brings it; only glTF files with WebP or AVIF images need it
     "fcntl", "msvcrt", "resource",   # one operating system's
 })
 

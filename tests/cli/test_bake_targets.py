@@ -9,12 +9,12 @@ import pytest
 
 from scenefit.core.data.glb import gltf_json
 from scenefit.core.stages.bake.engine_targets import COMPRESSION_EXTENSION, TARGETS
+from scenefit.core.stages.bake.gltf_output import MIME_OF_FORMAT
 
 from conftest import ROOT, scenefit_process, scenefit_side_by_side
 
 CORPUS = Path(os.environ.get("SCENEFIT_CORPUS", ROOT.parent / "shared" / "corpus")) / "assets"
 TOY_CAR = CORPUS / "khronos_ToyCar" / "ToyCar.gltf"
-MIME_OF_FORMAT = {"png": "image/png", "jpeg": "image/jpeg", "webp": "image/webp", "ktx2": "image/ktx2"}
 ENGINES = ("web", "godot", "unity", "unreal")
 
 
@@ -76,3 +76,41 @@ def test_a_report_naming_the_bakes_own_output_is_refused_before_work(tmp_path, l
         assert str(report) in proc.stderr and ("the bake itself writes" in proc.stderr or
                                               "does not exist" in proc.stderr), proc.stderr
         assert not out.exists() and not report.exists()
+
+
+TRUCK = CORPUS / "khronos_CesiumMilkTruck_draco" / "CesiumMilkTruck.gltf"
+INGENUITY = CORPUS / "nasa_ingenuity_meshopt" / "Ingenuity.glb"
+# (input, the targets it is baked for): every target sees a Draco, a meshopt and a WebP input; WebP and AVIF
+# (required extensions, written by glTF-Transform) are formats the Unity and Unreal importers do not read.
+INPUTS = {"draco": ("unity", "godot"), "meshopt": ("unreal", "web"), "webp": ENGINES, "avif": ("unity",)}
+
+
+def test_every_target_from_draco_meshopt_webp_and_avif_inputs(tmp_path, validator, gltf_transform):
+    """An engine's bake of any valid input: a geometry compression or texture format the engine does not read
+    becomes one it does (the input's WebP images re-encoded as PNG after Blender's exporter, its AVIF ones
+    before Blender's importer), and the file validates with 0 errors."""
+    if not (TRUCK.is_file() and INGENUITY.is_file()):
+        pytest.skip(f"the development corpus is not at {CORPUS.parent} (set SCENEFIT_CORPUS)")
+    files = {"draco": TRUCK, "meshopt": INGENUITY}
+    for fmt in ("webp", "avif"):
+        files[fmt] = tmp_path / f"truck_{fmt}.glb"
+        gltf_transform(fmt, TRUCK, files[fmt])
+        assert gltf_json(files[fmt])["extensionsRequired"] == [f"EXT_texture_{fmt}"]
+    # The file's validity does not depend on the texture's fit (nor on whose fit it is): one short fit for all.
+    proc = scenefit_process("convert", TRUCK, "--out", tmp_path / "convert", "--preset", "draft", "--resolution",
+                            "32", "--iterations", "10", "--quiet")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    texture = tmp_path / "convert" / "maps" / "texture.pt"
+    bakes = [(fmt, engine, tmp_path / f"{fmt}_{engine}.glb") for fmt, engines in INPUTS.items() for engine in engines]
+    results = scenefit_side_by_side(*[("bake", files[fmt], "--texture", texture, "--out", out, "--target", engine,
+                                       "--max-texture", "64", "--quiet") for fmt, engine, out in bakes])
+    for (code, err), (fmt, engine, out) in zip(results, bakes):
+        assert code == 0, f"{fmt} for {engine}: {err[-2000:]}"
+        report = validator(str(out))
+        assert report["issues"]["numErrors"] == 0, (fmt, engine, report["issues"]["messages"][:5])
+        document, target = gltf_json(out), TARGETS[engine]
+        used = set(document.get("extensionsUsed", []))
+        assert used <= target.extensions, (fmt, engine, used - target.extensions)
+        mimes = {image.get("mimeType") for image in document.get("images", [])}
+        assert mimes and mimes <= {MIME_OF_FORMAT[f] for f in target.textures}, (fmt, engine, mimes)
+    assert {i.get("mimeType") for i in gltf_json(tmp_path / "webp_godot.glb")["images"]} == {"image/webp"}

@@ -110,3 +110,29 @@ def test_the_presets_rows_are_the_tables_and_the_resolved_defaults():
     assert adapt["iterations"][2] == f"{stage_config('adapt', 'final', prompt='x').iterations}"   # (in the table)
     assert adapt["views_per_step"][2] == f"{stage_config('adapt', 'final', prompt='x').views_per_step} (default)"
     assert adapt["size_scale"][2] == "1.0 (default)"
+
+
+def test_the_jobs_file_tables_describe_every_key_in_the_files_words():
+    """The jobs-file page's tables (docs/technical/jobs-file.md): every key has a meaning, and no meaning names a
+    Python field the file has no key for (the run's camera_overrides is the file's `camera`)."""
+    import dataclasses
+    import re
+
+    from dataclass_fields import dataclass_rows
+
+    from scenefit.core.guidance.models import ModelConfig
+    from scenefit.core.pipeline.run_config import RunConfig
+    from scenefit.core.pipeline.run_table import RUN_KEYS
+    from scenefit.workers.jobs import BatchSettings, Job
+
+    tables = {"run": (RunConfig, dataclass_rows(RunConfig, keys=RUN_KEYS)),
+              "job": (Job, dataclass_rows(Job, exclude={"run"})),
+              "batch": (BatchSettings, dataclass_rows(BatchSettings)),
+              "models": (ModelConfig, dataclass_rows(ModelConfig))}
+    for name, (cls, rows) in tables.items():
+        keys = {row[0] for row in rows}
+        hidden = {f.name for f in dataclasses.fields(cls) if "_" in f.name} - keys
+        for key, _type, _default, meaning in rows:
+            assert meaning.strip(), f"[{name}] {key} has no meaning in the table"
+            named = set(re.findall(r"[a-z]+_[a-z_]+", meaning)) & hidden
+            assert not named, f"[{name}] {key}'s meaning names {named}, which a jobs file does not spell"

@@ -55,6 +55,9 @@ def test_a_job_may_name_the_folder_a_gltf_came_in(tmp_path):
     (lambda t: t + "[[job\n", "not valid TOML"),
     (lambda t: t + "[models]\nbase = 'x'\n", r"\[models\]: unknown key 'base'"),
     (lambda t: t + "[models]\ndevice_type = 'tpu'\n", "device_type must be one of"),
+    (lambda t: t + "[models]\nbase_model = './models/sd2-base'\n", r"base_model './models/sd2-base' names the "
+                                                                  r"folder .* which does not exist"),
+    (lambda t: t + "[models]\ncache_dir = 'hub-cache'\n", r"cache_dir 'hub-cache' names the folder"),
     (lambda t: t.replace("seed = 1", "overrides = { paint = { iterations = 2 } }"), "unknown stage 'paint'"),
 ])
 def test_jobs_file_errors_are_one_sentence(tmp_path, change, message):
@@ -63,6 +66,19 @@ def test_jobs_file_errors_are_one_sentence(tmp_path, change, message):
     with pytest.raises(InputError, match=message) as error:
         load_jobs(path)
     assert "\n" not in str(error.value).strip()
+
+
+def test_models_given_as_folders_are_folders_and_hub_ids_stay_ids(tmp_path):
+    """The docs' example `base_model = "models/sd2-base"`: with models/ beside the jobs file it is that folder,
+    refused while it is missing; without models/ it is a hub id (owner/name), as the run looks it up."""
+    path = make_inputs(tmp_path)
+    path.write_text(path.read_text() + '[models]\nbase_model = "models/sd2-base"\n')
+    assert load_jobs(path).jobs[0].models.base_model == "models/sd2-base"          # a hub id
+    (tmp_path / "models").mkdir()
+    with pytest.raises(InputError, match="names the folder .*sd2-base', which does not exist"):
+        load_jobs(path)
+    (tmp_path / "models" / "sd2-base").mkdir()
+    assert load_jobs(path).jobs[0].models.base_model == str((tmp_path / "models" / "sd2-base").resolve())
 
 
 def test_in_process_batch_writes_folders_summary_and_resumes(in_process, capsys):
@@ -381,3 +397,28 @@ def test_a_batch_stopped_half_way_says_which_jobs_it_finished_and_its_summary_ma
         (out / "summary.md").read_text()
     assert (out / "c" / "report.json").read_text() == before   # a job not reached is as it was
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]   # nothing half-written beside it
+
+
+def test_a_job_whose_adapt_was_skipped_says_so_everywhere(tmp_path, capsys):
+    """A job that lists adapt on a machine without the weights is done, and its skip is said: the command's
+    line for the job, report.json's stage_status (the place a run's report has it), summary.md and .json."""
+    make_inputs(tmp_path)
+    (tmp_path / "empty-cache").mkdir()   # no weights, whatever this machine holds
+    (tmp_path / "jobs.toml").write_text(
+        '[models]\ncache_dir = "empty-cache"\n[defaults]\npreset = "draft"\nphoto = "room.png"\nat = [0.5, 0.7]\n'
+        'stages = ["convert", "light", "adapt", "compose"]\n[[job]]\nname = "a"\nasset = "ball"\n'
+        'overrides = { convert = { iterations = 20 } }\n')
+    out = tmp_path / "out"
+    assert main(["batch", str(tmp_path / "jobs.toml"), "--out", str(out)]) == 0
+    said = capsys.readouterr()
+    assert "[a] done in" in said.err and "; adapt skipped: no weights" in said.err
+    assert "a skipped stages (summary.md says which and why)" in said.out
+    report = json.loads((out / "a" / "report.json").read_text())
+    assert report["status"] == "done" and report["stage_status"]["adapt"]["status"] == "skipped"
+    assert report["stage_status"] == report["stages"]["run"]["stage_status"]   # one shape, as `scenefit run` writes it
+    assert "scenefit models download" in report["stage_status"]["adapt"]["why"]
+    assert "| a | done, adapt skipped: no weights | 1 |" in (out / "summary.md").read_text()
+    assert json.loads((out / "summary.json").read_text())["jobs"][0]["skipped_stages"] == {"adapt": "no weights"}
+    # Run again: the job is skipped as done before, and what it skipped is still said.
+    assert main(["batch", str(tmp_path / "jobs.toml"), "--out", str(out)]) == 0
+    assert "| a | skipped, adapt skipped: no weights |" in (out / "summary.md").read_text()

@@ -21,6 +21,7 @@ TEXTURE_FORMATS = ("png", "jpeg", "webp", "ktx2")
 DEFAULT_MAX_TEXTURE = 2048
 _COMPRESSION_OF_EXTENSION = {"KHR_draco_mesh_compression": "draco", "EXT_meshopt_compression": "meshopt"}
 _FORMAT_OF_MIME = {"image/png": "png", "image/jpeg": "jpeg", "image/webp": "webp", "image/ktx2": "ktx2"}
+MIME_OF_FORMAT = {name: mime for mime, name in _FORMAT_OF_MIME.items()}
 # Blender's exporter compresses TANGENT inside the Draco data, where a degenerate UV triangle's zero tangent
 # can be neither kept from the input nor mended: a Draco file goes without, and clients generate them.
 DRACO_TANGENTS = ("the input's tangents are not written into Draco-compressed meshes: engines generate "

@@ -46,10 +46,16 @@ def test_run_composes_and_a_second_run_reuses_every_stage(tmp_path):
     light = report["stages"]["light"]["report"]
     assert light["map_size"] == [128, 64] and "capped at the draft preset" in light["decisions"]["envmap_height"]["why"]
 
-    second = scenefit_here("run", *args)
+    second = scenefit_here("run", *args[:-1])   # (not --quiet: what the terminal says)
     assert second.returncode == 0, second.stderr
     again = json.loads((out / "report.json").read_text())
     assert again["reused"] == ["convert", "light", "compose"]
+    # A skipped stage is said with its reason, on the line and in report.json's stage_status (demo's and batch's too).
+    line = second.stdout.splitlines()[0]
+    assert "adapt skipped: guidance none" in line and "bake skipped: " in line and "compose reused" in line
+    assert again["stage_status"]["adapt"] == {"status": "skipped", "why": "guidance none"}
+    assert {name: s["status"] for name, s in again["stage_status"].items()} == \
+        {name: s["status"] for name, s in again["stages"].items()}
 
     # A compose setting changes only the compose stage.
     third = scenefit_here("run", *args[:-3], "--spp", "2", "--quiet")

@@ -45,18 +45,21 @@ def demo_run(tmp_path_factory, example_asset):
     # Every stage runs (about 2 minutes on a quiet 2-core machine); room for a machine shared with others.
     proc = scenefit("demo", "--out", str(out), "--preset", "draft", timeout=1800)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    return out, json.loads((out / "report.json").read_text())
+    return out, json.loads((out / "report.json").read_text()), proc.stdout
 
 
 def test_demo_runs_the_pipeline_and_writes_the_sheet(demo_run):
-    out, report = demo_run
+    out, report, said = demo_run
     assert report["inputs"]["asset"] == "reused"
     assert report["convert"]["psnr_covered_texels_db"] >= 30.0
     assert report["environment"]["mitsuba_variant"] in ("llvm_ad_rgb", "cuda_ad_rgb")
     # Lit by the HDR map estimated from the photo; without a critic the prior sets the scales, and says so.
     assert report["lighting"]["stage"] == "light" and report["lighting"]["decisions"]["critic"]["used"] is False
     assert (out / "light" / "light.exr").is_file() and (out / "input" / "photo.png").is_file()
-    assert report["adapt"]["status"] == "skipped" and "not on this machine" in report["adapt"]["why"]
+    # A skipped stage is said where every run says it: report.json's stage_status, and the terminal.
+    adapt = report["stage_status"]["adapt"]
+    assert adapt["status"] == "skipped" and adapt["why"].startswith("no weights: ") and "not on this machine" in adapt["why"]
+    assert "adapt skipped: no weights" in said.splitlines()[0] and "scenefit models download" in said
     for name in ("base_color.png", "roughness.png"):
         assert (out / "convert" / "maps" / name).is_file()
     photo = read_image(out / "input" / "photo.png")
@@ -64,11 +67,12 @@ def test_demo_runs_the_pipeline_and_writes_the_sheet(demo_run):
     assert composite.shape == photo.shape and 0 < report["compose"]["changed_pixels"] < photo.shape[0] * photo.shape[1]
     sheet = read_image(out / "sheet.png")
     assert sheet.shape[1] == 3 * photo.shape[1]
-    assert report["run"]["bake"]["status"] == "skipped" and "asset folder" in report["run"]["bake"]["why"]
+    bake = report["stage_status"]["bake"]
+    assert bake["status"] == "skipped" and "asset folder" in bake["why"]
 
 
 def test_baked_maps_read_back_match_the_network_within_one_level(demo_run, example_asset):
-    out, _ = demo_run
+    out, _, _ = demo_run
     texture = load_neural_texture(out / "convert" / "maps" / "texture.pt")
     mesh, _ = load_asset_folder(example_asset)
     normalized, _ = normalize_to_unit_sphere(mesh)
