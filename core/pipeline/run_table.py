@@ -18,9 +18,9 @@ from dataclasses import dataclass, fields, is_dataclass
 from typing import Any, Callable
 
 from ..base.errors import InputError
-from ..base.names import CONFIG_STAGES
 from ..stages.camera import CAMERA_VALUES
 from .presets import stage_config, with_overrides
+from .registry import names
 from .run_config import RunConfig
 
 # Fields a table does not carry: photo_camera is a PhotoCamera object a Python caller already holds (a table
@@ -97,9 +97,10 @@ def _overrides(value, where: str) -> dict:
     if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
         raise InputError(f"{where}: overrides must be a table of stage tables, e.g. "
                          "{ adapt = { iterations = 50 } }.")
-    unknown = sorted(set(value) - set(CONFIG_STAGES))
+    configured = names().CONFIG_STAGES
+    unknown = sorted(set(value) - set(configured))
     if unknown:
-        raise InputError(f"{where}: overrides names unknown stage '{unknown[0]}'; it takes {', '.join(CONFIG_STAGES)}.")
+        raise InputError(f"{where}: overrides names unknown stage '{unknown[0]}'; it takes {', '.join(configured)}.")
     return {stage: dict(settings) for stage, settings in value.items()}
 
 
@@ -131,10 +132,11 @@ KEYS = tuple(k.key for k in RUN_KEYS)
 _BY_KEY = {k.key: k for k in RUN_KEYS}
 
 
-def run_config(table: dict, where: str, stages: tuple[str, ...] = CONFIG_STAGES, **given) -> RunConfig:
+def run_config(table: dict, where: str, stages: tuple[str, ...] | None = None, **given) -> RunConfig:
     """The RunConfig of `table` (keys of RUN_KEYS; others are the caller's to refuse), with `given` fields
     (models) over it; every problem one sentence beginning with `where`. The settings of `stages` (those
     the run will resolve) are checked against the stage configs they go to."""
+    stages = names().CONFIG_STAGES if stages is None else stages
     values = {_BY_KEY[k].field: _BY_KEY[k].read(v, where) for k, v in table.items() if k in _BY_KEY}
     # Guidance is adapt's (and the light critic's beside it): a run without adapt has none.
     values.setdefault("guidance_type", "auto" if "adapt" in stages else "none")
@@ -157,10 +159,12 @@ def run_table(config: RunConfig) -> dict:
     return {k.key: k.write(getattr(config, k.field)) for k in RUN_KEYS}
 
 
-def check_stage_settings(config: RunConfig, where: str, stages: tuple[str, ...] = CONFIG_STAGES) -> None:
+def check_stage_settings(config: RunConfig, where: str, stages: tuple[str, ...] | None = None) -> None:
     """The config of each of `stages` as the run resolves it, built now: an override the stage config does not
     have, or of the wrong type, and a mode without its prompts, are one sentence naming `where` and the key."""
-    for stage in (s for s in CONFIG_STAGES if s in stages or s in config.stage_overrides):
+    configured = names().CONFIG_STAGES
+    stages = configured if stages is None else stages
+    for stage in (s for s in configured if s in stages or s in config.stage_overrides):
         overrides = config.overrides(stage)
         # (a scene run without a prompt is given one from the asset's name: any text stands for it here)
         prompt = config.prompt or ("x" if config.mode == "scene" else "")

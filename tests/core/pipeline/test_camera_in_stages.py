@@ -42,16 +42,16 @@ def test_a_photo_without_lines_keeps_the_default_camera_and_says_so(tmp_path, in
 
 
 def test_the_users_pitch_roll_and_fov_win_and_reach_compose(tmp_path, inputs, monkeypatch):
-    import scenefit.core.pipeline.run as run_module
+    import scenefit.core.pipeline.steps.compose as compose_step
 
     seen = {}
-    real = run_module.compose_to_folder
+    real = compose_step.compose_to_folder
 
     def spy(inputs_, *args, **kwargs):
         seen["camera"] = inputs_.camera
         return real(inputs_, *args, **kwargs)
 
-    monkeypatch.setattr(run_module, "compose_to_folder", spy)
+    monkeypatch.setattr(compose_step, "compose_to_folder", spy)
     got = run(tmp_path, *inputs, "--pitch", "-20", "--roll", "3", "--fov", "50")
     camera = got["light"]["camera"]
     assert (camera["pitch_deg"], camera["roll_deg"], camera["fov_deg"]) == (-20.0, 3.0, 50.0)
