@@ -25,6 +25,7 @@ from types import ModuleType
 from typing import Any, Callable, Iterator, Mapping
 
 from ..base.errors import InputError
+from ..stages.camera_stage import CAMERA_FILE
 from .preset_tables import TABLES
 from .resolve import resolve_adapt, resolve_compose, resolve_convert, resolve_light
 
@@ -76,13 +77,13 @@ class Stage:
 
 REGISTRY: list[Stage] = [
     Stage("convert", ".steps.convert", resolve_convert, TABLES["convert"], inputs=("asset",),
-          writes={"texture": "maps/texture.pt"}, alone=True,
+          writes={"texture": "maps/texture.pt", "base_color": "maps/base_color.png"}, alone=True,
           shape=StageShape("core/stages/convert.py", "run_convert", "write_convert"),
           expected_seconds={"draft": 0.082, "balanced": 0.112, "final": 0.24}),
-    Stage("camera", ".steps.camera", inputs=("photo",), writes={"camera": "camera.json"}, listed=False,
+    Stage("camera", ".steps.camera", inputs=("photo",), writes={"camera": CAMERA_FILE}, listed=False,
           needs_photo=True, later_stages_follow=False),
     Stage("light", ".steps.light", resolve_light, TABLES["light"], reads=("convert", "camera"),
-          inputs=("photo", "placement", "sun_shadow"), writes={"light": "light.exr"}, needs_photo=True,
+          inputs=("photo", "placement", "sun_shadow"), writes={"light": "light.exr", "preview": "light_preview.png"}, needs_photo=True,
           alone=True, photo_only=True, shape=StageShape("core/stages/light/stage.py", "run_light", "write_light"),
           expected_seconds={"draft": 0.031, "balanced": 0.032, "final": 0.03}),
     Stage("adapt", ".steps.adapt", resolve_adapt, TABLES["adapt"], reads=("convert", "camera", "light"),

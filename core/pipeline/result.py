@@ -11,6 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .layout import RunLayout
+
 
 @dataclass(frozen=True)
 class StageRecord:
@@ -59,7 +61,7 @@ class RunResult:
 
     @property
     def composite(self) -> Path:
-        return self.folder / "compose" / "composite.png"
+        return RunLayout(self.folder).file("compose", "composite")
 
     @property
     def texture_stage(self) -> str:
