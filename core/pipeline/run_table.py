@@ -123,8 +123,8 @@ RUN_KEYS: tuple[RunKey, ...] = (
     RunKey("negative_prompt", "negative_prompt", _text("negative_prompt"),
            help="adapt: what the asset should not look like"),
     RunKey("object_prompt", "object_prompt", _text("object_prompt"), help="adapt: the object, e.g. 'a leather sofa' "
-           "(edit: with the instruction it makes the prompt; `scenefit run` without --prompt has a language model "
-           "write the prompt from it and --scene-prompt)"),
+           "(edit: with the instruction it makes the prompt; on the command line without --prompt, a language "
+           "model writes the prompt from it and --scene-prompt)"),
     RunKey("instruction", "instruction", _text("instruction"), help="adapt, mode edit: how to change the asset, "
            "e.g. 'add dust to the sofa'"),
     RunKey("seed", "seed", _whole("seed"), help="convert's fit and adapt's noise (default: each stage's)",
