@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from .core.data.asset_io import is_asset_folder, load_asset_folder
-from .core.stages.camera_stage import CAMERA_FILE, read_camera
+from .core.pipeline.layout import RunLayout
+from .core.stages.camera_stage import read_camera
 from .core.stages.compose import ComposeInputs, compose_to_folder
 from .core.data.imageio import read_image, write_image
 from .core.data.photo import load_photo
@@ -96,7 +97,8 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     # The same composite under a constant light of the estimated map's mean radiance: what the
     # direction of the light adds.
     t = time.perf_counter()
-    estimated = load_environment(out / "light" / "light.exr")
+    layout = RunLayout(out)
+    estimated = load_environment(layout.file("light", "light"))
     constant = constant_environment(estimated.reshape(-1, 3).mean(axis=0))
     compose_stage = run.stages["compose"].report
     texture_path = Path(compose_stage["inputs"]["texture"])
@@ -104,7 +106,7 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     texture = load_neural_texture(texture_path)
     view = texture_view(texture, mesh)
     mesh, stack = view.mesh, view.stack(texture)
-    camera, _ = read_camera(out / "camera" / CAMERA_FILE, photo.shape[1], photo.shape[0])   # the run's camera stage
+    camera, _ = read_camera(layout.file("camera", "camera"), photo.shape[1], photo.shape[0])   # the run's camera stage
     placement = Placement.parse(DEMO_PLACEMENT, (photo.shape[1], photo.shape[0])).pixel(photo.shape[:2])
     constant_report = compose_to_folder(
         ComposeInputs(mesh, stack, photo, placement, constant, camera),
@@ -112,7 +114,7 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
         {"light": f"constant, the estimated map's mean radiance {np.round(constant[0, 0], 4).tolist()}"})
     sheet = contact_sheet({"photo | composite under a constant light | composite under the estimated light": [
         photo, read_image(out / "constant" / "composite.png")[..., :3],
-        read_image(out / "compose" / "composite.png")[..., :3]]})
+        read_image(run.composite)[..., :3]]})
     write_image(out / "sheet.png", sheet)
     constant_seconds = time.perf_counter() - t
 

@@ -68,10 +68,11 @@ def _adapt(args, out: Path) -> int:
         where = placement(args, photo.shape[:2])
     env = environment(args)[0] if args.envmap else None
     camera = None
-    if photo is not None and args.envmap:  # the camera the light stage estimated this map with
-        from ..core.stages.compose import light_camera
+    if photo is not None and args.envmap:  # the camera of the run this map was estimated in
+        from ..core.pipeline.layout import camera_of, run_folder_of
 
-        camera = light_camera(args.envmap, {}, photo.shape[1], photo.shape[0])[0]
+        run_folder = run_folder_of(args.envmap)
+        camera = None if run_folder is None else camera_of(run_folder, photo.shape[1], photo.shape[0])[0]
     result, report = adapt_and_bake(mesh, texture, config, out, photo=photo, placement=where,
                                     envmap=env, photo_camera=camera, progress=progress(args))
     if not report["outputs"]:   # another rank of a distributed run writes the outputs

@@ -3,12 +3,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .options import (PRESETS, add_asset_args, add_old_photo_elevation_arg, add_output_args, add_placement_args,
-                      load_asset, output, photo_pitch, progress)
+from .options import (PRESETS, add_asset_args, add_old_photo_elevation_arg, add_output_args, add_photo_camera_args,
+                      add_placement_args, load_asset, output, photo_pitch, progress)
 
 
 def run(args) -> int:
-    from ..core.stages.compose import ComposeInputs, compose_to_folder, light_camera
+    from ..core.stages.compose import ComposeInputs, compose_to_folder
     from ..core.stages.convert import asset_stack
     from ..core.data.photo import load_photo
     from ..core.render.backend import environment_info
@@ -26,7 +26,7 @@ def run(args) -> int:
     h, w = photo.shape[:2]
     placement = Placement.parse(args.at, tuple(info["size"])).pixel((h, w))
     envmap = load_environment(args.light)
-    camera, camera_source = light_camera(args.light, info, w, h, args.fov, photo_pitch(args))
+    camera, camera_source = compose_camera(args, w, h)
     if args.texture:
         texture = load_neural_texture(Path(args.texture))
         view = texture_view(texture, mesh)
@@ -46,6 +46,27 @@ def run(args) -> int:
     return 0
 
 
+def compose_camera(args, width: int, height: int):
+    """The photo's camera at `width` x `height`, and where it came from: the camera stage of the run the light
+    map was made in (`scenefit run`'s, or `scenefit light`'s folder), else the camera stage's estimate of the
+    photo (fSpy, EXIF, its lines); --fov, --pitch and --roll given here win. The lens shift is kept."""
+    from dataclasses import replace
+
+    from ..core.pipeline.layout import camera_of, run_folder_of
+    from ..core.stages.camera import photo_camera_estimate
+
+    given = {k: v for k, v in (("fov_deg", args.fov), ("pitch_deg", photo_pitch(args)), ("roll_deg", args.roll))
+             if v is not None}
+    run_folder = run_folder_of(args.light)
+    if run_folder is None:
+        estimate = photo_camera_estimate(args.photo, args.fspy, given)
+        return estimate.photo_camera(width=width, height=height), \
+            f"the photo's camera as the camera stage estimates it ({estimate.to_dict().get('source', '')})"
+    camera, _ = camera_of(run_folder, width, height)
+    source = f"the camera stage of the run in '{run_folder}'"
+    return replace(camera, **given), source + (f"; overridden: {given}" if given else "")
+
+
 def add_parser(sub) -> None:
     from ..core.stages.compose import SAMPLER_TYPES, SHADOW_TYPES
     from ..core.scene.placement import DEFAULT_OBJECT_SIZE
@@ -55,7 +76,8 @@ def add_parser(sub) -> None:
     p.add_argument("--texture", help="a texture.pt (convert/adapt output) to render instead of the asset's own maps")
     p.add_argument("--photo", required=True, help="the scene photo")
     add_placement_args(p, required=True, object_size=DEFAULT_OBJECT_SIZE)
-    p.add_argument("--light", required=True, help="light.exr from `scenefit light` (its report.json gives the camera)")
+    p.add_argument("--light", required=True, help="light.exr from `scenefit light` or `scenefit run` (the camera "
+                                                  "stage of its run gives the camera)")
     add_output_args(p, help="output folder: composite.png/.exr, layers/, report.json")
     p.add_argument("--preset", choices=PRESETS, default="balanced", help="noise target and sample cap")
     p.add_argument("--shadow", choices=SHADOW_TYPES, help="ratio (shadow catcher, default), paper (thresholded), none")
@@ -64,8 +86,6 @@ def add_parser(sub) -> None:
     p.add_argument("--denoiser", choices=("auto", "oidn", "none"),
                    help="Intel Open Image Denoise (oidn), none, or auto (default: oidn where pyoidn is installed)")
     p.add_argument("--exposure", type=float, help="multiply the light map (default 1: it is in the photo's exposure)")
-    p.add_argument("--fov", type=float, help="horizontal field of view, degrees (default: the light stage's)")
-    p.add_argument("--pitch", type=float, help="where the photo's camera looks above the horizon, degrees; negative "
-                                               "looks down (default: the light stage's)")
+    add_photo_camera_args(p)
     add_old_photo_elevation_arg(p)
     p.set_defaults(func=run)

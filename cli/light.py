@@ -58,12 +58,16 @@ def _light(args, out: Path) -> int:
     from ..core.stages.light.scene_type import is_blended, scene_type_words
     from ..core.stages.light.stage import light_inputs, run_light, sun_words, write_light
     from ..core.render.backend import environment_info
+    from ..core.pipeline.layout import RunLayout
+    from ..core.pipeline.registry import names
+    from ..core.stages.camera_stage import write_camera
 
     run = light_run(args)
     critic = light_critic(run)
     inputs = light_inputs(args.photo, args.at, run.fspy, run.camera_overrides)
     config = with_shadow_sun(light_config(run, critic.choice), run, inputs.camera, tuple(inputs.info["size"]),
                              inputs.photo.shape[:2])
+    write_camera(inputs.camera, inputs.camera_record, RunLayout(out).stage(names().CAMERA_STAGE))   # (compose reads it)
     result = run_light(inputs, config, progress(args))
     if args.sun_from_shadow:
         result.decisions["sun"]["from"] = "the shadow given by --sun-from-shadow (foot, top, tip)"
@@ -86,7 +90,8 @@ def add_parser(sub) -> None:
     p = sub.add_parser("light", help="estimate an HDR environment map from a photo and the object's placement")
     p.add_argument("--photo", help="the scene photo (JPEG/PNG/EXR, any size)")
     add_placement_args(p, required=False)
-    add_output_args(p, help="output folder: light.exr, light_preview.png, report.json", required=False)
+    add_output_args(p, help="output folder: light.exr, light_preview.png, report.json and the "
+                                    "camera stage's camera/camera.json", required=False)
     add_preset_args(p)
     add_scene_arg(p)
     add_photo_camera_args(p)

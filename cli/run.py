@@ -1,30 +1,23 @@
 """scenefit run: the whole pipeline (convert -> light -> adapt -> compose -> bake) for one asset and photo."""
 from __future__ import annotations
 
-from ..core.base.names import GUIDANCE_TYPES
-
 from pathlib import Path
 
-from .options import (add_asset_args, add_model_args, add_output_args, add_photo_camera_args, add_placement_args,
-                      add_preset_args, add_scene_arg, add_sun_args,
-                      add_prompt_service_args, load_asset, model_config, output, progress,
-                      scene_conditional_prompt)
+from .options import (add_asset_args, add_model_args, add_output_args, add_placement_args, add_prompt_service_args,
+                      load_asset, model_config, output, progress, scene_conditional_prompt)
+from .run_options import add_run_options, run_table_of
 
 
 def run_config(args):
-    """(RunConfig, prompt record or None): the prompt is --prompt, else written from --object-prompt
-    and --scene-prompt (and the photo, for a vision model)."""
-    from ..core.pipeline.run_config import RunConfig
+    """(RunConfig, prompt record or None), read through the run table as a jobs file's job is: the prompt
+    is --prompt, else written from --object-prompt and --scene-prompt (and the photo, for a vision model)."""
+    from ..core.pipeline.registry import names
+    from ..core.pipeline.run_table import run_config as config_of_table
 
-    prompt, _, written = scene_conditional_prompt(args, "scene")
-    camera = {k: v for k, v in (("fov_deg", args.fov), ("pitch_deg", args.pitch), ("roll_deg", args.roll))
-              if v is not None}
-    config = RunConfig(preset=args.preset, prompt=prompt, guidance_type=args.guidance,
-                       size=args.object_size, shadow_type=args.shadow, compose_spp=args.spp, models=model_config(args),
-                       fspy=args.fspy, camera_overrides=camera, sun_deg=args.sun,
-                       sun_shadow=tuple(args.sun_from_shadow) if args.sun_from_shadow else None,
-                       scene_type=args.scene)
-    return config, written
+    table = run_table_of(args)
+    prompt, instruction, written = scene_conditional_prompt(args, table.get("mode", "scene"))
+    table.update({k: v for k, v in (("prompt", prompt), ("instruction", instruction)) if v})
+    return config_of_table(table, "scenefit run", names().STAGES, models=model_config(args)), written
 
 
 def game_bake(args):
@@ -88,28 +81,16 @@ def run(args) -> int:
 
 
 def add_parser(sub) -> None:
-    from ..core.stages.compose import SHADOW_TYPES
-    from ..core.scene.placement import DEFAULT_OBJECT_SIZE
-
     p = sub.add_parser("run", help="convert, light, adapt, compose and bake in one go (resumable)")
     add_asset_args(p)
     p.add_argument("--photo", required=True, help="the scene photo")
-    add_placement_args(p, required=True, object_size=DEFAULT_OBJECT_SIZE)
+    add_placement_args(p, required=True)   # (--object-size is a run option)
     add_output_args(p, help="output folder; a second run into it reuses the stages whose settings and inputs are "
                             "the same (--replace is not needed for that)")
-    p.add_argument("--prompt", help="what the asset should become in this scene (adapt; default from its name)")
-    p.add_argument("--object-prompt", help="the object, e.g. 'a leather sofa': without --prompt, a language model "
-                                           "writes the prompt from it and --scene-prompt (or the photo)")
-    p.add_argument("--scene-prompt", help="the scene, e.g. 'a swamp'")
-    add_preset_args(p)
-    p.add_argument("--guidance", choices=GUIDANCE_TYPES, default="auto",
-                   help="adapt with Stable Diffusion 2 (sd2), not at all (none), or when its weights are here (auto)")
-    p.add_argument("--shadow", choices=SHADOW_TYPES, default="ratio")
-    p.add_argument("--spp", type=int, help="compose: samples per pixel (default: from the preset's noise target)")
+    add_run_options(p)   # (one per key of the run table, as a jobs file's job gives them)
+    p.add_argument("--scene-prompt", help="the scene, e.g. 'a swamp' (with --object-prompt, a language model writes "
+                                          "the prompt)")
     p.add_argument("--no-bake", action="store_true", help="skip the game bake (a .glb of the asset with its new texture)")
-    add_scene_arg(p, default="auto")
-    add_photo_camera_args(p)
-    add_sun_args(p)
     add_model_args(p)
     add_prompt_service_args(p, prefix="prompt-")
     p.set_defaults(func=run, by_stage=True)  # an interrupt keeps the finished stages (see the message)

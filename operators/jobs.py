@@ -21,7 +21,7 @@ from bpy.props import BoolProperty, FloatProperty, PointerProperty, StringProper
 
 from ..workers import background
 from ..core.base.errors import SceneFitError
-from ..core.base.names import RUN_ORDER
+from ..core.pipeline.registry import RUN_ORDER
 from ..core.base.progress import TerminalProgress
 from ..core.data.map_plan import PendingAsset
 from .dependencies import check_dependencies
@@ -95,7 +95,7 @@ def preview_image(rgba_bottom_up: np.ndarray):
 
 
 def whole_run(state: background.JobState, stages: tuple[str, ...]) -> tuple[float, str] | None:
-    """(fraction, words) of a job that runs several stages in order (Run All: core.base.names.RUN_ORDER) as one
+    """(fraction, words) of a job that runs several stages in order (Run All: core.pipeline.registry.RUN_ORDER) as one
     bar, stage k of n, from the stage now running and its own fraction; None for a one-stage job."""
     if state.name != "run" or state.finished:
         return None

@@ -94,14 +94,15 @@ def photo_view(context, photo: Path, obj=None) -> dict:
 
 def composite_camera(context, photo: Path, view: dict):
     """The PhotoCamera the Cycles set-up uses when no job hands one back: the view's, else the camera the
-    World's light map was estimated with (its report.json), else the estimate from the photo."""
-    from ..core.stages.compose import light_camera
+    World's light map was estimated with (its run's camera stage), else the estimate from the photo."""
+    from ..core.pipeline.layout import camera_of, run_folder_of
     from ..core.stages.camera import photo_camera_estimate
     from ..core.scene.camera import PhotoCamera
 
     if view["camera"] is not None:
         return PhotoCamera(**view["camera"])
     light = context.scene.scenefit.light_path
-    if light and (Path(bpy.path.abspath(light)).parent / "report.json").is_file():
-        return light_camera(bpy.path.abspath(light), {}, 1, 1)[0]
+    run_folder = run_folder_of(bpy.path.abspath(light)) if light else None
+    if run_folder is not None:
+        return camera_of(run_folder, 1, 1)[0]
     return photo_camera_estimate(photo).photo_camera()

@@ -15,7 +15,7 @@ from urllib.parse import urlparse
 import bpy
 
 from ..core.base.errors import InputError
-from ..core.base.names import STAGES
+from ..core.pipeline.registry import STAGES
 from .asset import scene_layout
 from .folders import last_finished_run, run_folder
 from .photo import photo_view

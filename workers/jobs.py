@@ -56,7 +56,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from ..core.base.errors import InputError
-from ..core.base.names import PHOTO_STAGES, STAGES
+from ..core.pipeline.registry import PHOTO_STAGES, STAGES
 from ..core.guidance.models import ModelConfig
 from ..core.pipeline.run_config import RunConfig, stage_subset
 from ..core.pipeline.run_table import KEYS as RUN_KEYS, run_config, run_table

@@ -39,8 +39,8 @@ def make_payload(job: Job, attempt: int = 1, stages: Sequence[Path] = (), files:
 def finished_stage_folders(folder: Path | None) -> list[Path]:
     """The stage folders of a run folder that hold a finished stage (its stage.json) and no link, which
     would be sent as the file it points at: those are run again instead."""
-    from ..core.base.names import RUN_ORDER
-    from ..core.pipeline.run import STAGE_FILE
+    from ..core.pipeline.layout import STAGE_FILE
+    from ..core.pipeline.registry import RUN_ORDER
 
     if folder is None or not folder.is_dir():
         return []

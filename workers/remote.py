@@ -331,7 +331,7 @@ def work_remotely(data: dict, progress=None, cancel=None) -> dict:
     """
     import tempfile
 
-    from ..core.base.names import STAGES
+    from ..core.pipeline.registry import STAGES
     from ..core.data.asset_io import save_asset_folder
     from ..core.data.map_plan import fitting_inputs
     from ..core.guidance.models import ModelConfig

@@ -7,13 +7,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..core.base.atomic import write_json_atomic, write_text_atomic
+from ..core.pipeline.layout import RunLayout
 from .jobs import JobsFile
 
 
 SUMMARY_JSON, SUMMARY_MD, CONTACT_SHEET = "summary.json", "summary.md", "contact_sheet.png"
 RESERVED_NAMES = (SUMMARY_JSON, SUMMARY_MD, CONTACT_SHEET)
 # What a job's contact-sheet cell shows, the first that exists (the composite once compose runs).
-SHEET_IMAGES = ("composite.png", "compose/composite.png", "light/light_preview.png", "convert/maps/base_color.png")
+SHEET_IMAGES = ("composite.png", RunLayout.relative("compose", "composite"), RunLayout.relative("light", "preview"),
+                RunLayout.relative("convert", "base_color"))
 
 
 @dataclass

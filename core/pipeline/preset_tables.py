@@ -6,7 +6,9 @@ convert row's "texture" names a texture preset, which stage_config turns into it
 """
 from __future__ import annotations
 
-from ..base.names import CONFIG_STAGES, PRESETS
+from typing import Any
+
+from ..base.names import PRESETS
 
 PRESET_NAMES = PRESETS
 # What a person picking one should know (the Blender panel's choices say the same).
@@ -15,9 +17,8 @@ PRESET_DESCRIPTIONS = {
     "balanced": "The default trade-off between time and quality",
     "final": "The paper's settings: slowest, best",
 }
-STAGES = ("texture", *CONFIG_STAGES)   # the neural texture's table, then each configured stage's
 
-TABLES: dict[str, dict[str, dict]] = {
+TABLES: dict[str, dict[str, dict[str, Any]]] = {
     # The neural texture's hash grid: "final" is the paper's / Instant-NGP's (NeuralTextureConfig defaults).
     "texture": {
         "draft": {"n_levels": 8, "log2_table": 17, "finest_resolution": 512},
@@ -61,7 +62,7 @@ TABLES: dict[str, dict[str, dict]] = {
 }
 
 
-def texture_preset(name: str, **overrides):
+def texture_preset(name: str, **overrides: Any) -> Any:
     """The neural texture's config at preset `name` (the one place a texture preset is resolved)."""
     from ..texture.neural_texture import NeuralTextureConfig  # lazy: torch takes seconds to load
 

@@ -12,6 +12,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .layout import RunLayout
+
 
 # A stage's status when the run was not asked for it (a job's stages leave it out): not a skip to be said.
 NOT_LISTED = "not listed"
@@ -69,7 +71,7 @@ class RunResult:
 
     @property
     def composite(self) -> Path:
-        return self.folder / "compose" / "composite.png"
+        return RunLayout(self.folder).file("compose", "composite")
 
     @property
     def texture_stage(self) -> str:

@@ -7,12 +7,12 @@ import math
 from dataclasses import dataclass, field
 
 from ..base.errors import InputError
-from ..base.names import (ALONE_STAGES, CAMERA_SOURCES, CONFIG_STAGES, GUIDANCE_TYPES, MODES, OPTIONAL_STAGES,
-                          PIPELINE_STAGES, PRESETS, SCENE_TYPES, SHADOW_TYPES, STAGES)
+from ..base.names import CAMERA_SOURCES, GUIDANCE_TYPES, MODES, PRESETS, SCENE_TYPES, SHADOW_TYPES
 from ..guidance.models import ModelConfig
 from ..scene.camera import PhotoCamera
 from ..scene.placement import DEFAULT_OBJECT_SIZE
 from ..stages.camera import check_camera_values
+from .registry import names
 
 # (The camera stage's report is the run report's "camera", beside the "stages" a job lists.)
 
@@ -72,10 +72,11 @@ class RunConfig:
             from ..stages.light.shadow_hint import check_point_count
 
             check_point_count(self.sun_shadow)
-        unknown = sorted(set(self.stage_overrides) - set(CONFIG_STAGES))
+        configured = names().CONFIG_STAGES
+        unknown = sorted(set(self.stage_overrides) - set(configured))
         if unknown:
             raise _refused("stage_overrides", f"stage_overrides names unknown stage {unknown[0]!r}; it takes "
-                             f"{', '.join(CONFIG_STAGES)}.")
+                             f"{', '.join(configured)}.")
 
     def overrides(self, stage: str) -> dict:
         return dict(self.stage_overrides.get(stage, {}))
@@ -130,6 +131,8 @@ def _check_view(config: RunConfig) -> None:
 def stage_subset(stages) -> tuple[str, ...]:
     """`stages` in the run's order when they run together: convert and/or light alone (ALONE_STAGES), or the
     pipeline (PIPELINE_STAGES, with any of OPTIONAL_STAGES); any other subset is one sentence (InputError)."""
+    n = names()
+    STAGES, ALONE_STAGES, PIPELINE_STAGES, OPTIONAL_STAGES = n.STAGES, n.ALONE_STAGES, n.PIPELINE_STAGES, n.OPTIONAL_STAGES
     listed = tuple(stages)
     unknown = [s for s in listed if s not in STAGES]
     if unknown:

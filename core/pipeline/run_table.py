@@ -18,9 +18,11 @@ from dataclasses import dataclass, fields, is_dataclass
 from typing import Any, Callable
 
 from ..base.errors import InputError
-from ..base.names import CONFIG_STAGES
+from ..base.names import CAMERA_SOURCES, GUIDANCE_TYPES, MODES, PRESETS, SCENE_TYPES
 from ..stages.camera import CAMERA_VALUES
+from ..stages.compose import SHADOW_TYPES
 from .presets import stage_config, with_overrides
+from .registry import names
 from .run_config import RunConfig
 
 # Fields a table does not carry: photo_camera is a PhotoCamera object a Python caller already holds (a table
@@ -35,12 +37,19 @@ assert set(CAMERA_TABLE.values()) == set(CAMERA_VALUES)
 @dataclass(frozen=True)
 class RunKey:
     """A table key and the RunConfig field it gives: `read(value, where)` checks the value's shape and returns
-    the field's value; `write(field value)` gives the table's value back."""
+    the field's value; `write(field value)` gives the table's value back. `help` is what the key means, said
+    once for the jobs file and `scenefit run`'s option of the same name (cli/run.py makes each option from
+    its key); `kind` is how a command line spells its value ("text", "number", "whole", "angles": AZ,EL,
+    "points": three X,Y, "camera": --fov/--pitch/--roll, "settings": --set stage.setting=value, "blender":
+    Blender's own, no option) and `choices` the names it takes."""
 
     key: str
     field: str
     read: Callable[[Any, str], Any]
     write: Callable[[Any], Any] = lambda value: value
+    help: str = ""
+    kind: str = "text"
+    choices: tuple[str, ...] | None = None
 
 
 def _is_number(value) -> bool:
@@ -97,44 +106,75 @@ def _overrides(value, where: str) -> dict:
     if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
         raise InputError(f"{where}: overrides must be a table of stage tables, e.g. "
                          "{ adapt = { iterations = 50 } }.")
-    unknown = sorted(set(value) - set(CONFIG_STAGES))
+    configured = names().CONFIG_STAGES
+    unknown = sorted(set(value) - set(configured))
     if unknown:
-        raise InputError(f"{where}: overrides names unknown stage '{unknown[0]}'; it takes {', '.join(CONFIG_STAGES)}.")
+        raise InputError(f"{where}: overrides names unknown stage '{unknown[0]}'; it takes {', '.join(configured)}.")
     return {stage: dict(settings) for stage, settings in value.items()}
 
 
 RUN_KEYS: tuple[RunKey, ...] = (
-    RunKey("preset", "preset", _text("preset")),
-    RunKey("mode", "mode", _text("mode")),
-    *(RunKey(k, k, _text(k)) for k in ("prompt", "negative_prompt", "object_prompt", "instruction")),
-    RunKey("seed", "seed", _whole("seed")),
-    RunKey("guidance_type", "guidance_type", _text("guidance_type")),
-    RunKey("object_size", "size", _number("object_size")),
-    RunKey("shadow_type", "shadow_type", _text("shadow_type")),
-    RunKey("compose_spp", "compose_spp", _whole("compose_spp")),
-    RunKey("fspy", "fspy", _text("fspy", optional=True)),
+    RunKey("preset", "preset", _text("preset"), help="draft / balanced / final (the paper's values) for every stage",
+           choices=PRESETS),
+    RunKey("mode", "mode", _text("mode"), help="adapt: scene (fit the photo), generate (a new appearance from the "
+           "prompt) or edit (change it as the instruction says)", choices=MODES),
+    RunKey("prompt", "prompt", _text("prompt"), help="adapt: what the asset should become in this scene (default "
+           "from its name)"),
+    RunKey("negative_prompt", "negative_prompt", _text("negative_prompt"),
+           help="adapt: what the asset should not look like"),
+    RunKey("object_prompt", "object_prompt", _text("object_prompt"), help="adapt: the object, e.g. 'a leather sofa' "
+           "(edit: with the instruction it makes the prompt; on the command line without --prompt, a language "
+           "model writes the prompt from it and --scene-prompt)"),
+    RunKey("instruction", "instruction", _text("instruction"), help="adapt, mode edit: how to change the asset, "
+           "e.g. 'add dust to the sofa'"),
+    RunKey("seed", "seed", _whole("seed"), help="convert's fit and adapt's noise (default: each stage's)",
+           kind="whole"),
+    RunKey("guidance_type", "guidance_type", _text("guidance_type"), help="adapt (and the light critic) with "
+           "Stable Diffusion 2 (sd2), not at all (none), or when its weights are here (auto)", choices=GUIDANCE_TYPES),
+    RunKey("object_size", "size", _number("object_size"), help="compose: the fraction of the photo's height the "
+           "asset spans", kind="number"),
+    RunKey("shadow_type", "shadow_type", _text("shadow_type"), help="compose: ratio (shadow catcher), paper "
+           "(thresholded) or none", choices=SHADOW_TYPES),
+    RunKey("compose_spp", "compose_spp", _whole("compose_spp"), help="compose: samples per pixel (default: from "
+           "the preset's noise target)", kind="whole"),
+    RunKey("fspy", "fspy", _text("fspy", optional=True), help="an fSpy project of the photo: its solved camera is "
+           "used"),
     RunKey("camera", "camera_overrides", _camera,
-           lambda value: {k: value[f] for k, f in CAMERA_TABLE.items() if value.get(f) is not None}),
-    RunKey("camera_source", "camera_source", _text("camera_source")),
-    RunKey("camera_why", "camera_why", _text("camera_why")),
-    RunKey("turn", "turn_deg", _number("turn")),
+           lambda value: {k: value[f] for k, f in CAMERA_TABLE.items() if value.get(f) is not None},
+           help="the photo's camera over the estimate: fov, pitch and roll in degrees (and the lens shift)",
+           kind="camera"),
+    RunKey("camera_source", "camera_source", _text("camera_source"), help="where the camera values come from",
+           kind="blender", choices=CAMERA_SOURCES),
+    RunKey("camera_why", "camera_why", _text("camera_why"), help="the camera values' source, as the report says it",
+           kind="blender"),
+    RunKey("turn", "turn_deg", _number("turn"), help="compose: degrees the asset turns about its up axis after "
+           "facing the camera", kind="number"),
     RunKey("sun", "sun_deg", lambda value, where: None if value is None else _sun(value, where),
-           lambda value: None if value is None else list(value)),
+           lambda value: None if value is None else list(value),
+           help="light: the dominant light's azimuth (from the photo's view direction, positive to the right) and "
+                "elevation above the horizon, degrees (default: guessed from the photo)", kind="angles"),
     RunKey("sun_shadow", "sun_shadow", lambda value, where: None if value is None else _shadow(value, where),
-           lambda value: None if value is None else list(value)),
-    RunKey("sun_uncertainty", "sun_uncertainty_deg", _number("sun_uncertainty")),
-    RunKey("scene", "scene_type", _text("scene")),
-    RunKey("depth_model", "depth_model", _text("depth_model", optional=True)),
-    RunKey("overrides", "stage_overrides", _overrides),
+           lambda value: None if value is None else list(value),
+           help="light: the sun from a shadow in the photo: the foot of something upright on the floor, its top "
+                "and the tip of its shadow, each X,Y as --at takes it", kind="points"),
+    RunKey("sun_uncertainty", "sun_uncertainty_deg", _number("sun_uncertainty"), help="light: degrees the sun's "
+           "direction may be off", kind="number"),
+    RunKey("scene", "scene_type", _text("scene"), help="light: the photo's scene type (default: decided from the "
+           "photo)", choices=SCENE_TYPES),
+    RunKey("depth_model", "depth_model", _text("depth_model", optional=True), help="light: hub id or local folder "
+           "of a transformers depth model"),
+    RunKey("overrides", "stage_overrides", _overrides, help="stage settings over the preset's, e.g. adapt's "
+           "iterations (docs/technical/stage-settings.md lists them)", kind="settings"),
 )
 KEYS = tuple(k.key for k in RUN_KEYS)
 _BY_KEY = {k.key: k for k in RUN_KEYS}
 
 
-def run_config(table: dict, where: str, stages: tuple[str, ...] = CONFIG_STAGES, **given) -> RunConfig:
+def run_config(table: dict, where: str, stages: tuple[str, ...] | None = None, **given) -> RunConfig:
     """The RunConfig of `table` (keys of RUN_KEYS; others are the caller's to refuse), with `given` fields
     (models) over it; every problem one sentence beginning with `where`. The settings of `stages` (those
     the run will resolve) are checked against the stage configs they go to."""
+    stages = names().CONFIG_STAGES if stages is None else stages
     values = {_BY_KEY[k].field: _BY_KEY[k].read(v, where) for k, v in table.items() if k in _BY_KEY}
     # Guidance is adapt's (and the light critic's beside it): a run without adapt has none.
     values.setdefault("guidance_type", "auto" if "adapt" in stages else "none")
@@ -157,10 +197,12 @@ def run_table(config: RunConfig) -> dict:
     return {k.key: k.write(getattr(config, k.field)) for k in RUN_KEYS}
 
 
-def check_stage_settings(config: RunConfig, where: str, stages: tuple[str, ...] = CONFIG_STAGES) -> None:
+def check_stage_settings(config: RunConfig, where: str, stages: tuple[str, ...] | None = None) -> None:
     """The config of each of `stages` as the run resolves it, built now: an override the stage config does not
     have, or of the wrong type, and a mode without its prompts, are one sentence naming `where` and the key."""
-    for stage in (s for s in CONFIG_STAGES if s in stages or s in config.stage_overrides):
+    configured = names().CONFIG_STAGES
+    stages = configured if stages is None else stages
+    for stage in (s for s in configured if s in stages or s in config.stage_overrides):
         overrides = config.overrides(stage)
         # (a scene run without a prompt is given one from the asset's name: any text stands for it here)
         prompt = config.prompt or ("x" if config.mode == "scene" else "")

@@ -44,13 +44,12 @@ from ..base.atomic import write_json_atomic
 from ..base.errors import InputError, check_choice
 from ..base.names import SHADOW_TYPES
 from ..base.limits import COMPOSE_MAX_SIDE
-from ..base.untrusted import parse_json, read_bytes
 from ..data.imageio import linear_to_srgb, srgb_to_linear, write_image
 from ..data.mesh import Mesh, normalize_to_unit_sphere
 from ..base.progress import ProgressCallback, check_cancel, emit
 from ..render.renderer import _mitsuba_mesh, material_shapes
 from ..scene.asset_pose import ASSUMED_CAMERA_HEIGHT_M, ObjectPlacement, place_asset, placed_mesh
-from ..scene.camera import CAMERA_HEIGHT, PhotoCamera, camera_origin, horizon_row, photo_camera_for
+from ..scene.camera import CAMERA_HEIGHT, PhotoCamera, camera_origin, horizon_row
 from ..scene.frame import ENVMAP_TO_WORLD
 from ..scene.mattes import composite_linear, paper_shadow_matte
 from ..scene.placement import DEFAULT_OBJECT_SIZE
@@ -515,30 +514,6 @@ def _write_images(result: ComposeResult, out) -> dict[str, str]:
     with ThreadPoolExecutor(max_workers=len(files)) as pool:
         written = {key: pool.submit(write_image, path, pixels, dtype) for key, (path, pixels, dtype) in files.items()}
         return {key: str(job.result()) for key, job in written.items()}
-
-
-def light_camera(light_path, photo_info: dict, width: int, height: int, fov_deg: float | None = None,
-                 pitch_deg: float | None = None) -> tuple[PhotoCamera, str]:
-    """The photo camera the light map was estimated with: from the light stage's report.json beside the
-    map when there is one, else the light stage's default for this photo; fov/pitch given here win."""
-    report_path = Path(light_path).with_name("report.json")
-    camera = None
-    if report_path.is_file():
-        try:
-            saved = parse_json(read_bytes(report_path, what="light report"),
-                               f"the light report '{report_path}'")["decisions"]["photo_camera"]
-            camera = PhotoCamera(**{k: saved[k] for k in ("yaw_deg", "pitch_deg", "fov_deg", "width", "height")},
-                                 roll_deg=float(saved.get("roll_deg", 0.0)))   # reports before roll have none
-            source = f"the light stage's report ({report_path})"
-        except (KeyError, TypeError, ValueError, InputError):   # (a report from elsewhere: the default camera)
-            camera = None
-    if camera is None:
-        camera, fov_why = photo_camera_for(photo_info, width, height)
-        source = f"the light stage's default (no report.json beside the map); field of view from {fov_why['from']}"
-    overrides = {k: v for k, v in (("fov_deg", fov_deg), ("pitch_deg", pitch_deg)) if v is not None}
-    if overrides:
-        source += f"; overridden: {overrides}"
-    return replace(camera, width=width, height=height, **overrides), source
 
 
 def compose_to_folder(inputs: ComposeInputs, config: ComposeConfig, out_dir, report_extra: dict | None = None,

@@ -65,7 +65,7 @@ class PresetsTable(SphinxDirective):
         self.env.note_dependency(tables.__file__)
         result: list[nodes.Node] = [table(["preset", "what it is for"],
                                           [[n, tables.PRESET_DESCRIPTIONS[n]] for n in tables.PRESET_NAMES])]
-        for stage in tables.STAGES:
+        for stage in tables.TABLES:   # (the neural texture's table, then each configured stage's)
             section_title = nodes.rubric(text=f"{stage}")
             result += [section_title, table(["setting", *tables.PRESET_NAMES], stage_rows(stage),
                                             widths=[3, 2, 2, 2], literal_columns=(0,))]

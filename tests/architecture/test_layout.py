@@ -5,6 +5,7 @@ import ast
 from pathlib import Path
 
 from scenefit.core.base.source_graph import PACKAGES, ROOT, module_imports as imports, project_modules as modules
+from scenefit.core.pipeline.registry import REGISTRY
 
 # What core/ may never import, at any level: Blender, what talks to Blender, and the layers above it.
 ABOVE_CORE = ("bpy", "bmesh", "mathutils", "addon_utils", "blender_io", "operators", "panels", "cli", "workers")
@@ -137,10 +138,8 @@ def test_the_scenes_concepts_are_defined_once_in_core_scene():
 
 # Each stage: run(inputs, config, progress, cancel) -> Result and write(result, folder) -> report (the
 # game bake is a child `scenefit bake` process, core/stages/bake/process.py, and keeps that process's shape).
-STAGE_SHAPES = {"convert": ("core/stages/convert.py", "run_convert", "write_convert"),
-                "light": ("core/stages/light/stage.py", "run_light", "write_light"),
-                "adapt": ("core/stages/adapt/stage.py", "adapt_texture", "write_adapt"),
-                "compose": ("core/stages/compose.py", "compose", "write_compose")}
+# The shapes are the stage registry's (core/pipeline/registry.py: Stage.shape).
+STAGE_SHAPES = {s.name: (s.shape.source, s.shape.run, s.shape.write) for s in REGISTRY if s.shape is not None}
 
 
 def function_args(path: Path, name: str) -> list[tuple[str, str]]:
@@ -161,11 +160,13 @@ def test_every_stage_has_one_shape_run_then_write():
 
 
 def test_the_pipeline_runs_each_stage_through_its_shape():
-    """core/pipeline/run.py strings the stages together only through these (or the entry that is both)."""
+    """Each stage's work module (core/pipeline/steps/) runs it only through these (or the entry that is both)."""
+    assert set(STAGE_SHAPES) == {"convert", "light", "adapt", "compose"}
     text = (ROOT / "core" / "pipeline" / "run.py").read_text()
     for stage, names in {"convert": ("convert_and_bake",), "light": ("run_light", "write_light"),
                          "adapt": ("adapt_and_bake",), "compose": ("compose_to_folder",)}.items():
-        assert all(f"{name}(" in text for name in names), stage
+        steps = (ROOT / "core" / "pipeline" / "steps" / f"{stage}.py").read_text()
+        assert all(f"{name}(" in steps for name in names), stage
     for old in ("estimate_light(", "write_light_stage(", "write_compose_outputs("):
         assert old not in text
 

@@ -279,9 +279,14 @@ def test_the_command_line_and_the_panel_share_one_set_of_defaults():
     sub = next(a for a in parser._actions if a.dest == "command").choices
     for command in ("adapt", "light"):
         assert tuple(sub[command].parse_known_args([])[0].at) == DEFAULT_AT
-    for command in ("adapt", "run", "compose"):
+    for command in ("adapt", "compose"):
         defaults = {a.dest: a.default for a in sub[command]._actions}
         assert defaults["object_size"] == DEFAULT_OBJECT_SIZE
+    # (`scenefit run`'s options leave what is not given to the run table, as a jobs file does)
+    from scenefit.cli.run import run_config as run_options_config
+
+    given = sub["run"].parse_args(["ball", "--photo", "p.png", "--at", "0.5,0.7", "--out", "o", "--offline"])
+    assert run_options_config(given)[0].size == DEFAULT_OBJECT_SIZE
     # The panel's properties name the same constants (read from the source: registering them needs bpy).
     source = (Path(run_module.__file__).parents[2] / "operators" / "properties.py").read_text()
     classes = {node.name: node for node in ast.walk(ast.parse(source)) if isinstance(node, ast.ClassDef)}

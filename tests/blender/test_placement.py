@@ -137,6 +137,9 @@ def test_quality_panel_times_are_the_bench_measurements():
                 assert seconds == pytest.approx(measured[stage, preset], abs=0.01), (stage, preset)
                 shown += 1
     assert shown >= 9   # convert, light and compose at every preset
+    from scenefit.core.pipeline.registry import expected_seconds
+
+    assert EXPECTED_SECONDS == expected_seconds()   # the panel's copy is the stage registry's
 
 
 def test_adapts_projected_time_is_the_sd2_bench_measurement():

@@ -11,7 +11,10 @@ import pytest
 
 from scenefit.cli import main
 from scenefit.core.base.errors import InputError
-from scenefit.core.base.names import ALONE_STAGES, OPTIONAL_STAGES, PIPELINE_STAGES, STAGES
+from scenefit.core.pipeline.registry import BUILT_IN
+
+ALONE_STAGES, OPTIONAL_STAGES, PIPELINE_STAGES, STAGES = (BUILT_IN.ALONE_STAGES, BUILT_IN.OPTIONAL_STAGES,
+                                                          BUILT_IN.PIPELINE_STAGES, BUILT_IN.STAGES)
 from scenefit.core.pipeline import run as run_module
 from scenefit.core.pipeline.run_config import RunConfig
 from scenefit.core.data.maps import PBRMaps
@@ -74,17 +77,16 @@ def test_scenefit_batch_refuses_such_a_jobs_file_with_exit_2_before_any_work(tmp
 def steps(monkeypatch):
     """run_pipeline's steps, recorded instead of run (the inputs are still read and checked)."""
     called: list[str] = []
-    for step in ("convert", "camera_stage", "light", "adapt", "compose"):
-        monkeypatch.setattr(run_module.PipelineRun, step, lambda self, step=step: called.append(step))
+    monkeypatch.setattr(run_module.PipelineRun, "run_stage", lambda self, record: called.append(record.name))
     monkeypatch.setattr(run_module.PipelineRun, "finish", lambda self: called)
     return called
 
 
 @pytest.mark.parametrize("stages, expected", [
     (("convert",), ["convert"]),
-    (("light",), ["camera_stage", "light"]),
-    (("convert", "light"), ["convert", "camera_stage", "light"]),
-    (("convert", "light", "compose"), ["convert", "camera_stage", "light", "adapt", "compose"]),
+    (("light",), ["camera", "light"]),
+    (("convert", "light"), ["convert", "camera", "light"]),
+    (("convert", "light", "compose"), ["convert", "camera", "light", "compose"]),   # (adapt: no guidance, skipped)
 ])
 def test_run_pipeline_runs_the_steps_of_the_subset_it_is_given(tmp_path, steps, stages, expected):
     make_inputs(tmp_path)
@@ -108,7 +110,7 @@ def test_the_light_alone_runs_without_an_asset_and_nothing_else_does(tmp_path, s
     make_inputs(tmp_path)
     run_module.run_pipeline(None, None, tmp_path / "room.png", (0.5, 0.7), tmp_path / "run",
                             RunConfig(guidance_type="none"), stages=("light",))
-    assert steps == ["camera_stage", "light"]
+    assert steps == ["camera", "light"]
     for stages in [s for s in sorted(RUNS) if s != ("light",)]:
         with pytest.raises(InputError, match="need an asset; only light runs on a photo alone") as error:
             run_module.run_pipeline(None, None, tmp_path / "room.png", (0.5, 0.7), tmp_path / "other",

@@ -103,7 +103,7 @@ def test_run_on_an_asset_file_bakes_a_game_asset_and_reuses_it(tmp_path):
 
 
 def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monkeypatch, capsys):
-    import scenefit.core.pipeline.run as run_module
+    import scenefit.core.pipeline.steps.compose as compose_step
     from scenefit.cli import main
     from scenefit.core.base.output_folder import staging_path
 
@@ -114,7 +114,7 @@ def test_an_interrupted_run_keeps_its_finished_stages_and_says_so(tmp_path, monk
     args = ["run", str(asset), "--photo", str(photo_path), "--at", "0.5,0.8", "--out", str(out), "--preset", "draft",
             "--guidance", "none", "--spp", "2", "--quiet"]
 
-    monkeypatch.setattr(run_module, "compose_to_folder", _interrupted)   # Ctrl-C during the compose stage
+    monkeypatch.setattr(compose_step, "compose_to_folder", _interrupted)   # Ctrl-C during the compose stage
     assert main(args) == 130
     message = capsys.readouterr().err
     assert "stages finished so far (convert, camera, light) are kept beside it" in message
@@ -153,12 +153,12 @@ def _interrupted(*_, **__):
 
 
 def test_a_run_stopped_before_any_stage_finished_says_nothing_was_kept(tmp_path, monkeypatch, capsys):
-    import scenefit.core.pipeline.run as run_module
+    import scenefit.core.pipeline.steps.convert as convert_step
     from scenefit.cli import main
     from scenefit.core.base.output_folder import staging_path
 
     _, out, args = _grey_sphere_run(tmp_path)
-    monkeypatch.setattr(run_module, "convert_and_bake", _interrupted)   # Ctrl-C in the first stage
+    monkeypatch.setattr(convert_step, "convert_and_bake", _interrupted)   # Ctrl-C in the first stage
     assert main(args) == 130
     message = capsys.readouterr().err
     assert "no stage had finished, so nothing of this run was kept" in message and "kept beside" not in message
@@ -171,7 +171,7 @@ def test_a_stopped_rerun_never_counts_the_earlier_runs_stages_as_kept(tmp_path, 
     a stage of its own finished, it keeps nothing and says so (it named the earlier run's stages as kept),
     and the earlier folder stays whole."""
     import scenefit.core.base.output_folder as output_folder
-    import scenefit.core.pipeline.run as run_module
+    import scenefit.core.pipeline.steps.convert as convert_step
     from scenefit.cli import main
     from scenefit.core.base.output_folder import staging_path
 
@@ -183,7 +183,7 @@ def test_a_stopped_rerun_never_counts_the_earlier_runs_stages_as_kept(tmp_path, 
         monkeypatch.setattr(output_folder.os, "link", no_links)
     before = (out / "report.json").read_bytes()
     save_asset_folder(uv_sphere(0.5, 12, 6), PBRMaps(np.full((16, 16, 3), 0.3, np.float32), 0.5, 0.0), asset)
-    monkeypatch.setattr(run_module, "convert_and_bake", _interrupted)   # the changed asset's convert, stopped
+    monkeypatch.setattr(convert_step, "convert_and_bake", _interrupted)   # the changed asset's convert, stopped
     capsys.readouterr()
     assert main(args) == 130
     message = capsys.readouterr().err
@@ -194,7 +194,7 @@ def test_a_stopped_rerun_never_counts_the_earlier_runs_stages_as_kept(tmp_path, 
 def test_a_run_refused_mid_way_says_which_finished_stages_it_kept(tmp_path, monkeypatch, capsys):
     """A refusal once stages have finished (here compose's, after convert and light) names what was kept for
     the next run, and the next run reuses it."""
-    import scenefit.core.pipeline.run as run_module
+    import scenefit.core.pipeline.steps.compose as compose_step
     from scenefit.cli import main
     from scenefit.core.base.errors import InputError
 
@@ -203,7 +203,7 @@ def test_a_run_refused_mid_way_says_which_finished_stages_it_kept(tmp_path, monk
     def refused(*_, **__):
         raise InputError("Compose refused this.")
 
-    monkeypatch.setattr(run_module, "compose_to_folder", refused)
+    monkeypatch.setattr(compose_step, "compose_to_folder", refused)
     assert main(args) == 2
     message = capsys.readouterr().err.strip()
     assert message == (f"scenefit: error: Compose refused this. The finished stages (convert, camera, light) are kept beside "
@@ -221,10 +221,10 @@ def test_a_run_refused_mid_way_says_which_finished_stages_it_kept(tmp_path, monk
 def test_what_only_the_camera_shows_is_refused_before_any_work(tmp_path, monkeypatch, capsys):
     """A shadow tip in the sky and an asset too flat to stand in view were found by the light stage and
     compose, after convert had run (the corpus's palm tree on its ground plane: convert and light first)."""
-    import scenefit.core.pipeline.run as run_module
+    import scenefit.core.pipeline.steps.convert as convert_step
     from scenefit.cli import main
 
-    monkeypatch.setattr(run_module, "convert_and_bake", _interrupted)   # any work would stop the test with 130
+    monkeypatch.setattr(convert_step, "convert_and_bake", _interrupted)   # any work would stop the test with 130
     _, out, args = _grey_sphere_run(tmp_path)
     assert main([*args, "--sun-from-shadow", "0.5,0.9", "0.5,0.8", "0.3,0.02"]) == 2   # the tip in the sky
     said = capsys.readouterr().err.strip()

@@ -133,9 +133,11 @@ def test_cli_compose_writes_every_layer_and_leaves_the_photo_alone(tmp_path):
     asset = save_asset_folder(uv_sphere(0.5, 16, 8), maps, tmp_path / "asset")
     photo_path = write_image(tmp_path / "photo.png", textured_photo(2))
     light_path = write_image(tmp_path / "light" / "light.exr", sun_environment([1.0, 0.0, 1.0], height=32))
-    (tmp_path / "light" / "report.json").write_text(json.dumps(
-        {"decisions": {"photo_camera": {"yaw_deg": 90.0, "pitch_deg": -15.0, "fov_deg": 50.0,
-                                        "width": 128, "height": 96}}}))
+    from scenefit.core.stages.camera_stage import write_camera
+
+    # The run's camera stage beside its light stage: compose renders through it.
+    write_camera(PhotoCamera(yaw_deg=90.0, pitch_deg=-15.0, fov_deg=50.0, width=128, height=96), {"source": "a test"},
+                 tmp_path / "camera")
     before = hashlib.sha256(photo_path.read_bytes()).hexdigest()
     out = tmp_path / "out"
     proc = scenefit_here("compose", str(asset), "--photo", str(photo_path), "--at", "0.5,0.7", "--light",
