@@ -72,6 +72,10 @@ def save_checkpoint(path: Path, iteration: int, config: AdaptConfig, texture: Ne
     return write_bytes_atomic(path, buffer.getvalue())
 
 
+class OtherInputsCheckpoint(InputError):
+    """A checkpoint of this run's settings made for other inputs (another asset, texture, photo or light)."""
+
+
 def load_checkpoint(path: Path, config: AdaptConfig, inputs: str = "") -> dict | None:
     """The checkpoint's payload, None when there is none; one sentence when it cannot be resumed: not a
     checkpoint, not of the shape SceneFit writes, or made for other inputs or settings."""
@@ -96,7 +100,7 @@ def load_checkpoint(path: Path, config: AdaptConfig, inputs: str = "") -> dict |
         raise InputError(f"The checkpoint '{path}' was made with other settings ({', '.join(differ)}); "
                          f"use the same settings to resume, or delete it to start over.")
     if payload["inputs"] != inputs:
-        raise InputError(f"The checkpoint '{path}' was made for another asset, texture, photo or light than this "
+        raise OtherInputsCheckpoint(f"The checkpoint '{path}' was made for another asset, texture, photo or light than this "
                          "run's; delete it to start over, or resume with the inputs it was made for.")
     return payload
 

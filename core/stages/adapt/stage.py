@@ -27,14 +27,18 @@ from .system import AdaptSystem
 
 def adapt_texture(inputs: AdaptInputs, config: AdaptConfig, progress: ProgressCallback | None = None,
                   cancel: threading.Event | None = None, checkpoint_dir: str | Path | None = None,
-                  models: GuidanceModels | None = None, cache_constants: bool = True) -> AdaptResult:
+                  models: GuidanceModels | None = None, cache_constants: bool = True,
+                  replace_other_inputs: bool = False) -> AdaptResult:
     """Run the adapt stage; returns a new NeuralTexture (the input texture is left as it was).
 
     Models are located (and a missing one reported) before any work. With `checkpoint_dir`, a
     checkpoint is written every `checkpoint_every` iterations and a run with the same settings
-    resumes from it.
+    resumes from it; one made for other inputs is refused in one sentence, or with `replace_other_inputs`
+    (a run folder's own stage redone for new inputs) overwritten, the run starting at iteration 0.
     """
-    system = AdaptSystem.build(inputs, config, models, checkpoint_dir, cache_constants)
+    system = AdaptSystem.build(inputs, config, models, checkpoint_dir, cache_constants, replace_other_inputs)
+    if system.replaced_checkpoint:
+        emit(progress, "adapt", 0, config.iterations, "the checkpoint here was made for other inputs: starting over")
     done = saved = system.start
     try:
         for iteration in range(system.start, config.iterations):
@@ -75,7 +79,7 @@ def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfi
                          texture=texture, photo=photo, placement=placement, envmap=envmap,
                          photo_camera=photo_camera, base_logit=view.base_logit if view else None, layout=layout)
     result = adapt_texture(inputs, config, progress=progress, cancel=cancel, checkpoint_dir=out_dir / "checkpoint",
-                           models=models)
+                           models=models, replace_other_inputs=True)
     check_cancel(cancel)
     result.config, result.bake_raster, result.uv_report = config, raster, uv_report
     return result, write_adapt(result, out_dir)
