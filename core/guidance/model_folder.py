@@ -9,7 +9,7 @@ import stat
 from pathlib import Path
 from typing import Any
 
-from ..base.errors import ModelMissingError
+from ..base.errors import InputError, ModelMissingError
 from ..base.limits import memory_needed_sentence
 from ..base.untrusted import parse_json, read_bytes
 
@@ -44,8 +44,6 @@ def check_model_files(folder: Path, what: str) -> None:
 def read_config(path: Path, what: str, bounded: bool = True) -> dict[str, Any]:
     """One config file as a JSON object, or one sentence naming it; `bounded`: a network's config, whose
     counts and lists are held to what a network has (a tokenizer's may say 1e30 for "no limit")."""
-    from ..base.errors import InputError
-
     try:
         value = parse_json(read_bytes(path, MAX_CONFIG_BYTES, f"{what} file"), f"the {what} file '{path}'",
                            MAX_CONFIG_BYTES)

@@ -337,7 +337,7 @@ def _fetch_blob(spec: ModelSpec, storage: Path, commit: str, name: str, endpoint
 def _fetch_into(partial: Path, meta, transfer: _Transfer) -> bool:
     """The rest of the file into `partial` (the hub's Range resume); whether a kept part was resumed."""
     from huggingface_hub.file_download import http_get   # lazy: needed only to fetch models
-    from huggingface_hub.utils import build_hf_headers
+    from huggingface_hub.utils import build_hf_headers   # lazy: needed only to fetch models
 
     if partial.is_symlink() or (partial.exists() and not partial.is_file()):
         partial.unlink()   # a partial is SceneFit's own plain file; anything else is not appended to
@@ -360,7 +360,7 @@ def _fetch_into(partial: Path, meta, transfer: _Transfer) -> bool:
 def _link_snapshot(storage: Path, commit: str, revision: str, blobs: dict[str, str]) -> None:
     """Each fetched file linked into snapshots/<commit>/ from its checked blob, and the revision recorded, by the
     hub's own helpers (relative links, or copies where the file system has none)."""
-    from huggingface_hub.file_download import _cache_commit_hash_for_specific_revision, _create_symlink
+    from huggingface_hub.file_download import _cache_commit_hash_for_specific_revision, _create_symlink  # lazy: fetching only
 
     snapshot = storage / "snapshots" / commit
     for name, etag in blobs.items():

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..base.errors import InputError, ModelMissingError
+from .model_folder import check_model_files, check_model_memory, read_config
 
 DEFAULT_BASE_MODEL = "stabilityai/stable-diffusion-2-base"
 DEFAULT_INPAINT_MODEL = "stabilityai/stable-diffusion-2-inpainting"
@@ -365,9 +366,7 @@ def load_guidance_models(config: ModelConfig, need_inpaint: bool, paths: dict[st
 def _check_guidance_folders(paths: dict[str, Path], dtype) -> None:
     """The folders' files and configs checked, and each network's size against memory, before any is loaded."""
     from diffusers import AutoencoderKL, UNet2DConditionModel   # lazy: seconds to load
-    from transformers import CLIPTextConfig, CLIPTextModel
-
-    from .model_folder import check_model_files, check_model_memory, read_config
+    from transformers import CLIPTextConfig, CLIPTextModel   # lazy: seconds to load
 
     size = dtype.itemsize
     for role, folder in paths.items():
@@ -469,8 +468,6 @@ def _check_depth_folder(folder: Path) -> None:
     if not folder.is_dir():
         return   # transformers' own error says what is missing
     from transformers import AutoConfig, AutoModelForDepthEstimation   # lazy: seconds to load
-
-    from .model_folder import check_model_files, check_model_memory, read_config
 
     check_model_files(folder, "depth model")
     if (folder / "config.json").is_file():
