@@ -11,6 +11,7 @@ Runtime state lives on the WindowManager (never saved into the .blend); the live
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import time
 from typing import TYPE_CHECKING
 
@@ -227,18 +228,34 @@ def has_ui(context) -> bool:
     return context.window is not None and not bpy.app.background
 
 
+def _parts(data) -> dict:
+    """A job's data by name: a dict's items, a frozen dataclass's fields (job_seam.RunInputs)."""
+    if isinstance(data, dict):
+        return data
+    if dataclasses.is_dataclass(data) and not isinstance(data, type):
+        return {f.name: getattr(data, f.name) for f in dataclasses.fields(data)}
+    return {}
+
+
 def owed_bakes(data) -> list:
     """The Cycles bakes a job's inputs still owe the main thread (core/data/map_plan.PendingAsset.bakes)."""
-    if not isinstance(data, dict):
-        return []
-    return [b for v in data.values() if isinstance(v, PendingAsset) for b in v.bakes if not b.done]
+    return [b for v in _parts(data).values() if isinstance(v, PendingAsset) for b in v.bakes if not b.done]
 
 
 def for_the_worker(data):
     """A job's data as its worker takes it: each planned asset as plain data, its bakes' pixels in place."""
-    if not isinstance(data, dict):
+    planned = {k: v.for_job() for k, v in _parts(data).items() if isinstance(v, PendingAsset)}
+    if not planned:
         return data
-    return {k: v.for_job() if isinstance(v, PendingAsset) else v for k, v in data.items()}
+    return {**data, **planned} if isinstance(data, dict) else dataclasses.replace(data, **planned)
+
+
+def job_out(data) -> str:
+    """The run folder a job writes (its request's, or a dict's "out"), or ""."""
+    request = getattr(data, "request", None)
+    if request is not None:
+        return request.out
+    return data.get("out", "") if isinstance(data, dict) else ""
 
 
 def job_seconds(job: background.Job) -> float:
@@ -307,7 +324,7 @@ class JobSteps:
             if warning:
                 self.report({"WARNING"}, warning)
             work, data = self.job_work(context)
-            self._out = data.get("out", "") if isinstance(data, dict) else ""
+            self._out = job_out(data)
             for bake in owed_bakes(data):
                 bake.run()
             result = background.run_inline(work, for_the_worker(data), TerminalProgress())
@@ -376,7 +393,7 @@ class JobSteps:
             if getattr(self, "_gathered", None) is None:
                 check_dependencies()
                 work, data = self.job_work(context)
-                self._out = data.get("out", "") if isinstance(data, dict) else ""
+                self._out = job_out(data)
                 self._gathered, self._owed, self._baked = (work, data), owed_bakes(data), 0
             elif self._owed:
                 self._owed.pop(0).run()

@@ -34,9 +34,18 @@ def depth_model_preference(context=None) -> str | None:
 
 
 def model_settings(context=None):
-    """(ModelConfig, DepthConfig) from the preferences: hub ids or folders, cache, offline, device."""
-    from ..core.guidance import ModelConfig
+    """(ModelConfig, DepthConfig) from the preferences: hub ids or folders, cache, offline, device. The depth
+    config's module imports torch: a job's click takes model_config alone."""
     from ..core.stages.light.depth import depth_config_for
+
+    models = model_config(context)
+    prefs = preferences(context)
+    return models, depth_config_for(models, model=prefs.depth_model if prefs is not None else None)
+
+
+def model_config(context=None):
+    """The ModelConfig of the preferences (hub ids or folders, cache, offline, device), without torch."""
+    from ..core.guidance.models import ModelConfig
 
     prefs = preferences(context)
     cache, local_only = model_cache(context), offline(context)
@@ -46,5 +55,4 @@ def model_settings(context=None):
         kwargs = {"base_model": prefs.base_model, "inpaint_model": prefs.inpaint_model,
                   "attention_slicing": prefs.attention_slicing, "vae_tiling": prefs.vae_tiling,
                   "cpu_offload": prefs.cpu_offload}
-    models = ModelConfig(cache_dir=cache, local_files_only=local_only, device_type=device, **kwargs)
-    return models, depth_config_for(models, model=prefs.depth_model if prefs is not None else None)
+    return ModelConfig(cache_dir=cache, local_files_only=local_only, device_type=device, **kwargs)

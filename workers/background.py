@@ -210,7 +210,8 @@ class Job:
         except OSError as error:   # disk full, read-only, a path in the way: a sentence, as on the command line
             from ..core.base.os_errors import os_error_sentence
 
-            out = self._data.get("out") if isinstance(self._data, dict) else None
+            request = getattr(self._data, "request", None)
+            out = request.out if request is not None else self._data.get("out") if isinstance(self._data, dict) else None
             self._events.put(("error", (os_error_sentence(error, out), traceback.format_exc())))
         except Exception as error:  # an unexpected failure still ends the job, with its traceback kept
             self._events.put(("error", (f"{self.name} failed: {error!r}", traceback.format_exc())))
