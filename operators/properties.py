@@ -80,8 +80,8 @@ class SceneFitSlot(bpy.types.PropertyGroup):
 
 
 RUN_STATES = (("finished", "Finished", "The run finished; Apply puts its results in the asset's slots and World"),
-              ("cancelled", "Cancelled", "The run was cancelled; an adaptation can be resumed from its checkpoint"),
-              ("failed", "Failed", "The run failed; its folder keeps what it wrote"))
+              ("cancelled", "Cancelled", "The run was cancelled; Resume continues it from its finished stages and checkpoint"),
+              ("failed", "Failed", "The run failed; Resume continues it from the stages it finished"))
 
 
 class SceneFitRun(bpy.types.PropertyGroup):

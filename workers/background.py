@@ -249,13 +249,16 @@ def release_job(job: Job) -> None:
 
 
 def end_active_job(timeout: float = 10.0) -> JobState | None:
-    """Cancel the running job and wait for its worker (Blender is loading another file, or quitting)."""
+    """Cancel the running job and wait up to `timeout` for its worker to stop (Blender is loading another file,
+    quitting, or disabling SceneFit). The slot frees only once the worker has stopped: one still running
+    (stuck in a call that checks no cancel) keeps it, so no new job starts beside it."""
     job = _active
     if job is None:
         return None
     job.cancel()
     state = job.wait(timeout)
-    release_job(job)
+    if not job.alive:
+        release_job(job)
     return state
 
 

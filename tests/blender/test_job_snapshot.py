@@ -114,6 +114,29 @@ deleted = sorted(bpy.ops.scenefit.delete_run(index=index, folder=True))
 out["delete"] = {"had": had, "deleted": deleted, "left": [folder.exists(), partial_of(folder).exists()]}
 """
 
+# Two clicks of Run All before the first one's first tick: the second is refused, not started beside it. A file
+# loaded during a job leaves no job thread running.
+SECOND = r"""
+import threading
+select("Fox Renamed")
+first_op, first_ctx = probe(run_ops.SCENEFIT_OT_run, choice="skip", guidance="auto", **QUICK), Ctx()
+second_op, second_ctx = probe(run_ops.SCENEFIT_OT_run, choice="skip", guidance="auto", **QUICK), Ctx()
+answers = [sorted(ui_invoke(first_op, first_ctx, event("LEFTMOUSE"))), sorted(ui_invoke(second_op, second_ctx, event("LEFTMOUSE")))]
+while getattr(first_op, "_job", None) is None:
+    first_op.modal(first_ctx, event("TIMER"))
+while first_op._job.poll().step < 1 and not first_op._job.state.finished:
+    time.sleep(0.05)
+third = sorted(ui_invoke(probe(run_ops.SCENEFIT_OT_run, choice="skip", guidance="auto", **QUICK), Ctx(), event("LEFTMOUSE")))
+job = first_op._job
+t = time.perf_counter()
+bpy.ops.wm.open_mainfile(filepath=str(tmp / "scene.blend"))   # another file: load_pre ends the job first
+out["second"] = {"answers": answers, "refused": second_op.reported[-1:], "third": third,
+                 "load_s": round(time.perf_counter() - t, 2), "alive": job.alive,
+                 "threads": [th.name for th in threading.enumerate() if th.name.startswith("scenefit-")],
+                 "slot": background.active_job() is None}
+settings = bpy.context.scene.scenefit
+"""
+
 # Shift+D: the copy starts with an empty history; its Delete cannot reach the original's folder.
 DUPLICATE = r"""
 fox = bpy.data.objects["Fox Renamed"]
@@ -176,3 +199,10 @@ def test_a_duplicate_starts_with_an_empty_history(session):
     assert out["after"] == 0 and "no such run" in str(out["said"]) and out["ids"] == [False]
     runs, folders_kept = out["original"]
     assert runs >= 1 and folders_kept
+
+
+def test_a_second_run_all_never_starts_beside_the_first_and_a_file_load_ends_it(session):
+    out = _step(session, SECOND, "second")["second"]
+    assert out["answers"] == [["RUNNING_MODAL"], ["CANCELLED"]] and "wait for it" in out["refused"][0]
+    assert out["third"] == ["CANCELLED"]
+    assert not out["alive"] and out["threads"] == [] and out["slot"]
