@@ -14,7 +14,7 @@ from .asset import asset_layout, asset_texture
 from .folders import run_folder
 from .photo import photo_path, photo_view
 from .polls import OnMesh
-from .prefs import model_settings
+from .prefs import model_config
 from .jobs import CHOICES, CostFirst, JobOperator
 from .results import apply_layout_results, apply_result_material, materials_words, result_targets
 
@@ -49,7 +49,7 @@ def gather_adapt(op, context, texture: str) -> dict:
     # the operator's quick-look properties as stage overrides.
     settings_of_run = {"preset": op.run_preset(context), "mode": settings.mode, "prompt": settings.prompt,
                        "object_prompt": settings.object_prompt, "instruction": settings.instruction,
-                       "models": model_settings(context)[0], "stage_overrides": work.quick_overrides(op)}
+                       "models": model_config(context), "stage_overrides": work.quick_overrides(op)}
     config = work.view_config(view, **settings_of_run) if view else work.plain_config(
         size=settings.size, **settings_of_run)
     return {
@@ -135,7 +135,7 @@ class SCENEFIT_OT_adapt(OnMesh, CostFirst, JobOperator):
             mats = apply_layout_results(context, self._layout, result, "adapt")
         else:
             mats = [apply_result_material(context, self._object_name, result, "adapt")]
-        return f"Adapted ({result['iterations']} iterations): {materials_words(mats)}"
+        return f"Adapted ({result.numbers['iterations']:.0f} iterations): {materials_words(mats)}"
 
 
 classes = (SCENEFIT_OT_adapt,)

@@ -210,16 +210,17 @@ def asset_objects(context) -> list:
     return [obj]
 
 
-def asset_layout(context) -> AssetLayout:
+def asset_layout(context, objects: list | None = None, owner: str = "") -> AssetLayout:
     """The asset of Run All and Bake Asset: the selected objects in world space, or the active object with
-    all its material slots. One sentence (InputError) for what cannot be textured."""
+    all its material slots (`objects` and `owner`, its name: another asset than the selection's, such as the
+    one a resumed run was clicked on). One sentence (InputError) for what cannot be textured."""
     from ..blender_io.material import object_mesh_and_slots
     from ..blender_io.scene_asset import scene_mesh
 
-    objects = asset_objects(context)
+    objects = objects or asset_objects(context)
     depsgraph = context.evaluated_depsgraph_get()
     active = context.active_object
-    name = active.name if active in objects else objects[0].name
+    name = owner or (active.name if active in objects else objects[0].name)
     if len(objects) == 1:
         obj = objects[0]
         mesh, used = object_mesh_and_slots(obj, depsgraph)

@@ -40,7 +40,7 @@ class SCENEFIT_OT_convert(OnMesh, JobOperator):
     def apply(self, context, result) -> str:
         mats = apply_layout_results(context, self._layout, result, "convert")
         return (f"Converted: {materials_words(mats)} "
-                f"({result['psnr_db']:.1f} dB on the covered texels)")
+                f"({result.numbers['psnr_db']:.1f} dB on the covered texels)")
 
 
 classes = (SCENEFIT_OT_convert,)

@@ -21,26 +21,36 @@ from .results import put_in_slots
 
 def record_run(op, context, state: str, result) -> None:
     """The run `op` (a job operator that records runs) just ended, in its asset's history: its folder, preset,
-    prompt, time and state; for a finished run, the materials in its slots, its World and composite."""
+    prompt, time and state as the click asked for them (the request of a Run All: a rename, another selection
+    or an edited prompt meanwhile changes nothing); for a finished run, the materials in its slots, its World
+    and composite. An asset deleted meanwhile: the run goes to the scene's list of runs without an asset."""
+    from .identity import object_by_id
+
     settings = context.scene.scenefit
+    request = getattr(op, "_request", None)
     layout = getattr(op, "_layout", None) or {}
-    names = list(layout.get("objects") or [getattr(op, "_object_name", "")])
-    owner = layout.get("owner") or names[0]
-    obj = bpy.data.objects.get(owner) if owner else None
-    if obj is None:
-        return   # the asset was deleted while the run went on
-    runs = asset_state(obj).runs
+    owner_id = layout.get("owner_id")
+    obj = object_by_id(owner_id) if owner_id else bpy.data.objects.get(getattr(op, "_object_name", "") or "")
+    names = [o.name for o in (object_by_id(i) for i in layout.get("object_ids", ())) if o is not None] or \
+        ([obj.name] if obj is not None else [])
+    runs = asset_state(obj).runs if obj is not None else settings.runs_without_asset
     folder = relative_if_saved(op._out)
     run = next((r for r in runs if r.folder == folder), None) or runs.add()   # a resumed run updates its entry
     run.folder, run.stage, run.state = folder, op.job_name, state
-    preset = op.run_preset(context) if hasattr(op, "run_preset") else settings.preset   # (Draft at the question)
-    run.preset, run.prompt, run.when = preset, settings.prompt, time.strftime("%Y-%m-%d %H:%M")
+    if request is not None:
+        run.preset, run.prompt = request.config.preset, request.config.prompt
+    else:
+        run.preset = op.run_preset(context) if hasattr(op, "run_preset") else settings.preset   # (Draft at the question)
+        run.prompt = settings.prompt
+    run.when = time.strftime("%Y-%m-%d %H:%M")
     run.mesh_digest = layout.get("digest", "")
     for name in ("iterations", "model_resolution", "render_size"):
         setattr(run, name, int(getattr(op, name, 0) or 0))
-    if state != "finished" or not isinstance(result, dict):
+    if obj is not None:
+        asset_state(obj).run_index = list(runs).index(run)
+    if state != "finished" or result is None:
         return
-    run.texture_path = relative_if_saved(result["texture"]) if result.get("texture") else ""
+    run.texture_path = relative_if_saved(result.texture) if result.texture else ""
     made = getattr(op, "_made", {})
     run.world, run.composite = made.get("world"), made.get("composite")
     if run.composite is not None:
@@ -52,12 +62,16 @@ def record_run(op, context, state: str, result) -> None:
             kept = run.slots.add()
             kept.asset_object, kept.slot, kept.original, kept.result, kept.job = (
                 entry.asset_object, entry.slot, entry.original, entry.result, entry.job)
-    asset_state(obj).run_index = list(runs).index(run)
 
 
 def chosen_run(context, index: int):
-    """(asset state, run) of the active asset's run `index`; one sentence when there is none."""
+    """(asset state, run) of the active asset's run `index`; one sentence when there is none. A duplicate of an
+    asset is told apart here first (operators/identity.py): its copied history is emptied."""
+    from .identity import object_id
+
     owner = asset_owner(context.scene)
+    if owner is not None:
+        object_id(owner)
     state = owner.scenefit_asset if owner is not None else None
     if state is None or not 0 <= index < len(state.runs):
         raise InputError("There is no such run; choose one in the Results section's list.")
@@ -277,7 +291,8 @@ class SCENEFIT_OT_delete_run(_RunOperator, bpy.types.Operator):
 
 
 class SCENEFIT_OT_resume_run(_RunOperator, bpy.types.Operator):
-    """Continue this cancelled adaptation from its last checkpoint (the step count goes on)"""
+    """Continue this unfinished run from what it kept: its finished stages and the adaptation's last checkpoint
+    (the step count goes on), with the settings it was started with"""
 
     bl_idname = "scenefit.resume_run"
     bl_label = "Resume"
@@ -292,14 +307,20 @@ class SCENEFIT_OT_resume_run(_RunOperator, bpy.types.Operator):
     def _resume(self, context, how: str):
         try:
             _, run = chosen_run(context, self.index)
-            if run.stage != "adapt" or run.state == "finished":
-                raise InputError(f"Only a cancelled or failed adaptation can be resumed; the run of {run.when} is a "
-                                 f"{run.state} {run.stage}.")
+            if run.stage not in RESUMABLE or run.state == "finished":
+                raise InputError(f"Only an unfinished Run All or adaptation can be resumed; the run of {run.when} is "
+                                 f"a {run.state} {run.stage}.")
         except SceneFitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
+        if run.stage == "run":   # as it was clicked (its request.json): its stages and checkpoint go on
+            return bpy.ops.scenefit.run(how, resume=bpy.path.abspath(run.folder), choice="start")
         return bpy.ops.scenefit.adapt(how, resume=bpy.path.abspath(run.folder), iterations=run.iterations,
                                       model_resolution=run.model_resolution, render_size=run.render_size)
+
+
+# The jobs whose unfinished runs go on from their folder (finished stages, the adaptation's checkpoint).
+RESUMABLE = ("run", "adapt")
 
 
 classes = (SCENEFIT_OT_apply_run, SCENEFIT_OT_compare_run, SCENEFIT_OT_open_run_folder, SCENEFIT_OT_delete_run,

@@ -11,6 +11,7 @@ Runtime state lives on the WindowManager (never saved into the .blend); the live
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import time
 from typing import TYPE_CHECKING
 
@@ -193,8 +194,10 @@ def long_work_warning(context, label: str, work: LocalWork | None, runs_remotely
 
 # A job that has run longer than this asks before Esc cancels it (a stray Esc must not end hours of work).
 CONFIRM_CANCEL_AFTER = 60.0
-# How long loading another file (or quitting) waits for a job's worker to stop.
-END_JOB_SECONDS = 2.0
+# How long loading another file, quitting or disabling SceneFit waits for a job's worker to stop: a worker
+# checks its cancel within a UNet block or a download chunk (seconds); only one stuck in a call that checks
+# none (a model's load) outlasts it, and it keeps the job slot until it stops (workers/background.py).
+END_JOB_SECONDS = 30.0
 
 
 def esc_action(over_progress: bool, seconds: float) -> str:
@@ -227,18 +230,34 @@ def has_ui(context) -> bool:
     return context.window is not None and not bpy.app.background
 
 
+def _parts(data) -> dict:
+    """A job's data by name: a dict's items, a frozen dataclass's fields (job_seam.RunInputs)."""
+    if isinstance(data, dict):
+        return data
+    if dataclasses.is_dataclass(data) and not isinstance(data, type):
+        return {f.name: getattr(data, f.name) for f in dataclasses.fields(data)}
+    return {}
+
+
 def owed_bakes(data) -> list:
     """The Cycles bakes a job's inputs still owe the main thread (core/data/map_plan.PendingAsset.bakes)."""
-    if not isinstance(data, dict):
-        return []
-    return [b for v in data.values() if isinstance(v, PendingAsset) for b in v.bakes if not b.done]
+    return [b for v in _parts(data).values() if isinstance(v, PendingAsset) for b in v.bakes if not b.done]
 
 
 def for_the_worker(data):
     """A job's data as its worker takes it: each planned asset as plain data, its bakes' pixels in place."""
-    if not isinstance(data, dict):
+    planned = {k: v.for_job() for k, v in _parts(data).items() if isinstance(v, PendingAsset)}
+    if not planned:
         return data
-    return {k: v.for_job() if isinstance(v, PendingAsset) else v for k, v in data.items()}
+    return {**data, **planned} if isinstance(data, dict) else dataclasses.replace(data, **planned)
+
+
+def job_out(data) -> str:
+    """The run folder a job writes (its request's, or a dict's "out"), or ""."""
+    request = getattr(data, "request", None)
+    if request is not None:
+        return request.out
+    return data.get("out", "") if isinstance(data, dict) else ""
 
 
 def job_seconds(job: background.Job) -> float:
@@ -307,7 +326,7 @@ class JobSteps:
             if warning:
                 self.report({"WARNING"}, warning)
             work, data = self.job_work(context)
-            self._out = data.get("out", "") if isinstance(data, dict) else ""
+            self._out = job_out(data)
             for bake in owed_bakes(data):
                 bake.run()
             result = background.run_inline(work, for_the_worker(data), TerminalProgress())
@@ -342,8 +361,9 @@ class JobSteps:
     def _begin(self, context):
         """The bar at once; the inputs are gathered on the first timer tick (`_gather`), a procedural chain's
         bake on each tick after (`_bake_one`), and the worker started once they are (`_start_job`)."""
+        global _gathering
         active = background.active_job()
-        if _gathering is not None and _gathering is not self:
+        if _gathering is not None and _gathering is not self and runtime(context).running:
             self.report({"ERROR"}, f"SceneFit's {_gathering.bl_label} is reading its asset; wait for it or cancel it "
                                    "first.")
             return {"CANCELLED"}
@@ -351,6 +371,7 @@ class JobSteps:
             self.report({"ERROR"}, f"A SceneFit job ('{active.name}') is already running; wait for it or cancel it "
                                    "first.")
             return {"CANCELLED"}
+        _gathering = self   # from the click: a second click before the first tick is refused, not started beside
         self._job, self._gathered, self._owed, self._cancel_gathering = None, None, [], False
         rt = runtime(context)
         rt.running, rt.job, rt.stage, rt.progress = True, self.job_name, "prepare", 0.0
@@ -376,7 +397,7 @@ class JobSteps:
             if getattr(self, "_gathered", None) is None:
                 check_dependencies()
                 work, data = self.job_work(context)
-                self._out = data.get("out", "") if isinstance(data, dict) else ""
+                self._out = job_out(data)
                 self._gathered, self._owed, self._baked = (work, data), owed_bakes(data), 0
             elif self._owed:
                 self._owed.pop(0).run()
@@ -573,8 +594,8 @@ class JobOperator(JobSteps, bpy.types.Operator):
 
 
 class SCENEFIT_OT_cancel_job(bpy.types.Operator):
-    """Stop the running SceneFit job within seconds; an adaptation keeps its folder and checkpoint, and
-    Resume in the Results section continues it"""
+    """Stop the running SceneFit job within seconds; a Run All or Adapt keeps its finished stages and the
+    adaptation's checkpoint, and Resume in the Results section continues it"""
 
     bl_idname = "scenefit.cancel_job"
     bl_label = "Cancel"
@@ -592,8 +613,8 @@ class SCENEFIT_OT_cancel_job(bpy.types.Operator):
         job = background.active_job()
         if job is not None and not job.state.finished and job_seconds(job) > CONFIRM_CANCEL_AFTER:
             return context.window_manager.invoke_confirm(self, event, title=f"Cancel {job.name}?",
-                                                         message="It has run for a while; an adaptation can be "
-                                                                 "resumed later.", confirm_text="Cancel it")
+                                                         message="It has run for a while; Resume continues it "
+                                                                 "later from its finished stages.", confirm_text="Cancel it")
         return self.execute(context)
 
     def execute(self, context):
@@ -617,12 +638,12 @@ def draw_status_bar(self, context) -> None:
 
 @persistent
 def _end_job_before_load(*_args) -> None:
-    """Loading a file frees the data a job would write into: cancel it and wait (briefly) for its worker,
-    which writes only into its own run folder and stops at its next check."""
+    """Loading a file frees the data a job would write into: cancel it and wait for its worker to stop (it
+    writes only into its own run folder, which keeps its finished stages, and stops at its next check)."""
     state = background.end_active_job(timeout=END_JOB_SECONDS)
     if state is not None:
         print(f"SceneFit: '{state.name}' was stopped because another file is being loaded ({state.status}); "
-              "an adaptation can be resumed from its run folder.")
+              "Resume in the Results section continues a Run All or Adapt from what it kept.")
 
 
 @persistent

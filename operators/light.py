@@ -8,7 +8,7 @@ from bpy.props import EnumProperty, IntProperty
 from ..workers import blender_jobs as work
 from .folders import last_finished_run, run_folder
 from .photo import photo_path, photo_view
-from .prefs import depth_model_preference, model_settings
+from .prefs import depth_model_preference, model_config
 from .jobs import JobOperator
 from .results import apply_result_world
 
@@ -45,7 +45,7 @@ class SCENEFIT_OT_estimate_light(JobOperator):
         light = dict(work.quick_overrides(self).get("light", {}), critic_type=self.critic)
         light["outpaint"] = dict(light.get("outpaint", {}), completion_type=self.outpaint)
         config = work.view_config(photo_view(context, photo), preset=settings.preset, scene_type=settings.scene_type,
-                                  models=model_settings(context)[0], depth_model=depth_model_preference(context),
+                                  models=model_config(context), depth_model=depth_model_preference(context),
                                   stage_overrides={"light": light})
         earlier = last_finished_run(out)   # the last estimate of this photo: its stages with these keys are reused
         return work.estimate_light, {"photo": str(photo), "placement": tuple(settings.placement), "config": config,

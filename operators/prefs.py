@@ -34,17 +34,27 @@ def depth_model_preference(context=None) -> str | None:
 
 
 def model_settings(context=None):
-    """(ModelConfig, DepthConfig) from the preferences: hub ids or folders, cache, offline, device."""
-    from ..core.guidance import ModelConfig
+    """(ModelConfig, DepthConfig) from the preferences: hub ids or folders, cache, offline, device. The depth
+    config's module imports torch: a job's click takes model_config alone."""
     from ..core.stages.light.depth import depth_config_for
 
+    models = model_config(context, job=False)
     prefs = preferences(context)
-    cache, local_only = model_cache(context), offline(context)
+    return models, depth_config_for(models, model=prefs.depth_model if prefs is not None else None)
+
+
+def model_config(context=None, job: bool = True):
+    """The ModelConfig of the preferences (hub ids or folders, cache, offline, device), without torch. A job's
+    (job=True) never downloads: models come only through the manager (Download in the preferences), so a job
+    starts at once, its cost is what was asked, and its cancel is never stuck in a download."""
+    from ..core.guidance.models import ModelConfig
+
+    prefs = preferences(context)
+    cache, local_only = model_cache(context), job or offline(context)
     device = prefs.device if prefs is not None else "auto"
     kwargs = {}
     if prefs is not None:
         kwargs = {"base_model": prefs.base_model, "inpaint_model": prefs.inpaint_model,
                   "attention_slicing": prefs.attention_slicing, "vae_tiling": prefs.vae_tiling,
                   "cpu_offload": prefs.cpu_offload}
-    models = ModelConfig(cache_dir=cache, local_files_only=local_only, device_type=device, **kwargs)
-    return models, depth_config_for(models, model=prefs.depth_model if prefs is not None else None)
+    return ModelConfig(cache_dir=cache, local_files_only=local_only, device_type=device, **kwargs)

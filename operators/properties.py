@@ -80,8 +80,8 @@ class SceneFitSlot(bpy.types.PropertyGroup):
 
 
 RUN_STATES = (("finished", "Finished", "The run finished; Apply puts its results in the asset's slots and World"),
-              ("cancelled", "Cancelled", "The run was cancelled; an adaptation can be resumed from its checkpoint"),
-              ("failed", "Failed", "The run failed; its folder keeps what it wrote"))
+              ("cancelled", "Cancelled", "The run was cancelled; Resume continues it from its finished stages and checkpoint"),
+              ("failed", "Failed", "The run failed; Resume continues it from the stages it finished"))
 
 
 class SceneFitRun(bpy.types.PropertyGroup):
@@ -214,6 +214,10 @@ class SceneFitSettings(bpy.types.PropertyGroup):
     prompt_source: StringProperty(name="Prompt source", description="Who wrote the prompt: the language model or the "
                                                                     "offline template")
     instruction: StringProperty(name="Instruction", description="Edit mode: e.g. 'add dust to the sofa'")
+    negative_prompt: StringProperty(name="Avoid", description="What the asset should not look like, e.g. 'blurry, "
+                                                              "text' (the restyling steers away from it)")
+    seed: IntProperty(name="Seed", default=-1, min=-1, description="The same seed gives the same texture again "
+                                                                   "(-1: SceneFit's own for each step)")
     # Quality and output
     preset: EnumProperty(name="Preset", items=PRESETS, default="balanced", description="Draft is quick, Final is best; the times below say how long each takes")
     guidance: EnumProperty(name="Adaptation", items=GUIDANCE, default="auto",
@@ -226,6 +230,9 @@ class SceneFitSettings(bpy.types.PropertyGroup):
     result_object: PointerProperty(name="Asset", type=bpy.types.Object, description="The object the latest result went to")
     # Every slot of every object the last result went to (the Results section switches them all).
     result_slots: CollectionProperty(name="Result slots", type=SceneFitSlot, description="Every slot the latest result went to")
+    runs_without_asset: CollectionProperty(name="Runs without asset", type=SceneFitRun,
+                                           description="Runs whose asset was deleted while they ran (their folders "
+                                                       "keep what they made)")
     result_world: PointerProperty(name="SceneFit World", type=bpy.types.World, description="SceneFit's latest World (the photo's light)")
     original_world: PointerProperty(name="Original World", type=bpy.types.World, description="The World it replaced")
     texture_path: StringProperty(name="Neural texture", subtype="FILE_PATH", options=PATH, **_per_asset("texture_path"),

@@ -2,13 +2,14 @@
 SceneFit install with CUDA torch), and their results applied when they come back.
 
 The job object is the same background job as a local one (workers/background.py): its work function is
-workers.remote.work_remotely, which streams the worker's progress events and previews into the job's
+workers.remote.send_run, which streams the worker's progress events and previews into the job's
 queue, passes a cancel on to the worker and unpacks the job's folder into a new run folder. So the
 panel, the status bar, Esc and the Cancel button work unchanged; only the gathering (`remote_work`)
 and the applying (`apply_remote`, main thread) are this module's.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlparse
 
@@ -16,11 +17,11 @@ import bpy
 
 from ..core.base.errors import InputError
 from ..core.pipeline.registry import STAGES
-from .asset import scene_layout
-from .folders import last_finished_run, run_folder
-from .photo import photo_view
-from .prefs import depth_model_preference, model_settings, preferences
-from .results import apply_layout_results, materials_words, result_targets
+from ..workers.job_seam import read_run_outcome
+from ..workers.remote import RemoteRun
+from .folders import last_finished_run
+from .prefs import preferences
+from .results import apply_layout_results, materials_words
 
 # What the worker runs for each operator: the whole pipeline but the bake (Bake Asset writes the file here).
 REMOTE_STAGES = tuple(stage for stage in STAGES if stage != "bake")
@@ -63,43 +64,36 @@ def is_local_address(address: str) -> bool:
 
 
 def remote_work(op, context, address: str) -> tuple:
-    """(work function, plain data) that run the whole pipeline in the worker environment at `address`; the
-    operator's quick-look settings travel as stage overrides. Run All and Adapt take what they take here:
-    every material of the active object, or the selected objects as one asset (their atlas travels, and
-    each material's maps are baked here from the texture that comes back)."""
-    from ..workers.remote import work_remotely
-
-    settings = context.scene.scenefit
-    photo, layout = scene_layout(op, context, "A worker environment runs the pipeline that fits the asset into a "
-                                              "photo; other modes run in this Blender")
-    # as a local Run All hands them over: planned here, decoded in the job, procedural chains baked between ticks
-    materials = layout.bake_data() if len(layout.materials) > 1 else None
-    op._layout = result_targets(layout)   # where the results go: every slot of the asset
-    objects, name = [bpy.data.objects[n] for n in layout.objects], layout.name
-    models, _ = model_settings(context)
+    """(work function, RemoteRun) that run the whole pipeline in the worker environment at `address`: the
+    same request a Run All here sends (operators/run_request.gather_run), its RunConfig as it is, the
+    worker finding the models in its own cache and on its own device. Every material of the active object,
+    or the selected objects as one asset (their atlas travels, and each material's maps are baked here from
+    the texture that comes back)."""
     from dataclasses import replace
 
-    # The worker finds the models in its own cache and on its own device.
-    models = replace(models, cache_dir=None, device_type="auto")
-    check_models_reach_the_worker(address, {"base model": models.base_model, "inpainting model": models.inpaint_model,
-                                            "depth model": depth_model_preference(context)})
-    # The job's folder comes back whole as this run's new folder (nothing of it while it runs or if cancelled).
-    folder = run_folder(context, op.job_name, name)
-    earlier = last_finished_run(folder)   # its stages with this run's settings and inputs are reused, as here
-    # How the photo is seen, as Run All here sees it (operators/photo.photo_view): the artist's camera or the
-    # panel's values, where the asset stands, and the artist's sun.
-    from ..core.pipeline.run_table import run_table
-    from ..workers.blender_jobs import quick_overrides, view_config
+    from ..workers.remote import RemoteRun, send_run
+    from .run_request import gather_run
 
-    view = photo_view(context, photo, objects)
-    # The run as a local Run All builds it (workers/blender_jobs.view_config), sent as a job's table.
-    config = view_config(view, preset=settings.preset, prompt=settings.prompt, stage_overrides=quick_overrides(op),
-                         scene_type=settings.scene_type, depth_model=depth_model_preference(context))
-    return (work_remotely if materials is None else work_remotely_per_material), {
-        "asset": layout.plan(context), "photo": str(photo), "worker": address, "at": tuple(view["placement"]),
-        "out": str(folder.parent), "name": folder.name, "stages": REMOTE_STAGES, "models": models,
-        "materials": materials, "earlier": str(earlier) if earlier else None,
-        **{k: v for k, v in run_table(config).items() if v is not None}}
+    guidance = op.chosen_guidance(context) if hasattr(op, "chosen_guidance") else context.scene.scenefit.guidance
+    request, layout = gather_run(op, context, "A worker environment runs the pipeline that fits the asset into "
+                                              "a photo; other modes run in this Blender", guidance)
+    config = request.config
+    check_models_reach_the_worker(address, {"base model": config.models.base_model,
+                                            "inpainting model": config.models.inpaint_model,
+                                            "depth model": config.depth_model})
+    config = replace(config, models=replace(config.models, cache_dir=None, device_type="auto"))
+    op._request = request = replace(request, config=config)
+    # The job's folder comes back whole as this run's new folder (nothing of it while it runs or if cancelled).
+    folder = Path(request.out)
+    earlier = last_finished_run(folder)   # its stages with this run's settings and inputs are reused, as here
+    sent = RemoteRun(name=folder.name, worker=address, out=str(folder.parent), stages=REMOTE_STAGES, run=config,
+                     photo=request.photo, at=request.placement, asset=layout.plan(context),
+                     earlier=str(earlier) if earlier else None)
+    # as a local Run All hands them over: planned here, decoded in the job, procedural chains baked between ticks
+    materials = layout.bake_data() if len(layout.materials) > 1 else None
+    if materials is None:
+        return send_run, sent
+    return send_run_per_material, RemoteRunPerMaterial(sent, materials)
 
 
 def check_models_reach_the_worker(address: str, models: dict[str, str | None]) -> None:
@@ -115,51 +109,36 @@ def check_models_reach_the_worker(address: str, models: dict[str, str | None]) -
                              "or run jobs in this Blender.")
 
 
-def work_remotely_per_material(data: dict, progress=None, cancel=None) -> dict:
-    """work_remotely for an asset of several materials: the worker fits their atlas; each material's maps
+@dataclass(frozen=True)
+class RemoteRunPerMaterial:
+    """A RemoteRun of an asset of several materials, with what each material's bake here needs."""
+
+    run: RemoteRun
+    materials: dict
+
+
+def send_run_per_material(data: RemoteRunPerMaterial, progress=None, cancel=None) -> dict:
+    """send_run for an asset of several materials: the worker fits their atlas; each material's maps
     are then baked here from the texture that came back, in its own UVs (workers.blender_jobs.material_results,
     as after a local Run All), into the run folder's materials/."""
-    from ..workers.remote import work_remotely
     from ..workers.blender_jobs import material_results
+    from ..workers.remote import send_run
 
-    result = work_remotely(data, progress, cancel)
-    texture = run_result(result["folder"], result["report"])["texture"]
-    result["material_maps"] = material_results(data, texture, Path(result["folder"]) / "materials")
+    result = send_run(data.run, progress, cancel)
+    texture = read_run_outcome(result["folder"]).texture
+    result["material_maps"] = material_results(data.materials, texture, Path(result["folder"]) / "materials")
     return result
-
-
-def run_result(folder: str | Path, report: dict) -> dict:
-    """What Blender applies from a worker's job folder (the run pipeline's layout): the last texture's
-    maps (adapt's, else convert's), the light, the composite, each stage's status."""
-    folder = Path(folder)
-    stages = report["stages"]["run"]["stages"]
-    last = "adapt" if stages.get("adapt", {}).get("status") in ("ran", "reused") else "convert"
-    outputs = stages[last]["report"]["outputs"]
-
-    def path(value):
-        return str(folder / value) if isinstance(value, str) else value
-
-    light = folder / "light" / "light.exr"
-    composite = folder / "compose" / "composite.png"
-    return {"stage": last, "report": str(folder / "report.json"), "texture": path(outputs["weights"]),
-            "maps": {k: path(outputs[k]) for k in ("base_color", "roughness", "metallic")},
-            "hdr": str(light) if light.is_file() else "", "composite": str(composite) if composite.is_file() else "",
-            "stages": {name: stage["status"] for name, stage in stages.items()},
-            "adapt_skipped": stages.get("adapt", {}).get("why", ""),
-            # the camera the light stage used, which the Cycles set-up takes (as after a local run)
-            "camera": {k: v for k, v in stages.get("light", {}).get("report", {}).get("decisions", {})
-                       .get("photo_camera", {}).items() if k in ("fov_deg", "pitch_deg", "roll_deg")}}
 
 
 def apply_remote(op, context, result: dict) -> str:
     """Main thread: the worker's results as new datablocks (the artist's own are kept); a Run's are
-    applied by Run's own apply, as after a local run."""
-    shaped = dict(run_result(result["folder"], result["report"]), material_maps=result.get("material_maps", []))
+    applied by Run's own apply, as after a local run (the same outcome, job_seam.run_outcome)."""
+    outcome = read_run_outcome(result["folder"], tuple(result.get("material_maps", ())))
     done = f"Done on the worker ({result['report'].get('seconds', 0):.0f} s): "
     if op.job_name == "run":
-        return done + op.apply(context, shaped).removeprefix("Done: ")
-    if shaped["stage"] != "adapt":
-        raise InputError(f"The worker did not adapt the texture: {shaped['adapt_skipped'] or 'no reason given'}; "
+        return done + op.apply(context, outcome).removeprefix("Done: ")
+    if outcome.stage != "adapt":
+        raise InputError(f"The worker did not adapt the texture: {outcome.adapt_skipped or 'no reason given'}; "
                          f"its results are in '{result['folder']}'.")
-    mats = apply_layout_results(context, op._layout, shaped, "adapt")
+    mats = apply_layout_results(context, op._layout, outcome, "adapt")
     return done + materials_words(mats)

@@ -18,6 +18,7 @@ from ..blender_io.tag import TAG
 from .asset import ORIGINAL_PROPERTY, artists_material_behind, asset_state, recorded_originals
 from .folders import keep_image, relative_if_saved
 from .polls import needs_setting
+from ..workers.job_seam import TextureOutcome
 
 
 
@@ -32,17 +33,18 @@ def material_images(material) -> list:
     return [n.image for n in tree.nodes if n.type in ("TEX_IMAGE", "TEX_ENVIRONMENT") and n.image] if tree else []
 
 
-def apply_result_material(context, object_name: str, result: dict, stage: str):
-    """A new material from result['maps'] in the object's active slot; the artist's material is kept as the original."""
+def apply_result_material(context, object_name: str, result: TextureOutcome, stage: str):
+    """A new material from result.maps in the object's active slot; the artist's material is kept as the original."""
     obj = bpy.data.objects.get(object_name)
     if obj is not None and not obj.material_slots:   # (a generated texture on an object without material)
         obj.data.materials.append(None)
     slot = obj.active_material_index if obj is not None else 0
-    return apply_result_materials(context, [[(object_name, slot)]], [result["maps"]], result, stage,
+    return apply_result_materials(context, [[(object_name, slot)]], [dict(result.maps)], result, stage,
                                   names=[f"{object_name} SceneFit {stage}"])[0]
 
 
-def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: list[dict], result: dict, stage: str,
+def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: list[dict], result: TextureOutcome,
+                           stage: str,
                            names: list[str] | None = None, wraps: list | None = None, digest: str = "",
                            owner: str = "") -> list:
     """A new material per material of the asset, from maps[i], in every slot slots[i] names ((object name,
@@ -50,7 +52,7 @@ def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: li
     keeps it) for the Results section's switch; a slot that held an earlier SceneFit result keeps the
     artist's material it replaced as its original. Nothing is changed when an object or slot is gone."""
     settings = context.scene.scenefit
-    where = Path(result["report"]).parent
+    where = Path(result.report).parent
     targets = []
     for pairs in slots:
         found = []
@@ -96,9 +98,9 @@ def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: li
     settings.result_material, settings.result_object = made[0], records[0][0]
     if records[0][2] is not None:
         settings.original_material = records[0][2]
-    if result.get("texture"):   # the asset's own texture, and the mesh it was made for (digest)
+    if result.texture:   # the asset's own texture, and the mesh it was made for (digest)
         state = asset_state(bpy.data.objects.get(owner) or records[0][0])   # the asset's (its active object's)
-        state.texture_path = relative_if_saved(result["texture"])
+        state.texture_path = relative_if_saved(result.texture)
         state.texture_mesh = digest
     return made
 
@@ -109,33 +111,56 @@ def materials_words(materials: list) -> str:
 
 
 def result_targets(layout) -> dict:
-    """Where a job's result goes, as plain data kept on the operator while the job runs (the datablocks
-    are found again by name when it ends): an operators.asset.AssetLayout's objects and slots, the
-    wrap of each material's maps, and the result's name where the asset is one object with one material
-    (as ever: '<object> SceneFit <stage>'; else each is named after the artist's material it replaces)."""
+    """Where a job's result goes, as plain data kept on the operator while the job runs: an
+    operators.asset.AssetLayout's objects and slots by their ids (operators/identity.py: a rename while the
+    job runs keeps them), the wrap of each material's maps, and whether the result is named after the
+    object (one object with one material: '<object> SceneFit <stage>'; else each is named after the
+    artist's material it replaces). targets_now gives the names they have when the job ends."""
     from ..blender_io.material import material_wrap
 
     from .asset import asset_digest
+    from .identity import object_id
 
+    ids = {name: object_id(bpy.data.objects[name]) for name in layout.objects}
+    if layout.name not in ids:
+        ids[layout.name] = object_id(bpy.data.objects[layout.name])
     one = len(layout.objects) == 1 and len(layout.materials) == 1
-    return {"objects": list(layout.objects), "slots": [list(pairs) for pairs in layout.slots],
-            "wraps": [material_wrap(m) for m in layout.artists], "name": layout.objects[0] if one else None,
-            "digest": asset_digest(layout), "owner": layout.name}
+    return {"object_ids": [ids[name] for name in layout.objects],
+            "slots": [[(ids[name], number) for name, number in pairs] for pairs in layout.slots],
+            "wraps": [material_wrap(m) for m in layout.artists], "named_after_object": one,
+            "digest": asset_digest(layout), "owner_id": ids[layout.name], "names": dict(map(reversed, ids.items()))}
 
 
-def apply_layout_results(context, targets: dict, result: dict, stage: str) -> list:
-    """The job's maps into every slot of `targets` (result_targets): result['material_maps'] has each
-    material's own (several materials), else result['maps'] goes to the one material's slots."""
-    per_material = result.get("material_maps") or [result["maps"]]
+def targets_now(targets: dict) -> dict:
+    """result_targets with the objects' names as they are now: objects, slots (object name, slot number),
+    owner and the result's name; an object deleted meanwhile keeps its name at the click (and its slot is
+    refused in one sentence when the result is applied)."""
+    from .identity import object_by_id
+
+    def name(value: str) -> str:
+        obj = object_by_id(value)
+        return obj.name if obj is not None else targets["names"].get(value, value)
+
+    objects = [name(i) for i in targets["object_ids"]]
+    return dict(targets, objects=objects, slots=[[(name(i), n) for i, n in pairs] for pairs in targets["slots"]],
+                owner=name(targets["owner_id"]), name=objects[0] if targets["named_after_object"] else None)
+
+
+def apply_layout_results(context, targets: dict, result: TextureOutcome, stage: str) -> list:
+    """The job's maps into every slot of `targets` (result_targets): result.material_maps has each
+    material's own (several materials), else result.maps goes to the one material's slots."""
+    now = targets_now(targets)
+    per_material = result.material_maps or [result.maps]
     maps = [{k: m[k] for k in ("base_color", "roughness", "metallic")} for m in per_material]
-    names = [f"{targets['name']} SceneFit {stage}"] if targets["name"] else None
-    return apply_result_materials(context, targets["slots"], maps, result, stage, names=names, wraps=targets["wraps"],
-                                  digest=targets.get("digest", ""), owner=targets.get("owner", ""))
+    names = [f"{now['name']} SceneFit {stage}"] if now["name"] else None
+    return apply_result_materials(context, now["slots"], maps, result, stage, names=names, wraps=targets["wraps"],
+                                  digest=targets.get("digest", ""), owner=now["owner"])
 
 
-def apply_result_world(context, hdr_path: str, stage: str = "light"):
-    """A new World lit by the HDR map (rotation and strength editable); the artist's World is kept."""
-    scene = context.scene
+def apply_result_world(context, hdr_path: str, stage: str = "light", scene=None):
+    """A new World lit by the HDR map (rotation and strength editable) in `scene` (the job's, else the
+    current one); the artist's World is kept."""
+    scene = scene or context.scene
     settings = scene.scenefit
     world = world_from_hdr(hdr_path, name="SceneFit Light")
     world[TAG] = stage

@@ -2,25 +2,24 @@
 applied in Blender: the new material, the World, the composite set up for Cycles and its image."""
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import bpy
-from bpy.props import EnumProperty
+from bpy.props import EnumProperty, StringProperty
 
 from ..blender_io.compose import setup_composite
-from ..core.base.errors import SceneFitError
-from ..core.scene.camera import PhotoCamera
+from ..core.base.errors import InputError, SceneFitError
 from ..workers import blender_jobs as work
+from ..workers.job_seam import RunInputs, RunOutcome, RunRequest
 from .adapt import adapt_seconds_here
-from .asset import scene_layout
-from .folders import last_finished_run, run_folder
-from .photo import photo_path, photo_view
+from .folders import last_finished_run
+from .identity import object_by_id
 from .polls import OnMesh
-from .prefs import depth_model_preference, model_settings
 from .jobs import CHOICES, CostFirst, JobOperator
 from .properties import GUIDANCE
-from .results import (apply_composite_image, apply_layout_results, apply_result_world, materials_words,
-                      result_targets)
+from .results import apply_composite_image, apply_layout_results, apply_result_world, materials_words
+from .run_request import gather_run, resumed_run
 
 if TYPE_CHECKING:
     from ..panels.quality import LocalWork
@@ -50,31 +49,22 @@ class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
             return "none"
         return self.guidance if self.properties.is_property_set("guidance") else context.scene.scenefit.guidance
 
+    resume: StringProperty(name="Resume", default="", options={"SKIP_SAVE", "HIDDEN"}, subtype="DIR_PATH",
+                           description="An unfinished Run All's folder to continue (Resume in the run list)")
+
     def prepare(self, context):
-        settings = context.scene.scenefit
-        photo, layout = scene_layout(self, context, "Run All fits the asset into the photo; use Convert and "
-                                                    "Adapt for the other modes")
-        guidance, why_no_adapt = self.chosen_guidance(context), ""
-        if not settings.prompt.strip() and guidance == "auto":
-            guidance, why_no_adapt = "none", "the Style section has no prompt"
-        if self.choice == "skip":
-            why_no_adapt = "skipped at the question before the run (Skip adaptation)"
-        # The artist's camera when it shows the photo, else the panel's or the estimate; the Cycles set-up
-        # takes the camera the run used, so both composites agree.
-        view = photo_view(context, photo, [bpy.data.objects[name] for name in layout.objects])
-        self._scene_camera = view["scene_camera"]
-        self._layout = result_targets(layout)
-        out = run_folder(context, "run", layout.name)
-        earlier = last_finished_run(out)   # its stages with this run's settings and inputs are reused
-        # The run's settings as one frozen RunConfig, built here on the main thread, as `scenefit run` builds it.
-        config = work.view_config(view, preset=self.run_preset(context), prompt=settings.prompt, guidance_type=guidance,
-                                  models=model_settings(context)[0], scene_type=settings.scene_type,
-                                  depth_model=depth_model_preference(context))
+        if getattr(self, "resume", ""):   # (scripts may leave it out) as it was clicked, on its own asset: its finished stages and checkpoint go on
+            request, layout = resumed_run(self, context, self.resume)
+            earlier = None
+        else:
+            request, layout = gather_run(self, context, "Run All fits the asset into the photo; use Convert and "
+                                                        "Adapt for the other modes", self.chosen_guidance(context))
+            earlier = last_finished_run(Path(request.out))   # its stages with this run's settings are reused
+        self._request = request
         # the maps are decoded in the job; procedural chains are baked between redraws before it starts
-        return work.run, {"asset": layout.plan(context), "photo": str(photo), "placement": tuple(view["placement"]),
-                          "config": config, "why_no_adapt": why_no_adapt,
-                          "materials": layout.bake_data() if len(layout.materials) > 1 else None,
-                          "out": str(out), "reuse_from": str(earlier) if earlier else None}
+        return work.run, RunInputs(request=request, asset=layout.plan(context),
+                                   materials=layout.bake_data() if len(layout.materials) > 1 else None,
+                                   reuse_from=str(earlier) if earlier else None)
 
     def long_local_work(self, context) -> LocalWork | None:
         guidance = self.chosen_guidance(context)
@@ -90,30 +80,32 @@ class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
         return long_work_warning(context, "Run All's adaptation (when Stable Diffusion 2's weights are found)",
                                  self.long_local_work(context), self.runs_remotely)
 
-    def apply(self, context, result) -> str:
-        mats = apply_layout_results(context, self._layout, result, result["stage"])
-        world = apply_result_world(context, result["hdr"], "run")
-        image = apply_composite_image(context, result["composite"], "run")
+    def apply(self, context, result: RunOutcome) -> str:
+        """The run's results on its own asset (found by its identity, whatever its name or the selection
+        is now), the World in the scene it was clicked in, the composite through its placement and size."""
+        request: RunRequest = self._request
+        mats = apply_layout_results(context, self._layout, result, result.stage)
+        scene = bpy.data.scenes.get(request.scene) or context.scene
+        world = apply_result_world(context, result.hdr, "run", scene=scene)
+        image = apply_composite_image(context, result.composite, "run")
         self._made = {"world": world, "composite": image}   # the run history's (operators/history.py)
-        lines = [materials_words(mats),
-                 f"World '{world.name}'", f"composite image '{image.name}'"]
-        settings = context.scene.scenefit
+        lines = [materials_words(mats), f"World '{world.name}'", f"composite image '{image.name}'"]
         try:
-            name = getattr(self, "_scene_camera", "")   # (not set when the run went to a worker)
-            scene_camera = bpy.data.objects.get(name) if name else None
-            objects = [bpy.data.objects[name] for name in self._layout["objects"] if name in bpy.data.objects]
-            made = setup_composite(context, objects, photo_path(context),
-                                   tuple(settings.placement), settings.size, PhotoCamera(**result["camera"]),
-                                   scene_camera=scene_camera, world=world)
+            if result.camera is None:
+                raise InputError("the run has no camera stage")
+            scene_camera = bpy.data.objects.get(request.scene_camera) if request.scene_camera else None
+            objects = [o for o in (object_by_id(i) for i in request.object_ids) if o is not None]
+            made = setup_composite(context, objects, request.photo, request.placement, request.config.size,
+                                   result.camera, scene_camera=scene_camera, world=world)
             lines.append(f"Cycles composite set up in the scene '{made['scene'].name}' through "
                          f"'{made['camera'].name}' (F12 there renders it)")
         except SceneFitError as error:
             lines.append(f"no Cycles composite: {error}")
-        reused = [name for name, status in result["stages"].items() if status == "reused"]
+        reused = [name for name, status in result.stages.items() if status == "reused"]
         if reused:
             lines.append(f"{', '.join(reused)} reused from the last run (same settings and inputs)")
-        if result["stages"]["adapt"] == "skipped":
-            lines.append(f"adapt skipped: {result['adapt_skipped']}")
+        if result.stages.get("adapt") == "skipped":
+            lines.append(f"adapt skipped: {result.adapt_skipped}")
         return "Done: " + "; ".join(lines)
 
 

@@ -175,6 +175,8 @@ class SCENEFIT_PT_style(_Subsection, bpy.types.Panel):
         col.prop(settings, "scene_prompt")
         col.operator("scenefit.generate_prompt", icon="FILE_TEXT")
         col.prop(settings, "instruction" if settings.mode == "edit" else "prompt")
+        col.prop(settings, "negative_prompt")
+        col.prop(settings, "seed")
         if settings.prompt_source:
             col.label(text=settings.prompt_source, icon="INFO")
 
@@ -285,7 +287,7 @@ def draw_runs(layout, context) -> None:
     row.operator("scenefit.apply_run", text="Apply", icon="CHECKMARK").index = state.run_index
     row.operator("scenefit.compare_run", text="Compare", icon="SPLIT_HORIZONTAL").index = state.run_index
     row.operator("scenefit.open_run_folder", text="", icon="FILE_FOLDER").index = state.run_index
-    if run.stage == "adapt" and run.state != "finished":
+    if run.stage in ("run", "adapt") and run.state != "finished":   # (operators/history.RESUMABLE)
         row.operator("scenefit.resume_run", text="Resume", icon="PLAY").index = state.run_index
     row.operator("scenefit.delete_run", text="", icon="X").index = state.run_index
     op = row.operator("scenefit.delete_run", text="", icon="TRASH")

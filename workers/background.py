@@ -210,7 +210,8 @@ class Job:
         except OSError as error:   # disk full, read-only, a path in the way: a sentence, as on the command line
             from ..core.base.os_errors import os_error_sentence
 
-            out = self._data.get("out") if isinstance(self._data, dict) else None
+            request = getattr(self._data, "request", None)
+            out = request.out if request is not None else self._data.get("out") if isinstance(self._data, dict) else None
             self._events.put(("error", (os_error_sentence(error, out), traceback.format_exc())))
         except Exception as error:  # an unexpected failure still ends the job, with its traceback kept
             self._events.put(("error", (f"{self.name} failed: {error!r}", traceback.format_exc())))
@@ -248,13 +249,16 @@ def release_job(job: Job) -> None:
 
 
 def end_active_job(timeout: float = 10.0) -> JobState | None:
-    """Cancel the running job and wait for its worker (Blender is loading another file, or quitting)."""
+    """Cancel the running job and wait up to `timeout` for its worker to stop (Blender is loading another file,
+    quitting, or disabling SceneFit). The slot frees only once the worker has stopped: one still running
+    (stuck in a call that checks no cancel) keeps it, so no new job starts beside it."""
     job = _active
     if job is None:
         return None
     job.cancel()
     state = job.wait(timeout)
-    release_job(job)
+    if not job.alive:
+        release_job(job)
     return state
 
 

@@ -8,18 +8,20 @@ from __future__ import annotations
 
 import threading
 from pathlib import Path
+from typing import Any, Mapping
 
 from ..core.base.progress import ProgressCallback
+from .job_seam import TEXTURE_KEYS, RunInputs, RunOutcome, TextureOutcome, read_run_outcome, write_request
 
 
 def written_whole(out: str, write, resume: bool = False) -> dict:
     """Run `write(folder)` into the hidden sibling of `out` and swap it in whole when it returns
-    (core.output_folder: a cancelled or failed run leaves nothing, except with `resume`: a stage that
-    checkpoints keeps its sibling, which the same `out` continues from); the paths it returns are moved
-    along to `out`."""
+    (core.output_folder: a cancelled or failed run leaves nothing, except with `resume`: a cancel keeps the
+    sibling, and so does any stop with a finished stage in it (a failure, a quit), which the same `out`
+    continues from, its finished stages reused); the paths it returns are moved along to `out`."""
     from ..core.base.output_folder import output_folder
 
-    with output_folder(out, resume=resume) as staging:
+    with output_folder(out, resume=resume, reuse=resume) as staging:
         result = write(staging)
     target = str(Path(out).absolute())
     return _moved(_moved(result, str(staging.resolve()), target), str(staging), target)
@@ -35,7 +37,7 @@ def _moved(value, old: str, new: str):
     return value
 
 
-def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> TextureOutcome:
     """Fit the neural texture to the asset's maps and bake base colour, roughness, metallic: the pipeline's
     convert stage alone (run_pipeline, stages ("convert",)) into data['out'], with data['config'], the
     RunConfig Convert's prepare() built (an iteration count in its overrides asks for the fit; else the
@@ -55,16 +57,23 @@ def convert(data: dict, progress: ProgressCallback, cancel: threading.Event) -> 
         result = run_pipeline(mesh, maps, None, None, folder, data["config"], progress=progress, cancel=cancel,
                               stages=("convert",))
         report, outputs = result.to_report(), result.outputs("convert")
-        per_material = material_results(data, outputs["weights"], folder / "materials") \
+        per_material = material_results(data["materials"], outputs["weights"], folder / "materials") \
             if data.get("materials") else []
         if per_material:
             report["materials_in_blender"] = per_material
         write_report(folder / "report.json", report)  # paths relative to the run folder, which moves
-        return {"maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
-                "texture": outputs["weights"], "report": str(folder / "report.json"),
-                "psnr_db": result.stages["convert"].report["psnr_covered_texels_db"], "material_maps": per_material}
+        return {"maps": {k: outputs[k] for k in TEXTURE_KEYS}, "texture": outputs["weights"],
+                "report": str(folder / "report.json"), "material_maps": per_material,
+                "numbers": {"psnr_db": result.stages["convert"].report["psnr_covered_texels_db"]}}
 
-    return written_whole(data["out"], write)
+    return texture_outcome(data["out"], written_whole(data["out"], write))
+
+
+def texture_outcome(out: str, written: dict) -> TextureOutcome:
+    """A Convert's or Adapt's written folder (its paths moved to `out`) as what Blender applies."""
+    return TextureOutcome(folder=str(Path(out).absolute()), report=written["report"], texture=written["texture"],
+                          maps=written["maps"], material_maps=tuple(written["material_maps"]),
+                          numbers=written["numbers"])
 
 
 def camera_source(view: dict) -> tuple[str, str]:
@@ -105,7 +114,7 @@ def estimate_light(data: dict, progress: ProgressCallback, cancel: threading.Eve
     return written_whole(data["out"], write)
 
 
-def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> TextureOutcome:
     """Restyle the converted texture (or make one, mode 'generate') and bake the maps: the pipeline's adapt
     stage from the texture Convert made and the light Estimate Light made (run_pipeline, `given`), of the
     photo in scene mode, into data['out'] with data['config'], the RunConfig Adapt's prepare() built
@@ -121,13 +130,14 @@ def adapt(data: dict, progress: ProgressCallback, cancel: threading.Event) -> di
         adapted = result.stages["adapt"]
         outputs = result.outputs("adapt")
         # several materials: each one's maps from the adapted texture, in its own UVs, for its slots
-        per_material = material_results(data, outputs["weights"], folder / "materials") \
+        per_material = material_results(data["materials"], outputs["weights"], folder / "materials") \
             if data.get("materials") else []
-        return {"maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
-                "texture": outputs["weights"], "report": str(folder / "report.json"),
-                "iterations": adapted.report["iterations"], "material_maps": per_material}
+        return {"maps": {k: outputs[k] for k in TEXTURE_KEYS}, "texture": outputs["weights"],
+                "report": str(folder / "report.json"), "material_maps": per_material,
+                "numbers": {"iterations": adapted.report["iterations"]}}
 
-    return written_whole(data["out"], write, resume=True)   # a cancelled adaptation keeps its checkpoint
+    # a cancelled adaptation keeps its checkpoint
+    return texture_outcome(data["out"], written_whole(data["out"], write, resume=True))
 
 
 def view_config(view: dict, **settings):
@@ -171,18 +181,17 @@ def quick_overrides(op) -> dict:
     return overrides
 
 
-def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:
+def material_results(info: Mapping[str, Any], texture_path: str, folder: Path) -> list[dict]:
     """Each material's maps baked from the neural texture in that material's own UVs (core.game_bake, as
     Bake Asset and the command line's bake do), written into folder/<n>/: what the new material in its
     slots shows. The run's own maps are the atlas of every material (core.materials), which no slot reads.
-    data['materials']: operators.asset.AssetLayout.bake_data()."""
+    info: operators.asset.AssetLayout.bake_data()."""
     import numpy as np
 
     from ..core.stages.bake.game_bake import bake_game_maps as bake, default_texture_size
     from ..core.data.imageio import write_image
     from ..core.texture.bake import load_neural_texture
 
-    info = data["materials"]
     texture = load_neural_texture(texture_path)
     size = default_texture_size(texture, len(info["names"]))
     baked = bake(texture, info["mesh"], list(info["names"]), size, [dict(c) for c in info["constants"]],
@@ -199,41 +208,38 @@ def material_results(data: dict, texture_path: str, folder: Path) -> list[dict]:
     return maps
 
 
-def run(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:
+def run(inputs: RunInputs, progress: ProgressCallback, cancel: threading.Event) -> RunOutcome:
     """The command line's pipeline (core.run.run_pipeline: convert -> light -> adapt -> compose; the
-    game bake is Bake Asset's, on the main thread) into data['out'] with data['config'], the RunConfig
-    Run All built (view_config); returns what Blender applies."""
+    game bake is Bake Asset's, on the main thread) into the request's folder with its RunConfig; returns
+    what Blender applies (job_seam.run_outcome). Written resumably: a cancelled, failed or interrupted run
+    keeps its finished stages and the adaptation's checkpoint beside the folder, which the same request
+    continues from (Resume)."""
     from ..core.base.report import write_report
     from ..core.data.map_plan import resolved_asset
     from ..core.pipeline.run import run_pipeline
 
-    mesh, maps = resolved_asset(data["asset"]).fitting_view()   # the maps decoded here, off the main thread
+    request = inputs.request
+    mesh, maps = resolved_asset(inputs.asset).fitting_view()   # the maps decoded here, off the main thread
 
     def write(folder: Path) -> dict:
-        result = run_pipeline(mesh, maps, data["photo"], data["placement"], folder,
-                              data["config"], progress=progress, cancel=cancel,
+        write_request(folder, request)
+        result = run_pipeline(mesh, maps, request.photo, request.placement, folder,
+                              request.config, progress=progress, cancel=cancel,
                               bake_skipped_why="in Blender the game file is written by Bake Asset",
-                              reuse_from=data.get("reuse_from"))
+                              reuse_from=inputs.reuse_from)
         report = result.to_report()
         stages = report["stages"]
-        if result.stages["adapt"].status == "skipped" and data.get("why_no_adapt"):
-            stages["adapt"]["why"] = report["stage_status"]["adapt"]["why"] = data["why_no_adapt"]
-        last = result.texture_stage
-        outputs = result.outputs(last)
-        per_material = material_results(data, outputs["weights"], folder / "materials") \
-            if data.get("materials") else []
+        if result.stages["adapt"].status == "skipped" and request.why_no_adapt:
+            stages["adapt"]["why"] = report["stage_status"]["adapt"]["why"] = request.why_no_adapt
+        per_material = material_results(inputs.materials, result.outputs(result.texture_stage)["weights"],
+                                        folder / "materials") if inputs.materials else []
         if per_material:
             report["materials_in_blender"] = per_material
         write_report(folder / "report.json", report)  # paths relative to the run folder, which moves
-        return {"stage": last, "report": str(folder / "report.json"), "texture": outputs["weights"],
-                "maps": {k: outputs[k] for k in ("base_color", "roughness", "metallic")},
-                "hdr": str(folder / "light" / "light.exr"), "composite": str(result.composite),
-                # the camera stage's (which light and compose used), for the Cycles set-up
-                "camera": camera_values(result.camera),
-                "stages": {name: stage.status for name, stage in result.stages.items()},
-                "adapt_skipped": stages["adapt"].get("why", ""), "material_maps": per_material}
+        return {"material_maps": per_material}
 
-    return written_whole(data["out"], write)
+    written = written_whole(request.out, write, resume=True)
+    return read_run_outcome(request.out, tuple(written["material_maps"]))
 
 
 def bake_game_maps(data: dict, progress: ProgressCallback, cancel: threading.Event) -> dict:

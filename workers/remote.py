@@ -17,7 +17,9 @@ installed `scenefit`, so neither side could unpickle the other's classes.
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from ..core.base import errors
 from .packing import unpack
@@ -27,6 +29,7 @@ from .batch_ray import connect, import_ray, job_resources
 from ..core.base.errors import Cancelled, SceneFitError
 from .job_inputs import read_job_report
 from .jobs import BatchSettings, Job
+from ..core.pipeline.run_config import RunConfig
 
 # What the worker environment imports SceneFit as (a pip install of it).
 WORKER_PACKAGE = "scenefit"
@@ -322,18 +325,14 @@ def _read_preview(path: str):
 
 
 def work_remotely(data: dict, progress=None, cancel=None) -> dict:
-    """A background-job work function for the add-on: plain data in (the asset as arrays, the photo,
-    the placement), the job run in the worker environment `data["worker"]`, its folder back in
-    `data["out"]`. Keys: asset (planned in Blender, decoded here; or mesh and maps), photo, at, worker, out; optional name, stages, models (a ModelConfig),
-    num_cpus, num_gpus, earlier (an earlier run's folder: its stages with the same inputs and settings are
-    reused), and the run's settings as a jobs file's job gives them (core/pipeline/run_table.py: preset,
-    mode, prompt, overrides, object_size, camera, sun, scene, ...), read by the same code.
-    """
-    import tempfile
-
+    """A background-job work function for scripts: plain data in (the asset as arrays, the photo, the
+    placement), the job run in the worker environment `data["worker"]`, its folder back in `data["out"]`.
+    Keys: asset (planned, decoded here; or mesh and maps), photo, at, worker, out; optional name, stages,
+    models (a ModelConfig), num_cpus, num_gpus, earlier (an earlier run's folder: its stages with the same
+    inputs and settings are reused), and the run's settings as a jobs file's job gives them
+    (core/pipeline/run_table.py: preset, mode, prompt, overrides, object_size, camera, sun, scene, ...).
+    Blender's Run All sends its RunConfig as it is (send_run)."""
     from ..core.pipeline.registry import STAGES
-    from ..core.data.asset_io import save_asset_folder
-    from ..core.data.map_plan import fitting_inputs
     from ..core.guidance.models import ModelConfig
     from ..core.pipeline.run_table import KEYS, run_config
 
@@ -341,12 +340,47 @@ def work_remotely(data: dict, progress=None, cancel=None) -> dict:
     stages = tuple(data.get("stages", STAGES))
     run = run_config({k: data[k] for k in KEYS if data.get(k) is not None}, f"The remote job '{name}'", stages,
                      models=data.get("models") or ModelConfig())
+    return send_run(RemoteRun(name=name, worker=data["worker"], out=data["out"], stages=stages, run=run,
+                              photo=data.get("photo"), at=tuple(data["at"]) if data.get("at") is not None else None,
+                              asset=data.get("asset"), mesh=data.get("mesh"), maps=data.get("maps"),
+                              earlier=data.get("earlier"), num_cpus=float(data.get("num_cpus", 1.0)),
+                              num_gpus=data.get("num_gpus", "auto")), progress, cancel)
+
+
+@dataclass(frozen=True)
+class RemoteRun:
+    """One run sent to a worker environment: the RunConfig as it is (Blender's Run All builds it once, at the
+    click), the asset (planned in Blender and decoded in the job, or a script's mesh and maps), the photo and
+    placement, where the job's folder comes back (out/name), and an earlier run whose stages may be reused."""
+
+    name: str
+    worker: str
+    out: str
+    stages: tuple[str, ...]
+    run: RunConfig
+    photo: str | None = None
+    at: tuple[float, float] | None = None
+    asset: Any = None
+    mesh: Any = None
+    maps: Any = None
+    earlier: str | None = None
+    num_cpus: float = 1.0
+    num_gpus: Any = "auto"
+
+
+def send_run(sent: RemoteRun, progress=None, cancel=None) -> dict:
+    """Run `sent` as one Job in its worker environment; {"folder", "report"} of the folder that came back."""
+    import tempfile
+
+    from ..core.data.asset_io import save_asset_folder
+    from ..core.data.map_plan import fitting_inputs
+
     with tempfile.TemporaryDirectory(prefix="scenefit-asset-") as tmp:
-        asset = save_asset_folder(*fitting_inputs(data), Path(tmp) / "asset")
-        job = Job(name=name, asset=asset, stages=stages, photo=Path(data["photo"]) if data.get("photo") else None,
-                  at=tuple(data["at"]) if data.get("at") is not None else None, run=run)
-        settings = BatchSettings(retries=0, num_cpus=float(data.get("num_cpus", 1.0)),
-                                 num_gpus=data.get("num_gpus", "auto"))
-        folder, report = run_remote(job, data["out"], data["worker"], settings, progress=progress, cancel=cancel,
-                                    earlier=Path(data["earlier"]) if data.get("earlier") else None)
+        asset = save_asset_folder(*fitting_inputs({"asset": sent.asset, "mesh": sent.mesh, "maps": sent.maps}),
+                                  Path(tmp) / "asset")
+        job = Job(name=sent.name, asset=asset, stages=sent.stages, photo=Path(sent.photo) if sent.photo else None,
+                  at=sent.at, run=sent.run)
+        settings = BatchSettings(retries=0, num_cpus=sent.num_cpus, num_gpus=sent.num_gpus)
+        folder, report = run_remote(job, sent.out, sent.worker, settings, progress=progress, cancel=cancel,
+                                    earlier=Path(sent.earlier) if sent.earlier else None)
     return {"folder": str(folder), "report": report}

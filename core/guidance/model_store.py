@@ -28,8 +28,8 @@ from pathlib import Path
 
 from ..base.errors import InputError, ModelMissingError, SceneFitError
 from ..base.progress import ProgressCallback, ProgressEvent, check_cancel, emit
-from .models import (ABOUT_DOWNLOAD, BASE_PARTS, DEFAULT_DEPTH_MODEL, IGNORE_PATTERNS,
-                     DEPTH_PATTERNS, INPAINT_PARTS, ModelConfig, hub_cache, hub_offline, hub_patterns)
+from .models import (ABOUT_DOWNLOAD, BASE_PARTS, DEFAULT_DEPTH_MODEL, IGNORE_PATTERNS, DEPTH_PATTERNS, INPAINT_PARTS, ModelConfig, hub_cache, hub_offline, hub_patterns,
+                     is_unread_copy)
 
 FOUND, PARTIAL, MISSING, FOLDER, FOLDER_INCOMPLETE = "found", "partial", "missing", "folder", "folder incomplete"
 PARTIAL_SUFFIX = ".incomplete"
@@ -116,7 +116,9 @@ def _files(folder: Path) -> list[str]:
 
 
 def _complete(folder: Path, required: tuple[str, ...]) -> bool:
-    files = _files(folder) if folder.is_dir() else []
+    """Whether `folder` holds a file for each pattern, counting only files the loader reads: a snapshot of
+    half-precision copies alone (IGNORE_PATTERNS) is not found, the loader would ask for the full ones."""
+    files = [f for f in _files(folder) if not is_unread_copy(f)] if folder.is_dir() else []
     return all(any(fnmatch.fnmatch(f, pattern) for f in files) for pattern in required)
 
 

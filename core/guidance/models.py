@@ -10,6 +10,7 @@ inpainting was fine-tuned from SD2 with both frozen), so only its UNet is loaded
 """
 from __future__ import annotations
 
+import fnmatch
 import gc
 import os
 from dataclasses import dataclass, field, replace
@@ -165,11 +166,21 @@ def _cache_dir(config: ModelConfig) -> Path:
     return hub_cache(config.cache_dir)
 
 
+def is_unread_copy(name: str) -> bool:
+    """A file the loader never reads (it asks for no variant): a half-precision copy (IGNORE_PATTERNS)."""
+    return any(fnmatch.fnmatch(Path(name).name, pattern) for pattern in IGNORE_PATTERNS)
+
+
 def _missing_parts(folder: Path, parts: dict) -> list[str]:
+    """The parts of `folder` the loader would not find: no marker file, nothing at all, or (a weighted part)
+    no safetensors weights but the half-precision copies it never reads."""
     missing = []
     for sub, marker in parts.items():
         path = folder / sub
-        if not path.is_dir() or (marker is not None and not (path / marker).is_file()) or not any(path.iterdir()):
+        files = [p for p in path.iterdir() if not is_unread_copy(p.name)] if path.is_dir() else []
+        weighted = "*.safetensors" in _PART_FILES.get(sub, ())
+        if not files or (marker is not None and not (path / marker).is_file()) or \
+                (weighted and not any(p.name.endswith(".safetensors") for p in files)):
             missing.append(f"{sub}/")
     return missing
 

@@ -192,7 +192,7 @@ try:
     work, data = sent.job_work(bpy.context)
     here = probe(run_ops.SCENEFIT_OT_run, choice="start", guidance="auto")
     here_work, _ = here.job_work(bpy.context)
-    seen["sent"] = [sent._remote, work.__module__, data.get("worker"), here._remote, here_work.__module__]
+    seen["sent"] = [sent._remote, work.__module__, data.worker, here._remote, here_work.__module__]
     prefs.worker_when = "ALWAYS"
     op, ctx = probe(run_ops.SCENEFIT_OT_run, choice="ask", guidance="auto"), Ctx()
     ui_invoke(op, ctx, event("LEFTMOUSE"))
@@ -482,22 +482,27 @@ out["main_thread"] = {"same": same, "kinds": kinds, "convert_ticks": convert_tic
 """
 
 
-@pytest.fixture(scope="module")
-def session(tmp_path_factory):
+def artist_session(tmp_path_factory, name: str, extra: str = ""):
+    """A bpy session with SETUP's file open (and `extra` run after it), for the module's steps."""
     missing = [p for p in ASSETS if not p.is_file()]
     if missing:
         pytest.skip(f"the corpus asset {missing[0]} is not here")
     from conftest import shared_tiny_pair
 
-    tmp = tmp_path_factory.mktemp("trust_jobs")
+    tmp = tmp_path_factory.mktemp(name)
     tiny = shared_tiny_pair()
     python = PythonSession()
     try:
         setup = python.run(SETUP.replace("TMP", repr(str(tmp))).replace("ASSETS", repr([str(p) for p in ASSETS]))
-                           + f"\ntiny = {[str(p) for p in tiny]!r}\n")
+                           + f"\ntiny = {[str(p) for p in tiny]!r}\n" + extra)
         yield SimpleNamespace(run=python.run, tmp=tmp, setup=setup)
     finally:
         python.close()
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    yield from artist_session(tmp_path_factory, "trust_jobs")
 
 
 def _step(session, code: str, name: str) -> dict:

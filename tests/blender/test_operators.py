@@ -279,7 +279,7 @@ try:
     state = job.state
     jobs.release_job(job)
     out["job"] = {"status": state.status, "stages": sorted({s for s, _ in seen if s}), "steps": max(s for _, s in seen),
-                  "result_maps": {k: v if isinstance(v, float) else Path(v).name for k, v in state.result["maps"].items()}}
+                  "result_maps": {k: v if isinstance(v, float) else Path(v).name for k, v in state.result.maps.items()}}
     out["worker_touched_bpy"] = list(touched)
     timings["profiled_job"] = round(time.perf_counter() - t_job, 2)
     mat_from_job = results.apply_result_material(bpy.context, "Sphere", state.result, "convert")  # main thread

@@ -79,7 +79,7 @@ t0 = time.perf_counter()
 work, data = Run.job_work(op, bpy.context)
 data = handed(data)
 out["handed_off"] = [work.__module__, work.__name__, op._remote]
-data["overrides"]["adapt"].update(preview_every=1)   # a preview at every step
+data.run.run.stage_overrides["adapt"].update(preview_every=1)   # a preview at every step
 job = jobs.start_job(jobs.Job("run", work, data))
 seen, previews = [], 0
 while not job.poll().finished:
@@ -108,8 +108,8 @@ if state.status == "done":
 # them (a Run All on a worker reused nothing, while one here reuses the last run's).
 work, data = Run.job_work(op, bpy.context)
 data = handed(data)
-data["overrides"]["adapt"].update(preview_every=1)   # as the first run had it
-out["rerun_earlier"] = data.get("earlier")
+data.run.run.stage_overrides["adapt"].update(preview_every=1)   # as the first run had it
+out["rerun_earlier"] = data.run.earlier
 t0 = time.perf_counter()
 job = jobs.start_job(jobs.Job("run", work, data))
 state = job.wait(300)
@@ -133,7 +133,7 @@ t1 = time.perf_counter()
 state = job.wait(60)
 jobs.release_job(job)
 out["cancel"] = {"status": state.status, "seconds_to_stop": round(time.perf_counter() - t1, 1),
-                 "folder_left": (Path(data["out"]) / data["name"]).exists(),
+                 "folder_left": (Path(data.run.out) / data.run.name).exists(),
                  "materials_unchanged": sorted(m.name for m in bpy.data.materials) == materials_before}
 out["user_material_kept"] = "AssetMaterial" in bpy.data.materials
 ray.shutdown()
@@ -153,7 +153,7 @@ def test_preferences_choose_the_worker_and_respect_online_access(handed_off):
     _, out = handed_off
     assert out["address"] == "local"
     # Run's job_work chose Ray (for two materials: the worker's run, then each material's maps baked here)
-    assert out["handed_off"] == ["bl_ext.user_default.scenefit.operators.remote", "work_remotely_per_material", True]
+    assert out["handed_off"] == ["bl_ext.user_default.scenefit.operators.remote", "send_run_per_material", True]
     assert out["folder_refusal"].startswith("The base model is a folder on this machine") and \
         "gpu-head.example" in out["folder_refusal"] and out["folder_refusal"].count(". ") == 0
     online, message = out["offline_refusal"]

@@ -48,6 +48,20 @@ from .sampling import ViewSample, draw_view_bank, sample_view, uses_view_bank
 from .stage_data import AdaptInputs, AdaptResult
 
 
+def cancel_hooks(models: GuidanceModels, cancel: threading.Event) -> list:
+    """Forward pre-hooks on every block of the UNets and the VAE that raise Cancelled once `cancel` is set, so
+    a cancel is seen within one block's time rather than one whole view's; the caller removes them."""
+    blocks: list = []
+    for unet in (models.unet, models.inpaint_unet):
+        if unet is not None and hasattr(unet, "down_blocks"):
+            blocks += [*unet.down_blocks, unet.mid_block, *unet.up_blocks]
+    vae = models.vae
+    for coder, part in ((getattr(vae, "encoder", None), "down_blocks"), (getattr(vae, "decoder", None), "up_blocks")):
+        blocks += list(getattr(coder, part, None) or ())
+    return [block.register_forward_pre_hook(lambda module, args: check_cancel(cancel))
+            for block in blocks if block is not None and hasattr(block, "register_forward_pre_hook")]
+
+
 class AdaptSystem:
     """Holds everything a step needs; built once by `build`, stepped, then `finish`ed."""
 
@@ -166,10 +180,19 @@ class AdaptSystem:
     def step(self, iteration: int, cancel: threading.Event | None = None) -> dict:
         """One optimisation step: this rank's views, gradients summed over ranks, Adam on texture and ε_ψ.
         Alone (one rank), a cancel is seen between views, so a step on a CPU stops within seconds; the
-        half-made step is dropped (the texture and optimiser change only at its end)."""
+        half-made step is dropped (the texture and optimiser change only at its end). Inside a view, each
+        UNet and VAE block checks it too (a pass takes tens of seconds on a CPU)."""
+        self.cancel = cancel if self.world.choice == 1 else None   # (ranks must finish a step together)
+        hooks = cancel_hooks(self.models, self.cancel) if self.cancel is not None else []
+        try:
+            return self._step(iteration)
+        finally:
+            for hook in hooks:
+                hook.remove()
+
+    def _step(self, iteration: int) -> dict:
         self.timer.restart()
         self.optimizer.zero_grad(set_to_none=True)
-        self.cancel = cancel if self.world.choice == 1 else None   # (ranks must finish a step together)
         views = [self.sample(iteration, j) for j in self.my_views]
         if self.batch_views and self.holds_renders(views):
             per_view = self.train_views(views)

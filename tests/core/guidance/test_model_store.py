@@ -111,6 +111,30 @@ def test_a_folder_model_is_reported_and_never_removed(tmp_path):
     assert (folder / "unet" / "diffusion_pytorch_model.safetensors").is_file()
 
 
+def test_half_precision_copies_alone_are_not_a_found_model(tmp_path):
+    """SD2's repository also holds fp16 copies, which the loader never reads (it asks for no variant): a cache or
+    folder holding only those was reported found, and the loader then asked for the full-precision files."""
+    cache = tmp_path / "hub"
+    snapshot = cache / "models--tiny--sd2-inpainting" / "snapshots" / "abc"
+    folder = tmp_path / "my_inpainting"
+    for where in (snapshot, folder):
+        (where / "unet").mkdir(parents=True)
+        (where / "unet" / "config.json").write_text("{}")
+        (where / "unet" / "diffusion_pytorch_model.fp16.safetensors").write_bytes(b"h" * 10)
+    (snapshot.parent.parent / "refs").mkdir()
+    (snapshot.parent.parent / "refs" / "main").write_text("abc")
+    hub = store.spec_named(store.model_specs(ModelConfig(inpaint_model=INPAINT, cache_dir=str(cache))), "inpaint")
+    own = store.spec_named(store.model_specs(ModelConfig(inpaint_model=str(folder))), "inpaint")
+    assert store.model_state(hub, cache).state != store.FOUND
+    assert store.model_state(own, cache).state == store.FOLDER_INCOMPLETE
+    with pytest.raises(ModelMissingError, match="lacks unet/"):
+        locate_models(ModelConfig(base_model=str(folder), cache_dir=str(cache)), need_inpaint=False)
+    for where in (snapshot, folder):   # the loader's own file: found
+        (where / "unet" / "diffusion_pytorch_model.safetensors").write_bytes(b"f" * 10)
+    assert store.model_state(hub, cache).state == store.FOUND
+    assert store.model_state(own, cache).state == store.FOLDER
+
+
 def test_a_run_fetches_what_it_lacks(tmp_path, monkeypatch):
     """The download step a run's job calls: only the missing models, with progress; cancelled before it starts."""
     monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)

@@ -83,3 +83,27 @@ def test_a_cancel_mid_step_stops_between_views_and_resume_continues_the_count(ti
     with torch.no_grad():
         got = resumed.texture.texture(raster.position, raster.border, raster.fill_index)
     assert torch.equal(got, expected)   # the half-made step left no trace
+
+
+def test_a_cancel_is_seen_inside_a_unet_pass(tiny_models):
+    """A view's UNet pass takes tens of seconds on a CPU at the presets' sizes: each of its blocks (and the VAE's)
+    checks the cancel, so a cancel set during a pass ends it at the next block, not at the view's end; the hooks
+    go with the step, so a later pass runs whole."""
+    from scenefit.core.guidance.models import load_guidance_models
+    from scenefit.core.stages.adapt.system import cancel_hooks
+
+    base, inpaint = tiny_models
+    models = load_guidance_models(ModelConfig(base_model=str(base), inpaint_model=str(inpaint)), need_inpaint=True)
+    cancel, entered = threading.Event(), []
+    first_block = models.unet.down_blocks[0]
+    spy = first_block.register_forward_pre_hook(lambda module, args: (entered.append(1), cancel.set()))
+    hooks = cancel_hooks(models, cancel)
+    latents = torch.zeros(1, 4, 4, 4, dtype=models.dtype)
+    text = torch.zeros(1, 77, models.unet.config.cross_attention_dim, dtype=models.dtype)
+    with torch.no_grad(), pytest.raises(Cancelled):
+        models.unet(latents, 10, encoder_hidden_states=text)   # cancel set as the first block starts
+    assert entered == [1] and len(hooks) >= len(models.unet.down_blocks) * 2
+    for hook in hooks + [spy]:
+        hook.remove()
+    with torch.no_grad():
+        assert models.unet(latents, 10, encoder_hidden_states=text).sample.shape == latents.shape
