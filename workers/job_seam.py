@@ -14,6 +14,8 @@ from typing import Any, Mapping
 
 from ..core.base.errors import InputError
 from ..core.guidance.models import ModelConfig
+from ..core.pipeline.layout import RunLayout, camera_of
+from ..core.pipeline.registry import CAMERA_STAGE
 from ..core.pipeline.run_config import RunConfig
 from ..core.pipeline.run_table import run_config, run_table
 from ..core.scene.camera import PhotoCamera
@@ -148,10 +150,8 @@ class RunOutcome(TextureOutcome):
 def run_camera(folder: Path) -> PhotoCamera | None:
     """The camera a run folder's camera stage wrote (None when the run has none). Width and height are the
     photo's, which the Cycles set-up puts in."""
-    from ..core.stages.camera_stage import CAMERA_FILE, read_camera
-
-    path = Path(folder) / "camera" / CAMERA_FILE
-    return read_camera(path, 1, 1)[0] if path.is_file() else None
+    has_camera = RunLayout(Path(folder)).file(CAMERA_STAGE, "camera").is_file()
+    return camera_of(folder, 1, 1)[0] if has_camera else None
 
 
 def run_outcome(folder: str | Path, run_report: Mapping[str, Any],
