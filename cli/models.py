@@ -33,9 +33,11 @@ def run(args) -> int:
                 continue
             if config.offline:
                 raise InputError(f"Downloading is off (--offline or HF_HUB_OFFLINE). {store.fetch_sentence(spec, cache)}")
-            size = f"about {store.format_bytes(spec.about_bytes)}" if spec.about_bytes else "its size is on the bar"
-            _say(args, f"{spec.key}: downloading {spec.model} ({size}) into {cache}")
-            state = store.download_model(spec, cache, progress)
+            def announce(total: int, here: int, spec=spec) -> None:
+                kept = f", {store.format_bytes(here)} of it already here" if here else ""
+                _say(args, f"{spec.key}: downloading {spec.model}, {store.format_bytes(total)}{kept}, into {cache}")
+
+            state = store.download_model(spec, cache, progress, announce=announce)
             _say(args, f"{spec.key}: {state.state}, {store.format_bytes(state.bytes_on_disk)} in {state.where}")
     return _list(args, specs, cache, config)
 

@@ -25,6 +25,7 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from ..base.errors import InputError, ModelMissingError, SceneFitError
 from ..base.progress import ProgressCallback, ProgressEvent, check_cancel, emit
@@ -378,9 +379,10 @@ def _already_there(storage: Path, commit: str, name: str) -> bool:
 
 def download_model(spec: ModelSpec, cache: Path, progress: ProgressCallback | None = None,
                    cancel: threading.Event | None = None, endpoint: str | None = None,
-                   revision: str = "main") -> ModelState:
+                   revision: str = "main", announce: Callable[[int, int], None] | None = None) -> ModelState:
     """Fetch the files of `spec` a run reads into the hub cache at `cache`: progress as bytes with speed,
-    `cancel` honoured between chunks (the partial file is kept and the next call resumes it)."""
+    `cancel` honoured between chunks (the partial file is kept and the next call resumes it). `announce(total,
+    here)` is told the download's size (the hub's listing) and the bytes already here before any is fetched."""
     from huggingface_hub import HfApi  # lazy: huggingface_hub is needed only to find or fetch models
 
     if spec.is_folder:
@@ -392,6 +394,8 @@ def download_model(spec: ModelSpec, cache: Path, progress: ProgressCallback | No
         commit, sizes = _repo_files(HfApi(endpoint=endpoint), spec, revision)
         todo = [n for n in sorted(sizes) if not _already_there(storage, commit, n)]
         transfer = _Transfer(spec, sum(sizes.values()), sum(sizes[n] for n in sizes if n not in todo), progress, cancel)
+        if announce is not None:
+            announce(transfer.total, transfer.done)
         blobs = {}
         for name in todo:
             check_cancel(cancel)

@@ -26,6 +26,10 @@ def test_download_then_list_offline_and_remove(tmp_path, monkeypatch):
         server.stop()
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "base: found" in proc.stdout
+    # The size is said before the download starts: the files a run reads, the half-precision copy left out.
+    size = sum(len(d) for n, d in FILES.items() if "fp16" not in n)
+    said = proc.stdout.splitlines()
+    assert said[0] == f"base: downloading {BASE}, {size / 1000:.1f} KB, into {cache}" and "found" in said[-1]
 
     monkeypatch.setenv("HF_HUB_OFFLINE", "1")
     monkeypatch.setenv("HF_HUB_CACHE", str(cache))
