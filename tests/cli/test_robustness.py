@@ -277,7 +277,8 @@ def test_light_messages_name_options_not_fields_and_offline_never_touches_the_ne
     assert cli("light", "--photo", str(photo), "--at", "0.5,0.8", "--depth", "model", "--offline", "--out",
                str(tmp_path / "b"), "--quiet") == 2
     assert attempts == []
-    assert "offline" in capsys.readouterr().err and not (tmp_path / "b").exists()
+    err = capsys.readouterr().err   # (a run never downloads: it says how to, offline or not)
+    assert "was not found" in err and "scenefit models download depth" in err and not (tmp_path / "b").exists()
 
 
 @pytest.mark.parametrize("value", [np.nan, np.inf, -1.0])
