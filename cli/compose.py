@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from .options import (PRESETS, add_asset_args, add_old_photo_elevation_arg, add_output_args, add_photo_camera_args,
                       add_placement_args, load_asset, output, photo_pitch, progress)
@@ -55,8 +56,8 @@ def compose_camera(args, width: int, height: int):
     from ..core.pipeline.layout import camera_of, run_folder_of
     from ..core.stages.camera import photo_camera_estimate
 
-    given = {k: v for k, v in (("fov_deg", args.fov), ("pitch_deg", photo_pitch(args)), ("roll_deg", args.roll))
-             if v is not None}
+    given: dict[str, Any] = {k: v for k, v in (("fov_deg", args.fov), ("pitch_deg", photo_pitch(args)),
+                                               ("roll_deg", args.roll)) if v is not None}
     run_folder = run_folder_of(args.light)
     if run_folder is None:
         estimate = photo_camera_estimate(args.photo, args.fspy, given)

@@ -66,7 +66,7 @@ def _light(args, out: Path) -> int:
     critic = light_critic(run)
     inputs = light_inputs(args.photo, args.at, run.fspy, run.camera_overrides)
     config = with_shadow_sun(light_config(run, critic.choice), run, inputs.camera, tuple(inputs.info["size"]),
-                             inputs.photo.shape[:2])
+                             (inputs.photo.shape[0], inputs.photo.shape[1]))
     write_camera(inputs.camera, inputs.camera_record, RunLayout(out).stage(names().CAMERA_STAGE))   # (compose reads it)
     result = run_light(inputs, config, progress(args))
     if args.sun_from_shadow:
