@@ -14,6 +14,7 @@ import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -107,7 +108,7 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     view = texture_view(texture, mesh)
     mesh, stack = view.mesh, view.stack(texture)
     camera, _ = read_camera(layout.file("camera", "camera"), photo.shape[1], photo.shape[0])   # the run's camera stage
-    placement = Placement.parse(DEMO_PLACEMENT, (photo.shape[1], photo.shape[0])).pixel(photo.shape[:2])
+    placement = Placement.parse(DEMO_PLACEMENT, (photo.shape[1], photo.shape[0])).pixel((photo.shape[0], photo.shape[1]))
     constant_report = compose_to_folder(
         ComposeInputs(mesh, stack, photo, placement, constant, camera),
         stage_config("compose", preset, size=DEMO_SIZE, spp=compose_stage["spp"]), out / "constant",
@@ -118,7 +119,7 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     write_image(out / "sheet.png", sheet)
     constant_seconds = time.perf_counter() - t
 
-    report = {
+    report: dict[str, Any] = {
         "stage": "demo",
         "preset": preset,
         "inputs": {"asset": example_origin, "photo": photo_info, "placement": DEMO_PLACEMENT},

@@ -115,7 +115,7 @@ def _quiet_if_asked(args):
     return contextlib.nullcontext()
 
 
-def _interrupted(error: BaseException) -> bool:
+def _interrupted(error: BaseException | None) -> bool:
     while error is not None:
         if isinstance(error, KeyboardInterrupt):
             return True

@@ -65,7 +65,7 @@ def _adapt(args, out: Path) -> int:
     photo = where = None
     if args.photo:
         photo = linear_to_srgb(np.clip(read_color_image(args.photo, upright=True), 0.0, 1.0))
-        where = placement(args, photo.shape[:2])
+        where = placement(args, (photo.shape[0], photo.shape[1]))
     env = environment(args)[0] if args.envmap else None
     camera = None
     if photo is not None and args.envmap:  # the camera of the run this map was estimated in

@@ -23,6 +23,7 @@ def run(args) -> int:
     if mode == "auto" and not ray_available():
         print("scenefit: Ray is not installed; running the jobs here, one after another.", file=sys.stderr)
         mode = None
+    dispatcher: InProcessDispatcher | RayDispatcher
     try:
         if mode is None:
             dispatcher = InProcessDispatcher(jobs.settings, progress_sink=EventLines() if args.events else None)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from .options import (PRESETS, add_asset_args, add_old_photo_elevation_arg, add_output_args, add_photo_camera_args,
                       add_placement_args, load_asset, output, photo_pitch, progress)
@@ -17,10 +18,15 @@ def run(args) -> int:
     from ..core.texture.surface_layout import texture_view
     from ..core.texture.bake import load_neural_texture
 
-    from ..core.pipeline.presets import stage_config
+    from ..core.pipeline.run_table import run_config
+    from ..core.pipeline.stage_configs import compose_config
 
-    config = stage_config("compose", args.preset, size=args.object_size, shadow_type=args.shadow, spp=args.spp,
-                            sampler_type=args.sampler, denoiser_type=args.denoiser, exposure=args.exposure)
+    # The run this asks for, read through the run table as a jobs file's job is.
+    settings = {k: v for k, v in (("sampler_type", args.sampler), ("denoiser_type", args.denoiser),
+                                  ("exposure", args.exposure)) if v is not None}
+    table = {"preset": args.preset, "object_size": args.object_size, "overrides": {"compose": settings},
+             **{k: v for k, v in (("shadow_type", args.shadow), ("compose_spp", args.spp)) if v is not None}}
+    config = compose_config(run_config(table, "scenefit compose", stages=("compose",)))
     mesh, maps = load_asset(args.asset, args.object)
     photo, info = load_photo(args.photo, max_side=config.max_side)
     h, w = photo.shape[:2]
@@ -55,8 +61,8 @@ def compose_camera(args, width: int, height: int):
     from ..core.pipeline.layout import camera_of, run_folder_of
     from ..core.stages.camera import photo_camera_estimate
 
-    given = {k: v for k, v in (("fov_deg", args.fov), ("pitch_deg", photo_pitch(args)), ("roll_deg", args.roll))
-             if v is not None}
+    given: dict[str, Any] = {k: v for k, v in (("fov_deg", args.fov), ("pitch_deg", photo_pitch(args)),
+                                               ("roll_deg", args.roll)) if v is not None}
     run_folder = run_folder_of(args.light)
     if run_folder is None:
         estimate = photo_camera_estimate(args.photo, args.fspy, given)

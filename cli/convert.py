@@ -20,16 +20,19 @@ def print_material_report(asset) -> None:
 def run(args) -> int:
     from ..blender_io.asset_file import load_asset_materials
     from ..core.data.asset_io import save_asset_folder
-    from ..core.pipeline.presets import stage_config
+    from ..core.pipeline.run_table import run_config
+    from ..core.pipeline.stage_configs import convert_config
     from ..core.base.report import write_report
     from ..core.render.backend import environment_info
     from ..core.stages.convert import convert_and_bake
 
-    # (a fitting method or iterations imply --init fit: core/pipeline/presets.py stage_config)
-    overrides = {k: v for k, v in (("init_type", args.init), ("method_type", args.method), ("iterations", args.iterations),
-                                   ("resolution", args.resolution), ("seed", args.seed),
-                                   ("screen_px", args.screen_px)) if v is not None}
-    config = stage_config("convert", args.preset, **overrides)
+    # The run this asks for, read through the run table as a jobs file's convert job is (a fitting method or
+    # iterations imply --init fit: core/pipeline/resolve.py).
+    settings = {k: v for k, v in (("init_type", args.init), ("method_type", args.method), ("iterations", args.iterations),
+                                  ("resolution", args.resolution)) if v is not None}
+    table = {"preset": args.preset, "overrides": {"convert": settings},
+             **({"seed": args.seed} if args.seed is not None else {})}
+    config = convert_config(run_config(table, "scenefit convert", stages=("convert",)), args.screen_px)
     with output(args) as out:
         asset = load_asset_materials(args.asset, args.object)
         print_material_report(asset)

@@ -10,23 +10,24 @@ from .options import (add_dry_run_arg, add_model_args, add_old_photo_elevation_a
 
 
 def light_run(args):
-    """The run the arguments ask for (core/pipeline/run.RunConfig): the light options that are a run's
-    settings as its fields, the others as the light stage's overrides."""
-    from ..core.pipeline.run_config import RunConfig
+    """The run the arguments ask for, read through the run table as a jobs file's light job is: the light
+    options that are a run's settings as its keys, the others as the light stage's overrides ("auto", the
+    critic's default, left to light_critic)."""
+    from ..core.pipeline.run_table import run_config
 
-    light = {"critic_type": args.critic, "tint": args.tint, "depth": {"depth_type": args.depth},
-             "outpaint": {"completion_type": args.outpaint}}
+    light = {"critic_type": None if args.critic == "auto" else args.critic, "tint": args.tint,
+             "depth": {"depth_type": args.depth}, "outpaint": {"completion_type": args.outpaint}}
     if args.iterations is not None:
         light["optimise"] = {"iterations": args.iterations}
     if args.model_resolution is not None:
         light["diffusion"] = {"model_resolution": args.model_resolution}
         light["outpaint"]["resolution"] = args.model_resolution
-    camera = {k: v for k, v in (("fov_deg", args.fov), ("pitch_deg", photo_pitch(args)), ("roll_deg", args.roll))
-              if v is not None}
-    return RunConfig(preset=args.preset, scene_type=args.scene or "auto", sun_deg=args.sun,
-                     sun_shadow=tuple(args.sun_from_shadow) if args.sun_from_shadow else None, fspy=args.fspy,
-                     camera_overrides=camera, depth_model=args.depth_model, models=model_config(args),
-                     stage_overrides={"light": {k: v for k, v in light.items() if v is not None}})
+    camera = {k: v for k, v in (("fov", args.fov), ("pitch", photo_pitch(args)), ("roll", args.roll)) if v is not None}
+    table = {"preset": args.preset, "scene": args.scene or "auto", "sun": None if args.sun is None else list(args.sun),
+             "sun_shadow": list(args.sun_from_shadow) if args.sun_from_shadow else None, "fspy": args.fspy,
+             "camera": camera, "depth_model": args.depth_model,
+             "overrides": {"light": {k: v for k, v in light.items() if v is not None}}}
+    return run_config(table, "scenefit light", stages=("light",), models=model_config(args))
 
 
 def print_strict_json(config: dict) -> int:
@@ -66,7 +67,7 @@ def _light(args, out: Path) -> int:
     critic = light_critic(run)
     inputs = light_inputs(args.photo, args.at, run.fspy, run.camera_overrides)
     config = with_shadow_sun(light_config(run, critic.choice), run, inputs.camera, tuple(inputs.info["size"]),
-                             inputs.photo.shape[:2])
+                             (inputs.photo.shape[0], inputs.photo.shape[1]))
     write_camera(inputs.camera, inputs.camera_record, RunLayout(out).stage(names().CAMERA_STAGE))   # (compose reads it)
     result = run_light(inputs, config, progress(args))
     if args.sun_from_shadow:

@@ -15,13 +15,14 @@ from ..scene.placement import Placement
 from .models import GuidanceModels, ModelConfig, load_guidance_models, locate_models, models_available
 
 if TYPE_CHECKING:
-    from .critics import CRITIC_TYPES, CriticConfig, CriticOutput, ScoreCritic
+    from .critic_config import CRITIC_TYPES, CriticConfig
+    from .critics import CriticOutput, ScoreCritic
     from .injection import ReferenceInjector
     from .lora import LoraCritic, camera_condition
 
 # The critics, LoRA and injection load torch (a second or more): imported when first named, so a RunConfig's
 # ModelConfig (built on Blender's main thread) or the model store does not load it.
-_TORCH_NAMES = {"CRITIC_TYPES": "critics", "CriticConfig": "critics", "CriticOutput": "critics",
+_TORCH_NAMES = {"CRITIC_TYPES": "critic_config", "CriticConfig": "critic_config", "CriticOutput": "critics",
                 "ScoreCritic": "critics", "ReferenceInjector": "injection", "LoraCritic": "lora",
                 "camera_condition": "lora"}
 

@@ -11,9 +11,7 @@ import torch
 
 from ..base.errors import InputError
 
-WEIGHTING_TYPES = ("sds", "uniform")          # w_t = 1 - ᾱ_t (DreamFusion) or 1
-ANNEAL_TYPES = ("linear", "none")             # timestep window moving from high to low noise, or fixed
-NORMAL_WEIGHT_TYPES = ("cosine", "none")      # ⟨camera, normal⟩ term in w_t, or none
+from .critic_config import ANNEAL_TYPES, NORMAL_WEIGHT_TYPES, WEIGHTING_TYPES
 
 # ᾱ_t is kept inside [ALPHA_EPS, 1 - ALPHA_EPS] wherever it is divided by (t -> 0 and t -> T).
 ALPHA_EPS = 1e-6

@@ -1,6 +1,6 @@
 """The presets' data: what draft / balanced / final change from each stage's config defaults.
 
-Data only (it imports nothing of SceneFit but, lazily, the neural texture's config), resolved into
+Data only (it imports nothing of SceneFit but the neural texture's config), resolved into
 stage configs by core/pipeline/presets.py. No stage reads it: a stage config holds resolved values (a
 convert row's "texture" names a texture preset, which stage_config turns into its NeuralTextureConfig).
 """
@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..base.names import PRESETS
+from ..texture.texture_config import NeuralTextureConfig
 
 PRESET_NAMES = PRESETS
 # What a person picking one should know (the Blender panel's choices say the same).
@@ -62,8 +63,6 @@ TABLES: dict[str, dict[str, dict[str, Any]]] = {
 }
 
 
-def texture_preset(name: str, **overrides: Any) -> Any:
+def texture_preset(name: str, **overrides: Any) -> NeuralTextureConfig:
     """The neural texture's config at preset `name` (the one place a texture preset is resolved)."""
-    from ..texture.neural_texture import NeuralTextureConfig  # lazy: torch takes seconds to load
-
     return NeuralTextureConfig(**{**TABLES["texture"][name], **overrides})

@@ -6,13 +6,14 @@ from dataclasses import fields, replace
 from typing import Any
 
 from ..base.errors import InputError
+from ..stages.adapt.config import MODE_SETTINGS, MODE_TYPES, SCENE_STAGES, AdaptConfig, StageSpec
 from ..stages.compose import ComposeConfig
+from ..stages.convert_config import ConvertConfig
+from ..stages.light.config import LightConfig
 from .preset_tables import texture_preset
 
 
-def resolve_convert(table: dict[str, Any], overrides: dict[str, Any]) -> Any:
-    from ..stages.convert import ConvertConfig  # lazy: torch takes seconds to load
-
+def resolve_convert(table: dict[str, Any], overrides: dict[str, Any]) -> ConvertConfig:
     overrides = dict(overrides)
     # Fitting settings ask for the fit: without them the asset's own maps are the exact start.
     if "init_type" not in overrides and {"iterations", "method_type"} & set(overrides):
@@ -23,9 +24,7 @@ def resolve_convert(table: dict[str, Any], overrides: dict[str, Any]) -> Any:
     return ConvertConfig(**values)
 
 
-def resolve_light(table: dict[str, Any], overrides: dict[str, Any]) -> Any:
-    from ..stages.light.estimate import LightConfig  # lazy: torch takes seconds to load
-
+def resolve_light(table: dict[str, Any], overrides: dict[str, Any]) -> LightConfig:
     return nested(LightConfig(), {**table, **overrides})
 
 
@@ -33,11 +32,8 @@ def resolve_compose(table: dict[str, Any], overrides: dict[str, Any]) -> Compose
     return ComposeConfig(**{**table, **overrides})
 
 
-def resolve_adapt(table: dict[str, Any], overrides: dict[str, Any]) -> Any:
+def resolve_adapt(table: dict[str, Any], overrides: dict[str, Any]) -> AdaptConfig:
     """For adapt, `mode_type` (default "scene") picks the mode's settings from the appendix first."""
-    # lazy: torch takes seconds to load
-    from ..stages.adapt.config import MODE_SETTINGS, MODE_TYPES, SCENE_STAGES, AdaptConfig, StageSpec
-
     table, overrides = dict(table), dict(overrides)
     mode = overrides.pop("mode_type", "scene")
     if mode not in MODE_TYPES:

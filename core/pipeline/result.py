@@ -11,6 +11,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from .layout import RunLayout
 
@@ -28,7 +29,7 @@ class StageRecord:
     status: str
     key: str | None = None
     seconds: float = 0.0
-    report: dict = field(default_factory=dict)   # the stage's own report; its outputs as paths from here
+    report: dict[str, Any] = field(default_factory=dict)   # the stage's own report; its outputs as paths from here
     why: str = ""
     source: str | None = None                    # the earlier run's folder a reused stage was copied from
 
@@ -37,18 +38,18 @@ class StageRecord:
         """Whether the stage's outputs are there (it ran or was reused)."""
         return self.status in ("ran", "reused")
 
-    def status_words(self) -> dict:
+    def status_words(self) -> dict[str, str]:
         """{"status", "why"}: report.json's `stage_status` entry, the same shape in demo, run and batch."""
         return {"status": self.status, "why": self.why}
 
-    def to_report(self) -> dict:
+    def to_report(self) -> dict[str, Any]:
         if not self.done:
             return {"status": self.status, "why": self.why}
         out = {"status": self.status, "key": self.key, "seconds": self.seconds, "report": self.report}
         return out if self.source is None else dict(out, **{"from": self.source})
 
     @classmethod
-    def from_runner(cls, name: str, record: dict) -> "StageRecord":
+    def from_runner(cls, name: str, record: dict[str, Any]) -> "StageRecord":
         return cls(name, record["status"], record.get("key"), record.get("seconds", 0.0), record.get("report", {}),
                    record.get("why", ""), record.get("from"))
 
@@ -58,12 +59,12 @@ class RunResult:
     """A finished run: its folder, the config it ran with, each stage's record and the camera stage's."""
 
     folder: Path
-    config: dict                                 # the RunConfig as plain data (as report.json keeps it)
-    inputs: dict
+    config: dict[str, Any]                                 # the RunConfig as plain data (as report.json keeps it)
+    inputs: dict[str, Any]
     stages: dict[str, StageRecord]               # the stages a job lists, in the pipeline's order
     camera: StageRecord | None
     seconds: float
-    environment: dict = field(default_factory=dict)
+    environment: dict[str, Any] = field(default_factory=dict)
 
     @property
     def reused(self) -> tuple[str, ...]:
@@ -79,14 +80,14 @@ class RunResult:
         adapt = self.stages.get("adapt")
         return "adapt" if adapt is not None and adapt.done else "convert"
 
-    def outputs(self, name: str) -> dict:
+    def outputs(self, name: str) -> dict[str, Any]:
         return dict(self.stages[name].report.get("outputs", {}))
 
-    def stage_status(self) -> dict:
+    def stage_status(self) -> dict[str, dict[str, str]]:
         """Each stage's status and why: report.json's `stage_status`, one place and shape in demo, run and batch."""
         return {name: stage.status_words() for name, stage in self.stages.items()}
 
-    def to_report(self) -> dict:
+    def to_report(self) -> dict[str, Any]:
         """report.json's content (paths as they are here; write_report makes them relative to the folder)."""
         return {"stage": "run", "config": self.config, "inputs": self.inputs, "stage_status": self.stage_status(),
                 "stages": {name: stage.to_report() for name, stage in self.stages.items()},

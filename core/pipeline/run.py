@@ -19,7 +19,7 @@ import threading
 import time
 from dataclasses import asdict, dataclass, is_dataclass, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -51,7 +51,7 @@ from .result import NOT_LISTED, RunResult, StageRecord
 from .run_config import RunConfig, stage_subset
 
 
-def _digest(*parts) -> str:
+def _digest(*parts: Any) -> str:
     h = hashlib.sha256()
     for part in parts:
         if isinstance(part, np.ndarray):
@@ -89,19 +89,19 @@ class StageRunner:
         self.out, self.progress, self.cancel = out, progress, cancel
         self.earlier = earlier   # a finished run's folder: a stage of it with this run's key is copied in, not redone
         self.before_work = before_work   # called once, before the first stage that is not reused
-        self.stages: dict[str, dict] = {}
+        self.stages: dict[str, dict[str, Any]] = {}
         self.fresh = False   # once a stage runs, every later stage runs too
 
-    def run(self, name: str, key: str, work: Callable[[Path], dict]) -> dict:
+    def run(self, name: str, key: str, work: Callable[[Path], dict[str, Any]]) -> dict[str, Any]:
         """Reuse the stage, or do `work(folder) -> report` and record it."""
-        def begin(folder: Path) -> Callable[[], dict]:
+        def begin(folder: Path) -> Callable[[], dict[str, Any]]:
             report = work(folder)
             return lambda: report
 
         return self.start(name, key, begin)()
 
-    def start(self, name: str, key: str, begin: Callable[[Path], Callable[[], dict]],
-              later_stages_follow: bool = True) -> Callable[[], dict]:
+    def start(self, name: str, key: str, begin: Callable[[Path], Callable[[], dict[str, Any]]],
+              later_stages_follow: bool = True) -> Callable[[], dict[str, Any]]:
         """Reuse the stage, or `begin(folder)` its work, which returns a function that waits for its report.
         Returns a function that waits, records the stage and gives its report. `later_stages_follow`
         False: a stage started ahead of others (the bake, while compose runs) does not make them run."""
@@ -136,7 +136,7 @@ class StageRunner:
         record.unlink(missing_ok=True)  # a stage half redone is not a finished stage
         wait = begin(folder)
 
-        def finish() -> dict:
+        def finish() -> dict[str, Any]:
             report = wait()
             seconds = time.perf_counter() - t0
             # Outputs are kept relative to the stage's folder: the run's folder may be moved (Blender swaps
@@ -155,7 +155,7 @@ class StageRunner:
         emit(self.progress, "run", run_order.index(name) + 1, len(run_order), f"{name}: {status}")
 
 
-def _finished_stage(folder: Path, key: str) -> dict | None:
+def _finished_stage(folder: Path, key: str) -> dict[str, Any] | None:
     """The report of the stage finished in `folder` with `key` whose outputs all exist, else None. A
     stage.json is data from wherever the folder came from (an earlier run, a worker, someone else's run
     folder): one that does not read as a stage record, an output that leads out of the stage's folder
@@ -177,20 +177,20 @@ def _finished_stage(folder: Path, key: str) -> dict | None:
     return report if finite_outputs(outputs) else None
 
 
-def _absolute_outputs(outputs, folder: Path):
+def _absolute_outputs(outputs: Any, folder: Path) -> Any:
     """A stage.json's outputs (kept relative to the stage's folder) as paths from here."""
     if isinstance(outputs, dict):
         return {k: _absolute_outputs(v, folder) for k, v in outputs.items()}
     return str(folder / outputs) if isinstance(outputs, str) else outputs
 
 
-def _paths(outputs) -> list[str]:
+def _paths(outputs: Any) -> list[str]:
     if isinstance(outputs, dict):
         return [p for v in outputs.values() for p in _paths(v)]
     return [outputs] if isinstance(outputs, str) else []
 
 
-def run_pipeline(mesh: Mesh | AssetMaterials | None, maps: PBRMaps | None, photo_path: str | Path | None, placement,
+def run_pipeline(mesh: Mesh | AssetMaterials | None, maps: PBRMaps | None, photo_path: str | Path | None, placement: Any,
                  out_dir: str | Path, config: RunConfig = RunConfig(), progress: ProgressCallback | None = None,
                  cancel: threading.Event | None = None, bake: GameBake | None = None,
                  bake_skipped_why: str = "no game bake was asked for", models: ModelCache | None = None,
@@ -224,7 +224,7 @@ def run_pipeline(mesh: Mesh | AssetMaterials | None, maps: PBRMaps | None, photo
     return run.finish()
 
 
-def from_given(stages) -> tuple[str, ...]:
+def from_given(stages: Sequence[str]) -> tuple[str, ...]:
     """`stages` when they are FROM_GIVEN_STAGES, else one sentence: the rest of a run makes its own inputs."""
     from_given_stages = names().FROM_GIVEN_STAGES
     if tuple(stages) != from_given_stages:
@@ -530,5 +530,5 @@ def _file_bytes(path: Path | None) -> bytes:
             from None
 
 
-def _plain(config: RunConfig) -> dict:
+def _plain(config: RunConfig) -> dict[str, Any]:
     return json.loads(json.dumps(asdict(config), default=str))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any, Iterable
 
 from ..base.errors import InputError
 from ..base.names import CAMERA_SOURCES, GUIDANCE_TYPES, MODES, PRESETS, SCENE_TYPES, SHADOW_TYPES
@@ -12,6 +13,7 @@ from ..guidance.models import ModelConfig
 from ..scene.camera import PhotoCamera
 from ..scene.placement import DEFAULT_OBJECT_SIZE
 from ..stages.camera import check_camera_values
+from ..stages.light.shadow_hint import check_point_count
 from .registry import names
 
 # (The camera stage's report is the run report's "camera", beside the "stages" a job lists.)
@@ -35,8 +37,8 @@ class RunConfig:
     compose_spp: int | None = None            # compose: samples per pixel (None: from the preset's noise target)
     photo_camera: PhotoCamera | None = None   # None: the photo's camera as estimated (core/stages/camera.py)
     fspy: str | None = None                   # an fSpy project of the photo: its solved camera is used
-    camera_overrides: dict = field(default_factory=dict)   # the photo's camera over the estimate: field of view,
-                                                           # pitch and roll (degrees), lens shift x and y
+    camera_overrides: dict[str, float] = field(default_factory=dict)   # the photo's camera over the estimate:
+                                              # field of view, pitch and roll (degrees), lens shift x and y
     camera_source: str = "user"               # where those camera values come from: "user", or "blender" (the scene camera)
     camera_why: str = "given by the user"     # ... said in the report's camera notes
     turn_deg: float = 0.0                     # compose: the asset turned about Z after facing the camera
@@ -52,7 +54,7 @@ class RunConfig:
     models: ModelConfig = field(default_factory=ModelConfig)
     # Settings over the preset's, per stage ("convert", "light", "adapt", "compose"), as the stage's config takes them:
     # quick looks, tests and benchmarks (e.g. {"adapt": {"iterations": 4}}). Part of each stage's key.
-    stage_overrides: dict = field(default_factory=dict)
+    stage_overrides: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         _choice("preset", self.preset, PRESETS)
@@ -68,9 +70,6 @@ class RunConfig:
             raise _refused("sun_shadow", "Give the sun as an azimuth and elevation or as a shadow's three points, "
                                          "not both.")
         if self.sun_shadow is not None:
-            # lazy: core.stages.light loads torch (seconds); a RunConfig is built on Blender's main thread
-            from ..stages.light.shadow_hint import check_point_count
-
             check_point_count(self.sun_shadow)
         configured = names().CONFIG_STAGES
         unknown = sorted(set(self.stage_overrides) - set(configured))
@@ -78,12 +77,12 @@ class RunConfig:
             raise _refused("stage_overrides", f"stage_overrides names unknown stage {unknown[0]!r}; it takes "
                              f"{', '.join(configured)}.")
 
-    def overrides(self, stage: str) -> dict:
+    def overrides(self, stage: str) -> dict[str, Any]:
         return dict(self.stage_overrides.get(stage, {}))
 
 
 
-def _choice(name: str, value, choices: tuple[str, ...]) -> None:
+def _choice(name: str, value: object, choices: tuple[str, ...]) -> None:
     if value not in choices:
         raise _refused(name, f"{name} must be one of {', '.join(choices)}, got {value!r}.")
 
@@ -95,11 +94,11 @@ def _refused(field_name: str, sentence: str) -> InputError:
     return error
 
 
-def _whole(value) -> bool:
+def _whole(value: object) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def _finite(value) -> bool:
+def _finite(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
@@ -128,7 +127,7 @@ def _check_view(config: RunConfig) -> None:
                                               f"{config.sun_uncertainty_deg!r}.")
 
 
-def stage_subset(stages) -> tuple[str, ...]:
+def stage_subset(stages: Iterable[str]) -> tuple[str, ...]:
     """`stages` in the run's order when they run together: convert and/or light alone (ALONE_STAGES), or the
     pipeline (PIPELINE_STAGES, with any of OPTIONAL_STAGES); any other subset is one sentence (InputError)."""
     n = names()

@@ -52,12 +52,12 @@ class RunKey:
     choices: tuple[str, ...] | None = None
 
 
-def _is_number(value) -> bool:
+def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def _text(key: str, optional: bool = False) -> Callable[[Any, str], Any]:
-    def read(value, where: str):
+    def read(value: Any, where: str) -> Any:
         if optional and value is None:
             return None
         if not isinstance(value, str):
@@ -67,7 +67,7 @@ def _text(key: str, optional: bool = False) -> Callable[[Any, str], Any]:
 
 
 def _number(key: str) -> Callable[[Any, str], float]:
-    def read(value, where: str) -> float:
+    def read(value: Any, where: str) -> float:
         if not (_is_number(value) and math.isfinite(value)):
             raise InputError(f"{where}: {key} must be a finite number, got {_shown(value)}.")
         return float(value)
@@ -75,34 +75,34 @@ def _number(key: str) -> Callable[[Any, str], float]:
 
 
 def _whole(key: str) -> Callable[[Any, str], int | None]:
-    def read(value, where: str) -> int | None:
+    def read(value: Any, where: str) -> int | None:
         if value is not None and not (isinstance(value, int) and not isinstance(value, bool)):
             raise InputError(f"{where}: {key} must be a whole number, got {_shown(value)}.")
         return value
     return read
 
 
-def _sun(value, where: str) -> tuple[float, float]:
+def _sun(value: Any, where: str) -> tuple[float, float]:
     if not (isinstance(value, (list, tuple)) and len(value) == 2 and all(_is_number(v) for v in value)):
         raise InputError(f"{where}: sun must be [azimuth, elevation] in degrees, e.g. [-30, 45], got {_shown(value)}.")
     return float(value[0]), float(value[1])
 
 
-def _shadow(value, where: str) -> tuple[str, str, str]:
+def _shadow(value: Any, where: str) -> tuple[str, str, str]:
     if not (isinstance(value, (list, tuple)) and len(value) == 3 and all(isinstance(v, str) for v in value)):
         raise InputError(f"{where}: sun_shadow must be the shadow's foot, top and tip, three points as --at takes "
                          f"them, e.g. [\"0.4,0.8\", \"0.4,0.5\", \"0.6,0.85\"], got {_shown(value)}.")
     return tuple(value)
 
 
-def _camera(value, where: str) -> dict:
+def _camera(value: Any, where: str) -> dict[str, float]:
     if not isinstance(value, dict) or set(value) - set(CAMERA_TABLE) or not all(_is_number(v) for v in value.values()):
         raise InputError(f"{where}: camera must be a table of fov, pitch and roll in degrees (and shift_x, shift_y), e.g. "
                          f"{{ fov = 50, pitch = -14 }}, got {_shown(value)}.")
     return {CAMERA_TABLE[k]: float(v) for k, v in value.items()}
 
 
-def _overrides(value, where: str) -> dict:
+def _overrides(value: Any, where: str) -> dict[str, dict[str, Any]]:
     if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
         raise InputError(f"{where}: overrides must be a table of stage tables, e.g. "
                          "{ adapt = { iterations = 50 } }.")
@@ -170,7 +170,7 @@ KEYS = tuple(k.key for k in RUN_KEYS)
 _BY_KEY = {k.key: k for k in RUN_KEYS}
 
 
-def run_config(table: dict, where: str, stages: tuple[str, ...] | None = None, **given) -> RunConfig:
+def run_config(table: dict[str, Any], where: str, stages: tuple[str, ...] | None = None, **given: Any) -> RunConfig:
     """The RunConfig of `table` (keys of RUN_KEYS; others are the caller's to refuse), with `given` fields
     (models) over it; every problem one sentence beginning with `where`. The settings of `stages` (those
     the run will resolve) are checked against the stage configs they go to."""
@@ -190,7 +190,7 @@ def run_config(table: dict, where: str, stages: tuple[str, ...] | None = None, *
     return config
 
 
-def run_table(config: RunConfig) -> dict:
+def run_table(config: RunConfig) -> dict[str, Any]:
     """`config` as a table `run_config` reads back to the same config (models aside: NOT_IN_A_TABLE)."""
     if config.photo_camera is not None:
         raise InputError("A run given a PhotoCamera object has no table; give its angles as camera values.")
@@ -206,7 +206,7 @@ def check_stage_settings(config: RunConfig, where: str, stages: tuple[str, ...] 
         overrides = config.overrides(stage)
         # (a scene run without a prompt is given one from the asset's name: any text stands for it here)
         prompt = config.prompt or ("x" if config.mode == "scene" else "")
-        owns: dict[str, dict] = {
+        owns: dict[str, dict[str, Any]] = {
             "adapt": {"mode_type": config.mode, "prompt": prompt, "object_prompt": config.object_prompt,
                       "instruction": config.instruction},
             "compose": {"size": config.size, "shadow_type": config.shadow_type, "spp": config.compose_spp}}
@@ -221,7 +221,7 @@ def check_stage_settings(config: RunConfig, where: str, stages: tuple[str, ...] 
             raise InputError(text if text.startswith(where) else f"{where}: {stage}: {text}") from None
 
 
-def _check_types(overrides: dict, config, where: str) -> None:
+def _check_types(overrides: dict[str, Any], config: Any, where: str) -> None:
     """Each override a field of `config` (a stage config, or one nested in it), of that field's type."""
     hints = typing.get_type_hints(type(config))
     names = [f.name for f in fields(config)]
@@ -236,7 +236,7 @@ def _check_types(overrides: dict, config, where: str) -> None:
             raise InputError(f"{where}.{key} must be {_type_words(hints.get(key))}, got {_shown(value)}.")
 
 
-def _fits(value, hint) -> bool:
+def _fits(value: Any, hint: Any) -> bool:
     """Whether a plain (TOML/JSON) value can stand for a field of type `hint`: numbers finite, a tuple as a list,
     a nested config as a table; types it does not know are left to the config's own checks."""
     origin, args = typing.get_origin(hint), typing.get_args(hint)
@@ -259,7 +259,7 @@ def _fits(value, hint) -> bool:
     return True
 
 
-def _type_words(hint) -> str:
+def _type_words(hint: Any) -> str:
     words = {bool: "true or false", int: "a whole number", float: "a finite number", str: "a string"}
     union = typing.get_origin(hint) in (typing.Union, types.UnionType)
     args = [a for a in typing.get_args(hint) if a is not type(None)] if union else [hint]
@@ -267,7 +267,7 @@ def _type_words(hint) -> str:
                                  getattr(a, "__name__", str(a))) for a in args)
 
 
-def _shown(value) -> str:
+def _shown(value: Any) -> str:
     text = repr(value)
     return text if len(text) <= 80 else text[:77] + "..."
 

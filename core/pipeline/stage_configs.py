@@ -13,21 +13,22 @@ properties all give.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import TYPE_CHECKING
+from typing import Any
 
 from ..base.decision import Decision
+from ..scene.camera import PhotoCamera
+from ..stages.adapt.config import AdaptConfig
+from ..stages.compose import ComposeConfig
+from ..stages.convert_config import ConvertConfig
+from ..stages.light.config import LightConfig
+from ..stages.light.critic_choice import critic_choice
+from ..stages.light.depth import depth_config_for
+from ..stages.light.shadow_hint import sun_from_shadow_points
 from .presets import stage_config, with_overrides
 from .run_config import RunConfig
 
-if TYPE_CHECKING:
-    from ..scene.camera import PhotoCamera
-    from ..stages.adapt.config import AdaptConfig
-    from ..stages.compose import ComposeConfig
-    from ..stages.convert import ConvertConfig
-    from ..stages.light.estimate import LightConfig
 
-
-def _resolved(stage: str, run: RunConfig, values: dict):
+def _resolved(stage: str, run: RunConfig, values: dict[str, Any]) -> Any:
     """The preset's config for `stage` with `values` over it, then the run's own overrides for it."""
     return stage_config(stage, run.preset, **with_overrides(values, run.overrides(stage)))
 
@@ -43,8 +44,6 @@ def light_critic(run: RunConfig, guidance: tuple[bool, str] | None = None) -> De
     `guidance` (a run that may adapt: `guidance_found`'s answer) the diffusion critic exactly when
     adapt's weights are found, else (light alone, as `scenefit light`) "auto": diffusion when the SD2
     base weights are on this machine."""
-    from ..stages.light.stage import critic_choice  # lazy: torch takes seconds to load
-
     asked = run.overrides("light").get("critic_type")
     if asked is not None or guidance is None:
         return critic_choice(asked or "auto", run.models)
@@ -58,8 +57,6 @@ def light_config(run: RunConfig, critic: str, map_height: int | None = None,
     the preset's); without_diffusion: the run asked for no diffusion model at all (a pipeline's guidance
     "none"), so the sky/ground prior completes an outdoor map unless its overrides say otherwise. The run
     gives the sun, the scene type, the models and the depth model, looked for where the models are."""
-    from ..stages.light.depth import depth_config_for  # lazy: torch takes seconds to load
-
     values = {"critic_type": critic, "map_height": map_height, "scene_type": run.scene_type,
               "sun_deg": None if run.sun_deg is None else tuple(run.sun_deg),
               "sun_uncertainty_deg": float(run.sun_uncertainty_deg), "models": run.models,
@@ -79,8 +76,6 @@ def with_shadow_sun(config: LightConfig, run: RunConfig, camera: PhotoCamera, st
     `stored_size` (w, h)); `config` itself when the run gives none."""
     if run.sun_shadow is None:
         return config
-    from ..stages.light.shadow_hint import sun_from_shadow_points  # lazy: torch takes seconds to load
-
     sun, spread = sun_from_shadow_points(run.sun_shadow, camera, stored_size, working_shape)
     return replace(config, sun_deg=sun, sun_uncertainty_deg=spread)
 

@@ -13,25 +13,14 @@ attribute `fit_direct` is the module (Python sets it), so the package cannot han
 """
 from __future__ import annotations
 
-import importlib
+from ..base.lazy_exports import lazy_exports
 
 _MODULE_OF = {
     "bake_maps": "bake", "bake_texture": "bake", "load_neural_texture": "bake", "save_neural_texture": "bake",
     "FitResult": "fit_direct", "encode_for_metric": "fit_direct", "masked_psnr": "fit_direct",
     "HashGrid3D": "hashgrid",
-    "CHANNELS": "neural_texture", "NeuralTexture": "neural_texture", "NeuralTextureConfig": "neural_texture",
+    "CHANNELS": "neural_texture", "NeuralTexture": "neural_texture", "NeuralTextureConfig": "texture_config",
     "TexelPlan": "neural_texture", "split_channels": "neural_texture",
 }
 __all__ = sorted(_MODULE_OF)
-
-
-def __getattr__(name: str):
-    if name not in _MODULE_OF:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{_MODULE_OF[name]}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return __all__
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _MODULE_OF)

@@ -1,4 +1,4 @@
-"""The linter (ruff) over the shipped code and the type checker (mypy) over core/ and workers/, both
+"""The linter (ruff) over the shipped code and the type checker (mypy) over core/, workers/ and cli/, both
 configured in pyproject.toml and pinned in requirements.txt; each test fails with the tool's report."""
 from __future__ import annotations
 
@@ -42,8 +42,8 @@ def test_ruff_passes_on_the_shipped_code():
         pytest.fail(f"ruff check found problems:\n{proc.stdout[-8000:]}{proc.stderr[-2000:]}")
 
 
-def test_mypy_passes_on_core_and_workers():
-    proc = _mypy(_package_root(), "-p", "scenefit.core", "-p", "scenefit.workers")
+def test_mypy_passes_on_core_workers_and_cli():
+    proc = _mypy(_package_root(), "-p", "scenefit.core", "-p", "scenefit.workers", "-p", "scenefit.cli")
     if proc.returncode != 0:
         pytest.fail(f"mypy found problems:\n{proc.stdout[-8000:]}{proc.stderr[-2000:]}")
 

@@ -169,3 +169,27 @@ def test_registering_the_add_on_loads_no_torch():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout
+
+
+def project_imports_inside_functions(prefix: str, root: Path = ROOT) -> list[str]:
+    """'module:line target' for each import of a project module inside a function of a module under `prefix`."""
+    graph = _graph(root)
+    return [f"{module}:{lineno} {target}" for module, (_, _, inside) in sorted(graph.items())
+            if module == prefix or module.startswith(prefix + ".")
+            for lineno, target in inside if target in graph or target.rsplit(".", 1)[0] in graph]
+
+
+def test_the_pipeline_imports_no_project_module_inside_a_function():
+    """The stage configs load no torch (core/stages/*config*.py), so the registry, presets, run table and
+    RunConfig import them at the top; a stage's work module is loaded by its registry record when it runs."""
+    assert project_imports_inside_functions("core.pipeline") == []
+
+
+def test_the_check_sees_a_project_import_inside_a_function(tmp_path):
+    files = {"core/__init__.py": "", "core/pipeline/__init__.py": "", "core/stages/__init__.py": "",
+             "core/stages/convert.py": "import json\n",
+             "core/pipeline/presets.py": "import json\n\n\ndef f():\n    from ..stages.convert import Config\n"}
+    for name, text in files.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    assert project_imports_inside_functions("core.pipeline", tmp_path) == ["core.pipeline.presets:5 core.stages.convert"]

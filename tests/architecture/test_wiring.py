@@ -313,8 +313,8 @@ def test_every_stage_config_defaults_to_the_balanced_preset_or_says_why_not():
     from scenefit.core.stages.adapt.config import AdaptConfig
     from scenefit.core.stages.compose import ComposeConfig
     from scenefit.core.stages.convert import ConvertConfig
-    from scenefit.core.stages.light.estimate import LightConfig
-    from scenefit.core.texture.neural_texture import BALANCED_TEXTURE, NeuralTextureConfig
+    from scenefit.core.stages.light.config import LightConfig
+    from scenefit.core.texture.texture_config import BALANCED_TEXTURE, NeuralTextureConfig
 
     assert ConvertConfig() == stage_config("convert", "balanced")
     assert ComposeConfig() == stage_config("compose", "balanced")

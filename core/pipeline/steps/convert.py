@@ -5,7 +5,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ...data.materials import AssetMaterials
-from ...stages.convert import ConvertConfig, convert_and_bake
+from ...stages.convert import convert_and_bake
+from ...stages.convert_config import ConvertConfig
 from .. import stage_configs
 
 if TYPE_CHECKING:

@@ -12,7 +12,7 @@ import torch
 from ...base.decision import Decision
 from ...data.scene_needs import envmap_height_for, report as needs_report
 from ...data.uv_raster import rasterize_uv
-from ...stages.light.estimate import LightConfig
+from ...stages.light.config import LightConfig
 from ...stages.light.shadow_hint import sun_from_shadow_points
 from ...stages.light.stage import LightInputs, run_light, write_light
 from ...texture.bake import load_neural_texture

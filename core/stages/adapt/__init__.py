@@ -23,18 +23,19 @@ stage.py        adapt_texture (the stage's run), write_adapt, and adapt_and_bake
 checkpoint.py   save and resume
 distributed.py  torch.distributed: views spread over ranks, gradients summed
 """
-from .checkpoint import CHECKPOINT_FILE, load_checkpoint, save_checkpoint
-from .config import (GENERATE_STAGES, MODE_SETTINGS, MODE_TYPES, SCENE_STAGES, AdaptConfig, StageSpec, edit_prompt,
-                     stage_at)
-from .distributed import init_distributed
-from .sampling import sample_camera, sample_view, spherical_gaussian_environment, view_suffix
-from .stage import adapt_and_bake, adapt_texture, write_adapt
-from .stage_data import AdaptInputs, AdaptResult
-from .system import AdaptSystem
+from __future__ import annotations
 
-__all__ = [
-    "CHECKPOINT_FILE", "GENERATE_STAGES", "MODE_SETTINGS", "MODE_TYPES", "SCENE_STAGES", "AdaptConfig", "AdaptInputs",
-    "AdaptResult", "AdaptSystem", "StageSpec", "adapt_and_bake", "adapt_texture", "edit_prompt", "init_distributed",
-    "load_checkpoint", "sample_camera", "sample_view", "save_checkpoint", "spherical_gaussian_environment",
-    "stage_at", "view_suffix", "write_adapt",
-]
+from ...base.lazy_exports import lazy_exports
+
+_MODULE_OF = {
+    **{name: "checkpoint" for name in ("CHECKPOINT_FILE", "load_checkpoint", "save_checkpoint")},
+    **{name: "config" for name in ("GENERATE_STAGES", "MODE_SETTINGS", "MODE_TYPES", "SCENE_STAGES", "AdaptConfig",
+                                   "StageSpec", "edit_prompt", "stage_at")},
+    "init_distributed": "distributed",
+    **{name: "sampling" for name in ("sample_camera", "sample_view", "spherical_gaussian_environment", "view_suffix")},
+    **{name: "stage" for name in ("adapt_and_bake", "adapt_texture", "write_adapt")},
+    **{name: "stage_data" for name in ("AdaptInputs", "AdaptResult")},
+    "AdaptSystem": "system",
+}
+__all__ = sorted(_MODULE_OF)
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _MODULE_OF)

@@ -17,11 +17,10 @@ from dataclasses import asdict, dataclass, field
 from ...base.limits import check_render_size
 from ...base.names import MODES, SHADOW_TYPES
 from ...base.errors import InputError
-from ...guidance.critics import CriticConfig
+from ...guidance.critic_config import ANNEAL_TYPES, NORMAL_WEIGHT_TYPES, CriticConfig
 from ...guidance.models import ModelConfig
-from ...guidance.weighting import ANNEAL_TYPES, NORMAL_WEIGHT_TYPES
 from ...render.renderer import RENDERER_TYPES
-from ...texture.neural_texture import BALANCED_TEXTURE, NeuralTextureConfig
+from ...texture.texture_config import BALANCED_TEXTURE, NeuralTextureConfig
 
 MODE_TYPES = MODES   # (core/base/names.py)
 VIEWS_TYPES = ("local+global", "local")

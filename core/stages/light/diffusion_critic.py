@@ -21,7 +21,6 @@ dark-environment suffix and tint).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -34,46 +33,9 @@ from ...guidance.models import GuidanceModels
 from ...guidance.views import linear_to_srgb_torch, paste_layer, photo_crop, srgb_to_linear_torch
 from ...scene.mattes import composite_linear, paper_shadow_matte
 from .hdr import DEFAULT_L_WHITE, CriticRequest
+from .config import DiffusionCriticConfig
 
-VIEWS_TYPES = ("composited", "apparatus")
 LUMINANCE = (0.2126, 0.7152, 0.0722)
-
-
-@dataclass(frozen=True)
-class DiffusionCriticConfig:
-    """The paper's light-critic settings: VSD with λ = 1, CFG 7.5, LoRA lr 1e-4 annealed to 0.1 x."""
-
-    guidance_scale: float = 7.5
-    lambda_vsd: float = 1.0
-    lora_rank: int = 4
-    lr_lora: float = 1e-4
-    lr_lora_final_factor: float = 0.1
-    condition_dropout: float = 0.1
-    model_resolution: int = 512
-    l_white: float = DEFAULT_L_WHITE        # the tone curve applied to renders before encoding
-    negative_prompt: str = ""
-    views_type: str = "composited"          # the paper's two global views in the photo; "apparatus": the renders
-    object_size: float = 0.3                # composited: the object spans this fraction of the photo's height
-    shadow_threshold: float = 0.9           # composited: the paper's shadow threshold (x the floor's mean)
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        if self.views_type not in VIEWS_TYPES:
-            raise InputError(f"views_type must be one of {', '.join(VIEWS_TYPES)}, got {self.views_type!r}.")
-        if not 0.0 < self.object_size <= 2.0 or not 0.0 < self.shadow_threshold <= 1.0:
-            raise InputError("object_size must be in (0, 2] and shadow_threshold in (0, 1].")
-        if self.guidance_scale < 0:
-            raise InputError(f"guidance_scale must not be negative, got {self.guidance_scale}.")
-        if not 0.0 <= self.lambda_vsd <= 1.0:
-            raise InputError(f"lambda_vsd must be in [0, 1], got {self.lambda_vsd}.")
-        if self.lora_rank < 1 or not self.lr_lora > 0 or not 0 < self.lr_lora_final_factor <= 1:
-            raise InputError("lora_rank must be >= 1, lr_lora positive and lr_lora_final_factor in (0, 1].")
-        if not 0.0 <= self.condition_dropout < 1.0:
-            raise InputError(f"condition_dropout must be in [0, 1), got {self.condition_dropout}.")
-        if self.model_resolution < 8 or self.model_resolution % 8:
-            raise InputError(f"model_resolution must be a multiple of 8 (>= 8), got {self.model_resolution}.")
-        if not self.l_white > 1.0:
-            raise InputError(f"l_white must be above 1, got {self.l_white}.")
 
 
 def tonemap_srgb_torch(radiance: torch.Tensor, l_white: float = DEFAULT_L_WHITE) -> torch.Tensor:

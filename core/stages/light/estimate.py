@@ -9,7 +9,6 @@ light_preview.png (tone-mapped) and returns the report's fields.
 """
 from __future__ import annotations
 
-from ...base.names import SCENE_TYPES as NAMED_SCENE_TYPES
 
 import math
 import threading
@@ -21,7 +20,7 @@ import numpy as np
 import torch
 
 from ...base.decision import Decision
-from ...base.errors import InputError, ModelMissingError, check_choice
+from ...base.errors import InputError, ModelMissingError
 from ...guidance import models as model_loading   # called through the module, where tests stand in for them
 from ...guidance.models import ModelConfig
 from ...data.imageio import srgb_to_linear, write_image
@@ -29,18 +28,18 @@ from ...data.mesh import Mesh, normalize_to_unit_sphere
 from ...data.primitives import uv_sphere
 from ...base.progress import ProgressCallback, check_cancel, emit
 from ...scene.camera import PhotoCamera, photo_camera_for
-from .cues import CueConfig, build_cues
-from .depth import DepthConfig, estimate_ray_distance
-from .diffusion_critic import DiffusionCriticConfig, DiffusionLightCritic
-from .outpaint import OutpaintConfig, outpaint_panorama
-from .hdr import (SPHERE_PROMPT, ApparatusConfig, ApparatusScene, Critic, OptimiseConfig, OptimiseResult,
-                  hdr_from_scales, is_dark_environment, light_prompt, optimise_scales, prior_scales, tonemap_preview,
-                  DEFAULT_L_WHITE)
+from .cues import build_cues
+from .depth import estimate_ray_distance
+from .diffusion_critic import DiffusionLightCritic
+from .outpaint import outpaint_panorama
+from .hdr import (SPHERE_PROMPT, ApparatusScene, Critic, OptimiseResult,
+                  hdr_from_scales, is_dark_environment, light_prompt, optimise_scales, prior_scales, tonemap_preview)
 from ...scene.floor import place_on_floor
 from .panorama import Panorama, indoor_panorama, outdoor_panorama
-from .regions import RegionThresholds, bright_regions
+from .regions import bright_regions
 from .reference_critic import ReferenceCritic
 from .scene_type import scene_type_cue
+from .config import LightConfig
 
 # The panorama is built (and its lights found) at least this tall, whatever map size is asked for; a
 # smaller map is area-averaged from it, which keeps every light's energy. A lamp smaller than a texel
@@ -48,54 +47,6 @@ from .scene_type import scene_type_cue
 # draft's 64 rows are built at 64: at 128 it did balanced's work for a coarser map (benchmarks: same
 # seconds, same error). tests/core/stages/test_stability.py finds a 1.5 deg lamp and a 2 px 1e6 spot at every preset.
 MIN_WORKING_HEIGHT = 64
-SCENE_TYPES = NAMED_SCENE_TYPES   # (core/base/names.py)
-CRITIC_TYPES = ("none", "reference", "diffusion")
-PRIOR_TYPES = ("cues", "inverse_tonemap")   # cues: cues.py (default); inverse_tonemap: the paper's prior
-
-
-@dataclass(frozen=True)
-class LightConfig:
-    """The light stage's settings. Defaults are the balanced preset's (map size, apparatus renders),
-    except the critic's optimisation, which keeps the paper's 2000 iterations at lr 0.01 (it runs only
-    with a critic, i.e. with the SD2 weights; core/pipeline/preset_tables.py has shorter ones)."""
-
-    scene_type: str = "auto"
-    # (The photo's camera is not a light setting: it is the camera stage's, a PhotoCamera given to estimate_light.)
-    # The artist's dominant light (--sun AZ,EL), degrees: azimuth from the photo's view direction,
-    # positive to the camera's right (clockwise seen from above), elevation above the horizon.
-    sun_deg: tuple[float, float] | None = None
-    # How far off that direction may be (degrees): 0 as typed or taken from a Sun light; a shadow's three
-    # clicks give their own (shadow_hint.sun_uncertainty_deg). The unseen light's lobe widens with it.
-    sun_uncertainty_deg: float = 0.0
-    map_height: int = 128                     # the map is map_height x 2 map_height
-    depth: DepthConfig = DepthConfig()        # the monocular depth model that lifts an indoor photo to 3D
-    thresholds: RegionThresholds = RegionThresholds()   # the paper's bright-region thresholds
-    prior_type: str = "cues"                  # cues (weight-free, cues.py) | inverse_tonemap (the paper's prior)
-    cues: CueConfig = CueConfig()             # the weight-free cues' settings
-    l_white: float = DEFAULT_L_WHITE          # inverse_tonemap: the extended Reinhard white point
-    critic_type: str = "none"                 # none | diffusion (SD2, the paper's) | reference (the true map)
-    apparatus: ApparatusConfig = ApparatusConfig()   # the critic's renders of the object and sphere
-    optimise: OptimiseConfig = OptimiseConfig()      # the critic's optimisation of the region scales
-    object_prompt: str = "a 3D object"        # the diffusion critic's words for the object
-    tint: str | None = None                   # e.g. "in blue tint", appended to both prompts
-    models: ModelConfig = ModelConfig()       # SD2 for critic_type "diffusion" (core/guidance/models.py)
-    diffusion: DiffusionCriticConfig = DiffusionCriticConfig()   # the diffusion critic's settings
-    outpaint: OutpaintConfig = OutpaintConfig()   # outdoor completion: SD2 inpainting or the sky/ground prior
-
-    def __post_init__(self) -> None:
-        check_choice("scene_type", self.scene_type, SCENE_TYPES)
-        check_choice("critic_type", self.critic_type, CRITIC_TYPES)
-        check_choice("prior_type", self.prior_type, PRIOR_TYPES)
-        if self.sun_deg is not None and (len(self.sun_deg) != 2 or not all(map(math.isfinite, self.sun_deg))
-                                         or not -90.0 <= self.sun_deg[1] <= 90.0):
-            raise InputError(f"The sun direction must be two finite angles AZ,EL with the elevation within +-90 "
-                             f"degrees, got {self.sun_deg}; give it as --sun 30,45.")
-        if not (math.isfinite(self.sun_uncertainty_deg) and 0.0 <= self.sun_uncertainty_deg <= 180.0):
-            raise InputError(f"sun_uncertainty_deg must be within 0 and 180 degrees, got {self.sun_uncertainty_deg}.")
-        if not 8 <= self.map_height <= 4096:
-            raise InputError(f"map_height must be between 8 and 4096, got {self.map_height}.")
-        if not self.l_white > 1.0:
-            raise InputError(f"l_white must be above 1, got {self.l_white}.")
 
 
 @dataclass

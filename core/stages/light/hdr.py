@@ -33,6 +33,7 @@ from ...base.progress import ProgressCallback, check_cancel, emit
 from ...render.renderer import AssetRenderer, SceneOptions, SphereSpec
 from ...scene.frame import equirect_directions
 from ...texture.neural_texture import split_channels
+from .config import DEFAULT_L_WHITE, ApparatusConfig, OptimiseConfig
 
 LOG_SCALE_MIN = math.log(1e-4)
 LOG_SCALE_MAX = math.log(1e6)
@@ -40,7 +41,6 @@ SPHERE_PROMPT = "A gigantic diffuse white (spray-painted) sphere (ball)"
 DARK_SUFFIX = "in a dark environment"
 DARK_BACKGROUND_BELOW = 0.2
 DARK_LIGHTS_BELOW = 50.0
-DEFAULT_L_WHITE = 64.0
 
 
 # -- the HDR map -----------------------------------------------------------------------------------
@@ -185,32 +185,6 @@ def per_view_losses(output: torch.Tensor, renders: torch.Tensor) -> torch.Tensor
 
 
 # -- the apparatus scene ---------------------------------------------------------------------------
-@dataclass(frozen=True)
-class ApparatusConfig:
-    """Views of the object and of the white diffuse sphere beside it (appendix: 3 object views, 1 sphere).
-
-    Object views look at the object from the photo's direction (azimuth offset 0) and from either side;
-    lambda_FOV = 1.65 keeps the full shadow on the floor in view. Weights are the appendix's {1/6,1/6,1/6,1/2}.
-    """
-
-    object_azimuths: tuple[float, ...] = (-35.0, 0.0, 35.0)
-    elevation_deg: float = 15.0
-    fov_multiplier: float = 1.65
-    view_weights: tuple[float, ...] = (1 / 6, 1 / 6, 1 / 6, 1 / 2)
-    sphere_radius: float = 0.25
-    sphere_offset: tuple[float, float] = (0.9, 0.0)   # beside the object, x (right) and y (depth)
-    floor: bool = True
-    render_size: int = 64
-    spp: int = 8
-    max_depth: int = 3
-
-    def __post_init__(self) -> None:
-        if len(self.view_weights) != len(self.object_azimuths) + 1:
-            raise InputError("view_weights needs one weight per object view plus one for the sphere.")
-        if any(w < 0 for w in self.view_weights) or sum(self.view_weights) <= 0:
-            raise InputError("view_weights must be non-negative with a positive sum.")
-
-
 class ApparatusScene:
     """The object (fixed appearance) on the floor with the sphere beside it, rendered under an HDR map."""
 
@@ -289,23 +263,6 @@ class ApparatusScene:
 
 
 # -- optimisation ----------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class OptimiseConfig:
-    iterations: int = 2000
-    lr: float = 0.01
-    lr_final_factor: float = 0.1    # linearly annealed to 0.1 x lr
-    t_range: tuple[int, int] = (750, 990)
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        if self.iterations < 0:
-            raise InputError(f"iterations must be >= 0, got {self.iterations}.")
-        if not self.lr > 0 or not 0 < self.lr_final_factor <= 1:
-            raise InputError("lr must be positive and lr_final_factor in (0, 1].")
-        if not 0 <= self.t_range[0] <= self.t_range[1] < 1000:
-            raise InputError(f"t_range must lie in [0, 999] and be ordered, got {self.t_range}.")
-
-
 @dataclass
 class OptimiseResult:
     log_scales: dict[str, float]

@@ -13,7 +13,6 @@ region is kept exactly.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -22,33 +21,8 @@ import torch.nn.functional as F
 from ...base.errors import InputError
 from ...guidance.models import GuidanceModels
 from ...guidance.views import inpainting_input
+from .config import OutpaintConfig
 
-COMPLETION_TYPES = ("auto", "sd2", "prior")   # auto: SD2 inpainting when on this machine, else the prior
-DEFAULT_OUTDOOR_PROMPT = "a 360 degree equirectangular panorama of an outdoor scene, sky, natural daylight"
-
-
-@dataclass(frozen=True)
-class OutpaintConfig:
-    completion_type: str = "auto"
-    prompt: str = DEFAULT_OUTDOOR_PROMPT
-    negative_prompt: str = ""
-    steps: int = 25
-    guidance_scale: float = 7.5
-    resolution: int = 512              # working height; the model paints resolution x 2 resolution
-    seam_band_fraction: float = 0.125  # width of the band re-painted across the wrap seam (of the map width)
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        if self.completion_type not in COMPLETION_TYPES:
-            raise InputError(f"completion_type must be one of {', '.join(COMPLETION_TYPES)}, got {self.completion_type!r}.")
-        if not 1 <= self.steps <= 1000:
-            raise InputError(f"steps must be between 1 and 1000, got {self.steps}.")
-        if self.guidance_scale < 0:
-            raise InputError(f"guidance_scale must not be negative, got {self.guidance_scale}.")
-        if self.resolution < 16 or self.resolution % 16:
-            raise InputError(f"resolution must be a multiple of 16 (>= 16), got {self.resolution}.")
-        if not 0.0 <= self.seam_band_fraction <= 0.5:
-            raise InputError(f"seam_band_fraction must be in [0, 0.5], got {self.seam_band_fraction}.")
 
 
 def _decode(models: GuidanceModels, latents: torch.Tensor) -> torch.Tensor:

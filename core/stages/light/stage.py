@@ -17,9 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...base.decision import Decision
 from ...base.report import write_report
-from ...guidance import models as guidance_models
 from ...scene.camera import PhotoCamera
 from ...scene.placement import Placement
 from ...base.progress import ProgressCallback
@@ -36,19 +34,6 @@ class LightInputs:
     pixel: tuple[float, float]  # the placement in the working copy's pixels
     camera: PhotoCamera        # the photo's camera at the working copy's size
     camera_record: dict        # where each of its values came from (the report's decisions.camera)
-
-
-def critic_choice(asked: str, models) -> Decision:
-    """The light critic for `asked` ("auto", "diffusion" or "none"): auto is the diffusion critic when the
-    SD2 base weights are on this machine (never a download), else none. `scenefit light`, Blender's
-    Estimate Light and a batch light job decide it here; the whole pipeline follows its run's guidance
-    (core.run.guidance_found), which also needs the inpainting weights."""
-    if asked != "auto":
-        return Decision(asked, "the user's choice")
-    found, where = guidance_models.models_available(models, need_inpaint=False)
-    if found:
-        return Decision("diffusion", f"Stable Diffusion 2 found ({where})")
-    return Decision("none", "Stable Diffusion 2 weights are not on this machine, so the prior sets the scales")
 
 
 def light_inputs(photo_path: str | Path, at, fspy: str | Path | None = None,
