@@ -38,3 +38,89 @@ def test_render_draws_a_view_with_either_renderer(tmp_path):
     assert inside.sum() > 0.6 * asset_pixels.sum() and np.sqrt(np.mean(diff ** 2)) < 0.03
     proc = scenefit_here("render", str(asset), "--out", str(tmp_path / "x"), "--renderer", "raster")
     assert proc.returncode == 2
+
+
+def _small_asset(tmp_path):
+    maps = PBRMaps(base_color=np.full((16, 16, 3), 0.5, np.float32), roughness=0.5, metallic=0.0)
+    return save_asset_folder(uv_sphere(segments=12, rings=6), maps, tmp_path / "asset")
+
+
+def test_a_loop_render_is_sized_against_memory_by_the_loop_renderers_own_cost(tmp_path, monkeypatch):
+    """`--renderer loop --size 8192` passed the path tracer's 80 bytes a pixel and crossed half the machine's
+    memory; on a machine of 64 GiB the path tracer may draw it, the loop renderer is refused before any work."""
+    from scenefit.cli import render as render_command
+    from scenefit.core.base import limits
+
+    asset = _small_asset(tmp_path)
+    monkeypatch.setattr(limits, "physical_memory", lambda: 64 * 2**30)
+    drawn = []
+    monkeypatch.setattr(render_command, "_render", lambda *args: drawn.append(args) or 0)
+    proc = scenefit_here("render", str(asset), "--out", str(tmp_path / "loop"), "--size", "8192", "--renderer", "loop")
+    assert proc.returncode == 2 and "of memory" in proc.stderr and proc.stderr.count("\n") == 1, proc.stderr
+    assert not drawn and not (tmp_path / "loop").exists()
+    assert scenefit_here("render", str(asset), "--out", str(tmp_path / "path"), "--size", "8192").returncode == 0
+    assert len(drawn) == 1
+
+
+def test_environment_maps_of_odd_sizes_give_a_view(tmp_path):
+    """A 2x1 map failed in Mitsuba's sampling table (Distribution2D) with a traceback; one channel and a texel
+    of 1e30 give a view too."""
+    from scenefit.core.data.imageio import write_image
+
+    asset = _small_asset(tmp_path)
+    huge = np.full((8, 16, 3), 0.5, np.float32)
+    huge[3, 5] = 1e30
+    maps = {"two_by_one.exr": np.full((1, 2, 3), 0.8, np.float32), "grey.exr": np.full((8, 16, 1), 0.8, np.float32),
+            "huge.exr": huge}
+    for name, pixels in maps.items():
+        write_image(tmp_path / name, pixels)
+        for renderer in ("loop", "path"):
+            out = tmp_path / f"{name}_{renderer}"
+            proc = scenefit_here("render", str(asset), "--out", str(out), "--envmap", str(tmp_path / name), "--size",
+                                 "24", "--views", "1", "--spp", "4", "--renderer", renderer, "--quiet")
+            assert proc.returncode in (0, 2) and "Traceback" not in proc.stderr, proc.stderr
+            if proc.returncode == 0:
+                view = read_image(next(out.glob("view_*.png")))
+                assert view.shape[:2] == (24, 24) and np.isfinite(view).all()
+            else:
+                assert proc.stderr.count("\n") == 1, proc.stderr
+    assert (tmp_path / "two_by_one.exr_loop").is_dir()   # the 2x1 map gives a view
+
+
+RENDER_OPTIONS = {"--size": ["0", "-3", "7", "8193", "1e3", "abc", "99999999999999999999", "16"],
+                  "--views": ["0", "-1", "1", "3", "100000000", "2.5", "nan"],
+                  "--spp": ["0", "1", "4", "1000000000000", "x"],
+                  "--elevation": ["-90", "90", "89.9", "nan", "inf", "1e308", "10"],
+                  "--exposure": ["0", "-1", "inf", "1e308", "1e-300", "2"],
+                  "--renderer": ["loop", "path", "raster"], "--ambient": ["-1", "nan", "1e30", "0", "3"]}
+
+
+def test_fuzz_render_options_give_views_or_one_sentence(tmp_path, monkeypatch):
+    """Random render options (the renderers stubbed: the options' reading, the cameras, the envmap and the
+    files are what is tried) give views or one sentence, never a traceback or a run that will not end."""
+    from hypothesis import HealthCheck, given, settings, strategies as st
+
+    from scenefit.cli import render as render_command
+    from scenefit.core.texture import views as texture_views
+
+    asset = _small_asset(tmp_path)
+
+    def stub(normalized, stacks, env, cameras, *args, **kwargs):
+        images = [np.zeros((c.height, c.width, 3), np.float32) for c in cameras]
+        return {label: images for label in stacks} if isinstance(stacks, dict) else images
+
+    monkeypatch.setattr(render_command, "_loop_views", lambda normalized, stack, env, cameras, normal_map:
+                        stub(normalized, stack, env, cameras))
+    monkeypatch.setattr(texture_views, "render_views", stub)
+    runs = iter(range(10**6))
+
+    @settings(derandomize=True, max_examples=60, deadline=None, database=None,
+              suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+    @given(st.dictionaries(st.sampled_from(sorted(RENDER_OPTIONS)), st.none(), min_size=1, max_size=4), st.data())
+    def fuzz(chosen, data):
+        args = [a for option in chosen for a in (option, data.draw(st.sampled_from(RENDER_OPTIONS[option])))]
+        proc = scenefit_here("render", str(asset), "--out", str(tmp_path / f"out{next(runs)}"), "--quiet", *args)
+        assert proc.returncode in (0, 2) and "Traceback" not in proc.stderr, (args, proc.stderr[-2000:])
+        assert proc.returncode == 0 or proc.stderr.strip().count("\n") <= 1, (args, proc.stderr)
+
+    fuzz()
