@@ -150,6 +150,7 @@ def read_text_fbx(source: Path) -> tuple[int, list[tuple]]:
         version = _version(nodes)
         # The binary writer stamps its own file id and creation time, which must be of its types.
         typed = typed_tree([node for node in nodes if node[0] not in ("FileId", "CreationTime")])
+        check_polygon_indices(typed)
     except (ValueError, IndexError, OverflowError) as error:   # (binascii.Error is a ValueError)
         raise InputError(f"Asset file '{source}' is an ASCII FBX file that cannot be read ({_short(error)}); check "
                          "that it is a valid FBX file.") from None
@@ -195,6 +196,27 @@ def typed_tree(nodes: list, parent: str = "") -> list[tuple]:
             into.append(node)
             todo.append((children, name, node[2]))
     return typed
+
+
+def check_polygon_indices(typed: list[tuple]) -> None:
+    """Every polygon of every geometry names one of its vertices (an index past them crashed the importer).
+    PolygonVertexIndex marks each polygon's last corner as -(i + 1); ValueError naming the first stray one."""
+    todo = list(typed)
+    while todo:
+        name, values, children = todo.pop()
+        todo += children
+        if name != "Geometry":
+            continue
+        arrays = {child[0]: child[1][0][1] for child in children
+                  if child[1] and isinstance(child[1][0][1], np.ndarray)}
+        if "Vertices" not in arrays or "PolygonVertexIndex" not in arrays:
+            continue
+        count = len(arrays["Vertices"]) // 3
+        corners = arrays["PolygonVertexIndex"].astype(np.int64)
+        corners = np.where(corners < 0, -corners - 1, corners)
+        stray = corners[corners >= count]
+        if len(stray):
+            raise ValueError(f"PolygonVertexIndex names vertex {int(stray[0])} of {count}")
 
 
 def _element(encode_bin, parent_element, node: tuple) -> None:

@@ -30,6 +30,21 @@ def render_side(text: str) -> int:
     return value
 
 
+def count_up_to(most: int, what: str):
+    """An argparse type: a whole number from 1 to `most` (a count the run makes that many of)."""
+    def count(text: str) -> int:
+        value = positive_int(text)
+        if value > most:
+            raise argparse.ArgumentTypeError(f"at most {most} {what}, got {value}")
+        return value
+
+    return count
+
+
+MAX_VIEWS = 360        # one view per degree around the asset
+MAX_SPP = 65536        # as compose's samples: past it the noise no longer shows at 8 bits
+
+
 def finite_float(text: str) -> float:
     try:
         value = float(text)
@@ -171,7 +186,8 @@ def add_orbit_camera_args(p: argparse.ArgumentParser, size: int, spp: int) -> No
     """The orbit camera of `render` and `export`: --elevation (default 15), --size (pixels), --spp."""
     add_elevation_arg(p, default=15.0)
     p.add_argument("--size", type=render_side, default=size, help=f"image side in pixels (default {size})")
-    p.add_argument("--spp", type=positive_int, default=spp, help=f"samples per pixel (default {spp})")
+    p.add_argument("--spp", type=count_up_to(MAX_SPP, "samples per pixel"), default=spp,
+                   help=f"samples per pixel (default {spp})")
 
 
 def add_photo_camera_args(p: argparse.ArgumentParser) -> None:

@@ -4,8 +4,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..core.render.renderer import RENDERER_TYPES
-from .options import (add_asset_args, add_lighting_args, add_orbit_camera_args, add_output_args, environment,
-                      load_asset, positive_float, output, positive_int, progress)
+from .options import (MAX_VIEWS, add_asset_args, add_lighting_args, add_orbit_camera_args, add_output_args,
+                      count_up_to, environment, load_asset, positive_float, output, progress)
 
 
 def run(args) -> int:
@@ -14,13 +14,14 @@ def run(args) -> int:
     import torch
 
     from ..core.stages.convert import asset_stack
-    from ..core.base.limits import check_render_size
+    from ..core.base.limits import LOOP_RENDER_BYTES_PER_PIXEL, RENDER_BYTES_PER_PIXEL, check_render_size
     from ..core.data.mesh import normalize_to_unit_sphere
     from ..core.texture.surface_layout import texture_view
     from ..core.texture.bake import load_neural_texture
 
     # Sizes and inputs are refused before the output folder is made or anything is rendered.
-    check_render_size(args.size, args.size)
+    check_render_size(args.size, args.size, bytes_per_pixel=LOOP_RENDER_BYTES_PER_PIXEL if args.renderer == "loop"
+                      else RENDER_BYTES_PER_PIXEL)
     mesh, maps = load_asset(args.asset, args.object)
     normalized, _ = normalize_to_unit_sphere(mesh)
     if args.texture:
@@ -84,7 +85,7 @@ def add_parser(sub) -> None:
     add_lighting_args(p)
     add_output_args(p)
     p.add_argument("--texture", help="a texture.pt written by `scenefit convert` (default: the asset's maps)")
-    p.add_argument("--views", type=positive_int, default=4)
+    p.add_argument("--views", type=count_up_to(MAX_VIEWS, "views"), default=4)
     add_orbit_camera_args(p, size=256, spp=64)
     p.add_argument("--exposure", type=positive_float, default=1.0)
     p.add_argument("--no-normal-map", action="store_true", help="render without the asset's normal map")

@@ -12,6 +12,17 @@ from scenefit.core.data.maps import PBRMaps
 from scenefit.core.data.primitives import uv_sphere
 from scenefit.workers.job_worker import JobWorker
 
+# One small convert job of the ball (a 16-texel texture): a batch that runs in seconds.
+CONVERT_JOB = """
+[[job]]
+name = "a"
+asset = "ball"
+stages = ["convert"]
+preset = "draft"
+[job.overrides.convert]
+resolution = 16
+"""
+
 JOBS = """
 [batch]
 retries = {retries}

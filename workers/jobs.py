@@ -51,6 +51,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import struct
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -370,12 +371,34 @@ def _parse_asset(entry: dict, path: Path, where: str) -> tuple[Path, str | None]
         if asset.is_dir():
             raise InputError(f"{where}: the folder '{asset}' is not a SceneFit asset folder (it has no mesh.npz) "
                              "and holds no file Blender reads.")
+    _check_readable(asset, where)
     obj = entry.get("object")
     if obj is not None and (not isinstance(obj, str) or not obj):
         raise InputError(f"{where}: object must name an object in the asset file, got {obj!r}.")
     if obj is not None and asset.is_dir():
         raise InputError(f"{where}: object is for a Blender/glTF file; '{asset.name}' is an asset folder.")
     return asset, obj
+
+
+def _check_readable(asset: Path, where: str) -> None:
+    """What of the asset can be read without Blender, read now (a job that would fail when it runs is refused
+    when the file is read): an asset folder's mesh.npz is an archive, a glTF's JSON is a glTF document's."""
+    import zipfile
+
+    from ..core.data.glb import read_gltf
+
+    if asset.is_dir():
+        if not zipfile.is_zipfile(asset / _ASSET_FOLDER_FILE):
+            raise InputError(f"{where}: the asset folder's '{asset / _ASSET_FOLDER_FILE}' cannot be read as a "
+                             "mesh archive; save the asset again.")
+        return
+    if asset.suffix.lower() in (".gltf", ".glb"):
+        try:
+            read_gltf(asset)
+        except InputError as error:
+            raise InputError(f"{where}: {error}") from None
+        except (ValueError, struct.error, OSError):
+            raise InputError(f"{where}: the asset '{asset}' cannot be read as glTF; export it again.") from None
 
 
 def _names_a_path(text: str, jobs_path: Path) -> bool:

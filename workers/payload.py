@@ -37,15 +37,21 @@ def make_payload(job: Job, attempt: int = 1, stages: Sequence[Path] = (), files:
 
 
 def finished_stage_folders(folder: Path | None) -> list[Path]:
-    """The stage folders of a run folder that hold a finished stage (its stage.json) and no link, which
-    would be sent as the file it points at: those are run again instead."""
+    """The stage folders of a run folder that hold a finished stage (its stage.json) and nothing but plain
+    files and folders: a link would be sent as the file it points at, and a named pipe, socket or device
+    cannot travel (the payload's unpacking refuses them); those stages are run again instead."""
     from ..core.pipeline.layout import STAGE_FILE
     from ..core.pipeline.registry import RUN_ORDER
 
     if folder is None or not folder.is_dir():
         return []
     return [folder / name for name in RUN_ORDER if (folder / name / STAGE_FILE).is_file()
-            and not (folder / name).is_symlink() and not any(p.is_symlink() for p in (folder / name).rglob("*"))]
+            and not (folder / name).is_symlink() and _plain(folder / name)]
+
+
+def _plain(folder: Path) -> bool:
+    """Whether everything under `folder` is a plain file or folder (no link, pipe, socket or device)."""
+    return all(not p.is_symlink() and (p.is_dir() or p.is_file()) for p in folder.rglob("*"))
 
 
 def unpacked_job(payload: JobPayload, folder: Path) -> tuple[Job, Path | None]:

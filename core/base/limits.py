@@ -15,6 +15,10 @@ MAX_RENDER_SIDE = 8192
 # preset may ask for less: core/pipeline/preset_tables.py).
 COMPOSE_MAX_SIDE = 4096
 RENDER_BYTES_PER_PIXEL = 80
+# The loop renderer keeps a G-buffer per view: 16 sub-pixel samples (more on edges), each with its texel taps,
+# weights, light terms at every roughness level, and numpy's working copies while it is traced (measured:
+# 10.8 KB per pixel of peak memory between 128² and 384² views, benchmarks/FINDINGS.md).
+LOOP_RENDER_BYTES_PER_PIXEL = 11_000
 # A (H, W, 5) float32 map stack, with the copies alive while it is resampled, clipped and handed to
 # Mitsuba as three bitmaps.
 STACK_BYTES_PER_TEXEL = 5 * 4 * 4
@@ -35,13 +39,15 @@ def _gb(n: float) -> str:
     return f"{n / 2**30:.1f} GB" if n >= 2**30 else f"{n / 2**20:.0f} MB"
 
 
-def check_render_size(width: int, height: int, option: str = "--size") -> None:
-    """Refuse a render larger than MAX_RENDER_SIDE or than this machine's memory allows."""
+def check_render_size(width: int, height: int, option: str = "--size",
+                      bytes_per_pixel: int = RENDER_BYTES_PER_PIXEL) -> None:
+    """Refuse a render larger than MAX_RENDER_SIDE or than this machine's memory allows (at `bytes_per_pixel`:
+    the path tracer's, or LOOP_RENDER_BYTES_PER_PIXEL for the loop renderer's)."""
     if max(width, height) > MAX_RENDER_SIDE:
         raise InputError(f"{option} {max(width, height)} is larger than {MAX_RENDER_SIDE} px, the most SceneFit "
                          f"renders (one view of {MAX_RENDER_SIDE}x{MAX_RENDER_SIDE} pixels already takes about "
                          f"{_gb(MAX_RENDER_SIDE ** 2 * RENDER_BYTES_PER_PIXEL)} of memory); give a smaller {option}.")
-    _check_memory(width * height * RENDER_BYTES_PER_PIXEL, f"Rendering {width}x{height} pixels",
+    _check_memory(width * height * bytes_per_pixel, f"Rendering {width}x{height} pixels",
                   f"give a smaller {option}")
 
 

@@ -64,6 +64,7 @@ def _blender_version() -> str:
 MAX_READ_BYTES = 2**30
 # The arrays a copy may hold, and the numbers they may be (never objects: those would need pickle).
 _ARRAYS = ("positions", "faces", "uvs", "base_color", "normals", "material_index", "normal", "roughness", "metallic")
+_INDEX_ARRAYS = ("faces", "material_index")   # whole numbers, as save_read writes them
 
 
 class _Meta(Record):
@@ -93,6 +94,8 @@ def load_read(folder: str | Path, key: str | None) -> tuple[Mesh, PBRMaps] | Non
             arrays = {name: data[name] for name in data.files if name in _ARRAYS}
         if any(not np.issubdtype(a.dtype, np.number) or not np.isfinite(a).all() for a in arrays.values()):
             return None
+        if any(not np.issubdtype(arrays[name].dtype, np.integer) for name in _INDEX_ARRAYS if name in arrays):
+            return None   # (float faces would be cast to indices somewhere down the line: no copy of ours)
         mesh = Mesh(positions=arrays["positions"], faces=arrays["faces"], uvs=arrays["uvs"],
                     normals=arrays.get("normals"), name=meta.name, material_index=arrays.get("material_index"),
                     wraps=tuple((w[0], w[1]) for w in meta.wraps), atlas=meta.atlas)

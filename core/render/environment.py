@@ -9,6 +9,10 @@ from ..base.errors import InputError
 from ..data.imageio import read_color_image
 from ..scene.frame import equirect_directions
 
+# The fewest rows a map is rendered with: Mitsuba's importance-sampling table (Distribution2D) needs two
+# in each direction, and a 2x1 map is a fair (if coarse) map.
+MIN_HEIGHT = 8
+
 
 def constant_environment(color, height: int = 32) -> np.ndarray:
     """A uniform environment of linear RGB `color` (the stand-in until light estimation runs)."""
@@ -38,6 +42,8 @@ def load_environment(path: str | Path, max_height: int = 256) -> np.ndarray:
     check_environment(env, f"Environment map '{path}'")
     if h > max_height:
         env = cv2.resize(env, (2 * max_height, max_height), interpolation=cv2.INTER_AREA)
+    elif h < MIN_HEIGHT:   # each texel repeated: the same light, at a size the renderers' sampling tables take
+        env = cv2.resize(env, (2 * MIN_HEIGHT, MIN_HEIGHT), interpolation=cv2.INTER_NEAREST)
     return env.astype(np.float32)
 
 

@@ -62,6 +62,12 @@ class GBufferOptions:
         return replace(self, samples=self.map_samples, diffuse_rays=self.map_diffuse_rays)
 
 
+# Samples traced in one go: each of Mitsuba's evaluations (one kernel, which Ctrl-C cannot stop) takes about a
+# second at this size, where a 768-px view's 9.4 million in one kernel took 40 s; 256-px views (adapt's
+# local views) fit in one chunk.
+CHUNK_SAMPLES = 2**20
+
+
 @dataclass
 class GBuffer:
     """One view's cached samples. Hit samples only; `slots` says where each goes among the
@@ -119,34 +125,21 @@ def trace_gbuffer(renderer, camera, options: GBufferOptions, normal_map: np.ndar
                   prefiltered: "PrefilteredEnvironment | None" = None) -> GBuffer:
     """The G-buffer of `camera` in `renderer`'s scene (an AssetRenderer whose environment is already set
     to `envmap`, (He, We, 3) in the scene's latitude-longitude convention). `prefiltered`: that map's
-    tables, where the caller keeps them across views (built here otherwise)."""
-    # lazy: Mitsuba is heavy and Blender may lack it
-    import drjit as dr
-    import mitsuba as mi
-
+    tables, where the caller keeps them across views (built here otherwise). Traced in chunks of
+    CHUNK_SAMPLES, so a Ctrl-C stops it within seconds."""
     options = options.for_light(constant_light)
     scene, width, height = renderer.scene, camera.width, camera.height
     sensor = renderer._sensor(camera)
     rng = np.random.default_rng(options.seed)
     pixel, px, py = _sample_positions(scene, sensor, width, height, options, rng)
-    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(px, py), mi.Point2f(0.5, 0.5))
-    si = scene.ray_intersect(ray)
-    valid = np.array(si.is_valid(), bool)
-    hits = np.flatnonzero(valid)
-    si = dr.gather(mi.SurfaceInteraction3f, si, mi.UInt32(hits.astype(np.uint32)))
-    part_of = _part_ids(scene, si, list(renderer.parts))
-    uv = np.array(si.uv, np.float32).T
-    order = np.argsort(part_of, kind="stable")
-    texels, weights = _texel_taps(renderer, part_of, uv)
-    frame = {name: np.array(v, np.float64).T for name, v in
-             (("n", si.sh_frame.n), ("dp_du", si.dp_du), ("wi", -ray.d))}
-    frame["wi"] = frame["wi"][hits]
-    normal = _shading_normal(renderer, part_of, uv, frame, normal_map)
-    cosine = np.sum(normal * frame["wi"], axis=1)
     if not constant_light and prefiltered is None:
         prefiltered = PrefilteredEnvironment(scene, envmap)
-    diffuse, specular = _light_terms(scene, si, normal, frame["n"], frame["wi"], options, rng,
-                                     None if constant_light else prefiltered)
+    chunks = [_traced_samples(renderer, sensor, px[at:at + CHUNK_SAMPLES], py[at:at + CHUNK_SAMPLES], options,
+                              normal_map, rng, None if constant_light else prefiltered)
+              for at in range(0, len(px), CHUNK_SAMPLES)]
+    valid, part_of, texels, weights, cosine, diffuse, specular = (np.concatenate(arrays) for arrays in zip(*chunks))
+    hits = np.flatnonzero(valid)
+    order = np.argsort(part_of, kind="stable")
     taken = np.bincount(pixel, minlength=height * width)
     alpha = np.bincount(pixel, weights=valid, minlength=height * width) / np.maximum(taken, 1)
     pixel = pixel[hits]
@@ -158,6 +151,32 @@ def trace_gbuffer(renderer, camera, options: GBufferOptions, normal_map: np.ndar
                    torch.from_numpy(diffuse[order].astype(np.float32)),
                    torch.from_numpy(specular[order].astype(np.float32)),
                    torch.from_numpy(alpha.reshape(height, width, 1).astype(np.float32)))
+
+
+def _traced_samples(renderer, sensor, px: np.ndarray, py: np.ndarray, options: GBufferOptions, normal_map, rng,
+                    prefiltered: "PrefilteredEnvironment | None") -> tuple[np.ndarray, ...]:
+    """One chunk of the view's samples traced: (valid, and for the hits: part, texels, weights, cosine,
+    diffuse, specular light), as numpy arrays."""
+    # lazy: Mitsuba is heavy and Blender may lack it
+    import drjit as dr
+    import mitsuba as mi
+
+    scene = renderer.scene
+    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(px, py), mi.Point2f(0.5, 0.5))
+    si = scene.ray_intersect(ray)
+    valid = np.array(si.is_valid(), bool)
+    hits = np.flatnonzero(valid)
+    si = dr.gather(mi.SurfaceInteraction3f, si, mi.UInt32(hits.astype(np.uint32)))
+    part_of = _part_ids(scene, si, list(renderer.parts))
+    uv = np.array(si.uv, np.float32).T
+    texels, weights = _texel_taps(renderer, part_of, uv)
+    frame = {name: np.array(v, np.float64).T for name, v in
+             (("n", si.sh_frame.n), ("dp_du", si.dp_du), ("wi", -ray.d))}
+    frame["wi"] = frame["wi"][hits]
+    normal = _shading_normal(renderer, part_of, uv, frame, normal_map)
+    cosine = np.sum(normal * frame["wi"], axis=1)
+    diffuse, specular = _light_terms(scene, si, normal, frame["n"], frame["wi"], options, rng, prefiltered)
+    return valid, part_of, texels, weights, cosine, diffuse, specular
 
 
 def _sample_positions(scene, sensor, width: int, height: int, options: GBufferOptions, rng):
@@ -176,8 +195,12 @@ def _sample_positions(scene, sensor, width: int, height: int, options: GBufferOp
 
     ys, xs = (a.ravel() for a in np.mgrid[0:height, 0:width])
     px, py = stratified(xs, ys, options.samples)
-    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(px, py), mi.Point2f(0.5, 0.5))
-    hit = np.array(scene.ray_test(ray), bool).reshape(height, width, options.samples)
+    probes = []
+    for at in range(0, len(px), CHUNK_SAMPLES):
+        ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(px[at:at + CHUNK_SAMPLES], py[at:at + CHUNK_SAMPLES]),
+                                   mi.Point2f(0.5, 0.5))
+        probes.append(np.array(scene.ray_test(ray), bool))
+    hit = np.concatenate(probes).reshape(height, width, options.samples)
     cover = hit.mean(axis=2)
     band = (cover > 0) & (cover < 1)
     inside = cover > 0

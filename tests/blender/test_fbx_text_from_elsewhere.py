@@ -58,6 +58,8 @@ def test_a_good_text_reads_with_its_types(tmp_path):
 @pytest.mark.parametrize("old, new, words", [
     ("0,0,0,1.5", "0,0,zero,1.5", ("Vertices holds 'zero' among its numbers",)),   # a word in a number array
     ("a: 0,1,-2", "a: 0,1,9e99", ("PolygonVertexIndex",)),
+    ("a: 0,1,-2", "a: 0,99998,-2", ("PolygonVertexIndex names vertex 99998 of 2",)),   # a corner past the vertices
+    ("a: 0,1,-2", "a: 0,1,-99999", ("PolygonVertexIndex names vertex 99998 of 2",)),
     ('"bool", "", "",1', '"bool", "", "",1e999', ("Visibility", "1e999")),
     ("Geometry: 4455667788990", "Geometry: 99999999999999999999999", ("Geometry",)),
     ("FBXVersion: 7300", 'FBXVersion: "seven"', ("cannot be read",)),

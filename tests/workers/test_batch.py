@@ -15,6 +15,7 @@ from scenefit.workers.job_worker import JOB_FOLDER_PREFIX, JobWorker
 from scenefit.core.base.errors import InputError
 from scenefit.core.data.imageio import read_image, write_image
 from scenefit.workers.jobs import load_jobs
+from scenefit.core.data.glb import write_glb
 from scenefit.core.data.primitives import uv_sphere
 from batch_inputs import AlwaysFailingWorker, make_inputs
 
@@ -32,7 +33,7 @@ def test_jobs_file_paths_defaults_and_order(tmp_path):
 def test_a_job_may_name_the_folder_a_gltf_came_in(tmp_path):
     path = make_inputs(tmp_path)
     (tmp_path / "Fox").mkdir()
-    (tmp_path / "Fox" / "Fox.glb").write_bytes(b"glTF")
+    write_glb(tmp_path / "Fox" / "Fox.glb", {"asset": {"version": "2.0"}}, b"")   # (read when the jobs file is)
     (tmp_path / "Fox" / "LICENSE.md").write_text("CC-BY")
     path.write_text(path.read_text().replace('asset = "ball"\nseed', 'asset = "Fox"\nseed'))
     assert load_jobs(path).jobs[1].asset == (tmp_path / "Fox" / "Fox.glb").resolve()

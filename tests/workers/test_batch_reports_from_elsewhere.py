@@ -17,15 +17,9 @@ from scenefit.core.data.primitives import uv_sphere
 from scenefit.workers.batch import job_report, run_batch
 from scenefit.workers.jobs import load_jobs
 
-JOBS = """
-[[job]]
-name = "a"
-asset = "ball"
-stages = ["convert"]
-preset = "draft"
-[job.overrides.convert]
-resolution = 16
-"""
+from batch_inputs import CONVERT_JOB
+
+JOBS = CONVERT_JOB
 
 
 def strings(value):

@@ -166,3 +166,21 @@ def test_the_run_config_refuses_non_finite_numbers_from_any_entry_point():
             RunConfig(**values)
     assert RunConfig(sun_deg=(10.0, 90.0), camera_overrides={"pitch_deg": -89.0, "fov_deg": 170.0}).sun_deg[1] == 90.0
 
+
+
+@pytest.mark.parametrize("asset, says", [
+    ("cut.glb", "cannot be read as glTF"), ("deep.gltf", "nests deeper"), ("damaged", "cannot be read as a mesh archive"),
+])
+def test_an_unreadable_asset_is_refused_when_the_jobs_file_is_read(tmp_path, asset, says):
+    """An asset that cannot be read failed its convert job when it ran (and was retried); refused at read."""
+    make_inputs(tmp_path)
+    (tmp_path / "cut.glb").write_bytes(b"glTF\x02\x00\x00\x00\x20\x00\x00\x00")
+    (tmp_path / "deep.gltf").write_text('{"asset": ' + "[" * 100 + "]" * 100 + "}")
+    save_asset_folder(uv_sphere(segments=8, rings=4), PBRMaps(np.full((8, 8, 3), 0.5, np.float32), 0.5, 0.0),
+                      tmp_path / "damaged")
+    (tmp_path / "damaged" / "mesh.npz").write_bytes(b"not an archive")
+    path = tmp_path / "jobs.toml"
+    path.write_text(f'[[job]]\nname = "a"\nasset = "{asset}"\nstages = ["convert"]\n')
+    with pytest.raises(InputError) as error:
+        load_jobs(path)
+    assert says in str(error.value) and str(error.value).startswith("jobs.toml job 'a': "), str(error.value)

@@ -2,8 +2,8 @@
 (the asset's mesh, its starting texture, the photo and the light) that made it.
 
 A checkpoint found in a folder is data from elsewhere (a planted or damaged file, another asset's run):
-its shape is checked before any of it is used, and one made for other inputs or settings is refused in
-one sentence."""
+its shape is checked before any of it is used; one made for other inputs is not resumed (the run starts
+fresh), one made with other settings is refused in one sentence."""
 from __future__ import annotations
 
 import hashlib
@@ -72,13 +72,10 @@ def save_checkpoint(path: Path, iteration: int, config: AdaptConfig, texture: Ne
     return write_bytes_atomic(path, buffer.getvalue())
 
 
-class OtherInputsCheckpoint(InputError):
-    """A checkpoint of this run's settings made for other inputs (another asset, texture, photo or light)."""
-
-
 def load_checkpoint(path: Path, config: AdaptConfig, inputs: str = "") -> dict | None:
-    """The checkpoint's payload, None when there is none; one sentence when it cannot be resumed: not a
-    checkpoint, not of the shape SceneFit writes, or made for other inputs or settings."""
+    """The checkpoint's payload; None when there is none or it was made for other inputs (the run starts
+    fresh); one sentence when it cannot be resumed: not a checkpoint, not of the shape SceneFit writes, or
+    made with other settings."""
     if not path.is_file():
         return None
     try:
@@ -99,9 +96,8 @@ def load_checkpoint(path: Path, config: AdaptConfig, inputs: str = "") -> dict |
         differ = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
         raise InputError(f"The checkpoint '{path}' was made with other settings ({', '.join(differ)}); "
                          f"use the same settings to resume, or delete it to start over.")
-    if payload["inputs"] != inputs:
-        raise OtherInputsCheckpoint(f"The checkpoint '{path}' was made for another asset, texture, photo or light than this "
-                         "run's; delete it to start over, or resume with the inputs it was made for.")
+    if payload["inputs"] != inputs:   # another asset's, or this stage's before its inputs changed: not resumed
+        return None                   # (the run starts fresh and its first checkpoint replaces it)
     return payload
 
 

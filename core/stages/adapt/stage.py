@@ -27,18 +27,14 @@ from .system import AdaptSystem
 
 def adapt_texture(inputs: AdaptInputs, config: AdaptConfig, progress: ProgressCallback | None = None,
                   cancel: threading.Event | None = None, checkpoint_dir: str | Path | None = None,
-                  models: GuidanceModels | None = None, cache_constants: bool = True,
-                  replace_other_inputs: bool = False) -> AdaptResult:
+                  models: GuidanceModels | None = None, cache_constants: bool = True) -> AdaptResult:
     """Run the adapt stage; returns a new NeuralTexture (the input texture is left as it was).
 
     Models are located (and a missing one reported) before any work. With `checkpoint_dir`, a
     checkpoint is written every `checkpoint_every` iterations and a run with the same settings
-    resumes from it; one made for other inputs is refused in one sentence, or with `replace_other_inputs`
-    (a run folder's own stage redone for new inputs) overwritten, the run starting at iteration 0.
+    resumes from it.
     """
-    system = AdaptSystem.build(inputs, config, models, checkpoint_dir, cache_constants, replace_other_inputs)
-    if system.replaced_checkpoint:
-        emit(progress, "adapt", 0, config.iterations, "the checkpoint here was made for other inputs: starting over")
+    system = AdaptSystem.build(inputs, config, models, checkpoint_dir, cache_constants)
     done = saved = system.start
     try:
         for iteration in range(system.start, config.iterations):
@@ -79,7 +75,7 @@ def adapt_and_bake(mesh: Mesh, texture: NeuralTexture | None, config: AdaptConfi
                          texture=texture, photo=photo, placement=placement, envmap=envmap,
                          photo_camera=photo_camera, base_logit=view.base_logit if view else None, layout=layout)
     result = adapt_texture(inputs, config, progress=progress, cancel=cancel, checkpoint_dir=out_dir / "checkpoint",
-                           models=models, replace_other_inputs=True)
+                           models=models)
     check_cancel(cancel)
     result.config, result.bake_raster, result.uv_report = config, raster, uv_report
     return result, write_adapt(result, out_dir)

@@ -38,7 +38,7 @@ from ...render.loop_renderer import LoopRenderer, asset_renderer
 from ...render.renderer import AssetRenderer, SceneOptions
 from ...texture.neural_texture import NeuralTexture, split_channels
 from .assembly import Critics, build_critics, embed_prompts, global_scene_for, renderer_environment, working_texture
-from .checkpoint import CHECKPOINT_FILE, OtherInputsCheckpoint, inputs_digest, load_checkpoint, save_checkpoint
+from .checkpoint import CHECKPOINT_FILE, inputs_digest, load_checkpoint, save_checkpoint
 from .config import AdaptConfig
 from .constants import ConstantWork, ViewConstants, bank_box
 from .distributed import join_process_group, sum_gradients, views_of_rank
@@ -96,7 +96,6 @@ class AdaptSystem:
         self.my_views = views_of_rank(config.views_per_step, rank, world.choice)
         self.checkpoint_path = checkpoint_path
         self._inputs_digest: str | None = None
-        self.replaced_checkpoint = False
         self.cancel: threading.Event | None = None   # seen between views (one rank), set by step
         self.history: list[dict] = []
         self.start = 0
@@ -109,8 +108,7 @@ class AdaptSystem:
 
     @classmethod
     def build(cls, inputs: AdaptInputs, config: AdaptConfig, models: GuidanceModels | None = None,
-              checkpoint_dir: str | Path | None = None, cache_constants: bool = True,
-              replace_other_inputs: bool = False) -> "AdaptSystem":
+              checkpoint_dir: str | Path | None = None, cache_constants: bool = True) -> "AdaptSystem":
         """Validate, find and load the models (a missing one fails here, before any work), copy the
         texture, set up the renderer and critics, and resume from `checkpoint_dir` when it holds one.
         cache_constants False recomputes each view's constant work every step (for comparison)."""
@@ -132,7 +130,7 @@ class AdaptSystem:
         checkpoint_path = Path(checkpoint_dir) / CHECKPOINT_FILE if checkpoint_dir is not None else None
         system = cls(inputs, config, models, texture, renderer, build_critics(models, config), rank,
                      world, checkpoint_path, cache_constants)
-        system.resume(replace_other_inputs)
+        system.resume()
         if models.device.type == "cuda":
             torch.cuda.reset_peak_memory_stats()
         return system
@@ -150,18 +148,9 @@ class AdaptSystem:
                 inputs.envmap, inputs.photo_camera, inputs.base_logit)
         return self._inputs_digest
 
-    def resume(self, replace_other_inputs: bool = False) -> None:
-        """Go on from the checkpoint when there is one for this run. One made for other inputs is refused, or
-        with `replace_other_inputs` (a pipeline redoing its own stage for new inputs) left to be overwritten
-        and the run starts at iteration 0 (`replaced_checkpoint` says so)."""
-        try:
-            payload = load_checkpoint(self.checkpoint_path, self.config, self.inputs_digest) \
-                if self.checkpoint_path is not None else None
-        except OtherInputsCheckpoint:
-            if not replace_other_inputs:
-                raise
-            self.replaced_checkpoint = True
-            return
+    def resume(self) -> None:
+        payload = load_checkpoint(self.checkpoint_path, self.config, self.inputs_digest) \
+            if self.checkpoint_path is not None else None
         if payload is None:
             return
         try:

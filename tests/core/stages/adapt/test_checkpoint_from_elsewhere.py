@@ -36,15 +36,15 @@ def _config() -> AdaptConfig:
                        models=ModelConfig(base_model=str(base), inpaint_model=str(inpaint)))
 
 
-def test_another_assets_checkpoint_is_refused_not_resumed(tmp_path):
-    """The same settings, another asset: its finished checkpoint was resumed and nothing said."""
+def test_another_assets_checkpoint_is_not_resumed(tmp_path):
+    """The same settings, another asset: its finished checkpoint was resumed (no step of this asset's ran) and
+    nothing said; the run starts fresh, and its own checkpoint resumes."""
     config = _config()
     adapt_texture(_inputs(16), config, checkpoint_dir=tmp_path)
     assert (tmp_path / CHECKPOINT_FILE).is_file()
-    with pytest.raises(InputError, match="made for another asset") as refused:
-        adapt_texture(_inputs(12), config, checkpoint_dir=tmp_path)
-    assert "\n" not in str(refused.value)
-    assert adapt_texture(_inputs(16), config, checkpoint_dir=tmp_path).resumed_from == 1   # its own still resumes
+    other = adapt_texture(_inputs(12), config, checkpoint_dir=tmp_path)
+    assert other.resumed_from == 0 and len(other.history) == config.iterations
+    assert adapt_texture(_inputs(12), config, checkpoint_dir=tmp_path).resumed_from == 1   # its own resumes
 
 
 def _good_payload(config: AdaptConfig) -> dict:
