@@ -187,7 +187,7 @@ def _missing_parts(folder: Path, parts: dict) -> list[str]:
 
 # How a run goes on without the diffusion models, in each place a run is started (each a command or
 # setting that exists: tests/core/guidance/test_model_hints.py parses them).
-WITHOUT_GUIDANCE = ("or run without adaptation (`scenefit run --guidance none`, `scenefit demo --guidance none`; "
+WITHOUT_GUIDANCE = ("or run without adaptation (`scenefit run --guidance-type none`, `scenefit demo --guidance none`; "
                     "in Blender, Run All with Adaptation: None)")
 
 

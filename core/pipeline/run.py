@@ -234,10 +234,10 @@ def from_given(stages: Sequence[str]) -> tuple[str, ...]:
 
 
 def guidance_found(config: RunConfig) -> tuple[bool, str]:
-    """Whether adapt (and the diffusion light critic) run, and why: the one place `--guidance` is decided."""
+    """Whether adapt (and the diffusion light critic) run, and why: the one place `--guidance-type` is decided."""
     if config.guidance_type == "sd2":
         locate_models(config.models, need_inpaint=True)   # missing weights: a clear error before any work
-        return True, "asked for (--guidance sd2)"
+        return True, "asked for (--guidance-type sd2)"
     if config.guidance_type == "auto":
         return models_available(config.models)
     return False, "guidance none"

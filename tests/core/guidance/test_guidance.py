@@ -85,7 +85,7 @@ def test_missing_weights_give_a_clear_message(tmp_path, monkeypatch, tiny_folder
     message = str(info.value)
     assert "stabilityai/stable-diffusion-2-base" in message and str(empty_cache) in message
     assert "scenefit models download" in message and "hf download stabilityai/stable-diffusion-2-base" in message
-    assert "--guidance none" in message and "about 5.2 GB" in message
+    assert "--guidance-type none" in message and "about 5.2 GB" in message
     # HF_HUB_OFFLINE changes nothing: a run never downloads.
     monkeypatch.setenv("HF_HUB_OFFLINE", "1")
     with pytest.raises(ModelMissingError, match="scenefit models download"):

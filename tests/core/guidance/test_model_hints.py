@@ -80,7 +80,7 @@ def test_missing_model_messages_name_commands_that_parse(tmp_path):
         DepthEstimator("depth-anything/Depth-Anything-V2-Small-hf", cache_dir=str(empty))
     messages.append(str(info.value))
     commands = [c for m in messages for c in scenefit_commands(m)]
-    assert {"scenefit models download", "scenefit run --guidance none", "scenefit models download depth"} <= set(commands)
+    assert {"scenefit models download", "scenefit run --guidance-type none", "scenefit models download depth"} <= set(commands)
     for command in commands:
         assert command_problems(command) == [], command
 
