@@ -103,20 +103,20 @@ def reason(why: str) -> str:
     return re.split(r": | \(|; |, so ", why, maxsplit=1)[0].strip()
 
 
-def skipped_reasons(stage_status: dict) -> dict[str, str]:
+def skipped_reasons(stage_status: dict[str, Any]) -> dict[str, str]:
     """{stage: its reason in a few words} of the stages a run skipped."""
     return {name: reason(stage.get("why", "")) for name, stage in stage_status.items()
             if isinstance(stage, dict) and stage.get("status") == "skipped"}
 
 
-def stage_words(stage_status: dict) -> str:
+def stage_words(stage_status: dict[str, Any]) -> str:
     """Each stage and what became of it, a skipped one with its reason: "convert ran, adapt skipped: no weights"."""
     skipped = skipped_reasons(stage_status)
     return ", ".join(f"{name} {stage.get('status')}" + (f": {skipped[name]}" if name in skipped else "")
                      for name, stage in stage_status.items() if isinstance(stage, dict))
 
 
-def skipped_lines(stage_status: dict) -> list[str]:
+def skipped_lines(stage_status: dict[str, Any]) -> list[str]:
     """One line per skipped stage whose why says more than its reason (what to do to have it run)."""
     return [f"  {name} skipped: {stage_status[name]['why']}" for name, short in skipped_reasons(stage_status).items()
             if stage_status[name].get("why", "") != short]

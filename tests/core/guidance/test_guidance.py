@@ -95,8 +95,8 @@ def test_missing_weights_give_a_clear_message(tmp_path, monkeypatch, tiny_folder
     # A local folder that lacks a part names it; the inpainting model is checked too.
     broken = tmp_path / "broken"
     (broken / "unet").mkdir(parents=True)
-    (broken / "unet" / "config.json").write_text("{}")
-    with pytest.raises(ModelMissingError, match=r"lacks vae/, text_encoder/, tokenizer/, scheduler/"):
+    (broken / "unet" / "config.json").write_text("{}")   # (a config without weights: the loader reads both)
+    with pytest.raises(ModelMissingError, match=r"lacks unet/, vae/, text_encoder/, tokenizer/, scheduler/"):
         locate_models(ModelConfig(base_model=str(broken)), need_inpaint=False)
     with pytest.raises(ModelMissingError, match="inpainting"):
         locate_models(ModelConfig(base_model=str(tiny_folders[0]), inpaint_model=str(tmp_path / "nope")), True)
