@@ -49,7 +49,7 @@ class DiffusionCriticConfig:
     lr_lora: float = 1e-4
     lr_lora_final_factor: float = 0.1
     condition_dropout: float = 0.1
-    model_resolution: int = 512
+    model_resolution: int = 0               # the model's image side (0: its own config's)
     l_white: float = DEFAULT_L_WHITE        # the tone curve applied to renders before encoding
     negative_prompt: str = ""
     views_type: str = "composited"          # the paper's two global views in the photo; "apparatus": the renders
@@ -70,8 +70,9 @@ class DiffusionCriticConfig:
             raise InputError("lora_rank must be >= 1, lr_lora positive and lr_lora_final_factor in (0, 1].")
         if not 0.0 <= self.condition_dropout < 1.0:
             raise InputError(f"condition_dropout must be in [0, 1), got {self.condition_dropout}.")
-        if self.model_resolution < 8 or self.model_resolution % 8:
-            raise InputError(f"model_resolution must be a multiple of 8 (>= 8), got {self.model_resolution}.")
+        if self.model_resolution and (self.model_resolution < 8 or self.model_resolution % 8):
+            raise InputError(f"model_resolution must be 0 (the model's own) or a multiple of 8 (>= 8), "
+                             f"got {self.model_resolution}.")
         if not self.l_white > 1.0:
             raise InputError(f"l_white must be above 1, got {self.l_white}.")
 
@@ -91,7 +92,8 @@ class DiffusionLightCritic:
                  squares: list[tuple[float, float, float]] | None = None) -> None:
         """photo (sRGB, (H, W, 3)) and squares (per view, where its square rendering goes in the photo:
         ApparatusScene.photo_squares) are needed for views_type "composited"."""
-        if config.model_resolution // models.vae_scale_factor < 1:
+        self.size = config.model_resolution or models.image_size
+        if self.size // models.vae_scale_factor < 1:
             raise InputError("model_resolution is smaller than one latent texel.")
         if config.views_type == "composited" and (photo is None or squares is None or len(squares) != len(cameras)):
             raise InputError("The composited light critic needs the photo and one square per view.")
@@ -127,7 +129,7 @@ class DiffusionLightCritic:
         indices = request.view_indices or tuple(range(renders.shape[0]))
         self._anneal_lora(request)
         uncond = self.models.embed(self.config.negative_prompt)
-        size = self.config.model_resolution
+        size = self.size
         grads = []
         for i, (prompt, view) in enumerate(zip(request.prompts, indices)):
             # Gradients stop at `leaf`; each image the model sees carries its share back to it.
@@ -182,7 +184,7 @@ class DiffusionLightCritic:
         darkening = (1.0 - matte)[..., None].expand(*matte.shape, 3)
         layer = torch.cat([premultiplied, alpha, darkening], dim=-1)
         x0, y0, side = self.squares[view]  # type: ignore[index]
-        size = self.config.model_resolution
+        size = self.size
         images = {}
         for name, window in zip(("full", "crop"), self.global_windows(view)):
             pasted = paste_layer(layer, (x0, y0, side, side), window, size)
