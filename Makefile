@@ -10,7 +10,7 @@ PLATFORM ?= linux-x64
 # Mitsuba's llvm variant loads this library (found lazily, after `setup` may have installed it).
 export DRJIT_LIBLLVM_PATH ?= $(shell tools/find_llvm.sh 2>/dev/null)
 
-.PHONY: help setup test test-quick demo docs bench corpus extension extension-nowheels check-extension validate clean
+.PHONY: help setup test test-quick demo docs bench corpus prior extension extension-nowheels check-extension validate clean
 
 help:
 	@echo "make demo       set up on first use, run SceneFit on the bundled example -> out/demo/"
@@ -19,6 +19,8 @@ help:
 	@echo "make docs       the docs site into build/docs/ (warnings are errors; the tests build it too)"
 	@echo "make bench      speed and accuracy table (benchmarks/run.py)"
 	@echo "make gpu-check  on a CUDA machine: SD2-sized random models, each preset's adapt iterations, benchmarks/results/gpu.md"
+	@echo "make prior      the known-answer diffusion prior (a test instrument, never for artists' work) into"
+	@echo "                devtools/prior/ (PRIOR=DIR: DIR/base, DIR/inpaint); nothing to do when it is up to date"
 	@echo "make corpus     every real asset in ../shared/corpus through convert -> bake -> glTF validator"
 	@echo "                (benchmarks/results/corpus.md; installs npm's gltf-validator into .venv/node), and through"
 	@echo "                the Blender extension: Import Asset -> Run All -> Bake Asset (corpus_blender.md)"
@@ -55,6 +57,12 @@ docs: setup
 
 bench: setup
 	$(PY) benchmarks/run.py
+
+# The known-answer prior (devtools/train_prior.py): ~10 min on two cores; skipped when the weights in
+# PRIOR were made by the current sources (their hash is stamped beside them).
+PRIOR ?= devtools/prior
+prior: setup
+	$(PY) -m scenefit.devtools.train_prior --out $(PRIOR)
 
 corpus: setup
 	$(PY) benchmarks/corpus.py

@@ -49,7 +49,8 @@ def measure(base: Path, inpaint: Path, preset: str, dry_run: bool, renderer: str
     from scenefit.core.pipeline.presets import stage_config
 
     config = stage_config("adapt", preset, prompt="x")
-    stages, resolution, iterations, warmup = config.stages, config.model_resolution, ITERATIONS, 1
+    # 0: the model's own size, which for SD2's shape is its UNet's 64 latents x the VAE's 8.
+    stages, resolution, iterations, warmup = config.stages, config.model_resolution or 64 * 8, ITERATIONS, 1
     views = config.views_per_step
     if dry_run:   # the tiny models' 32-px latents, 8 samples, up to two views: seconds on two cores
         stages = tuple(replace(s, render_size=min(s.render_size, 32), spp=min(s.spp, 8)) for s in stages)

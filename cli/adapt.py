@@ -111,7 +111,7 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=int)
     p.add_argument("--views-per-step", type=positive_int, help="views averaged per step (paper: 4, one per GPU)")
     p.add_argument("--global-crops", type=positive_int, help="global-view crops scored per view (default 2)")
-    p.add_argument("--model-resolution", type=positive_int, help="image size the diffusion models see (default 512)")
+    p.add_argument("--model-resolution", type=positive_int, help="image size the diffusion models see (default: the model's own, from its config: 512 for SD2-base)")
     p.add_argument("--render-size", type=positive_int, help="cap on every stage's render size (pixels)")
     add_model_args(p)
     add_prompt_service_args(p, prefix="prompt-")

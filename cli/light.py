@@ -110,7 +110,8 @@ def add_parser(sub) -> None:
                    help="outdoor: complete the unseen map by SD2 inpainting (sd2), the sky/ground prior (prior), or "
                         "auto (sd2 when its weights are on this machine)")
     p.add_argument("--model-resolution", type=positive_int,
-                   help="image size the diffusion critic sees and the outpainting height (default 512)")
+                   help="image size the diffusion critic sees (default: the model's own) and the outpainting "
+                        "height (default 512)")
     add_model_args(p)
     p.add_argument("--quiet", action="store_true")
     add_dry_run_arg(p)

@@ -22,15 +22,33 @@ def _bytes_to_unicode() -> dict[int, str]:
     return dict(zip(bs, (chr(c) for c in cs)))
 
 
-def tiny_tokenizer():
-    """A CLIPTokenizer with a 514-token vocabulary: every byte alone and word-final, plus the specials."""
+def tiny_tokenizer(words: tuple[str, ...] = (), max_length: int = 77):
+    """A CLIPTokenizer with a 514-token vocabulary: every byte alone and word-final, plus the specials;
+    each of `words` (lower case) also becomes one token of its own, by BPE merges that join its letters.
+    max_length: the sequence prompts are padded to (CLIP's 77)."""
     from transformers import CLIPTokenizer
 
     chars = list(_bytes_to_unicode().values())
     vocab: dict[str, int] = {}
     for token in chars + [c + "</w>" for c in chars] + ["<|startoftext|>", "<|endoftext|>"]:
         vocab[token] = len(vocab)
-    return CLIPTokenizer(vocab=vocab, merges=[], model_max_length=77)
+    merges: list[tuple[str, str]] = []
+    tokenizer = CLIPTokenizer(vocab=vocab, merges=merges, model_max_length=max_length)
+    for word in words:
+        # Join the pieces the merges so far leave, left to right; the new merges rank after every earlier
+        # one, so no word made before is split differently.
+        pieces = tokenizer.tokenize(word)
+        if len(pieces) > 1:
+            joined = pieces[0]
+            for piece in pieces[1:]:
+                merges.append((joined, piece))
+                joined += piece
+                vocab.setdefault(joined, len(vocab))
+            tokenizer = CLIPTokenizer(vocab=vocab, merges=merges, model_max_length=max_length)
+    for word in words:
+        if len(tokenizer.tokenize(word)) != 1:
+            raise ValueError(f"The word {word!r} did not become one token.")
+    return tokenizer
 
 
 # Stable Diffusion 2's UNet shape (865M parameters), for timing with random weights on a GPU.
@@ -46,12 +64,15 @@ def build_tiny_sd(folder: str | Path, in_channels: int = 4, seed: int = 0, sampl
                   block_out_channels: tuple[int, ...] = (32, 64), cross_attention_dim: int = 32,
                   layers_per_block: int = 1, attention_head_dim: tuple[int, ...] | None = None,
                   vae_block_out_channels: tuple[int, ...] = (8, 16), vae_layers_per_block: int = 1,
-                  text_layers: int = 2, text_heads: int = 4, text_intermediate: int | None = None) -> Path:
+                  text_layers: int = 2, text_heads: int = 4, text_intermediate: int | None = None,
+                  tokenizer=None, norm_groups: int | None = None, vae_norm_groups: int | None = None) -> Path:
     """Write unet/, vae/, text_encoder/, tokenizer/, scheduler/ and model_index.json into `folder`.
 
     in_channels 4 is the text-to-image model, 9 the inpainting one (latents, mask, masked image).
     The VAE halves the resolution once per block after the first (tiny: a 32-pixel render gives 16x16
     latents; SD2_SIZED: 8x, as SD's). build_tiny_sd(folder, **SD2_SIZED) is Stable Diffusion 2's size.
+    tokenizer: a CLIPTokenizer (default: tiny_tokenizer()). norm_groups / vae_norm_groups: the GroupNorm
+    groups (default: up to 32, one channel each at these widths, which removes each channel's mean).
     """
     import torch
     from diffusers import AutoencoderKL, DDPMScheduler, UNet2DConditionModel
@@ -59,11 +80,11 @@ def build_tiny_sd(folder: str | Path, in_channels: int = 4, seed: int = 0, sampl
 
     folder = Path(folder)
     torch.manual_seed(seed)
-    tokenizer = tiny_tokenizer()
+    tokenizer = tiny_tokenizer() if tokenizer is None else tokenizer
     n = len(block_out_channels)
     unet = UNet2DConditionModel(
         sample_size=sample_size, in_channels=in_channels, out_channels=4, layers_per_block=layers_per_block,
-        block_out_channels=block_out_channels, norm_num_groups=min(32, block_out_channels[0]),
+        block_out_channels=block_out_channels, norm_num_groups=norm_groups or min(32, block_out_channels[0]),
         down_block_types=("CrossAttnDownBlock2D",) * (n - 1) + ("DownBlock2D",),
         up_block_types=("UpBlock2D",) + ("CrossAttnUpBlock2D",) * (n - 1),
         cross_attention_dim=cross_attention_dim,
@@ -73,7 +94,8 @@ def build_tiny_sd(folder: str | Path, in_channels: int = 4, seed: int = 0, sampl
     levels = len(vae_block_out_channels)
     vae = AutoencoderKL(in_channels=3, out_channels=3, latent_channels=4, block_out_channels=vae_block_out_channels,
                         down_block_types=("DownEncoderBlock2D",) * levels, up_block_types=("UpDecoderBlock2D",) * levels,
-                        layers_per_block=vae_layers_per_block, norm_num_groups=min(32, vae_block_out_channels[0]),
+                        layers_per_block=vae_layers_per_block,
+                        norm_num_groups=vae_norm_groups or min(32, vae_block_out_channels[0]),
                         sample_size=sample_size * 2 ** (levels - 1))
     text_encoder = CLIPTextModel(CLIPTextConfig(
         vocab_size=len(tokenizer), hidden_size=cross_attention_dim,

@@ -270,6 +270,12 @@ class GuidanceModels:
         return 2 ** (len(self.vae.config.block_out_channels) - 1)
 
     @property
+    def image_size(self) -> int:
+        """The image side the base model was trained at: its UNet's latent side times the VAE's downsampling
+        (SD2-base 64 x 8 = 512, SD 2.1 96 x 8 = 768)."""
+        return int(self.unet.config.sample_size) * self.vae_scale_factor
+
+    @property
     def latent_scale(self) -> float:
         return float(self.vae.config.scaling_factor)
 

@@ -109,7 +109,7 @@ class AdaptConfig:
     models: ModelConfig = field(default_factory=ModelConfig)     # the SD2 models (core/guidance/models.py)
     iterations: int = 4000                        # optimisation steps
     stages: tuple[StageSpec, ...] = SCENE_STAGES  # the schedule: fraction, render size, spp, timestep range
-    model_resolution: int = 512                   # the diffusion model's image side
+    model_resolution: int = 0                     # the diffusion model's image side (0: its own config's)
     lr_texture: float = 1e-3                      # the texture's learning rate (constant)
     lr_lora: float = 1e-4                         # the LoRA noise predictor's learning rate (constant)
     lora_rank: int = 4                            # the LoRA adapter's rank
@@ -160,9 +160,10 @@ class AdaptConfig:
         object.__setattr__(self, "stages", stages)
         need(len(stages) >= 1 and abs(sum(s.fraction for s in stages) - 1.0) < 1e-6,
              f"stage fractions must add up to 1, got {[s.fraction for s in stages]}.")
-        need(8 <= self.model_resolution <= MAX_MODEL_RESOLUTION and self.model_resolution % 8 == 0,
-             f"model_resolution must be a multiple of 8 from 8 to {MAX_MODEL_RESOLUTION}, got "
-             f"{self.model_resolution}.")
+        need(self.model_resolution == 0 or (8 <= self.model_resolution <= MAX_MODEL_RESOLUTION
+                                            and self.model_resolution % 8 == 0),
+             f"model_resolution must be 0 (the model's own) or a multiple of 8 from 8 to {MAX_MODEL_RESOLUTION}, "
+             f"got {self.model_resolution}.")
         need(self.lr_texture > 0 and self.lr_lora > 0, "learning rates must be positive.")
         need(self.lora_rank >= 1, f"lora_rank must be at least 1, got {self.lora_rank}.")
         need(0.0 <= self.condition_dropout <= 1.0, "condition_dropout must be in [0, 1].")

@@ -51,7 +51,7 @@ class ConstantWork:
     def compute(self, view: ViewSample, env: torch.Tensor) -> ViewConstants:
         """Rendered before the step's differentiable renders (Mitsuba's backward replays the last one)."""
         s = self.system
-        models, config, size = s.models, s.config, s.config.model_resolution
+        models, config, size = s.models, s.config, s.model_resolution
         reference_latents = weight_map = None
         maps = None if s.reference_stack is None else split_channels(s.reference_stack)
         if maps is not None:

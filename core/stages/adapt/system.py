@@ -85,7 +85,8 @@ class AdaptSystem:
         if config.views_type == "local+global":
             assert self.photo is not None   # (AdaptInputs refuses global views without the photo)
             self.global_scene = global_scene_for(inputs, config, self.photo, np.asarray(self.base_env))
-        self.latent_res = config.model_resolution // models.vae_scale_factor
+        self.model_resolution = config.model_resolution or models.image_size
+        self.latent_res = self.model_resolution // models.vae_scale_factor
         self.bank = draw_view_bank(config, *bank_box(self)) if uses_view_bank(config) else None
         self.constants = ConstantWork(self, cache_constants)
         # The step's images through each model in one pass (else one image at a time: less memory).
@@ -331,7 +332,7 @@ class AdaptSystem:
         for rows in self._passes(len(items)):
             part = [items[i] for i in rows]
             image = torch.cat([local_view(it.leaves[0][..., 0:3], it.leaves[0][..., 3:4], it.view.background,
-                                          self.config.model_resolution) for it in part])
+                                          self.model_resolution) for it in part])
             z = self.models.encode(image)
             self.timer.lap("vae")
             views, constants = [it.view for it in part], [it.constants for it in part]
@@ -381,7 +382,7 @@ class AdaptSystem:
         placed = item.placed
         assert placed is not None and self.photo is not None   # (a view with crops was placed in the photo)
         return global_view(item.leaves[1][..., 0:3], item.leaves[1][..., 3:4], placed.rect, self.photo, placed.matte,
-                           crop, self.config.model_resolution)[0]
+                           crop, self.model_resolution)[0]
 
     # -- reporting and finish ------------------------------------------------------------------------
 

@@ -75,7 +75,7 @@ class DiffusionCriticConfig:
     lr_lora: float = 1e-4
     lr_lora_final_factor: float = 0.1
     condition_dropout: float = 0.1
-    model_resolution: int = 512
+    model_resolution: int = 0               # the model's image side (0: its own config's)
     l_white: float = DEFAULT_L_WHITE        # the tone curve applied to renders before encoding
     negative_prompt: str = ""
     views_type: str = "composited"          # the paper's two global views in the photo; "apparatus": the renders
@@ -96,8 +96,9 @@ class DiffusionCriticConfig:
             raise InputError("lora_rank must be >= 1, lr_lora positive and lr_lora_final_factor in (0, 1].")
         if not 0.0 <= self.condition_dropout < 1.0:
             raise InputError(f"condition_dropout must be in [0, 1), got {self.condition_dropout}.")
-        if self.model_resolution < 8 or self.model_resolution % 8:
-            raise InputError(f"model_resolution must be a multiple of 8 (>= 8), got {self.model_resolution}.")
+        if self.model_resolution and (self.model_resolution < 8 or self.model_resolution % 8):
+            raise InputError(f"model_resolution must be 0 (the model's own) or a multiple of 8 (>= 8), "
+                             f"got {self.model_resolution}.")
         if not self.l_white > 1.0:
             raise InputError(f"l_white must be above 1, got {self.l_white}.")
 

@@ -53,7 +53,8 @@ class DiffusionLightCritic:
                  squares: list[tuple[float, float, float]] | None = None) -> None:
         """photo (sRGB, (H, W, 3)) and squares (per view, where its square rendering goes in the photo:
         ApparatusScene.photo_squares) are needed for views_type "composited"."""
-        if config.model_resolution // models.vae_scale_factor < 1:
+        self.size = config.model_resolution or models.image_size
+        if self.size // models.vae_scale_factor < 1:
             raise InputError("model_resolution is smaller than one latent texel.")
         if config.views_type == "composited" and (photo is None or squares is None or len(squares) != len(cameras)):
             raise InputError("The composited light critic needs the photo and one square per view.")
@@ -89,7 +90,7 @@ class DiffusionLightCritic:
         indices = request.view_indices or tuple(range(renders.shape[0]))
         self._anneal_lora(request)
         uncond = self.models.embed(self.config.negative_prompt)
-        size = self.config.model_resolution
+        size = self.size
         grads = []
         for i, (prompt, view) in enumerate(zip(request.prompts, indices)):
             # Gradients stop at `leaf`; each image the model sees carries its share back to it.
@@ -144,7 +145,7 @@ class DiffusionLightCritic:
         darkening = (1.0 - matte)[..., None].expand(*matte.shape, 3)
         layer = torch.cat([premultiplied, alpha, darkening], dim=-1)
         x0, y0, side = self.squares[view]  # type: ignore[index]
-        size = self.config.model_resolution
+        size = self.size
         images = {}
         for name, window in zip(("full", "crop"), self.global_windows(view)):
             pasted = paste_layer(layer, (x0, y0, side, side), window, size)

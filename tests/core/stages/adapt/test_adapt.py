@@ -353,3 +353,25 @@ def test_bf16_frozen_weights_give_the_fp32_gradient_within_tolerance(tiny_models
     cosine = float(torch.dot(full, half) / (full.norm() * half.norm()))
     assert cosine >= 0.98, cosine
     assert abs(float(half.norm() / full.norm()) - 1.0) <= 0.10
+
+
+def test_the_model_image_size_comes_from_the_models_own_config_unless_set(tiny_models, asset, tmp_path):
+    """SD2-base's config gives 64 x 8 = 512 and SD 2.1's 96 x 8 = 768: the image size is read, not assumed.
+    The tiny model (16 latents, a VAE that halves once) gives 32; a 768-px-shaped config gives 768."""
+    from scenefit.core.guidance import load_guidance_models
+    from scenefit.devtools.tiny_models import build_tiny_sd
+
+    base, inpaint = tiny_models
+    models = load_guidance_models(ModelConfig(base_model=str(base), inpaint_model=str(inpaint), dtype_type="fp32"),
+                                  need_inpaint=True)
+    assert models.image_size == 32
+    own = AdaptSystem.build(_inputs(asset), _config(tiny_models, model_resolution=0), models=models)
+    assert (own.model_resolution, own.latent_res) == (32, 16)
+    asked = AdaptSystem.build(_inputs(asset), _config(tiny_models, model_resolution=48), models=models)
+    assert (asked.model_resolution, asked.latent_res) == (48, 24)
+    wide = build_tiny_sd(tmp_path / "sd21-shaped", sample_size=96, block_out_channels=(8, 16),
+                         vae_block_out_channels=(8, 8, 8, 8))
+    wide_models = load_guidance_models(ModelConfig(base_model=str(wide), inpaint_model=str(inpaint),
+                                                   dtype_type="fp32"), need_inpaint=False)
+    assert wide_models.image_size == 768
+    assert AdaptConfig(prompt="x").model_resolution == 0
