@@ -66,7 +66,7 @@ def adapt_seconds_here(context, iterations: int | None = None) -> LocalWork | No
     """The projected work of an adaptation at the panel's preset when it would run in this Blender
     (panels/quality.py's measurements: the bench CPU, or an H200 on CUDA); None when not measured.
 
-    Main thread, at a click: no model lookup (the job looks the models up, and downloads them, itself),
+    Main thread, at a click: no model lookup (the job looks the models up; it never downloads them),
     no network, and torch is not imported for it (`device_here`)."""
     from ..panels.quality import LocalWork, adapt_projection
     from .prefs import preferences

@@ -93,15 +93,17 @@ def photo_view(context, photo: Path, obj=None) -> dict:
 
 
 def composite_camera(context, photo: Path, view: dict):
-    """The PhotoCamera the Cycles set-up uses when no job hands one back: the view's, else the camera the
-    World's light map was estimated with (its report.json), else the estimate from the photo."""
-    from ..core.stages.compose import light_camera
-    from ..core.stages.camera import photo_camera_estimate
+    """The PhotoCamera the Cycles set-up uses when no job hands one back: the view's, else the camera stage's of
+    the run that made the World's light map (lens shift included), else the photo's estimate."""
     from ..core.scene.camera import PhotoCamera
+    from ..workers.job_seam import run_camera
 
     if view["camera"] is not None:
         return PhotoCamera(**view["camera"])
     light = context.scene.scenefit.light_path
-    if light and (Path(bpy.path.abspath(light)).parent / "report.json").is_file():
-        return light_camera(bpy.path.abspath(light), {}, 1, 1)[0]
+    camera = run_camera(Path(bpy.path.abspath(light)).parent.parent) if light else None
+    if camera is not None:
+        return camera
+    from ..core.stages.camera import photo_camera_estimate
+
     return photo_camera_estimate(photo).photo_camera()

@@ -132,7 +132,7 @@ t = time.perf_counter()
 bpy.ops.wm.open_mainfile(filepath=str(tmp / "scene.blend"))   # another file: load_pre ends the job first
 out["second"] = {"answers": answers, "refused": second_op.reported[-1:], "third": third,
                  "load_s": round(time.perf_counter() - t, 2), "alive": job.alive,
-                 "threads": [th.name for th in threading.enumerate() if th.name.startswith("scenefit-")],
+                 "threads": [th.name for th in threading.enumerate() if th.name == "scenefit-run"],
                  "slot": background.active_job() is None}
 settings = bpy.context.scene.scenefit
 """

@@ -98,6 +98,7 @@ def counted(*args, **kw):
 imageio.read_image = counted
 try:
     bpy.context.scene.scenefit.photo_path = str(path)
+    panels.thumbnail.wait_for_thumbnails(60)   # (decoded in the reader thread)
 finally:
     imageio.read_image = real_read
 import OpenImageIO as oiio
