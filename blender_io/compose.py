@@ -163,6 +163,15 @@ def link_into(scene, objects) -> None:
             scene.collection.objects.link(obj)
 
 
+def unlink_others(scene, kept) -> None:
+    """Composing one asset never shows another: the composite scene's objects that are neither SceneFit's
+    own (its camera, floor) nor `kept` are unlinked from it (they stay in the artist's scenes)."""
+    keep = {o.as_pointer() for o in kept}
+    for obj in list(scene.collection.objects):
+        if TAG not in obj and obj.as_pointer() not in keep:
+            scene.collection.objects.unlink(obj)
+
+
 def ensure_photo_camera(scene, image, camera: PhotoCamera):
     """SceneFit's camera (made once per file) in the composite scene (`composite_scene`): core's `camera`
     (its horizontal field of view, pitch, roll and lens shift) at the photo's aspect, the photo as its
@@ -327,6 +336,7 @@ def setup_composite(context, obj, photo_path: str | Path, placement: tuple[float
         position = np.array(cam.matrix_world.translation, np.float64)
         yaw = camera_pose(np.array(cam.matrix_world, np.float64))[0]
     link_into(own, objects)
+    unlink_others(own, objects + [cam])
     own.world = world if world is not None else artist.world
     turn_world_to(own.world, yaw)
     reach = float(np.linalg.norm(position - base))

@@ -15,7 +15,7 @@ from ..workers.job_seam import RunInputs, RunOutcome, RunRequest
 from .adapt import adapt_seconds_here
 from .folders import last_finished_run
 from .identity import object_by_id
-from .polls import OnMesh
+from .polls import OnMeshWithPhoto
 from .jobs import CHOICES, CostFirst, JobOperator
 from .properties import GUIDANCE
 from .results import apply_composite_image, apply_layout_results, apply_result_world, materials_words
@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 
 
 
-class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
+class SCENEFIT_OT_run(OnMeshWithPhoto, CostFirst, JobOperator):
     """Fit the asset into the photo in one go (the selected objects, or the active one with all its
     materials): convert, estimate the photo's light, restyle (when the diffusion models are here and there
     is a prompt), compose; then put the results in every material slot"""

@@ -114,6 +114,18 @@ deleted = sorted(bpy.ops.scenefit.delete_run(index=index, folder=True))
 out["delete"] = {"had": had, "deleted": deleted, "left": [folder.exists(), partial_of(folder).exists()]}
 """
 
+# Composing one asset, then another: each composite shows only its own asset (and SceneFit's camera and floor).
+COMPOSE = r"""
+shown = {}
+for name in ("Fox Renamed", roots[0]):
+    select(name)
+    settings.placement = (0.5, 0.75)
+    said = sorted(bpy.ops.scenefit.compose(render=False))
+    scene = next(s for s in bpy.data.scenes if s.get("scenefit") == "composite")
+    shown[name] = [said, sorted(o.name for o in scene.collection.objects if "scenefit" not in o)]
+out["compose"] = shown
+"""
+
 # Two clicks of Run All before the first one's first tick: the second is refused, not started beside it. A file
 # loaded during a job leaves no job thread running.
 SECOND = r"""
@@ -199,6 +211,13 @@ def test_a_duplicate_starts_with_an_empty_history(session):
     assert out["after"] == 0 and "no such run" in str(out["said"]) and out["ids"] == [False]
     runs, folders_kept = out["original"]
     assert runs >= 1 and folders_kept
+
+
+def test_composing_one_asset_never_shows_another(session):
+    out = _step(session, COMPOSE, "compose")["compose"]
+    fox, character = out.values()
+    assert fox == [["FINISHED"], ["Fox Renamed"]] and character[0] == ["FINISHED"]
+    assert "Fox Renamed" not in character[1] and len(character[1]) == 1, character
 
 
 def test_a_second_run_all_never_starts_beside_the_first_and_a_file_load_ends_it(session):

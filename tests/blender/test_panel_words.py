@@ -245,7 +245,8 @@ def test_every_button_that_can_be_greyed_out_says_why(blender):
     for must in ("scenefit.run", "scenefit.adapt", "scenefit.bake_asset", "scenefit.generate_prompt",
                  "scenefit.cancel_job", "scenefit.apply_run", "scenefit.open_composite", "scenefit.copy_details"):
         assert must in out["empty"], must
-    assert "scenefit.bake_asset" in out["with_mesh"] and "scenefit.run" not in out["with_mesh"]
+    assert "scenefit.bake_asset" in out["with_mesh"] and "photo" in out["with_mesh"]["scenefit.run"]
+    assert "photo" in out["with_mesh"]["scenefit.estimate_light"]   # both need the photo, and say so
     silent = {k: v for case in ("empty", "with_mesh") for k, v in out[case].items() if not v}
     assert silent == {}
     assert out["with_mesh"]["scenefit.bake_asset"] != out["empty"]["scenefit.bake_asset"]   # each says its own why
