@@ -22,7 +22,7 @@ from .results import apply_composite_image, apply_layout_results, apply_result_w
 from .run_request import gather_run, resumed_run
 
 if TYPE_CHECKING:
-    from ..panels.quality import LocalWork
+    from ..workers.time_model import LocalWork
 
 
 
