@@ -126,6 +126,37 @@ for name in ("Fox Renamed", roots[0]):
 out["compose"] = shown
 """
 
+# Three Estimate Lights, then a run's Delete: Purge leaves only what the scene or a kept run holds.
+LEFTOVERS = r"""
+def held():
+    runs = [r for o in bpy.data.objects for r in getattr(o.scenefit_asset, "runs", ())]
+    worlds = {s.world.name for s in bpy.data.scenes if s.world} | {r.world.name for r in runs if r.world}
+    materials = {slot.material.name for o in bpy.data.objects for slot in o.material_slots if slot.material} | {
+        e.result.name for r in runs for e in r.slots if e.result}
+    return worlds, materials
+
+def left(kind):
+    return sorted(x.name for x in getattr(bpy.data, kind) if "scenefit" in x)
+
+def purge():
+    bpy.ops.outliner.orphans_purge(do_local_ids=True, do_linked_ids=True, do_recursive=True)
+
+select("Fox Renamed")
+before = len(left("worlds"))
+said = [sorted(bpy.ops.scenefit.estimate_light(critic="none", outpaint="prior")) for _ in range(3)]   # (quick)
+made = len(left("worlds")) - before
+purge()
+worlds, materials = held()
+after_lights = {"worlds": left("worlds"), "held": sorted(worlds), "fake": [w.name for w in bpy.data.worlds if w.use_fake_user and "scenefit" in w]}
+runs = bpy.data.objects["Fox Renamed"].scenefit_asset.runs
+deleted = sorted(bpy.ops.scenefit.delete_run(index=0))
+purge()
+worlds, materials = held()
+out["leftovers"] = {"said": said, "made": made, "after_lights": after_lights,
+                    "after_delete": [deleted, sorted(set(left("worlds")) - worlds), sorted(set(left("materials")) - materials)],
+                    "env_images": sorted(i.name for i in bpy.data.images if "scenefit" in i and i.users == 0)}
+"""
+
 # Two clicks of Run All before the first one's first tick: the second is refused, not started beside it. A file
 # loaded during a job leaves no job thread running.
 SECOND = r"""
@@ -218,6 +249,16 @@ def test_composing_one_asset_never_shows_another(session):
     fox, character = out.values()
     assert fox == [["FINISHED"], ["Fox Renamed"]] and character[0] == ["FINISHED"]
     assert "Fox Renamed" not in character[1] and len(character[1]) == 1, character
+
+
+def test_three_estimate_lights_and_a_delete_leave_nothing_purge_keeps(session):
+    out = _step(session, LEFTOVERS, "leftovers")["leftovers"]
+    assert out["said"] == [["FINISHED"]] * 3 and out["made"] == 3
+    lights = out["after_lights"]
+    assert set(lights["worlds"]) <= set(lights["held"]) and lights["fake"] == [], lights   # the two older: purged
+    deleted, worlds_left, materials_left = out["after_delete"]
+    assert deleted == ["FINISHED"] and worlds_left == [] and materials_left == []
+    assert out["env_images"] == []
 
 
 def test_a_second_run_all_never_starts_beside_the_first_and_a_file_load_ends_it(session):
