@@ -424,7 +424,8 @@ class JobSteps:
         if state.status == background.DONE:
             try:
                 message = self.apply_result(context, state.result)
-            except SceneFitError as error:
+            except SceneFitError as error:   # (its asset deleted meanwhile): the run and its folder are kept
+                self.keep_run(context, "failed", None)
                 rt.status = rt.details = str(error)
                 self.report({"ERROR"}, rt.status)
                 return {"CANCELLED"}

@@ -157,6 +157,17 @@ out["leftovers"] = {"said": said, "made": made, "after_lights": after_lights,
                     "env_images": sorted(i.name for i in bpy.data.images if "scenefit" in i and i.users == 0)}
 """
 
+# An asset deleted while its run goes on: the run is kept (the scene's runs without an asset) with its folder.
+DELETED = r"""
+character = select(roots[0])
+settings.placement = (0.5, 0.75)
+op, ctx, first = clicked({"choice": "skip", "guidance": "auto", **QUICK})
+bpy.data.objects.remove(character)
+end = to_the_end(op, ctx)
+kept = [(r.stage, r.state, Path(bpy.path.abspath(r.folder)).is_dir()) for r in settings.runs_without_asset]
+out["deleted"] = {"end": end, "said": op.reported[-1:], "kept": kept}
+"""
+
 # Two clicks of Run All before the first one's first tick: the second is refused, not started beside it. A file
 # loaded during a job leaves no job thread running.
 SECOND = r"""
@@ -259,6 +270,12 @@ def test_three_estimate_lights_and_a_delete_leave_nothing_purge_keeps(session):
     deleted, worlds_left, materials_left = out["after_delete"]
     assert deleted == ["FINISHED"] and worlds_left == [] and materials_left == []
     assert out["env_images"] == []
+
+
+def test_an_asset_deleted_during_its_run_keeps_the_run_and_its_folder(session):
+    out = _step(session, DELETED, "deleted")["deleted"]
+    assert out["end"] == ["CANCELLED"] and "deleted while SceneFit ran" in out["said"][0]
+    assert out["kept"] == [["run", "failed", True]]
 
 
 def test_a_second_run_all_never_starts_beside_the_first_and_a_file_load_ends_it(session):
