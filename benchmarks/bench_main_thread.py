@@ -1,5 +1,5 @@
-"""How long Blender's main thread is held by Convert and Run All on corpus assets: the click (invoke) and
-each timer tick until the job's worker has started, driven through the operators' own invoke / modal code
+"""How long Blender's main thread is held by Convert and Run All on corpus assets, each in a fresh process
+(cold: torch not yet imported): the click (invoke) and each timer tick until the job's worker has started, driven through the operators' own invoke / modal code
 with a stand-in window (as tests/blender/test_jobs_an_artist_can_trust.py does). The worker is cancelled
 as soon as it starts: only the main thread's stretches are measured.
 
@@ -36,7 +36,7 @@ from types import SimpleNamespace
 import numpy as np
 import bpy, addon_utils
 
-asset, tmp = sys.argv[-2:]
+asset, tmp, operator = sys.argv[-3:]
 addon_utils.enable("scenefit", default_set=True)
 from scenefit.operators import convert, jobs, run
 from scenefit.workers import background
@@ -52,6 +52,7 @@ write_image(Path(tmp) / "photo.png", np.full((48, 64, 3), 0.5, np.float32))
 settings.photo_path, settings.preset, settings.prompt = str(Path(tmp) / "photo.png"), "draft", ""
 settings.output_dir = str(Path(tmp) / "out")
 
+# (its own stand-in window, not scenefit.devtools': --code may name a commit from before that module)
 class WM:
     scenefit_runtime = property(lambda self: bpy.context.window_manager.scenefit_runtime)
     windows = ()
@@ -77,9 +78,12 @@ def probe(cls, **props):
 timer = SimpleNamespace(type="TIMER", value="PRESS", mouse_x=0, mouse_y=0)
 click = SimpleNamespace(type="LEFTMOUSE", value="PRESS", mouse_x=0, mouse_y=0)
 jobs.has_ui = lambda context: True
-for name, cls, props in (("convert", convert.SCENEFIT_OT_convert, {"iterations": 1}),
-                         ("run", run.SCENEFIT_OT_run, {"choice": "skip", "guidance": "none"})):
+OPERATORS = {"convert": (convert.SCENEFIT_OT_convert, {"iterations": 1}),
+             "run": (run.SCENEFIT_OT_run, {"choice": "skip", "guidance": "none"})}
+for name in (operator,):   # one per process: each measured cold (torch not yet imported)
+    cls, props = OPERATORS[name]
     op, ctx = probe(cls, **props), Ctx()
+    torch_before = "torch" in sys.modules
     t = time.perf_counter()
     op.invoke(ctx, click)
     invoke = time.perf_counter() - t
@@ -93,7 +97,7 @@ for name, cls, props in (("convert", convert.SCENEFIT_OT_convert, {"iterations":
     job = getattr(op, "_job", None)
     if job is not None:
         job.cancel(); job.wait(120); background.release_job(job)
-    print("RESULT " + json.dumps({"operator": name, "invoke_s": round(invoke, 4), "ticks_s": ticks,
+    print("RESULT " + json.dumps({"operator": name, "torch_before": torch_before, "invoke_s": round(invoke, 4), "ticks_s": ticks,
                                   "longest_s": round(max([invoke] + ticks), 4), "started": job is not None,
                                   "said": bpy.context.window_manager.scenefit_runtime.status[:120]}))
 """
@@ -105,12 +109,15 @@ def measure(asset: Path, code: Path | None) -> list[dict]:
     env = dict(os.environ)
     if code is not None:
         env["PYTHONPATH"] = str(code)
-    with tempfile.TemporaryDirectory(prefix="scenefit-main-thread-") as tmp:
-        done = subprocess.run([sys.executable, "-c", DRIVE, str(asset), tmp], env=env, capture_output=True,
-                              text=True, timeout=900)
-    rows = [json.loads(line[len("RESULT "):]) for line in done.stdout.splitlines() if line.startswith("RESULT ")]
-    if not rows:
-        raise SystemExit(f"{asset.name}: no result\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
+    rows = []
+    for operator in ("convert", "run"):   # each in a fresh process: cold, as an artist's first click is
+        with tempfile.TemporaryDirectory(prefix="scenefit-main-thread-") as tmp:
+            done = subprocess.run([sys.executable, "-c", DRIVE, str(asset), tmp, operator], env=env,
+                                  capture_output=True, text=True, timeout=900)
+        found = [json.loads(line[len("RESULT "):]) for line in done.stdout.splitlines() if line.startswith("RESULT ")]
+        if not found:
+            raise SystemExit(f"{asset.name}: no result\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
+        rows += found
     return rows
 
 

@@ -31,6 +31,26 @@ SCENE_NAME = "SceneFit Composite"
 COMPOSITE_SAMPLES = 128   # a new composite scene's Cycles samples (the artist's scene's are for their engine)
 
 
+# (path, mtime, size) of the photos decoded whole this session: by load_photo_image's check, or by a job.
+_checked_photos: set[tuple] = set()
+
+
+def _photo_key(path: Path) -> tuple | None:
+    try:
+        stat = path.stat()
+    except OSError:
+        return None
+    return str(path.resolve()), stat.st_mtime_ns, stat.st_size
+
+
+def photo_read_whole(path: str | Path) -> None:
+    """Say that the photo at `path` decoded whole (a job's pipeline read it, or the check did): its Blender
+    image is loaded without decoding it again on the main thread."""
+    key = _photo_key(Path(path))
+    if key is not None:
+        _checked_photos.add(key)
+
+
 def load_photo_image(path: str | Path):
     """The photo as a Blender image (reused when already loaded); one sentence when unreadable.
 
@@ -41,8 +61,11 @@ def load_photo_image(path: str | Path):
 
     path = Path(path)
     # Decoded once by OpenImageIO first (band by band, reduced): Blender shows a truncated JPEG with
-    # its missing rows grey and says nothing, and a refusal here leaves no datablock in the file.
-    read_image(path, max_side=CHECK_SIDE)
+    # its missing rows grey and says nothing, and a refusal here leaves no datablock in the file. Once per
+    # file: a 24 MP photo takes seconds, and a job that read it whole already checked it (photo_read_whole).
+    if _photo_key(path) not in _checked_photos:
+        read_image(path, max_side=CHECK_SIDE)
+        photo_read_whole(path)
     orientation = stored_orientation(path)
     if orientation not in (0, 1):
         return _upright_copy(path, orientation)
@@ -138,6 +161,15 @@ def link_into(scene, objects) -> None:
     for obj in objects:
         if scene not in obj.users_scene:
             scene.collection.objects.link(obj)
+
+
+def unlink_others(scene, kept) -> None:
+    """Composing one asset never shows another: the composite scene's objects that are neither SceneFit's
+    own (its camera, floor) nor `kept` are unlinked from it (they stay in the artist's scenes)."""
+    keep = {o.as_pointer() for o in kept}
+    for obj in list(scene.collection.objects):
+        if TAG not in obj and obj.as_pointer() not in keep:
+            scene.collection.objects.unlink(obj)
 
 
 def ensure_photo_camera(scene, image, camera: PhotoCamera):
@@ -304,6 +336,7 @@ def setup_composite(context, obj, photo_path: str | Path, placement: tuple[float
         position = np.array(cam.matrix_world.translation, np.float64)
         yaw = camera_pose(np.array(cam.matrix_world, np.float64))[0]
     link_into(own, objects)
+    unlink_others(own, objects + [cam])
     own.world = world if world is not None else artist.world
     turn_world_to(own.world, yaw)
     reach = float(np.linalg.norm(position - base))

@@ -65,9 +65,12 @@ def world_from_hdr(path: str | Path, name: str = "SceneFit Light", strength: flo
 
 
 def assign_world(scene, world) -> None:
-    """Make `world` the scene's world; the previous one gets a fake user so saving does not purge it."""
+    """Make `world` the scene's world; the artist's previous one gets a fake user so saving does not purge it
+    (a SceneFit World replaced gets none: a run that keeps it holds it, else Purge takes it and its map)."""
+    from .tag import TAG
+
     previous = scene.world
-    if previous is not None and previous != world:
+    if previous is not None and previous != world and TAG not in previous:
         previous.use_fake_user = True
     scene.world = world
 

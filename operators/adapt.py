@@ -19,7 +19,7 @@ from .jobs import CHOICES, CostFirst, JobOperator
 from .results import apply_layout_results, apply_result_material, materials_words, result_targets
 
 if TYPE_CHECKING:
-    from ..panels.quality import LocalWork
+    from ..workers.time_model import LocalWork
 
 
 def gather_adapt(op, context, texture: str) -> dict:
@@ -64,11 +64,11 @@ def gather_adapt(op, context, texture: str) -> dict:
 
 def adapt_seconds_here(context, iterations: int | None = None) -> LocalWork | None:
     """The projected work of an adaptation at the panel's preset when it would run in this Blender
-    (panels/quality.py's measurements: the bench CPU, or an H200 on CUDA); None when not measured.
+    (workers/time_model.py's measurements: the bench CPU, or an H200 on CUDA); None when not measured.
 
-    Main thread, at a click: no model lookup (the job looks the models up itself; only Download fetches them),
+    Main thread, at a click: no model lookup (the job looks the models up; it never downloads them),
     no network, and torch is not imported for it (`device_here`)."""
-    from ..panels.quality import LocalWork, adapt_projection
+    from ..workers.time_model import LocalWork, adapt_projection
     from .prefs import preferences
 
     prefs = preferences(context)   # (not model_settings: its ModelConfig imports torch)

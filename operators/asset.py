@@ -137,7 +137,7 @@ def asset_state(obj):
 
 def asset_digest(layout) -> str:
     """Names the asset's mesh as a texture is fitted to it (its fitting mesh: faces and own UVs, no pixels)."""
-    from ..core.texture.surface_layout import mesh_digest
+    from ..core.data.materials import mesh_digest
 
     return mesh_digest(layout.fitting_mesh())
 

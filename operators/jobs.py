@@ -11,7 +11,6 @@ Runtime state lives on the WindowManager (never saved into the .blend); the live
 from __future__ import annotations
 
 import atexit
-import dataclasses
 import time
 from typing import TYPE_CHECKING
 
@@ -21,14 +20,15 @@ from bpy.app.handlers import persistent
 from bpy.props import BoolProperty, FloatProperty, PointerProperty, StringProperty
 
 from ..workers import background
+from ..workers.job_control import (CONFIRM_CANCEL_AFTER, END_JOB_SECONDS, esc_action, for_the_worker, job_out,
+                                   owed_bakes, time_left, whole_run)
 from ..core.base.errors import SceneFitError
 from ..core.pipeline.registry import RUN_ORDER
 from ..core.base.progress import TerminalProgress
-from ..core.data.map_plan import PendingAsset
 from .dependencies import check_dependencies
 
 if TYPE_CHECKING:
-    from ..panels.quality import LocalWork
+    from ..workers.time_model import LocalWork
 
 TIMER_SECONDS = 0.25
 _previews = None  # bpy.utils.previews collection, made on register
@@ -95,34 +95,6 @@ def preview_image(rgba_bottom_up: np.ndarray):
     return image
 
 
-def whole_run(state: background.JobState, stages: tuple[str, ...]) -> tuple[float, str] | None:
-    """(fraction, words) of a job that runs several stages in order (Run All: core.pipeline.registry.RUN_ORDER) as one
-    bar, stage k of n, from the stage now running and its own fraction; None for a one-stage job."""
-    if state.name != "run" or state.finished:
-        return None
-    n = len(stages)
-    if state.stage in stages:
-        k, inner = stages.index(state.stage), state.fraction
-    elif state.stage == "run" and state.total:   # between stages: the pipeline's own count
-        k, inner = min(state.step, n - 1), 0.0
-    else:
-        return None
-    return (k + inner) / n, f"stage {k + 1} of {n} ({stages[k]})"
-
-
-def time_left(expected: float, state: background.JobState, stages: tuple[str, ...]) -> float | None:
-    """Seconds left of a job whose adaptation the bench projects at `expected` seconds: the projection until
-    the adaptation starts, then weighed over to its own pace (panels/quality.eta_from_start); None once it is
-    done (a run's later stages take seconds, their own guess stands)."""
-    from ..panels.quality import eta_from_start
-
-    if state.stage == "adapt":
-        return eta_from_start(expected, time.perf_counter() - state.started, state.fraction, state.eta_seconds)
-    if "adapt" in stages and state.stage in stages and stages.index(state.stage) > stages.index("adapt"):
-        return None
-    return expected
-
-
 def show_time_left(rt, state: background.JobState, cancelling: bool) -> None:
     """The status's time left from the job's first moment: the bench's projection for this preset and device
     (rt.expected_seconds, set when the job starts), refined by the job's own pace as it goes."""
@@ -171,7 +143,7 @@ def redraw(context) -> None:
 def long_work_warning(context, label: str, work: LocalWork | None, runs_remotely: bool) -> str | None:
     """One sentence when a job would run here for longer than LONG_LOCAL_SECONDS; None when it is short,
     unknown, or goes to the worker environment the preferences name for every job."""
-    from ..panels.quality import LONG_LOCAL_SECONDS
+    from ..workers.time_model import LONG_LOCAL_SECONDS
 
     if work is None or work.seconds < LONG_LOCAL_SECONDS:
         return None
@@ -184,28 +156,12 @@ def long_work_warning(context, label: str, work: LocalWork | None, runs_remotely
         except SceneFitError:
             pass   # a worker set up wrongly: the job's start says so
         if offers_worker(context, runs_remotely):
-            return f"{label} would run {work.where()}; the worker set in the preferences runs it sooner."
+            return f"{label} would run {work.where(bpy.app.translations.pgettext_iface)}; the worker set in the preferences runs it sooner."
     if work.on_gpu:
-        return (f"{label} would run {work.where()}; a worker environment with more GPUs, set in the add-on's "
+        return (f"{label} would run {work.where(bpy.app.translations.pgettext_iface)}; a worker environment with more GPUs, set in the add-on's "
                 "preferences (Jobs), runs it sooner.")
-    return (f"{label} would run {work.where()}; a GPU, or a worker environment set in the add-on's "
+    return (f"{label} would run {work.where(bpy.app.translations.pgettext_iface)}; a GPU, or a worker environment set in the add-on's "
             "preferences (Jobs), runs it far sooner.")
-
-
-# A job that has run longer than this asks before Esc cancels it (a stray Esc must not end hours of work).
-CONFIRM_CANCEL_AFTER = 60.0
-# How long loading another file, quitting or disabling SceneFit waits for a job's worker to stop: a worker
-# checks its cancel within a UNet block or a download chunk (seconds); only one stuck in a call that checks
-# none (a model's load) outlasts it, and it keeps the job slot until it stops (workers/background.py).
-END_JOB_SECONDS = 30.0
-
-
-def esc_action(over_progress: bool, seconds: float) -> str:
-    """What Esc does during a job: "pass" (not meant for SceneFit: the pointer is elsewhere), "ask" (a
-    job longer than CONFIRM_CANCEL_AFTER: confirm first) or "cancel"."""
-    if not over_progress:
-        return "pass"
-    return "ask" if seconds > CONFIRM_CANCEL_AFTER else "cancel"
 
 
 def pointer_over_progress(context, event) -> bool:
@@ -228,36 +184,6 @@ def pointer_over_progress(context, event) -> bool:
 def has_ui(context) -> bool:
     """Whether a job runs in the background with a bar (a window), rather than inline (`blender -b`, scripts)."""
     return context.window is not None and not bpy.app.background
-
-
-def _parts(data) -> dict:
-    """A job's data by name: a dict's items, a frozen dataclass's fields (job_seam.RunInputs)."""
-    if isinstance(data, dict):
-        return data
-    if dataclasses.is_dataclass(data) and not isinstance(data, type):
-        return {f.name: getattr(data, f.name) for f in dataclasses.fields(data)}
-    return {}
-
-
-def owed_bakes(data) -> list:
-    """The Cycles bakes a job's inputs still owe the main thread (core/data/map_plan.PendingAsset.bakes)."""
-    return [b for v in _parts(data).values() if isinstance(v, PendingAsset) for b in v.bakes if not b.done]
-
-
-def for_the_worker(data):
-    """A job's data as its worker takes it: each planned asset as plain data, its bakes' pixels in place."""
-    planned = {k: v.for_job() for k, v in _parts(data).items() if isinstance(v, PendingAsset)}
-    if not planned:
-        return data
-    return {**data, **planned} if isinstance(data, dict) else dataclasses.replace(data, **planned)
-
-
-def job_out(data) -> str:
-    """The run folder a job writes (its request's, or a dict's "out"), or ""."""
-    request = getattr(data, "request", None)
-    if request is not None:
-        return request.out
-    return data.get("out", "") if isinstance(data, dict) else ""
 
 
 def job_seconds(job: background.Job) -> float:
@@ -498,7 +424,8 @@ class JobSteps:
         if state.status == background.DONE:
             try:
                 message = self.apply_result(context, state.result)
-            except SceneFitError as error:
+            except SceneFitError as error:   # (its asset deleted meanwhile): the run and its folder are kept
+                self.keep_run(context, "failed", None)
                 rt.status = rt.details = str(error)
                 self.report({"ERROR"}, rt.status)
                 return {"CANCELLED"}

@@ -9,6 +9,7 @@ from ..workers import blender_jobs as work
 from .folders import last_finished_run, run_folder
 from .photo import photo_path, photo_view
 from .prefs import depth_model_preference, model_config
+from .polls import needs_setting
 from .jobs import JobOperator
 from .results import apply_result_world
 
@@ -20,6 +21,7 @@ class SCENEFIT_OT_estimate_light(JobOperator):
     bl_label = "Estimate Light"
     job_name = "light"
     asks_options = True   # Critic and Outpaint in a dialog before it starts
+    poll = needs_setting("photo_path", "Pick a photo in the Scene section first")
 
     critic: EnumProperty(name="Critic", default="auto", description="What sets how bright the light is", items=(
         ("auto", "Auto", "The diffusion critic when Stable Diffusion 2 is on this machine, else the prior alone"),

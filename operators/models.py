@@ -7,7 +7,7 @@ import bpy
 from bpy.props import EnumProperty
 
 from ..workers import background
-from .prefs import ADDON_PACKAGE, model_settings, offline, preferences
+from .prefs import ADDON_PACKAGE, depth_model_preference, model_config, offline, preferences
 from .jobs import JobOperator
 
 MODEL_ITEMS = (
@@ -23,8 +23,8 @@ def model_specs(context=None):
     from ..core.guidance import model_store
     from ..core.guidance.models import hub_cache
 
-    models, depth = model_settings(context)
-    return model_store.model_specs(models, depth.model), hub_cache(models.cache_dir)
+    models = model_config(context, job=False)   # (not model_settings: its depth config's module imports torch)
+    return model_store.model_specs(models, depth_model_preference(context)), hub_cache(models.cache_dir)
 
 
 def model_states(context=None) -> list:

@@ -93,10 +93,9 @@ def photo_view(context, photo: Path, obj=None) -> dict:
 
 
 def composite_camera(context, photo: Path, view: dict):
-    """The PhotoCamera the Cycles set-up uses when no job hands one back: the view's, else the camera the
-    World's light map was estimated with (its run's camera stage), else the estimate from the photo."""
+    """The PhotoCamera the Cycles set-up uses when no job hands one back: the view's, else the camera stage's of
+    the run that made the World's light map (lens shift included), else the photo's estimate."""
     from ..core.pipeline.layout import camera_of, run_folder_of
-    from ..core.stages.camera import photo_camera_estimate
     from ..core.scene.camera import PhotoCamera
 
     if view["camera"] is not None:
@@ -105,4 +104,6 @@ def composite_camera(context, photo: Path, view: dict):
     run_folder = run_folder_of(bpy.path.abspath(light)) if light else None
     if run_folder is not None:
         return camera_of(run_folder, 1, 1)[0]
+    from ..core.stages.camera import photo_camera_estimate
+
     return photo_camera_estimate(photo).photo_camera()

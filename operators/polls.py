@@ -14,6 +14,20 @@ class OnMesh:
         return False
 
 
+class OnMeshWithPhoto(OnMesh):
+    """Operator mixin: a mesh is active and the Scene section has a photo (Run All fits the asset into it)."""
+
+    @classmethod
+    def poll(cls, context) -> bool:
+        if not super().poll(context):
+            return False
+        settings = getattr(context.scene, "scenefit", None)
+        if settings is not None and settings.photo_path.strip():
+            return True
+        cls.poll_message_set("Pick a photo in the Scene section first")
+        return False
+
+
 def needs_setting(name: str, why: str) -> classmethod:
     """An operator poll: available when the scene's SceneFit setting `name` is filled in."""
 

@@ -31,9 +31,11 @@ SUN_SOURCES = (
     ("set", "As set here", "The azimuth and elevation below (Pick Sun sets them from a shadow in the photo, "
                            "Sun from Light from a Sun light turned until its shadows match the photo's)"),
 )
-GUIDANCE = (("auto", "Auto", "Adapt with Stable Diffusion 2 when its weights are on this machine (Preferences: Models, "
-                               "Download) and there is a prompt"),
-            ("sd2", "Stable Diffusion 2", "Adapt; fail when the weights cannot be found"),
+GUIDANCE = (("auto", "Auto", "Adapt with Stable Diffusion 2 when its weights are on this machine and there is a "
+                               "prompt; else compose the converted texture (Download in the add-on's preferences "
+                               "fetches them)"),
+            ("sd2", "Stable Diffusion 2", "Adapt; fail in one sentence when the weights are not on this machine "
+                                          "(Download in the add-on's preferences fetches them)"),
             ("none", "None", "No adaptation: compose the converted texture (seconds instead of hours)"))
 MODES = (
     ("scene", "Scene", "Restyle the asset so it fits the photo (the prompt describes how it should look there)"),

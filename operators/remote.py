@@ -11,14 +11,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import urlparse
 
 import bpy
 
+if TYPE_CHECKING:   # (workers.remote and its batch modules load when a job is sent, not at every click)
+    from ..workers.remote import RemoteRun
+
 from ..core.base.errors import InputError
 from ..core.pipeline.registry import STAGES
 from ..workers.job_seam import read_run_outcome
-from ..workers.remote import RemoteRun
 from .folders import last_finished_run
 from .prefs import preferences
 from .results import apply_layout_results, materials_words
@@ -113,7 +116,7 @@ def check_models_reach_the_worker(address: str, models: dict[str, str | None]) -
 class RemoteRunPerMaterial:
     """A RemoteRun of an asset of several materials, with what each material's bake here needs."""
 
-    run: RemoteRun
+    run: "RemoteRun"
     materials: dict
 
 

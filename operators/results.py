@@ -79,8 +79,8 @@ def apply_result_materials(context, slots: list[list[tuple[str, int]]], maps: li
         for obj, number in found:
             current = obj.material_slots[number].material
             original = artists_material_behind(current, previous.get((obj.name, number)))
-            if current is not None:
-                current.use_fake_user = True   # whichever is swapped out survives saving
+            if current is not None and TAG not in current:
+                current.use_fake_user = True   # the artist's, swapped out, survives saving (a result: its run holds it)
             obj.material_slots[number].material = mat
             records.append((obj, number, original, mat))
         made.append(mat)
@@ -206,7 +206,7 @@ def put_in_slots(entries, result: bool = True) -> int:
         if obj is None or mat is None or entry.slot >= len(obj.material_slots):
             continue
         current = obj.material_slots[entry.slot].material
-        if current is not None:
+        if current is not None and TAG not in current:   # (a result swapped out: its entry holds it)
             current.use_fake_user = True
         obj.material_slots[entry.slot].material = mat
         switched += 1
@@ -250,8 +250,8 @@ class SCENEFIT_OT_use_result(bpy.types.Operator):
         if obj is None or mat is None:
             self.report({"ERROR"}, "There is no such material; convert or adapt the asset first.")
             return {"CANCELLED"}
-        if obj.active_material is not None:
-            obj.active_material.use_fake_user = True  # whichever is swapped out survives saving
+        if obj.active_material is not None and TAG not in obj.active_material:
+            obj.active_material.use_fake_user = True  # the artist's, swapped out, survives saving
         obj.active_material = mat
         return {"FINISHED"}
 

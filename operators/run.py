@@ -8,25 +8,25 @@ from typing import TYPE_CHECKING
 import bpy
 from bpy.props import EnumProperty, StringProperty
 
-from ..blender_io.compose import setup_composite
+from ..blender_io.compose import photo_read_whole, setup_composite
 from ..core.base.errors import InputError, SceneFitError
 from ..workers import blender_jobs as work
 from ..workers.job_seam import RunInputs, RunOutcome, RunRequest
 from .adapt import adapt_seconds_here
 from .folders import last_finished_run
 from .identity import object_by_id
-from .polls import OnMesh
+from .polls import OnMeshWithPhoto
 from .jobs import CHOICES, CostFirst, JobOperator
 from .properties import GUIDANCE
 from .results import apply_composite_image, apply_layout_results, apply_result_world, materials_words
 from .run_request import gather_run, resumed_run
 
 if TYPE_CHECKING:
-    from ..panels.quality import LocalWork
+    from ..workers.time_model import LocalWork
 
 
 
-class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
+class SCENEFIT_OT_run(OnMeshWithPhoto, CostFirst, JobOperator):
     """Fit the asset into the photo in one go (the selected objects, or the active one with all its
     materials): convert, estimate the photo's light, restyle (when the diffusion models are here and there
     is a prompt), compose; then put the results in every material slot"""
@@ -70,7 +70,7 @@ class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
         guidance = self.chosen_guidance(context)
         if guidance == "none" or (guidance == "auto" and not context.scene.scenefit.prompt.strip()):
             return None   # no adaptation: the rest takes seconds
-        # "auto" adapts only when the job finds the weights on disk (only Download fetches them): the
+        # "auto" adapts only when the job finds the weights on disk (jobs never download): the
         # question is asked without looking (a look imports torch and may touch the network).
         return adapt_seconds_here(context)
 
@@ -95,6 +95,7 @@ class SCENEFIT_OT_run(OnMesh, CostFirst, JobOperator):
                 raise InputError("the run has no camera stage")
             scene_camera = bpy.data.objects.get(request.scene_camera) if request.scene_camera else None
             objects = [o for o in (object_by_id(i) for i in request.object_ids) if o is not None]
+            photo_read_whole(request.photo)   # (the run's camera and light stages decoded it whole)
             made = setup_composite(context, objects, request.photo, request.placement, request.config.size,
                                    result.camera, scene_camera=scene_camera, world=world)
             lines.append(f"Cycles composite set up in the scene '{made['scene'].name}' through "

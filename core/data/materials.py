@@ -9,6 +9,7 @@ paper instead re-maps the whole mesh into one new atlas; a game pipeline wants i
 """
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field, replace
 
@@ -256,3 +257,13 @@ def atlas_maps(maps: list[PBRMaps], cell: int) -> PBRMaps:
         normal = atlas_stack([m.normal_at(cell, cell) for m in maps], cell, empty=FLAT_NORMAL)
     return PBRMaps(base_color=stack[..., :3].copy(), roughness=stack[..., 3].copy(),
                    metallic=stack[..., 4].copy(), normal=normal)
+
+
+def mesh_digest(mesh: Mesh) -> str:
+    """Names a mesh by its faces and own UVs (not its positions, so normalised and object space agree). Here,
+    without torch: Blender's main thread names the asset's mesh at a click."""
+    own = own_uv_mesh(mesh)
+    digest = hashlib.sha256()
+    for array in (own.faces, own.uvs, np.asarray([len(own.positions)], np.int64)):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()[:16]

@@ -11,7 +11,6 @@ point's own UV, its residual the network at that point. Without adaptation nothi
 """
 from __future__ import annotations
 
-import hashlib
 import time
 from dataclasses import dataclass
 
@@ -19,7 +18,7 @@ import numpy as np
 import torch
 
 from ..base.errors import InputError
-from ..data.materials import atlas_grid, atlas_slices, mesh_raster, own_uv_mesh
+from ..data.materials import atlas_grid, atlas_slices, mesh_digest, mesh_raster, own_uv_mesh
 from ..data.mesh import Mesh, normalize_to_unit_sphere
 from .neural_texture import NeuralTexture, to_logit
 from ..data.uv_raster import UVRaster, rasterize_uv, sample_image
@@ -127,15 +126,6 @@ class SurfaceLayout:
         count = mesh.material_count
         return Mesh.from_arrays(mesh.positions[faces].reshape(-1, 3), corners, self.corner_uvs.reshape(-1, 2),
                                 normals, mesh.name, mesh.material_index, (("clamp", "clamp"),) * count)
-
-
-def mesh_digest(mesh: Mesh) -> str:
-    """Names a mesh by its faces and own UVs (not its positions, so normalised and object space agree)."""
-    own = own_uv_mesh(mesh)
-    digest = hashlib.sha256()
-    for array in (own.faces, own.uvs, np.asarray([len(own.positions)], np.int64)):
-        digest.update(np.ascontiguousarray(array).tobytes())
-    return digest.hexdigest()[:16]
 
 
 def new_layout(mesh: Mesh, resolution: int, sharing: UVSharing) -> SurfaceLayout:

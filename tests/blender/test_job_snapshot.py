@@ -114,6 +114,60 @@ deleted = sorted(bpy.ops.scenefit.delete_run(index=index, folder=True))
 out["delete"] = {"had": had, "deleted": deleted, "left": [folder.exists(), partial_of(folder).exists()]}
 """
 
+# Composing one asset, then another: each composite shows only its own asset (and SceneFit's camera and floor).
+COMPOSE = r"""
+shown = {}
+for name in ("Fox Renamed", roots[0]):
+    select(name)
+    settings.placement = (0.5, 0.75)
+    said = sorted(bpy.ops.scenefit.compose(render=False))
+    scene = next(s for s in bpy.data.scenes if s.get("scenefit") == "composite")
+    shown[name] = [said, sorted(o.name for o in scene.collection.objects if "scenefit" not in o)]
+out["compose"] = shown
+"""
+
+# Three Estimate Lights, then a run's Delete: Purge leaves only what the scene or a kept run holds.
+LEFTOVERS = r"""
+def held():
+    runs = [r for o in bpy.data.objects for r in getattr(o.scenefit_asset, "runs", ())]
+    worlds = {s.world.name for s in bpy.data.scenes if s.world} | {r.world.name for r in runs if r.world}
+    materials = {slot.material.name for o in bpy.data.objects for slot in o.material_slots if slot.material} | {
+        e.result.name for r in runs for e in r.slots if e.result}
+    return worlds, materials
+
+def left(kind):
+    return sorted(x.name for x in getattr(bpy.data, kind) if "scenefit" in x)
+
+def purge():
+    bpy.ops.outliner.orphans_purge(do_local_ids=True, do_linked_ids=True, do_recursive=True)
+
+select("Fox Renamed")
+before = len(left("worlds"))
+said = [sorted(bpy.ops.scenefit.estimate_light(critic="none", outpaint="prior")) for _ in range(3)]   # (quick)
+made = len(left("worlds")) - before
+purge()
+worlds, materials = held()
+after_lights = {"worlds": left("worlds"), "held": sorted(worlds), "fake": [w.name for w in bpy.data.worlds if w.use_fake_user and "scenefit" in w]}
+runs = bpy.data.objects["Fox Renamed"].scenefit_asset.runs
+deleted = sorted(bpy.ops.scenefit.delete_run(index=0))
+purge()
+worlds, materials = held()
+out["leftovers"] = {"said": said, "made": made, "after_lights": after_lights,
+                    "after_delete": [deleted, sorted(set(left("worlds")) - worlds), sorted(set(left("materials")) - materials)],
+                    "env_images": sorted(i.name for i in bpy.data.images if "scenefit" in i and i.users == 0)}
+"""
+
+# An asset deleted while its run goes on: the run is kept (the scene's runs without an asset) with its folder.
+DELETED = r"""
+character = select(roots[0])
+settings.placement = (0.5, 0.75)
+op, ctx, first = clicked({"choice": "skip", "guidance": "auto", **QUICK})
+bpy.data.objects.remove(character)
+end = to_the_end(op, ctx)
+kept = [(r.stage, r.state, Path(bpy.path.abspath(r.folder)).is_dir()) for r in settings.runs_without_asset]
+out["deleted"] = {"end": end, "said": op.reported[-1:], "kept": kept}
+"""
+
 # Two clicks of Run All before the first one's first tick: the second is refused, not started beside it. A file
 # loaded during a job leaves no job thread running.
 SECOND = r"""
@@ -132,7 +186,7 @@ t = time.perf_counter()
 bpy.ops.wm.open_mainfile(filepath=str(tmp / "scene.blend"))   # another file: load_pre ends the job first
 out["second"] = {"answers": answers, "refused": second_op.reported[-1:], "third": third,
                  "load_s": round(time.perf_counter() - t, 2), "alive": job.alive,
-                 "threads": [th.name for th in threading.enumerate() if th.name.startswith("scenefit-")],
+                 "threads": [th.name for th in threading.enumerate() if th.name == "scenefit-run"],
                  "slot": background.active_job() is None}
 settings = bpy.context.scene.scenefit
 """
@@ -199,6 +253,29 @@ def test_a_duplicate_starts_with_an_empty_history(session):
     assert out["after"] == 0 and "no such run" in str(out["said"]) and out["ids"] == [False]
     runs, folders_kept = out["original"]
     assert runs >= 1 and folders_kept
+
+
+def test_composing_one_asset_never_shows_another(session):
+    out = _step(session, COMPOSE, "compose")["compose"]
+    fox, character = out.values()
+    assert fox == [["FINISHED"], ["Fox Renamed"]] and character[0] == ["FINISHED"]
+    assert "Fox Renamed" not in character[1] and len(character[1]) == 1, character
+
+
+def test_three_estimate_lights_and_a_delete_leave_nothing_purge_keeps(session):
+    out = _step(session, LEFTOVERS, "leftovers")["leftovers"]
+    assert out["said"] == [["FINISHED"]] * 3 and out["made"] == 3
+    lights = out["after_lights"]
+    assert set(lights["worlds"]) <= set(lights["held"]) and lights["fake"] == [], lights   # the two older: purged
+    deleted, worlds_left, materials_left = out["after_delete"]
+    assert deleted == ["FINISHED"] and worlds_left == [] and materials_left == []
+    assert out["env_images"] == []
+
+
+def test_an_asset_deleted_during_its_run_keeps_the_run_and_its_folder(session):
+    out = _step(session, DELETED, "deleted")["deleted"]
+    assert out["end"] == ["CANCELLED"] and "deleted while SceneFit ran" in out["said"][0]
+    assert out["kept"] == [["run", "failed", True]]
 
 
 def test_a_second_run_all_never_starts_beside_the_first_and_a_file_load_ends_it(session):

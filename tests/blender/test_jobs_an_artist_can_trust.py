@@ -89,17 +89,7 @@ class Ctx:      # bpy.context with a window: a status bar along the bottom, a 3D
         self.window, self.window_manager = SimpleNamespace(screen=SimpleNamespace(areas=(bar, view))), FakeWM()
     def __getattr__(self, name): return getattr(bpy.context, name)
 
-def probe(cls, **props):
-    # the operator's own methods on a plain object (Blender makes operator instances only for a window)
-    attrs = {}
-    for klass in reversed(cls.__mro__):
-        if klass.__module__.startswith(MODULE):
-            attrs.update({k: v for k, v in vars(klass).items() if not k.startswith("__") and k != "bl_rna"})
-    attrs.update(props, properties=SimpleNamespace(is_property_set=lambda name: name in props))
-    op = type("Probe", (), attrs)()
-    op.reported = []
-    op.report = lambda kind, text: op.reported.append(text)
-    return op
+from scenefit.devtools.stand_in_window import probe   # the operator's own methods on a plain object
 
 def event(kind, x=0, y=0):
     return SimpleNamespace(type=kind, value="PRESS", mouse_x=x, mouse_y=y)

@@ -448,13 +448,8 @@ def test_hours_of_local_adaptation_are_said_before_they_start(operated):
     """Adapt with the models present on a CPU: the preset's iterations at the measured seconds per
     iteration (SD2 size) is hours, said in one sentence that offers the worker; two iterations are not."""
     _, out, _ = operated
-    import importlib.util
+    from scenefit.workers import time_model as quality   # (the panel's numbers, without bpy)
 
-    # (by path, named as in the package so its relative import of the presets resolves)
-    spec = importlib.util.spec_from_file_location("scenefit.panels.quality",
-                                                  ROOT / "panels" / "quality.py")
-    quality = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(quality)
     sentence, short, preset = out["long_work"]
     hours = quality.duration_text(quality.adapt_projection(preset))
     assert short is None and hours.endswith(" h"), hours

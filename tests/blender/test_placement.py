@@ -120,13 +120,9 @@ def test_an_asset_behind_the_scene_camera_is_refused_in_one_sentence():
 
 
 def test_quality_panel_times_are_the_bench_measurements():
-    import importlib.util
+    from scenefit.workers import time_model as quality   # (the panel's numbers, without bpy)
 
     root = ROOT
-    # Loaded by path: importing the panels package would start Blender.
-    spec = importlib.util.spec_from_file_location("quality", root / "panels" / "quality.py")
-    quality = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(quality)
     EXPECTED_SECONDS = quality.EXPECTED_SECONDS
     runs = json.loads((root / "benchmarks/results/trade_run.json").read_text())["rows"]
     measured = {(stage, row["preset"]): seconds for row in runs for stage, seconds in row["stage_seconds"].items()}
@@ -145,16 +141,10 @@ def test_quality_panel_times_are_the_bench_measurements():
 def test_adapts_projected_time_is_the_sd2_bench_measurement():
     """The panel's adapt time and the warning before hours of local work come from the SD2-size bench
     (benchmarks/results/adapt_sd2.json: the cached bf16 rows, warm step) and the presets' iterations."""
-    import importlib.util
-
     from scenefit.core.pipeline.presets import stage_config
+    from scenefit.workers import time_model as quality   # (the panel's numbers, without bpy)
 
     root = ROOT
-    # Loaded by path (importing the panels package would start Blender), named as in the package so that its
-    # relative import of the presets resolves.
-    spec = importlib.util.spec_from_file_location("scenefit.panels.quality", root / "panels" / "quality.py")
-    quality = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(quality)
     rows = json.loads((root / "benchmarks/results/adapt_sd2.json").read_text())["rows"]
     measured = {row["preset"]: row["warm_s"] for row in rows if row["cache"] and "bfloat16" in row["dtype"]}
     for preset, seconds in quality.ADAPT_SECONDS_PER_ITERATION.items():

@@ -23,7 +23,7 @@ def test_blender_validator_accepts_manifest():
     manifest = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
     assert manifest["id"] == "scenefit" and manifest["type"] == "add-on"
     assert len(manifest["tagline"]) <= 64 and manifest["blender_version_min"] == "4.2.0"
-    assert set(manifest["permissions"]) == {"files", "network"}
+    assert set(manifest["permissions"]) == {"files", "network", "clipboard"}   # (Copy Details, worker, downloads)
 
 
 def test_every_package_folder_is_in_the_wheel():
