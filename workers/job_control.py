@@ -63,14 +63,33 @@ def _parts(data) -> dict:
     return {}
 
 
+def _pending_assets(data) -> list[PendingAsset]:
+    """The planned assets in a job's data, at any depth (a remote job's asset is inside its RemoteRun)."""
+    found: list[PendingAsset] = []
+    for value in _parts(data).values():
+        if isinstance(value, PendingAsset):
+            found.append(value)
+        elif isinstance(value, dict) or (dataclasses.is_dataclass(value) and not isinstance(value, type)):
+            found += _pending_assets(value)
+    return found
+
+
 def owed_bakes(data) -> list:
     """The Cycles bakes a job's inputs still owe the main thread (core/data/map_plan.PendingAsset.bakes)."""
-    return [b for v in _parts(data).values() if isinstance(v, PendingAsset) for b in v.bakes if not b.done]
+    return [b for asset in _pending_assets(data) for b in asset.bakes if not b.done]
 
 
 def for_the_worker(data):
-    """A job's data as its worker takes it: each planned asset as plain data, its bakes' pixels in place."""
-    planned = {k: v.for_job() for k, v in _parts(data).items() if isinstance(v, PendingAsset)}
+    """A job's data as its worker takes it: each planned asset, at any depth, as plain data, its bakes' pixels
+    in place."""
+    planned: dict = {}
+    for key, value in _parts(data).items():
+        if isinstance(value, PendingAsset):
+            planned[key] = value.for_job()
+        elif isinstance(value, dict) or (dataclasses.is_dataclass(value) and not isinstance(value, type)):
+            inner = for_the_worker(value)
+            if inner is not value:
+                planned[key] = inner
     if not planned:
         return data
     return {**data, **planned} if isinstance(data, dict) else dataclasses.replace(data, **planned)
