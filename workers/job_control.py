@@ -13,7 +13,7 @@ from .time_model import eta_from_start
 
 
 def whole_run(state: JobState, stages: tuple[str, ...]) -> tuple[float, str] | None:
-    """(fraction, words) of a job that runs several stages in order (Run All: core.base.names.RUN_ORDER) as one
+    """(fraction, words) of a job that runs several stages in order (Run All: core.pipeline.registry.RUN_ORDER) as one
     bar, stage k of n, from the stage now running and its own fraction; None for a one-stage job."""
     if state.name != "run" or state.finished:
         return None

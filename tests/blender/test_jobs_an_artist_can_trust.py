@@ -154,7 +154,7 @@ for name in roots:
         bpy.context.window_manager.scenefit_runtime.running = False
 # Run All's one bar: stage k of n from the stage running and its own fraction
 JobState = background.JobState
-stages = import_module(MODULE + ".core.base.names").RUN_ORDER   # what update_runtime gives it
+stages = import_module(MODULE + ".core.pipeline.registry").RUN_ORDER   # what update_runtime gives it
 out["whole_run"] = [jobs.whole_run(JobState("run", stage="adapt", step=3, total=4, fraction=0.75), stages),
                     jobs.whole_run(JobState("run", stage="run", step=1, total=5, fraction=0.2), stages),
                     jobs.whole_run(JobState("adapt", stage="adapt", step=3, total=4, fraction=0.75), stages)]

@@ -159,14 +159,14 @@ PROGRESS = r"""
 import time
 from importlib import import_module
 jobs, background = import_module("scenefit.operators.jobs"), import_module("scenefit.workers.background")
-names = import_module("scenefit.core.base.names")   # the stage order Run All's bar counts
+registry = import_module("scenefit.core.pipeline.registry")   # the stage order Run All's bar counts
 rt = bpy.context.window_manager.scenefit_runtime
 said = {}
 rt.expected_seconds = 7200.0                         # the bench's projection, set when the job starts
 state = background.JobState("adapt", stage="adapt", fraction=0.0, started=time.perf_counter())
 jobs.update_runtime(bpy.context, state)
 said["adapt_at_start"] = rt.status
-stages = list(names.RUN_ORDER)
+stages = list(registry.RUN_ORDER)
 later = stages[stages.index("adapt") + 1]
 for stage in ("convert", later):                     # Run All before its adaptation, and after it
     jobs.update_runtime(bpy.context, background.JobState("run", stage=stage, fraction=0.5, total=len(stages)))
