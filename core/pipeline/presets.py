@@ -72,6 +72,7 @@ def _nested(config, values: dict):
 
 def _adapt_config(table: dict, overrides: dict):
     # lazy: torch takes seconds to load
+    from ..guidance.critics import CriticConfig
     from ..stages.adapt.config import MODE_SETTINGS, MODE_TYPES, SCENE_STAGES, AdaptConfig, StageSpec
 
     mode = overrides.pop("mode_type", "scene")
@@ -84,5 +85,6 @@ def _adapt_config(table: dict, overrides: dict):
                   max(1, int(round(s.spp * spp_scale))), s.t_range)
         for s in values.get("stages", SCENE_STAGES))
     values.update(table)
-    values.update(overrides)
-    return AdaptConfig(mode_type=mode, **values)
+    if isinstance(overrides.get("critic"), dict):   # a table of critic settings changes only what it names
+        values.setdefault("critic", CriticConfig())
+    return AdaptConfig(mode_type=mode, **with_overrides(values, overrides))
