@@ -148,8 +148,8 @@ def run_batch(jobs: Path, out: Path) -> float:
 
 
 def _adapt_seconds(folder: Path) -> float:
-    report = json.loads((folder / "adapt" / "report.json").read_text()) if (folder / "adapt" / "report.json").is_file() \
-        else json.loads((folder / "report.json").read_text()).get("stages", {}).get("adapt", {})
+    """The adapt stage's own seconds, from its stage.json."""
+    report = json.loads((folder / "adapt" / "stage.json").read_text()).get("report", {})
     return float(report.get("seconds", float("nan")))
 
 

@@ -6,6 +6,7 @@ from dataclasses import fields, replace
 from typing import Any
 
 from ..base.errors import InputError
+from ..guidance.critic_config import CriticConfig
 from ..stages.adapt.config import MODE_SETTINGS, MODE_TYPES, SCENE_STAGES, AdaptConfig, StageSpec
 from ..stages.compose import ComposeConfig
 from ..stages.convert_config import ConvertConfig
@@ -45,6 +46,8 @@ def resolve_adapt(table: dict[str, Any], overrides: dict[str, Any]) -> AdaptConf
                   max(1, int(round(s.spp * spp_scale))), s.t_range)
         for s in values.get("stages", SCENE_STAGES))
     values.update(table)
+    if isinstance(overrides.get("critic"), dict):   # a table of critic settings changes only what it names
+        overrides["critic"] = replace(values.get("critic", CriticConfig()), **overrides["critic"])
     values.update(overrides)
     return AdaptConfig(mode_type=mode, **values)
 

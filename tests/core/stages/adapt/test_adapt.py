@@ -375,3 +375,12 @@ def test_the_model_image_size_comes_from_the_models_own_config_unless_set(tiny_m
                                                    dtype_type="fp32"), need_inpaint=False)
     assert wide_models.image_size == 768
     assert AdaptConfig(prompt="x").model_resolution == 0
+
+
+def test_a_critic_table_in_the_overrides_changes_only_what_it_names():
+    """A jobs file's `overrides = { adapt = { critic = { critic_type = "sds" } } }` picks the critic and keeps the
+    mode's other critic settings (generate: λ_end 0.9, no reference)."""
+    scene = stage_config("adapt", "draft", prompt="x", critic={"critic_type": "sds"})
+    assert scene.critic == CriticConfig(critic_type="sds")
+    generate = stage_config("adapt", "draft", prompt="x", mode_type="generate", critic={"critic_type": "sds"})
+    assert (generate.critic.critic_type, generate.critic.lambda_end, generate.critic.reference_type) == ("sds", 0.9, "none")
