@@ -105,7 +105,7 @@ def test_a_jobs_file_job_is_the_run_and_travels_whole(tmp_path):
     ("overrides = { adapt = { stages = [[1.0, 16.5, 2, [500, 990]]] } }", "a whole render_size"),
     ("overrides = { adapt = { stages = [[1.0, 1e9, 2, [500, 990]]] } }", "a whole render_size"),
     ("overrides = { adapt = { stages = [[1.0, 1000000000, 2, [500, 990]]] } }", "is larger than"),
-    ("overrides = { adapt = { model_resolution = 1048576 } }", "model_resolution must be 0 (the model.s own) or a multiple of 8 from 8"),
+    ("overrides = { adapt = { model_resolution = 1048576 } }", "model_resolution must be 0 (the model's own) or a multiple of 8 from 8"),
     ("overrides = { compose = { max_side = 10 } }", "compose: max_side"),
 ])
 def test_what_the_run_cannot_take_is_one_sentence_naming_file_job_and_key(tmp_path, line, says):
