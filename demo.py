@@ -88,6 +88,7 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
 
     # The whole pipeline, resumable: a second `make demo` reuses every stage.
     mesh, maps = load_asset_folder(inputs / "asset")
+    asset_mesh = mesh
     config = RunConfig(preset=preset, guidance_type=guidance, photo_camera=DEMO_PHOTO_CAMERA, size=DEMO_SIZE,
                        prompt="a monkey head sculpture standing in a living room, its painted surface dusty and "
                               "worn, photo")
@@ -113,11 +114,19 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
         ComposeInputs(mesh, stack, photo, placement, constant, camera),
         stage_config("compose", preset, size=DEMO_SIZE, spp=compose_stage["spp"]), out / "constant",
         {"light": f"constant, the estimated map's mean radiance {np.round(constant[0, 0], 4).tolist()}"})
-    sheet = contact_sheet({"photo | composite under a constant light | composite under the estimated light": [
-        photo, read_image(out / "constant" / "composite.png")[..., :3],
-        read_image(run.composite)[..., :3]]})
-    write_image(out / "sheet.png", sheet)
+    rows = {"photo | composite under a constant light | composite under the estimated light": [
+        photo, read_image(out / "constant" / "composite.png")[..., :3], read_image(run.composite)[..., :3]]}
     constant_seconds = time.perf_counter() - t
+
+    t = time.perf_counter()
+    prior = adapted_by_the_test_prior(out, asset_mesh, inputs / "photo.png", texture_path, layout, compose_stage["spp"],
+                                      preset, progress)
+    if prior is not None:
+        rows[f"adapted by SceneFit's small TEST prior to '{PRIOR_INSTRUCTION}' (real adaptation uses SD2) | "
+             "before | after"] = [np.full_like(photo, 0.12), read_image(run.composite)[..., :3],
+                                  read_image(Path(prior["composite"]))[..., :3]]
+    write_image(out / "sheet.png", contact_sheet(rows))
+    prior_seconds = time.perf_counter() - t
 
     report: dict[str, Any] = {
         "stage": "demo",
@@ -129,11 +138,54 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
         "adapt": run.stages["adapt"].to_report(),
         "compose": compose_stage,
         "constant_light_compose": {k: constant_report[k] for k in ("spp", "shadow", "outputs", "timings_seconds")},
+        "test_prior_adapt": prior or {"status": "skipped", "why": f"the test prior is not at {PRIOR_FOLDER} "
+                                                                    "(a checkout's devtools/prior)"},
         "sheet": str(out / "sheet.png"),
         "timings_seconds": {"inputs": round(inputs_seconds, 3), "run": run.seconds,
-                            "constant_light_compose": round(constant_seconds, 3)},
+                            "constant_light_compose": round(constant_seconds, 3),
+                            "test_prior_adapt": round(prior_seconds, 3)},
         "environment": environment_info(),
     }
     report["seconds_total"] = round(time.perf_counter() - started, 3)
     write_report(out / "report.json", report)
     return report
+
+
+# The known-answer prior (devtools/prior): a 2.5 MB diffusion model SceneFit trains itself to measure its
+# adaptation against, never a model for artists' work. The demo shows adaptation with it, labelled as such.
+PRIOR_FOLDER = Path(__file__).resolve().parent / "devtools" / "prior"
+PRIOR_INSTRUCTION = "make it blue"
+
+
+def adapted_by_the_test_prior(out: Path, mesh, photo_path: Path, texture_path: Path, layout: RunLayout, spp: int,
+                              preset: str, progress: ProgressCallback | None) -> dict[str, Any] | None:
+    """The run's converted texture edited by the test prior ("make it blue", its known answer) and composed as
+    the run's composite was; None when the prior is not here (an installed extension carries no devtools)."""
+    from .core.guidance import ModelConfig
+    from .core.pipeline.run import GivenOutputs
+
+    if not (PRIOR_FOLDER / "base" / "model_index.json").is_file():
+        return None
+    models = ModelConfig(base_model=str(PRIOR_FOLDER / "base"), inpaint_model=str(PRIOR_FOLDER / "inpaint"),
+                         dtype_type="fp32", local_files_only=True)
+    # The known-answer tests' small settings: 32-px views (the prior's own size), a few dozen steps.
+    config = RunConfig(preset="draft", guidance_type="sd2", mode="edit", object_prompt="a monkey head",
+                       instruction=PRIOR_INSTRUCTION, models=models, stage_overrides={"adapt": {
+                           "iterations": 40, "stages": ((1.0, 32, 2, (300, 980)),), "views": 8,
+                           "views_per_step": 1, "lr_texture": 2e-2, "checkpoint_every": 0, "preview_every": 0}})
+    adapted = run_pipeline(mesh, None, photo_path, DEMO_PLACEMENT, out / "test_prior", config, progress=progress,
+                           stages=("adapt",), given=GivenOutputs(texture=texture_path))
+    texture = load_neural_texture(Path(adapted.outputs("adapt")["weights"]))
+    view = texture_view(texture, mesh)
+    photo, _ = load_photo(photo_path)
+    camera, _ = read_camera(layout.file("camera", "camera"), photo.shape[1], photo.shape[0])
+    placement = Placement.parse(DEMO_PLACEMENT, (photo.shape[1], photo.shape[0])).pixel((photo.shape[0], photo.shape[1]))
+    folder = out / "test_prior" / "compose"
+    compose_to_folder(
+        ComposeInputs(view.mesh, view.stack(texture), photo, placement, load_environment(layout.file("light", "light")),
+                      camera), stage_config("compose", preset, size=DEMO_SIZE, spp=spp), folder,
+        {"texture": "the run's converted texture edited by the test prior"})
+    return {"status": adapted.stages["adapt"].status, "instruction": PRIOR_INSTRUCTION,
+            "models": str(PRIOR_FOLDER), "composite": str(folder / "composite.png"),
+            "note": "a small test prior SceneFit trains to check its adaptation against known answers; real "
+                    "adaptation uses Stable Diffusion 2"}

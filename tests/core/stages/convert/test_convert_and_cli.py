@@ -66,7 +66,16 @@ def test_demo_runs_the_pipeline_and_writes_the_sheet(demo_run):
     composite = read_image(out / "compose" / "composite.png")
     assert composite.shape == photo.shape and 0 < report["compose"]["changed_pixels"] < photo.shape[0] * photo.shape[1]
     sheet = read_image(out / "sheet.png")
-    assert sheet.shape[1] == 3 * photo.shape[1]
+    assert sheet.shape[1] == 3 * photo.shape[1] and sheet.shape[0] > 2 * photo.shape[0]   # a row for the prior
+    # The test prior's edit ("make it blue", its known answer) turns the asset bluer where it shows.
+    prior = report["test_prior_adapt"]
+    assert prior["status"] == "ran" and prior["instruction"] == "make it blue"
+    adapted = read_image(out / prior["composite"] if not Path(prior["composite"]).is_absolute() else
+                         Path(prior["composite"]))[..., :3]
+    shows = np.abs(adapted - composite[..., :3]).sum(axis=-1) > 0.03
+    blueness = lambda image: float((image[..., 2] - image[..., 0])[shows].mean())   # noqa: E731
+    assert shows.sum() > 100 and blueness(adapted) > blueness(composite[..., :3]) + 0.05, \
+        (int(shows.sum()), blueness(adapted), blueness(composite[..., :3]))
     bake = report["stage_status"]["bake"]
     assert bake["status"] == "skipped" and "asset folder" in bake["why"]
 
