@@ -12,15 +12,14 @@ import shutil
 import subprocess
 import sys
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .core.data.asset_io import is_asset_folder, load_asset_folder
-from .core.pipeline.layout import RunLayout
-from .core.stages.camera_stage import read_camera
+from .core.pipeline.layout import RunLayout, camera_of
 from .core.stages.compose import ComposeInputs, compose_to_folder
 from .core.data.imageio import read_image, write_image
 from .core.data.photo import load_photo
@@ -108,7 +107,7 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     texture = load_neural_texture(texture_path)
     view = texture_view(texture, mesh)
     mesh, stack = view.mesh, view.stack(texture)
-    camera, _ = read_camera(layout.file("camera", "camera"), photo.shape[1], photo.shape[0])   # the run's camera stage
+    camera, _ = camera_of(out, photo.shape[1], photo.shape[0])   # the run's camera stage
     placement = Placement.parse(DEMO_PLACEMENT, (photo.shape[1], photo.shape[0])).pixel((photo.shape[0], photo.shape[1]))
     constant_report = compose_to_folder(
         ComposeInputs(mesh, stack, photo, placement, constant, camera),
@@ -119,8 +118,9 @@ def run_demo(out: Path, preset: str = "balanced", progress: ProgressCallback | N
     constant_seconds = time.perf_counter() - t
 
     t = time.perf_counter()
-    prior = adapted_by_the_test_prior(out, asset_mesh, inputs / "photo.png", texture_path, layout, compose_stage["spp"],
-                                      preset, progress)
+    prior = adapted_by_the_test_prior(out, asset_mesh, inputs / "photo.png", texture_path,
+                                      ComposeInputs(mesh, stack, photo, placement, estimated, camera),
+                                      compose_stage["spp"], preset, progress)
     if prior is not None:
         rows[f"adapted by SceneFit's small TEST prior to '{PRIOR_INSTRUCTION}' (real adaptation uses SD2) | "
              "before | after"] = [np.full_like(photo, 0.12), read_image(run.composite)[..., :3],
@@ -157,10 +157,11 @@ PRIOR_FOLDER = Path(__file__).resolve().parent / "devtools" / "prior"
 PRIOR_INSTRUCTION = "make it blue"
 
 
-def adapted_by_the_test_prior(out: Path, mesh, photo_path: Path, texture_path: Path, layout: RunLayout, spp: int,
-                              preset: str, progress: ProgressCallback | None) -> dict[str, Any] | None:
+def adapted_by_the_test_prior(out: Path, mesh, photo_path: Path, texture_path: Path, composed: ComposeInputs,
+                              spp: int, preset: str, progress: ProgressCallback | None) -> dict[str, Any] | None:
     """The run's converted texture edited by the test prior ("make it blue", its known answer) and composed as
-    the run's composite was; None when the prior is not here (an installed extension carries no devtools)."""
+    the run's composite was (`composed`: its photo, placement, light and camera); None when the prior is not
+    here (an installed extension carries no devtools)."""
     from .core.guidance import ModelConfig
     from .core.pipeline.run import GivenOutputs
 
@@ -177,14 +178,10 @@ def adapted_by_the_test_prior(out: Path, mesh, photo_path: Path, texture_path: P
                            stages=("adapt",), given=GivenOutputs(texture=texture_path))
     texture = load_neural_texture(Path(adapted.outputs("adapt")["weights"]))
     view = texture_view(texture, mesh)
-    photo, _ = load_photo(photo_path)
-    camera, _ = read_camera(layout.file("camera", "camera"), photo.shape[1], photo.shape[0])
-    placement = Placement.parse(DEMO_PLACEMENT, (photo.shape[1], photo.shape[0])).pixel((photo.shape[0], photo.shape[1]))
     folder = out / "test_prior" / "compose"
-    compose_to_folder(
-        ComposeInputs(view.mesh, view.stack(texture), photo, placement, load_environment(layout.file("light", "light")),
-                      camera), stage_config("compose", preset, size=DEMO_SIZE, spp=spp), folder,
-        {"texture": "the run's converted texture edited by the test prior"})
+    compose_to_folder(replace(composed, mesh=view.mesh, maps=view.stack(texture)),
+                      stage_config("compose", preset, size=DEMO_SIZE, spp=spp), folder,
+                      {"texture": "the run's converted texture edited by the test prior"})
     return {"status": adapted.stages["adapt"].status, "instruction": PRIOR_INSTRUCTION,
             "models": str(PRIOR_FOLDER), "composite": str(folder / "composite.png"),
             "note": "a small test prior SceneFit trains to check its adaptation against known answers; real "

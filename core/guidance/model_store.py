@@ -325,11 +325,13 @@ def _fetch_blob(spec: ModelSpec, storage: Path, commit: str, name: str, endpoint
         blob.parent.mkdir(parents=True, exist_ok=True)
         partial = blob.with_name(blob.name + PARTIAL_SUFFIX)
         resumed = _fetch_into(partial, meta, transfer)
-        if not _hashes_to(partial, meta.etag) and resumed:
+        matches = _hashes_to(partial, meta.etag)   # (each read hashes gigabytes: once a fetch)
+        if not matches and resumed:
             # the kept part was not the start of this file (damaged or planted): fetched once more, whole
             partial.unlink()
             _fetch_into(partial, meta, transfer)
-        if not _hashes_to(partial, meta.etag):
+            matches = _hashes_to(partial, meta.etag)
+        if not matches:
             partial.unlink()
             raise ModelMissingError(f"'{name}' of {spec.model} arrived with bytes that do not match its hash "
                                     f"{meta.etag}; nothing was kept, the next download fetches it again.")
